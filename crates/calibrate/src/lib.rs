@@ -1,0 +1,1 @@
+//! The calibration pipeline on one machine: project files, design points, training, chains, validation and the summary.

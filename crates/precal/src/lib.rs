@@ -1,0 +1,1 @@
+//! Pre-calibration: meter ingestion, base-load disaggregation, DTW day-type clustering and informative schedule priors.
