@@ -126,7 +126,10 @@ impl Epw {
             }
         }
         if header_end.is_none() {
-            return Err(err(2, "no 'DATA PERIODS' header line before the hourly data".into()));
+            return Err(err(
+                2,
+                "no 'DATA PERIODS' header line before the hourly data".into(),
+            ));
         }
         let mut hours = Vec::with_capacity(HOURS_PER_YEAR);
         for (i, line) in lines {
@@ -138,7 +141,10 @@ impl Epw {
             if f.len() < 22 {
                 return Err(err(
                     lineno,
-                    format!("expected at least 22 comma-separated fields, found {}", f.len()),
+                    format!(
+                        "expected at least 22 comma-separated fields, found {}",
+                        f.len()
+                    ),
                 ));
             }
             let field = |idx: usize, name: &str| -> Result<f64, WeatherError> {
@@ -187,7 +193,10 @@ impl Epw {
             if !(0.0..=110.0).contains(&h.rel_humidity_pct) {
                 return Err(err(
                     lineno,
-                    format!("relative humidity {} % is outside 0..110 %", h.rel_humidity_pct),
+                    format!(
+                        "relative humidity {} % is outside 0..110 %",
+                        h.rel_humidity_pct
+                    ),
                 ));
             }
             hours.push(h);
@@ -351,7 +360,11 @@ impl HourlyFeatures {
             dry_bulb_c: epw.hours.iter().map(|h| h.dry_bulb_c).collect(),
             rel_humidity_pct: epw.hours.iter().map(|h| h.rel_humidity_pct).collect(),
             wind_speed_m_s: epw.hours.iter().map(|h| h.wind_speed_m_s).collect(),
-            global_horizontal_wh_m2: epw.hours.iter().map(|h| h.global_horizontal_wh_m2).collect(),
+            global_horizontal_wh_m2: epw
+                .hours
+                .iter()
+                .map(|h| h.global_horizontal_wh_m2)
+                .collect(),
             day_type: calendar.hourly_day_types(epw),
         }
     }
@@ -403,7 +416,11 @@ mod tests {
         assert_eq!((m, d, h), (1, 1, 1));
         let mean_t: f64 = epw.hours.iter().map(|h| h.dry_bulb_c).sum::<f64>() / 8760.0;
         assert!((5.0..15.0).contains(&mean_t), "Golden annual mean {mean_t}");
-        let jul: f64 = epw.hours[4344..5088].iter().map(|h| h.dry_bulb_c).sum::<f64>() / 744.0;
+        let jul: f64 = epw.hours[4344..5088]
+            .iter()
+            .map(|h| h.dry_bulb_c)
+            .sum::<f64>()
+            / 744.0;
         assert!(jul > 18.0, "July mean {jul}");
     }
 
@@ -421,7 +438,8 @@ mod tests {
         let msg = e.to_string();
         assert!(msg.starts_with("x.epw:21:"), "{msg}");
         assert!(msg.contains("dry bulb"), "{msg}");
-        let short = lines[..100].join("\n");
+        let short: Vec<&str> = text.lines().take(100).collect();
+        let short = short.join("\n");
         let e = Epw::parse(&short, Path::new("x.epw")).unwrap_err();
         assert!(e.to_string().contains("expected 8760 hourly rows"), "{e}");
     }
