@@ -1,2 +1,518 @@
 //! Random-walk Metropolis-Hastings in the unit space `[0, 1]^d` (reference Algorithm 1) with
-//! adaptive Metropolis during burn-in (Haario, Saksman & Tamminen 2001).
+//! adaptive Metropolis during burn-in (Haario, Saksman & Tamminen 2001, Bernoulli 7(2)).
+//!
+//! - The chain moves in the unit space of the priors (`u = (x - min) / (max - min)`); the
+//!   target is the log posterior of the unit-space point, up to a constant.
+//! - Proposal: `u' = u + L z`, `z ~ N(0, I)`, `L` the lower Cholesky factor of the proposal
+//!   covariance. The proposal is symmetric, so the acceptance ratio of Algorithm 1 reduces to
+//!   `alpha = p(u' | y) / p(u | y)`; a draw is accepted when `ln U < ln p(u') - ln p(u)`.
+//! - Proposals outside `[0, 1]^d` are **rejected** (not clipped) and never sent to the target:
+//!   the prior density is zero there.
+//! - Adaptive Metropolis: the proposal covariance starts as `initial_sd^2 I`; from iteration
+//!   `adapt_start` until the end of burn-in it is `s_d (Cov + eps I)`, `s_d = 2.38^2 / d`, with
+//!   `Cov` the running (Welford) covariance of the chain's states so far. After burn-in the
+//!   proposal is frozen, so the recorded draws come from a time-homogeneous Markov chain.
+//! - Randomness per iteration, in this order: `d` standard normals, then one uniform — the same
+//!   whether the proposal is in the support or not, so a chain's draws do not depend on how it
+//!   is stepped (alone, batched, or in checkpointed segments).
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+
+use crate::prior::Triangular;
+use crate::{Result, StatsError};
+
+/// Settings of one chain; stored inside its [`ChainState`] so a checkpoint is self-contained.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MhConfig {
+    /// Iterations discarded as burn-in (adaptation happens only in these).
+    pub burn_in: u64,
+    /// Iteration from which the proposal covariance adapts (Haario's `t0`).
+    pub adapt_start: u64,
+    /// Recompute the proposal factor every this many iterations during adaptation.
+    pub adapt_every: u64,
+    /// Initial proposal standard deviation per coordinate, in the unit space.
+    pub initial_sd: f64,
+    /// Regularisation `eps` of `s_d (Cov + eps I)`.
+    pub epsilon: f64,
+    /// Scale `s_d`; `None` means `2.38^2 / d`.
+    pub scale: Option<f64>,
+}
+
+impl Default for MhConfig {
+    fn default() -> Self {
+        MhConfig {
+            burn_in: 5000,
+            adapt_start: 500,
+            adapt_every: 10,
+            initial_sd: 0.05,
+            epsilon: 1e-6,
+            scale: None,
+        }
+    }
+}
+
+impl MhConfig {
+    fn validate(&self) -> Result<()> {
+        if self.adapt_every == 0 {
+            return Err(StatsError::Invalid("adapt_every must be at least 1".into()));
+        }
+        if !(self.initial_sd.is_finite() && self.initial_sd > 0.0) {
+            return Err(StatsError::Invalid("initial_sd must be positive".into()));
+        }
+        if !(self.epsilon.is_finite() && self.epsilon >= 0.0) {
+            return Err(StatsError::Invalid("epsilon must be non-negative".into()));
+        }
+        if let Some(s) = self.scale {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(StatsError::Invalid("scale must be positive".into()));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The complete, serialisable state of one chain: resuming from a deserialised `ChainState`
+/// continues with bit-identical draws.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+///
+/// Floating-point fields are serialised as their IEEE-754 bit patterns (`u64`), so any
+/// serialiser (JSON included, whatever its float parsing) restores them exactly.
+pub struct ChainState {
+    config: MhConfig,
+    #[serde(with = "f64_bits::vec")]
+    position: Vec<f64>,
+    #[serde(with = "f64_bits")]
+    log_density: f64,
+    iteration: u64,
+    accepted: u64,
+    accepted_post_burn_in: u64,
+    /// Welford running mean and sum of outer products of the states seen during burn-in.
+    adapt_n: u64,
+    #[serde(with = "f64_bits::vec")]
+    adapt_mean: Vec<f64>,
+    #[serde(with = "f64_bits::vec")]
+    adapt_m2: Vec<f64>,
+    /// Lower Cholesky factor of the proposal covariance, row-major `d x d`.
+    #[serde(with = "f64_bits::vec")]
+    chol: Vec<f64>,
+    rng: ChaCha8Rng,
+}
+
+/// Exact serialisation of `f64` values as their bit patterns.
+mod f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_u64(v.to_bits())
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(f64::from_bits(u64::deserialize(d)?))
+    }
+
+    pub mod vec {
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(v: &[f64], s: S) -> Result<S::Ok, S::Error> {
+            s.collect_seq(v.iter().map(|x| x.to_bits()))
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+            Ok(Vec::<u64>::deserialize(d)?
+                .into_iter()
+                .map(f64::from_bits)
+                .collect())
+        }
+    }
+}
+
+/// Recorded post-burn-in draws of one chain (unit space) and their log densities.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Draws {
+    /// Dimension `d` of a draw.
+    pub dim: usize,
+    /// Draws, row-major `len x dim`.
+    pub points: Vec<f64>,
+    /// Log posterior of each draw.
+    pub log_density: Vec<f64>,
+}
+
+impl Draws {
+    /// No draws yet.
+    pub fn new(dim: usize) -> Self {
+        Draws {
+            dim,
+            points: Vec::new(),
+            log_density: Vec::new(),
+        }
+    }
+    /// Number of draws.
+    pub fn len(&self) -> usize {
+        self.log_density.len()
+    }
+    /// Whether there are no draws.
+    pub fn is_empty(&self) -> bool {
+        self.log_density.is_empty()
+    }
+    /// Draw `i`.
+    pub fn point(&self, i: usize) -> &[f64] {
+        &self.points[i * self.dim..(i + 1) * self.dim]
+    }
+    /// All draws of coordinate `j`.
+    pub fn column(&self, j: usize) -> Vec<f64> {
+        self.points
+            .iter()
+            .skip(j)
+            .step_by(self.dim)
+            .copied()
+            .collect()
+    }
+    /// Append the draws of a later segment.
+    pub fn extend(&mut self, later: &Draws) {
+        assert_eq!(self.dim, later.dim, "draws of different dimension");
+        self.points.extend_from_slice(&later.points);
+        self.log_density.extend_from_slice(&later.log_density);
+    }
+    fn push(&mut self, x: &[f64], lp: f64) {
+        self.points.extend_from_slice(x);
+        self.log_density.push(lp);
+    }
+}
+
+/// In-place lower Cholesky factor of a symmetric positive-definite row-major `d x d` matrix;
+/// `None` if not positive definite.
+fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..=i {
+            let mut s = a[i * d + j];
+            for k in 0..j {
+                s -= l[i * d + k] * l[j * d + k];
+            }
+            if i == j {
+                if s.is_nan() || s <= 0.0 || !s.is_finite() {
+                    return None;
+                }
+                l[i * d + i] = s.sqrt();
+            } else {
+                l[i * d + j] = s / l[j * d + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+impl ChainState {
+    /// A chain at `start` (in `[0, 1]^d`) whose log posterior is `log_density`, with its own
+    /// random stream: `ChaCha8Rng` seeded from `seed`, stream `stream` (use the chain index).
+    pub fn new(
+        config: MhConfig,
+        start: Vec<f64>,
+        log_density: f64,
+        seed: u64,
+        stream: u64,
+    ) -> Result<Self> {
+        config.validate()?;
+        let d = start.len();
+        if d == 0 {
+            return Err(StatsError::Invalid(
+                "a chain needs at least one parameter".into(),
+            ));
+        }
+        if let Some(i) = start.iter().position(|u| !(0.0..=1.0).contains(u)) {
+            return Err(StatsError::Invalid(format!(
+                "start coordinate {i} = {} is outside the unit interval",
+                start[i]
+            )));
+        }
+        let mut chol = vec![0.0; d * d];
+        for i in 0..d {
+            chol[i * d + i] = config.initial_sd;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(stream);
+        Ok(ChainState {
+            config,
+            position: start,
+            log_density: if log_density.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                log_density
+            },
+            iteration: 0,
+            accepted: 0,
+            accepted_post_burn_in: 0,
+            adapt_n: 0,
+            adapt_mean: vec![0.0; d],
+            adapt_m2: vec![0.0; d * d],
+            chol,
+            rng,
+        })
+    }
+
+    /// The chain's settings.
+    pub fn config(&self) -> &MhConfig {
+        &self.config
+    }
+    /// Dimension `d`.
+    pub fn dim(&self) -> usize {
+        self.position.len()
+    }
+    /// Current point (unit space).
+    pub fn position(&self) -> &[f64] {
+        &self.position
+    }
+    /// Log posterior of the current point.
+    pub fn log_density(&self) -> f64 {
+        self.log_density
+    }
+    /// Iterations completed.
+    pub fn iteration(&self) -> u64 {
+        self.iteration
+    }
+    /// Whether the next iteration is still burn-in.
+    pub fn in_burn_in(&self) -> bool {
+        self.iteration < self.config.burn_in
+    }
+    /// Accepted proposals over all iterations.
+    pub fn accepted(&self) -> u64 {
+        self.accepted
+    }
+    /// Acceptance rate over all iterations (NaN before the first).
+    pub fn acceptance_rate(&self) -> f64 {
+        self.accepted as f64 / self.iteration as f64
+    }
+    /// Acceptance rate after burn-in (NaN before the first post-burn-in iteration).
+    pub fn acceptance_rate_post_burn_in(&self) -> f64 {
+        let n = self.iteration.saturating_sub(self.config.burn_in);
+        self.accepted_post_burn_in as f64 / n as f64
+    }
+    /// Current proposal covariance `L L^T`, row-major `d x d`.
+    pub fn proposal_covariance(&self) -> Vec<f64> {
+        let d = self.dim();
+        let l = &self.chol;
+        let mut c = vec![0.0; d * d];
+        for i in 0..d {
+            for j in 0..d {
+                c[i * d + j] = (0..d).map(|k| l[i * d + k] * l[j * d + k]).sum();
+            }
+        }
+        c
+    }
+
+    /// Draw the proposal into `buf`; returns (inside the support, ln U).
+    fn propose(&mut self, buf: &mut Vec<f64>) -> (bool, f64) {
+        let d = self.dim();
+        buf.clear();
+        let z: Vec<f64> = (0..d).map(|_| self.rng.sample(StandardNormal)).collect();
+        for i in 0..d {
+            let step: f64 = (0..=i).map(|k| self.chol[i * d + k] * z[k]).sum();
+            buf.push(self.position[i] + step);
+        }
+        let u: f64 = self.rng.random();
+        let inside = buf.iter().all(|v| (0.0..=1.0).contains(v));
+        (inside, u.ln())
+    }
+
+    /// Accept or reject, adapt, and record. `lp` is `None` for an out-of-support proposal.
+    fn finish(&mut self, proposal: &[f64], ln_u: f64, lp: Option<f64>, draws: &mut Draws) {
+        if let Some(lp) = lp {
+            // Metropolis acceptance (Algorithm 1, step 6) for a symmetric proposal.
+            if !lp.is_nan() && ln_u < lp - self.log_density {
+                self.position.copy_from_slice(proposal);
+                self.log_density = lp;
+                self.accepted += 1;
+                if self.iteration >= self.config.burn_in {
+                    self.accepted_post_burn_in += 1;
+                }
+            }
+        }
+        self.iteration += 1;
+        let t = self.iteration;
+        if t <= self.config.burn_in {
+            self.adapt_update();
+            if t >= self.config.adapt_start
+                && t.is_multiple_of(self.config.adapt_every)
+                && t < self.config.burn_in
+            {
+                self.refresh_proposal();
+            }
+        } else {
+            draws.push(&self.position, self.log_density);
+        }
+    }
+
+    /// Welford update of the running mean and covariance with the current state.
+    fn adapt_update(&mut self) {
+        let d = self.dim();
+        self.adapt_n += 1;
+        let n = self.adapt_n as f64;
+        let delta: Vec<f64> = (0..d)
+            .map(|i| self.position[i] - self.adapt_mean[i])
+            .collect();
+        for (m, dl) in self.adapt_mean.iter_mut().zip(&delta) {
+            *m += dl / n;
+        }
+        for i in 0..d {
+            let after_i = self.position[i] - self.adapt_mean[i];
+            for (j, dj) in delta.iter().enumerate() {
+                // Symmetric update: M2 += delta_before x delta_after.
+                self.adapt_m2[j * d + i] += dj * after_i;
+            }
+        }
+    }
+
+    /// Haario et al. (2001) Eq. (2.1): `C_t = s_d Cov(X_0..X_{t-1}) + s_d eps I_d`.
+    fn refresh_proposal(&mut self) {
+        let d = self.dim();
+        if self.adapt_n < 2 {
+            return;
+        }
+        let s_d = self.config.scale.unwrap_or(2.38 * 2.38 / d as f64);
+        let n1 = (self.adapt_n - 1) as f64;
+        let mut c = vec![0.0; d * d];
+        for i in 0..d {
+            for j in 0..d {
+                // Symmetrise against rounding.
+                let cov = 0.5 * (self.adapt_m2[i * d + j] + self.adapt_m2[j * d + i]) / n1;
+                c[i * d + j] = s_d * (cov + if i == j { self.config.epsilon } else { 0.0 });
+            }
+        }
+        if let Some(l) = cholesky(&c, d) {
+            self.chol = l;
+        }
+    }
+}
+
+/// Advance one chain by one iteration, calling `target` (log posterior of a unit-space point)
+/// only for proposals inside `[0, 1]^d`; post-burn-in states are appended to `draws`.
+pub fn step<F: FnMut(&[f64]) -> f64>(state: &mut ChainState, target: &mut F, draws: &mut Draws) {
+    let mut buf = Vec::with_capacity(state.dim());
+    let (inside, ln_u) = state.propose(&mut buf);
+    let lp = inside.then(|| target(&buf));
+    state.finish(&buf, ln_u, lp, draws);
+}
+
+/// Advance one chain by `n` iterations; returns the post-burn-in draws of this segment.
+/// Running `a` then `b` iterations (with any checkpoint in between) gives exactly the draws of
+/// one run of `a + b`.
+pub fn run_segment<F: FnMut(&[f64]) -> f64>(
+    state: &mut ChainState,
+    n: u64,
+    mut target: F,
+) -> Draws {
+    let mut draws = Draws::new(state.dim());
+    for _ in 0..n {
+        step(state, &mut target, &mut draws);
+    }
+    draws
+}
+
+/// Advance several chains by one iteration each, calling `target` once with all in-support
+/// proposals (in chain order; chains whose proposal left the support are skipped). `target`
+/// must return one log posterior per point it was given. Each chain's draws are identical to
+/// stepping it alone.
+pub fn step_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
+    states: &mut [ChainState],
+    target: &mut F,
+    draws: &mut [Draws],
+) -> Result<()> {
+    if draws.len() != states.len() {
+        return Err(StatsError::Shape(format!(
+            "{} chains but {} draw buffers",
+            states.len(),
+            draws.len()
+        )));
+    }
+    let mut proposals = Vec::with_capacity(states.len());
+    let mut pending = Vec::with_capacity(states.len());
+    for s in states.iter_mut() {
+        let mut buf = Vec::with_capacity(s.dim());
+        let (inside, ln_u) = s.propose(&mut buf);
+        // An out-of-support proposal is kept only to finish the step; it is never evaluated.
+        pending.push((inside, ln_u));
+        proposals.push(buf);
+    }
+    let batch: Vec<Vec<f64>> = proposals
+        .iter()
+        .zip(&pending)
+        .filter(|(_, (inside, _))| *inside)
+        .map(|(p, _)| p.clone())
+        .collect();
+    let lps = if batch.is_empty() {
+        Vec::new()
+    } else {
+        target(&batch)
+    };
+    if lps.len() != batch.len() {
+        return Err(StatsError::Shape(format!(
+            "target returned {} log densities for {} proposals",
+            lps.len(),
+            batch.len()
+        )));
+    }
+    let mut next = lps.into_iter();
+    for ((s, (inside, ln_u)), (p, d)) in states
+        .iter_mut()
+        .zip(pending)
+        .zip(proposals.iter().zip(draws.iter_mut()))
+    {
+        let lp = if inside { next.next() } else { None };
+        s.finish(p, ln_u, lp, d);
+    }
+    Ok(())
+}
+
+/// Advance several chains by `n` iterations each with a batched target; returns each chain's
+/// post-burn-in draws of this segment.
+pub fn run_segment_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
+    states: &mut [ChainState],
+    n: u64,
+    mut target: F,
+) -> Result<Vec<Draws>> {
+    let mut draws: Vec<Draws> = states.iter().map(|s| Draws::new(s.dim())).collect();
+    for _ in 0..n {
+        step_batch(states, &mut target, &mut draws)?;
+    }
+    Ok(draws)
+}
+
+/// Dispersed starting points for `n_chains` chains: each a draw from the priors (inverse CDF),
+/// mapped to the unit space; chain `c` uses `ChaCha8Rng` seeded from `seed`, stream `c`.
+pub fn dispersed_starts(priors: &[Triangular], n_chains: usize, seed: u64) -> Vec<Vec<f64>> {
+    (0..n_chains)
+        .map(|c| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(c as u64);
+            priors
+                .iter()
+                .map(|p| p.to_unit(p.sample(&mut rng)))
+                .collect()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cholesky_known() {
+        // [[4, 2], [2, 3]] = L L^T with L = [[2, 0], [1, sqrt 2]].
+        let l = cholesky(&[4.0, 2.0, 2.0, 3.0], 2).unwrap();
+        assert!((l[0] - 2.0).abs() < 1e-15 && (l[2] - 1.0).abs() < 1e-15);
+        assert!((l[3] - 2f64.sqrt()).abs() < 1e-15 && l[1] == 0.0);
+        assert!(cholesky(&[1.0, 2.0, 2.0, 1.0], 2).is_none());
+    }
+
+    #[test]
+    fn rejects_bad_start_and_config() {
+        assert!(ChainState::new(MhConfig::default(), vec![0.5, 1.2], 0.0, 1, 0).is_err());
+        let cfg = MhConfig {
+            adapt_every: 0,
+            ..MhConfig::default()
+        };
+        assert!(ChainState::new(cfg, vec![0.5], 0.0, 1, 0).is_err());
+    }
+}
