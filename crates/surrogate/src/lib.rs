@@ -1,1 +1,18 @@
-//! The LSTM surrogate: training sets from design points, and evaluation of the exported ONNX model through ONNX Runtime.
+//! The LSTM surrogate (Jiang et al. 2024, section 2.3.2): training sets from design points,
+//! training through the embedded PyTorch trainer, and evaluation of the exported ONNX model
+//! through ONNX Runtime.
+//!
+//! * [`dataset`]: [`TrainingSet`] (design points x 8,760 h) written as `.npy` + `dataset.json`.
+//! * [`train()`]: runs `python -m bemcal_train` (LSTM, lookback 3, 2 x 128, ReLU, linear head),
+//!   which writes the ONNX graphs and `surrogate.json` ([`SurrogateMeta`]).
+//! * [`surrogate`]: [`Surrogate::load`] and [`Evaluator`], the per-proposal hot path.
+//! * [`predict`]: CSV output of an evaluation.
+
+pub mod dataset;
+pub mod predict;
+pub mod surrogate;
+pub mod train;
+
+pub use dataset::{DatasetError, DatasetMeta, ParamSpec, Split, TrainingSet};
+pub use surrogate::{Evaluator, Surrogate, SurrogateError, SurrogateMeta};
+pub use train::{train, TimeFeatures, TrainOptions, TrainReport};

@@ -1,0 +1,689 @@
+//! Evaluation of a trained surrogate through ONNX Runtime (`ort`, dynamically loaded from the
+//! Python environment's `onnxruntime` wheel).
+//!
+//! A surrogate directory (written by `python -m bemcal_train`) holds `surrogate.json`
+//! ([`SurrogateMeta`]) and three ONNX graphs:
+//!
+//! * `surrogate.onnx` (plain): `x` `[batch, 3, n_features]` f32 -> `y` `[batch, n_outputs]` kWh,
+//!   the LSTM of the reference (Jiang et al. 2024, Fig. 8) with the output scaling folded in.
+//! * `surrogate_weather.onnx`: `w` `[n_hours, n_hourly]` -> `gw` `[n_hours, 4 * hidden]`, the
+//!   hourly part of the first layer's input projection, computed once per weather year.
+//! * `surrogate_core.onnx`: `p` `[n_proposals, n_params]`, `gw` -> `y`
+//!   `[n_proposals, n_hours, n_outputs]` kWh: the same numbers as the plain graph on every window
+//!   of the year, with the parameter part of the input projection computed once per proposal and
+//!   the zero-state recurrent terms of each window's first step dropped. This is the MCMC hot
+//!   path ([`Evaluator`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use bemcal_weather::HourlyFeatures;
+use ndarray::{s, Array2, Array3, ArrayView2, ArrayView3};
+use ort::environment::Environment;
+use ort::session::builder::GraphOptimizationLevel;
+use ort::session::Session;
+use ort::value::{Tensor, TensorRef};
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::{ParamSpec, WEATHER_FEATURES};
+
+/// Name of the metadata file in a surrogate directory.
+pub const METADATA_FILE: &str = "surrogate.json";
+/// The `format` field every surrogate metadata file carries.
+pub const FORMAT: &str = "bemcal-surrogate";
+/// The metadata `format_version` this build reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// Lookback of the LSTM windows (reference Table 3).
+pub const LOOKBACK: usize = 3;
+/// Variable overriding the ONNX Runtime shared library.
+pub const ORT_DYLIB_VAR: &str = "ORT_DYLIB_PATH";
+/// ONNX Runtime library inside the `onnxruntime` wheel.
+pub const ORT_LIBRARY: &str = "capi/libonnxruntime.so.1.31.1";
+
+/// Errors loading or evaluating a surrogate.
+#[derive(Debug, thiserror::Error)]
+pub enum SurrogateError {
+    /// ONNX Runtime could not be found or initialised.
+    #[error("ONNX Runtime: {0}")]
+    Runtime(String),
+    /// The surrogate directory or its metadata is missing or invalid.
+    #[error("{path}: {message}")]
+    Metadata { path: PathBuf, message: String },
+    /// Arguments do not fit the surrogate (wrong number of parameters, hours, ...).
+    #[error("{0}")]
+    Input(String),
+    /// ONNX Runtime failed while running a graph.
+    #[error("ONNX Runtime run failed: {0}")]
+    Ort(String),
+}
+
+type Result<T> = std::result::Result<T, SurrogateError>;
+
+fn ort_err(e: impl std::fmt::Display) -> SurrogateError {
+    SurrogateError::Ort(e.to_string())
+}
+
+/// The ONNX Runtime shared library: `$ORT_DYLIB_PATH`, else the venv's `onnxruntime` wheel.
+pub fn ort_library_path() -> Result<PathBuf> {
+    if let Some(p) = std::env::var_os(ORT_DYLIB_VAR) {
+        let p = PathBuf::from(p);
+        return if p.exists() {
+            Ok(p)
+        } else {
+            Err(SurrogateError::Runtime(format!(
+                "{ORT_DYLIB_VAR}={} does not exist",
+                p.display()
+            )))
+        };
+    }
+    let venv = bemcal_pyenv::find_venv().ok_or_else(|| {
+        SurrogateError::Runtime(format!(
+            "no Python environment found to load {ORT_LIBRARY} from; {}",
+            bemcal_pyenv::INSTALL_HINT
+        ))
+    })?;
+    bemcal_pyenv::package_file(&venv, "onnxruntime", ORT_LIBRARY).ok_or_else(|| {
+        SurrogateError::Runtime(format!(
+            "onnxruntime/{ORT_LIBRARY} not found in {} (or set {ORT_DYLIB_VAR}); {}",
+            venv.display(),
+            bemcal_pyenv::INSTALL_HINT
+        ))
+    })
+}
+
+/// The process-wide ONNX Runtime environment, initialised on first use from
+/// [`ort_library_path`].
+pub fn ort_environment() -> Result<&'static Environment> {
+    static ENV: OnceLock<std::result::Result<Environment, String>> = OnceLock::new();
+    ENV.get_or_init(|| {
+        let path = ort_library_path().map_err(|e| e.to_string())?;
+        ort::init_from(&path)
+            .map_err(|e| format!("cannot load {}: {e}", path.display()))?
+            .with_name("bemcal")
+            .build()
+            .map_err(|e| format!("cannot initialise {}: {e}", path.display()))
+    })
+    .as_ref()
+    .map_err(|e| SurrogateError::Runtime(e.clone()))
+}
+
+/// Model shape recorded in the metadata.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelInfo {
+    /// `"lstm"`.
+    pub kind: String,
+    /// Window length (3).
+    pub lookback: usize,
+    /// LSTM layers.
+    pub layers: usize,
+    /// Hidden units per layer.
+    pub hidden: usize,
+}
+
+/// Graph file names.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GraphFiles {
+    /// `x` -> `y`.
+    pub plain: String,
+    /// `w` -> `gw`.
+    pub weather: String,
+    /// `p`, `gw` -> `y`.
+    pub core: String,
+}
+
+/// Weather normalisation: `(w - mean) / std` per feature.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WeatherNorm {
+    /// Feature names, [`WEATHER_FEATURES`].
+    pub names: Vec<String>,
+    /// Means over the training year.
+    pub mean: Vec<f64>,
+    /// Standard deviations (1 for constant features).
+    pub std: Vec<f64>,
+}
+
+/// One output (meter) of the surrogate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputInfo {
+    /// Output name, e.g. `heating_kwh`.
+    pub name: String,
+    /// The scale folded into the graphs (the output's training maximum, kWh).
+    pub scale: f64,
+    /// Held-out RMSE in kWh: the surrogate error sigma_eta of the likelihood (reference Eq. 7).
+    pub sigma_eta_kwh: f64,
+}
+
+/// Held-out accuracy of one output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutMetric {
+    /// RMSE over held-out points x hours, kWh.
+    pub rmse_kwh: f64,
+    /// RMSE / mean of the held-out truth, %; absent for an all-zero output.
+    pub cv_rmse_pct: Option<f64>,
+    /// Mean bias / mean of the held-out truth, %.
+    pub nmbe_pct: Option<f64>,
+    /// Mean of the held-out truth, kWh.
+    pub mean_kwh: f64,
+}
+
+/// Held-out design points and per-output metrics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// Held-out design point indices.
+    pub points: Vec<usize>,
+    /// Metrics by output name.
+    pub metrics: std::collections::BTreeMap<String, HeldOutMetric>,
+}
+
+/// Training facts recorded by the trainer (subset).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingInfo {
+    /// Seed.
+    pub seed: u64,
+    /// Epochs run (early stopping may end before the maximum).
+    pub epochs_run: usize,
+    /// Epoch with the best held-out loss (the exported weights).
+    pub best_epoch: usize,
+    /// Wall time of training and evaluation, s.
+    pub seconds: f64,
+    /// torch version used.
+    pub torch_version: String,
+    /// `cpu` or `cuda...`.
+    pub device: String,
+}
+
+/// `surrogate.json`: the contract between the trainer and [`Surrogate`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurrogateMeta {
+    /// [`FORMAT`].
+    pub format: String,
+    /// [`FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Network shape.
+    pub model: ModelInfo,
+    /// Graph file names.
+    pub files: GraphFiles,
+    /// Features per window step: params + weather + time features.
+    pub n_features: usize,
+    /// Feature names in input order.
+    pub feature_names: Vec<String>,
+    /// Parameters (names, bounds for the [0, 1] scaling, prior modes), input order.
+    pub params: Vec<ParamSpec>,
+    /// Weather normalisation.
+    pub weather: WeatherNorm,
+    /// `none`, `hour` or `hour+schedule`.
+    pub time_features: String,
+    /// Names of the time features.
+    pub time_feature_names: Vec<String>,
+    /// Outputs, graph order.
+    pub outputs: Vec<OutputInfo>,
+    /// Whether the graphs clamp outputs at 0.
+    pub nonnegative: bool,
+    /// Held-out accuracy.
+    pub held_out: HeldOut,
+    /// Training facts.
+    pub training: TrainingInfo,
+}
+
+impl SurrogateMeta {
+    /// Reads and validates `dir/surrogate.json`.
+    pub fn read(dir: &Path) -> Result<SurrogateMeta> {
+        let path = dir.join(METADATA_FILE);
+        let bad = |message: String| SurrogateError::Metadata {
+            path: path.clone(),
+            message,
+        };
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            bad(format!(
+                "cannot read ({e}); is this a surrogate directory written by `bemcal train`?"
+            ))
+        })?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+        if value.get("format").and_then(|v| v.as_str()) != Some(FORMAT) {
+            return Err(bad(format!("'format' is not \"{FORMAT}\"")));
+        }
+        let version = value.get("format_version").and_then(|v| v.as_u64());
+        if version != Some(FORMAT_VERSION as u64) {
+            return Err(bad(format!(
+                "format_version {version:?} is not supported by this bemcal (reads {FORMAT_VERSION}); retrain with `bemcal train`"
+            )));
+        }
+        let meta: SurrogateMeta = serde_json::from_value(value)
+            .map_err(|e| bad(format!("missing or invalid field: {e}")))?;
+        meta.validate().map_err(bad)?;
+        Ok(meta)
+    }
+
+    /// Consistency checks; the message names the field.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.model.lookback != LOOKBACK {
+            return Err(format!(
+                "model.lookback {} is not {LOOKBACK}",
+                self.model.lookback
+            ));
+        }
+        if self.weather.names != WEATHER_FEATURES {
+            return Err(format!(
+                "weather.names {:?} are not {:?}",
+                self.weather.names, WEATHER_FEATURES
+            ));
+        }
+        if self.weather.mean.len() != 5 || self.weather.std.len() != 5 {
+            return Err("weather.mean and weather.std need 5 values".into());
+        }
+        if self
+            .weather
+            .std
+            .iter()
+            .any(|s| !(s.is_finite() && *s > 0.0))
+            || self.weather.mean.iter().any(|m| !m.is_finite())
+        {
+            return Err("weather.mean must be finite and weather.std finite and > 0".into());
+        }
+        let expect: &[&str] = match self.time_features.as_str() {
+            "none" => &[],
+            "hour" => &["hour_sin", "hour_cos"],
+            "hour+schedule" => &["hour_sin", "hour_cos", "offday_hour_sin", "offday_hour_cos"],
+            other => {
+                return Err(format!(
+                    "time_features '{other}' is not none, hour or hour+schedule"
+                ))
+            }
+        };
+        if self.time_feature_names != expect {
+            return Err(format!(
+                "time_feature_names {:?} do not match time_features '{}'",
+                self.time_feature_names, self.time_features
+            ));
+        }
+        if self.n_features != self.params.len() + self.n_hourly() {
+            return Err(format!(
+                "n_features {} != {} params + {} weather + {} time features",
+                self.n_features,
+                self.params.len(),
+                self.weather.names.len(),
+                self.time_feature_names.len()
+            ));
+        }
+        if self.feature_names.len() != self.n_features {
+            return Err("feature_names length differs from n_features".into());
+        }
+        for p in &self.params {
+            if !(p.min.is_finite()
+                && p.max.is_finite()
+                && p.max > p.min
+                && (p.min..=p.max).contains(&p.mode))
+            {
+                return Err(format!(
+                    "parameter '{}': need finite min < max and min <= mode <= max",
+                    p.name
+                ));
+            }
+        }
+        if self.outputs.is_empty() {
+            return Err("no outputs".into());
+        }
+        for o in &self.outputs {
+            if !(o.scale.is_finite()
+                && o.scale > 0.0
+                && o.sigma_eta_kwh.is_finite()
+                && o.sigma_eta_kwh >= 0.0)
+            {
+                return Err(format!(
+                    "output '{}': scale must be > 0 and sigma_eta_kwh >= 0",
+                    o.name
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Per-hour features: weather + time features.
+    pub fn n_hourly(&self) -> usize {
+        self.weather.names.len() + self.time_feature_names.len()
+    }
+
+    /// Output names in graph order.
+    pub fn output_names(&self) -> Vec<String> {
+        self.outputs.iter().map(|o| o.name.clone()).collect()
+    }
+
+    /// sigma_eta (kWh) per output, graph order.
+    pub fn sigma_eta_kwh(&self) -> Vec<f64> {
+        self.outputs.iter().map(|o| o.sigma_eta_kwh).collect()
+    }
+
+    /// Prior modes of the parameters, input order.
+    pub fn param_modes(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.mode).collect()
+    }
+
+    /// Writes the normalised parameters `(p - min) / (max - min)` into `out`. Pure.
+    pub fn normalise_params(&self, params: &[f64], out: &mut [f32]) -> Result<()> {
+        if params.len() != self.params.len() || out.len() != self.params.len() {
+            return Err(SurrogateError::Input(format!(
+                "{} parameter values given; the surrogate takes {} ({})",
+                params.len(),
+                self.params.len(),
+                self.params
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+        for ((o, v), spec) in out.iter_mut().zip(params).zip(&self.params) {
+            if !v.is_finite() {
+                return Err(SurrogateError::Input(format!(
+                    "parameter '{}' is {v}",
+                    spec.name
+                )));
+            }
+            *o = spec.normalise(*v) as f32;
+        }
+        Ok(())
+    }
+
+    /// The per-hour part of the input, `[n_hours, n_hourly]`: `(w - mean) / std` for the five
+    /// weather features, then the time features (hour of day `h = t mod 24`, hour beginning:
+    /// `sin, cos(2 pi h / 24)`, and for `hour+schedule` the same two times the off-day flag,
+    /// day type != weekday). Pure; identical to the trainer's `data.hourly_features`.
+    pub fn hourly_inputs(&self, weather: &HourlyFeatures) -> Array2<f32> {
+        let n = weather.len();
+        let k = self.n_hourly();
+        let mut m = Array2::zeros((n, k));
+        for t in 0..n {
+            let row = weather.row(t);
+            for j in 0..5 {
+                m[[t, j]] = ((row[j] - self.weather.mean[j]) / self.weather.std[j]) as f32;
+            }
+            let ang = 2.0 * std::f64::consts::PI * ((t % 24) as f64) / 24.0;
+            let off = if row[4] != 0.0 { 1.0 } else { 0.0 };
+            let extra = [ang.sin(), ang.cos(), off * ang.sin(), off * ang.cos()];
+            for (j, v) in extra.iter().take(self.time_feature_names.len()).enumerate() {
+                m[[t, 5 + j]] = *v as f32;
+            }
+        }
+        m
+    }
+}
+
+/// A loaded surrogate: metadata and the three ONNX Runtime sessions.
+pub struct Surrogate {
+    meta: SurrogateMeta,
+    dir: PathBuf,
+    plain: Session,
+    weather: Session,
+    core: Session,
+}
+
+impl std::fmt::Debug for Surrogate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Surrogate")
+            .field("dir", &self.dir)
+            .field("outputs", &self.meta.output_names())
+            .finish()
+    }
+}
+
+fn session(dir: &Path, file: &str, threads: usize) -> Result<Session> {
+    let path = dir.join(file);
+    if !path.exists() {
+        return Err(SurrogateError::Metadata {
+            path,
+            message: "graph file missing".into(),
+        });
+    }
+    let env = ort_environment()?;
+    let fail = |e: String| SurrogateError::Metadata {
+        path: path.clone(),
+        message: format!("cannot load ONNX graph: {e}"),
+    };
+    Session::builder(env)
+        .map_err(|e| fail(e.to_string()))?
+        .with_optimization_level(GraphOptimizationLevel::Level3)
+        .map_err(|e| fail(e.to_string()))?
+        .with_intra_threads(threads.max(1))
+        .map_err(|e| fail(e.to_string()))?
+        .with_inter_threads(1)
+        .map_err(|e| fail(e.to_string()))?
+        .commit_from_file(&path)
+        .map_err(|e| fail(e.to_string()))
+}
+
+/// Checks a session's input or output `name` has rank `dims.len()` and the fixed sizes given
+/// (`None` = dynamic/any).
+fn check_io(s: &Session, file: &Path, input: bool, name: &str, dims: &[Option<i64>]) -> Result<()> {
+    let list = if input { s.inputs() } else { s.outputs() };
+    let what = if input { "input" } else { "output" };
+    let bad = |message: String| SurrogateError::Metadata {
+        path: file.to_path_buf(),
+        message,
+    };
+    let o = list
+        .iter()
+        .find(|o| o.name() == name)
+        .ok_or_else(|| bad(format!("graph has no {what} '{name}'")))?;
+    let shape = o
+        .dtype()
+        .tensor_shape()
+        .ok_or_else(|| bad(format!("{what} '{name}' is not a tensor")))?;
+    let got: Vec<i64> = shape.iter().copied().collect();
+    if got.len() != dims.len() {
+        return Err(bad(format!(
+            "{what} '{name}' has rank {}, expected {}",
+            got.len(),
+            dims.len()
+        )));
+    }
+    for (i, (g, d)) in got.iter().zip(dims).enumerate() {
+        if let Some(d) = d {
+            if g != d {
+                return Err(bad(format!(
+                    "{what} '{name}' dimension {i} is {g}, metadata says {d} (graph and surrogate.json do not match)"
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+impl Surrogate {
+    /// Loads `dir/surrogate.json` (validated) and its graphs, with `threads` intra-op threads
+    /// per session and graph optimisation level 3. Checks every graph's inputs and outputs
+    /// against the metadata.
+    pub fn load(dir: impl AsRef<Path>, threads: usize) -> Result<Surrogate> {
+        let dir = dir.as_ref().to_path_buf();
+        let meta = SurrogateMeta::read(&dir)?;
+        let plain = session(&dir, &meta.files.plain, threads)?;
+        let weather = session(&dir, &meta.files.weather, threads)?;
+        let core = session(&dir, &meta.files.core, threads)?;
+        let (np, nf, no, nh) = (
+            meta.params.len() as i64,
+            meta.n_features as i64,
+            meta.outputs.len() as i64,
+            meta.n_hourly() as i64,
+        );
+        let g = 4 * meta.model.hidden as i64;
+        let f = |n: &str| dir.join(n);
+        check_io(
+            &plain,
+            &f(&meta.files.plain),
+            true,
+            "x",
+            &[None, Some(LOOKBACK as i64), Some(nf)],
+        )?;
+        check_io(&plain, &f(&meta.files.plain), false, "y", &[None, Some(no)])?;
+        check_io(
+            &weather,
+            &f(&meta.files.weather),
+            true,
+            "w",
+            &[None, Some(nh)],
+        )?;
+        check_io(
+            &weather,
+            &f(&meta.files.weather),
+            false,
+            "gw",
+            &[None, Some(g)],
+        )?;
+        check_io(&core, &f(&meta.files.core), true, "p", &[None, Some(np)])?;
+        check_io(&core, &f(&meta.files.core), true, "gw", &[None, Some(g)])?;
+        check_io(
+            &core,
+            &f(&meta.files.core),
+            false,
+            "y",
+            &[None, None, Some(no)],
+        )?;
+        Ok(Surrogate {
+            meta,
+            dir,
+            plain,
+            weather,
+            core,
+        })
+    }
+
+    /// The validated metadata.
+    pub fn meta(&self) -> &SurrogateMeta {
+        &self.meta
+    }
+
+    /// The directory the surrogate was loaded from.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Runs the plain graph on explicit windows `x` `[batch, 3, n_features]` (normalised
+    /// inputs) -> `[batch, n_outputs]` kWh. For checks and tools; the hot path is [`Evaluator`].
+    pub fn run_windows(&mut self, x: ArrayView3<'_, f32>) -> Result<Array2<f32>> {
+        let (b, l, f) = x.dim();
+        if l != LOOKBACK || f != self.meta.n_features {
+            return Err(SurrogateError::Input(format!(
+                "windows have shape [{b}, {l}, {f}], expected [batch, {LOOKBACK}, {}]",
+                self.meta.n_features
+            )));
+        }
+        let x = x.as_standard_layout();
+        let out = self
+            .plain
+            .run(ort::inputs!["x" => TensorRef::from_array_view(x.view()).map_err(ort_err)?])
+            .map_err(ort_err)?;
+        let y = out["y"].try_extract_array::<f32>().map_err(ort_err)?;
+        y.into_dimensionality::<ndarray::Ix2>()
+            .map(|v| v.to_owned())
+            .map_err(ort_err)
+    }
+
+    /// Binds the surrogate to a weather year: computes the normalised hourly inputs and their
+    /// first-layer projection once and keeps them for every later evaluation.
+    pub fn bind(mut self, weather: &HourlyFeatures) -> Result<Evaluator> {
+        if weather.len() < LOOKBACK {
+            return Err(SurrogateError::Input(format!(
+                "{} weather hours; need at least {LOOKBACK}",
+                weather.len()
+            )));
+        }
+        let w = self.meta.hourly_inputs(weather);
+        let gw = {
+            let out = self
+                .weather
+                .run(ort::inputs!["w" => TensorRef::from_array_view(w.view()).map_err(ort_err)?])
+                .map_err(ort_err)?;
+            let gw = out["gw"].try_extract_array::<f32>().map_err(ort_err)?;
+            Tensor::from_array(gw.to_owned()).map_err(ort_err)?
+        };
+        let n_hours = weather.len();
+        let n_out = self.meta.outputs.len();
+        Ok(Evaluator {
+            p: Vec::new(),
+            out: Array3::zeros((1, n_hours, n_out)),
+            gw,
+            n_hours,
+            surrogate: self,
+        })
+    }
+}
+
+/// A surrogate bound to one weather year ([`Surrogate::bind`]): each evaluation only writes the
+/// normalised parameters; the weather part stays in `gw`.
+pub struct Evaluator {
+    surrogate: Surrogate,
+    gw: Tensor<f32>,
+    n_hours: usize,
+    p: Vec<f32>,
+    out: Array3<f32>,
+}
+
+impl Evaluator {
+    /// The surrogate (metadata).
+    pub fn surrogate(&self) -> &Surrogate {
+        &self.surrogate
+    }
+
+    /// Releases the surrogate (e.g. to bind another weather year).
+    pub fn into_surrogate(self) -> Surrogate {
+        self.surrogate
+    }
+
+    /// Hours of the bound weather.
+    pub fn n_hours(&self) -> usize {
+        self.n_hours
+    }
+
+    /// One parameter vector (raw values, the surrogate's parameter order) -> `[n_hours,
+    /// n_outputs]` kWh, a view of a buffer reused by the next call.
+    pub fn evaluate(&mut self, params: &[f64]) -> Result<ArrayView2<'_, f32>> {
+        let y = self.evaluate_batch(std::slice::from_ref(&params))?;
+        Ok(y.index_axis_move(ndarray::Axis(0), 0))
+    }
+
+    /// Several parameter vectors in one ONNX Runtime call -> `[n_proposals, n_hours, n_outputs]`
+    /// kWh, a view of a buffer reused by the next call.
+    pub fn evaluate_batch<P: AsRef<[f64]>>(&mut self, params: &[P]) -> Result<ArrayView3<'_, f32>> {
+        let meta = &self.surrogate.meta;
+        let np = meta.params.len();
+        let n = params.len();
+        if n == 0 {
+            return Err(SurrogateError::Input(
+                "no parameter vectors to evaluate".into(),
+            ));
+        }
+        self.p.resize(n * np, 0.0);
+        for (i, p) in params.iter().enumerate() {
+            meta.normalise_params(p.as_ref(), &mut self.p[i * np..(i + 1) * np])?;
+        }
+        let n_out = meta.outputs.len();
+        let outputs = self
+            .surrogate
+            .core
+            .run(ort::inputs![
+                "p" => TensorRef::from_array_view(([n, np], &self.p[..])).map_err(ort_err)?,
+                "gw" => &self.gw,
+            ])
+            .map_err(ort_err)?;
+        let y = outputs["y"].try_extract_array::<f32>().map_err(ort_err)?;
+        if y.shape() != [n, self.n_hours, n_out] {
+            return Err(SurrogateError::Ort(format!(
+                "core graph returned shape {:?}, expected [{n}, {}, {n_out}]",
+                y.shape(),
+                self.n_hours
+            )));
+        }
+        if self.out.dim().0 != n {
+            self.out = Array3::zeros((n, self.n_hours, n_out));
+        }
+        self.out
+            .as_slice_mut()
+            .expect("standard layout")
+            .copy_from_slice(
+                y.as_slice()
+                    .ok_or_else(|| SurrogateError::Ort("non-contiguous output".into()))?,
+            );
+        drop(outputs);
+        Ok(self.out.slice(s![.., .., ..]))
+    }
+}

@@ -1,0 +1,225 @@
+//! `train`: runs the Python trainer (`python/bemcal_train`, embedded in this crate) on a dataset
+//! directory and reads back the metadata it writes.
+//!
+//! The package files are compiled into the binary with `include_str!` and written to a temporary
+//! directory at run time, so training works from any directory. The interpreter is
+//! `$BEMCAL_PYTHON`, else the Python environment's (`bemcal-pyenv`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::surrogate::{SurrogateError, SurrogateMeta};
+
+/// Variable naming the Python interpreter explicitly.
+pub const PYTHON_VAR: &str = "BEMCAL_PYTHON";
+
+/// The trainer package, `(relative path, contents)`.
+pub const TRAINER_FILES: [(&str, &str); 6] = [
+    (
+        "bemcal_train/__init__.py",
+        include_str!("../../../python/bemcal_train/__init__.py"),
+    ),
+    (
+        "bemcal_train/__main__.py",
+        include_str!("../../../python/bemcal_train/__main__.py"),
+    ),
+    (
+        "bemcal_train/data.py",
+        include_str!("../../../python/bemcal_train/data.py"),
+    ),
+    (
+        "bemcal_train/model.py",
+        include_str!("../../../python/bemcal_train/model.py"),
+    ),
+    (
+        "bemcal_train/export.py",
+        include_str!("../../../python/bemcal_train/export.py"),
+    ),
+    (
+        "bemcal_train/train.py",
+        include_str!("../../../python/bemcal_train/train.py"),
+    ),
+];
+
+/// Time-of-day inputs offered to the LSTM (the reference gives it none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TimeFeatures {
+    /// The reference's inputs only.
+    #[default]
+    None,
+    /// sin/cos of 2 pi h / 24.
+    Hour,
+    /// Hour plus hour x off-day (weekend/holiday) interactions.
+    HourSchedule,
+}
+
+impl TimeFeatures {
+    /// The trainer's spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TimeFeatures::None => "none",
+            TimeFeatures::Hour => "hour",
+            TimeFeatures::HourSchedule => "hour+schedule",
+        }
+    }
+}
+
+impl std::str::FromStr for TimeFeatures {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "none" => Ok(TimeFeatures::None),
+            "hour" => Ok(TimeFeatures::Hour),
+            "hour+schedule" => Ok(TimeFeatures::HourSchedule),
+            _ => Err(format!("'{s}': expected none, hour or hour+schedule")),
+        }
+    }
+}
+
+/// Trainer options (defaults: reference Table 3 with early stopping).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainOptions {
+    /// Maximum epochs (200).
+    pub epochs: usize,
+    /// Early-stopping patience on the held-out loss, epochs (20).
+    pub patience: usize,
+    /// Seed for torch and numpy (0).
+    pub seed: u64,
+    /// Mini-batch size (1024).
+    pub batch_size: usize,
+    /// Time-of-day features (none).
+    pub time_features: TimeFeatures,
+    /// `auto`, `cpu` or `cuda` (`cpu`).
+    pub device: String,
+    /// torch threads; 0 = torch's default.
+    pub threads: usize,
+    /// Interpreter; `None` = `$BEMCAL_PYTHON` or the venv's.
+    pub python: Option<PathBuf>,
+    /// Do not echo the trainer's output (it still goes into the error on failure).
+    pub quiet: bool,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            epochs: 200,
+            patience: 20,
+            seed: 0,
+            batch_size: 1024,
+            time_features: TimeFeatures::None,
+            device: "cpu".into(),
+            threads: 0,
+            python: None,
+            quiet: false,
+        }
+    }
+}
+
+/// What training produced.
+#[derive(Debug, Clone)]
+pub struct TrainReport {
+    /// The surrogate directory.
+    pub out_dir: PathBuf,
+    /// Its validated metadata (held-out metrics, sigma_eta).
+    pub meta: SurrogateMeta,
+    /// Wall time of the Python run, s.
+    pub seconds: f64,
+}
+
+/// The interpreter: `$BEMCAL_PYTHON`, else the venv's; `None` with no environment.
+pub fn find_python() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os(PYTHON_VAR) {
+        return Some(PathBuf::from(p));
+    }
+    bemcal_pyenv::find_venv().map(|v| bemcal_pyenv::python(&v))
+}
+
+fn runtime(msg: String) -> SurrogateError {
+    SurrogateError::Runtime(msg)
+}
+
+/// Writes the embedded trainer package under `dir` (e.g. to run it by hand).
+pub fn write_trainer(dir: &Path) -> std::io::Result<()> {
+    for (rel, text) in TRAINER_FILES {
+        let p = dir.join(rel);
+        std::fs::create_dir_all(p.parent().expect("relative path has a parent"))?;
+        std::fs::write(p, text)?;
+    }
+    Ok(())
+}
+
+/// Trains a surrogate on `dataset_dir` (written by [`crate::TrainingSet::write`]) into
+/// `out_dir` by running `python -m bemcal_train`; returns the validated metadata.
+pub fn train(
+    dataset_dir: &Path,
+    out_dir: &Path,
+    opts: &TrainOptions,
+) -> Result<TrainReport, SurrogateError> {
+    let python = opts.python.clone().or_else(find_python).ok_or_else(|| {
+        runtime(format!(
+            "no Python environment found for training (set {PYTHON_VAR} or {}); {}",
+            bemcal_pyenv::VENV_VAR,
+            bemcal_pyenv::INSTALL_HINT
+        ))
+    })?;
+    let pkg = tempfile::tempdir()
+        .map_err(|e| runtime(format!("cannot create a temporary directory: {e}")))?;
+    write_trainer(pkg.path())
+        .map_err(|e| runtime(format!("cannot write the trainer package: {e}")))?;
+    std::fs::create_dir_all(out_dir).map_err(|e| SurrogateError::Metadata {
+        path: out_dir.to_path_buf(),
+        message: format!("cannot create: {e}"),
+    })?;
+    let mut cmd = Command::new(&python);
+    cmd.arg("-m")
+        .arg("bemcal_train")
+        .arg("--dataset")
+        .arg(dataset_dir)
+        .arg("--out")
+        .arg(out_dir)
+        .args(["--epochs", &opts.epochs.to_string()])
+        .args(["--patience", &opts.patience.to_string()])
+        .args(["--seed", &opts.seed.to_string()])
+        .args(["--batch-size", &opts.batch_size.to_string()])
+        .args(["--time-features", opts.time_features.as_str()])
+        .args(["--device", &opts.device])
+        .args(["--threads", &opts.threads.to_string()])
+        .env("PYTHONPATH", pkg.path())
+        .env("PYTHONDONTWRITEBYTECODE", "1");
+    let start = std::time::Instant::now();
+    let (ok, log) = if opts.quiet {
+        let out = cmd
+            .output()
+            .map_err(|e| runtime(format!("cannot start {}: {e}", python.display())))?;
+        let mut log = String::from_utf8_lossy(&out.stdout).into_owned();
+        log.push_str(&String::from_utf8_lossy(&out.stderr));
+        (out.status.success(), log)
+    } else {
+        let status = cmd
+            .status()
+            .map_err(|e| runtime(format!("cannot start {}: {e}", python.display())))?;
+        (status.success(), String::from("(output above)"))
+    };
+    if !ok {
+        let tail: String = log
+            .lines()
+            .rev()
+            .take(30)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect::<Vec<_>>()
+            .join("\n");
+        return Err(runtime(format!(
+            "the trainer ({} -m bemcal_train) failed:\n{tail}",
+            python.display()
+        )));
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let meta = SurrogateMeta::read(out_dir)?;
+    Ok(TrainReport {
+        out_dir: out_dir.to_path_buf(),
+        meta,
+        seconds,
+    })
+}

@@ -1,0 +1,185 @@
+//! End to end: synthetic training set -> Python trainer (a few epochs) -> ONNX -> Rust/ort,
+//! with parity against the torch outputs the trainer wrote (`parity.json`).
+//! Skipped (with a message) when the Python environment or ONNX Runtime is absent.
+
+mod common;
+
+use bemcal_surrogate::{train, Surrogate, SurrogateError, TimeFeatures, TrainOptions};
+use ndarray::{Array3, ArrayView2};
+
+fn rel_err(a: ArrayView2<'_, f32>, b: &[Vec<f64>]) -> f64 {
+    let mut max_diff = 0.0f64;
+    let mut max_abs = 0.0f64;
+    for (row_a, row_b) in a.rows().into_iter().zip(b) {
+        for (x, y) in row_a.iter().zip(row_b) {
+            max_diff = max_diff.max((*x as f64 - y).abs());
+            max_abs = max_abs.max(y.abs());
+        }
+    }
+    max_diff / max_abs.max(1e-12)
+}
+
+fn environment_ready() -> bool {
+    if bemcal_surrogate::train::find_python().is_none() {
+        eprintln!(
+            "SKIPPED: no Python environment (.venv); {}",
+            bemcal_pyenv::INSTALL_HINT
+        );
+        return false;
+    }
+    if let Err(e) = bemcal_surrogate::surrogate::ort_library_path() {
+        eprintln!("SKIPPED: {e}");
+        return false;
+    }
+    true
+}
+
+fn train_small(
+    time_features: TimeFeatures,
+) -> Option<(tempfile::TempDir, bemcal_surrogate::TrainReport)> {
+    if !environment_ready() {
+        return None;
+    }
+    let weather = common::synthetic_weather(8760);
+    let set = common::synthetic_set(6, &weather);
+    let tmp = tempfile::tempdir().unwrap();
+    let ds = tmp.path().join("dataset");
+    set.write(&ds).unwrap();
+    let opts = TrainOptions {
+        epochs: 2,
+        patience: 5,
+        seed: 3,
+        batch_size: 512,
+        time_features,
+        threads: 1,
+        quiet: true,
+        ..TrainOptions::default()
+    };
+    let report = train(&ds, &tmp.path().join("model"), &opts).expect("training runs");
+    Some((tmp, report))
+}
+
+#[test]
+fn trains_exports_and_matches_torch() {
+    let Some((tmp, report)) = train_small(TimeFeatures::HourSchedule) else {
+        return;
+    };
+    let meta = &report.meta;
+    assert_eq!(
+        meta.output_names(),
+        ["heating_kwh", "cooling_kwh", "electricity_kwh"]
+    );
+    assert_eq!(meta.training.epochs_run, 2);
+    assert_eq!(meta.held_out.points.len(), 1);
+    for o in &meta.outputs {
+        let m = &meta.held_out.metrics[&o.name];
+        assert!(m.rmse_kwh.is_finite() && m.rmse_kwh > 0.0);
+        assert_eq!(o.sigma_eta_kwh, m.rmse_kwh);
+        assert!(m.cv_rmse_pct.is_some());
+    }
+    assert_eq!(meta.n_features, 3 + 5 + 4);
+
+    let dir = tmp.path().join("model");
+    let parity: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("parity.json")).unwrap()).unwrap();
+    let to_vv = |v: &serde_json::Value| -> Vec<Vec<f64>> {
+        v.as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                r.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            })
+            .collect()
+    };
+    let shape: Vec<usize> = parity["x_shape"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let x: Vec<f32> = parity["x"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
+    let x = Array3::from_shape_vec((shape[0], shape[1], shape[2]), x).unwrap();
+
+    let mut s = Surrogate::load(&dir, 1).expect("loads");
+    // Plain graph on explicit windows.
+    let y = s.run_windows(x.view()).unwrap();
+    let e = rel_err(y.view(), &to_vv(&parity["y_windows"]));
+    assert!(e < 1e-4, "plain graph vs torch: relative error {e:.2e}");
+
+    // Structured hot path over the whole year.
+    let params: Vec<f64> = parity["params_raw"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let weather = common::synthetic_weather(8760);
+    let mut ev = s.bind(&weather).unwrap();
+    let y_year = to_vv(&parity["y_year"]);
+    let y = ev.evaluate(&params).unwrap().to_owned();
+    assert_eq!(y.dim(), (8760, 3));
+    let e = rel_err(y.view(), &y_year);
+    assert!(
+        e < 1e-4,
+        "structured graph vs torch: relative error {e:.2e}"
+    );
+    assert!(y.iter().all(|v| *v >= 0.0));
+
+    // A batch gives the same numbers as single evaluations.
+    let modes = ev.surrogate().meta().param_modes();
+    let yb = ev
+        .evaluate_batch(&[params.clone(), modes.clone()])
+        .unwrap()
+        .to_owned();
+    let y_modes = ev.evaluate(&modes).unwrap().to_owned();
+    let d1 = (&yb.index_axis(ndarray::Axis(0), 0) - &y)
+        .iter()
+        .fold(0f32, |m, v| m.max(v.abs()));
+    let d2 = (&yb.index_axis(ndarray::Axis(0), 1) - &y_modes)
+        .iter()
+        .fold(0f32, |m, v| m.max(v.abs()));
+    assert!(d1 < 1e-4 && d2 < 1e-4, "batch vs single: {d1} {d2}");
+
+    // Wrong parameter count is a clear error.
+    let e = ev.evaluate(&[1.0]).unwrap_err().to_string();
+    assert!(
+        e.contains(
+            "1 parameter values given; the surrogate takes 3 (u_wall, lpd_w_m2, setpoint_heat_c)"
+        ),
+        "{e}"
+    );
+
+    // Metadata validation on load.
+    let meta_path = dir.join("surrogate.json");
+    let good = std::fs::read_to_string(&meta_path).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["format_version"] = 99.into();
+    std::fs::write(&meta_path, v.to_string()).unwrap();
+    let e = Surrogate::load(&dir, 1).unwrap_err();
+    assert!(
+        matches!(e, SurrogateError::Metadata { .. }) && e.to_string().contains("format_version"),
+        "{e}"
+    );
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v.as_object_mut().unwrap().remove("outputs");
+    std::fs::write(&meta_path, v.to_string()).unwrap();
+    let e = Surrogate::load(&dir, 1).unwrap_err().to_string();
+    assert!(e.contains("missing field `outputs`"), "{e}");
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["n_features"] = 11.into();
+    v["feature_names"].as_array_mut().unwrap().pop();
+    v["params"].as_array_mut().unwrap().pop();
+    std::fs::write(&meta_path, v.to_string()).unwrap();
+    let e = Surrogate::load(&dir, 1).unwrap_err().to_string();
+    assert!(e.contains("graph and surrogate.json do not match"), "{e}");
+    std::fs::write(&meta_path, good).unwrap();
+}

@@ -1,0 +1,101 @@
+"""Training-set loading and feature construction (no torch here: pure numpy).
+
+Dataset directory (written by Rust ``TrainingSet::write``):
+
+* ``params.npy``  f64 [n_points, n_params]  raw parameter values
+* ``weather.npy`` f64 [n_hours, 5]          raw weather (dry bulb C, RH %, wind m/s, GHI Wh/m2, day type code)
+* ``outputs.npy`` f64 [n_points, n_hours, n_outputs]  kWh per hour
+* ``dataset.json`` names, parameter bounds and modes, split by design point
+
+Feature vector of hour t for design point i (``feature_names`` order):
+``[(p_i - min)/(max - min) ..., (w_t - mean)/std ..., time features of t ...]``.
+A sample is the window of hours (t-2, t-1, t); hours before 0 repeat hour 0.
+"""
+
+import json
+import os
+
+import numpy as np
+
+from . import DATASET_FORMAT_VERSION, LOOKBACK
+
+TIME_FEATURES = ("none", "hour", "hour+schedule")
+
+
+def load_dataset(path):
+    """Reads and validates a dataset directory; returns a dict of arrays and metadata."""
+    with open(os.path.join(path, "dataset.json")) as f:
+        meta = json.load(f)
+    if meta.get("format_version") != DATASET_FORMAT_VERSION:
+        raise ValueError(
+            f"{path}/dataset.json: format_version {meta.get('format_version')} is not "
+            f"{DATASET_FORMAT_VERSION}"
+        )
+    params = np.load(os.path.join(path, "params.npy"))
+    weather = np.load(os.path.join(path, "weather.npy"))
+    outputs = np.load(os.path.join(path, "outputs.npy"))
+    n_p, n_h, n_o = len(meta["params"]), meta["n_hours"], len(meta["output_names"])
+    if params.shape != (meta["n_points"], n_p):
+        raise ValueError(f"params.npy shape {params.shape}, expected {(meta['n_points'], n_p)}")
+    if weather.shape != (n_h, 5):
+        raise ValueError(f"weather.npy shape {weather.shape}, expected {(n_h, 5)}")
+    if outputs.shape != (meta["n_points"], n_h, n_o):
+        raise ValueError(f"outputs.npy shape {outputs.shape}, expected {(meta['n_points'], n_h, n_o)}")
+    return {"meta": meta, "params": params, "weather": weather, "outputs": outputs}
+
+
+def normalise_params(raw, specs):
+    """(p - min) / (max - min) per column; raw is [..., n_params]."""
+    lo = np.array([p["min"] for p in specs], dtype=np.float64)
+    hi = np.array([p["max"] for p in specs], dtype=np.float64)
+    return (np.asarray(raw, dtype=np.float64) - lo) / (hi - lo)
+
+
+def weather_stats(weather):
+    """Mean and std per weather column; a constant column gets std 1."""
+    mean = weather.mean(axis=0)
+    std = weather.std(axis=0)
+    std = np.where(std > 1e-12, std, 1.0)
+    return mean, std
+
+
+def time_feature_names(mode):
+    if mode == "none":
+        return []
+    if mode == "hour":
+        return ["hour_sin", "hour_cos"]
+    if mode == "hour+schedule":
+        return ["hour_sin", "hour_cos", "offday_hour_sin", "offday_hour_cos"]
+    raise ValueError(f"time features '{mode}': expected one of {TIME_FEATURES}")
+
+
+def time_features(weather, mode):
+    """Time-of-day features per hour, [n_hours, k]. Hour of day h = t mod 24 (hour beginning).
+
+    * ``hour``: sin, cos of 2*pi*h/24.
+    * ``hour+schedule``: those plus the same two multiplied by the off-day flag (day type code
+      != 0: weekend or holiday), so working days and off days get their own daily profile.
+    """
+    n = weather.shape[0]
+    h = np.arange(n) % 24
+    ang = 2.0 * np.pi * h / 24.0
+    cols = []
+    if mode in ("hour", "hour+schedule"):
+        cols += [np.sin(ang), np.cos(ang)]
+    if mode == "hour+schedule":
+        off = (weather[:, 4] != 0).astype(np.float64)
+        cols += [off * np.sin(ang), off * np.cos(ang)]
+    time_feature_names(mode)
+    return np.stack(cols, axis=1) if cols else np.zeros((n, 0))
+
+
+def hourly_features(weather, mean, std, mode):
+    """The per-hour part of the feature vector: normalised weather then time features, [n_hours, k]."""
+    w = (weather - mean) / std
+    return np.concatenate([w, time_features(weather, mode)], axis=1)
+
+
+def window_index(n_hours):
+    """[n_hours, LOOKBACK] hour indices of each window (t-2, t-1, t), clamped at 0."""
+    t = np.arange(n_hours)[:, None] + np.arange(-(LOOKBACK - 1), 1)[None, :]
+    return np.maximum(t, 0)

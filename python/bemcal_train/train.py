@@ -1,0 +1,220 @@
+"""Training loop, held-out metrics, export and metadata."""
+
+import json
+import os
+import time
+
+import numpy as np
+import torch
+
+from . import FORMAT, FORMAT_VERSION, LOOKBACK
+from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
+                   weather_stats, window_index)
+from .export import check_with_onnxruntime, export_all
+from .model import Denormalised, Surrogate
+
+
+def pick_device(name):
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: CUDA is not available to this torch")
+    return torch.device(name)
+
+
+class Windows:
+    """Builds window batches on the device from the compact arrays (no per-hour repeated matrix)."""
+
+    def __init__(self, p_norm, hourly, targets, device):
+        self.p = torch.as_tensor(p_norm, dtype=torch.float32, device=device)  # [N, n_params]
+        self.w = torch.as_tensor(hourly, dtype=torch.float32, device=device)  # [T, n_hourly]
+        self.y = torch.as_tensor(targets, dtype=torch.float32, device=device)  # [N, T, n_out]
+        self.widx = torch.as_tensor(window_index(hourly.shape[0]), device=device)  # [T, 3]
+
+    def batch(self, point, hour):
+        """point, hour: int64 tensors [B] -> x [B, 3, F], y [B, n_out]."""
+        w = self.w[self.widx[hour]]  # [B, 3, n_hourly]
+        p = self.p[point].unsqueeze(1).expand(-1, LOOKBACK, -1)
+        return torch.cat([p, w], dim=2), self.y[point, hour]
+
+
+def predict(model, win, points, batch_size):
+    """Normalised predictions for all hours of ``points`` -> [len(points), T, n_out]."""
+    model.eval()
+    T = win.w.shape[0]
+    out = []
+    with torch.no_grad():
+        for i in points:
+            pred = []
+            for s in range(0, T, batch_size):
+                hour = torch.arange(s, min(s + batch_size, T), device=win.w.device)
+                x, _ = win.batch(torch.full_like(hour, i), hour)
+                pred.append(model(x))
+            out.append(torch.cat(pred))
+    return torch.stack(out)
+
+
+def metrics(pred_kwh, true_kwh, names):
+    """Per output: RMSE (kWh, = sigma_eta), CV-RMSE (%) = RMSE / mean(true), NMBE (%), mean."""
+    res = {}
+    for k, name in enumerate(names):
+        e = pred_kwh[..., k] - true_kwh[..., k]
+        rmse = float(np.sqrt(np.mean(e**2)))
+        mean = float(np.mean(true_kwh[..., k]))
+        res[name] = {
+            "rmse_kwh": rmse,
+            "cv_rmse_pct": 100.0 * rmse / mean if mean > 0 else None,
+            "nmbe_pct": 100.0 * float(np.mean(e)) / mean if mean > 0 else None,
+            "mean_kwh": mean,
+        }
+    return res
+
+
+def train(args):
+    t_start = time.time()
+    torch.manual_seed(args.seed)
+    np.random.seed(args.seed)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    device = pick_device(args.device)
+    ds = load_dataset(args.dataset)
+    meta = ds["meta"]
+    specs = meta["params"]
+    names = meta["output_names"]
+    n_params = len(specs)
+    split = meta["split"]
+    train_pts, held_pts = list(split["train"]), list(split["held_out"])
+
+    mean, std = weather_stats(ds["weather"])
+    hourly = hourly_features(ds["weather"], mean, std, args.time_features)
+    p_norm = normalise_params(ds["params"], specs)
+    outputs = ds["outputs"]
+    nonnegative = bool(np.all(outputs >= 0))
+    # Targets are divided by each output's maximum over the training points (so in [0, 1] for
+    # meters); an all-zero output keeps scale 1.
+    scale = np.abs(outputs[train_pts]).max(axis=(0, 1))
+    scale = np.where(scale > 0, scale, 1.0)
+    win = Windows(p_norm, hourly, outputs / scale, device)
+
+    n_features = n_params + hourly.shape[1]
+    model = Surrogate(n_features, len(names), args.hidden, args.layers).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=args.lr)
+    T = hourly.shape[0]
+    tr_point = torch.as_tensor(np.repeat(train_pts, T), device=device)
+    tr_hour = torch.as_tensor(np.tile(np.arange(T), len(train_pts)), device=device)
+    n = tr_point.shape[0]
+    gen = torch.Generator(device="cpu").manual_seed(args.seed)
+    y_held = win.y[held_pts]
+
+    best, best_state, best_epoch, bad, history = float("inf"), None, 0, 0, []
+    for epoch in range(1, args.epochs + 1):
+        t0 = time.time()
+        model.train()
+        perm = torch.randperm(n, generator=gen).to(device)
+        total = 0.0
+        for s in range(0, n, args.batch_size):
+            idx = perm[s : s + args.batch_size]
+            x, y = win.batch(tr_point[idx], tr_hour[idx])
+            loss = torch.mean((model(x) - y) ** 2)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += loss.item() * idx.shape[0]
+        train_loss = total / n
+        held_loss = float(torch.mean((predict(model, win, held_pts, args.eval_batch_size) - y_held) ** 2))
+        secs = time.time() - t0
+        history.append({"epoch": epoch, "train_loss": train_loss, "held_out_loss": held_loss, "seconds": secs})
+        print(f"epoch {epoch:4d}  train {train_loss:.6f}  held-out {held_loss:.6f}  {secs:.1f} s", flush=True)
+        if held_loss < best:
+            best, best_epoch, bad = held_loss, epoch, 0
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        else:
+            bad += 1
+            if bad >= args.patience:
+                print(f"early stop: no held-out improvement in {args.patience} epochs (best epoch {best_epoch})")
+                break
+    model.load_state_dict(best_state)
+    train_seconds = time.time() - t_start
+
+    # Held-out accuracy in kWh, with the same non-negativity clamp the exported graph applies.
+    pred = predict(model, win, held_pts, args.eval_batch_size).cpu().numpy()
+    if nonnegative:
+        pred = np.maximum(pred, 0)
+    pred_kwh = pred * scale
+    held = metrics(pred_kwh, outputs[held_pts], names)
+    for name, m in held.items():
+        cv = "n/a" if m["cv_rmse_pct"] is None else f"{m['cv_rmse_pct']:.2f} %"
+        print(f"held-out {name}: RMSE {m['rmse_kwh']:.4f} kWh  CV-RMSE {cv}")
+
+    os.makedirs(args.out, exist_ok=True)
+    model = model.cpu().eval()
+    files = export_all(model, n_params, hourly.shape[1], scale, nonnegative, args.out)
+
+    # Parity fixture: a few windows of the first held-out point, and its whole year.
+    rng = np.random.default_rng(args.seed)
+    i = held_pts[0]
+    hours = np.sort(rng.choice(T, size=min(16, T), replace=False))
+    hours[0] = 0  # include the padded first window
+    winc = Windows(p_norm, hourly, outputs / scale, "cpu")
+    x, _ = winc.batch(torch.full((len(hours),), i), torch.as_tensor(hours))
+    plain = Denormalised(model, scale, nonnegative).eval()
+    with torch.no_grad():
+        y_win = plain(x).numpy()
+        y_year = predict(plain, winc, [i], args.eval_batch_size).numpy()  # [1, T, n_out] kWh
+    check = check_with_onnxruntime(args.out, x.numpy(), y_win, p_norm[[i]], hourly, y_year)
+    if check is not None:
+        print(f"onnxruntime check (max |diff| / max |y|): plain {check['plain_vs_torch']:.2e}, "
+              f"structured {check['structured_vs_torch']:.2e}")
+    parity = {
+        "note": "torch outputs (kWh) of the plain model; relative error = max|diff| / max|y|",
+        "point": int(i),
+        "params_raw": ds["params"][i].tolist(),
+        "hours": hours.tolist(),
+        "x_shape": list(x.shape),
+        "x": x.numpy().ravel().tolist(),
+        "y_windows": y_win.tolist(),
+        "y_year": y_year[0].tolist(),
+    }
+    with open(os.path.join(args.out, "parity.json"), "w") as f:
+        json.dump(parity, f)
+
+    hourly_names = list(meta["weather_features"]) + time_feature_names(args.time_features)
+    info = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "model": {"kind": "lstm", "lookback": LOOKBACK, "layers": args.layers, "hidden": args.hidden,
+                  "relu_after_lstm": True, "head": "linear"},
+        "files": files,
+        "onnx": {"opset": 17, "plain": {"inputs": {"x": ["batch", LOOKBACK, n_features]},
+                                        "outputs": {"y": ["batch", len(names)]}},
+                 "weather": {"inputs": {"w": ["hours", len(hourly_names)]},
+                             "outputs": {"gw": ["hours", 4 * args.hidden]}},
+                 "core": {"inputs": {"p": ["proposals", n_params], "gw": ["hours", 4 * args.hidden]},
+                          "outputs": {"y": ["proposals", "hours", len(names)]}}},
+        "n_features": n_features,
+        "feature_names": [p["name"] for p in specs] + hourly_names,
+        "params": specs,
+        "weather": {"names": list(meta["weather_features"]), "units": meta["weather_units"],
+                    "mean": mean.tolist(), "std": std.tolist()},
+        "time_features": args.time_features,
+        "time_feature_names": time_feature_names(args.time_features),
+        "input_layout": "x[:, s, :] = [(p - min)/(max - min) (params order), (w - mean)/std (weather order), "
+                        "time features] of hour t-2+s (clamped at 0) for the window ending at hour t",
+        "outputs": [{"name": nm, "unit": "kWh", "scale": float(scale[k]),
+                     "sigma_eta_kwh": held[nm]["rmse_kwh"]} for k, nm in enumerate(names)],
+        "output_scaling": ("y_kwh = max(head, 0) * scale" if nonnegative else "y_kwh = head * scale")
+        + "; scale = the output's maximum over the training points",
+        "nonnegative": nonnegative,
+        "held_out": {"points": held_pts, "metrics": held},
+        "onnxruntime_check": check,
+        "training": {"seed": args.seed, "epochs_max": args.epochs, "epochs_run": len(history),
+                     "best_epoch": best_epoch, "patience": args.patience, "batch_size": args.batch_size,
+                     "lr": args.lr, "optimizer": "adam", "loss": "mse on scaled targets",
+                     "device": str(device), "threads": torch.get_num_threads(), "seconds": train_seconds,
+                     "torch_version": torch.__version__, "train_points": train_pts,
+                     "history": history},
+    }
+    with open(os.path.join(args.out, "surrogate.json"), "w") as f:
+        json.dump(info, f, indent=1)
+    print(f"wrote {args.out}/surrogate.json ({train_seconds:.1f} s)")
+    return info
