@@ -1,0 +1,335 @@
+//! File I/O of the pre-calibration: the project file's `[meters]` / `[precalibration]` tables and
+//! the output directory.
+//!
+//! Outputs of [`write_outputs`]:
+//! `disaggregated.csv` (timestamp + every meter and derived series, kWh per hour),
+//! `calendar.csv` (date, calendar day type, cluster, label, outlier flag and reason),
+//! `schedule_priors.csv` (day type, hour, n, q1, median, q3, triangular min/mode/max),
+//! `intervals.csv` (day type, interval, start/end hour, quartile means, prior),
+//! `priors.toml` (the file the calibration reads), `quality.json`, `summary.txt`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::meters::{slot_time, MeterSpec, HOURS};
+use crate::pipeline::{PrecalOptions, Precalibration, PriorsFile};
+use crate::PrecalError;
+
+/// The parts of a project file the pre-calibration reads; other tables are ignored.
+///
+/// ```toml
+/// year = 2011                 # optional
+/// [meters]                    # a MeterSpec
+/// file = "meters.csv"
+/// [precalibration.schedule]   # PrecalOptions
+/// band = 2
+/// ```
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PrecalProject {
+    /// Grid year.
+    #[serde(default)]
+    pub year: Option<i32>,
+    /// How to read the meters.
+    #[serde(default)]
+    pub meters: Option<MeterSpec>,
+    /// Options.
+    #[serde(default)]
+    pub precalibration: PrecalOptions,
+}
+
+impl PrecalProject {
+    /// Reads a project file. A relative `meters.file` is resolved against the file's folder.
+    pub fn read(path: &Path) -> Result<PrecalProject, PrecalError> {
+        let text = std::fs::read_to_string(path).map_err(|source| PrecalError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mut p: PrecalProject = toml::from_str(&text)
+            .map_err(|e| PrecalError::Invalid(format!("{}: {e}", path.display())))?;
+        if let Some(m) = p.meters.as_mut() {
+            if let Some(f) = m.file.as_mut() {
+                if f.is_relative() {
+                    *f = path.parent().unwrap_or(Path::new(".")).join(&*f);
+                }
+            }
+        }
+        Ok(p)
+    }
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PrecalError + '_ {
+    move |source| PrecalError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn num(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v}")
+    } else {
+        String::new()
+    }
+}
+
+/// Serialises `priors.toml` (with a header comment).
+pub fn priors_toml(p: &PriorsFile) -> Result<String, PrecalError> {
+    let body = toml::to_string(p).map_err(|e| PrecalError::Invalid(format!("priors.toml: {e}")))?;
+    Ok(format!(
+        "# Written by bemcal precalibrate. Schedule boundaries: the hour (1..=24) at which each\n\
+         # interval ends. Parameters: triangular priors (min, mode, max).\n{body}"
+    ))
+}
+
+/// Reads a `priors.toml`.
+pub fn read_priors(path: &Path) -> Result<PriorsFile, PrecalError> {
+    let text = std::fs::read_to_string(path).map_err(io_err(path))?;
+    toml::from_str(&text).map_err(|e| PrecalError::Invalid(format!("{}: {e}", path.display())))
+}
+
+/// The human-readable summary.
+pub fn summary_text(r: &Precalibration) -> String {
+    let mut s = String::new();
+    let m = &r.meters;
+    let _ = writeln!(
+        s,
+        "bemcal pre-calibration: {} (year {})",
+        m.source.display(),
+        m.year
+    );
+    let _ = writeln!(
+        s,
+        "\nMeters (kWh per hour, hour-beginning, local standard time):"
+    );
+    for (series, q) in m.series.iter().zip(&r.quality) {
+        let gap = q
+            .longest_gap
+            .as_ref()
+            .map(|g| format!("{} h from {}", g.hours, g.start))
+            .unwrap_or_else(|| "none".into());
+        let _ = writeln!(
+            s,
+            "  {:<12} '{}' [{}]: coverage {:.2} %, mean {:.1}, max {:.1}, zeros {} h, longest gap {}, flat runs >= {} h: {}",
+            q.meter,
+            series.column,
+            series.unit.as_str(),
+            q.coverage_pct,
+            q.mean_kwh,
+            q.max_kwh,
+            q.zero_hours,
+            gap,
+            q.flat_run_min_hours,
+            q.flat_run_count
+        );
+    }
+    for n in &m.notes {
+        let _ = writeln!(s, "  note: {n}");
+    }
+    let _ = writeln!(s, "\nBases (disaggregation):");
+    for e in &r.disaggregation.estimates {
+        let _ = writeln!(
+            s,
+            "  {} = {:.6} {}  [{}]",
+            e.name, e.value, e.unit, e.method
+        );
+    }
+    for d in &r.disaggregation.series {
+        let _ = writeln!(s, "  series {}: {}", d.name, d.method);
+    }
+    let c = &r.clusters;
+    let _ = writeln!(s, "\nDay types:");
+    let _ = writeln!(s, "  schedule series: {}", r.schedule_series.method);
+    let _ = writeln!(s, "  normalisation: {}", r.profiles.scale_method);
+    let _ = writeln!(
+        s,
+        "  days clustered: {} (skipped for missing hours: {})",
+        r.profiles.days.len(),
+        r.profiles.skipped_days.len()
+    );
+    let _ = writeln!(
+        s,
+        "  DTW band: |i - j| <= {} h (dtaidistance window {})",
+        c.band.max_shift.map_or("none".into(), |w| w.to_string()),
+        c.band
+            .dtaidistance_window()
+            .map_or("none".into(), |w| w.to_string())
+    );
+    let sil: Vec<String> = c
+        .silhouettes
+        .iter()
+        .map(|(k, v)| format!("k={k}: {v:.3}"))
+        .collect();
+    let _ = writeln!(
+        s,
+        "  k = {} (silhouette {:.3}; {})",
+        c.clustering.k,
+        c.clustering.silhouette,
+        sil.join(", ")
+    );
+    for (k, (lab, (wd, off))) in c.cluster_labels.iter().zip(&c.cluster_counts).enumerate() {
+        let _ = writeln!(
+            s,
+            "  cluster {k}: label {}, {wd} calendar weekdays, {off} weekend/holiday days, medoid {}",
+            lab.as_str(),
+            c.days[r.profiles.days[c.clustering.medoids[k]]].date
+        );
+    }
+    let outliers: Vec<_> = c.days.iter().filter(|d| d.outlier.is_some()).collect();
+    let _ = writeln!(s, "  outlier days: {}", outliers.len());
+    for d in outliers.iter().take(30) {
+        let _ = writeln!(
+            s,
+            "    {} ({}): {}",
+            d.date,
+            d.calendar,
+            d.outlier.as_deref().unwrap_or("")
+        );
+    }
+    let (before, after) = r.reduction();
+    let _ = writeln!(
+        s,
+        "\nSchedule intervals: {before} hourly fractions -> {after} interval fractions"
+    );
+    for sch in &r.schedules {
+        let _ = writeln!(
+            s,
+            "  {} ({} days, {}): {} intervals ending at {:?}",
+            sch.label.as_str(),
+            sch.n_days,
+            sch.source,
+            sch.intervals.len(),
+            sch.boundaries()
+        );
+    }
+    let _ = writeln!(s, "\nPriors (priors.toml):");
+    for p in &r.priors.parameter {
+        let _ = writeln!(
+            s,
+            "  {:<22} min {:.4} mode {:.4} max {:.4} {}",
+            p.name, p.min, p.mode, p.max, p.unit
+        );
+    }
+    for n in &r.notes {
+        let _ = writeln!(s, "note: {n}");
+    }
+    s
+}
+
+/// Writes all outputs into `dir` (created if needed); returns the paths written.
+pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, PrecalError> {
+    std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let mut written = Vec::new();
+    let mut put = |name: &str, text: String| -> Result<(), PrecalError> {
+        let p = dir.join(name);
+        std::fs::write(&p, text).map_err(io_err(&p))?;
+        written.push(p);
+        Ok(())
+    };
+    let year = r.meters.year;
+
+    // disaggregated.csv
+    let mut cols: Vec<(&str, &[f64])> = r
+        .meters
+        .series
+        .iter()
+        .map(|s| (s.role.name(), s.values.as_slice()))
+        .collect();
+    for d in &r.disaggregation.series {
+        cols.push((&d.name, &d.values));
+    }
+    cols.push((&r.schedule_series.name, &r.schedule_series.values));
+    let mut t = String::from("timestamp");
+    for (n, _) in &cols {
+        let _ = write!(t, ",{n}_kwh");
+    }
+    t.push('\n');
+    for h in 0..HOURS {
+        let _ = write!(t, "{}", slot_time(year, h).format("%Y-%m-%dT%H:%M"));
+        for (_, v) in &cols {
+            let _ = write!(t, ",{}", num(v[h]));
+        }
+        t.push('\n');
+    }
+    put("disaggregated.csv", t)?;
+
+    // calendar.csv
+    let mut t =
+        String::from("date,calendar_day_type,cluster,label,outlier,reason,medoid_distance\n");
+    for d in &r.clusters.days {
+        let _ = writeln!(
+            t,
+            "{},{},{},{},{},\"{}\",{}",
+            d.date,
+            d.calendar,
+            d.cluster.map_or(String::new(), |c| c.to_string()),
+            d.label.map_or("skipped", |l| l.as_str()),
+            d.outlier.is_some(),
+            d.outlier.as_deref().unwrap_or("").replace('"', "'"),
+            num(d.medoid_distance)
+        );
+    }
+    put("calendar.csv", t)?;
+
+    // schedule_priors.csv
+    let mut t = String::from("day_type,hour,n_days,q1,median,q3\n");
+    for s in &r.schedules {
+        for h in &s.hours {
+            let _ = writeln!(
+                t,
+                "{},{},{},{},{},{}",
+                s.label.as_str(),
+                h.hour,
+                h.n,
+                h.q1,
+                h.median,
+                h.q3
+            );
+        }
+    }
+    put("schedule_priors.csv", t)?;
+
+    // intervals.csv
+    let mut t = String::from(
+        "day_type,interval,start_hour,end_hour,q1_mean,median_mean,q3_mean,min,mode,max\n",
+    );
+    for s in &r.schedules {
+        for (i, iv) in s.intervals.iter().enumerate() {
+            let _ = writeln!(
+                t,
+                "{},{},{},{},{},{},{},{},{},{}",
+                s.label.as_str(),
+                i + 1,
+                iv.start_hour,
+                iv.end_hour,
+                iv.q1,
+                iv.median,
+                iv.q3,
+                iv.prior.min,
+                iv.prior.mode,
+                iv.prior.max
+            );
+        }
+    }
+    put("intervals.csv", t)?;
+    put("priors.toml", priors_toml(&r.priors)?)?;
+
+    let q = serde_json::json!({
+        "year": year,
+        "source": r.meters.source,
+        "notes": r.meters.notes,
+        "meters": r.quality,
+        "estimates": r.disaggregation.estimates,
+        "non_heating_months": r.disaggregation.non_heating_months,
+        "heating_months": r.disaggregation.heating_months,
+        "schedule_days_skipped": r.profiles.skipped_days.len(),
+        "silhouettes": r.clusters.silhouettes,
+        "k": r.clusters.clustering.k,
+    });
+    let qtext = serde_json::to_string_pretty(&q)
+        .map_err(|e| PrecalError::Invalid(format!("quality.json: {e}")))?;
+    put("quality.json", qtext)?;
+    put("summary.txt", summary_text(r))?;
+    Ok(written)
+}

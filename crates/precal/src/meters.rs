@@ -1,0 +1,1232 @@
+//! Meter ingestion: a CSV of timestamped meter readings -> kWh per hour on the 8,760
+//! hour-beginning slots of one year, in local standard time.
+//!
+//! # Rules (documented behaviour)
+//!
+//! * **Timestamps** are parsed with a chrono format string ([`MeterSpec::timestamp_format`],
+//!   default `%m/%d/%Y %H:%M`; single-digit months/days/hours such as `1/13/2011 0:00` parse
+//!   too) or `iso8601` (`2011-01-13T05:00`, `2011-01-13 05:00:00`, or RFC 3339 with a UTC offset,
+//!   which is converted to local standard time with the site's standard offset). A time of
+//!   `24:00` means 00:00 of the next day.
+//! * **Hour convention**: hour-ending stamps (`01:00` = the hour 00:00-01:00) are shifted back one
+//!   hour. `auto` picks hour-ending when a `24:00` stamp occurs, or the earliest stamp of the file
+//!   is 01:00 on January 1, or the latest is 00:00 on January 1; otherwise hour-beginning.
+//! * **Daylight saving**: `none` = the file is in local standard time all year. `us` = the clock
+//!   follows US DST (second Sunday of March to first Sunday of November, since 2007): stamps
+//!   inside DST are moved back one hour; in the autumn the first occurrence of the repeated
+//!   01:00 hour is DST and the second standard time. `auto` (default) chooses `us` when the
+//!   spring-forward hour (02:00 on the second Sunday of March) is absent while its neighbours are
+//!   present, or the autumn 01:00 hour occurs twice; otherwise `none`.
+//! * **Grid**: slot `t` of year `Y` is hour `t mod 24` of day `t / 24` counted without 29
+//!   February, so the grid lines up with a non-leap EPW file. Rows on 29 February and rows
+//!   outside year `Y` are dropped and counted in [`MeterData::notes`]. A slot without a row is
+//!   missing (NaN).
+//! * **Duplicates** (two rows in one slot that are not a DST repeat): [`DuplicatePolicy`]
+//!   (default: error naming both lines).
+//! * **Values**: empty, `NA`, `N/A`, `NaN`, `null`, `-` and `--` are missing (NaN). Other text is
+//!   an error naming the file, line and column. Negative values: [`NegativePolicy`] (default:
+//!   error).
+//! * **Units** ([`EnergyUnit`]): power units are hourly means (kW over an hour = kWh), energy
+//!   units are converted to kWh.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use chrono::{Datelike, Duration, NaiveDate, NaiveDateTime, Timelike, Weekday};
+use serde::{Deserialize, Serialize};
+
+use crate::PrecalError;
+
+/// Hours in the (non-leap) meter year.
+pub const HOURS: usize = 8760;
+
+const CUM_DAYS: [usize; 13] = [0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334, 365];
+
+/// Default timestamp format (`01/13/2011 05:00`).
+pub const DEFAULT_TIMESTAMP_FORMAT: &str = "%m/%d/%Y %H:%M";
+
+/// What a meter measures.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(from = "String", into = "String")]
+pub enum MeterRole {
+    /// Total heating (space heating + domestic hot water).
+    Heating,
+    /// Total cooling.
+    Cooling,
+    /// Total (whole-building) electricity.
+    Electricity,
+    /// A named sub-meter, e.g. `lighting`, `plug_loads`, `data_center`, `mechanical`.
+    Submeter(String),
+}
+
+impl MeterRole {
+    /// The role's name as written in files (`heating`, `cooling`, `electricity`, or the
+    /// sub-meter's name).
+    pub fn name(&self) -> &str {
+        match self {
+            MeterRole::Heating => "heating",
+            MeterRole::Cooling => "cooling",
+            MeterRole::Electricity => "electricity",
+            MeterRole::Submeter(s) => s,
+        }
+    }
+}
+
+impl From<String> for MeterRole {
+    fn from(s: String) -> MeterRole {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "heating" => MeterRole::Heating,
+            "cooling" => MeterRole::Cooling,
+            "electricity" => MeterRole::Electricity,
+            other => MeterRole::Submeter(other.replace([' ', '-'], "_")),
+        }
+    }
+}
+
+impl From<MeterRole> for String {
+    fn from(r: MeterRole) -> String {
+        r.name().to_string()
+    }
+}
+
+impl fmt::Display for MeterRole {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Unit of a meter column. Power units are means over the hour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum EnergyUnit {
+    /// Watt (hourly mean).
+    W,
+    /// Kilowatt (hourly mean): numerically kWh per hour.
+    #[default]
+    KW,
+    /// Megawatt (hourly mean).
+    MW,
+    /// Watt-hour.
+    Wh,
+    /// Kilowatt-hour.
+    KWh,
+    /// Megawatt-hour.
+    MWh,
+    /// US therm (105.5 MJ = 29.3071 kWh).
+    Therm,
+    /// Thousand Btu (0.293071 kWh).
+    KBtu,
+    /// Million Btu (293.071 kWh).
+    MMBtu,
+    /// Megajoule (0.277778 kWh).
+    MJ,
+    /// Gigajoule (277.778 kWh).
+    GJ,
+    /// Ton of refrigeration (hourly mean; 3.51685 kW).
+    Ton,
+    /// Ton-hour of refrigeration (3.51685 kWh).
+    TonHour,
+}
+
+impl EnergyUnit {
+    /// Factor converting one hour's value in this unit to kWh.
+    pub fn to_kwh(self) -> f64 {
+        match self {
+            EnergyUnit::W | EnergyUnit::Wh => 1e-3,
+            EnergyUnit::KW | EnergyUnit::KWh => 1.0,
+            EnergyUnit::MW | EnergyUnit::MWh => 1e3,
+            EnergyUnit::Therm => 29.307_107,
+            EnergyUnit::KBtu => 0.293_071_07,
+            EnergyUnit::MMBtu => 293.071_07,
+            EnergyUnit::MJ => 1.0 / 3.6,
+            EnergyUnit::GJ => 1000.0 / 3.6,
+            EnergyUnit::Ton | EnergyUnit::TonHour => 3.516_853,
+        }
+    }
+
+    /// The unit's canonical spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EnergyUnit::W => "W",
+            EnergyUnit::KW => "kW",
+            EnergyUnit::MW => "MW",
+            EnergyUnit::Wh => "Wh",
+            EnergyUnit::KWh => "kWh",
+            EnergyUnit::MWh => "MWh",
+            EnergyUnit::Therm => "therm",
+            EnergyUnit::KBtu => "kBtu",
+            EnergyUnit::MMBtu => "MMBtu",
+            EnergyUnit::MJ => "MJ",
+            EnergyUnit::GJ => "GJ",
+            EnergyUnit::Ton => "ton",
+            EnergyUnit::TonHour => "ton_h",
+        }
+    }
+}
+
+impl FromStr for EnergyUnit {
+    type Err = String;
+    fn from_str(s: &str) -> Result<EnergyUnit, String> {
+        let k = s.trim().to_ascii_lowercase().replace([' ', '-', '_'], "");
+        Ok(match k.as_str() {
+            "w" => EnergyUnit::W,
+            "kw" => EnergyUnit::KW,
+            "mw" => EnergyUnit::MW,
+            "wh" => EnergyUnit::Wh,
+            "kwh" => EnergyUnit::KWh,
+            "mwh" => EnergyUnit::MWh,
+            "therm" | "therms" | "thm" => EnergyUnit::Therm,
+            "kbtu" => EnergyUnit::KBtu,
+            "mmbtu" => EnergyUnit::MMBtu,
+            "mj" => EnergyUnit::MJ,
+            "gj" => EnergyUnit::GJ,
+            "ton" | "tons" | "tr" => EnergyUnit::Ton,
+            "tonh" | "tonhour" | "tonhours" | "trh" => EnergyUnit::TonHour,
+            _ => {
+                return Err(format!(
+                    "unknown unit '{s}' (known: W, kW, MW, Wh, kWh, MWh, therm, kBtu, MMBtu, MJ, GJ, ton, ton_h)"
+                ))
+            }
+        })
+    }
+}
+
+impl TryFrom<String> for EnergyUnit {
+    type Error = String;
+    fn try_from(s: String) -> Result<EnergyUnit, String> {
+        s.parse()
+    }
+}
+
+impl From<EnergyUnit> for String {
+    fn from(u: EnergyUnit) -> String {
+        u.as_str().to_string()
+    }
+}
+
+/// Whether a timestamp marks the start or the end of its hour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HourConvention {
+    /// Detect (see the module docs).
+    #[default]
+    Auto,
+    /// `05:00` = the hour 05:00-06:00.
+    HourBeginning,
+    /// `05:00` = the hour 04:00-05:00.
+    HourEnding,
+}
+
+/// How the file's clock relates to local standard time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DstHandling {
+    /// Detect from the spring skip / autumn repeat (see the module docs).
+    #[default]
+    Auto,
+    /// Local standard time all year.
+    None,
+    /// Local clock time following US daylight saving rules (2007 onwards).
+    Us,
+}
+
+/// What to do when two rows fall into the same hour slot (other than a DST repeat).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DuplicatePolicy {
+    /// Reject the file, naming both lines.
+    #[default]
+    Error,
+    /// Keep the first row.
+    First,
+    /// Keep the last row.
+    Last,
+    /// Average the rows (e.g. repeated readings of an hourly mean).
+    Mean,
+    /// Sum the rows (e.g. sub-hourly energy readings).
+    Sum,
+}
+
+/// What to do with a negative reading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NegativePolicy {
+    /// Reject the file, naming line and column.
+    #[default]
+    Error,
+    /// Treat as missing (NaN).
+    Missing,
+    /// Set to zero.
+    Zero,
+    /// Keep (e.g. a net meter).
+    Keep,
+}
+
+/// One meter column of the CSV.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeterColumn {
+    /// Column header in the CSV (matched after trimming, case-sensitive first, then
+    /// case-insensitive).
+    pub column: String,
+    /// What the column measures.
+    pub role: MeterRole,
+    /// Unit of the values (default kW, hourly mean).
+    #[serde(default)]
+    pub unit: EnergyUnit,
+}
+
+/// How to read a meters CSV. Sits in the project file as `[meters]`:
+///
+/// ```toml
+/// [meters]
+/// file = "rsfmeasureddata2011.csv"
+/// timestamp_column = "Date and Time"
+/// timestamp_format = "%m/%d/%Y %H:%M"
+/// convention = "hour_ending"
+/// dst = "none"
+/// [[meters.columns]]
+/// column = "Total Heating (kW)"
+/// role = "heating"
+/// unit = "kW"
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeterSpec {
+    /// The CSV file (relative paths are relative to the project file). Optional when given on
+    /// the command line.
+    #[serde(default)]
+    pub file: Option<PathBuf>,
+    /// Timestamp column; default: the first header containing "time" or "date".
+    #[serde(default)]
+    pub timestamp_column: Option<String>,
+    /// chrono format string, or `iso8601`.
+    #[serde(default = "default_format")]
+    pub timestamp_format: String,
+    /// Hour-beginning or hour-ending stamps.
+    #[serde(default)]
+    pub convention: HourConvention,
+    /// Daylight saving handling.
+    #[serde(default)]
+    pub dst: DstHandling,
+    /// Two rows in one hour slot.
+    #[serde(default)]
+    pub duplicates: DuplicatePolicy,
+    /// Negative readings.
+    #[serde(default)]
+    pub negative: NegativePolicy,
+    /// Hours a value must repeat to count as a flat run in the quality summary (default 24).
+    #[serde(default = "default_flat")]
+    pub flat_run_hours: usize,
+    /// The meter columns; empty = detect from the headers ([`detect_columns`]).
+    #[serde(default)]
+    pub columns: Vec<MeterColumn>,
+}
+
+fn default_format() -> String {
+    DEFAULT_TIMESTAMP_FORMAT.to_string()
+}
+
+fn default_flat() -> usize {
+    24
+}
+
+impl Default for MeterSpec {
+    fn default() -> MeterSpec {
+        MeterSpec {
+            file: None,
+            timestamp_column: None,
+            timestamp_format: default_format(),
+            convention: HourConvention::Auto,
+            dst: DstHandling::Auto,
+            duplicates: DuplicatePolicy::Error,
+            negative: NegativePolicy::Error,
+            flat_run_hours: default_flat(),
+            columns: Vec::new(),
+        }
+    }
+}
+
+/// One meter on the hourly grid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeterSeries {
+    /// What it measures.
+    pub role: MeterRole,
+    /// The CSV column it came from.
+    pub column: String,
+    /// The unit the CSV used.
+    pub unit: EnergyUnit,
+    /// kWh per hour, 8,760 hour-beginning slots, NaN = missing.
+    pub values: Vec<f64>,
+}
+
+/// Meters of one building-year on the hourly grid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeterData {
+    /// Calendar year of the grid.
+    pub year: i32,
+    /// The source file.
+    pub source: PathBuf,
+    /// The meters, in spec order.
+    pub series: Vec<MeterSeries>,
+    /// What ingestion decided or dropped (convention, DST, rows outside the year, ...).
+    pub notes: Vec<String>,
+}
+
+impl MeterData {
+    /// The first meter with `role`.
+    pub fn get(&self, role: &MeterRole) -> Option<&MeterSeries> {
+        self.series.iter().find(|s| &s.role == role)
+    }
+
+    /// The sub-meter named `name`.
+    pub fn submeter(&self, name: &str) -> Option<&MeterSeries> {
+        self.get(&MeterRole::Submeter(name.to_string()))
+    }
+}
+
+/// Detects meter columns from headers (case-insensitive): heating, cooling, electricity
+/// (`electric`, `total building`, `whole building`, `building`, `main`), and the sub-meters
+/// `lighting`, `plug_loads`, `data_center`, `mechanical`. Columns mentioning `net`, `pv`,
+/// `solar` or `generation` are skipped. A unit in parentheses or brackets (`(kW)`, `[kWh]`) is
+/// used, otherwise kW. The first column per role wins.
+pub fn detect_columns(headers: &[&str], timestamp_column: Option<&str>) -> Vec<MeterColumn> {
+    let mut out: Vec<MeterColumn> = Vec::new();
+    for h in headers {
+        let h = h.trim();
+        if h.is_empty() || Some(h) == timestamp_column {
+            continue;
+        }
+        let l = h.to_ascii_lowercase();
+        let words: Vec<&str> = l
+            .split(|c: char| !c.is_ascii_alphanumeric())
+            .filter(|w| !w.is_empty())
+            .collect();
+        let has = |w: &str| words.contains(&w);
+        if has("net") || has("pv") || has("solar") || has("generation") {
+            continue;
+        }
+        let role = if l.contains("heating") || has("heat") {
+            MeterRole::Heating
+        } else if l.contains("cooling") || l.contains("chilled") {
+            MeterRole::Cooling
+        } else if l.contains("data center") || l.contains("datacenter") || l.contains("server") {
+            MeterRole::Submeter("data_center".into())
+        } else if l.contains("lighting") || has("lights") {
+            MeterRole::Submeter("lighting".into())
+        } else if l.contains("plug") {
+            MeterRole::Submeter("plug_loads".into())
+        } else if l.contains("mechanical") || has("hvac") {
+            MeterRole::Submeter("mechanical".into())
+        } else if l.contains("electric") || l.contains("building") || has("main") {
+            MeterRole::Electricity
+        } else {
+            continue;
+        };
+        if out.iter().any(|c| c.role == role) {
+            continue;
+        }
+        let unit = unit_in_header(h).unwrap_or_default();
+        out.push(MeterColumn {
+            column: h.to_string(),
+            role,
+            unit,
+        });
+    }
+    out
+}
+
+fn unit_in_header(h: &str) -> Option<EnergyUnit> {
+    let open = h.rfind(['(', '['])?;
+    let close = h[open..].find([')', ']'])? + open;
+    h[open + 1..close].parse().ok()
+}
+
+/// Parses one timestamp. Returns the naive local time and whether it carried a UTC offset
+/// (already converted with `std_offset_h`).
+fn parse_timestamp(
+    s: &str,
+    format: &str,
+    std_offset_h: Option<f64>,
+) -> Result<(NaiveDateTime, bool), String> {
+    let s = s.trim();
+    // 24:00 = midnight at the end of the day.
+    let (text, plus_day) = match s.find("24:00") {
+        Some(i) if i > 0 && matches!(s.as_bytes()[i - 1], b' ' | b'T') => {
+            (format!("{}00:00{}", &s[..i], &s[i + 5..]), true)
+        }
+        _ => (s.to_string(), false),
+    };
+    let mut offset = false;
+    let dt = if format.eq_ignore_ascii_case("iso8601") || format.eq_ignore_ascii_case("iso") {
+        if let Ok(dt) = chrono::DateTime::parse_from_rfc3339(&text) {
+            let off = std_offset_h.ok_or_else(|| {
+                format!(
+                    "timestamp '{s}' has a UTC offset but the site's standard time zone is unknown"
+                )
+            })?;
+            offset = true;
+            dt.naive_utc() + Duration::minutes((off * 60.0).round() as i64)
+        } else {
+            const F: [&str; 5] = [
+                "%Y-%m-%dT%H:%M:%S",
+                "%Y-%m-%d %H:%M:%S",
+                "%Y-%m-%dT%H:%M",
+                "%Y-%m-%d %H:%M",
+                "%Y-%m-%dT%H:%M:%S%.f",
+            ];
+            F.iter()
+                .find_map(|f| NaiveDateTime::parse_from_str(&text, f).ok())
+                .ok_or_else(|| format!("timestamp '{s}' is not ISO 8601 (e.g. 2011-01-13T05:00)"))?
+        }
+    } else {
+        NaiveDateTime::parse_from_str(&text, format)
+            .map_err(|e| format!("timestamp '{s}' does not match format '{format}': {e}"))?
+    };
+    Ok((if plus_day { dt + Duration::days(1) } else { dt }, offset))
+}
+
+/// Index of a (non-29-February) hour-beginning time of `year` on the 8,760-slot grid.
+pub fn slot_of(year: i32, t: NaiveDateTime) -> Option<usize> {
+    if t.year() != year || (t.month() == 2 && t.day() == 29) {
+        return None;
+    }
+    let day = CUM_DAYS[t.month0() as usize] + t.day0() as usize;
+    Some(day * 24 + t.hour() as usize)
+}
+
+/// Date of day `d` (0..365, counted without 29 February) of `year`.
+pub fn day_date(year: i32, d: usize) -> NaiveDate {
+    let m = CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11);
+    NaiveDate::from_ymd_opt(year, m as u32 + 1, (d - CUM_DAYS[m]) as u32 + 1)
+        .expect("valid day of year")
+}
+
+/// Hour-beginning local standard time of slot `t` of `year`.
+pub fn slot_time(year: i32, t: usize) -> NaiveDateTime {
+    day_date(year, t / 24)
+        .and_hms_opt((t % 24) as u32, 0, 0)
+        .expect("valid hour")
+}
+
+/// Month (1..=12) of slot `t`.
+pub fn slot_month(t: usize) -> u32 {
+    let d = t / 24;
+    CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11) as u32 + 1
+}
+
+/// US DST start/end (clock, hour-beginning): second Sunday of March 02:00 (absent hour), first
+/// Sunday of November 01:00 (repeated hour).
+fn us_dst_days(year: i32) -> Option<(NaiveDate, NaiveDate)> {
+    Some((
+        NaiveDate::from_weekday_of_month_opt(year, 3, Weekday::Sun, 2)?,
+        NaiveDate::from_weekday_of_month_opt(year, 11, Weekday::Sun, 1)?,
+    ))
+}
+
+fn is_missing_token(s: &str) -> bool {
+    matches!(
+        s.to_ascii_lowercase().as_str(),
+        "" | "na" | "n/a" | "nan" | "null" | "none" | "-" | "--"
+    )
+}
+
+/// Reads a meters CSV with `spec`. `year`: the grid year (default: the most common year of
+/// the timestamps). `std_offset_h`: the site's standard UTC offset, used only for ISO
+/// timestamps that carry an offset (e.g. from the EPW `LOCATION` time zone).
+pub fn read_meters(
+    path: &Path,
+    spec: &MeterSpec,
+    year: Option<i32>,
+    std_offset_h: Option<f64>,
+) -> Result<MeterData, PrecalError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PrecalError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_meters(&text, path, spec, year, std_offset_h)
+}
+
+struct Row {
+    line: u64,
+    clock: NaiveDateTime,
+    offset: bool,
+    record: csv::StringRecord,
+}
+
+/// [`read_meters`] on text already in memory; `path` is used in messages.
+pub fn parse_meters(
+    text: &str,
+    path: &Path,
+    spec: &MeterSpec,
+    year: Option<i32>,
+    std_offset_h: Option<f64>,
+) -> Result<MeterData, PrecalError> {
+    let file_err = |message: String| PrecalError::MeterFile {
+        path: path.to_path_buf(),
+        message,
+    };
+    let row_err = |line: u64, column: &str, message: String| PrecalError::Meter {
+        path: path.to_path_buf(),
+        line,
+        column: column.to_string(),
+        message,
+    };
+    let mut rdr = csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let headers: Vec<String> = rdr
+        .headers()
+        .map_err(|e| file_err(format!("cannot read the header line: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let find = |name: &str| -> Option<usize> {
+        headers.iter().position(|h| h == name.trim()).or_else(|| {
+            headers
+                .iter()
+                .position(|h| h.eq_ignore_ascii_case(name.trim()))
+        })
+    };
+    let ts_idx = match &spec.timestamp_column {
+        Some(c) => find(c).ok_or_else(|| {
+            file_err(format!(
+                "timestamp column '{c}' not found; headers: {headers:?}"
+            ))
+        })?,
+        None => headers
+            .iter()
+            .position(|h| {
+                let l = h.to_ascii_lowercase();
+                l.contains("time") || l.contains("date")
+            })
+            .unwrap_or(0),
+    };
+    let ts_name = headers[ts_idx].clone();
+    let mut notes = Vec::new();
+    let columns = if spec.columns.is_empty() {
+        let hs: Vec<&str> = headers.iter().map(String::as_str).collect();
+        let c = detect_columns(&hs, Some(&ts_name));
+        if c.is_empty() {
+            return Err(file_err(format!(
+                "no meter column recognised among headers {headers:?}; list them in [meters] columns"
+            )));
+        }
+        notes.push(format!(
+            "columns detected from headers: {}",
+            c.iter()
+                .map(|c| format!("'{}' -> {} [{}]", c.column, c.role, c.unit.as_str()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        c
+    } else {
+        spec.columns.clone()
+    };
+    let col_idx: Vec<usize> = columns
+        .iter()
+        .map(|c| {
+            find(&c.column).ok_or_else(|| {
+                file_err(format!(
+                    "meter column '{}' not found; headers: {headers:?}",
+                    c.column
+                ))
+            })
+        })
+        .collect::<Result<_, _>>()?;
+
+    // Pass 1: timestamps.
+    let mut rows: Vec<Row> = Vec::new();
+    let mut saw_24 = false;
+    for rec in rdr.records() {
+        let record = rec.map_err(|e| {
+            let line = e.position().map(|p| p.line()).unwrap_or(0);
+            row_err(line, "", format!("malformed CSV: {e}"))
+        })?;
+        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
+        let raw = record.get(ts_idx).unwrap_or("");
+        if raw.is_empty() {
+            return Err(row_err(line, &ts_name, "empty timestamp".into()));
+        }
+        saw_24 |= raw.contains("24:00");
+        let (clock, offset) = parse_timestamp(raw, &spec.timestamp_format, std_offset_h)
+            .map_err(|m| row_err(line, &ts_name, m))?;
+        rows.push(Row {
+            line,
+            clock,
+            offset,
+            record,
+        });
+    }
+    if rows.is_empty() {
+        return Err(file_err("no data rows".into()));
+    }
+
+    // Hour convention.
+    let convention = match spec.convention {
+        HourConvention::Auto => {
+            let min = rows.iter().map(|r| r.clock).min().expect("rows");
+            let max = rows.iter().map(|r| r.clock).max().expect("rows");
+            let jan1 = |t: NaiveDateTime, h: u32| t.month() == 1 && t.day() == 1 && t.hour() == h;
+            let ending = saw_24 || jan1(min, 1) || (jan1(max, 0) && max.year() > min.year());
+            notes.push(format!(
+                "hour convention detected: {} (earliest stamp {min}, latest {max})",
+                if ending {
+                    "hour-ending"
+                } else {
+                    "hour-beginning"
+                }
+            ));
+            if ending {
+                HourConvention::HourEnding
+            } else {
+                HourConvention::HourBeginning
+            }
+        }
+        c => c,
+    };
+    if convention == HourConvention::HourEnding {
+        for r in &mut rows {
+            r.clock -= Duration::hours(1);
+        }
+    }
+
+    // Grid year.
+    let year = match year {
+        Some(y) => y,
+        None => {
+            let mut counts: HashMap<i32, usize> = HashMap::new();
+            for r in &rows {
+                *counts.entry(r.clock.year()).or_default() += 1;
+            }
+            let y = counts
+                .into_iter()
+                .max_by_key(|&(y, n)| (n, -y))
+                .map(|(y, _)| y)
+                .expect("rows");
+            notes.push(format!("year inferred from the timestamps: {y}"));
+            y
+        }
+    };
+
+    // Daylight saving.
+    let dst_days = us_dst_days(year);
+    let dst = match (spec.dst, dst_days) {
+        (DstHandling::Auto, Some((spring, fall))) => {
+            let count = |d: NaiveDate, h: u32| {
+                rows.iter()
+                    .filter(|r| !r.offset && r.clock.date() == d && r.clock.hour() == h)
+                    .count()
+            };
+            let skipped = count(spring, 2) == 0 && count(spring, 1) > 0 && count(spring, 3) > 0;
+            let repeated = count(fall, 1) >= 2;
+            let us = skipped || repeated;
+            notes.push(format!(
+                "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
+                if us {
+                    "US DST clock"
+                } else {
+                    "none (standard time)"
+                },
+                if skipped { "absent" } else { "not absent" },
+                if repeated { "repeated" } else { "not repeated" }
+            ));
+            if us {
+                DstHandling::Us
+            } else {
+                DstHandling::None
+            }
+        }
+        (DstHandling::Auto, None) => DstHandling::None,
+        (d, _) => d,
+    };
+    if dst == DstHandling::Us {
+        let (spring, fall) = dst_days.ok_or_else(|| file_err("no DST dates".into()))?;
+        let start = spring.and_hms_opt(3, 0, 0).expect("time");
+        let end = fall.and_hms_opt(1, 0, 0).expect("time");
+        let mut seen_repeat = false;
+        let mut moved = 0usize;
+        for r in &mut rows {
+            if r.offset {
+                continue;
+            }
+            let in_dst = if r.clock >= start && r.clock < end {
+                true
+            } else if r.clock == end {
+                // First occurrence of the repeated hour is still DST.
+                let first = !seen_repeat;
+                seen_repeat = true;
+                first
+            } else {
+                false
+            };
+            if in_dst {
+                r.clock -= Duration::hours(1);
+                moved += 1;
+            }
+        }
+        notes.push(format!(
+            "{moved} rows inside daylight saving time moved back one hour to local standard time"
+        ));
+    }
+
+    // Pass 2: values on the grid.
+    let n = columns.len();
+    let mut sums = vec![vec![f64::NAN; HOURS]; n];
+    let mut counts = vec![vec![0u32; HOURS]; n];
+    let mut slot_line = vec![0u64; HOURS];
+    let (mut outside, mut feb29, mut dups) = (0usize, 0usize, 0usize);
+    for r in &rows {
+        let Some(t) = slot_of(year, r.clock) else {
+            if r.clock.year() == year {
+                feb29 += 1;
+            } else {
+                outside += 1;
+            }
+            continue;
+        };
+        let dup = slot_line[t] != 0;
+        if dup {
+            dups += 1;
+            if spec.duplicates == DuplicatePolicy::Error {
+                return Err(row_err(
+                    r.line,
+                    &ts_name,
+                    format!(
+                        "duplicate hour {} (hour-beginning, standard time): line {} has the same hour; \
+                         set meters.duplicates = \"first\" | \"last\" | \"mean\" | \"sum\" to accept",
+                        r.clock, slot_line[t]
+                    ),
+                ));
+            }
+        } else {
+            slot_line[t] = r.line;
+        }
+        for (k, (col, &idx)) in columns.iter().zip(&col_idx).enumerate() {
+            let raw = r.record.get(idx).unwrap_or("");
+            let v = if is_missing_token(raw) {
+                f64::NAN
+            } else {
+                let v: f64 = raw.parse().map_err(|_| {
+                    row_err(
+                        r.line,
+                        &col.column,
+                        format!("value '{raw}' is not a number"),
+                    )
+                })?;
+                if !v.is_finite() {
+                    f64::NAN
+                } else if v < 0.0 {
+                    match spec.negative {
+                        NegativePolicy::Error => {
+                            return Err(row_err(
+                                r.line,
+                                &col.column,
+                                format!(
+                                    "negative value {v}; set meters.negative = \"missing\" | \"zero\" | \"keep\" to accept"
+                                ),
+                            ))
+                        }
+                        NegativePolicy::Missing => f64::NAN,
+                        NegativePolicy::Zero => 0.0,
+                        NegativePolicy::Keep => v,
+                    }
+                } else {
+                    v
+                }
+            };
+            let v = v * col.unit.to_kwh();
+            let (s, c) = (&mut sums[k][t], &mut counts[k][t]);
+            if !dup {
+                *s = v;
+                *c = u32::from(v.is_finite());
+                continue;
+            }
+            match spec.duplicates {
+                DuplicatePolicy::Error | DuplicatePolicy::First => {}
+                DuplicatePolicy::Last => {
+                    *s = v;
+                    *c = u32::from(v.is_finite());
+                }
+                DuplicatePolicy::Mean | DuplicatePolicy::Sum => {
+                    if v.is_finite() {
+                        *s = if *c == 0 { v } else { *s + v };
+                        *c += 1;
+                    }
+                }
+            }
+        }
+    }
+    if spec.duplicates == DuplicatePolicy::Mean {
+        for k in 0..n {
+            for t in 0..HOURS {
+                if counts[k][t] > 1 {
+                    sums[k][t] /= counts[k][t] as f64;
+                }
+            }
+        }
+    }
+    if outside > 0 {
+        notes.push(format!("{outside} rows outside year {year} dropped"));
+    }
+    if feb29 > 0 {
+        notes.push(format!(
+            "{feb29} rows on 29 February dropped (the grid is a non-leap year)"
+        ));
+    }
+    if dups > 0 {
+        notes.push(format!(
+            "{dups} duplicate rows combined with policy {:?}",
+            spec.duplicates
+        ));
+    }
+    if slot_line.iter().all(|&l| l == 0) {
+        return Err(file_err(format!("no rows fall in year {year}")));
+    }
+    let series = columns
+        .into_iter()
+        .zip(sums)
+        .map(|(c, values)| MeterSeries {
+            role: c.role,
+            column: c.column,
+            unit: c.unit,
+            values,
+        })
+        .collect();
+    Ok(MeterData {
+        year,
+        source: path.to_path_buf(),
+        series,
+        notes,
+    })
+}
+
+/// A run of missing hours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Gap {
+    /// Length in hours.
+    pub hours: usize,
+    /// First missing slot.
+    pub start_slot: usize,
+    /// First missing hour (hour-beginning, local standard time).
+    pub start: String,
+}
+
+/// A run of identical non-zero values (a stuck meter, or an estimated fill).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FlatRun {
+    /// Length in hours.
+    pub hours: usize,
+    /// First slot.
+    pub start_slot: usize,
+    /// First hour (hour-beginning, local standard time).
+    pub start: String,
+    /// The repeated value (kWh).
+    pub value: f64,
+}
+
+/// Data quality of one meter series.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeterQuality {
+    /// The meter's role name.
+    pub meter: String,
+    /// Share of the 8,760 hours with a value, %.
+    pub coverage_pct: f64,
+    /// Hours without a value.
+    pub missing_hours: usize,
+    /// The longest run of missing hours, if any.
+    pub longest_gap: Option<Gap>,
+    /// Runs of the same non-zero value lasting at least `flat_run_min_hours` (longest first, at
+    /// most 10 listed).
+    pub flat_runs: Vec<FlatRun>,
+    /// Number of such runs.
+    pub flat_run_count: usize,
+    /// The threshold used for flat runs.
+    pub flat_run_min_hours: usize,
+    /// Hours with exactly zero.
+    pub zero_hours: usize,
+    /// Hours with a negative value (kept by policy).
+    pub negative_hours: usize,
+    /// Sum of the values, kWh.
+    pub total_kwh: f64,
+    /// Mean of the values, kWh per hour.
+    pub mean_kwh: f64,
+    /// Largest value, kWh per hour.
+    pub max_kwh: f64,
+}
+
+/// Quality summary of one kWh-per-hour series on the grid of `year`.
+pub fn quality(name: &str, values: &[f64], year: i32, flat_run_min_hours: usize) -> MeterQuality {
+    let n = values.len();
+    let present = values.iter().filter(|v| v.is_finite()).count();
+    let mut longest: Option<(usize, usize)> = None;
+    let mut t = 0;
+    while t < n {
+        if values[t].is_finite() {
+            t += 1;
+            continue;
+        }
+        let s = t;
+        while t < n && !values[t].is_finite() {
+            t += 1;
+        }
+        if longest.is_none_or(|(_, h)| t - s > h) {
+            longest = Some((s, t - s));
+        }
+    }
+    let mut flats = Vec::new();
+    let min_h = flat_run_min_hours.max(2);
+    let mut t = 0;
+    while t < n {
+        let v = values[t];
+        let s = t;
+        t += 1;
+        if !v.is_finite() || v == 0.0 {
+            continue;
+        }
+        while t < n && values[t] == v {
+            t += 1;
+        }
+        if t - s >= min_h {
+            flats.push(FlatRun {
+                hours: t - s,
+                start_slot: s,
+                start: slot_time(year, s).to_string(),
+                value: v,
+            });
+        }
+    }
+    let flat_run_count = flats.len();
+    flats.sort_by(|a, b| b.hours.cmp(&a.hours).then(a.start_slot.cmp(&b.start_slot)));
+    flats.truncate(10);
+    let finite = values.iter().copied().filter(|v| v.is_finite());
+    let total: f64 = finite.clone().sum();
+    MeterQuality {
+        meter: name.to_string(),
+        coverage_pct: if n == 0 {
+            0.0
+        } else {
+            100.0 * present as f64 / n as f64
+        },
+        missing_hours: n - present,
+        longest_gap: longest.map(|(s, h)| Gap {
+            hours: h,
+            start_slot: s,
+            start: slot_time(year, s).to_string(),
+        }),
+        flat_runs: flats,
+        flat_run_count,
+        flat_run_min_hours: min_h,
+        zero_hours: values.iter().filter(|&&v| v == 0.0).count(),
+        negative_hours: values.iter().filter(|&&v| v < 0.0).count(),
+        total_kwh: total,
+        mean_kwh: if present == 0 {
+            f64::NAN
+        } else {
+            total / present as f64
+        },
+        max_kwh: finite.fold(f64::NAN, f64::max),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> MeterSpec {
+        MeterSpec {
+            columns: vec![MeterColumn {
+                column: "Heat".into(),
+                role: MeterRole::Heating,
+                unit: EnergyUnit::KWh,
+            }],
+            ..MeterSpec::default()
+        }
+    }
+
+    #[test]
+    fn slots_and_dates() {
+        let t = NaiveDate::from_ymd_opt(2011, 3, 1)
+            .unwrap()
+            .and_hms_opt(5, 0, 0)
+            .unwrap();
+        assert_eq!(slot_of(2011, t), Some(59 * 24 + 5));
+        assert_eq!(slot_time(2011, 59 * 24 + 5), t);
+        assert_eq!(slot_time(2016, 59 * 24).date().to_string(), "2016-03-01");
+        assert_eq!(slot_month(8759), 12);
+        assert_eq!(day_date(2011, 364).to_string(), "2011-12-31");
+    }
+
+    #[test]
+    fn hour_ending_and_units_and_missing() {
+        let text = "Time,Heat,Gas (therm)\n01/01/2011 01:00,5,1\n01/01/2011 02:00,,2\n1/1/2011 3:00,NA,x\n";
+        let mut s = spec();
+        s.columns.push(MeterColumn {
+            column: "Gas (therm)".into(),
+            role: MeterRole::Submeter("gas".into()),
+            unit: EnergyUnit::Therm,
+        });
+        let e = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with("m.csv:4: column 'Gas (therm)'"), "{msg}");
+        let text = text.replace(",x\n", ",3\n");
+        let d = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap();
+        assert_eq!(d.year, 2011);
+        assert_eq!(d.series[0].values[0], 5.0);
+        assert!(d.series[0].values[1].is_nan());
+        assert!((d.series[1].values[1] - 2.0 * 29.307107).abs() < 1e-9);
+        assert!(
+            d.notes.iter().any(|n| n.contains("hour-ending")),
+            "{:?}",
+            d.notes
+        );
+    }
+
+    #[test]
+    fn duplicates_negative_and_24h() {
+        let text = "timestamp,Heat\n2011-01-01 00:00,1\n2011-01-01 01:00,2\n2011-01-01 01:00,4\n";
+        let mut s = spec();
+        s.timestamp_format = "iso8601".into();
+        let e = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap_err();
+        assert!(e.to_string().contains("m.csv:4:"), "{e}");
+        assert!(e.to_string().contains("line 3"), "{e}");
+        s.duplicates = DuplicatePolicy::Mean;
+        let d = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap();
+        assert_eq!(d.series[0].values[1], 3.0);
+        let neg = "timestamp,Heat\n2011-01-01 00:00,-1\n";
+        let e = parse_meters(neg, Path::new("m.csv"), &s, None, None).unwrap_err();
+        assert!(
+            e.to_string().contains("m.csv:2: column 'Heat': negative"),
+            "{e}"
+        );
+        s.negative = NegativePolicy::Zero;
+        let d = parse_meters(neg, Path::new("m.csv"), &s, None, None).unwrap();
+        assert_eq!(d.series[0].values[0], 0.0);
+        // 24:00 hour-ending = last hour of the day.
+        let mut s = spec();
+        s.convention = HourConvention::HourEnding;
+        let t = "Time,Heat\n01/01/2011 24:00,7\n";
+        let d = parse_meters(t, Path::new("m.csv"), &s, None, None).unwrap();
+        assert_eq!(d.series[0].values[23], 7.0);
+    }
+
+    #[test]
+    fn us_dst_repeats_and_skips() {
+        // Clock time, hour-beginning, 2011: spring forward 13 March, fall back 6 November.
+        let mut text = String::from("Time,Heat\n");
+        let mut t = NaiveDate::from_ymd_opt(2011, 3, 12)
+            .unwrap()
+            .and_hms_opt(0, 0, 0)
+            .unwrap();
+        let end = NaiveDate::from_ymd_opt(2011, 3, 14)
+            .unwrap()
+            .and_hms_opt(0, 0, 0)
+            .unwrap();
+        while t < end {
+            if !(t.date().day() == 13 && t.hour() == 2) {
+                text += &format!("{},{}\n", t.format("%m/%d/%Y %H:%M"), t.hour());
+            }
+            t += Duration::hours(1);
+        }
+        // Autumn: 01:00 appears twice.
+        for (h, v) in [(0, 100), (1, 101), (1, 102), (2, 103)] {
+            text += &format!("11/06/2011 {h:02}:00,{v}\n");
+        }
+        let mut s = spec();
+        s.convention = HourConvention::HourBeginning;
+        let d = parse_meters(&text, Path::new("m.csv"), &s, Some(2011), None).unwrap();
+        assert!(
+            d.notes.iter().any(|n| n.contains("US DST")),
+            "{:?}",
+            d.notes
+        );
+        let v = &d.series[0].values;
+        let mar13 = (CUM_DAYS[2] + 12) * 24;
+        // Before the switch: unchanged; clock 03:00 (DST) = 02:00 standard.
+        assert_eq!(v[mar13 + 1], 1.0);
+        assert_eq!(v[mar13 + 2], 3.0);
+        // Clock 23:00 = 22:00 standard; standard 23:00 would be clock 00:00 on 14 March,
+        // which is not in the file.
+        assert_eq!(v[mar13 + 22], 23.0);
+        assert!(v[mar13 + 23].is_nan());
+        let nov6 = (CUM_DAYS[10] + 5) * 24;
+        // Clock 00:00 DST = 23:00 standard on 5 Nov; first 01:00 = 00:00; second 01:00 = 01:00.
+        assert_eq!(v[nov6 - 1], 100.0);
+        assert_eq!(v[nov6], 101.0);
+        assert_eq!(v[nov6 + 1], 102.0);
+        assert_eq!(v[nov6 + 2], 103.0);
+    }
+
+    #[test]
+    fn detects_rsf_columns() {
+        let h = [
+            "Day of Week",
+            "Date and Time",
+            "Total Cooling (kW)",
+            "Total Heating (kW)",
+            "Total Mechanical (kW)",
+            "Total Lighting (kW)",
+            "Total Plug Loads (kW)",
+            "Total Data Center (kW)",
+            "Total Building (kW)",
+            "PV (kW)",
+            "Building Net (kW)",
+            "",
+        ];
+        let c = detect_columns(&h, Some("Date and Time"));
+        let roles: Vec<&str> = c.iter().map(|c| c.role.name()).collect();
+        assert_eq!(
+            roles,
+            [
+                "cooling",
+                "heating",
+                "mechanical",
+                "lighting",
+                "plug_loads",
+                "data_center",
+                "electricity"
+            ]
+        );
+        assert!(c.iter().all(|c| c.unit == EnergyUnit::KW));
+    }
+
+    #[test]
+    fn quality_summary() {
+        let mut v = vec![1.0; 100];
+        v[10..15].fill(f64::NAN);
+        v[50..52].fill(f64::NAN);
+        v[60..70].fill(0.0);
+        for (i, x) in v.iter_mut().enumerate().take(50).skip(20) {
+            *x = i as f64;
+        }
+        let q = quality("heating", &v, 2011, 24);
+        assert_eq!(q.missing_hours, 7);
+        assert_eq!(q.longest_gap.as_ref().unwrap().hours, 5);
+        assert_eq!(q.longest_gap.as_ref().unwrap().start_slot, 10);
+        assert_eq!(q.zero_hours, 10);
+        // 70..100 = 30 hours of 1.0.
+        assert_eq!(q.flat_run_count, 1);
+        assert_eq!(q.flat_runs[0].hours, 30);
+    }
+
+    #[test]
+    fn spec_round_trips_through_toml_friendly_serde() {
+        let s: MeterSpec = serde_json::from_str(
+            r#"{"file":"m.csv","convention":"hour_ending","dst":"none",
+                "columns":[{"column":"Total Data Center (kW)","role":"data center","unit":"kW"},
+                           {"column":"Gas","role":"heating","unit":"MMBtu"}]}"#,
+        )
+        .unwrap();
+        assert_eq!(s.columns[0].role, MeterRole::Submeter("data_center".into()));
+        assert_eq!(s.columns[1].unit, EnergyUnit::MMBtu);
+        assert_eq!(s.timestamp_format, DEFAULT_TIMESTAMP_FORMAT);
+        let j = serde_json::to_string(&s).unwrap();
+        assert!(j.contains("\"role\":\"data_center\""), "{j}");
+    }
+}

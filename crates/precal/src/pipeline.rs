@@ -1,0 +1,254 @@
+//! The whole pre-calibration of one building-year: meters + outdoor temperature -> quality,
+//! disaggregation, day-type clusters, schedule priors and `priors.toml` content.
+
+use serde::{Deserialize, Serialize};
+
+use crate::disaggregate::{
+    disaggregate_cooling, disaggregate_electricity, disaggregate_heating, DerivedSeries,
+    Disaggregation, DisaggregationOptions,
+};
+use crate::meters::{quality, MeterData, MeterQuality, MeterRole, HOURS};
+use crate::schedule::{
+    cluster_days, daily_profiles, day_type_schedules, DailyProfiles, DayLabel, DayTypeClusters,
+    DayTypeSchedule, ScheduleOptions, ScheduleSource,
+};
+use crate::PrecalError;
+
+/// Options of [`run`]; the `[precalibration]` table of a project file.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PrecalOptions {
+    /// Disaggregation options.
+    pub disaggregation: DisaggregationOptions,
+    /// Schedule analysis options.
+    pub schedule: ScheduleOptions,
+}
+
+/// One parameter of `priors.toml`: a triangular prior.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParameterPrior {
+    /// Parameter name (`schedule_weekday_01`, ..., `hot_water_peak_flow`).
+    pub name: String,
+    /// Lower bound.
+    pub min: f64,
+    /// Mode.
+    pub mode: f64,
+    /// Upper bound.
+    pub max: f64,
+    /// Unit (`-` for fractions).
+    pub unit: String,
+    /// Where the prior comes from.
+    pub source: String,
+}
+
+/// Interval boundaries per day type: the hour (1..=24) at which each interval ends.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ScheduleBoundaries {
+    /// Weekday intervals.
+    pub weekday_boundaries: Vec<usize>,
+    /// Weekend (and holiday) intervals.
+    pub weekend_boundaries: Vec<usize>,
+}
+
+/// The content of `priors.toml`, the file the calibration reads.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PriorsFile {
+    /// Schedule interval boundaries.
+    pub schedule: ScheduleBoundaries,
+    /// Triangular priors.
+    pub parameter: Vec<ParameterPrior>,
+}
+
+/// Everything the pre-calibration found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Precalibration {
+    /// The meters on the hourly grid.
+    pub meters: MeterData,
+    /// Quality per meter.
+    pub quality: Vec<MeterQuality>,
+    /// Bases and derived series.
+    pub disaggregation: Disaggregation,
+    /// The series the daily profiles came from.
+    pub schedule_series: DerivedSeries,
+    /// Normalised daily profiles.
+    pub profiles: DailyProfiles,
+    /// Day-type clusters and the calendar.
+    pub clusters: DayTypeClusters,
+    /// Weekday and weekend quartiles and intervals.
+    pub schedules: Vec<DayTypeSchedule>,
+    /// The priors file content.
+    pub priors: PriorsFile,
+    /// Decisions worth reporting.
+    pub notes: Vec<String>,
+}
+
+impl Precalibration {
+    /// The weekday or weekend schedule.
+    pub fn schedule(&self, label: DayLabel) -> &DayTypeSchedule {
+        self.schedules
+            .iter()
+            .find(|s| s.label == label)
+            .expect("both day types present")
+    }
+
+    /// Hourly fractions before merging (2 x 24) and intervals after.
+    pub fn reduction(&self) -> (usize, usize) {
+        (
+            self.schedules.iter().map(|s| s.hours.len()).sum(),
+            self.schedules.iter().map(|s| s.intervals.len()).sum(),
+        )
+    }
+}
+
+fn sum_series(parts: &[&[f64]]) -> Vec<f64> {
+    (0..HOURS)
+        .map(|t| parts.iter().map(|p| p[t]).sum::<f64>())
+        .collect()
+}
+
+/// Runs the pre-calibration on `meters` with the hourly outdoor dry bulb `outdoor_c` (8,760
+/// values in the same hour order, e.g. from the EPW).
+pub fn run(
+    meters: MeterData,
+    outdoor_c: &[f64],
+    opts: &PrecalOptions,
+) -> Result<Precalibration, PrecalError> {
+    if outdoor_c.len() != HOURS {
+        return Err(PrecalError::Invalid(format!(
+            "outdoor temperature needs {HOURS} hourly values, got {}",
+            outdoor_c.len()
+        )));
+    }
+    let year = meters.year;
+    let mut notes = Vec::new();
+    let quality: Vec<MeterQuality> = meters
+        .series
+        .iter()
+        .map(|s| quality(s.role.name(), &s.values, year, 24))
+        .collect();
+
+    let mut dis = Disaggregation::default();
+    let d_opts = &opts.disaggregation;
+    if let Some(h) = meters.get(&MeterRole::Heating) {
+        disaggregate_heating(&h.values, outdoor_c, year, d_opts, &mut dis);
+    } else {
+        notes.push("no heating meter: heating base not estimated".into());
+    }
+    if let Some(c) = meters.get(&MeterRole::Cooling) {
+        disaggregate_cooling(&c.values, outdoor_c, d_opts, &mut dis);
+    } else {
+        notes.push("no cooling meter: cooling base not estimated".into());
+    }
+    let elec = meters
+        .get(&MeterRole::Electricity)
+        .map(|s| s.values.as_slice());
+    let dc = meters.submeter("data_center").map(|s| s.values.as_slice());
+    let e_base = disaggregate_electricity(elec, dc, d_opts, &mut dis);
+
+    // Schedule series.
+    let lighting = meters.submeter("lighting").map(|s| s.values.as_slice());
+    let plug = meters.submeter("plug_loads").map(|s| s.values.as_slice());
+    let subs: Vec<&[f64]> = [lighting, plug].into_iter().flatten().collect();
+    let names: Vec<&str> = [("lighting", lighting), ("plug_loads", plug)]
+        .iter()
+        .filter(|(_, s)| s.is_some())
+        .map(|(n, _)| *n)
+        .collect();
+    let use_subs = match opts.schedule.source {
+        ScheduleSource::Submeters => {
+            if subs.is_empty() {
+                return Err(PrecalError::Invalid(
+                    "schedule source 'submeters' needs a lighting or plug_loads meter".into(),
+                ));
+            }
+            true
+        }
+        ScheduleSource::Electricity => false,
+        ScheduleSource::Auto => !subs.is_empty(),
+    };
+    let schedule_series = if use_subs {
+        DerivedSeries {
+            name: "schedule_series".into(),
+            values: sum_series(&subs),
+            method: format!("sum of the {} sub-meters", names.join(" + ")),
+        }
+    } else {
+        let e = dis.get("electricity_variable").ok_or_else(|| {
+            PrecalError::Invalid(
+                "no electricity meter (nor lighting / plug_loads sub-meters) for the schedule analysis"
+                    .into(),
+            )
+        })?;
+        DerivedSeries {
+            name: "schedule_series".into(),
+            values: e.values.clone(),
+            method: format!("electricity minus the {e_base:.3} kW electricity base"),
+        }
+    };
+    let profiles = daily_profiles(&schedule_series.values, opts.schedule.normalise_quantile)?;
+    if !profiles.skipped_days.is_empty() {
+        notes.push(format!(
+            "{} days with missing hours skipped in the schedule analysis",
+            profiles.skipped_days.len()
+        ));
+    }
+    let (clusters, _) = cluster_days(&profiles, year, &opts.schedule)?;
+    let schedules = day_type_schedules(&profiles, &clusters, &opts.schedule)?;
+
+    // priors.toml.
+    let mut parameter = Vec::new();
+    for s in &schedules {
+        for (i, iv) in s.intervals.iter().enumerate() {
+            parameter.push(ParameterPrior {
+                name: format!("schedule_{}_{:02}", s.label.as_str(), i + 1),
+                min: iv.prior.min,
+                mode: iv.prior.mode,
+                max: iv.prior.max,
+                unit: "-".into(),
+                source: format!(
+                    "DTW day-type cluster '{}', hours {}-{}, box-plot quartiles",
+                    s.label.as_str(),
+                    iv.start_hour,
+                    iv.end_hour
+                ),
+            });
+        }
+    }
+    match dis.estimate("hot_water_peak_flow_m3s") {
+        Some(e) if e.value.is_finite() && e.value > 0.0 => parameter.push(ParameterPrior {
+            name: "hot_water_peak_flow".into(),
+            min: 0.0,
+            mode: e.value,
+            max: 2.0 * e.value,
+            unit: "m3/s".into(),
+            source: format!(
+                "heating base peak {:.2} kW -> {} (min 0, max 2 x mode)",
+                dis.estimate("heating_base_peak_kw").map_or(f64::NAN, |p| p.value),
+                e.method
+            ),
+        }),
+        _ => notes.push(
+            "hot_water_peak_flow prior not derived: no positive heating base in the non-heating season \
+             (the heating meter may exclude domestic hot water)"
+                .into(),
+        ),
+    }
+    let priors = PriorsFile {
+        schedule: ScheduleBoundaries {
+            weekday_boundaries: schedules[0].boundaries(),
+            weekend_boundaries: schedules[1].boundaries(),
+        },
+        parameter,
+    };
+    Ok(Precalibration {
+        meters,
+        quality,
+        disaggregation: dis,
+        schedule_series,
+        profiles,
+        clusters,
+        schedules,
+        priors,
+        notes,
+    })
+}
