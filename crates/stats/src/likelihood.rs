@@ -1,1 +1,316 @@
-//! TODO
+//! Gaussian likelihood of the reference, Eqs. 5 and 7, with a diagonal covariance per output.
+//!
+//! For each output `k` (heating, cooling, electricity, ...) the observations are
+//! `y_kt ~ N(f_kt(x, theta), sigma_k^2)`, independent over hours, with
+//! `sigma_k^2 = sigma_y,k^2 + sigma_delta,k^2 + sigma_eta,k^2` (measurement error, model
+//! inadequacy, surrogate error; reference Eq. 7). Hence
+//!
+//! `ln L = sum_k [ -n_k / 2 ln(2 pi sigma_k^2) - sum_t (y_kt - f_kt)^2 / (2 sigma_k^2) ]`
+//!
+//! over the `n_k` hours where output `k` was observed (missing hours are masked out).
+//!
+//! **Units.** Each output's residuals are computed in that output's own units (e.g. kWh of
+//! heating, kWh of electricity); no rescaling is applied. Every term is divided by its own
+//! `sigma_k^2`, so each output contributes a dimensionless sum of squared standardised
+//! residuals: outputs on very different scales are commensurate, and an output's weight is
+//! set by its noise level rather than by its magnitude.
+//!
+//! **Hyperparameter mode.** `sigma_delta,k` may be sampled with the calibration parameters,
+//! on the log scale, with a weakly informative prior ([`ln_prior_log_sigma_delta`]: half-normal
+//! or half-Cauchy on `sigma_delta,k` with a scale such as the output's measured standard
+//! deviation, [`GaussianLikelihood::measured_sd`]). The pipeline decides which mode is used.
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Result, StatsError};
+
+/// Noise standard deviations of one output, in that output's units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct OutputNoise {
+    /// Measurement error `sigma_y`.
+    pub sigma_y: f64,
+    /// Model inadequacy `sigma_delta` (used when it is not sampled).
+    pub sigma_delta: f64,
+    /// Surrogate error `sigma_eta` (the surrogate's RMSE, reference Eq. 6).
+    pub sigma_eta: f64,
+}
+
+impl OutputNoise {
+    /// `sigma^2 = sigma_y^2 + sigma_delta^2 + sigma_eta^2` (reference Eq. 7).
+    pub fn variance(&self) -> f64 {
+        self.sigma_y * self.sigma_y
+            + self.sigma_delta * self.sigma_delta
+            + self.sigma_eta * self.sigma_eta
+    }
+}
+
+/// Gaussian log likelihood of hourly observations of several outputs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GaussianLikelihood {
+    n_hours: usize,
+    n_outputs: usize,
+    /// Observations, row-major `hours x outputs`.
+    observed: Vec<f64>,
+    /// Whether each observation is present, row-major `hours x outputs`.
+    present: Vec<bool>,
+    /// Observed hours per output.
+    n_obs: Vec<usize>,
+    noise: Vec<OutputNoise>,
+}
+
+impl GaussianLikelihood {
+    /// Observations row-major `hours x outputs` (`observed.len() = hours * noise.len()`),
+    /// NaN marking a missing hour; one [`OutputNoise`] per output.
+    pub fn new(observed: &[f64], noise: &[OutputNoise]) -> Result<Self> {
+        let mask: Vec<bool> = observed.iter().map(|v| v.is_finite()).collect();
+        Self::with_mask(observed, &mask, noise)
+    }
+
+    /// As [`GaussianLikelihood::new`] with an explicit mask (`true` = observed); a masked-in
+    /// value that is not finite is an error.
+    pub fn with_mask(observed: &[f64], mask: &[bool], noise: &[OutputNoise]) -> Result<Self> {
+        let k = noise.len();
+        if k == 0 {
+            return Err(StatsError::Invalid("no outputs".into()));
+        }
+        if !observed.len().is_multiple_of(k) || mask.len() != observed.len() {
+            return Err(StatsError::Shape(format!(
+                "{} observations and {} mask entries for {k} outputs",
+                observed.len(),
+                mask.len()
+            )));
+        }
+        for (i, nz) in noise.iter().enumerate() {
+            let ok = [nz.sigma_y, nz.sigma_delta, nz.sigma_eta]
+                .iter()
+                .all(|s| s.is_finite() && *s >= 0.0);
+            if !ok || nz.variance() <= 0.0 {
+                return Err(StatsError::Invalid(format!(
+                    "output {i}: noise standard deviations must be finite, non-negative and not all zero"
+                )));
+            }
+        }
+        let n_hours = observed.len() / k;
+        let mut n_obs = vec![0; k];
+        for (i, (&v, &m)) in observed.iter().zip(mask).enumerate() {
+            if m {
+                if !v.is_finite() {
+                    return Err(StatsError::Invalid(format!(
+                        "hour {}, output {}: observed value {v} is not finite",
+                        i / k,
+                        i % k
+                    )));
+                }
+                n_obs[i % k] += 1;
+            }
+        }
+        Ok(GaussianLikelihood {
+            n_hours,
+            n_outputs: k,
+            observed: observed.to_vec(),
+            present: mask.to_vec(),
+            n_obs,
+            noise: noise.to_vec(),
+        })
+    }
+
+    /// Number of hours.
+    pub fn n_hours(&self) -> usize {
+        self.n_hours
+    }
+    /// Number of outputs.
+    pub fn n_outputs(&self) -> usize {
+        self.n_outputs
+    }
+    /// Observed (unmasked) hours per output.
+    pub fn n_observed(&self) -> &[usize] {
+        &self.n_obs
+    }
+    /// The noise of each output.
+    pub fn noise(&self) -> &[OutputNoise] {
+        &self.noise
+    }
+
+    /// Sample standard deviation (`ddof = 1`) of each output's observed values: a natural
+    /// scale for the prior on `sigma_delta` in hyperparameter mode.
+    pub fn measured_sd(&self) -> Vec<f64> {
+        let k = self.n_outputs;
+        (0..k)
+            .map(|j| {
+                let vals = self.column(j);
+                let n = vals.len() as f64;
+                let m = vals.iter().sum::<f64>() / n;
+                (vals.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (n - 1.0)).sqrt()
+            })
+            .collect()
+    }
+
+    fn column(&self, j: usize) -> Vec<f64> {
+        (0..self.n_hours)
+            .filter(|t| self.present[t * self.n_outputs + j])
+            .map(|t| self.observed[t * self.n_outputs + j])
+            .collect()
+    }
+
+    /// Sum of squared residuals `sum_t (y_kt - f_kt)^2` of output `k` over its observed hours.
+    #[inline]
+    fn ssr(&self, predicted: &[f32], k: usize) -> f64 {
+        let stride = self.n_outputs;
+        let mut s = 0.0;
+        let mut t = k;
+        while t < self.observed.len() {
+            if self.present[t] {
+                let r = self.observed[t] - predicted[t] as f64;
+                s += r * r;
+            }
+            t += stride;
+        }
+        s
+    }
+
+    fn check_len(&self, predicted: &[f32]) {
+        assert_eq!(
+            predicted.len(),
+            self.observed.len(),
+            "predictions must be hours x outputs = {} x {}",
+            self.n_hours,
+            self.n_outputs
+        );
+    }
+
+    /// `ln L` with each output's fixed `sigma_delta` (reference Eqs. 5 and 7). `predicted` is
+    /// row-major `hours x outputs`, as the surrogate returns it. No allocation.
+    ///
+    /// # Panics
+    /// If `predicted` does not have `hours x outputs` values.
+    pub fn log_likelihood(&self, predicted: &[f32]) -> f64 {
+        self.check_len(predicted);
+        (0..self.n_outputs)
+            .map(|k| self.term(predicted, k, self.noise[k].variance()))
+            .sum()
+    }
+
+    /// `ln L` with `sigma_delta,k` given per output (hyperparameter mode). No allocation.
+    ///
+    /// # Panics
+    /// If the lengths do not match.
+    pub fn log_likelihood_with_delta(&self, predicted: &[f32], sigma_delta: &[f64]) -> f64 {
+        self.check_len(predicted);
+        assert_eq!(
+            sigma_delta.len(),
+            self.n_outputs,
+            "one sigma_delta per output"
+        );
+        (0..self.n_outputs)
+            .map(|k| {
+                let nz = &self.noise[k];
+                let var = nz.sigma_y * nz.sigma_y
+                    + sigma_delta[k] * sigma_delta[k]
+                    + nz.sigma_eta * nz.sigma_eta;
+                self.term(predicted, k, var)
+            })
+            .sum()
+    }
+
+    #[inline]
+    fn term(&self, predicted: &[f32], k: usize, var: f64) -> f64 {
+        let n = self.n_obs[k] as f64;
+        -0.5 * n * (2.0 * std::f64::consts::PI * var).ln() - self.ssr(predicted, k) / (2.0 * var)
+    }
+}
+
+/// Weakly informative prior families for `sigma_delta` in hyperparameter mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SigmaPrior {
+    /// Half-normal: `p(s) = 2 / (scale sqrt(2 pi)) exp(-s^2 / (2 scale^2))`, `s >= 0`.
+    HalfNormal,
+    /// Half-Cauchy: `p(s) = 2 / (pi scale (1 + (s / scale)^2))`, `s >= 0` (Gelman 2006).
+    HalfCauchy,
+}
+
+/// Log prior density of `eta = ln sigma_delta` when `sigma_delta` has a half-normal or
+/// half-Cauchy prior of the given `scale`: `ln p(sigma) + eta` (the Jacobian of
+/// `sigma = exp(eta)`). Normalised.
+pub fn ln_prior_log_sigma_delta(log_sigma: f64, scale: f64, family: SigmaPrior) -> f64 {
+    let s = log_sigma.exp();
+    let z = s / scale;
+    let ln_p_sigma = match family {
+        SigmaPrior::HalfNormal => {
+            (2.0f64).ln() - scale.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln() - 0.5 * z * z
+        }
+        SigmaPrior::HalfCauchy => (2.0 / std::f64::consts::PI).ln() - scale.ln() - (z * z).ln_1p(),
+    };
+    ln_p_sigma + log_sigma
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn noise(sy: f64, sd: f64, se: f64) -> OutputNoise {
+        OutputNoise {
+            sigma_y: sy,
+            sigma_delta: sd,
+            sigma_eta: se,
+        }
+    }
+
+    #[test]
+    fn hand_computed_with_missing_hours() {
+        // Two outputs, three hours; output 1 misses hour 1.
+        let obs = [1.0, 10.0, 2.0, f64::NAN, 3.0, 30.0];
+        let pred = [1.5f32, 12.0, 2.0, 999.0, 2.0, 27.0];
+        // Output 0: sigma^2 = 0.3^2 + 0.4^2 + 0 = 0.25, residuals -0.5, 0, 1 -> SSR 1.25, n 3.
+        // Output 1: sigma^2 = 1 + 4 + 4 = 9, residuals -2, 3 -> SSR 13, n 2.
+        let lik =
+            GaussianLikelihood::new(&obs, &[noise(0.3, 0.4, 0.0), noise(1.0, 2.0, 2.0)]).unwrap();
+        assert_eq!(lik.n_observed(), &[3, 2]);
+        let want = -1.5 * (2.0 * PI * 0.25).ln() - 1.25 / 0.5 - (2.0 * PI * 9.0).ln() - 13.0 / 18.0;
+        assert!((lik.log_likelihood(&pred) - want).abs() < 1e-12);
+        // Hyperparameter mode with the same sigma_delta gives the same value.
+        assert!((lik.log_likelihood_with_delta(&pred, &[0.4, 2.0]) - want).abs() < 1e-12);
+        // An explicit mask equals NaN marking.
+        let obs2 = [1.0, 10.0, 2.0, 0.0, 3.0, 30.0];
+        let mask = [true, true, true, false, true, true];
+        let lik2 = GaussianLikelihood::with_mask(
+            &obs2,
+            &mask,
+            &[noise(0.3, 0.4, 0.0), noise(1.0, 2.0, 2.0)],
+        )
+        .unwrap();
+        assert_eq!(lik2.log_likelihood(&pred), lik.log_likelihood(&pred));
+    }
+
+    #[test]
+    fn rejects_bad_shapes_and_noise() {
+        assert!(GaussianLikelihood::new(&[1.0, 2.0, 3.0], &[noise(1.0, 0.0, 0.0); 2]).is_err());
+        assert!(GaussianLikelihood::new(&[1.0, 2.0], &[noise(0.0, 0.0, 0.0); 2]).is_err());
+        assert!(GaussianLikelihood::new(&[1.0, 2.0], &[noise(-1.0, 0.0, 0.0); 2]).is_err());
+    }
+
+    #[test]
+    fn sigma_priors_normalise_on_log_scale() {
+        for family in [SigmaPrior::HalfNormal, SigmaPrior::HalfCauchy] {
+            // Integrate exp(ln p(eta)) over eta in [-30, 30] (half-Cauchy tail beyond is ~1e-13).
+            let (lo, hi, n) = (-30.0, 30.0, 600_000);
+            let h = (hi - lo) / n as f64;
+            let total: f64 = (0..n)
+                .map(|i| ln_prior_log_sigma_delta(lo + (i as f64 + 0.5) * h, 2.5, family).exp() * h)
+                .sum();
+            assert!((total - 1.0).abs() < 1e-6, "{family:?}: {total}");
+        }
+        // Hand value: half-normal, scale 1, sigma = 1: ln(2 / sqrt(2 pi)) - 1/2 + ln 1.
+        let v = ln_prior_log_sigma_delta(0.0, 1.0, SigmaPrior::HalfNormal);
+        assert!((v - ((2.0 / (2.0 * PI).sqrt()).ln() - 0.5)).abs() < 1e-14);
+    }
+
+    #[test]
+    fn measured_sd_skips_missing() {
+        let obs = [1.0, f64::NAN, 3.0, 5.0];
+        let lik = GaussianLikelihood::new(&obs, &[noise(1.0, 0.0, 0.0)]).unwrap();
+        // sd of [1, 3, 5] = 2.
+        assert!((lik.measured_sd()[0] - 2.0).abs() < 1e-15);
+    }
+}

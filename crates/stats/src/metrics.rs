@@ -1,1 +1,123 @@
-//! TODO
+//! ASHRAE Guideline 14 goodness-of-fit of a calibrated model (reference Eqs. 7 and 8 of
+//! Section 2.3.4), with `p = 1`:
+//!
+//! - `CV-RMSE = sqrt( sum_i (y_i - yhat_i)^2 / (n - p) ) / ybar * 100`
+//! - `NMBE = sum_i (y_i - yhat_i) / ((n - p) ybar) * 100`
+//!
+//! `y` measured, `yhat` simulated, residual = measured - simulated (positive NMBE: the model
+//! underestimates), `ybar` the mean of the measured values, `n` the hours where both are
+//! present. Hours where either value is NaN (or not finite) are excluded. Hourly calibration
+//! criteria: `|NMBE| <= 10 %` and `CV-RMSE <= 30 %`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Result, StatsError};
+
+/// Number of adjustable model parameters `p` in the Guideline 14 denominators.
+pub const P: usize = 1;
+/// Hourly NMBE criterion, per cent (absolute value).
+pub const HOURLY_NMBE_LIMIT: f64 = 10.0;
+/// Hourly CV-RMSE criterion, per cent.
+pub const HOURLY_CV_RMSE_LIMIT: f64 = 30.0;
+
+/// Guideline 14 metrics of one output.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct G14Metrics {
+    /// Hours used (both values present).
+    pub n: usize,
+    /// Mean of the measured values over those hours.
+    pub mean_measured: f64,
+    /// NMBE, per cent.
+    pub nmbe: f64,
+    /// CV-RMSE, per cent.
+    pub cv_rmse: f64,
+    /// Whether both hourly criteria are met.
+    pub pass: bool,
+}
+
+/// NMBE and CV-RMSE of simulated against measured hourly values; NaN marks a missing hour.
+/// Errors if the lengths differ, fewer than `p + 1` hours are usable, or the measured mean
+/// is zero.
+pub fn g14(measured: &[f64], simulated: &[f64]) -> Result<G14Metrics> {
+    if measured.len() != simulated.len() {
+        return Err(StatsError::Shape(format!(
+            "{} measured but {} simulated values",
+            measured.len(),
+            simulated.len()
+        )));
+    }
+    let (mut n, mut sum_y, mut sum_r, mut sum_r2) = (0usize, 0.0, 0.0, 0.0);
+    for (&y, &s) in measured.iter().zip(simulated) {
+        if y.is_finite() && s.is_finite() {
+            let r = y - s;
+            n += 1;
+            sum_y += y;
+            sum_r += r;
+            sum_r2 += r * r;
+        }
+    }
+    if n <= P {
+        return Err(StatsError::NotEnoughData(format!(
+            "{n} hours with both measured and simulated values; need more than {P}"
+        )));
+    }
+    let ybar = sum_y / n as f64;
+    if ybar == 0.0 {
+        return Err(StatsError::Invalid(
+            "mean of the measured values is zero; NMBE and CV-RMSE are undefined".into(),
+        ));
+    }
+    let dof = (n - P) as f64;
+    let nmbe = sum_r / (dof * ybar) * 100.0;
+    let cv_rmse = (sum_r2 / dof).sqrt() / ybar * 100.0;
+    Ok(G14Metrics {
+        n,
+        mean_measured: ybar,
+        nmbe,
+        cv_rmse,
+        pass: nmbe.abs() <= HOURLY_NMBE_LIMIT && cv_rmse <= HOURLY_CV_RMSE_LIMIT,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_computed() {
+        // y = [10, 12, 8, 10], yhat = [9, 12, 10, 11]: r = [1, 0, -2, -1], n = 4, ybar = 10.
+        // NMBE = -2 / (3 * 10) * 100 = -6.666..%; CV-RMSE = sqrt(6 / 3) / 10 * 100 = 14.142..%.
+        let m = g14(&[10.0, 12.0, 8.0, 10.0], &[9.0, 12.0, 10.0, 11.0]).unwrap();
+        assert_eq!(m.n, 4);
+        assert!((m.nmbe + 200.0 / 30.0).abs() < 1e-12);
+        assert!((m.cv_rmse - 2f64.sqrt() * 10.0).abs() < 1e-12);
+        assert!(m.pass);
+    }
+
+    #[test]
+    fn missing_hours_excluded() {
+        // Hours 1 (measured missing) and 3 (simulated missing) dropped:
+        // y = [4, 6, 2], yhat = [5, 3, 2]: r = [-1, 3, 0], n = 3, ybar = 4.
+        // NMBE = 2 / (2 * 4) * 100 = 25 %; CV-RMSE = sqrt(10 / 2) / 4 * 100 = 55.90..%.
+        let y = [4.0, f64::NAN, 6.0, 7.0, 2.0];
+        let s = [5.0, 1.0, 3.0, f64::NAN, 2.0];
+        let m = g14(&y, &s).unwrap();
+        assert_eq!(m.n, 3);
+        assert!((m.nmbe - 25.0).abs() < 1e-12);
+        assert!((m.cv_rmse - 5f64.sqrt() * 25.0).abs() < 1e-12);
+        assert!(!m.pass);
+    }
+
+    #[test]
+    fn criteria_boundaries_and_errors() {
+        // r = [1, -1] around ybar = 10 with p = 1: NMBE 0, CV-RMSE sqrt(2)/10*100 = 14.1 %.
+        assert!(g14(&[10.0, 10.0], &[9.0, 11.0]).unwrap().pass);
+        // Bias 1 over ybar 10 with n = 11: NMBE = 11 / (10 * 10) * 100 = 11 % > 10 %.
+        let m = g14(&[10.0; 11], &[9.0; 11]).unwrap();
+        assert!((m.nmbe - 11.0).abs() < 1e-12 && !m.pass);
+        assert!(g14(&[1.0], &[1.0]).is_err());
+        assert!(g14(&[1.0, 2.0], &[1.0]).is_err());
+        assert!(g14(&[1.0, -1.0], &[0.0, 0.0]).is_err());
+        assert!(g14(&[f64::NAN, 1.0, 2.0], &[1.0, f64::NAN, 2.0]).is_err());
+    }
+}
