@@ -1,0 +1,1270 @@
+//! A parametric office/laboratory building written as EnergyPlus 25.2 input.
+//!
+//! Users rarely have a detailed model of each building; a portfolio needs one per building. A
+//! [`BuildingSpec`] (a short TOML file) describes the massing, zoning, glazing and HVAC; bemcal
+//! writes the IDF itself: rectangular storeys, one zone per floor or perimeter + core zones with
+//! matched interzone surfaces, a VAV system with hot-water reheat split over two air-handling
+//! units (HVACTemplate objects, expanded before the run), chilled water from a district plant,
+//! hot water from a boiler or district heating, and a stand-alone domestic hot water heater.
+//!
+//! Every calibration parameter of the reference study (its Tables 1-2) is exposed by name with
+//! the reference's triangular prior as default ([`BuildingSpec::parameters`]).
+
+use serde::{Deserialize, Serialize};
+
+use bemcal_weather::{us_federal_holidays, Calendar, Holidays};
+use chrono::Datelike;
+
+use crate::idf::{num, Idf};
+use crate::params::{Constraint, ParameterDef, ParameterValues, TriangularPrior};
+use crate::Error;
+
+/// Zoning of each storey.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Zoning {
+    /// One thermal zone per floor.
+    OnePerFloor,
+    /// Four perimeter zones and a core zone per floor.
+    PerimeterCore,
+}
+
+/// Where space heating hot water comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeatingSource {
+    /// Natural-gas hot-water boiler in the building (the reference building has four).
+    Boiler,
+    /// District heating hot water.
+    District,
+}
+
+/// The building description.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BuildingSpec {
+    #[serde(default = "default_name")]
+    pub name: String,
+    #[serde(default = "default_storeys")]
+    pub storeys: u32,
+    /// Footprint length (east-west, x) and width (north-south, y), m.
+    #[serde(default = "default_footprint")]
+    pub footprint_m: [f64; 2],
+    #[serde(default = "default_floor_height")]
+    pub floor_to_floor_m: f64,
+    #[serde(default = "default_zoning")]
+    pub zoning: Zoning,
+    #[serde(default = "default_perimeter_depth")]
+    pub perimeter_depth_m: f64,
+    #[serde(default = "default_wwr")]
+    pub window_to_wall: f64,
+    #[serde(default = "default_heating")]
+    pub heating_source: HeatingSource,
+    /// Simulation time steps per hour (EnergyPlus `Timestep`).
+    #[serde(default = "default_timesteps")]
+    pub timesteps_per_hour: u32,
+    /// Occupied period on weekdays, [start hour, end hour): set-points and outdoor air switch
+    /// between their occupied and unoccupied values at these hours.
+    #[serde(default = "default_occupied")]
+    pub occupied_hours: [u32; 2],
+    /// Hour (1..=24) at which each weekday schedule interval ends; the last must be 24.
+    #[serde(default = "default_weekday_bounds")]
+    pub weekday_boundaries: Vec<u32>,
+    /// Hour (1..=24) at which each weekend/holiday schedule interval ends; the last must be 24.
+    #[serde(default = "default_weekend_bounds")]
+    pub weekend_boundaries: Vec<u32>,
+    /// One supply-air temperature parameter per AHU instead of one shared by both.
+    #[serde(default)]
+    pub separate_ahu_supply_air: bool,
+    /// Calendar year simulated (sets the day of week of January 1).
+    #[serde(default = "default_year")]
+    pub year: i32,
+    /// Holidays run on the weekend schedule (`RunPeriodControl:SpecialDays`); the same
+    /// calendar gives the surrogate its day types.
+    #[serde(default)]
+    pub holidays: Holidays,
+    /// Overrides of default priors, by parameter name.
+    #[serde(default)]
+    pub priors: std::collections::BTreeMap<String, TriangularPrior>,
+}
+
+fn default_name() -> String {
+    "bemcal-office".into()
+}
+fn default_storeys() -> u32 {
+    4
+}
+fn default_footprint() -> [f64; 2] {
+    // 4 x 71.5 x 40 = 11,440 m2, the reference building's ~11,437 m2.
+    [71.5, 40.0]
+}
+fn default_floor_height() -> f64 {
+    3.96
+}
+fn default_zoning() -> Zoning {
+    Zoning::PerimeterCore
+}
+fn default_perimeter_depth() -> f64 {
+    4.57
+}
+fn default_wwr() -> f64 {
+    0.33
+}
+fn default_heating() -> HeatingSource {
+    HeatingSource::Boiler
+}
+fn default_timesteps() -> u32 {
+    4
+}
+fn default_occupied() -> [u32; 2] {
+    [7, 19]
+}
+/// Default weekday intervals: 12, as in the reference.
+pub fn default_weekday_bounds() -> Vec<u32> {
+    vec![6, 7, 8, 9, 11, 13, 15, 17, 18, 19, 21, 24]
+}
+/// Default weekend intervals: 10, as in the reference.
+pub fn default_weekend_bounds() -> Vec<u32> {
+    vec![6, 8, 10, 12, 14, 16, 18, 20, 22, 24]
+}
+fn default_year() -> i32 {
+    2021
+}
+
+/// Reference Table 2 schedule priors (weekdays, 12 intervals).
+const WEEKDAY_PRIORS: [(f64, f64, f64); 12] = [
+    (0.1, 0.2, 0.3),
+    (0.1, 0.35, 0.6),
+    (0.4, 0.5, 0.6),
+    (0.4, 0.55, 0.7),
+    (0.5, 0.65, 0.8),
+    (0.5, 0.7, 0.9),
+    (0.5, 0.65, 0.8),
+    (0.4, 0.55, 0.7),
+    (0.3, 0.45, 0.6),
+    (0.3, 0.4, 0.5),
+    (0.2, 0.3, 0.4),
+    (0.1, 0.2, 0.3),
+];
+/// Reference Table 2 schedule priors (weekends, 10 intervals).
+const WEEKEND_PRIORS: [(f64, f64, f64); 10] = [
+    (0.1, 0.15, 0.2),
+    (0.1, 0.25, 0.4),
+    (0.2, 0.35, 0.5),
+    (0.2, 0.35, 0.5),
+    (0.3, 0.45, 0.6),
+    (0.3, 0.45, 0.6),
+    (0.2, 0.35, 0.5),
+    (0.1, 0.25, 0.4),
+    (0.1, 0.25, 0.4),
+    (0.1, 0.2, 0.3),
+];
+
+/// Floor area of the reference building (Crocker Science Center), m2.
+pub const REFERENCE_FLOOR_AREA_M2: f64 = 11_437.0;
+
+/// Effective thickness of the glazing layer that turns the reference's "window glass
+/// conductivity" (0.01-0.02 W/m-K) into a glazing U-factor: U = 1 / (R_films + t / k).
+pub const GLASS_EQUIVALENT_THICKNESS_M: f64 = 0.005;
+/// Interior + exterior film resistance used in that mapping, m2-K/W.
+pub const GLASS_FILM_RESISTANCE: f64 = 0.17;
+
+/// Glazing U-factor (W/m2-K) for an equivalent glass-layer conductivity (W/m-K).
+pub fn glazing_u_factor(glass_conductivity: f64) -> f64 {
+    1.0 / (GLASS_FILM_RESISTANCE + GLASS_EQUIVALENT_THICKNESS_M / glass_conductivity)
+}
+
+impl Default for BuildingSpec {
+    fn default() -> Self {
+        toml::from_str("").expect("all fields have defaults")
+    }
+}
+
+struct P {
+    name: &'static str,
+    unit: &'static str,
+    description: &'static str,
+    prior: (f64, f64, f64),
+}
+
+const ENGINEERING: [P; 16] = [
+    P { name: "wall_insulation_conductivity", unit: "W/m-K", description: "conductivity of the wall insulation layer", prior: (0.03, 0.04, 0.05) },
+    P { name: "roof_insulation_conductivity", unit: "W/m-K", description: "conductivity of the roof insulation layer", prior: (0.08, 0.09, 0.10) },
+    P { name: "window_glass_conductivity", unit: "W/m-K", description: "equivalent glass conductivity, mapped to the glazing U-factor (5 mm layer + 0.17 m2-K/W films)", prior: (0.01, 0.015, 0.02) },
+    P { name: "shgc", unit: "-", description: "window solar heat gain coefficient", prior: (0.3, 0.5, 0.8) },
+    P { name: "equipment_power_density", unit: "W/m2", description: "electric equipment power per floor area", prior: (10.0, 17.5, 25.0) },
+    P { name: "lighting_power_density", unit: "W/m2", description: "lighting power per floor area", prior: (5.0, 10.0, 15.0) },
+    P { name: "people_area_per_person", unit: "m2/person", description: "floor area per person", prior: (5.0, 10.0, 15.0) },
+    P { name: "cooling_setpoint_occupied", unit: "C", description: "cooling set-point at occupied hours", prior: (20.0, 24.0, 26.0) },
+    P { name: "cooling_setpoint_unoccupied", unit: "C", description: "cooling set-point at unoccupied hours", prior: (24.0, 26.0, 28.0) },
+    P { name: "heating_setpoint_occupied", unit: "C", description: "heating set-point at occupied hours", prior: (18.0, 21.0, 24.0) },
+    P { name: "heating_setpoint_unoccupied", unit: "C", description: "heating set-point at unoccupied hours", prior: (12.0, 18.0, 20.0) },
+    P { name: "chilled_water_supply_temp", unit: "C", description: "chilled water supply temperature", prior: (3.0, 6.0, 9.0) },
+    P { name: "supply_air_temp", unit: "C", description: "supply air temperature of each AHU", prior: (10.0, 14.0, 18.0) },
+    P { name: "outdoor_air_ach_occupied", unit: "1/h", description: "outdoor air at occupied hours", prior: (0.8, 1.1, 1.4) },
+    P { name: "outdoor_air_ach_unoccupied", unit: "1/h", description: "outdoor air at unoccupied hours", prior: (0.4, 0.595, 0.79) },
+    P { name: "hot_water_peak_flow", unit: "m3/s", description: "domestic hot water peak flow", prior: (0.0, 0.0015, 0.003) },
+];
+
+/// Name of the n-th (1-based) weekday schedule interval fraction.
+pub fn weekday_param(n: usize) -> String {
+    format!("schedule_weekday_{n:02}")
+}
+/// Name of the n-th (1-based) weekend schedule interval fraction.
+pub fn weekend_param(n: usize) -> String {
+    format!("schedule_weekend_{n:02}")
+}
+
+impl BuildingSpec {
+    /// Parses and validates a spec from TOML text.
+    pub fn from_toml(text: &str, path: &std::path::Path) -> Result<BuildingSpec, Error> {
+        let spec: BuildingSpec = toml::from_str(text).map_err(|e| Error::Input {
+            path: path.to_path_buf(),
+            line: e
+                .span()
+                .map(|s| text[..s.start].lines().count().max(1))
+                .unwrap_or(0),
+            message: e.message().to_string(),
+        })?;
+        spec.validate().map_err(|message| Error::Input {
+            path: path.to_path_buf(),
+            line: 0,
+            message,
+        })?;
+        Ok(spec)
+    }
+
+    /// Checks geometry, schedule boundaries and prior overrides.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.storeys == 0 || self.storeys > 60 {
+            return Err(format!("storeys = {}, expected 1..=60", self.storeys));
+        }
+        let [l, w] = self.footprint_m;
+        if !(l >= 3.0 && w >= 3.0) {
+            return Err(format!("footprint_m = [{l}, {w}], expected both >= 3 m"));
+        }
+        if !(2.4..=10.0).contains(&self.floor_to_floor_m) {
+            return Err(format!(
+                "floor_to_floor_m = {}, expected 2.4..10 m",
+                self.floor_to_floor_m
+            ));
+        }
+        if self.zoning == Zoning::PerimeterCore && 2.0 * self.perimeter_depth_m + 1.0 > l.min(w) {
+            return Err(format!(
+                "perimeter_depth_m = {} leaves no core in a {l} x {w} m footprint",
+                self.perimeter_depth_m
+            ));
+        }
+        if !(0.01..=0.9).contains(&self.window_to_wall) {
+            return Err(format!(
+                "window_to_wall = {}, expected 0.01..0.9",
+                self.window_to_wall
+            ));
+        }
+        if ![1, 2, 3, 4, 5, 6, 10, 12, 15, 20, 30, 60].contains(&self.timesteps_per_hour) {
+            return Err(format!(
+                "timesteps_per_hour = {}, expected a divisor of 60",
+                self.timesteps_per_hour
+            ));
+        }
+        let [a, b] = self.occupied_hours;
+        if !(a < b && b <= 24) {
+            return Err(format!(
+                "occupied_hours = [{a}, {b}], expected start < end <= 24"
+            ));
+        }
+        for (what, bounds) in [
+            ("weekday_boundaries", &self.weekday_boundaries),
+            ("weekend_boundaries", &self.weekend_boundaries),
+        ] {
+            check_boundaries(bounds).map_err(|m| format!("{what}: {m}"))?;
+        }
+        let names: Vec<String> = self.parameters().into_iter().map(|d| d.name).collect();
+        for (name, p) in &self.priors {
+            if !names.contains(name) {
+                return Err(format!("priors.{name}: unknown parameter"));
+            }
+            TriangularPrior::new(p.min, p.mode, p.max)
+                .map_err(|m| format!("priors.{name}: {m}"))?;
+        }
+        Ok(())
+    }
+
+    /// Total conditioned floor area, m2.
+    pub fn floor_area_m2(&self) -> f64 {
+        self.footprint_m[0] * self.footprint_m[1] * self.storeys as f64
+    }
+
+    /// All calibration parameters with their priors (defaults from the reference's Table 2,
+    /// overridden by `priors`).
+    pub fn parameters(&self) -> Vec<ParameterDef> {
+        let mut out = Vec::new();
+        for p in &ENGINEERING {
+            if p.name == "supply_air_temp" && self.separate_ahu_supply_air {
+                for ahu in 1..=2 {
+                    out.push(def(
+                        &format!("supply_air_temp_ahu{ahu}"),
+                        p.unit,
+                        &format!("supply air temperature of AHU {ahu}"),
+                        p.prior,
+                    ));
+                }
+                continue;
+            }
+            out.push(def(p.name, p.unit, p.description, p.prior));
+        }
+        for (i, _) in self.weekday_boundaries.iter().enumerate() {
+            let prior = WEEKDAY_PRIORS.get(i).copied().unwrap_or((0.1, 0.4, 0.8));
+            let d = format!("weekday schedule fraction, interval {}", i + 1);
+            out.push(def(&weekday_param(i + 1), "-", &d, prior));
+        }
+        for (i, _) in self.weekend_boundaries.iter().enumerate() {
+            let prior = WEEKEND_PRIORS.get(i).copied().unwrap_or((0.1, 0.25, 0.5));
+            let d = format!("weekend/holiday schedule fraction, interval {}", i + 1);
+            out.push(def(&weekend_param(i + 1), "-", &d, prior));
+        }
+        // The reference's hot water prior belongs to its 11,437 m2 building: scale by floor area.
+        let scale = self.floor_area_m2() / REFERENCE_FLOOR_AREA_M2;
+        for d in &mut out {
+            if d.name == "hot_water_peak_flow" {
+                d.prior.mode *= scale;
+                d.prior.max *= scale;
+            }
+            if let Some(p) = self.priors.get(&d.name) {
+                d.prior = *p;
+            }
+        }
+        out
+    }
+
+    /// Physical constraints between parameters (checked before any EnergyPlus run).
+    pub fn constraints(&self) -> Vec<Constraint> {
+        let mut c = vec![
+            Constraint {
+                lower: "heating_setpoint_occupied".into(),
+                upper: "cooling_setpoint_occupied".into(),
+                margin: 0.0,
+                reason: "a heating set-point above the cooling set-point is fatal in EnergyPlus (DualSetPointWithDeadband)".into(),
+            },
+            Constraint {
+                lower: "heating_setpoint_unoccupied".into(),
+                upper: "cooling_setpoint_unoccupied".into(),
+                margin: 0.0,
+                reason: "a heating set-point above the cooling set-point is fatal in EnergyPlus (DualSetPointWithDeadband)".into(),
+            },
+        ];
+        let sat: Vec<String> = if self.separate_ahu_supply_air {
+            vec!["supply_air_temp_ahu1".into(), "supply_air_temp_ahu2".into()]
+        } else {
+            vec!["supply_air_temp".into()]
+        };
+        for s in sat {
+            c.push(Constraint {
+                lower: "chilled_water_supply_temp".into(),
+                upper: s,
+                margin: 3.0,
+                reason:
+                    "supply air below chilled water + 3 K cannot be reached by the cooling coil"
+                        .into(),
+            });
+        }
+        c
+    }
+
+    /// Number of air-handling units: two, as in the reference building, unless there is a
+    /// single zone.
+    pub fn ahu_count(&self) -> usize {
+        if self.zone_names().len() == 1 {
+            1
+        } else {
+            2
+        }
+    }
+
+    /// The AHU (1 or 2) serving zone `i` of [`BuildingSpec::zone_names`]: the lower half of the
+    /// storeys on AHU 1, the upper half on AHU 2; one storey alternates zones.
+    fn ahu_of_zone(&self, i: usize) -> usize {
+        if self.ahu_count() == 1 {
+            return 1;
+        }
+        if self.storeys == 1 {
+            return 1 + i % 2;
+        }
+        let per_floor = self.zone_names().len() / self.storeys as usize;
+        if i / per_floor < (self.storeys as usize).div_ceil(2) {
+            1
+        } else {
+            2
+        }
+    }
+
+    /// The calendar the model simulates (year and holidays).
+    pub fn calendar(&self) -> Calendar {
+        Calendar::new(self.year, self.holidays)
+    }
+
+    /// Zone names, floor by floor.
+    pub fn zone_names(&self) -> Vec<String> {
+        let mut z = Vec::new();
+        for f in 1..=self.storeys {
+            match self.zoning {
+                Zoning::OnePerFloor => z.push(format!("F{f}")),
+                Zoning::PerimeterCore => {
+                    for side in ["South", "East", "North", "West", "Core"] {
+                        z.push(format!("F{f}_{side}"));
+                    }
+                }
+            }
+        }
+        z
+    }
+
+    /// Writes the model's IDF for a complete set of parameter values (see
+    /// [`crate::params::complete_values`]); constraints must already hold.
+    pub fn to_idf(&self, v: &ParameterValues) -> Result<Idf, Error> {
+        let get = |n: &str| -> Result<f64, Error> {
+            v.get(n).copied().ok_or_else(|| Error::Parameter {
+                name: n.into(),
+                message: "missing value".into(),
+            })
+        };
+        let mut m = Idf::new();
+        let year = self.year;
+        m.add("Version", &["25.2"]);
+        m.add(
+            "SimulationControl",
+            &["Yes", "Yes", "Yes", "No", "Yes", "No", "1"],
+        );
+        m.add(
+            "Building",
+            &[
+                &self.name,
+                "0",
+                "City",
+                "0.04",
+                "0.4",
+                "FullInteriorAndExterior",
+                "25",
+                "6",
+            ],
+        );
+        m.add("Timestep", &[self.timesteps_per_hour.to_string()]);
+        m.add(
+            "GlobalGeometryRules",
+            &["UpperLeftCorner", "Counterclockwise", "Relative"],
+        );
+        // Sizing from the weather file itself (no .ddy needed).
+        m.add(
+            "SizingPeriod:WeatherFileConditionType",
+            &["Summer Extreme", "SummerExtreme", "Monday", "No", "No"],
+        );
+        m.add(
+            "SizingPeriod:WeatherFileConditionType",
+            &["Winter Extreme", "WinterExtreme", "Monday", "No", "No"],
+        );
+        m.add("Sizing:Parameters", &["1.2", "1.2"]);
+        let jan1 = chrono_weekday_name(year);
+        m.add(
+            "RunPeriod",
+            &[
+                "Year",
+                "1",
+                "1",
+                &year.to_string(),
+                "12",
+                "31",
+                &year.to_string(),
+                jan1,
+                "No",
+                "No",
+                "No",
+                "Yes",
+                "Yes",
+            ],
+        );
+        let holidays = match self.holidays {
+            Holidays::None => vec![],
+            Holidays::UsFederal => us_federal_holidays(year),
+        };
+        for (i, d) in holidays.iter().filter(|d| d.year() == year).enumerate() {
+            m.add(
+                "RunPeriodControl:SpecialDays",
+                &[
+                    format!("Holiday {}", i + 1),
+                    format!("{}/{}", d.month(), d.day()),
+                    "1".into(),
+                    "Holiday".into(),
+                ],
+            );
+        }
+        m.add(
+            "Site:GroundTemperature:BuildingSurface",
+            &["18"; 12].map(String::from),
+        );
+
+        // Schedules.
+        m.add("ScheduleTypeLimits", &["Fraction", "0", "1", "Continuous"]);
+        m.add(
+            "ScheduleTypeLimits",
+            &["Temperature", "-60", "200", "Continuous"],
+        );
+        m.add("ScheduleTypeLimits", &["Any Number"]);
+        constant(&mut m, "Always On", "Fraction", 1.0);
+        constant(&mut m, "Activity", "Any Number", 120.0);
+        let wd: Vec<f64> = (1..=self.weekday_boundaries.len())
+            .map(|i| get(&weekday_param(i)))
+            .collect::<Result<_, _>>()?;
+        let we: Vec<f64> = (1..=self.weekend_boundaries.len())
+            .map(|i| get(&weekend_param(i)))
+            .collect::<Result<_, _>>()?;
+        interval_schedule(
+            &mut m,
+            "Occupancy",
+            (&self.weekday_boundaries, &wd),
+            (&self.weekend_boundaries, &we),
+        );
+        let [o0, o1] = self.occupied_hours;
+        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64| {
+            let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
+            f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
+            if o0 > 0 {
+                f.push(format!("Until: {o0:02}:00"));
+                f.push(num(unocc));
+            }
+            f.push(format!("Until: {o1:02}:00"));
+            f.push(num(occ));
+            if o1 < 24 {
+                f.push("Until: 24:00".into());
+                f.push(num(unocc));
+            }
+            f.push("For: AllOtherDays".into());
+            f.push("Until: 24:00".into());
+            f.push(num(unocc));
+            m.add("Schedule:Compact", &f);
+        };
+        occ_sched(
+            &mut m,
+            "Heating Setpoint",
+            "Temperature",
+            get("heating_setpoint_occupied")?,
+            get("heating_setpoint_unoccupied")?,
+        );
+        occ_sched(
+            &mut m,
+            "Cooling Setpoint",
+            "Temperature",
+            get("cooling_setpoint_occupied")?,
+            get("cooling_setpoint_unoccupied")?,
+        );
+        let oa_occ = get("outdoor_air_ach_occupied")?;
+        let oa_unocc = get("outdoor_air_ach_unoccupied")?;
+        let oa_frac = if oa_occ > 0.0 {
+            (oa_unocc / oa_occ).min(1.0)
+        } else {
+            0.0
+        };
+        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac);
+        let chw = get("chilled_water_supply_temp")?;
+        constant(&mut m, "CHW Setpoint", "Temperature", chw);
+        constant(&mut m, "HW Setpoint", "Temperature", 80.0);
+        let sat = |ahu: usize| -> Result<f64, Error> {
+            if self.separate_ahu_supply_air {
+                get(&format!("supply_air_temp_ahu{ahu}"))
+            } else {
+                get("supply_air_temp")
+            }
+        };
+        for ahu in 1..=2 {
+            let s = sat(ahu)?;
+            constant(&mut m, &format!("AHU{ahu} Supply Air"), "Temperature", s);
+            constant(
+                &mut m,
+                &format!("AHU{ahu} Preheat"),
+                "Temperature",
+                (s - 2.0).min(10.0),
+            );
+        }
+        constant(&mut m, "DHW Setpoint", "Temperature", 60.0);
+        constant(&mut m, "DHW Mains", "Temperature", 12.0);
+        constant(&mut m, "DHW Ambient", "Temperature", 21.0);
+
+        // Materials and constructions.
+        let k_wall = get("wall_insulation_conductivity")?;
+        let k_roof = get("roof_insulation_conductivity")?;
+        let k_glass = get("window_glass_conductivity")?;
+        if k_wall <= 0.0 || k_roof <= 0.0 || k_glass <= 0.0 {
+            return Err(Error::Parameter {
+                name: "insulation / glass conductivity".into(),
+                message: "conductivities must be > 0".into(),
+            });
+        }
+        let mat = |m: &mut Idf, n: &str, t: f64, k: f64, rho: f64, cp: f64| {
+            m.add(
+                "Material",
+                &[
+                    n.into(),
+                    "MediumRough".into(),
+                    num(t),
+                    num(k),
+                    num(rho),
+                    num(cp),
+                ],
+            );
+        };
+        mat(&mut m, "Brick", 0.1016, 0.89, 1920.0, 790.0);
+        mat(&mut m, "Wall Insulation", 0.0794, k_wall, 43.0, 1210.0);
+        mat(&mut m, "Gypsum", 0.0127, 0.16, 784.9, 830.0);
+        mat(&mut m, "Roof Membrane", 0.0095, 0.16, 1121.3, 1460.0);
+        mat(&mut m, "Roof Insulation", 0.2, k_roof, 265.0, 836.8);
+        mat(&mut m, "Metal Deck", 0.0015, 45.0, 7680.0, 418.0);
+        mat(&mut m, "Concrete Slab", 0.1016, 1.95, 2240.0, 900.0);
+        mat(&mut m, "Carpet", 0.0127, 0.06, 288.0, 1380.0);
+        m.add(
+            "Construction",
+            &["Exterior Wall", "Brick", "Wall Insulation", "Gypsum"],
+        );
+        m.add(
+            "Construction",
+            &["Roof", "Roof Membrane", "Roof Insulation", "Metal Deck"],
+        );
+        m.add("Construction", &["Ground Floor", "Concrete Slab", "Carpet"]);
+        m.add(
+            "Construction",
+            &["Interior Floor", "Concrete Slab", "Carpet"],
+        );
+        m.add(
+            "Construction",
+            &["Interior Ceiling", "Carpet", "Concrete Slab"],
+        );
+        m.add("Construction", &["Interior Wall", "Gypsum", "Gypsum"]);
+        let shgc = get("shgc")?;
+        if !(0.0 < shgc && shgc < 1.0) {
+            return Err(Error::Parameter {
+                name: "shgc".into(),
+                message: format!("{shgc} is outside (0, 1)"),
+            });
+        }
+        m.add(
+            "WindowMaterial:SimpleGlazingSystem",
+            &[
+                "Glazing".into(),
+                num(glazing_u_factor(k_glass)),
+                num(shgc),
+                "0.6".into(),
+            ],
+        );
+        m.add("Construction", &["Window", "Glazing"]);
+
+        // Geometry.
+        self.add_geometry(&mut m);
+
+        // Internal gains, infiltration.
+        m.add(
+            "ZoneList",
+            &std::iter::once("All Zones".to_string())
+                .chain(self.zone_names())
+                .collect::<Vec<_>>(),
+        );
+        let people = get("people_area_per_person")?;
+        if people <= 0.0 {
+            return Err(Error::Parameter {
+                name: "people_area_per_person".into(),
+                message: "must be > 0".into(),
+            });
+        }
+        m.add(
+            "People",
+            &[
+                "People",
+                "All Zones",
+                "Occupancy",
+                "Area/Person",
+                "",
+                "",
+                &num(people),
+                "0.3",
+                "AUTOCALCULATE",
+                "Activity",
+            ],
+        );
+        m.add(
+            "Lights",
+            &[
+                "Lights".to_string(),
+                "All Zones".into(),
+                "Occupancy".into(),
+                "Watts/Area".into(),
+                "".into(),
+                num(get("lighting_power_density")?),
+                "".into(),
+                "0".into(),
+                "0.7".into(),
+                "0.2".into(),
+                "1".into(),
+            ],
+        );
+        m.add(
+            "ElectricEquipment",
+            &[
+                "Equipment".to_string(),
+                "All Zones".into(),
+                "Occupancy".into(),
+                "Watts/Area".into(),
+                "".into(),
+                num(get("equipment_power_density")?),
+                "".into(),
+                "0".into(),
+                "0.5".into(),
+                "0".into(),
+            ],
+        );
+        m.add(
+            "ZoneInfiltration:DesignFlowRate",
+            &[
+                "Infiltration",
+                "All Zones",
+                "Always On",
+                "AirChanges/Hour",
+                "",
+                "",
+                "",
+                "0.2",
+                "1",
+                "0",
+                "0",
+                "0",
+            ],
+        );
+
+        // HVAC: VAV with hot-water reheat, two AHUs, district chilled water, boiler or district
+        // hot water.
+        m.add(
+            "HVACTemplate:Thermostat",
+            &["Thermostat", "Heating Setpoint", "", "Cooling Setpoint", ""],
+        );
+        m.add(
+            "DesignSpecification:OutdoorAir",
+            &[
+                "Outdoor Air".to_string(),
+                "AirChanges/Hour".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+                num(oa_occ),
+                "Outdoor Air Fraction".into(),
+            ],
+        );
+        let zones = self.zone_names();
+        let ahus = self.ahu_count();
+        for (i, z) in zones.iter().enumerate() {
+            let ahu = self.ahu_of_zone(i);
+            let mut f = vec![
+                z.clone(),
+                format!("AHU{ahu}"),
+                "Thermostat".into(),
+                "autosize".into(),
+                "".into(),
+                "".into(),
+                "Constant".into(),
+                "0.3".into(),
+                "".into(),
+                "".into(),
+                "DetailedSpecification".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+                "HotWater".into(),
+                "".into(),
+                "Reverse".into(),
+            ];
+            f.resize(20, String::new());
+            f.push("Outdoor Air".into()); // for control
+            f.resize(32, String::new());
+            f.push("Outdoor Air".into()); // for sizing
+            m.add("HVACTemplate:Zone:VAV", &f);
+        }
+        for ahu in 1..=ahus {
+            let s = sat(ahu)?;
+            let mut f = vec![
+                format!("AHU{ahu}"),
+                "Always On".into(),
+                "autosize".into(),
+                "autosize".into(),
+                "0.7".into(),
+                "1000".into(),
+                "0.9".into(),
+                "1".into(),
+                "ChilledWater".into(),
+                "".into(),
+                format!("AHU{ahu} Supply Air"),
+                num(s),
+                "HotWater".into(),
+                "".into(),
+                format!("AHU{ahu} Preheat"),
+                num((s - 2.0).min(10.0)),
+                "".into(),
+                "".into(),
+                "None".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+                "".into(),
+                "autosize".into(),
+                "autosize".into(),
+                "FixedMinimum".into(),
+                "Outdoor Air Fraction".into(),
+                "NoEconomizer".into(),
+            ];
+            f.resize(38, String::new());
+            f.push("StayOff".into()); // night cycle: the AHUs run around the clock anyway
+            m.add("HVACTemplate:System:VAV", &f);
+        }
+        m.add(
+            "HVACTemplate:Plant:ChilledWaterLoop",
+            &[
+                "Chilled Water Loop".to_string(),
+                "".into(),
+                "Intermittent".into(),
+                "Default".into(),
+                "".into(),
+                "CHW Setpoint".into(),
+                num(chw),
+            ],
+        );
+        m.add(
+            "HVACTemplate:Plant:Chiller",
+            &[
+                "District Cooling",
+                "DistrictChilledWater",
+                "autosize",
+                "",
+                "",
+                "1",
+            ],
+        );
+        m.add(
+            "HVACTemplate:Plant:HotWaterLoop",
+            &[
+                "Hot Water Loop",
+                "",
+                "Intermittent",
+                "Default",
+                "",
+                "HW Setpoint",
+                "80",
+            ],
+        );
+        match self.heating_source {
+            HeatingSource::Boiler => m.add(
+                "HVACTemplate:Plant:Boiler",
+                &[
+                    "Boiler",
+                    "HotWaterBoiler",
+                    "autosize",
+                    "0.85",
+                    "NaturalGas",
+                    "1",
+                ],
+            ),
+            HeatingSource::District => m.add(
+                "HVACTemplate:Plant:Boiler",
+                &[
+                    "District Heating",
+                    "DistrictHotWater",
+                    "autosize",
+                    "1.0",
+                    "",
+                    "1",
+                ],
+            ),
+        }
+        // Domestic hot water: a stand-alone mixed tank, sized so it never saturates.
+        let dhw_fuel = match self.heating_source {
+            HeatingSource::Boiler => "NaturalGas",
+            HeatingSource::District => "DistrictHeatingWater",
+        };
+        let dhw_flow = get("hot_water_peak_flow")?;
+        if dhw_flow < 0.0 {
+            return Err(Error::Parameter {
+                name: "hot_water_peak_flow".into(),
+                message: "must be >= 0".into(),
+            });
+        }
+        // Fields by IDD position (1-based): 1 name, 2 volume, 3 set-point schedule, 4 deadband,
+        // 6 control, 7 max capacity, 11 fuel, 12 efficiency, 20-21 ambient, 24/26 loss
+        // coefficients, 28 peak use flow, 29 use fraction schedule, 30 cold water schedule.
+        let mut f = vec![String::new(); 30];
+        for (i, v) in [
+            (1, "DHW Heater".to_string()),
+            (2, "2.0".into()),
+            (3, "DHW Setpoint".into()),
+            (4, "2.0".into()),
+            (6, "Modulate".into()),
+            (7, "600000".into()),
+            (8, "0".into()),
+            (11, dhw_fuel.into()),
+            (12, "0.9".into()),
+            (14, "0".into()),
+            (17, "0".into()),
+            (20, "Schedule".into()),
+            (21, "DHW Ambient".into()),
+            (24, "2.0".into()),
+            (26, "2.0".into()),
+            (28, num(dhw_flow)),
+            (29, "Occupancy".into()),
+            (30, "DHW Mains".into()),
+        ] {
+            f[i - 1] = v;
+        }
+        m.add("WaterHeater:Mixed", &f);
+
+        // Outputs: EnergyPlus writes its own hourly meter CSV (no ReadVarsESO).
+        for meter in REPORTED_METERS {
+            m.add("Output:Meter", &[meter, "Hourly"]);
+        }
+        let mut files = vec!["Yes", "Yes", "Yes"];
+        files.resize(33, "No");
+        files[3] = "Yes"; // EIO, small and useful for sizing checks
+        m.add("OutputControl:Files", &files);
+        Ok(m)
+    }
+
+    fn add_geometry(&self, m: &mut Idf) {
+        let [l, w] = self.footprint_m;
+        let h = self.floor_to_floor_m;
+        let d = self.perimeter_depth_m;
+        // Zone footprints, counterclockwise seen from above.
+        let plans: Vec<(&str, Vec<[f64; 2]>)> = match self.zoning {
+            Zoning::OnePerFloor => vec![("", vec![[0.0, 0.0], [l, 0.0], [l, w], [0.0, w]])],
+            Zoning::PerimeterCore => vec![
+                ("_South", vec![[0.0, 0.0], [l, 0.0], [l - d, d], [d, d]]),
+                ("_East", vec![[l, 0.0], [l, w], [l - d, w - d], [l - d, d]]),
+                ("_North", vec![[l, w], [0.0, w], [d, w - d], [l - d, w - d]]),
+                ("_West", vec![[0.0, w], [0.0, 0.0], [d, d], [d, w - d]]),
+                (
+                    "_Core",
+                    vec![[d, d], [l - d, d], [l - d, w - d], [d, w - d]],
+                ),
+            ],
+        };
+        let on_boundary = |a: [f64; 2], b: [f64; 2]| {
+            let eq = |x: f64, y: f64| (x - y).abs() < 1e-9;
+            (eq(a[1], 0.0) && eq(b[1], 0.0))
+                || (eq(a[0], l) && eq(b[0], l))
+                || (eq(a[1], w) && eq(b[1], w))
+                || (eq(a[0], 0.0) && eq(b[0], 0.0))
+        };
+        let fmt_pts = |pts: &[[f64; 3]]| -> Vec<String> {
+            pts.iter()
+                .flat_map(|p| [num(p[0]), num(p[1]), num(p[2])])
+                .collect()
+        };
+        // Map each directed edge to its zone suffix, to find the zone across an interior wall.
+        let edge_owner = |a: [f64; 2], b: [f64; 2]| -> Option<&str> {
+            plans.iter().find_map(|(suffix, poly)| {
+                let n = poly.len();
+                (0..n)
+                    .any(|i| poly[i] == a && poly[(i + 1) % n] == b)
+                    .then_some(*suffix)
+            })
+        };
+        for f in 1..=self.storeys {
+            let z0 = (f - 1) as f64 * h;
+            let z1 = z0 + h;
+            for (suffix, poly) in &plans {
+                let zone = format!("F{f}{suffix}");
+                m.add(
+                    "Zone",
+                    &[
+                        zone.clone(),
+                        "0".into(),
+                        "0".into(),
+                        "0".into(),
+                        "0".into(),
+                        "1".into(),
+                        "1".into(),
+                        num(h),
+                        "autocalculate".into(),
+                    ],
+                );
+                let n = poly.len();
+                // Floor: outward normal down -> clockwise seen from above.
+                let floor: Vec<[f64; 3]> = poly.iter().rev().map(|p| [p[0], p[1], z0]).collect();
+                let (fc, fb, fo) = if f == 1 {
+                    (
+                        "Ground Floor".to_string(),
+                        "Ground".to_string(),
+                        String::new(),
+                    )
+                } else {
+                    (
+                        "Interior Floor".to_string(),
+                        "Surface".to_string(),
+                        format!("F{}{suffix} Ceiling", f - 1),
+                    )
+                };
+                let mut s = vec![
+                    format!("{zone} Floor"),
+                    "Floor".into(),
+                    fc,
+                    zone.clone(),
+                    "".into(),
+                    fb,
+                    fo,
+                    "NoSun".into(),
+                    "NoWind".into(),
+                    "autocalculate".into(),
+                    n.to_string(),
+                ];
+                s.extend(fmt_pts(&floor));
+                m.add("BuildingSurface:Detailed", &s);
+                let ceil: Vec<[f64; 3]> = poly.iter().map(|p| [p[0], p[1], z1]).collect();
+                let (ct, cc, cb, co, sun, wind) = if f == self.storeys {
+                    (
+                        "Roof",
+                        "Roof",
+                        "Outdoors",
+                        String::new(),
+                        "SunExposed",
+                        "WindExposed",
+                    )
+                } else {
+                    (
+                        "Ceiling",
+                        "Interior Ceiling",
+                        "Surface",
+                        format!("F{}{suffix} Floor", f + 1),
+                        "NoSun",
+                        "NoWind",
+                    )
+                };
+                let mut s = vec![
+                    format!("{zone} Ceiling"),
+                    ct.into(),
+                    cc.into(),
+                    zone.clone(),
+                    "".into(),
+                    cb.into(),
+                    co,
+                    sun.into(),
+                    wind.into(),
+                    "autocalculate".into(),
+                    n.to_string(),
+                ];
+                s.extend(fmt_pts(&ceil));
+                m.add("BuildingSurface:Detailed", &s);
+                for i in 0..n {
+                    let a = poly[i];
+                    let b = poly[(i + 1) % n];
+                    let wall = format!("{zone} Wall {}", i + 1);
+                    let pts = [
+                        [a[0], a[1], z1],
+                        [a[0], a[1], z0],
+                        [b[0], b[1], z0],
+                        [b[0], b[1], z1],
+                    ];
+                    if on_boundary(a, b) {
+                        let mut s = vec![
+                            wall.clone(),
+                            "Wall".into(),
+                            "Exterior Wall".into(),
+                            zone.clone(),
+                            "".into(),
+                            "Outdoors".into(),
+                            "".into(),
+                            "SunExposed".into(),
+                            "WindExposed".into(),
+                            "autocalculate".into(),
+                            "4".into(),
+                        ];
+                        s.extend(fmt_pts(&pts));
+                        m.add("BuildingSurface:Detailed", &s);
+                        // A centred strip window with the wall's window-to-wall ratio.
+                        let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+                        let win_len = len * 0.98;
+                        let win_h = (self.window_to_wall * len * h / win_len).min(h - 0.2);
+                        m.add(
+                            "Window",
+                            &[
+                                format!("{wall} Window"),
+                                "Window".into(),
+                                wall,
+                                "".into(),
+                                "1".into(),
+                                num(len * 0.01),
+                                num((h - win_h) / 2.0),
+                                num(win_len),
+                                num(win_h),
+                            ],
+                        );
+                    } else {
+                        let other = edge_owner(b, a).expect("interior edge has a twin");
+                        let other_zone = format!("F{f}{other}");
+                        let other_poly = &plans.iter().find(|(s, _)| *s == other).unwrap().1;
+                        let j = (0..other_poly.len())
+                            .find(|&j| other_poly[j] == b)
+                            .expect("twin edge");
+                        let mut s = vec![
+                            wall,
+                            "Wall".into(),
+                            "Interior Wall".into(),
+                            zone.clone(),
+                            "".into(),
+                            "Surface".into(),
+                            format!("{other_zone} Wall {}", j + 1),
+                            "NoSun".into(),
+                            "NoWind".into(),
+                            "autocalculate".into(),
+                            "4".into(),
+                        ];
+                        s.extend(fmt_pts(&pts));
+                        m.add("BuildingSurface:Detailed", &s);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Meters every generated model reports hourly.
+pub const REPORTED_METERS: [&str; 7] = [
+    "Electricity:Facility",
+    "InteriorLights:Electricity",
+    "InteriorEquipment:Electricity",
+    "DistrictCooling:Facility",
+    "NaturalGas:Facility",
+    "DistrictHeatingWater:Facility",
+    "Fans:Electricity",
+];
+
+fn def(name: &str, unit: &str, description: &str, p: (f64, f64, f64)) -> ParameterDef {
+    ParameterDef {
+        name: name.into(),
+        unit: unit.into(),
+        description: description.into(),
+        prior: TriangularPrior {
+            min: p.0,
+            mode: p.1,
+            max: p.2,
+        },
+    }
+}
+
+fn check_boundaries(b: &[u32]) -> Result<(), String> {
+    if b.is_empty() {
+        return Err("no intervals".into());
+    }
+    if b.last() != Some(&24) {
+        return Err(format!("the last boundary is {:?}, expected 24", b.last()));
+    }
+    if b[0] == 0 || b.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(format!(
+            "{b:?}: expected strictly increasing hours in 1..=24"
+        ));
+    }
+    Ok(())
+}
+
+fn constant(m: &mut Idf, name: &str, limits: &str, value: f64) {
+    m.add(
+        "Schedule:Constant",
+        &[name.to_string(), limits.into(), num(value)],
+    );
+}
+
+/// `Schedule:Compact` with one value per interval: weekdays (and design days) and
+/// weekends/holidays.
+fn interval_schedule(
+    m: &mut Idf,
+    name: &str,
+    weekday: (&[u32], &[f64]),
+    weekend: (&[u32], &[f64]),
+) {
+    let mut f: Vec<String> = vec![name.into(), "Fraction".into(), "Through: 12/31".into()];
+    f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
+    for (h, v) in weekday.0.iter().zip(weekday.1) {
+        f.push(format!("Until: {h:02}:00"));
+        f.push(num(*v));
+    }
+    f.push("For: AllOtherDays".into());
+    for (h, v) in weekend.0.iter().zip(weekend.1) {
+        f.push(format!("Until: {h:02}:00"));
+        f.push(num(*v));
+    }
+    m.add("Schedule:Compact", &f);
+}
+
+/// Day of week of January 1 of `year`, as EnergyPlus spells it.
+fn chrono_weekday_name(year: i32) -> &'static str {
+    // Zeller-style computation (Sakamoto's method) to avoid a date dependency.
+    let t = [0, 3, 2, 5, 0, 3, 5, 1, 4, 6, 2, 4];
+    let y = year - 1; // January counts with the previous year
+    let dow = (y + y / 4 - y / 100 + y / 400 + t[0] + 1).rem_euclid(7);
+    [
+        "Sunday",
+        "Monday",
+        "Tuesday",
+        "Wednesday",
+        "Thursday",
+        "Friday",
+        "Saturday",
+    ][dow as usize]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::complete_values;
+
+    #[test]
+    fn default_spec_is_reference_building() {
+        let s = BuildingSpec::default();
+        assert!((s.floor_area_m2() - 11437.0).abs() < 50.0);
+        let p = s.parameters();
+        assert_eq!(p.len(), 38, "16 engineering + 12 weekday + 10 weekend");
+        assert_eq!(s.zone_names().len(), 20);
+    }
+
+    #[test]
+    fn weekday_of_jan1() {
+        assert_eq!(chrono_weekday_name(2021), "Friday");
+        assert_eq!(chrono_weekday_name(2011), "Saturday");
+        assert_eq!(chrono_weekday_name(2024), "Monday");
+    }
+
+    #[test]
+    fn idf_has_matched_interzone_surfaces() {
+        let s = BuildingSpec::default();
+        let v = complete_values(&s.parameters(), &Default::default()).unwrap();
+        let idf = s.to_idf(&v).unwrap();
+        let surfaces: Vec<_> = idf.of_class("BuildingSurface:Detailed").collect();
+        for srf in &surfaces {
+            if srf.fields[5] == "Surface" {
+                let twin = surfaces
+                    .iter()
+                    .find(|o| o.fields[0] == srf.fields[6])
+                    .unwrap_or_else(|| panic!("{} has no twin {}", srf.fields[0], srf.fields[6]));
+                assert_eq!(twin.fields[6], srf.fields[0]);
+            }
+        }
+        assert_eq!(idf.of_class("HVACTemplate:Zone:VAV").count(), 20);
+        assert_eq!(idf.of_class("HVACTemplate:System:VAV").count(), 2);
+    }
+
+    #[test]
+    fn bad_spec_is_a_clear_error() {
+        let e =
+            BuildingSpec::from_toml("storeys = 0\n", std::path::Path::new("b.toml")).unwrap_err();
+        assert!(e.to_string().contains("storeys = 0"), "{e}");
+        let e =
+            BuildingSpec::from_toml("storys = 2\n", std::path::Path::new("b.toml")).unwrap_err();
+        assert!(e.to_string().contains("b.toml:1"), "{e}");
+        let e = BuildingSpec::from_toml(
+            "weekday_boundaries = [6, 12, 20]\n",
+            std::path::Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("expected 24"), "{e}");
+    }
+}

@@ -1,0 +1,250 @@
+//! Real EnergyPlus runs of generated models. Skipped (with a message) when no engine is installed.
+
+use std::path::PathBuf;
+
+use bemcal_energyplus::{
+    building::{BuildingSpec, Zoning},
+    params::ParameterValues,
+    Engine, Error, Model, RunOptions, Runner,
+};
+
+fn runner() -> Option<Runner> {
+    match Engine::locate() {
+        Ok(e) => Some(Runner::new(e, RunOptions::default()).unwrap()),
+        Err(e) => {
+            eprintln!("skipping: {e}");
+            None
+        }
+    }
+}
+
+/// A one-storey, one-zone-per-floor box: the smallest model that exercises the whole HVAC.
+fn small_spec() -> BuildingSpec {
+    let mut s = BuildingSpec::default();
+    s.storeys = 1;
+    s.footprint_m = [20.0, 15.0];
+    s.zoning = Zoning::OnePerFloor;
+    s.timesteps_per_hour = 4;
+    s
+}
+
+fn weather(r: &Runner) -> PathBuf {
+    r.engine()
+        .bundled_weather("USA_CO_Golden-NREL.724666_TMY3.epw")
+        .expect("engine ships Golden weather")
+}
+
+fn simulate(
+    r: &Runner,
+    model: &Model,
+    set: &[(&str, f64)],
+    dir: &std::path::Path,
+) -> Result<bemcal_energyplus::HourlyOutputs, Error> {
+    let given: ParameterValues = set.iter().map(|(k, v)| (k.to_string(), *v)).collect();
+    let idf = model.instantiate(&given, r.idd())?;
+    Ok(r.run(&idf, &weather(r), model.outputs(), dir)?.outputs)
+}
+
+#[test]
+fn small_model_runs_and_reports_meters() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let out = simulate(&r, &model, &[], &tmp.path().join("base")).unwrap();
+    assert_eq!(out.hours(), 8760);
+    for (name, total) in out.totals() {
+        eprintln!("{name}: {total:.0} kWh");
+        assert!(total > 0.0, "{name} is zero");
+    }
+}
+
+fn total(out: &bemcal_energyplus::HourlyOutputs, name: &str) -> f64 {
+    out.get(name).unwrap().iter().sum()
+}
+
+#[test]
+fn more_lighting_power_raises_electricity() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let lo = simulate(
+        &r,
+        &model,
+        &[("lighting_power_density", 8.0)],
+        &tmp.path().join("lo"),
+    )
+    .unwrap();
+    let hi = simulate(
+        &r,
+        &model,
+        &[("lighting_power_density", 14.0)],
+        &tmp.path().join("hi"),
+    )
+    .unwrap();
+    let (l0, l1) = (total(&lo, "lighting_kwh"), total(&hi, "lighting_kwh"));
+    assert!(
+        (l1 / l0 - 14.0 / 8.0).abs() < 0.01,
+        "lights scale with density: {l0} -> {l1}"
+    );
+    assert!(total(&hi, "electricity_kwh") > total(&lo, "electricity_kwh") + 0.9 * (l1 - l0));
+}
+
+#[test]
+fn lower_cooling_setpoint_raises_cooling() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let warm = simulate(
+        &r,
+        &model,
+        &[("cooling_setpoint_occupied", 25.5)],
+        &tmp.path().join("w"),
+    )
+    .unwrap();
+    let cool = simulate(
+        &r,
+        &model,
+        &[("cooling_setpoint_occupied", 21.5)],
+        &tmp.path().join("c"),
+    )
+    .unwrap();
+    let (c0, c1) = (total(&warm, "cooling_kwh"), total(&cool, "cooling_kwh"));
+    assert!(c1 > c0 * 1.02, "cooling {c0} -> {c1}");
+}
+
+#[test]
+fn one_weekday_interval_changes_only_its_hours_on_weekdays() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let spec = small_spec();
+    let model = Model::generated(spec.clone());
+    // Interval 5 of the default weekday boundaries [6, 7, 8, 9, 11, ...] is 09:00-11:00.
+    assert_eq!(&spec.weekday_boundaries[3..5], &[9, 11]);
+    let a = simulate(
+        &r,
+        &model,
+        &[("schedule_weekday_05", 0.5)],
+        &tmp.path().join("a"),
+    )
+    .unwrap();
+    let b = simulate(
+        &r,
+        &model,
+        &[("schedule_weekday_05", 0.8)],
+        &tmp.path().join("b"),
+    )
+    .unwrap();
+    let cal = spec.calendar();
+    let (la, lb) = (
+        a.get("lighting_kwh").unwrap(),
+        b.get("lighting_kwh").unwrap(),
+    );
+    let mut changed = 0;
+    for t in 0..8760 {
+        let day = t / 24;
+        let hour = t % 24;
+        let date = chrono::NaiveDate::from_yo_opt(spec.year, day as u32 + 1).unwrap();
+        let dt = cal
+            .day_type(chrono::Datelike::month(&date), chrono::Datelike::day(&date))
+            .unwrap();
+        let inside = dt == bemcal_weather::DayType::Weekday && (9..11).contains(&hour);
+        if inside {
+            assert!(
+                (lb[t] / la[t] - 1.6).abs() < 1e-3,
+                "hour {t}: {} vs {}",
+                la[t],
+                lb[t]
+            );
+            changed += 1;
+        } else {
+            assert!(
+                (la[t] - lb[t]).abs() < 1e-9,
+                "hour {t} ({dt}, {hour}h) changed: {} vs {}",
+                la[t],
+                lb[t]
+            );
+        }
+    }
+    // 2021 has 261 Monday-Fridays, 11 of them federal holidays (observed).
+    assert_eq!(changed, 2 * (261 - 11));
+}
+
+#[test]
+fn parallel_runs_do_not_interfere() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let (a, b) = std::thread::scope(|s| {
+        let ha = s.spawn(|| simulate(&r, &model, &[], &tmp.path().join("p1")));
+        let hb = s.spawn(|| simulate(&r, &model, &[], &tmp.path().join("p2")));
+        (ha.join().unwrap().unwrap(), hb.join().unwrap().unwrap())
+    });
+    assert_eq!(a, b, "identical inputs in parallel give identical outputs");
+    // Reusing a run directory is refused rather than silently mixing outputs.
+    let again = simulate(&r, &model, &[], &tmp.path().join("p1")).unwrap_err();
+    assert!(again.to_string().contains("already holds a run"), "{again}");
+}
+
+#[test]
+fn impossible_parameters_are_rejected_before_energyplus() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let dir = tmp.path().join("bad");
+    let e = simulate(
+        &r,
+        &model,
+        &[
+            ("heating_setpoint_occupied", 23.0),
+            ("cooling_setpoint_occupied", 21.0),
+        ],
+        &dir,
+    )
+    .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("heating_setpoint_occupied") && msg.contains("cooling_setpoint_occupied"),
+        "{msg}"
+    );
+    assert!(!dir.exists(), "EnergyPlus never started");
+    let e = simulate(
+        &r,
+        &model,
+        &[
+            ("chilled_water_supply_temp", 8.0),
+            ("supply_air_temp", 10.0),
+        ],
+        &dir,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("chilled water + 3 K"), "{e}");
+    let e = simulate(&r, &model, &[("lighting_power", 8.0)], &dir).unwrap_err();
+    assert!(e.to_string().contains("unknown parameter"), "{e}");
+}
+
+#[test]
+fn severe_error_with_exit_code_zero_is_a_failure() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let model = Model::generated(small_spec());
+    let mut idf = model.instantiate(&Default::default(), r.idd()).unwrap();
+    // One warm-up day: EnergyPlus reports "** Severe ** CheckWarmupConvergence" yet exits 0.
+    let b = idf
+        .objects
+        .iter_mut()
+        .find(|o| o.class == "Building")
+        .unwrap();
+    b.fields[6] = "1".into();
+    b.fields[7] = "1".into();
+    let dir = tmp.path().join("warmup");
+    let e = r
+        .run(&idf, &weather(&r), model.outputs(), &dir)
+        .unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("exit code 0"), "{msg}");
+    assert!(msg.contains("CheckWarmupConvergence"), "{msg}");
+    assert!(
+        dir.join("eplusmtr.csv").exists(),
+        "EnergyPlus wrote results, and they were still refused"
+    );
+}
