@@ -2,6 +2,9 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod predict;
+pub mod train;
+
 /// Bayesian calibration of EnergyPlus building energy models against hourly meters.
 #[derive(Debug, Parser)]
 #[command(name = "bemcal", version, about)]
@@ -11,8 +14,16 @@ pub struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Train the LSTM surrogate on a training set and export it to ONNX.
+    Train(train::Args),
+    /// Predict hourly meters with a trained surrogate.
+    Predict(predict::Args),
+}
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {}
+    match cli.command {
+        Command::Train(a) => train::run(a),
+        Command::Predict(a) => predict::run(a),
+    }
 }

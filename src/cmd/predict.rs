@@ -1,0 +1,70 @@
+//! `bemcal predict`: evaluates a trained surrogate for one parameter vector over a weather year.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context};
+use bemcal_surrogate::predict::{hour_beginning_timestamps, write_csv};
+use bemcal_surrogate::Surrogate;
+use bemcal_weather::{Calendar, Epw, HourlyFeatures, Holidays};
+
+/// Predict hourly meters with a trained surrogate (parameters not set are at their prior mode).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Surrogate directory written by `bemcal train`.
+    #[arg(long)]
+    pub surrogate: PathBuf,
+    /// EPW weather file.
+    #[arg(long)]
+    pub weather: PathBuf,
+    /// Calendar year for day types and timestamps.
+    #[arg(long, default_value_t = 2021)]
+    pub year: i32,
+    /// Parameter value, NAME=VALUE (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub set: Vec<String>,
+    /// Output CSV: timestamp,<output>... (8,760 rows, hour beginning, local standard time).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// ONNX Runtime intra-op threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let surrogate = Surrogate::load(&args.surrogate, args.threads)?;
+    let meta = surrogate.meta().clone();
+    let mut values = meta.param_modes();
+    for s in &args.set {
+        let (name, value) = s
+            .split_once('=')
+            .with_context(|| format!("--set '{s}': expected NAME=VALUE"))?;
+        let Some(i) = meta.params.iter().position(|p| p.name == name.trim()) else {
+            bail!(
+                "--set '{s}': unknown parameter '{}'; the surrogate has: {}",
+                name.trim(),
+                meta.params.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
+            );
+        };
+        let v: f64 = value
+            .trim()
+            .parse()
+            .with_context(|| format!("--set '{s}': '{}' is not a number", value.trim()))?;
+        let p = &meta.params[i];
+        if !(p.min..=p.max).contains(&v) {
+            eprintln!("warning: {} = {v} is outside the training range [{}, {}]", p.name, p.min, p.max);
+        }
+        values[i] = v;
+    }
+    let epw = Epw::read(&args.weather)?;
+    let features = HourlyFeatures::from_epw(&epw, &Calendar::new(args.year, Holidays::UsFederal));
+    let mut ev = surrogate.bind(&features)?;
+    let y = ev.evaluate(&values)?;
+    let ts = hour_beginning_timestamps(args.year, epw.hours.iter().map(|h| (h.month, h.day, h.hour)));
+    write_csv(&args.out, &ts, &meta.output_names(), y)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    println!("wrote {} ({} rows)", args.out.display(), ts.len());
+    for (k, name) in meta.output_names().iter().enumerate() {
+        println!("  {name}: {:.1} kWh/year", y.column(k).iter().map(|v| *v as f64).sum::<f64>());
+    }
+    Ok(())
+}
