@@ -145,7 +145,7 @@ pub fn detect_non_heating_months(
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max);
     (0..12)
-        .filter(|&m| outdoor[m] >= balance_c && !(heating[m] > 0.2 * peak))
+        .filter(|&m| outdoor[m] >= balance_c && (heating[m].is_nan() || heating[m] <= 0.2 * peak))
         .map(|m| m as u32 + 1)
         .collect()
 }

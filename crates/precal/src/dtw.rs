@@ -72,11 +72,64 @@ impl Band {
     }
 }
 
+/// Pairs computed together by the matrix kernel (one series against `LANES` others of equal
+/// length, lane-parallel so the compiler can vectorise across pairs).
+const LANES: usize = 8;
+
 /// Reusable working memory for [`distance_with`] (two rows of the cost matrix).
 #[derive(Debug, Default, Clone)]
 pub struct DtwBuffer {
     prev: Vec<f64>,
     cur: Vec<f64>,
+    lprev: Vec<[f64; LANES]>,
+    lcur: Vec<[f64; LANES]>,
+    lb: Vec<[f64; LANES]>,
+}
+
+/// DTW of `s1` against `LANES` series of one common length at once; identical arithmetic per
+/// lane to [`distance_with`].
+fn distance_lanes(
+    s1: &[f64],
+    s2: [&[f64]; LANES],
+    band: Band,
+    buf: &mut DtwBuffer,
+) -> [f64; LANES] {
+    let (r, c) = (s1.len(), s2[0].len());
+    let window = band.window(r, c);
+    let extra_r = r.saturating_sub(c);
+    let extra_c = c.saturating_sub(r);
+    buf.lb.clear();
+    buf.lb
+        .extend((0..c).map(|j| std::array::from_fn(|l| s2[l][j])));
+    buf.lprev.clear();
+    buf.lprev.resize(c + 1, [f64::INFINITY; LANES]);
+    buf.lcur.clear();
+    buf.lcur.resize(c + 1, [f64::INFINITY; LANES]);
+    buf.lprev[0] = [0.0; LANES];
+    let b = &buf.lb[..];
+    let (mut prev, mut cur) = (&mut buf.lprev, &mut buf.lcur);
+    for (i, &a) in s1.iter().enumerate() {
+        let j_start = (i + 1).saturating_sub(extra_r + window);
+        let j_end = (i + extra_c + window).min(c);
+        cur[j_start] = [f64::INFINITY; LANES];
+        if j_end < c {
+            cur[j_end + 1] = [f64::INFINITY; LANES];
+        }
+        let mut left = [f64::INFINITY; LANES];
+        for j in j_start..j_end {
+            let (bj, p0, p1) = (&b[j], &prev[j], &prev[j + 1]);
+            let mut v = [0.0; LANES];
+            for l in 0..LANES {
+                let t = a - bj[l];
+                let d = t * t;
+                v[l] = d + p0[l].min(p1[l]).min(left[l]);
+            }
+            cur[j + 1] = v;
+            left = v;
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    std::array::from_fn(|l| prev[c][l].sqrt())
 }
 
 /// DTW distance between `s1` and `s2` within `band` (see the module docs for the definition).
@@ -164,9 +217,24 @@ pub fn distance_matrix<S: AsRef<[f64]> + Sync>(series: &[S], band: Band) -> Dist
         .into_par_iter()
         .map_init(DtwBuffer::default, |buf, i| {
             let a = series[i].as_ref();
-            ((i + 1)..n)
-                .map(|j| distance_with(a, series[j].as_ref(), band, buf))
-                .collect()
+            let mut row = Vec::with_capacity(n - i - 1);
+            let mut j = i + 1;
+            while j < n {
+                let len = series[j].as_ref().len();
+                if j + LANES <= n
+                    && len > 0
+                    && (j..j + LANES).all(|k| series[k].as_ref().len() == len)
+                    && !a.is_empty()
+                {
+                    let group: [&[f64]; LANES] = std::array::from_fn(|l| series[j + l].as_ref());
+                    row.extend(distance_lanes(a, group, band, buf));
+                    j += LANES;
+                } else {
+                    row.push(distance_with(a, series[j].as_ref(), band, buf));
+                    j += 1;
+                }
+            }
+            row
         })
         .collect();
     let mut data = vec![0.0; n * n];

@@ -1,0 +1,136 @@
+//! The pre-calibration on the real NREL RSF 2011 meters (skipped when ../shared/data is absent).
+
+use std::path::{Path, PathBuf};
+
+use bemcal_precal::meters::{read_meters, MeterRole, MeterSpec};
+use bemcal_precal::pipeline::{run, PrecalOptions};
+use bemcal_precal::schedule::DayLabel;
+use bemcal_weather::{DayType, Epw};
+
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(rel);
+    p.exists().then_some(p)
+}
+
+fn rsf() -> Option<(PathBuf, PathBuf)> {
+    Some((
+        shared("nrel_rsf_2011/rsfmeasureddata2011.csv")?,
+        shared("epw/USA_CO_Golden-NREL.724666_TMY3.epw")?,
+    ))
+}
+
+#[test]
+fn rsf_meters_ingest_with_auto_detection() {
+    let Some((csv, _)) = rsf() else {
+        eprintln!("shared data absent; skipping");
+        return;
+    };
+    let m = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
+    assert_eq!(m.year, 2011);
+    assert!(
+        m.notes.iter().any(|n| n.contains("hour-ending")),
+        "{:?}",
+        m.notes
+    );
+    assert!(
+        m.notes.iter().any(|n| n.contains("none (standard time)")),
+        "{:?}",
+        m.notes
+    );
+    let h = m.get(&MeterRole::Heating).unwrap();
+    assert_eq!(h.values.len(), 8760);
+    // First row "01/01/2011 01:00" (hour-ending) = slot 0; the last hour of the year is absent.
+    assert_eq!(h.values[0], 936.0);
+    assert!(h.values[8759].is_nan());
+    assert_eq!(h.values.iter().filter(|v| v.is_nan()).count(), 1);
+    // Row "1/13/2011 0:00" (unpadded) = 12 January 23:00 hour-beginning.
+    let e = m.get(&MeterRole::Electricity).unwrap();
+    assert!(e.values[11 * 24 + 23].is_finite());
+    let mean_dc: f64 = m.submeter("data_center").unwrap().values[..8759]
+        .iter()
+        .sum::<f64>()
+        / 8759.0;
+    assert!((mean_dc - 102.0).abs() < 1.5, "{mean_dc}");
+    assert!(m.submeter("lighting").is_some() && m.submeter("plug_loads").is_some());
+}
+
+#[test]
+fn rsf_precalibration_finds_bases_day_types_and_intervals() {
+    let Some((csv, epw)) = rsf() else {
+        eprintln!("shared data absent; skipping");
+        return;
+    };
+    let m = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
+    let w = Epw::read(&epw).unwrap();
+    let outdoor: Vec<f64> = w.hours.iter().map(|h| h.dry_bulb_c).collect();
+    let r = run(m, &outdoor, &PrecalOptions::default()).unwrap();
+    let est = |n: &str| r.disaggregation.estimate(n).unwrap().value;
+
+    // Data center: a near-constant ~100 kW electricity base.
+    let dc = est("electricity_base_kw");
+    assert!((95.0..110.0).contains(&dc), "data center base {dc}");
+    assert!(r
+        .disaggregation
+        .estimate("electricity_base_kw")
+        .unwrap()
+        .method
+        .contains("data_center"));
+    // Heating base: non-heating season is summer (Golden), where RSF heating is ~0: the base is
+    // small next to the winter heating (hundreds of kW).
+    let nh = &r.disaggregation.non_heating_months;
+    assert!(
+        nh.contains(&7) && nh.contains(&8) && !nh.contains(&1),
+        "{nh:?}"
+    );
+    let hb = est("heating_base_mean_kw");
+    assert!((0.0..20.0).contains(&hb), "heating base {hb}");
+    let sh = &r.disaggregation.get("space_heating").unwrap().values;
+    let jan: f64 = sh[..744].iter().filter(|v| v.is_finite()).sum::<f64>() / 744.0;
+    assert!(jan > 200.0, "January space heating {jan}");
+    // Cooling base from winter: RSF cooling is ~0 in winter.
+    assert!(est("cooling_base_kw") < 5.0);
+
+    // Day types: the weekday cluster(s) hold mostly calendar weekdays, weekend mostly off days.
+    let c = &r.clusters;
+    assert!((2..=6).contains(&c.clustering.k));
+    let (mut wd_in_wd, mut n_wd, mut off_in_we, mut n_we) = (0, 0, 0, 0);
+    for d in &c.days {
+        match d.label {
+            Some(DayLabel::Weekday) => {
+                n_wd += 1;
+                wd_in_wd += usize::from(d.calendar == DayType::Weekday);
+            }
+            Some(DayLabel::Weekend) => {
+                n_we += 1;
+                off_in_we += usize::from(d.calendar.is_off_day());
+            }
+            None => {}
+        }
+    }
+    assert!(n_wd > 200 && n_we > 80, "weekday {n_wd}, weekend {n_we}");
+    assert!(wd_in_wd as f64 / n_wd as f64 > 0.9, "{wd_in_wd}/{n_wd}");
+    assert!(off_in_we as f64 / n_we as f64 > 0.8, "{off_in_we}/{n_we}");
+
+    // Intervals: 48 hourly fractions reduced.
+    let (before, after) = r.reduction();
+    assert_eq!(before, 48);
+    assert!((4..48).contains(&after), "{after}");
+    let wd = r.schedule(DayLabel::Weekday);
+    let we = r.schedule(DayLabel::Weekend);
+    assert_eq!(*wd.boundaries().last().unwrap(), 24);
+    // Weekday daytime fractions exceed weekend daytime fractions.
+    assert!(wd.hours[11].median > we.hours[11].median + 0.1);
+    for p in &r.priors.parameter {
+        assert!(p.min < p.max && p.min <= p.mode && p.mode <= p.max, "{p:?}");
+    }
+    let n_sched = r
+        .priors
+        .parameter
+        .iter()
+        .filter(|p| p.name.starts_with("schedule_"))
+        .count();
+    assert_eq!(n_sched, after);
+    eprintln!("{}", bemcal_precal::io::summary_text(&r));
+}
