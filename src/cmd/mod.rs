@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod precalibrate;
 pub mod predict;
 pub mod train;
 
@@ -15,6 +16,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Pre-calibration: meters -> bases, day types, schedule priors (priors.toml).
+    Precalibrate(precalibrate::Args),
     /// Train the LSTM surrogate on a training set and export it to ONNX.
     Train(train::Args),
     /// Predict hourly meters with a trained surrogate.
@@ -23,6 +26,7 @@ pub enum Command {
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Precalibrate(a) => precalibrate::run(a),
         Command::Train(a) => train::run(a),
         Command::Predict(a) => predict::run(a),
     }

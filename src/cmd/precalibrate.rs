@@ -1,0 +1,80 @@
+//! `bemcal precalibrate`: meters + weather -> disaggregated series, day-type calendar, schedule
+//! priors and `priors.toml` (reference section 2.2). All logic lives in `bemcal-precal`.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use bemcal_precal::io::{write_outputs, PrecalProject};
+use bemcal_precal::meters::{read_meters, MeterSpec};
+use bemcal_weather::Epw;
+
+/// Pre-calibration: disaggregate the meters and derive schedule priors from day-type clusters.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Meters CSV (overrides the project's `[meters] file`).
+    #[arg(long)]
+    pub meters: Option<PathBuf>,
+    /// EPW weather file (outdoor temperature for the heating / non-heating seasons).
+    #[arg(long)]
+    pub weather: PathBuf,
+    /// Project TOML with `[meters]` and `[precalibration]` tables. Without it, meter columns
+    /// are detected from their names (heating / cooling / electricity / total building, unit kW).
+    #[arg(long)]
+    pub project: Option<PathBuf>,
+    /// Calendar year of the meters (default: the project's, else inferred from the timestamps).
+    #[arg(long)]
+    pub year: Option<i32>,
+    /// Output directory.
+    #[arg(long, default_value = "precal")]
+    pub out: PathBuf,
+    /// DTW band: largest warp |i - j| in hours (overrides the project).
+    #[arg(long)]
+    pub band: Option<i64>,
+    /// Number of day-type clusters (default: chosen by silhouette over 2..=6).
+    #[arg(long)]
+    pub k: Option<usize>,
+    /// Largest difference of medians for merging adjacent hours into one interval.
+    #[arg(long)]
+    pub merge_tolerance: Option<f64>,
+    /// Largest number of schedule intervals per day type.
+    #[arg(long)]
+    pub max_intervals: Option<usize>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let project = match &args.project {
+        Some(p) => PrecalProject::read(p)?,
+        None => PrecalProject::default(),
+    };
+    let spec = project.meters.clone().unwrap_or_else(MeterSpec::default);
+    let meters_path = args
+        .meters
+        .clone()
+        .or_else(|| spec.file.clone())
+        .context("no meters file: pass --meters or set [meters] file in the project")?;
+    let epw = Epw::read(&args.weather)?;
+    let year = args.year.or(project.year);
+    let meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
+    let mut opts = project.precalibration.clone();
+    if let Some(b) = args.band {
+        opts.schedule.band = b;
+    }
+    if args.k.is_some() {
+        opts.schedule.k = args.k;
+    }
+    if let Some(t) = args.merge_tolerance {
+        opts.schedule.merge_tolerance = t;
+    }
+    if args.max_intervals.is_some() {
+        opts.schedule.max_intervals = args.max_intervals;
+    }
+    let outdoor: Vec<f64> = epw.hours.iter().map(|h| h.dry_bulb_c).collect();
+    let result = bemcal_precal::pipeline::run(meters, &outdoor, &opts)?;
+    let written = write_outputs(&args.out, &result)?;
+    print!("{}", bemcal_precal::io::summary_text(&result));
+    println!();
+    for p in written {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
