@@ -314,15 +314,25 @@ mod tests {
 
     #[test]
     fn matrix_is_symmetric_and_matches_pairwise_calls() {
-        let s: Vec<Vec<f64>> = (0..9)
-            .map(|k| (0..24).map(|h| ((h * (k + 1)) % 7) as f64).collect())
+        // 21 series: the lane kernel (8 at a time) and the scalar tail are both exercised.
+        let s: Vec<Vec<f64>> = (0..21)
+            .map(|k| (0..24).map(|h| ((h * (k + 1)) % 7) as f64 * 0.37).collect())
             .collect();
-        let m = distance_matrix(&s, Band::new(2));
-        for i in 0..9 {
-            assert_eq!(m.get(i, i), 0.0);
-            for j in 0..9 {
-                assert_eq!(m.get(i, j), m.get(j, i));
-                assert_eq!(m.get(i, j), distance(&s[i], &s[j], Band::new(2)));
+        for band in [
+            Band::new(0),
+            Band::new(2),
+            Band::new(5),
+            Band::unconstrained(),
+        ] {
+            let m = distance_matrix(&s, band);
+            for i in 0..s.len() {
+                assert_eq!(m.get(i, i), 0.0);
+                for j in 0..s.len() {
+                    assert_eq!(m.get(i, j), m.get(j, i));
+                    if i != j {
+                        assert_eq!(m.get(i, j), distance(&s[i], &s[j], band));
+                    }
+                }
             }
         }
     }

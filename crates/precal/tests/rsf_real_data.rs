@@ -134,3 +134,41 @@ fn rsf_precalibration_finds_bases_day_types_and_intervals() {
     assert_eq!(n_sched, after);
     eprintln!("{}", bemcal_precal::io::summary_text(&r));
 }
+
+#[test]
+fn rsf_example_project_matches_auto_detection_and_writes_outputs() {
+    let Some((csv, epw)) = rsf() else {
+        eprintln!("shared data absent; skipping");
+        return;
+    };
+    let proj_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/rsf_project.toml");
+    let proj = bemcal_precal::io::PrecalProject::read(&proj_path).unwrap();
+    assert_eq!(proj.year, Some(2011));
+    let spec = proj.meters.clone().unwrap();
+    let m = read_meters(&csv, &spec, proj.year, None).unwrap();
+    let auto = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
+    for s in &m.series {
+        assert_eq!(s.values.len(), 8760);
+        let a = auto.get(&s.role).unwrap();
+        assert!(s
+            .values
+            .iter()
+            .zip(&a.values)
+            .all(|(x, y)| x == y || (x.is_nan() && y.is_nan())));
+    }
+    let w = Epw::read(&epw).unwrap();
+    let outdoor: Vec<f64> = w.hours.iter().map(|h| h.dry_bulb_c).collect();
+    let r = run(m, &outdoor, &proj.precalibration).unwrap();
+    let dir = std::env::temp_dir().join(format!("bemcal-precal-test-{}", std::process::id()));
+    let written = bemcal_precal::io::write_outputs(&dir, &r).unwrap();
+    assert_eq!(written.len(), 7);
+    let priors = bemcal_precal::io::read_priors(&dir.join("priors.toml")).unwrap();
+    assert_eq!(priors, r.priors);
+    assert_eq!(priors.parameter[0].name, "schedule_weekday_01");
+    assert_eq!(*priors.schedule.weekend_boundaries.last().unwrap(), 24);
+    let text = std::fs::read_to_string(dir.join("disaggregated.csv")).unwrap();
+    assert_eq!(text.lines().count(), 8761);
+    let cal = std::fs::read_to_string(dir.join("calendar.csv")).unwrap();
+    assert_eq!(cal.lines().count(), 366);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
