@@ -1,79 +1,156 @@
-"""ONNX export of the surrogate: the plain graph (``x`` -> ``y``) and the structured pair
-(``w`` -> ``gw``; ``p``, ``gw`` -> ``y``) used by the Rust hot path."""
+"""ONNX export of the surrogate.
 
+* ``surrogate.onnx`` (plain, torch's exporter): ``x`` [batch, 3, n_features] -> ``y``
+  [batch, n_outputs] kWh; the reference's LSTM with the output scaling folded in.
+* ``surrogate_fast.onnx`` (structured, built with ``onnx.helper`` from the same weights):
+  ``p`` [1, n_params] normalised parameters and ``xw`` [3, n_hours, n_hourly] (the hourly part of
+  every window, step-major, built once per weather year) -> ``y`` [1, n_hours, n_outputs] kWh.
+  The parameter part of the first layer's input projection is the same for every hour and step,
+  so ``W_p . p + b_ih`` is computed once per proposal and passed to ONNX's fused LSTM kernel as
+  its bias; the LSTM multiplies only the hourly features. Same numbers as the plain graph.
+* ``surrogate_fast_int8.onnx``: the fast graph with dynamic int8 quantisation of the LSTM and
+  head weights (onnxruntime.quantization); its error against the float graph is measured by the
+  trainer and recorded in surrogate.json.
+"""
+
+import os
 import warnings
 
 import numpy as np
+import onnx
 import torch
+from onnx import TensorProto, helper, numpy_helper
 
 from . import LOOKBACK
-from .model import Denormalised, StructuredCore, WeatherProjection
+from .model import Denormalised
 
 OPSET = 17
 PLAIN = "surrogate.onnx"
-WEATHER = "surrogate_weather.onnx"
-CORE = "surrogate_core.onnx"
+FAST = "surrogate_fast.onnx"
+FAST_INT8 = "surrogate_fast_int8.onnx"
+# torch gate blocks (i, f, g, o) -> ONNX LSTM order (i, o, f, c)
+ONNX_GATES = [0, 3, 1, 2]
 
 
-def _export(module, args, path, input_names, output_names, dynamic_axes):
-    module.eval()
+def _gates(a, hidden):
+    """Reorders the 4*hidden gate axis (axis 0) from torch to ONNX order."""
+    blocks = [a[k * hidden : (k + 1) * hidden] for k in range(4)]
+    return np.concatenate([blocks[k] for k in ONNX_GATES], axis=0)
+
+
+def export_plain(model, n_features, scale, nonnegative, path):
+    plain = Denormalised(model, scale, nonnegative).eval()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        torch.onnx.export(
-            module,
-            args,
-            path,
-            dynamo=False,
-            opset_version=OPSET,
-            input_names=input_names,
-            output_names=output_names,
-            dynamic_axes=dynamic_axes,
-            do_constant_folding=True,
-        )
+        torch.onnx.export(plain, (torch.zeros(2, LOOKBACK, n_features),), path, dynamo=False,
+                          opset_version=OPSET, input_names=["x"], output_names=["y"],
+                          dynamic_axes={"x": {0: "batch"}, "y": {0: "batch"}}, do_constant_folding=True)
+
+
+def build_fast(model, n_params, n_hourly, scale, nonnegative):
+    """The structured graph (see the module doc) as an ``onnx.ModelProto``."""
+    lstm = model.lstm
+    H = lstm.hidden_size
+    f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)
+    sd = {k: v.detach().cpu().numpy().astype(np.float64) for k, v in lstm.state_dict().items()}
+    w_ih0 = _gates(sd["weight_ih_l0"], H)
+    inits = [
+        numpy_helper.from_array(f32(w_ih0[:, :n_params].T), "w_p"),
+        numpy_helper.from_array(f32(_gates(sd["bias_ih_l0"], H)[None, :]), "b_ih0"),
+        numpy_helper.from_array(f32(_gates(sd["bias_hh_l0"], H)[None, :]), "b_hh0"),
+        numpy_helper.from_array(f32(w_ih0[None, :, n_params:]), "w_0"),
+        numpy_helper.from_array(f32(_gates(sd["weight_hh_l0"], H)[None]), "r_0"),
+        numpy_helper.from_array(np.array([1], dtype=np.int64), "axis1"),
+        numpy_helper.from_array(f32(model.head.weight.detach().cpu().numpy().T), "w_fc"),
+        numpy_helper.from_array(f32(model.head.bias.detach().cpu().numpy()), "b_fc"),
+        numpy_helper.from_array(f32(scale), "scale"),
+    ]
+    nodes = [
+        helper.make_node("MatMul", ["p", "w_p"], ["pp"]),
+        helper.make_node("Add", ["pp", "b_ih0"], ["pb"]),
+        helper.make_node("Concat", ["pb", "b_hh0"], ["bias0"], axis=1),
+        helper.make_node("LSTM", ["xw", "w_0", "r_0", "bias0"], ["y0", "", ""], hidden_size=H),
+        helper.make_node("Squeeze", ["y0", "axis1"], ["x1"]),
+    ]
+    x = "x1"
+    for k in range(1, lstm.num_layers):
+        b = np.concatenate([_gates(sd[f"bias_ih_l{k}"], H), _gates(sd[f"bias_hh_l{k}"], H)])[None]
+        inits += [
+            numpy_helper.from_array(f32(_gates(sd[f"weight_ih_l{k}"], H)[None]), f"w_{k}"),
+            numpy_helper.from_array(f32(_gates(sd[f"weight_hh_l{k}"], H)[None]), f"r_{k}"),
+            numpy_helper.from_array(f32(b), f"b_{k}"),
+        ]
+        last = k == lstm.num_layers - 1
+        outs = ["", f"h{k}", ""] if last else [f"y{k}", "", ""]
+        nodes.append(helper.make_node("LSTM", [x, f"w_{k}", f"r_{k}", f"b_{k}"], outs, hidden_size=H))
+        if not last:
+            nodes.append(helper.make_node("Squeeze", [f"y{k}", "axis1"], [f"x{k + 1}"]))
+            x = f"x{k + 1}"
+    last_h = f"h{lstm.num_layers - 1}"  # [1, T, H]: the last step of every window
+    nodes += [
+        helper.make_node("Relu", [last_h], ["hr"]),
+        helper.make_node("MatMul", ["hr", "w_fc"], ["z0"]),
+        helper.make_node("Add", ["z0", "b_fc"], ["z"]),
+    ]
+    if nonnegative:
+        nodes.append(helper.make_node("Relu", ["z"], ["zr"]))
+        nodes.append(helper.make_node("Mul", ["zr", "scale"], ["y"]))
+    else:
+        nodes.append(helper.make_node("Mul", ["z", "scale"], ["y"]))
+    if lstm.num_layers == 1:
+        raise ValueError("the fast graph needs at least 2 LSTM layers")
+    graph = helper.make_graph(
+        nodes, "bemcal_surrogate_fast",
+        [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, n_params]),
+         helper.make_tensor_value_info("xw", TensorProto.FLOAT, [LOOKBACK, "hours", n_hourly])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, "hours", len(scale)])],
+        initializer=inits)
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="bemcal_train")
+    m.ir_version = 8  # opset 17 era; readable by every onnxruntime bemcal supports
+    onnx.checker.check_model(m)
+    return m
 
 
 def export_all(model, n_params, n_hourly, scale, nonnegative, out_dir):
-    """Writes the three graphs into ``out_dir``; returns their file names."""
-    import os
-
+    """Writes the graphs into ``out_dir``; returns their file names (int8 only when
+    onnxruntime's quantiser is available)."""
     model = model.cpu().eval()
-    n_features = n_params + n_hourly
-    plain = Denormalised(model, scale, nonnegative)
-    _export(
-        plain,
-        (torch.zeros(2, LOOKBACK, n_features),),
-        os.path.join(out_dir, PLAIN),
-        ["x"],
-        ["y"],
-        {"x": {0: "batch"}, "y": {0: "batch"}},
-    )
-    wp = WeatherProjection(model, n_params)
-    _export(wp, (torch.zeros(5, n_hourly),), os.path.join(out_dir, WEATHER), ["w"], ["gw"],
-            {"w": {0: "hours"}, "gw": {0: "hours"}})
-    core = StructuredCore(model, n_params, scale, nonnegative)
-    gw = torch.zeros(5, 4 * model.lstm.hidden_size)
-    _export(core, (torch.zeros(2, n_params), gw), os.path.join(out_dir, CORE), ["p", "gw"], ["y"],
-            {"p": {0: "proposals"}, "gw": {0: "hours"}, "y": {0: "proposals", 1: "hours"}})
-    return {"plain": PLAIN, "weather": WEATHER, "core": CORE}
+    export_plain(model, n_params + n_hourly, scale, nonnegative, os.path.join(out_dir, PLAIN))
+    onnx.save(build_fast(model, n_params, n_hourly, scale, nonnegative), os.path.join(out_dir, FAST))
+    files = {"plain": PLAIN, "fast": FAST}
+    try:
+        from onnxruntime.quantization import QuantType, quantize_dynamic
+    except ImportError:
+        return files
+    import logging
+
+    logging.getLogger().setLevel(logging.ERROR)
+    quantize_dynamic(os.path.join(out_dir, FAST), os.path.join(out_dir, FAST_INT8),
+                     weight_type=QuantType.QInt8, op_types_to_quantize=["LSTM", "MatMul"])
+    files["fast_int8"] = FAST_INT8
+    return files
 
 
-def check_with_onnxruntime(out_dir, x, y_torch, p, w, y_year_torch, threads=1):
-    """Runs the exported graphs in onnxruntime (when installed) and returns the largest relative
-    differences to torch: plain graph on windows ``x``, structured pair on the year for ``p``."""
+def windows_step_major(hourly):
+    """[3, n_hours, n_hourly]: step s of the window ending at hour t is hour max(t - 2 + s, 0)."""
+    T = hourly.shape[0]
+    return np.stack([hourly[np.maximum(np.arange(T) - (LOOKBACK - 1) + s, 0)] for s in range(LOOKBACK)])
+
+
+def run_onnx(out_dir, files, x, p_rows, hourly, threads=1):
+    """Runs the exported graphs in onnxruntime: plain on windows ``x``; fast (and int8) on the
+    year for each parameter row. Returns None without onnxruntime."""
     try:
         import onnxruntime as ort
     except ImportError:
         return None
-    import os
-
     so = ort.SessionOptions()
     so.intra_op_num_threads = threads
     sess = lambda f: ort.InferenceSession(os.path.join(out_dir, f), so, providers=["CPUExecutionProvider"])
-    y_plain = sess(PLAIN).run(["y"], {"x": x.astype(np.float32)})[0]
-    gw = sess(WEATHER).run(["gw"], {"w": w.astype(np.float32)})[0]
-    y_core = sess(CORE).run(["y"], {"p": p.astype(np.float32), "gw": gw})[0]
-
-    def rel(a, b):
-        return float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-12))
-
-    return {"plain_vs_torch": rel(y_plain, y_torch), "structured_vs_torch": rel(y_core, y_year_torch)}
+    xw = windows_step_major(hourly).astype(np.float32)
+    res = {"plain": sess(files["plain"]).run(["y"], {"x": x.astype(np.float32)})[0]}
+    for key in ("fast", "fast_int8"):
+        if key in files:
+            s = sess(files[key])
+            res[key] = np.stack([s.run(["y"], {"p": p[None].astype(np.float32), "xw": xw})[0][0] for p in p_rows])
+    return res

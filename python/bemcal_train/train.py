@@ -10,7 +10,7 @@ import torch
 from . import FORMAT, FORMAT_VERSION, LOOKBACK
 from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
                    weather_stats, window_index)
-from .export import check_with_onnxruntime, export_all
+from .export import export_all, run_onnx
 from .model import Denormalised, Surrogate
 
 
@@ -160,11 +160,26 @@ def train(args):
     plain = Denormalised(model, scale, nonnegative).eval()
     with torch.no_grad():
         y_win = plain(x).numpy()
-        y_year = predict(plain, winc, [i], args.eval_batch_size).numpy()  # [1, T, n_out] kWh
-    check = check_with_onnxruntime(args.out, x.numpy(), y_win, p_norm[[i]], hourly, y_year)
-    if check is not None:
+        y_held = predict(plain, winc, held_pts, args.eval_batch_size).numpy()  # [n_held, T, n_out] kWh
+    y_year = y_held[:1]
+    onx = run_onnx(args.out, files, x.numpy(), p_norm[held_pts], hourly)
+    check, int8 = None, None
+    if onx is not None:
+        rel = lambda a, b: float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-12))
+        check = {"definition": "max |onnx - torch| / max |torch|",
+                 "plain_vs_torch": rel(onx["plain"], y_win), "fast_vs_torch": rel(onx["fast"], y_held)}
         print(f"onnxruntime check (max |diff| / max |y|): plain {check['plain_vs_torch']:.2e}, "
-              f"structured {check['structured_vs_torch']:.2e}")
+              f"fast {check['fast_vs_torch']:.2e}")
+        if "fast_int8" in onx:
+            d = onx["fast_int8"] - onx["fast"]
+            q = metrics(onx["fast_int8"], outputs[held_pts], names)
+            int8 = {"file": files["fast_int8"],
+                    "rmse_vs_float_kwh": {n: float(np.sqrt(np.mean(d[..., k] ** 2))) for k, n in enumerate(names)},
+                    "held_out_rmse_kwh": {n: q[n]["rmse_kwh"] for n in names}}
+            int8["ratio_to_sigma_eta"] = {n: int8["rmse_vs_float_kwh"][n] / max(held[n]["rmse_kwh"], 1e-12)
+                                          for n in names}
+            print("int8 graph: RMSE vs float / sigma_eta: " + ", ".join(
+                f"{n} {int8['ratio_to_sigma_eta'][n]:.3f}" for n in names))
     parity = {
         "note": "torch outputs (kWh) of the plain model; relative error = max|diff| / max|y|",
         "point": int(i),
@@ -187,10 +202,8 @@ def train(args):
         "files": files,
         "onnx": {"opset": 17, "plain": {"inputs": {"x": ["batch", LOOKBACK, n_features]},
                                         "outputs": {"y": ["batch", len(names)]}},
-                 "weather": {"inputs": {"w": ["hours", len(hourly_names)]},
-                             "outputs": {"gw": ["hours", 4 * args.hidden]}},
-                 "core": {"inputs": {"p": ["proposals", n_params], "gw": ["hours", 4 * args.hidden]},
-                          "outputs": {"y": ["proposals", "hours", len(names)]}}},
+                 "fast": {"inputs": {"p": [1, n_params], "xw": [LOOKBACK, "hours", len(hourly_names)]},
+                          "outputs": {"y": [1, "hours", len(names)]}}},
         "n_features": n_features,
         "feature_names": [p["name"] for p in specs] + hourly_names,
         "params": specs,
@@ -207,6 +220,7 @@ def train(args):
         "nonnegative": nonnegative,
         "held_out": {"points": held_pts, "metrics": held},
         "onnxruntime_check": check,
+        "int8": int8,
         "training": {"seed": args.seed, "epochs_max": args.epochs, "epochs_run": len(history),
                      "best_epoch": best_epoch, "patience": args.patience, "batch_size": args.batch_size,
                      "lr": args.lr, "optimizer": "adam", "loss": "mse on scaled targets",

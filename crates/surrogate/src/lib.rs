@@ -14,5 +14,5 @@ pub mod surrogate;
 pub mod train;
 
 pub use dataset::{DatasetError, DatasetMeta, ParamSpec, Split, TrainingSet};
-pub use surrogate::{Evaluator, Surrogate, SurrogateError, SurrogateMeta};
+pub use surrogate::{Evaluator, Precision, Surrogate, SurrogateError, SurrogateMeta};
 pub use train::{train, TimeFeatures, TrainOptions, TrainReport};

@@ -2,17 +2,18 @@
 //! Python environment's `onnxruntime` wheel).
 //!
 //! A surrogate directory (written by `python -m bemcal_train`) holds `surrogate.json`
-//! ([`SurrogateMeta`]) and three ONNX graphs:
+//! ([`SurrogateMeta`]) and the ONNX graphs:
 //!
 //! * `surrogate.onnx` (plain): `x` `[batch, 3, n_features]` f32 -> `y` `[batch, n_outputs]` kWh,
 //!   the LSTM of the reference (Jiang et al. 2024, Fig. 8) with the output scaling folded in.
-//! * `surrogate_weather.onnx`: `w` `[n_hours, n_hourly]` -> `gw` `[n_hours, 4 * hidden]`, the
-//!   hourly part of the first layer's input projection, computed once per weather year.
-//! * `surrogate_core.onnx`: `p` `[n_proposals, n_params]`, `gw` -> `y`
-//!   `[n_proposals, n_hours, n_outputs]` kWh: the same numbers as the plain graph on every window
-//!   of the year, with the parameter part of the input projection computed once per proposal and
-//!   the zero-state recurrent terms of each window's first step dropped. This is the MCMC hot
-//!   path ([`Evaluator`]).
+//! * `surrogate_fast.onnx` (structured): `p` `[1, n_params]` normalised parameters and `xw`
+//!   `[3, n_hours, n_hourly]` (the hourly part of every window, step-major, built once per
+//!   weather year) -> `y` `[1, n_hours, n_outputs]` kWh. The parameter part of the first layer's
+//!   input projection is identical for every hour and step, so it is computed once per proposal
+//!   and handed to ONNX Runtime's fused LSTM kernel as its bias. Same numbers as the plain graph;
+//!   this is the MCMC hot path ([`Evaluator`]).
+//! * `surrogate_fast_int8.onnx` (optional): the fast graph with dynamically quantised int8
+//!   weights; its error against the float graph is in the metadata (`int8`), see [`Precision`].
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -125,10 +126,33 @@ pub struct ModelInfo {
 pub struct GraphFiles {
     /// `x` -> `y`.
     pub plain: String,
-    /// `w` -> `gw`.
-    pub weather: String,
-    /// `p`, `gw` -> `y`.
-    pub core: String,
+    /// `p`, `xw` -> `y` (float).
+    pub fast: String,
+    /// `p`, `xw` -> `y` with int8 weights, when the trainer could quantise.
+    #[serde(default)]
+    pub fast_int8: Option<String>,
+}
+
+/// Which fast graph the [`Evaluator`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Precision {
+    /// Float weights: equal to the trained network (to ~1e-6 relative).
+    #[default]
+    F32,
+    /// Dynamically quantised int8 weights: faster; check [`SurrogateMeta::int8`] (its error
+    /// against the float graph relative to sigma_eta) before using it for calibration.
+    Int8,
+}
+
+/// Accuracy of the int8 graph, measured by the trainer on the held-out points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Int8Info {
+    /// File name.
+    pub file: String,
+    /// RMSE of (int8 - float) predictions per output, kWh.
+    pub rmse_vs_float_kwh: std::collections::BTreeMap<String, f64>,
+    /// That RMSE divided by sigma_eta, per output.
+    pub ratio_to_sigma_eta: std::collections::BTreeMap<String, f64>,
 }
 
 /// Weather normalisation: `(w - mean) / std` per feature.
@@ -223,6 +247,9 @@ pub struct SurrogateMeta {
     pub held_out: HeldOut,
     /// Training facts.
     pub training: TrainingInfo,
+    /// Accuracy of the int8 graph, when there is one.
+    #[serde(default)]
+    pub int8: Option<Int8Info>,
 }
 
 impl SurrogateMeta {
@@ -414,8 +441,7 @@ pub struct Surrogate {
     meta: SurrogateMeta,
     dir: PathBuf,
     plain: Session,
-    weather: Session,
-    core: Session,
+    fast: Session,
 }
 
 impl std::fmt::Debug for Surrogate {
@@ -494,56 +520,64 @@ impl Surrogate {
     /// per session and graph optimisation level 3. Checks every graph's inputs and outputs
     /// against the metadata.
     pub fn load(dir: impl AsRef<Path>, threads: usize) -> Result<Surrogate> {
+        Surrogate::load_with(dir, threads, Precision::F32)
+    }
+
+    /// [`Surrogate::load`] choosing the fast graph's [`Precision`]; `Int8` on a surrogate
+    /// without an int8 graph is an error.
+    pub fn load_with(
+        dir: impl AsRef<Path>,
+        threads: usize,
+        precision: Precision,
+    ) -> Result<Surrogate> {
         let dir = dir.as_ref().to_path_buf();
         let meta = SurrogateMeta::read(&dir)?;
         let plain = session(&dir, &meta.files.plain, threads)?;
-        let weather = session(&dir, &meta.files.weather, threads)?;
-        let core = session(&dir, &meta.files.core, threads)?;
+        let fast_file = match precision {
+            Precision::F32 => meta.files.fast.clone(),
+            Precision::Int8 => {
+                meta.files
+                    .fast_int8
+                    .clone()
+                    .ok_or_else(|| SurrogateError::Metadata {
+                        path: dir.join(METADATA_FILE),
+                        message:
+                            "no int8 graph (files.fast_int8); retrain with onnxruntime installed"
+                                .into(),
+                    })?
+            }
+        };
+        let fast = session(&dir, &fast_file, threads)?;
         let (np, nf, no, nh) = (
             meta.params.len() as i64,
             meta.n_features as i64,
             meta.outputs.len() as i64,
             meta.n_hourly() as i64,
         );
-        let g = 4 * meta.model.hidden as i64;
         let f = |n: &str| dir.join(n);
+        let lb = Some(LOOKBACK as i64);
         check_io(
             &plain,
             &f(&meta.files.plain),
             true,
             "x",
-            &[None, Some(LOOKBACK as i64), Some(nf)],
+            &[None, lb, Some(nf)],
         )?;
         check_io(&plain, &f(&meta.files.plain), false, "y", &[None, Some(no)])?;
+        check_io(&fast, &f(&fast_file), true, "p", &[Some(1), Some(np)])?;
+        check_io(&fast, &f(&fast_file), true, "xw", &[lb, None, Some(nh)])?;
         check_io(
-            &weather,
-            &f(&meta.files.weather),
-            true,
-            "w",
-            &[None, Some(nh)],
-        )?;
-        check_io(
-            &weather,
-            &f(&meta.files.weather),
-            false,
-            "gw",
-            &[None, Some(g)],
-        )?;
-        check_io(&core, &f(&meta.files.core), true, "p", &[None, Some(np)])?;
-        check_io(&core, &f(&meta.files.core), true, "gw", &[None, Some(g)])?;
-        check_io(
-            &core,
-            &f(&meta.files.core),
+            &fast,
+            &f(&fast_file),
             false,
             "y",
-            &[None, None, Some(no)],
+            &[Some(1), None, Some(no)],
         )?;
         Ok(Surrogate {
             meta,
             dir,
             plain,
-            weather,
-            core,
+            fast,
         })
     }
 
@@ -578,41 +612,43 @@ impl Surrogate {
             .map_err(ort_err)
     }
 
-    /// Binds the surrogate to a weather year: computes the normalised hourly inputs and their
-    /// first-layer projection once and keeps them for every later evaluation.
-    pub fn bind(mut self, weather: &HourlyFeatures) -> Result<Evaluator> {
-        if weather.len() < LOOKBACK {
+    /// Binds the surrogate to a weather year: builds the normalised hourly part of every
+    /// window once (`xw`, `[3, n_hours, n_hourly]`, hour `max(t - 2 + s, 0)` at step `s`) and
+    /// keeps it for every later evaluation.
+    pub fn bind(self, weather: &HourlyFeatures) -> Result<Evaluator> {
+        let n_hours = weather.len();
+        if n_hours < LOOKBACK {
             return Err(SurrogateError::Input(format!(
-                "{} weather hours; need at least {LOOKBACK}",
-                weather.len()
+                "{n_hours} weather hours; need at least {LOOKBACK}"
             )));
         }
-        let w = self.meta.hourly_inputs(weather);
-        let gw = {
-            let out = self
-                .weather
-                .run(ort::inputs!["w" => TensorRef::from_array_view(w.view()).map_err(ort_err)?])
-                .map_err(ort_err)?;
-            let gw = out["gw"].try_extract_array::<f32>().map_err(ort_err)?;
-            Tensor::from_array(gw.to_owned()).map_err(ort_err)?
-        };
-        let n_hours = weather.len();
+        let xw = Tensor::from_array(windows_step_major(self.meta.hourly_inputs(weather).view()))
+            .map_err(ort_err)?;
         let n_out = self.meta.outputs.len();
         Ok(Evaluator {
-            p: Vec::new(),
+            p: vec![0.0; self.meta.params.len()],
             out: Array3::zeros((1, n_hours, n_out)),
-            gw,
+            xw,
             n_hours,
             surrogate: self,
         })
     }
 }
 
+/// `[3, n_hours, k]` step-major windows of hourly rows: step `s` of the window ending at hour `t`
+/// is row `max(t - 2 + s, 0)`. Pure.
+pub fn windows_step_major(hourly: ArrayView2<'_, f32>) -> Array3<f32> {
+    let (n, k) = hourly.dim();
+    Array3::from_shape_fn((LOOKBACK, n, k), |(s, t, j)| {
+        hourly[[(t + s).saturating_sub(LOOKBACK - 1), j]]
+    })
+}
+
 /// A surrogate bound to one weather year ([`Surrogate::bind`]): each evaluation only writes the
 /// normalised parameters; the weather part stays in `gw`.
 pub struct Evaluator {
     surrogate: Surrogate,
-    gw: Tensor<f32>,
+    xw: Tensor<f32>,
     n_hours: usize,
     p: Vec<f32>,
     out: Array3<f32>,
@@ -641,49 +677,51 @@ impl Evaluator {
         Ok(y.index_axis_move(ndarray::Axis(0), 0))
     }
 
-    /// Several parameter vectors in one ONNX Runtime call -> `[n_proposals, n_hours, n_outputs]`
-    /// kWh, a view of a buffer reused by the next call.
+    /// Several parameter vectors -> `[n_proposals, n_hours, n_outputs]` kWh, a view of a buffer
+    /// reused by the next call. One fast-graph run per proposal: each run already spans the
+    /// 8,760 windows of the year, which fills the kernels, and each proposal has its own
+    /// first-layer bias (`scripts/bench_surrogate.sh` measures it).
     pub fn evaluate_batch<P: AsRef<[f64]>>(&mut self, params: &[P]) -> Result<ArrayView3<'_, f32>> {
-        let meta = &self.surrogate.meta;
-        let np = meta.params.len();
         let n = params.len();
         if n == 0 {
             return Err(SurrogateError::Input(
                 "no parameter vectors to evaluate".into(),
             ));
         }
-        self.p.resize(n * np, 0.0);
-        for (i, p) in params.iter().enumerate() {
-            meta.normalise_params(p.as_ref(), &mut self.p[i * np..(i + 1) * np])?;
-        }
-        let n_out = meta.outputs.len();
-        let outputs = self
-            .surrogate
-            .core
-            .run(ort::inputs![
-                "p" => TensorRef::from_array_view(([n, np], &self.p[..])).map_err(ort_err)?,
-                "gw" => &self.gw,
-            ])
-            .map_err(ort_err)?;
-        let y = outputs["y"].try_extract_array::<f32>().map_err(ort_err)?;
-        if y.shape() != [n, self.n_hours, n_out] {
-            return Err(SurrogateError::Ort(format!(
-                "core graph returned shape {:?}, expected [{n}, {}, {n_out}]",
-                y.shape(),
-                self.n_hours
-            )));
-        }
+        let n_out = self.surrogate.meta.outputs.len();
         if self.out.dim().0 != n {
             self.out = Array3::zeros((n, self.n_hours, n_out));
         }
-        self.out
-            .as_slice_mut()
-            .expect("standard layout")
-            .copy_from_slice(
-                y.as_slice()
-                    .ok_or_else(|| SurrogateError::Ort("non-contiguous output".into()))?,
-            );
-        drop(outputs);
+        let np = self.p.len();
+        for (i, p) in params.iter().enumerate() {
+            self.surrogate
+                .meta
+                .normalise_params(p.as_ref(), &mut self.p)?;
+            let outputs = self
+                .surrogate
+                .fast
+                .run(ort::inputs![
+                    "p" => TensorRef::from_array_view(([1usize, np], &self.p[..])).map_err(ort_err)?,
+                    "xw" => &self.xw,
+                ])
+                .map_err(ort_err)?;
+            let y = outputs["y"].try_extract_array::<f32>().map_err(ort_err)?;
+            if y.shape() != [1, self.n_hours, n_out] {
+                return Err(SurrogateError::Ort(format!(
+                    "fast graph returned shape {:?}, expected [1, {}, {n_out}]",
+                    y.shape(),
+                    self.n_hours
+                )));
+            }
+            let src = y
+                .as_slice()
+                .ok_or_else(|| SurrogateError::Ort("non-contiguous output".into()))?;
+            self.out
+                .index_axis_mut(ndarray::Axis(0), i)
+                .as_slice_mut()
+                .expect("standard layout")
+                .copy_from_slice(src);
+        }
         Ok(self.out.slice(s![.., .., ..]))
     }
 }

@@ -4,7 +4,7 @@
 
 mod common;
 
-use bemcal_surrogate::{train, Surrogate, SurrogateError, TimeFeatures, TrainOptions};
+use bemcal_surrogate::{train, Precision, Surrogate, SurrogateError, TimeFeatures, TrainOptions};
 use ndarray::{Array3, ArrayView2};
 
 fn rel_err(a: ArrayView2<'_, f32>, b: &[Vec<f64>]) -> f64 {
@@ -148,6 +148,27 @@ fn trains_exports_and_matches_torch() {
         .iter()
         .fold(0f32, |m, v| m.max(v.abs()));
     assert!(d1 < 1e-4 && d2 < 1e-4, "batch vs single: {d1} {d2}");
+
+    // The int8 graph: present, its measured error recorded, and close to the float graph.
+    let int8 = meta.int8.as_ref().expect("int8 accuracy in the metadata");
+    assert_eq!(int8.ratio_to_sigma_eta.len(), 3);
+    let mut q = Surrogate::load_with(&dir, 1, Precision::Int8)
+        .unwrap()
+        .bind(&weather)
+        .unwrap();
+    let yq = q.evaluate(&params).unwrap().to_owned();
+    for k in 0..3 {
+        let rmse = ((&yq.column(k) - &y.column(k))
+            .mapv(|v| (v as f64).powi(2))
+            .mean()
+            .unwrap())
+        .sqrt();
+        let sigma = meta.outputs[k].sigma_eta_kwh;
+        assert!(
+            rmse < 0.25 * sigma,
+            "int8 output {k}: RMSE vs float {rmse} vs sigma_eta {sigma}"
+        );
+    }
 
     // Wrong parameter count is a clear error.
     let e = ev.evaluate(&[1.0]).unwrap_err().to_string();
