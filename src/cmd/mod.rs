@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod diagnose;
+pub mod metrics;
 pub mod precalibrate;
 pub mod predict;
 pub mod train;
@@ -22,6 +24,10 @@ pub enum Command {
     Train(train::Args),
     /// Predict hourly meters with a trained surrogate.
     Predict(predict::Args),
+    /// Convergence diagnostics (R-hat, bulk/tail ESS) of MCMC draws from a CSV.
+    Diagnose(diagnose::Args),
+    /// ASHRAE Guideline 14 NMBE and CV-RMSE of simulated vs measured hourly CSVs.
+    Metrics(metrics::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -29,5 +35,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Precalibrate(a) => precalibrate::run(a),
         Command::Train(a) => train::run(a),
         Command::Predict(a) => predict::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
+        Command::Metrics(a) => metrics::run(a),
     }
 }

@@ -1,0 +1,183 @@
+//! `bemcal metrics`: ASHRAE Guideline 14 NMBE and CV-RMSE of simulated against measured hourly
+//! series (p = 1, hourly criteria |NMBE| <= 10 %, CV-RMSE <= 30 %).
+//!
+//! Both CSVs have a `timestamp` column and output columns such as `heating_kwh`; rows are
+//! matched by timestamp, every output present in both files is compared, and an empty or
+//! `NaN` cell is a missing hour.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+
+/// Arguments of `bemcal metrics`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Measured hourly series (CSV with a `timestamp` column).
+    #[arg(long)]
+    pub measured: PathBuf,
+    /// Simulated hourly series (CSV with a `timestamp` column).
+    #[arg(long)]
+    pub simulated: PathBuf,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A CSV table read as text: header and rows with their 1-based line numbers.
+pub(crate) struct Table {
+    pub path: PathBuf,
+    pub header: Vec<String>,
+    pub rows: Vec<(usize, Vec<String>)>,
+}
+
+fn split_fields(line: &str) -> Vec<String> {
+    line.split(',')
+        .map(|f| f.trim().trim_matches('"').to_string())
+        .collect()
+}
+
+impl Table {
+    /// Read a comma-separated file with a header line; blank lines are skipped.
+    pub fn read(path: &Path) -> anyhow::Result<Table> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty());
+        let Some((_, head)) = lines.next() else {
+            bail!("{}: empty file, expected a header line", path.display());
+        };
+        let header = split_fields(head.trim_start_matches('\u{feff}'));
+        let mut rows = Vec::new();
+        for (i, line) in lines {
+            let fields = split_fields(line);
+            if fields.len() != header.len() {
+                bail!(
+                    "{}:{}: {} fields, but the header has {}",
+                    path.display(),
+                    i + 1,
+                    fields.len(),
+                    header.len()
+                );
+            }
+            rows.push((i + 1, fields));
+        }
+        Ok(Table {
+            path: path.to_path_buf(),
+            header,
+            rows,
+        })
+    }
+
+    /// Index of a required column.
+    pub fn column(&self, name: &str) -> anyhow::Result<usize> {
+        self.header
+            .iter()
+            .position(|h| h == name)
+            .with_context(|| format!("{}:1: no column `{name}`", self.path.display()))
+    }
+
+    /// A number cell; empty or `NaN` gives NaN (missing).
+    pub fn number(&self, line: usize, col: usize, text: &str) -> anyhow::Result<f64> {
+        if text.is_empty() || text.eq_ignore_ascii_case("nan") {
+            return Ok(f64::NAN);
+        }
+        text.parse::<f64>().map_err(|_| {
+            anyhow::anyhow!(
+                "{}:{line}: column `{}`: `{text}` is not a number",
+                self.path.display(),
+                self.header[col]
+            )
+        })
+    }
+}
+
+/// Metrics of one output.
+#[derive(Debug, serde::Serialize)]
+struct Row {
+    output: String,
+    n: usize,
+    nmbe_percent: f64,
+    cv_rmse_percent: f64,
+    pass: bool,
+}
+
+/// Run `bemcal metrics`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let meas = Table::read(&args.measured)?;
+    let sim = Table::read(&args.simulated)?;
+    let (mt, st) = (meas.column("timestamp")?, sim.column("timestamp")?);
+    let outputs: Vec<(usize, usize)> = meas
+        .header
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != mt)
+        .filter_map(|(i, h)| sim.header.iter().position(|s| s == h).map(|j| (i, j)))
+        .filter(|&(_, j)| j != st)
+        .collect();
+    if outputs.is_empty() {
+        bail!(
+            "{} and {} have no output column in common",
+            meas.path.display(),
+            sim.path.display()
+        );
+    }
+    let mut sim_rows: HashMap<&str, usize> = HashMap::new();
+    for (k, (line, f)) in sim.rows.iter().enumerate() {
+        if sim_rows.insert(f[st].as_str(), k).is_some() {
+            bail!(
+                "{}:{line}: duplicate timestamp `{}`",
+                sim.path.display(),
+                f[st]
+            );
+        }
+    }
+    let mut results = Vec::new();
+    for &(i, j) in &outputs {
+        let (mut y, mut yhat) = (Vec::new(), Vec::new());
+        for (line, f) in &meas.rows {
+            let Some(&k) = sim_rows.get(f[mt].as_str()) else {
+                continue;
+            };
+            let (sline, sf) = &sim.rows[k];
+            y.push(meas.number(*line, i, &f[i])?);
+            yhat.push(sim.number(*sline, j, &sf[j])?);
+        }
+        let name = meas.header[i].clone();
+        let m = bemcal_stats::metrics::g14(&y, &yhat).with_context(|| {
+            format!(
+                "output `{name}` of {} vs {}",
+                meas.path.display(),
+                sim.path.display()
+            )
+        })?;
+        results.push(Row {
+            output: name,
+            n: m.n,
+            nmbe_percent: m.nmbe,
+            cv_rmse_percent: m.cv_rmse,
+            pass: m.pass,
+        });
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        println!(
+            "{:<24} {:>7} {:>9} {:>11}  pass (|NMBE| <= 10 %, CV-RMSE <= 30 %)",
+            "output", "n", "NMBE %", "CV-RMSE %"
+        );
+        for r in &results {
+            println!(
+                "{:<24} {:>7} {:>9.2} {:>11.2}  {}",
+                r.output,
+                r.n,
+                r.nmbe_percent,
+                r.cv_rmse_percent,
+                if r.pass { "yes" } else { "no" }
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,123 @@
+//! CLI tests of `bemcal diagnose` and `bemcal metrics`.
+
+use std::io::Write;
+use std::process::Command;
+
+fn bemcal(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_bemcal"))
+        .args(args)
+        .output()
+        .expect("run bemcal")
+}
+
+fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
+    let p = dir.path().join(name);
+    std::fs::File::create(&p)
+        .unwrap()
+        .write_all(text.as_bytes())
+        .unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn metrics_table_and_json() {
+    let dir = tempfile::tempdir().unwrap();
+    // heating: y = [10, 12, 8, 10], yhat = [9, 12, 10, 11] -> NMBE -6.67 %, CV-RMSE 14.14 %.
+    // cooling: hour 2 missing in the measured file; y = [4, 6, 2], yhat = [5, 3, 2]
+    //          (hours 0, 1, 3) -> NMBE 25 %, CV-RMSE 55.9 %.
+    let m = write(
+        &dir,
+        "m.csv",
+        "timestamp,heating_kwh,cooling_kwh,electricity_kwh\n\
+         2021-01-01T00:00,10,4,1\n2021-01-01T01:00,12,6,1\n\
+         2021-01-01T02:00,8,,1\n2021-01-01T03:00,10,2,1\n",
+    );
+    let s = write(
+        &dir,
+        "s.csv",
+        "timestamp,heating_kwh,cooling_kwh\n\
+         2021-01-01T00:00,9,5\n2021-01-01T01:00,12,3\n\
+         2021-01-01T02:00,10,NaN\n2021-01-01T03:00,11,2\n",
+    );
+    let out = bemcal(&["metrics", "--measured", &m, "--simulated", &s, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v.as_array().unwrap();
+    assert_eq!(rows.len(), 2, "only outputs in both files");
+    assert_eq!(rows[0]["output"], "heating_kwh");
+    assert_eq!(rows[0]["n"], 4);
+    assert!((rows[0]["nmbe_percent"].as_f64().unwrap() + 200.0 / 30.0).abs() < 1e-9);
+    assert!((rows[0]["cv_rmse_percent"].as_f64().unwrap() - 200f64.sqrt()).abs() < 1e-9);
+    assert_eq!(rows[0]["pass"], true);
+    assert_eq!(rows[1]["n"], 3);
+    assert!((rows[1]["nmbe_percent"].as_f64().unwrap() - 25.0).abs() < 1e-9);
+    assert_eq!(rows[1]["pass"], false);
+
+    let table = bemcal(&["metrics", "--measured", &m, "--simulated", &s]);
+    assert!(table.status.success());
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert!(text.contains("heating_kwh") && text.contains("-6.67") && text.contains("55.90"));
+}
+
+#[test]
+fn metrics_bad_cell_names_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = write(&dir, "m.csv", "timestamp,heating_kwh\nt0,1\nt1,abc\n");
+    let s = write(&dir, "s.csv", "timestamp,heating_kwh\nt0,1\nt1,2\n");
+    let out = bemcal(&["metrics", "--measured", &m, "--simulated", &s]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("m.csv:3") && err.contains("heating_kwh") && err.contains("abc"),
+        "{err}"
+    );
+}
+
+#[test]
+fn diagnose_matches_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("chain,draw,a,b\n");
+    let mut chains = vec![Vec::new(), Vec::new()];
+    for (c, chain) in chains.iter_mut().enumerate() {
+        for d in 0..51 {
+            // Deterministic, irregular values.
+            let a = (((d * 37 + c * 11) % 23) as f64).sin() + c as f64 * 0.1;
+            chain.push(a);
+            csv.push_str(&format!("{c},{d},{a},{}\n", 2.0 * a));
+        }
+    }
+    let p = write(&dir, "draws.csv", &csv);
+    let out = bemcal(&["diagnose", "--draws", &p, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let want = bemcal_stats::diagnostics::diagnose(&chains).unwrap();
+    assert_eq!(v[0]["parameter"], "a");
+    assert!((v[0]["rhat"].as_f64().unwrap() - want.rhat).abs() < 1e-12);
+    assert!((v[0]["ess_bulk"].as_f64().unwrap() - want.ess_bulk).abs() < 1e-9);
+    assert!((v[1]["mean"].as_f64().unwrap() - 2.0 * want.mean).abs() < 1e-12);
+
+    let table = bemcal(&["diagnose", "--draws", &p]);
+    assert!(table.status.success());
+    assert!(String::from_utf8_lossy(&table.stdout).contains("ess_tail"));
+}
+
+#[test]
+fn diagnose_bad_input_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = write(&dir, "d.csv", "chain,draw,a\n0,0,1\n0,1,2\n1,0,3\n");
+    let out = bemcal(&["diagnose", "--draws", &p]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("chain `1`"));
+    let q = write(&dir, "e.csv", "chain,draw,a\n0,0,1\n0,x,2\n");
+    let out = bemcal(&["diagnose", "--draws", &q]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("e.csv:3"));
+}
