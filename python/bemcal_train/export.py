@@ -66,7 +66,7 @@ def build_fast(model, n_params, n_hourly, scale, nonnegative):
         numpy_helper.from_array(f32(scale), "scale"),
     ]
     nodes = [
-        helper.make_node("MatMul", ["p", "w_p"], ["pp"]),
+        helper.make_node("MatMul", ["p", "w_p"], ["pp"], name="param_projection"),
         helper.make_node("Add", ["pp", "b_ih0"], ["pb"]),
         helper.make_node("Concat", ["pb", "b_hh0"], ["bias0"], axis=1),
         helper.make_node("LSTM", ["xw", "w_0", "r_0", "bias0"], ["y0", "", ""], hidden_size=H),
@@ -126,7 +126,8 @@ def export_all(model, n_params, n_hourly, scale, nonnegative, out_dir):
 
     logging.getLogger().setLevel(logging.ERROR)
     quantize_dynamic(os.path.join(out_dir, FAST), os.path.join(out_dir, FAST_INT8),
-                     weight_type=QuantType.QInt8, op_types_to_quantize=["LSTM", "MatMul"])
+                     weight_type=QuantType.QInt8, op_types_to_quantize=["LSTM", "MatMul"],
+                     nodes_to_exclude=["param_projection"])  # once per proposal: keep it float
     files["fast_int8"] = FAST_INT8
     return files
 

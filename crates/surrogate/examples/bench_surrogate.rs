@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use bemcal_surrogate::Surrogate;
+use bemcal_surrogate::{Precision, Surrogate};
 use bemcal_weather::{DayType, HourlyFeatures};
 use ndarray::Array3;
 
@@ -36,6 +36,26 @@ fn weather() -> HourlyFeatures {
             })
             .collect(),
     }
+}
+
+/// Best rate (calls x per_call per second) over 4 rounds of `seconds / 4`: the machine may be
+/// shared; the best round is the least disturbed.
+fn best_rate(
+    seconds: f64,
+    per_call: usize,
+    mut f: impl FnMut() -> Result<(), Box<dyn std::error::Error>>,
+) -> Result<f64, Box<dyn std::error::Error>> {
+    let mut best = 0.0f64;
+    for _ in 0..4 {
+        let t0 = Instant::now();
+        let mut k = 0usize;
+        while t0.elapsed().as_secs_f64() < seconds / 4.0 {
+            f()?;
+            k += per_call;
+        }
+        best = best.max(k as f64 / t0.elapsed().as_secs_f64());
+    }
+    Ok(best)
 }
 
 fn lcg(state: &mut u64) -> f64 {
@@ -85,46 +105,52 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let y_plain = s.run_windows(x.view())?;
-    let t0 = Instant::now();
-    let mut k = 0usize;
-    while t0.elapsed().as_secs_f64() < seconds / 3.0 {
+    // The plain graph gets its (already built) windows; the fast path builds nothing per call.
+    let r = best_rate(seconds / 4.0, 1, || {
         s.run_windows(x.view())?;
-        k += 1;
-    }
-    println!(
-        "ort_plain_evals_per_s={:.4}",
-        k as f64 / t0.elapsed().as_secs_f64()
-    );
+        Ok(())
+    })?;
+    println!("ort_plain_evals_per_s={r:.4}");
 
-    // Structured hot path: one proposal per call, then `batch` proposals per call.
+    // Fast (structured) hot path: one proposal per call, then `batch` proposals per call.
     let mut ev = s.bind(&w)?;
-    let y_struct = ev.evaluate(&p0)?.to_owned();
+    let y_fast = ev.evaluate(&p0)?.to_owned();
     let max_y = y_plain.iter().fold(0f32, |m, v| m.max(v.abs()));
-    let max_d = (&y_struct - &y_plain)
+    let max_d = (&y_fast - &y_plain)
         .iter()
         .fold(0f32, |m, v| m.max(v.abs()));
-    println!("structured_vs_plain_rel={:.3e}", max_d / max_y.max(1e-12));
-    let t0 = Instant::now();
-    let mut k = 0usize;
-    while t0.elapsed().as_secs_f64() < seconds / 3.0 {
+    println!("fast_vs_plain_rel={:.3e}", max_d / max_y.max(1e-12));
+    let r = best_rate(seconds / 4.0, 1, || {
         let p = proposal();
         ev.evaluate(&p)?;
-        k += 1;
-    }
-    println!(
-        "ort_structured_evals_per_s={:.4}",
-        k as f64 / t0.elapsed().as_secs_f64()
-    );
-    let t0 = Instant::now();
-    let mut k = 0usize;
-    while t0.elapsed().as_secs_f64() < seconds / 3.0 {
+        Ok(())
+    })?;
+    println!("ort_fast_evals_per_s={r:.4}");
+    let r = best_rate(seconds / 4.0, batch, || {
         let ps: Vec<Vec<f64>> = (0..batch).map(|_| proposal()).collect();
         ev.evaluate_batch(&ps)?;
-        k += batch;
+        Ok(())
+    })?;
+    println!("ort_fast_batch{batch}_evals_per_s={r:.4}");
+
+    // int8 fast graph.
+    if meta.files.fast_int8.is_some() {
+        let mut q = Surrogate::load_with(dir, threads, Precision::Int8)?.bind(&w)?;
+        let yq = q.evaluate(&p0)?.to_owned();
+        let rmse = ((&yq - &y_fast)
+            .mapv(|v| (v as f64).powi(2))
+            .mean()
+            .unwrap_or(0.0))
+        .sqrt();
+        let mean = y_fast.mean().unwrap_or(0.0);
+        println!("int8_rmse_vs_float_kwh={rmse:.4e}");
+        println!("float_mean_output_kwh={mean:.4e}");
+        let r = best_rate(seconds / 4.0, 1, || {
+            let p = proposal();
+            q.evaluate(&p)?;
+            Ok(())
+        })?;
+        println!("ort_fast_int8_evals_per_s={r:.4}");
     }
-    println!(
-        "ort_structured_batch{batch}_evals_per_s={:.4}",
-        k as f64 / t0.elapsed().as_secs_f64()
-    );
     Ok(())
 }
