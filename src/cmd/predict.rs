@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use bemcal_surrogate::predict::{hour_beginning_timestamps, write_csv};
 use bemcal_surrogate::Surrogate;
-use bemcal_weather::{Calendar, Epw, HourlyFeatures, Holidays};
+use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
 
 /// Predict hourly meters with a trained surrogate (parameters not set are at their prior mode).
 #[derive(Debug, clap::Args)]
@@ -42,7 +42,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!(
                 "--set '{s}': unknown parameter '{}'; the surrogate has: {}",
                 name.trim(),
-                meta.params.iter().map(|p| p.name.as_str()).collect::<Vec<_>>().join(", ")
+                meta.params
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             );
         };
         let v: f64 = value
@@ -51,7 +55,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("--set '{s}': '{}' is not a number", value.trim()))?;
         let p = &meta.params[i];
         if !(p.min..=p.max).contains(&v) {
-            eprintln!("warning: {} = {v} is outside the training range [{}, {}]", p.name, p.min, p.max);
+            eprintln!(
+                "warning: {} = {v} is outside the training range [{}, {}]",
+                p.name, p.min, p.max
+            );
         }
         values[i] = v;
     }
@@ -59,12 +66,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let features = HourlyFeatures::from_epw(&epw, &Calendar::new(args.year, Holidays::UsFederal));
     let mut ev = surrogate.bind(&features)?;
     let y = ev.evaluate(&values)?;
-    let ts = hour_beginning_timestamps(args.year, epw.hours.iter().map(|h| (h.month, h.day, h.hour)));
+    let ts = hour_beginning_timestamps(
+        args.year,
+        epw.hours.iter().map(|h| (h.month, h.day, h.hour)),
+    );
     write_csv(&args.out, &ts, &meta.output_names(), y)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     println!("wrote {} ({} rows)", args.out.display(), ts.len());
     for (k, name) in meta.output_names().iter().enumerate() {
-        println!("  {name}: {:.1} kWh/year", y.column(k).iter().map(|v| *v as f64).sum::<f64>());
+        println!(
+            "  {name}: {:.1} kWh/year",
+            y.column(k).iter().map(|v| *v as f64).sum::<f64>()
+        );
     }
     Ok(())
 }

@@ -56,9 +56,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.seconds
     );
     for o in &report.meta.outputs {
-        let cv = report.meta.held_out.metrics.get(&o.name).and_then(|m| m.cv_rmse_pct);
+        let cv = report
+            .meta
+            .held_out
+            .metrics
+            .get(&o.name)
+            .and_then(|m| m.cv_rmse_pct);
         match cv {
-            Some(cv) => println!("  {}: sigma_eta {:.4} kWh, held-out CV-RMSE {cv:.2} %", o.name, o.sigma_eta_kwh),
+            Some(cv) => println!(
+                "  {}: sigma_eta {:.4} kWh, held-out CV-RMSE {cv:.2} %",
+                o.name, o.sigma_eta_kwh
+            ),
             None => println!("  {}: sigma_eta {:.4} kWh", o.name, o.sigma_eta_kwh),
         }
     }
