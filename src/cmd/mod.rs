@@ -2,10 +2,16 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod calibrate;
+mod common;
+pub mod design;
 pub mod diagnose;
 pub mod metrics;
+pub mod params;
 pub mod precalibrate;
 pub mod predict;
+pub mod simulate;
+pub mod synthesize;
 pub mod train;
 
 /// Bayesian calibration of EnergyPlus building energy models against hourly meters.
@@ -18,24 +24,39 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run EnergyPlus once for a model at given parameter values.
+    Simulate(simulate::Args),
+    /// List a model's calibration parameters and priors.
+    Params(params::Args),
     /// Pre-calibration: meters -> bases, day types, schedule priors (priors.toml).
     Precalibrate(precalibrate::Args),
+    /// Design points: a Latin hypercube over the priors, optionally simulated.
+    Design(design::Args),
     /// Train the LSTM surrogate on a training set and export it to ONNX.
     Train(train::Args),
     /// Predict hourly meters with a trained surrogate.
     Predict(predict::Args),
     /// Convergence diagnostics (R-hat, bulk/tail ESS) of MCMC draws from a CSV.
     Diagnose(diagnose::Args),
+    /// The whole calibration on this machine: design, training, chains, validation.
+    Calibrate(calibrate::Args),
+    /// Synthetic meters: EnergyPlus at hidden true parameters, with noise and a gap.
+    Synthesize(synthesize::Args),
     /// ASHRAE Guideline 14 NMBE and CV-RMSE of simulated vs measured hourly CSVs.
     Metrics(metrics::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Simulate(a) => simulate::run(a),
+        Command::Params(a) => params::run(a),
         Command::Precalibrate(a) => precalibrate::run(a),
         Command::Train(a) => train::run(a),
         Command::Predict(a) => predict::run(a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Metrics(a) => metrics::run(a),
+        Command::Design(a) => design::run(a),
+        Command::Calibrate(a) => calibrate::run(a),
+        Command::Synthesize(a) => synthesize::run(a),
     }
 }

@@ -1,0 +1,317 @@
+//! The project file: what to calibrate, against which meters, with which settings.
+//!
+//! ```toml
+//! name = "example-office"
+//! model = "model.toml"                 # building spec or [idf] parameter map
+//! weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"   # or a path to an EPW
+//! priors = "precal/priors.toml"        # optional: written by `bemcal precalibrate`
+//! calibrate = ["lighting_power_density", "shgc"]   # optional; default: every parameter
+//!
+//! [fixed]                              # optional: values of parameters not calibrated
+//! people_area_per_person = 12.0
+//!
+//! [meters]                             # how to read the meters CSV (see bemcal-precal)
+//! file = "meters.csv"
+//! timestamp_column = "timestamp"
+//! timestamp_format = "iso8601"
+//! convention = "hour_beginning"
+//! [[meters.columns]]
+//! column = "heating_kwh"
+//! role = "heating"
+//! unit = "kWh"
+//!
+//! [outputs]                            # model output -> meter role (default: by name)
+//! heating_kwh = "heating"
+//!
+//! [design]
+//! points = 20
+//! [surrogate]
+//! epochs = 200
+//! [mcmc]
+//! chains = 4
+//! iterations = 10000
+//! burn_in = 2000
+//! ```
+//! Relative paths are relative to the project file.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use bemcal_precal::meters::MeterSpec;
+use serde::{Deserialize, Serialize};
+
+use crate::Error;
+
+/// A calibration project.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Project {
+    #[serde(default = "default_name")]
+    pub name: String,
+    /// Model file (building spec or `[idf]` parameter map).
+    pub model: PathBuf,
+    /// EPW path, or `bundled:FILE` for a weather file shipped with EnergyPlus.
+    pub weather: String,
+    /// Priors file from pre-calibration (schedule boundaries and parameter priors).
+    #[serde(default)]
+    pub priors: Option<PathBuf>,
+    /// Parameters to calibrate; empty = all.
+    #[serde(default)]
+    pub calibrate: Vec<String>,
+    /// Values of parameters that are not calibrated (others stay at their prior mode).
+    #[serde(default)]
+    pub fixed: BTreeMap<String, f64>,
+    /// The meters.
+    pub meters: MeterSpec,
+    /// Model output name -> meter role (`heating`, `cooling`, `electricity` or a sub-meter).
+    #[serde(default)]
+    pub outputs: BTreeMap<String, String>,
+    #[serde(default)]
+    pub design: DesignSettings,
+    #[serde(default)]
+    pub surrogate: SurrogateSettings,
+    #[serde(default)]
+    pub mcmc: McmcSettings,
+    #[serde(default)]
+    pub validation: ValidationSettings,
+    /// Folder of the project file (set on load).
+    #[serde(skip)]
+    pub base: PathBuf,
+}
+
+fn default_name() -> String {
+    "calibration".into()
+}
+
+/// Design points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DesignSettings {
+    /// Number of Latin hypercube points (reference: 20).
+    pub points: usize,
+    pub seed: u64,
+    /// Maximin column-swap iterations.
+    pub maximin_iterations: usize,
+    /// EnergyPlus runs at once (one core each).
+    pub parallel: usize,
+}
+
+impl Default for DesignSettings {
+    fn default() -> Self {
+        DesignSettings {
+            points: 20,
+            seed: 1,
+            maximin_iterations: 1000,
+            parallel: 2,
+        }
+    }
+}
+
+/// Surrogate training.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SurrogateSettings {
+    /// Maximum epochs (reference: 200), with early stopping.
+    pub epochs: usize,
+    pub patience: usize,
+    pub seed: u64,
+    pub batch_size: usize,
+    /// `none` (the reference), `hour` or `hour+schedule`.
+    pub time_features: String,
+    /// Threads for training and evaluation.
+    pub threads: usize,
+    /// Fraction of design points held out (split by design point).
+    pub held_out_fraction: f64,
+}
+
+impl Default for SurrogateSettings {
+    fn default() -> Self {
+        SurrogateSettings {
+            epochs: 200,
+            patience: 20,
+            seed: 0,
+            batch_size: 1024,
+            time_features: "none".into(),
+            threads: 2,
+            held_out_fraction: 0.2,
+        }
+    }
+}
+
+/// How the model-inadequacy variance is treated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SigmaDeltaMode {
+    /// Sampled per output on the log scale with a half-Cauchy prior (scale = the output's
+    /// measured sd). The default: with 8,760 hours the residuals are dominated by model
+    /// inadequacy of unknown size; fixing it too small makes the posterior overconfident and the
+    /// chains stick, too large washes the information out.
+    Sampled,
+    /// Fixed at `sigma_delta_fraction` x the output's measured sd.
+    Fixed,
+}
+
+/// Metropolis-Hastings chains.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct McmcSettings {
+    pub chains: usize,
+    /// Iterations per chain including burn-in (reference: 10,000).
+    pub iterations: u64,
+    /// Burn-in (reference: 2,000); the proposal adapts only during burn-in.
+    pub burn_in: u64,
+    pub seed: u64,
+    pub sigma_delta: SigmaDeltaMode,
+    /// `sigma_delta` as a fraction of the measured sd when fixed.
+    pub sigma_delta_fraction: f64,
+    /// Measurement error `sigma_y` as a fraction of each output's measured mean.
+    pub sigma_y_fraction: f64,
+    /// Initial proposal sd in the unit space.
+    pub initial_sd: f64,
+    /// Iterations per checkpointed segment.
+    pub segment: u64,
+    /// Posterior draws evaluated for the predictive bands.
+    pub predictive_draws: usize,
+}
+
+impl Default for McmcSettings {
+    fn default() -> Self {
+        McmcSettings {
+            chains: 4,
+            iterations: 10_000,
+            burn_in: 2_000,
+            seed: 7,
+            sigma_delta: SigmaDeltaMode::Sampled,
+            sigma_delta_fraction: 0.2,
+            sigma_y_fraction: 0.02,
+            initial_sd: 0.02,
+            segment: 500,
+            predictive_draws: 100,
+        }
+    }
+}
+
+/// Which posterior statistic becomes the calibrated estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimate {
+    /// The draw with the highest log posterior (default): a joint point, so it satisfies every
+    /// constraint, and it is what the reference marks at the posterior peak (its Fig. 10).
+    Map,
+    /// Per-parameter posterior mean.
+    Mean,
+    /// Per-parameter posterior median.
+    Median,
+}
+
+/// Validation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValidationSettings {
+    pub estimate: Estimate,
+    /// Also simulate the initial model (prior modes), as the reference's Table 5.
+    pub initial: bool,
+}
+
+impl Default for ValidationSettings {
+    fn default() -> Self {
+        ValidationSettings {
+            estimate: Estimate::Map,
+            initial: true,
+        }
+    }
+}
+
+impl Project {
+    /// Reads and validates a project file.
+    pub fn load(path: &Path) -> Result<Project, Error> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Input {
+            path: path.into(),
+            line: 0,
+            message: format!("cannot read: {e}"),
+        })?;
+        let mut p: Project = toml::from_str(&text).map_err(|e| Error::Input {
+            path: path.into(),
+            line: e
+                .span()
+                .map(|s| text[..s.start].lines().count().max(1))
+                .unwrap_or(0),
+            message: e.message().to_string(),
+        })?;
+        p.base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        p.validate().map_err(|message| Error::Input {
+            path: path.into(),
+            line: 0,
+            message,
+        })?;
+        Ok(p)
+    }
+
+    /// Checks settings that serde cannot.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.design.points < 3 {
+            return Err(format!(
+                "design.points = {}, need at least 3",
+                self.design.points
+            ));
+        }
+        if self.design.parallel == 0 {
+            return Err("design.parallel must be at least 1".into());
+        }
+        if self.mcmc.chains == 0 {
+            return Err("mcmc.chains must be at least 1".into());
+        }
+        if self.mcmc.burn_in >= self.mcmc.iterations {
+            return Err(format!(
+                "mcmc.burn_in = {} must be below mcmc.iterations = {}",
+                self.mcmc.burn_in, self.mcmc.iterations
+            ));
+        }
+        if self.mcmc.segment == 0 {
+            return Err("mcmc.segment must be at least 1".into());
+        }
+        if !(0.0..1.0).contains(&self.surrogate.held_out_fraction)
+            || self.surrogate.held_out_fraction == 0.0
+        {
+            return Err("surrogate.held_out_fraction must be in (0, 1)".into());
+        }
+        self.surrogate
+            .time_features
+            .parse::<bemcal_surrogate::TimeFeatures>()
+            .map_err(|e| format!("surrogate.time_features: {e}"))?;
+        if self.meters.file.is_none() {
+            return Err("[meters] needs file = \"...\"".into());
+        }
+        Ok(())
+    }
+
+    /// A path from the project file, resolved against its folder.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.into()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    /// The meters CSV.
+    pub fn meters_file(&self) -> PathBuf {
+        self.resolve(self.meters.file.as_deref().expect("validated"))
+    }
+
+    /// Model output -> meter role, with the defaults for the three main outputs.
+    pub fn output_roles(&self) -> BTreeMap<String, String> {
+        let mut m: BTreeMap<String, String> = [
+            ("heating_kwh", "heating"),
+            ("cooling_kwh", "cooling"),
+            ("electricity_kwh", "electricity"),
+        ]
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+        if !self.outputs.is_empty() {
+            m = self.outputs.clone();
+        }
+        m
+    }
+}

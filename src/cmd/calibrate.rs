@@ -1,0 +1,96 @@
+//! `bemcal calibrate`: the whole calibration on this machine.
+
+use std::path::PathBuf;
+
+use bemcal_calibrate::{calibrate, Project};
+
+/// Run design points, training, chains and validation for a project; write summary.json,
+/// draws.csv, the surrogate and the validation runs under --out.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Project file (TOML).
+    pub project: PathBuf,
+    /// Output folder (reused: finished stages are not redone).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Print summary.json to stdout when done.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let project = Project::load(&a.project)?;
+    let t0 = std::time::Instant::now();
+    let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
+    let s = calibrate(&project, &a.out, &log)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+        return Ok(());
+    }
+    println!(
+        "\nposterior ({} chains; max R-hat {:.3}, min bulk ESS {:.0}):",
+        s.acceptance_rate.len(),
+        s.posterior.max_rhat,
+        s.posterior.min_ess_bulk
+    );
+    println!(
+        "{:<30} {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>5}",
+        "parameter",
+        "prior min",
+        "mode",
+        "max",
+        "mean",
+        "q5",
+        "q95",
+        "estimate",
+        "rhat",
+        "ess",
+        "width"
+    );
+    for (p, r) in s.posterior.parameters.iter().zip(&s.parameters) {
+        let est = s
+            .calibrated_values
+            .iter()
+            .find(|(n, _)| *n == p.name)
+            .map_or(f64::NAN, |(_, v)| *v);
+        println!(
+            "{:<30} {:>9.4} {:>9.4} {:>9.4} | {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>6.3} {:>6.0} {:>5.2}",
+            p.name, r.prior_min, r.prior_mode, r.prior_max, p.mean, p.q5, p.q95, est, p.rhat, p.ess_bulk, p.width_ratio
+        );
+    }
+    for c in &s.posterior.correlated_pairs {
+        println!(
+            "warning: {} and {} are strongly correlated (rho = {:.2}): not separately identifiable",
+            c.a, c.b, c.rho
+        );
+    }
+    println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");
+    println!(
+        "{:<18} {:>22} {:>22}",
+        "output", "initial NMBE / CV-RMSE", "calibrated NMBE / CV"
+    );
+    for v in &s.validation {
+        let init = s.initial.iter().find(|i| i.output == v.output);
+        let i = init.map_or("-".to_string(), |i| {
+            format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
+        });
+        println!(
+            "{:<18} {:>22} {:>6.1} % / {:5.1} % {}",
+            v.output,
+            i,
+            v.metrics.nmbe,
+            v.metrics.cv_rmse,
+            if v.metrics.pass { "pass" } else { "FAIL" }
+        );
+    }
+    let t = &s.timings;
+    println!(
+        "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, summary {:.0} s, validation {:.0} s, total {:.0} s",
+        t.design_s, t.simulations_s, t.training_s, t.chains_s, t.summary_s, t.validation_s, t.total_s
+    );
+    println!(
+        "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/",
+        a.out.display()
+    );
+    Ok(())
+}
