@@ -149,6 +149,7 @@ pub struct SimulatedDesign {
     pub seconds: Vec<f64>,
 }
 
+#[allow(clippy::too_many_arguments)]
 /// Simulates every design point with `parallel` EnergyPlus processes. Point `i` runs in
 /// `dir/point_iii/`; its outputs are saved to `dir/point_iii.json` when it succeeds, and a later
 /// call finds them there (so an interrupted design resumes where it stopped).

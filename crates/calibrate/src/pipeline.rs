@@ -6,14 +6,16 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use bemcal_energyplus::HourlyOutputs;
 use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
 use bemcal_precal::meters::{read_meters, MeterRole};
+use bemcal_stats::lhs::Design;
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
-use bemcal_stats::mcmc::{dispersed_starts, Draws, MhConfig};
+use bemcal_stats::mcmc::{dispersed_starts, run_segment_batch, ChainState, Draws, MhConfig};
 use bemcal_stats::metrics::{g14, G14Metrics};
 use bemcal_stats::prior::Prior;
 use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
-use bemcal_surrogate::{ParamSpec, Split, Surrogate, TrainOptions, TrainingSet};
+use bemcal_surrogate::{Evaluator, ParamSpec, Split, Surrogate, TrainOptions, TrainingSet};
 use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
@@ -252,306 +254,208 @@ pub struct ParameterReport {
 /// Progress messages.
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
 
-/// Runs the whole calibration of `project` into `out`.
-pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
-    let t_all = Instant::now();
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let inp = load_inputs(project)?;
-    let mut timings = Timings::default();
-    log(&format!(
-        "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
-        inp.model.path.display(),
-        inp.model.parameters().len(),
-        inp.plan.calibrated.len(),
-        inp.outputs,
-        inp.weather_path.display()
-    ));
+/// Results of the chains, merged: what the summary is built from.
+pub struct ChainResults {
+    pub states: Vec<ChainState>,
+    pub draws: Vec<Draws>,
+}
 
-    // Design points.
-    let t = Instant::now();
-    let design = make_design(
-        &inp.plan,
-        &inp.model,
-        project.design.points,
-        project.design.seed,
-        project.design.maximin_iterations,
-    )?;
-    write_design_csv(&out.join("design.csv"), &inp.plan, &design)?;
-    timings.design_s = t.elapsed().as_secs_f64();
-    log(&format!(
-        "design: {} points over {} parameters (constraint repair: {} swaps, {} cells resampled)",
-        design.points.len(),
-        inp.plan.calibrated.len(),
-        design.repair.swaps,
-        design.repair.resampled_in_stratum + design.repair.resampled_outside_stratum
-    ));
-    let t = Instant::now();
-    let sims = simulate_design(
-        &inp.runner,
-        &inp.model,
-        &inp.plan,
-        &design,
-        &inp.weather_path,
-        &out.join("simulations"),
-        project.design.parallel,
-        &|done, n| log(&format!("simulations: {done}/{n}")),
-    )?;
-    timings.simulations_s = t.elapsed().as_secs_f64();
-    log(&format!(
-        "simulations: {} run ({:.1} s each on average), {} reused",
-        sims.seconds.len(),
-        sims.seconds.iter().sum::<f64>() / sims.seconds.len().max(1) as f64,
-        sims.reused
-    ));
+/// A loaded calibration: the project, its inputs and the output folder. Each stage is a method;
+/// [`calibrate`] runs them in order on this machine, and the coordinator dispatches the same
+/// methods to workers (simulations, training and chain segments as separate jobs).
+pub struct Calibration {
+    pub project: Project,
+    pub inputs: Inputs,
+    pub out: PathBuf,
+}
 
-    // Training set and surrogate.
-    let t = Instant::now();
-    let n_pts = design.points.len();
-    let n_h = inp.features.len();
-    let n_out = inp.outputs.len();
-    let mut points = Array2::zeros((n_pts, inp.plan.calibrated.len()));
-    let mut y = Array3::zeros((n_pts, n_h, n_out));
-    for (i, (x, o)) in design.points.iter().zip(&sims.outputs).enumerate() {
-        for (j, v) in x.iter().enumerate() {
-            points[[i, j]] = *v;
-        }
-        for (k, name) in inp.outputs.iter().enumerate() {
-            let s = o.get(name).ok_or_else(|| Error::Stage {
-                stage: "training set",
-                message: format!("design point {i} has no output {name}"),
-            })?;
-            for (h, v) in s.iter().enumerate() {
-                y[[i, h, k]] = *v;
+/// Everything the chains need: the bound surrogate, the likelihood and the noise model.
+pub struct Sampler<'c> {
+    cal: &'c Calibration,
+    pub evaluator: Evaluator,
+    pub likelihood: GaussianLikelihood,
+    pub noise: Vec<OutputNoise>,
+    pub sigma_box: SigmaDeltaBox,
+    pub sigma_eta: Vec<f64>,
+    pub held_out: serde_json::Value,
+}
+
+impl Calibration {
+    /// Loads the project's inputs; `out` is where every stage writes.
+    pub fn load(project: Project, out: &Path) -> Result<Calibration, Error> {
+        std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        let inputs = load_inputs(&project)?;
+        Ok(Calibration {
+            project,
+            inputs,
+            out: out.to_path_buf(),
+        })
+    }
+
+    /// Stage 1: the design (deterministic for the project's seed); writes `design.csv`.
+    pub fn design(&self) -> Result<Design, Error> {
+        let p = &self.project.design;
+        let d = make_design(
+            &self.inputs.plan,
+            &self.inputs.model,
+            p.points,
+            p.seed,
+            p.maximin_iterations,
+        )?;
+        write_design_csv(&self.out.join("design.csv"), &self.inputs.plan, &d)?;
+        Ok(d)
+    }
+
+    /// Folder of the design-point simulations.
+    pub fn simulations_dir(&self) -> PathBuf {
+        self.out.join("simulations")
+    }
+
+    /// Stage 2, one job: simulates design point `i` (or reloads it if already done).
+    pub fn simulate_point(
+        &self,
+        i: usize,
+        x: &[f64],
+    ) -> Result<(HourlyOutputs, Option<f64>), Error> {
+        let dir = self.simulations_dir();
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        simulate_point(
+            &self.inputs.runner,
+            &self.inputs.model,
+            &self.inputs.plan.values(x),
+            &self.inputs.weather_path,
+            &dir,
+            i,
+        )
+    }
+
+    /// Stage 3: the training set from the design and its simulated outputs; writes `dataset/`.
+    pub fn training_set(&self, design: &Design, sims: &[HourlyOutputs]) -> Result<PathBuf, Error> {
+        let inp = &self.inputs;
+        let n_pts = design.points.len();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let mut points = Array2::zeros((n_pts, inp.plan.calibrated.len()));
+        let mut y = Array3::zeros((n_pts, n_h, n_out));
+        for (i, (x, o)) in design.points.iter().zip(sims).enumerate() {
+            for (j, v) in x.iter().enumerate() {
+                points[[i, j]] = *v;
+            }
+            for (k, name) in inp.outputs.iter().enumerate() {
+                let s = o.get(name).ok_or_else(|| Error::Stage {
+                    stage: "training set",
+                    message: format!("design point {i} has no output {name}"),
+                })?;
+                for (h, v) in s.iter().enumerate() {
+                    y[[i, h, k]] = *v;
+                }
             }
         }
+        let params: Vec<ParamSpec> = inp
+            .plan
+            .calibrated
+            .iter()
+            .zip(&inp.plan.priors)
+            .map(|(n, p)| ParamSpec::new(n.clone(), p.min(), p.max(), p.mode()))
+            .collect();
+        let sp = &self.project.surrogate;
+        let split = Split::by_design_point(n_pts, sp.held_out_fraction, sp.seed)?;
+        let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
+            .with_split(split)?;
+        let dir = self.out.join("dataset");
+        set.write(&dir)?;
+        Ok(dir)
     }
-    let params: Vec<ParamSpec> = inp
-        .plan
-        .calibrated
-        .iter()
-        .zip(&inp.plan.priors)
-        .map(|(n, p)| ParamSpec::new(n.clone(), p.min(), p.max(), p.mode()))
-        .collect();
-    let split = Split::by_design_point(
-        n_pts,
-        project.surrogate.held_out_fraction,
-        project.surrogate.seed,
-    )?;
-    let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
-        .with_split(split)?;
-    let dataset_dir = out.join("dataset");
-    set.write(&dataset_dir)?;
-    let sur_dir = out.join("surrogate");
-    if bemcal_surrogate::SurrogateMeta::read(&sur_dir).is_err() {
-        log("training the surrogate (PyTorch)...");
+
+    /// Folder of the trained surrogate.
+    pub fn surrogate_dir(&self) -> PathBuf {
+        self.out.join("surrogate")
+    }
+
+    /// True once a valid surrogate is in place.
+    pub fn has_surrogate(&self) -> bool {
+        bemcal_surrogate::SurrogateMeta::read(&self.surrogate_dir()).is_ok()
+    }
+
+    /// Stage 4, one job: trains the surrogate on `dataset/` into `surrogate/`.
+    pub fn train(&self) -> Result<(), Error> {
+        let sp = &self.project.surrogate;
         let opts = TrainOptions {
-            epochs: project.surrogate.epochs,
-            patience: project.surrogate.patience,
-            seed: project.surrogate.seed,
-            batch_size: project.surrogate.batch_size,
-            time_features: project
-                .surrogate
-                .time_features
-                .parse()
-                .map_err(Error::Config)?,
-            threads: project.surrogate.threads,
+            epochs: sp.epochs,
+            patience: sp.patience,
+            seed: sp.seed,
+            batch_size: sp.batch_size,
+            time_features: sp.time_features.parse().map_err(Error::Config)?,
+            threads: sp.threads,
             quiet: true,
             ..TrainOptions::default()
         };
-        bemcal_surrogate::train(&dataset_dir, &sur_dir, &opts)?;
-    } else {
-        log("surrogate: reusing the one trained earlier");
+        bemcal_surrogate::train(&self.out.join("dataset"), &self.surrogate_dir(), &opts)?;
+        Ok(())
     }
-    let surrogate = Surrogate::load(&sur_dir, project.surrogate.threads)?;
-    let meta = surrogate.meta().clone();
-    if meta.output_names() != inp.outputs {
-        return Err(Error::Stage {
-            stage: "surrogate",
-            message: format!(
-                "surrogate in {} predicts {:?}, the calibration needs {:?}; delete it to retrain",
-                sur_dir.display(),
-                meta.output_names(),
-                inp.outputs
-            ),
-        });
-    }
-    let sigma_eta = meta.sigma_eta_kwh();
-    timings.training_s = t.elapsed().as_secs_f64();
-    log(&format!(
-        "surrogate: held-out RMSE (sigma_eta) {:?} kWh",
-        inp.outputs
+
+    /// Stage 5 set-up: loads the surrogate and builds the likelihood (reference Eq. 7).
+    pub fn sampler(&self) -> Result<Sampler<'_>, Error> {
+        let inp = &self.inputs;
+        let dir = self.surrogate_dir();
+        let surrogate = Surrogate::load(&dir, self.project.surrogate.threads)?;
+        let meta = surrogate.meta().clone();
+        if meta.output_names() != inp.outputs {
+            return Err(Error::Stage {
+                stage: "surrogate",
+                message: format!(
+                    "surrogate in {} predicts {:?}, the calibration needs {:?}; delete it to retrain",
+                    dir.display(),
+                    meta.output_names(),
+                    inp.outputs
+                ),
+            });
+        }
+        let sigma_eta = meta.sigma_eta_kwh();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let mut observed = vec![f64::NAN; n_h * n_out];
+        for (k, s) in inp.measured.iter().enumerate() {
+            for (h, v) in s.iter().enumerate() {
+                observed[h * n_out + k] = *v;
+            }
+        }
+        let stats: Vec<(f64, f64)> = inp.measured.iter().map(|s| mean_sd(s)).collect();
+        let m = &self.project.mcmc;
+        let noise: Vec<OutputNoise> = stats
             .iter()
             .zip(&sigma_eta)
-            .map(|(n, s)| format!("{n} {s:.2}"))
-            .collect::<Vec<_>>()
-    ));
-    let mut eval = surrogate.bind(&inp.features)?;
-
-    // Likelihood.
-    let mut observed = vec![f64::NAN; n_h * n_out];
-    for (k, s) in inp.measured.iter().enumerate() {
-        for (h, v) in s.iter().enumerate() {
-            observed[h * n_out + k] = *v;
-        }
-    }
-    let stats: Vec<(f64, f64)> = inp.measured.iter().map(|s| mean_sd(s)).collect();
-    let noise: Vec<OutputNoise> = stats
-        .iter()
-        .zip(&sigma_eta)
-        .map(|((m, sd), eta)| OutputNoise {
-            sigma_y: project.mcmc.sigma_y_fraction * m.abs(),
-            sigma_delta: project.mcmc.sigma_delta_fraction * sd,
-            sigma_eta: *eta,
-        })
-        .collect();
-    let likelihood = GaussianLikelihood::new(&observed, &noise)?;
-    let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
-    let sbox = SigmaDeltaBox::new(&sd);
-    let post = Posterior {
-        plan: &inp.plan,
-        model: &inp.model,
-        likelihood: &likelihood,
-        sigma_box: (project.mcmc.sigma_delta == SigmaDeltaMode::Sampled).then_some(&sbox),
-    };
-
-    // Chains.
-    let t = Instant::now();
-    let d = inp.plan.calibrated.len();
-    let mut starts = dispersed_starts(&inp.plan.priors, project.mcmc.chains, project.mcmc.seed);
-    for s in &mut starts {
-        // Feasible start: redraw towards the prior mode until the constraints hold.
-        let modes: Vec<f64> = inp
-            .plan
-            .priors
-            .iter()
-            .map(|p| p.to_unit(p.mode()))
-            .collect();
-        let mut tries = 0;
-        while !inp.plan.feasible(&inp.model, &post.theta(s)) && tries < 50 {
-            for (u, m) in s.iter_mut().zip(&modes) {
-                *u = 0.5 * (*u + m);
-            }
-            tries += 1;
-        }
-        if post.sigma_box.is_some() {
-            s.extend(std::iter::repeat_n(0.6, n_out));
-        }
-    }
-    let config = MhConfig {
-        burn_in: project.mcmc.burn_in,
-        adapt_start: (project.mcmc.burn_in / 4)
-            .max(100)
-            .min(project.mcmc.burn_in),
-        initial_sd: project.mcmc.initial_sd,
-        ..MhConfig::default()
-    };
-    let ck = run_chains(
-        &post,
-        &mut eval,
-        &starts,
-        config,
-        project.mcmc.iterations,
-        project.mcmc.segment,
-        project.mcmc.seed,
-        &out.join("chains.json"),
-        &|done, n| log(&format!("chains: {done}/{n} iterations")),
-    )?;
-    timings.chains_s = t.elapsed().as_secs_f64();
-    let acceptance: Vec<f64> = ck
-        .states
-        .iter()
-        .map(|s| s.acceptance_rate_post_burn_in())
-        .collect();
-    log(&format!(
-        "chains: acceptance after burn-in {acceptance:.3?}"
-    ));
-
-    // Summary and draws.
-    let t = Instant::now();
-    let theta_draws: Vec<Draws> = ck.draws.iter().map(|dr| sub_draws(dr, d)).collect();
-    let priors: Vec<Prior> = inp
-        .plan
-        .calibrated
-        .iter()
-        .zip(&inp.plan.priors)
-        .zip(&inp.plan.units)
-        .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
-        .collect();
-    let posterior = summarize(&priors, &theta_draws)?;
-    write_draws_csv(
-        &out.join("draws.csv"),
-        &post,
-        &inp.outputs,
-        &ck.draws,
-        &sbox,
-    )?;
-    let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
-        Some(b) => (0..n_out)
-            .map(|k| {
-                let mut v: Vec<f64> = ck
-                    .draws
-                    .iter()
-                    .flat_map(|dr| dr.column(d + k))
-                    .map(|u| b.sigma(k, u))
-                    .collect();
-                v.sort_by(f64::total_cmp);
-                (inp.outputs[k].clone(), v[v.len() / 2])
+            .map(|((mean, sd), eta)| OutputNoise {
+                sigma_y: m.sigma_y_fraction * mean.abs(),
+                sigma_delta: m.sigma_delta_fraction * sd,
+                sigma_eta: *eta,
             })
-            .collect(),
-        None => inp
-            .outputs
-            .iter()
-            .zip(&noise)
-            .map(|(n, z)| (n.clone(), z.sigma_delta))
-            .collect(),
-    };
-    // Posterior predictive bands from draws spread over all chains.
-    let all: Vec<Vec<f64>> = theta_draws
-        .iter()
-        .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
-        .collect();
-    let step = (all.len() / project.mcmc.predictive_draws.max(1)).max(1);
-    let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
-    let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
-    for chunk in picks.chunks(8) {
-        let y = eval.evaluate_batch(chunk)?;
-        for b in 0..chunk.len() {
-            for (k, p) in pred.iter_mut().enumerate() {
-                p.extend((0..n_h).map(|h| y[[b, h, k]]));
-            }
-        }
+            .collect();
+        let likelihood = GaussianLikelihood::new(&observed, &noise)?;
+        let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
+        Ok(Sampler {
+            cal: self,
+            evaluator: surrogate.bind(&inp.features)?,
+            likelihood,
+            noise,
+            sigma_box: SigmaDeltaBox::new(&sd),
+            sigma_eta,
+            held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
+        })
     }
-    let mut bands = vec![];
-    for p in &pred {
-        bands.push(predictive_bands(p, picks.len(), n_h)?);
-    }
-    write_bands_csv(
-        &out.join("posterior_predictive.csv"),
-        inp.year,
-        &inp.outputs,
-        &inp.measured,
-        &bands,
-    )?;
-    timings.summary_s = t.elapsed().as_secs_f64();
 
-    // Validation with EnergyPlus.
-    let t = Instant::now();
-    let estimate: Vec<f64> = match project.validation.estimate {
-        Estimate::Map => posterior.map_point.clone(),
-        Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
-        Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
-    };
-    let vdir = out.join("validation");
-    std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
-    let mut runs = vec![("calibrated", inp.plan.values(&estimate))];
-    if project.validation.initial {
-        let modes: Vec<f64> = inp.plan.priors.iter().map(|p| p.mode()).collect();
-        runs.push(("initial", inp.plan.values(&modes)));
-    }
-    let mut metrics: Vec<Vec<OutputMetrics>> = vec![];
-    for (i, (label, values)) in runs.iter().enumerate() {
-        log(&format!("validation: EnergyPlus at the {label} parameters"));
-        let (o, _) = simulate_point(&inp.runner, &inp.model, values, &inp.weather_path, &vdir, i)?;
+    /// Stage 7, one job per run: EnergyPlus at `values` (key `i` in `validation/`) against the
+    /// meters, ASHRAE Guideline 14 per output.
+    pub fn validate(&self, i: usize, label: &str, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
+        let inp = &self.inputs;
+        let vdir = self.out.join("validation");
+        std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
+        let (o, _) = simulate_point(
+            &inp.runner,
+            &inp.model,
+            &inp.plan.values(x),
+            &inp.weather_path,
+            &vdir,
+            i,
+        )?;
         write_outputs_csv(&vdir.join(format!("{label}.csv")), inp.year, &o)?;
         let mut m = vec![];
         for (k, name) in inp.outputs.iter().enumerate() {
@@ -561,13 +465,216 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 metrics: g14(&inp.measured[k], sim)?,
             });
         }
-        metrics.push(m);
+        Ok(m)
     }
-    timings.validation_s = t.elapsed().as_secs_f64();
-    timings.total_s = t_all.elapsed().as_secs_f64();
 
+    /// The prior modes of the calibrated parameters (the initial model).
+    pub fn initial_point(&self) -> Vec<f64> {
+        self.inputs.plan.priors.iter().map(|p| p.mode()).collect()
+    }
+}
+
+impl Sampler<'_> {
+    /// The posterior over the unit space.
+    pub fn posterior(&self) -> Posterior<'_> {
+        Posterior {
+            plan: &self.cal.inputs.plan,
+            model: &self.cal.inputs.model,
+            likelihood: &self.likelihood,
+            sigma_box: (self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled)
+                .then_some(&self.sigma_box),
+        }
+    }
+
+    /// MH settings of the project.
+    pub fn config(&self) -> MhConfig {
+        let m = &self.cal.project.mcmc;
+        MhConfig {
+            burn_in: m.burn_in,
+            adapt_start: (m.burn_in / 4).max(100).min(m.burn_in),
+            initial_sd: m.initial_sd,
+            ..MhConfig::default()
+        }
+    }
+
+    /// Dispersed, feasible starting points (unit space), one per chain.
+    pub fn starts(&self) -> Vec<Vec<f64>> {
+        let cal = self.cal;
+        let plan = &cal.inputs.plan;
+        let post = self.posterior();
+        let mut starts =
+            dispersed_starts(&plan.priors, cal.project.mcmc.chains, cal.project.mcmc.seed);
+        let modes: Vec<f64> = plan.priors.iter().map(|p| p.to_unit(p.mode())).collect();
+        for s in &mut starts {
+            let mut tries = 0;
+            while !plan.feasible(&cal.inputs.model, &post.theta(s)) && tries < 50 {
+                for (u, m) in s.iter_mut().zip(&modes) {
+                    *u = 0.5 * (*u + m);
+                }
+                tries += 1;
+            }
+            if post.sigma_box.is_some() {
+                s.extend(std::iter::repeat_n(0.6, cal.inputs.outputs.len()));
+            }
+        }
+        starts
+    }
+
+    /// The posterior and the evaluator, borrowed together.
+    pub fn split(&mut self) -> (Posterior<'_>, &mut Evaluator) {
+        let sampled = self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled;
+        let post = Posterior {
+            plan: &self.cal.inputs.plan,
+            model: &self.cal.inputs.model,
+            likelihood: &self.likelihood,
+            sigma_box: sampled.then_some(&self.sigma_box),
+        };
+        (post, &mut self.evaluator)
+    }
+
+    /// New chain states at `starts`; chain `c` gets random stream `first_chain + c`.
+    pub fn new_chains(
+        &mut self,
+        starts: &[Vec<f64>],
+        first_chain: u64,
+    ) -> Result<Vec<ChainState>, Error> {
+        let config = self.config();
+        let seed = self.cal.project.mcmc.seed;
+        let (post, eval) = self.split();
+        let lps = post.ln_posterior_batch(eval, starts);
+        starts
+            .iter()
+            .zip(lps)
+            .enumerate()
+            .map(|(c, (s, lp))| {
+                Ok(ChainState::new(
+                    config.clone(),
+                    s.clone(),
+                    lp,
+                    seed,
+                    first_chain + c as u64,
+                )?)
+            })
+            .collect()
+    }
+
+    /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
+    pub fn advance(&mut self, states: &mut [ChainState], n: u64) -> Result<Vec<Draws>, Error> {
+        let (post, eval) = self.split();
+        Ok(run_segment_batch(states, n, |us: &[Vec<f64>]| {
+            post.ln_posterior_batch(eval, us)
+        })?)
+    }
+
+    /// Stage 6: merged chains -> posterior summary, draws.csv and posterior predictive bands.
+    pub fn summarize(&mut self, draws: &[Draws]) -> Result<ChainSummary, Error> {
+        let cal = self.cal;
+        let inp = &cal.inputs;
+        let d = inp.plan.calibrated.len();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
+        let priors: Vec<Prior> = inp
+            .plan
+            .calibrated
+            .iter()
+            .zip(&inp.plan.priors)
+            .zip(&inp.plan.units)
+            .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
+            .collect();
+        let posterior = summarize(&priors, &theta_draws)?;
+        let sbox = self.sigma_box.clone();
+        let noise = self.noise.clone();
+        let (post, eval) = self.split();
+        write_draws_csv(
+            &cal.out.join("draws.csv"),
+            &post,
+            &inp.outputs,
+            draws,
+            &sbox,
+        )?;
+        let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
+            Some(b) => (0..n_out)
+                .map(|k| {
+                    let mut v: Vec<f64> = draws
+                        .iter()
+                        .flat_map(|dr| dr.column(d + k))
+                        .map(|u| b.sigma(k, u))
+                        .collect();
+                    v.sort_by(f64::total_cmp);
+                    (inp.outputs[k].clone(), v[v.len() / 2])
+                })
+                .collect(),
+            None => inp
+                .outputs
+                .iter()
+                .zip(&noise)
+                .map(|(n, z)| (n.clone(), z.sigma_delta))
+                .collect(),
+        };
+        // Posterior predictive bands from draws spread over all chains.
+        let all: Vec<Vec<f64>> = theta_draws
+            .iter()
+            .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
+            .collect();
+        let want = cal.project.mcmc.predictive_draws.max(1);
+        let step = (all.len() / want).max(1);
+        let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
+        let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
+        for chunk in picks.chunks(8) {
+            let y = eval.evaluate_batch(chunk)?;
+            for b in 0..chunk.len() {
+                for (k, p) in pred.iter_mut().enumerate() {
+                    p.extend((0..n_h).map(|h| y[[b, h, k]]));
+                }
+            }
+        }
+        let mut bands = vec![];
+        for p in &pred {
+            bands.push(predictive_bands(p, picks.len(), n_h)?);
+        }
+        write_bands_csv(
+            &cal.out.join("posterior_predictive.csv"),
+            inp.year,
+            &inp.outputs,
+            &inp.measured,
+            &bands,
+        )?;
+        let estimate: Vec<f64> = match cal.project.validation.estimate {
+            Estimate::Map => posterior.map_point.clone(),
+            Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
+            Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
+        };
+        Ok(ChainSummary {
+            posterior,
+            sigma_delta_kwh,
+            estimate,
+        })
+    }
+}
+
+/// What [`Sampler::summarize`] returns.
+pub struct ChainSummary {
+    pub posterior: PosteriorSummary,
+    pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// The calibrated estimate (calibrated parameters, physical units).
+    pub estimate: Vec<f64>,
+}
+
+/// Assembles `summary.json` from the stages' results and writes it.
+#[allow(clippy::too_many_arguments)]
+pub fn write_summary(
+    cal: &Calibration,
+    design: &Design,
+    chains: &ChainSummary,
+    sampler_info: (&[f64], &serde_json::Value),
+    acceptance: Vec<f64>,
+    validation: Vec<OutputMetrics>,
+    initial: Vec<OutputMetrics>,
+    timings: Timings,
+) -> Result<Summary, Error> {
+    let inp = &cal.inputs;
     let summary = Summary {
-        project: project.name.clone(),
+        project: cal.project.name.clone(),
         outputs: inp.outputs.clone(),
         parameters: inp
             .plan
@@ -583,23 +690,158 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 prior_max: p.max(),
             })
             .collect(),
-        converged: posterior.max_rhat <= 1.01,
-        posterior,
-        sigma_delta_kwh,
-        sigma_eta_kwh: inp.outputs.iter().cloned().zip(sigma_eta).collect(),
+        converged: chains.posterior.max_rhat <= 1.01,
+        posterior: chains.posterior.clone(),
+        sigma_delta_kwh: chains.sigma_delta_kwh.clone(),
+        sigma_eta_kwh: inp
+            .outputs
+            .iter()
+            .cloned()
+            .zip(sampler_info.0.iter().copied())
+            .collect(),
         acceptance_rate: acceptance,
-        estimate: project.validation.estimate,
-        calibrated_values: inp.plan.calibrated.iter().cloned().zip(estimate).collect(),
-        validation: metrics.first().cloned().unwrap_or_default(),
-        initial: metrics.get(1).cloned().unwrap_or_default(),
-        design_points: n_pts,
+        estimate: cal.project.validation.estimate,
+        calibrated_values: inp
+            .plan
+            .calibrated
+            .iter()
+            .cloned()
+            .zip(chains.estimate.clone())
+            .collect(),
+        validation,
+        initial,
+        design_points: design.points.len(),
         design_repair: design.repair,
-        surrogate_held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
+        surrogate_held_out: sampler_info.1.clone(),
         timings,
     };
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
-    write_atomic(&out.join("summary.json"), &json)?;
+    write_atomic(&cal.out.join("summary.json"), &json)?;
     Ok(summary)
+}
+
+/// Runs the whole calibration of `project` into `out` on this machine.
+pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
+    let t_all = Instant::now();
+    let cal = Calibration::load(project.clone(), out)?;
+    let inp = &cal.inputs;
+    let mut timings = Timings::default();
+    log(&format!(
+        "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
+        inp.model.path.display(),
+        inp.model.parameters().len(),
+        inp.plan.calibrated.len(),
+        inp.outputs,
+        inp.weather_path.display()
+    ));
+
+    let t = Instant::now();
+    let design = cal.design()?;
+    timings.design_s = t.elapsed().as_secs_f64();
+    log(&format!(
+        "design: {} points over {} parameters (constraint repair: {} swaps, {} cells resampled)",
+        design.points.len(),
+        inp.plan.calibrated.len(),
+        design.repair.swaps,
+        design.repair.resampled_in_stratum + design.repair.resampled_outside_stratum
+    ));
+
+    let t = Instant::now();
+    let sims = simulate_design(
+        &inp.runner,
+        &inp.model,
+        &inp.plan,
+        &design,
+        &inp.weather_path,
+        &cal.simulations_dir(),
+        project.design.parallel,
+        &|done, n| log(&format!("simulations: {done}/{n}")),
+    )?;
+    timings.simulations_s = t.elapsed().as_secs_f64();
+    log(&format!(
+        "simulations: {} run ({:.1} s each on average), {} reused",
+        sims.seconds.len(),
+        sims.seconds.iter().sum::<f64>() / sims.seconds.len().max(1) as f64,
+        sims.reused
+    ));
+
+    let t = Instant::now();
+    cal.training_set(&design, &sims.outputs)?;
+    if cal.has_surrogate() {
+        log("surrogate: reusing the one trained earlier");
+    } else {
+        log("training the surrogate (PyTorch)...");
+        cal.train()?;
+    }
+    let mut sampler = cal.sampler()?;
+    timings.training_s = t.elapsed().as_secs_f64();
+    log(&format!(
+        "surrogate: held-out RMSE (sigma_eta) {}",
+        inp.outputs
+            .iter()
+            .zip(&sampler.sigma_eta)
+            .map(|(n, s)| format!("{n} {s:.2} kWh"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+
+    let t = Instant::now();
+    let starts = sampler.starts();
+    let config = sampler.config();
+    let ck = {
+        let (post, eval) = sampler.split();
+        run_chains(
+            &post,
+            eval,
+            &starts,
+            config,
+            project.mcmc.iterations,
+            project.mcmc.segment,
+            project.mcmc.seed,
+            &out.join("chains.json"),
+            &|done, n| log(&format!("chains: {done}/{n} iterations")),
+        )?
+    };
+    timings.chains_s = t.elapsed().as_secs_f64();
+    let acceptance: Vec<f64> = ck
+        .states
+        .iter()
+        .map(|s| s.acceptance_rate_post_burn_in())
+        .collect();
+    log(&format!(
+        "chains: acceptance after burn-in {acceptance:.3?}"
+    ));
+
+    let t = Instant::now();
+    let chains = sampler.summarize(&ck.draws)?;
+    timings.summary_s = t.elapsed().as_secs_f64();
+    log(&format!(
+        "posterior: max R-hat {:.3}, min bulk ESS {:.0}",
+        chains.posterior.max_rhat, chains.posterior.min_ess_bulk
+    ));
+
+    let t = Instant::now();
+    log("validation: EnergyPlus at the calibrated parameters");
+    let validation = cal.validate(0, "calibrated", &chains.estimate)?;
+    let initial = if project.validation.initial {
+        log("validation: EnergyPlus at the initial parameters (prior modes)");
+        cal.validate(1, "initial", &cal.initial_point())?
+    } else {
+        vec![]
+    };
+    timings.validation_s = t.elapsed().as_secs_f64();
+    timings.total_s = t_all.elapsed().as_secs_f64();
+    let info = (sampler.sigma_eta.clone(), sampler.held_out.clone());
+    write_summary(
+        &cal,
+        &design,
+        &chains,
+        (&info.0, &info.1),
+        acceptance,
+        validation,
+        initial,
+        timings,
+    )
 }
 
 fn mean_sd(s: &[f64]) -> (f64, f64) {
