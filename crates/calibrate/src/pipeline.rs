@@ -92,7 +92,7 @@ pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
             path: path.clone(),
             line: e
                 .span()
-                .map(|s| text[..s.start].lines().count().max(1))
+                .map(|s| text[..s.start].matches('\n').count() + 1)
                 .unwrap_or(0),
             message: e.message().to_string(),
         })?;

