@@ -39,6 +39,7 @@ demo: setup
 	$(BIN) simulate --model examples/office/model.toml --weather "$(EPW)" --out out/demo/simulated.csv
 
 bench: setup
+	$(PY) -m pip install -q --disable-pip-version-check -r python/requirements-bench.txt
 	bash scripts/bench.sh
 
 clean:
