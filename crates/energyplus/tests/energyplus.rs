@@ -248,3 +248,55 @@ fn severe_error_with_exit_code_zero_is_a_failure() {
         "EnergyPlus wrote results, and they were still refused"
     );
 }
+
+#[test]
+fn users_own_idf_with_a_parameter_map() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    // A user's IDF: here the small generated building, written out as plain text.
+    let generated = Model::generated(small_spec());
+    let idf = generated.instantiate(&Default::default(), r.idd()).unwrap();
+    std::fs::write(tmp.path().join("mine.idf"), idf.to_text()).unwrap();
+    let map = r#"
+[idf]
+path = "mine.idf"
+
+[[parameter]]
+name = "lpd"
+unit = "W/m2"
+prior = { min = 5.0, mode = 10.0, max = 15.0 }
+targets = [{ class = "Lights", object = "*", field = "Watts per Floor Area" }]
+
+[[parameter]]
+name = "wall_k"
+unit = "W/m-K"
+prior = { min = 0.03, mode = 0.04, max = 0.05 }
+targets = [{ class = "Material", object = "Wall Insulation", field = "Conductivity" }]
+
+[[output]]
+name = "lighting_kwh"
+meters = ["InteriorLights:Electricity"]
+
+[[output]]
+name = "electricity_kwh"
+meters = ["Electricity:Facility"]
+"#;
+    let path = tmp.path().join("mine.toml");
+    std::fs::write(&path, map).unwrap();
+    let model = Model::load(&path, r.idd()).unwrap();
+    assert_eq!(model.parameters().len(), 2);
+    let a = simulate(&r, &model, &[("lpd", 6.0)], &tmp.path().join("a")).unwrap();
+    let b = simulate(&r, &model, &[("lpd", 12.0)], &tmp.path().join("b")).unwrap();
+    let (la, lb) = (total(&a, "lighting_kwh"), total(&b, "lighting_kwh"));
+    assert!((lb / la - 2.0).abs() < 0.01, "lighting {la} -> {lb}");
+
+    // Mistakes in the map name the field, the class and what exists.
+    let bad = map.replace("Watts per Floor Area", "Watts per Square Foot");
+    std::fs::write(&path, bad).unwrap();
+    let e = Model::load(&path, r.idd()).unwrap_err().to_string();
+    assert!(e.contains("mine.toml") && e.contains("has no field 'Watts per Square Foot'") && e.contains("Watts per Floor Area"), "{e}");
+    let bad = map.replace("object = \"Wall Insulation\"", "object = \"Wall Insulatoin\"");
+    std::fs::write(&path, bad).unwrap();
+    let e = Model::load(&path, r.idd()).unwrap_err().to_string();
+    assert!(e.contains("no object Wall Insulatoin of class Material"), "{e}");
+}
