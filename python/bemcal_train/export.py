@@ -8,8 +8,11 @@
   The parameter part of the first layer's input projection is the same for every hour and step,
   so ``W_p . p + b_ih`` is computed once per proposal and passed to ONNX's fused LSTM kernel as
   its bias; the LSTM multiplies only the hourly features. Same numbers as the plain graph.
-* ``surrogate_fast_int8.onnx``: the fast graph with dynamic int8 quantisation of the LSTM and
-  head weights (onnxruntime.quantization); its error against the float graph is measured by the
+* ``surrogate_fused.onnx`` / ``surrogate_fused_int8.onnx`` (``fused.py``): the LSTM written out
+  per step so the arithmetic shared by overlapping windows is done once, chunked over hours so
+  every intermediate stays in cache; ``p`` [1, n_params] and ``xw`` [n_chunks, chunk + 2,
+  n_hourly] -> ``y`` [n_chunks, chunk, n_outputs] kWh. The evaluator's default (float) and its
+  int8 option (per-column int8 weights, VNNI); the int8 error against float is measured by the
   trainer and recorded in surrogate.json.
 """
 
@@ -22,12 +25,14 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 
 from . import LOOKBACK
+from .fused import CHUNK, build_fused, chunked_hourly
 from .model import Denormalised
 
 OPSET = 17
 PLAIN = "surrogate.onnx"
 FAST = "surrogate_fast.onnx"
-FAST_INT8 = "surrogate_fast_int8.onnx"
+FUSED = "surrogate_fused.onnx"
+FUSED_INT8 = "surrogate_fused_int8.onnx"
 # torch gate blocks (i, f, g, o) -> ONNX LSTM order (i, o, f, c)
 ONNX_GATES = [0, 3, 1, 2]
 
@@ -118,17 +123,11 @@ def export_all(model, n_params, n_hourly, scale, nonnegative, out_dir):
     export_plain(model, n_params + n_hourly, scale, nonnegative, os.path.join(out_dir, PLAIN))
     onnx.save(build_fast(model, n_params, n_hourly, scale, nonnegative), os.path.join(out_dir, FAST))
     files = {"plain": PLAIN, "fast": FAST}
-    try:
-        from onnxruntime.quantization import QuantType, quantize_dynamic
-    except ImportError:
-        return files
-    import logging
-
-    logging.getLogger().setLevel(logging.ERROR)
-    quantize_dynamic(os.path.join(out_dir, FAST), os.path.join(out_dir, FAST_INT8),
-                     weight_type=QuantType.QInt8, op_types_to_quantize=["LSTM", "MatMul"],
-                     nodes_to_exclude=["param_projection"])  # once per proposal: keep it float
-    files["fast_int8"] = FAST_INT8
+    if model.lstm.num_layers == 2:
+        for key, name, int8 in (("fused", FUSED, False), ("fused_int8", FUSED_INT8, True)):
+            onnx.save(build_fused(model, n_params, n_hourly, scale, nonnegative, int8=int8),
+                      os.path.join(out_dir, name))
+            files[key] = name
     return files
 
 
@@ -139,8 +138,8 @@ def windows_step_major(hourly):
 
 
 def run_onnx(out_dir, files, x, p_rows, hourly, threads=1):
-    """Runs the exported graphs in onnxruntime: plain on windows ``x``; fast (and int8) on the
-    year for each parameter row. Returns None without onnxruntime."""
+    """Runs the exported graphs in onnxruntime: plain on windows ``x``; fast and fused (float and
+    int8) on the year for each parameter row. Returns None without onnxruntime."""
     try:
         import onnxruntime as ort
     except ImportError:
@@ -150,8 +149,14 @@ def run_onnx(out_dir, files, x, p_rows, hourly, threads=1):
     sess = lambda f: ort.InferenceSession(os.path.join(out_dir, f), so, providers=["CPUExecutionProvider"])
     xw = windows_step_major(hourly).astype(np.float32)
     res = {"plain": sess(files["plain"]).run(["y"], {"x": x.astype(np.float32)})[0]}
-    for key in ("fast", "fast_int8"):
+    if "fast" in files:
+        s = sess(files["fast"])
+        res["fast"] = np.stack([s.run(["y"], {"p": p[None].astype(np.float32), "xw": xw})[0][0] for p in p_rows])
+    T = hourly.shape[0]
+    xc = chunked_hourly(hourly.astype(np.float32), CHUNK)
+    for key in ("fused", "fused_int8"):
         if key in files:
             s = sess(files[key])
-            res[key] = np.stack([s.run(["y"], {"p": p[None].astype(np.float32), "xw": xw})[0][0] for p in p_rows])
+            ys = [s.run(["y"], {"p": p[None].astype(np.float32), "xw": xc})[0] for p in p_rows]
+            res[key] = np.stack([y.reshape(-1, y.shape[-1])[:T] for y in ys])
     return res

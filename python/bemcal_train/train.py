@@ -11,6 +11,7 @@ from . import FORMAT, FORMAT_VERSION, LOOKBACK
 from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
                    weather_stats, window_index)
 from .export import export_all, run_onnx
+from .fused import CHUNK
 from .model import Denormalised, Surrogate
 
 
@@ -168,12 +169,15 @@ def train(args):
         rel = lambda a, b: float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-12))
         check = {"definition": "max |onnx - torch| / max |torch|",
                  "plain_vs_torch": rel(onx["plain"], y_win), "fast_vs_torch": rel(onx["fast"], y_held)}
+        if "fused" in onx:
+            check["fused_vs_torch"] = rel(onx["fused"], y_held)
         print(f"onnxruntime check (max |diff| / max |y|): plain {check['plain_vs_torch']:.2e}, "
-              f"fast {check['fast_vs_torch']:.2e}")
-        if "fast_int8" in onx:
-            d = onx["fast_int8"] - onx["fast"]
-            q = metrics(onx["fast_int8"], outputs[held_pts], names)
-            int8 = {"file": files["fast_int8"],
+              f"fast {check['fast_vs_torch']:.2e}, fused {check.get('fused_vs_torch', float('nan')):.2e}")
+        if "fused_int8" in onx:
+            d = onx["fused_int8"] - onx["fused"]
+            q = metrics(onx["fused_int8"], outputs[held_pts], names)
+            int8 = {"file": files["fused_int8"],
+                    "against": "fused float graph, held-out points x all hours",
                     "rmse_vs_float_kwh": {n: float(np.sqrt(np.mean(d[..., k] ** 2))) for k, n in enumerate(names)},
                     "held_out_rmse_kwh": {n: q[n]["rmse_kwh"] for n in names}}
             int8["ratio_to_sigma_eta"] = {n: int8["rmse_vs_float_kwh"][n] / max(held[n]["rmse_kwh"], 1e-12)
@@ -203,7 +207,9 @@ def train(args):
         "onnx": {"opset": 17, "plain": {"inputs": {"x": ["batch", LOOKBACK, n_features]},
                                         "outputs": {"y": ["batch", len(names)]}},
                  "fast": {"inputs": {"p": [1, n_params], "xw": [LOOKBACK, "hours", len(hourly_names)]},
-                          "outputs": {"y": [1, "hours", len(names)]}}},
+                          "outputs": {"y": [1, "hours", len(names)]}},
+                 "fused": {"inputs": {"p": [1, n_params], "xw": ["chunks", CHUNK + LOOKBACK - 1, len(hourly_names)]},
+                           "outputs": {"y": ["chunks", CHUNK, len(names)]}, "chunk": CHUNK}},
         "n_features": n_features,
         "feature_names": [p["name"] for p in specs] + hourly_names,
         "params": specs,

@@ -112,7 +112,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     })?;
     println!("ort_plain_evals_per_s={r:.4}");
 
-    // Fast (structured) hot path: one proposal per call, then `batch` proposals per call.
+    // The evaluator's hot path (the fused graph when present): one proposal per call, then
+    // `batch` proposals per call.
+    println!("hot_path_file={}", s.hot_path_file());
     let mut ev = s.bind(&w)?;
     let y_fast = ev.evaluate(&p0)?.to_owned();
     let max_y = y_plain.iter().fold(0f32, |m, v| m.max(v.abs()));
@@ -133,8 +135,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     })?;
     println!("ort_fast_batch{batch}_evals_per_s={r:.4}");
 
-    // int8 fast graph.
-    if meta.files.fast_int8.is_some() {
+    // int8 graph.
+    if meta.files.fused_int8.is_some() || meta.files.fast_int8.is_some() {
         let mut q = Surrogate::load_with(dir, threads, Precision::Int8)?.bind(&w)?;
         let yq = q.evaluate(&p0)?.to_owned();
         let rmse = ((&yq - &y_fast)
@@ -144,6 +146,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .sqrt();
         let mean = y_fast.mean().unwrap_or(0.0);
         println!("int8_rmse_vs_float_kwh={rmse:.4e}");
+        let sigma = meta
+            .outputs
+            .iter()
+            .map(|o| o.sigma_eta_kwh)
+            .fold(f64::MAX, f64::min);
+        println!("int8_rmse_vs_min_sigma_eta={:.4e}", rmse / sigma.max(1e-12));
         println!("float_mean_output_kwh={mean:.4e}");
         let r = best_rate(seconds / 4.0, 1, || {
             let p = proposal();

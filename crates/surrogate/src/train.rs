@@ -14,7 +14,7 @@ use crate::surrogate::{SurrogateError, SurrogateMeta};
 pub const PYTHON_VAR: &str = "BEMCAL_PYTHON";
 
 /// The trainer package, `(relative path, contents)`.
-pub const TRAINER_FILES: [(&str, &str); 6] = [
+pub const TRAINER_FILES: [(&str, &str); 7] = [
     (
         "bemcal_train/__init__.py",
         include_str!("../../../python/bemcal_train/__init__.py"),
@@ -34,6 +34,10 @@ pub const TRAINER_FILES: [(&str, &str); 6] = [
     (
         "bemcal_train/export.py",
         include_str!("../../../python/bemcal_train/export.py"),
+    ),
+    (
+        "bemcal_train/fused.py",
+        include_str!("../../../python/bemcal_train/fused.py"),
     ),
     (
         "bemcal_train/train.py",
