@@ -8,7 +8,7 @@
 # 8,760 windows of a year for one parameter vector. GFLOP/s use the plain LSTM's count
 # (python/tools/bench_torch.py: 1,312,512 FLOP per window = 11.50 GFLOP per evaluation) for every
 # row, so they compare throughput; the 'exec' column uses the FLOPs the fused graph actually
-# executes (python/bemcal_train/fused.py: 7.75 GFLOP per evaluation).
+# executes (python/bemcal_train/fused.py: 7.80 GFLOP per evaluation).
 # Rates are the best of 4 rounds (the machine may be shared).
 # TRAIN_EPOCHS > 0 also times that many training epochs on a paper-size training set
 # (20 design points x 8,760 h).

@@ -20,8 +20,8 @@ is done once:
   into ``FusedGemm``), so no [n_hours, 4 * hidden] tensor is ever split.
 
 FLOPs (multiply-add = 2) per hour, H = hidden, F_h = n_hourly:
-  2 * (4H * F_h + 2 * 4H * H + 3H * H + 2 * 4H * 2H + H * K) ~ 0.885 MFLOP for H = 128
-(7.75 GFLOP per 8,760-hour evaluation, against 11.50 for the plain LSTM).
+  2 * (4H * F_h + 2 * 4H * H + 3H * H + 2 * 4H * 2H + H * K) = 890,624 FLOP for H = 128, F_h = 5,
+K = 3 (7.80 GFLOP per 8,760-hour evaluation, against 11.50 for the plain LSTM).
 
 The int8 variant quantises the recurrent / layer-2 weights (K = H or 2H) per output column,
 symmetric s8, and quantises each Gemm input once per step (``DynamicQuantizeLinear``, u8) for

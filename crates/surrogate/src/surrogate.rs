@@ -19,7 +19,7 @@
 //!   fused.py): steps 1-2 of every window are shared with the neighbouring windows and computed
 //!   once per hour, zero-state steps skip the recurrent product and the forget gate, layer 1's
 //!   parameter projection is one bias per proposal, one Gemm + activation per gate, and the hours
-//!   are processed in chunks so every intermediate stays in cache: ~7.75 GFLOP per year instead
+//!   are processed in chunks so every intermediate stays in cache: 7.80 GFLOP per year instead
 //!   of 11.5. Same numbers as the plain graph (~1e-7 relative). The [`Evaluator`] splits the
 //!   chunks (and the proposals of a batch) over `threads` single-threaded sessions.
 //! * `surrogate_fused_int8.onnx` (optional, [`Precision::Int8`]): the fused graph with int8
