@@ -8,10 +8,21 @@
 //!   `alpha = p(u' | y) / p(u | y)`; a draw is accepted when `ln U < ln p(u') - ln p(u)`.
 //! - Proposals outside `[0, 1]^d` are **rejected** (not clipped) and never sent to the target:
 //!   the prior density is zero there.
-//! - Adaptive Metropolis: the proposal covariance starts as `initial_sd^2 I`; from iteration
-//!   `adapt_start` until the end of burn-in it is `s_d (Cov + eps I)`, `s_d = 2.38^2 / d`, with
-//!   `Cov` the running (Welford) covariance of the chain's states so far. After burn-in the
-//!   proposal is frozen, so the recorded draws come from a time-homogeneous Markov chain.
+//! - Adaptive Metropolis: the proposal is `u' = u + lambda L z`. `L` starts as `initial_sd I`;
+//!   from iteration `adapt_start` until the end of burn-in it is refreshed every `adapt_every`
+//!   iterations to the Cholesky factor of `s_d (Cov + eps I)`, `s_d = 2.38^2 / d`, `Cov` the
+//!   running (Welford) covariance of the chain's states.
+//! - Global scale (`target_acceptance = Some(a*)`, the default, a* = 0.234): after every
+//!   burn-in iteration `ln lambda += k^-0.6 (alpha - a*)` with `alpha = min(1, p(u')/p(u))`
+//!   (0 outside the support): Robbins-Monro on the log scale, Andrieu & Thoms (2008), "A tutorial
+//!   on adaptive MCMC", Stat. Comput. 18, Algorithm 4. `lambda` restarts at 1 (and `k` at 1)
+//!   when the first AM covariance replaces the initial diagonal. `Cov` is then accumulated from
+//!   `adapt_start` on only, forgetting the transient from the start (set `adapt_start` to about
+//!   half of burn-in), and the first AM refresh waits for `max(2 (d + 1), adapt_every)` states.
+//!   With `target_acceptance = None`, `lambda = 1` and `Cov` covers all of burn-in (the plain
+//!   Haario et al. 2001 scheme, bit-identical to the chains of earlier versions).
+//! - After burn-in `lambda` and `L` are frozen, so the recorded draws come from a
+//!   time-homogeneous Metropolis chain.
 //! - Randomness per iteration, in this order: `d` standard normals, then one uniform — the same
 //!   whether the proposal is in the support or not, so a chain's draws do not depend on how it
 //!   is stepped (alone, batched, or in checkpointed segments).
@@ -39,6 +50,20 @@ pub struct MhConfig {
     pub epsilon: f64,
     /// Scale `s_d`; `None` means `2.38^2 / d`.
     pub scale: Option<f64>,
+    /// Target acceptance rate of the global scale adaptation during burn-in (Andrieu & Thoms
+    /// 2008, Algorithm 4); `None` turns scale adaptation off and estimates the covariance from
+    /// the whole burn-in (the plain Haario et al. 2001 scheme). Checkpoints written before this
+    /// field existed deserialise as `None`, so they resume with the algorithm they started with.
+    #[serde(default)]
+    pub target_acceptance: Option<f64>,
+    /// Exponent `a` of the Robbins-Monro step `gamma_k = k^-a` of the scale adaptation,
+    /// in `(0.5, 1]`.
+    #[serde(default = "default_scale_decay")]
+    pub scale_decay: f64,
+}
+
+fn default_scale_decay() -> f64 {
+    0.6
 }
 
 impl Default for MhConfig {
@@ -50,6 +75,8 @@ impl Default for MhConfig {
             initial_sd: 0.05,
             epsilon: 1e-6,
             scale: None,
+            target_acceptance: Some(0.234),
+            scale_decay: default_scale_decay(),
         }
     }
 }
@@ -69,6 +96,18 @@ impl MhConfig {
             if !(s.is_finite() && s > 0.0) {
                 return Err(StatsError::Invalid("scale must be positive".into()));
             }
+        }
+        if let Some(a) = self.target_acceptance {
+            if !(a > 0.0 && a < 1.0) {
+                return Err(StatsError::Invalid(
+                    "target_acceptance must be in (0, 1)".into(),
+                ));
+            }
+        }
+        if !(self.scale_decay > 0.5 && self.scale_decay <= 1.0) {
+            return Err(StatsError::Invalid(
+                "scale_decay must be in (0.5, 1]".into(),
+            ));
         }
         Ok(())
     }
@@ -95,9 +134,19 @@ pub struct ChainState {
     adapt_mean: Vec<f64>,
     #[serde(with = "f64_bits::vec")]
     adapt_m2: Vec<f64>,
-    /// Lower Cholesky factor of the proposal covariance, row-major `d x d`.
+    /// Lower Cholesky factor `L` of the proposal shape, row-major `d x d`; the proposal
+    /// step is `lambda L z`.
     #[serde(with = "f64_bits::vec")]
     chol: Vec<f64>,
+    /// `ln lambda`, the global proposal scale (0 when scale adaptation is off).
+    #[serde(default, with = "f64_bits")]
+    ln_lambda: f64,
+    /// Robbins-Monro steps taken since the scale sequence (re)started.
+    #[serde(default)]
+    scale_steps: u64,
+    /// Whether `chol` is an adaptive-Metropolis estimate (false: the initial diagonal).
+    #[serde(default)]
+    shape_adapted: bool,
     rng: ChaCha8Rng,
 }
 
@@ -247,6 +296,9 @@ impl ChainState {
             adapt_mean: vec![0.0; d],
             adapt_m2: vec![0.0; d * d],
             chol,
+            ln_lambda: 0.0,
+            scale_steps: 0,
+            shape_adapted: false,
             rng,
         })
     }
@@ -288,14 +340,19 @@ impl ChainState {
         let n = self.iteration.saturating_sub(self.config.burn_in);
         self.accepted_post_burn_in as f64 / n as f64
     }
-    /// Current proposal covariance `L L^T`, row-major `d x d`.
+    /// Current global proposal scale `lambda` (1 without scale adaptation).
+    pub fn proposal_scale(&self) -> f64 {
+        self.ln_lambda.exp()
+    }
+    /// Current proposal covariance `lambda^2 L L^T`, row-major `d x d`.
     pub fn proposal_covariance(&self) -> Vec<f64> {
         let d = self.dim();
         let l = &self.chol;
+        let l2 = (2.0 * self.ln_lambda).exp();
         let mut c = vec![0.0; d * d];
         for i in 0..d {
             for j in 0..d {
-                c[i * d + j] = (0..d).map(|k| l[i * d + k] * l[j * d + k]).sum();
+                c[i * d + j] = l2 * (0..d).map(|k| l[i * d + k] * l[j * d + k]).sum::<f64>();
             }
         }
         c
@@ -306,9 +363,11 @@ impl ChainState {
         let d = self.dim();
         buf.clear();
         let z: Vec<f64> = (0..d).map(|_| self.rng.sample(StandardNormal)).collect();
+        let lambda = self.ln_lambda.exp();
         for i in 0..d {
             let step: f64 = (0..=i).map(|k| self.chol[i * d + k] * z[k]).sum();
-            buf.push(self.position[i] + step);
+            // lambda = 1 exactly without scale adaptation, so this is then `step` bit for bit.
+            buf.push(self.position[i] + lambda * step);
         }
         let u: f64 = self.rng.random();
         let inside = buf.iter().all(|v| (0.0..=1.0).contains(v));
@@ -317,7 +376,20 @@ impl ChainState {
 
     /// Accept or reject, adapt, and record. `lp` is `None` for an out-of-support proposal.
     fn finish(&mut self, proposal: &[f64], ln_u: f64, lp: Option<f64>, draws: &mut Draws) {
+        // Acceptance probability min(1, p(u') / p(u)); 0 outside the support or for NaN.
+        let mut alpha = 0.0;
+
         if let Some(lp) = lp {
+            if !lp.is_nan() {
+                let r = lp - self.log_density;
+                alpha = if r >= 0.0 {
+                    1.0
+                } else if r.is_nan() {
+                    0.0
+                } else {
+                    r.exp()
+                };
+            }
             // Metropolis acceptance (Algorithm 1, step 6) for a symmetric proposal.
             if !lp.is_nan() && ln_u < lp - self.log_density {
                 self.position.copy_from_slice(proposal);
@@ -330,17 +402,55 @@ impl ChainState {
         }
         self.iteration += 1;
         let t = self.iteration;
-        if t <= self.config.burn_in {
-            self.adapt_update();
-            if t >= self.config.adapt_start
-                && t.is_multiple_of(self.config.adapt_every)
-                && t < self.config.burn_in
-            {
-                self.refresh_proposal();
-            }
-        } else {
+        if t > self.config.burn_in {
             draws.push(&self.position, self.log_density);
+            return;
         }
+        match self.config.target_acceptance {
+            None => {
+                // Plain Haario et al. (2001): covariance of the whole burn-in so far.
+                self.adapt_update();
+                if t >= self.config.adapt_start
+                    && t.is_multiple_of(self.config.adapt_every)
+                    && t < self.config.burn_in
+                {
+                    self.refresh_proposal();
+                }
+            }
+            Some(target) => {
+                // Robbins-Monro on ln lambda (Andrieu & Thoms 2008, Algorithm 4, with the
+                // covariance part of AM below): ln lambda += gamma_k (alpha_k - target).
+                self.scale_steps += 1;
+                let gamma = (self.scale_steps as f64).powf(-self.config.scale_decay);
+                self.ln_lambda = (self.ln_lambda + gamma * (alpha - target)).clamp(-40.0, 10.0);
+                // AM covariance of the states from `adapt_start` on only: the states before it
+                // are the transient from a start far in the tails, whose spread would make the
+                // frozen proposal far too wide (Haario et al. 2001 use all states; discarding
+                // an initial stretch is the usual remedy, cf. Andrieu & Thoms 2008, Sec. 5).
+                if t >= self.config.adapt_start {
+                    self.adapt_update();
+                }
+                if t >= self.config.adapt_start
+                    && t.is_multiple_of(self.config.adapt_every)
+                    && t < self.config.burn_in
+                    && self.adapt_n >= self.min_adapt_samples()
+                {
+                    let first = !self.shape_adapted;
+                    self.refresh_proposal();
+                    if first && self.shape_adapted {
+                        // s_d Cov is the optimal scale for a Gaussian target; start lambda
+                        // afresh from 1 for the new shape.
+                        self.ln_lambda = 0.0;
+                        self.scale_steps = 0;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Samples the AM accumulator needs before its covariance replaces the current shape.
+    fn min_adapt_samples(&self) -> u64 {
+        (2 * (self.dim() as u64 + 1)).max(self.config.adapt_every)
     }
 
     /// Welford update of the running mean and covariance with the current state.
@@ -381,6 +491,7 @@ impl ChainState {
         }
         if let Some(l) = cholesky(&c, d) {
             self.chol = l;
+            self.shape_adapted = true;
         }
     }
 }
@@ -514,5 +625,42 @@ mod tests {
             ..MhConfig::default()
         };
         assert!(ChainState::new(cfg, vec![0.5], 0.0, 1, 0).is_err());
+    }
+
+    #[test]
+    fn old_checkpoints_resume_without_scale_adaptation() {
+        let cfg = MhConfig {
+            target_acceptance: None,
+            ..MhConfig::default()
+        };
+        let st = ChainState::new(cfg, vec![0.5, 0.5], -1.0, 1, 0).unwrap();
+        let mut v = serde_json::to_value(&st).unwrap();
+        let o = v.as_object_mut().unwrap();
+        for k in ["ln_lambda", "scale_steps", "shape_adapted"] {
+            assert!(o.remove(k).is_some());
+        }
+        let c = o["config"].as_object_mut().unwrap();
+        c.remove("target_acceptance").unwrap();
+        c.remove("scale_decay").unwrap();
+        let back: ChainState = serde_json::from_value(v).unwrap();
+        assert_eq!(back, st);
+        assert_eq!(back.proposal_scale(), 1.0);
+    }
+
+    #[test]
+    fn rejects_bad_scale_adaptation() {
+        for (t, a) in [
+            (Some(0.0), 0.6),
+            (Some(1.0), 0.6),
+            (Some(0.2), 0.5),
+            (Some(0.2), 1.1),
+        ] {
+            let cfg = MhConfig {
+                target_acceptance: t,
+                scale_decay: a,
+                ..MhConfig::default()
+            };
+            assert!(ChainState::new(cfg, vec![0.5], 0.0, 1, 0).is_err());
+        }
     }
 }
