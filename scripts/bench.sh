@@ -7,3 +7,5 @@ for b in scripts/bench_energyplus.sh scripts/bench_surrogate.sh scripts/bench_dt
   bash "$b"
   echo
 done
+bash scripts/bench_baselines.sh
+bash scripts/bench_chains.sh

@@ -1,0 +1,366 @@
+//! Chains on the paper-size calibration problem (run by `scripts/bench_chains.sh`).
+//!
+//! ```text
+//! bench_chains [SURROGATE_DIR] --epw EPW [--iterations 10000] [--burn-in 2000] [--chains 4]
+//!              [--threads 2] [--seed 1]
+//! ```
+//!
+//! SURROGATE_DIR: an exported surrogate (e.g. the paper-size random-weight model written by
+//! `python/tools/bench_torch.py`: 38 parameters, LSTM 2 x 128, lookback 3, 3 outputs).
+//! Synthetic observations are the surrogate at a hidden truth (prior modes moved by a seeded
+//! fraction of the prior range) times `1 + 0.05 N(0, 1)`, with a month of missing hours. The
+//! posterior is the pipeline's (crates/calibrate/src/posterior.rs): triangular priors, the
+//! Gaussian likelihood of reference Eq. 7 with `sigma_eta` from the surrogate metadata,
+//! `sigma_y` = 2 % of the mean and `sigma_delta` sampled on the log scale under a half-Cauchy
+//! prior ([`SigmaDeltaBox`]). Prints evaluations per second, wall time, acceptance, max R-hat,
+//! min bulk/tail ESS, ESS per second, and whether the target is met: 4 chains x 10,000
+//! iterations (2,000 burn-in) with R-hat <= 1.01 and bulk ESS >= 400 for every parameter in
+//! under 15 minutes.
+
+use std::time::Instant;
+
+use bemcal_calibrate::posterior::SigmaDeltaBox;
+use bemcal_stats::diagnostics::diagnose;
+use bemcal_stats::likelihood::{
+    ln_prior_log_sigma_delta, GaussianLikelihood, OutputNoise, SigmaPrior,
+};
+use bemcal_stats::mcmc::{dispersed_starts, run_segment_batch, ChainState, Draws, MhConfig};
+use bemcal_stats::prior::Triangular;
+use bemcal_surrogate::{Evaluator, Surrogate};
+use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+type BoxResult<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// Target of issue 4: the full run's size and limits.
+const TARGET_ITER: u64 = 10_000;
+const TARGET_BURN: u64 = 2_000;
+const TARGET_SECONDS: f64 = 900.0;
+const TARGET_RHAT: f64 = 1.01;
+const TARGET_ESS: f64 = 400.0;
+
+struct Args {
+    surrogate: Option<String>,
+    epw: Option<String>,
+    iterations: u64,
+    burn_in: u64,
+    chains: usize,
+    threads: usize,
+    seed: u64,
+}
+
+fn parse_args() -> BoxResult<Args> {
+    let mut a = Args {
+        surrogate: None,
+        epw: None,
+        iterations: TARGET_ITER,
+        burn_in: TARGET_BURN,
+        chains: 4,
+        threads: 2,
+        seed: 1,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(s) = it.next() {
+        let mut val = || it.next().ok_or(format!("{s} needs a value"));
+        match s.as_str() {
+            "--epw" => a.epw = Some(val()?),
+            "--iterations" => a.iterations = val()?.parse()?,
+            "--burn-in" => a.burn_in = val()?.parse()?,
+            "--chains" => a.chains = val()?.parse()?,
+            "--threads" => a.threads = val()?.parse()?,
+            "--seed" => a.seed = val()?.parse()?,
+            _ if !s.starts_with("--") && a.surrogate.is_none() => a.surrogate = Some(s),
+            _ => return Err(format!("unknown argument {s}").into()),
+        }
+    }
+    if a.burn_in >= a.iterations {
+        return Err("--burn-in must be below --iterations".into());
+    }
+    Ok(a)
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// The log posterior over the unit space: `d` calibrated parameters, then `K` coordinates of
+/// `ln sigma_delta,k` (as `bemcal_calibrate::posterior::Posterior` in hyperparameter mode,
+/// without model constraints: the random-weight surrogate has none).
+struct Target<'a> {
+    priors: &'a [Triangular],
+    lik: &'a GaussianLikelihood,
+    sigma_box: &'a SigmaDeltaBox,
+}
+
+impl Target<'_> {
+    fn theta(&self, u: &[f64]) -> Vec<f64> {
+        self.priors
+            .iter()
+            .zip(u)
+            .map(|(p, u)| p.from_unit(*u))
+            .collect()
+    }
+
+    fn ln_prior(&self, u: &[f64]) -> f64 {
+        let d = self.priors.len();
+        let b = self.sigma_box;
+        let mut lp: f64 = self
+            .priors
+            .iter()
+            .zip(self.theta(u))
+            .map(|(p, x)| p.ln_pdf(x))
+            .sum();
+        for k in 0..b.lo.len() {
+            let ln_s = b.lo[k] + u[d + k] * (b.hi[k] - b.lo[k]);
+            lp += ln_prior_log_sigma_delta(ln_s, b.scale[k], SigmaPrior::HalfCauchy);
+        }
+        lp
+    }
+
+    /// Log posterior of a batch with one surrogate call; counts the evaluations.
+    fn batch(&self, ev: &mut Evaluator, us: &[Vec<f64>], evals: &mut u64) -> Vec<f64> {
+        let d = self.priors.len();
+        let k_out = self.sigma_box.lo.len();
+        let priors: Vec<f64> = us.iter().map(|u| self.ln_prior(u)).collect();
+        let live: Vec<usize> = (0..us.len()).filter(|&i| priors[i].is_finite()).collect();
+        let mut out = vec![f64::NEG_INFINITY; us.len()];
+        if live.is_empty() {
+            return out;
+        }
+        let thetas: Vec<Vec<f64>> = live.iter().map(|&i| self.theta(&us[i])).collect();
+        *evals += thetas.len() as u64;
+        let pred = ev.evaluate_batch(&thetas).expect("surrogate evaluation");
+        let flat = pred.as_slice().expect("contiguous prediction");
+        let per = flat.len() / thetas.len();
+        for (b, &i) in live.iter().enumerate() {
+            let sd: Vec<f64> = (0..k_out)
+                .map(|k| self.sigma_box.sigma(k, us[i][d + k]))
+                .collect();
+            out[i] = priors[i]
+                + self
+                    .lik
+                    .log_likelihood_with_delta(&flat[b * per..(b + 1) * per], &sd);
+        }
+        out
+    }
+}
+
+fn main() -> BoxResult<()> {
+    let a = parse_args()?;
+    let dir = a
+        .surrogate
+        .clone()
+        .ok_or("usage: bench_chains SURROGATE_DIR --epw EPW [--iterations N] [--burn-in N] [--chains C] [--threads T] [--seed S]")?;
+    let epw_path = a.epw.clone().ok_or("--epw EPW is required")?;
+    let cpus = std::thread::available_parallelism().map_or(0, |n| n.get());
+    println!(
+        "machine: {cpus} cores; surrogate threads {}; load average at start {}",
+        a.threads,
+        loadavg()
+    );
+
+    let epw = Epw::read(&epw_path)?;
+    let features = HourlyFeatures::from_epw(&epw, &Calendar::new(2021, Holidays::UsFederal));
+    let mut ev = Surrogate::load(&dir, a.threads)?.bind(&features)?;
+    let meta = ev.surrogate().meta().clone();
+    let priors: Vec<Triangular> = meta
+        .params
+        .iter()
+        .map(|p| Triangular::new(p.min, p.mode, p.max))
+        .collect::<Result<_, _>>()?;
+    let (d, k_out, n_h) = (priors.len(), meta.outputs.len(), ev.n_hours());
+
+    // Hidden truth: prior modes moved by a seeded fraction (up to +-15 %) of the prior range.
+    let mut rng = ChaCha8Rng::seed_from_u64(a.seed ^ 0x7275_7468);
+    let truth: Vec<f64> = priors
+        .iter()
+        .map(|p| {
+            let f: f64 = rng.random_range(-0.15..0.15);
+            (p.mode() + f * p.width()).clamp(p.min() + 0.02 * p.width(), p.max() - 0.02 * p.width())
+        })
+        .collect();
+    let clean = ev.evaluate_batch(std::slice::from_ref(&truth))?;
+    let clean: Vec<f64> = clean
+        .as_slice()
+        .ok_or("non-contiguous prediction")?
+        .iter()
+        .map(|v| *v as f64)
+        .collect();
+    // Noise 5 % multiplicative; March (hours 1,416 .. 2,160) missing for every output.
+    let gap = 1416..2160;
+    let observed: Vec<f64> = clean
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            if gap.contains(&(i / k_out)) {
+                f64::NAN
+            } else {
+                v * (1.0 + 0.05 * rng.sample::<f64, _>(StandardNormal))
+            }
+        })
+        .collect();
+    let stats: Vec<(f64, f64)> = (0..k_out)
+        .map(|k| {
+            let v: Vec<f64> = (0..n_h)
+                .map(|t| observed[t * k_out + k])
+                .filter(|v| v.is_finite())
+                .collect();
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            let s =
+                (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (v.len() - 1) as f64).sqrt();
+            (m, s)
+        })
+        .collect();
+    let noise: Vec<OutputNoise> = stats
+        .iter()
+        .zip(meta.sigma_eta_kwh())
+        .map(|((m, s), eta)| OutputNoise {
+            sigma_y: 0.02 * m.abs(),
+            sigma_delta: 0.2 * s,
+            sigma_eta: eta,
+        })
+        .collect();
+    let lik = GaussianLikelihood::new(&observed, &noise)?;
+    let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
+    let sigma_box = SigmaDeltaBox::new(&sd);
+    let target = Target {
+        priors: &priors,
+        lik: &lik,
+        sigma_box: &sigma_box,
+    };
+    println!(
+        "problem: {d} parameters + {k_out} log sigma_delta, {n_h} h x {k_out} outputs ({} observed), LSTM {} x {}, lookback {}",
+        lik.n_observed().iter().sum::<usize>(),
+        meta.model.layers,
+        meta.model.hidden,
+        meta.model.lookback
+    );
+
+    // Chains: dispersed starts from the priors, sigma_delta coordinates at 0.6 (as the pipeline).
+    let mut starts = dispersed_starts(&priors, a.chains, a.seed);
+    for s in &mut starts {
+        s.extend(std::iter::repeat_n(0.6, k_out));
+    }
+    let config = MhConfig {
+        burn_in: a.burn_in,
+        adapt_start: (a.burn_in / 2).max(100).min(a.burn_in),
+        initial_sd: 0.02,
+        ..MhConfig::default()
+    };
+    let mut evals = 0u64;
+    let t_start = Instant::now();
+    let init = target.batch(&mut ev, &starts, &mut evals);
+    let mut states: Vec<ChainState> = starts
+        .iter()
+        .zip(init)
+        .enumerate()
+        .map(|(c, (s, lp))| ChainState::new(config.clone(), s.clone(), lp, a.seed, c as u64))
+        .collect::<Result<_, _>>()?;
+    let mut draws: Vec<Draws> = states.iter().map(|s| Draws::new(s.dim())).collect();
+    let segment = 500u64;
+    let mut done = 0u64;
+    while done < a.iterations {
+        let n = segment.min(a.iterations - done);
+        let seg = run_segment_batch(&mut states, n, |us: &[Vec<f64>]| {
+            target.batch(&mut ev, us, &mut evals)
+        })?;
+        for (dr, s) in draws.iter_mut().zip(&seg) {
+            dr.extend(s);
+        }
+        done += n;
+        let el = t_start.elapsed().as_secs_f64();
+        eprintln!(
+            "  {done}/{} iterations, {el:.0} s, {:.2} evals/s, load {}",
+            a.iterations,
+            evals as f64 / el,
+            loadavg()
+        );
+    }
+    let wall = t_start.elapsed().as_secs_f64();
+    let evals_per_s = evals as f64 / wall;
+
+    // Diagnostics over the post-burn-in draws, every coordinate (sigma_delta included).
+    let dim = d + k_out;
+    let (mut max_rhat, mut min_bulk, mut min_tail) = (0.0f64, f64::INFINITY, f64::INFINITY);
+    let mut worst = (0usize, 0usize);
+    let mut covered = 0;
+    for j in 0..dim {
+        let cols: Vec<Vec<f64>> = draws.iter().map(|dr| dr.column(j)).collect();
+        let g = diagnose(&cols)?;
+        if g.rhat > max_rhat {
+            max_rhat = g.rhat;
+            worst.0 = j;
+        }
+        if g.ess_bulk < min_bulk {
+            min_bulk = g.ess_bulk;
+            worst.1 = j;
+        }
+        min_tail = min_tail.min(g.ess_tail);
+        if j < d {
+            let u = priors[j].to_unit(truth[j]);
+            if (g.q5..=g.q95).contains(&u) {
+                covered += 1;
+            }
+        }
+    }
+    let acc: f64 = states
+        .iter()
+        .map(|s| s.acceptance_rate_post_burn_in())
+        .sum::<f64>()
+        / states.len() as f64;
+    let name = |j: usize| -> String {
+        if j < d {
+            meta.params[j].name.clone()
+        } else {
+            format!("ln sigma_delta[{}]", meta.outputs[j - d].name)
+        }
+    };
+    let per_iter = wall / a.iterations as f64;
+    let projected = per_iter * TARGET_ITER as f64;
+    println!(
+        "run: {} chains x {} iterations ({} burn-in), {} surrogate+likelihood evaluations",
+        a.chains, a.iterations, a.burn_in, evals
+    );
+    println!("evaluations per second (surrogate + likelihood): {evals_per_s:.2}");
+    println!("total wall time: {wall:.1} s ({per_iter:.3} s per iteration of all chains)");
+    println!("post-burn-in acceptance (mean over chains): {acc:.3}");
+    println!(
+        "max R-hat: {max_rhat:.4} ({}); min bulk ESS: {min_bulk:.0} ({}); min tail ESS: {min_tail:.0}",
+        name(worst.0),
+        name(worst.1)
+    );
+    println!(
+        "min bulk ESS per second: {:.3}; truth inside the 90 % interval for {covered}/{d} parameters",
+        min_bulk / wall
+    );
+    let converged = max_rhat <= TARGET_RHAT && min_bulk >= TARGET_ESS;
+    let full = a.iterations == TARGET_ITER && a.burn_in == TARGET_BURN && a.chains == 4;
+    println!(
+        "projected wall time of the full run (4 x {TARGET_ITER}, {TARGET_BURN} burn-in) at the measured rate: {:.1} min (limit {:.0} min) -> {}",
+        projected / 60.0,
+        TARGET_SECONDS / 60.0,
+        if projected < TARGET_SECONDS { "within" } else { "OVER" }
+    );
+    if full {
+        println!(
+            "TARGET {}: wall {:.1} min < 15: {}, R-hat <= {TARGET_RHAT}: {}, bulk ESS >= {TARGET_ESS}: {}",
+            if converged && wall < TARGET_SECONDS { "MET" } else { "NOT MET" },
+            wall / 60.0,
+            wall < TARGET_SECONDS,
+            max_rhat <= TARGET_RHAT,
+            min_bulk >= TARGET_ESS
+        );
+    } else {
+        println!(
+            "(shortened run: convergence criteria on these draws: R-hat <= {TARGET_RHAT}: {}, bulk ESS >= {TARGET_ESS}: {}; FULL=1 runs the target)",
+            max_rhat <= TARGET_RHAT,
+            min_bulk >= TARGET_ESS
+        );
+    }
+    println!("load average at end {}", loadavg());
+    Ok(())
+}
