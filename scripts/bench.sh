@@ -9,3 +9,4 @@ for b in scripts/bench_energyplus.sh scripts/bench_surrogate.sh scripts/bench_dt
 done
 bash scripts/bench_baselines.sh
 bash scripts/bench_chains.sh
+bash scripts/bench_workers.sh

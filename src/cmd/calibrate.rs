@@ -16,13 +16,19 @@ pub struct Args {
     /// Print summary.json to stdout when done.
     #[arg(long)]
     pub json: bool,
+    /// Run through a coordinator and this many worker processes on loopback instead.
+    #[arg(long)]
+    pub local_workers: Option<usize>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let project = Project::load(&a.project)?;
     let t0 = std::time::Instant::now();
     let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
-    let s = calibrate(&project, &a.out, &log)?;
+    let s = match a.local_workers {
+        Some(n) => super::coordinator::calibrate_local(&a.project, &a.out, n.max(1))?,
+        None => calibrate(&project, &a.out, &log)?,
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
         return Ok(());

@@ -3,16 +3,23 @@
 use clap::{Parser, Subcommand};
 
 pub mod calibrate;
+pub mod cancel;
 mod common;
+pub mod coordinator;
 pub mod design;
 pub mod diagnose;
 pub mod metrics;
 pub mod params;
 pub mod precalibrate;
 pub mod predict;
+pub mod results;
+pub mod status;
+pub mod submit;
 pub mod simulate;
 pub mod synthesize;
 pub mod train;
+pub mod watch;
+pub mod worker;
 
 /// Bayesian calibration of EnergyPlus building energy models against hourly meters.
 #[derive(Debug, Parser)]
@@ -44,6 +51,20 @@ pub enum Command {
     Synthesize(synthesize::Args),
     /// ASHRAE Guideline 14 NMBE and CV-RMSE of simulated vs measured hourly CSVs.
     Metrics(metrics::Args),
+    /// Serve calibration runs to gRPC workers (state in SQLite).
+    Coordinator(coordinator::Args),
+    /// Pull and run jobs from a coordinator.
+    Worker(worker::Args),
+    /// Submit a project to a coordinator; prints the run id.
+    Submit(submit::Args),
+    /// Runs on a coordinator and their progress per stage.
+    Status(status::Args),
+    /// Follow a run's progress until it ends.
+    Watch(watch::Args),
+    /// Download a finished run's files.
+    Results(results::Args),
+    /// Cancel a run.
+    Cancel(cancel::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -58,5 +79,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Design(a) => design::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Synthesize(a) => synthesize::run(a),
+        Command::Coordinator(a) => coordinator::run(a),
+        Command::Worker(a) => worker::run(a),
+        Command::Submit(a) => submit::run(a),
+        Command::Status(a) => status::run(a),
+        Command::Watch(a) => watch::run(a),
+        Command::Results(a) => results::run(a),
+        Command::Cancel(a) => cancel::run(a),
     }
 }

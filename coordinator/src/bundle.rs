@@ -1,0 +1,119 @@
+//! Project bundles: the files a calibration needs (project file, model, IDF, priors, meters,
+//! weather unless bundled with EnergyPlus), under relative paths, so a coordinator or worker can
+//! lay them out in a folder of its own and load the project from there.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::artifacts::{safe_relative, ArtifactDir};
+use crate::db::File;
+
+/// Name of the project file in a bundle.
+pub const PROJECT_FILE: &str = "project.toml";
+
+/// Collects a project's files: `(relative path in the bundle, bytes)`, project file first. Paths
+/// that leave the project's folder are renamed under `files/` and the project file is rewritten
+/// to point at them.
+pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
+    let text = std::fs::read_to_string(project_file)
+        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", project_file.display()))?;
+    let mut doc: toml::Table = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", project_file.display(), e.message()))?;
+    let base = project_file.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
+    let mut place = |p: &str| -> anyhow::Result<String> {
+        let src = if Path::new(p).is_absolute() {
+            PathBuf::from(p)
+        } else {
+            base.join(p)
+        };
+        let name = match safe_relative(p) {
+            Ok(_) => p.to_string(),
+            Err(_) => {
+                let stem = src
+                    .file_name()
+                    .map(|s| s.to_string_lossy().to_string())
+                    .unwrap_or_else(|| "file".into());
+                let stem: String = stem
+                    .chars()
+                    .map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' })
+                    .collect();
+                format!("files/{}-{stem}", files.len())
+            }
+        };
+        if !src.is_file() {
+            anyhow::bail!("{}: file {} not found", project_file.display(), src.display());
+        }
+        files.insert(name.clone(), src);
+        Ok(name)
+    };
+    let str_at = |t: &toml::Table, k: &str| t.get(k).and_then(|v| v.as_str()).map(str::to_string);
+    let model = str_at(&doc, "model")
+        .ok_or_else(|| anyhow::anyhow!("{}: missing model = \"...\"", project_file.display()))?;
+    let model_name = place(&model)?;
+    if let Some(p) = str_at(&doc, "priors") {
+        let n = place(&p)?;
+        doc.insert("priors".into(), n.into());
+    }
+    if let Some(w) = str_at(&doc, "weather") {
+        if !w.starts_with("bundled:") {
+            let n = place(&w)?;
+            doc.insert("weather".into(), n.into());
+        }
+    }
+    if let Some(m) = doc.get_mut("meters").and_then(|v| v.as_table_mut()) {
+        if let Some(f) = str_at(m, "file") {
+            let n = place(&f)?;
+            m.insert("file".into(), n.into());
+        }
+    }
+    doc.insert("model".into(), model_name.clone().into());
+    // A model with an [idf] table names an IDF relative to itself.
+    let model_src = files[&model_name].clone();
+    let model_text = std::fs::read_to_string(&model_src)
+        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", model_src.display()))?;
+    if let Ok(mt) = toml::from_str::<toml::Table>(&model_text) {
+        if let Some(idf) = mt
+            .get("idf")
+            .and_then(|v| v.as_table())
+            .and_then(|t| t.get("path"))
+            .and_then(|v| v.as_str())
+        {
+            let dir = Path::new(&model_name).parent().unwrap_or(Path::new(""));
+            let rel = dir.join(idf).to_string_lossy().replace('\\', "/");
+            safe_relative(&rel).map_err(|e| {
+                anyhow::anyhow!("{}: [idf] path: {e} (keep the IDF beside the model)", model_src.display())
+            })?;
+            let src = model_src.parent().unwrap_or(Path::new(".")).join(idf);
+            files.insert(rel, src);
+        }
+    }
+    let mut out = vec![(PROJECT_FILE.to_string(), toml::to_string(&doc)?.into_bytes())];
+    for (name, src) in files {
+        if name == PROJECT_FILE {
+            anyhow::bail!("a project input may not be named {PROJECT_FILE}");
+        }
+        let bytes = std::fs::read(&src).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", src.display()))?;
+        out.push((name, bytes));
+    }
+    Ok(out)
+}
+
+/// Lays out `files` (from `store`) under `dir`, checking every path; returns the project file.
+pub fn materialize(files: &[File], store: &ArtifactDir, dir: &Path) -> Result<PathBuf, String> {
+    if !files.iter().any(|f| f.path == PROJECT_FILE) {
+        return Err(format!("the bundle has no {PROJECT_FILE}"));
+    }
+    for f in files {
+        let rel = safe_relative(&f.path)?;
+        let bytes = store
+            .read(&f.sha256)
+            .map_err(|e| format!("artifact {} ({}) is missing: {e}", f.sha256, f.path))?;
+        let p = dir.join(rel);
+        if let Some(parent) = p.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+        }
+        std::fs::write(&p, bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+    }
+    Ok(dir.join(PROJECT_FILE))
+}

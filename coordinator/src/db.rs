@@ -1,0 +1,802 @@
+//! The coordinator's durable state in SQLite: runs, stages, jobs, leases, attempts, artifacts,
+//! the simulation cache and results. The schema lives here, in one place, versioned with
+//! `PRAGMA user_version`; every state change is one transaction, committed before the caller
+//! acknowledges anything.
+
+use std::path::Path;
+use std::sync::Mutex;
+
+use prost::Message;
+use rusqlite::{params, Connection, OptionalExtension};
+use serde::{Deserialize, Serialize};
+
+use crate::now_ms;
+use crate::proto;
+
+/// Migrations, in order; `user_version` = how many have been applied.
+const MIGRATIONS: &[&str] = &[r#"
+CREATE TABLE runs (
+    id          TEXT PRIMARY KEY,
+    name        TEXT NOT NULL,
+    state       TEXT NOT NULL,              -- running, done, failed, cancelled
+    stage       TEXT NOT NULL,              -- design, simulate, train, chains, merge, validate, summary, done
+    error       TEXT,
+    bundle      TEXT NOT NULL,              -- JSON [File]: the project bundle
+    surrogate   TEXT NOT NULL,              -- JSON [File]: a given surrogate (empty: train one)
+    chain_target INTEGER NOT NULL DEFAULT 0, -- iterations per chain to reach (extensions raise it)
+    extensions  INTEGER NOT NULL DEFAULT 0,
+    merge       TEXT,                       -- JSON: merged chains (posterior summary, estimate)
+    summary     TEXT,                       -- summary.json when done
+    created_ms  INTEGER NOT NULL,
+    finished_ms INTEGER
+);
+CREATE TABLE stages (
+    run_id      TEXT NOT NULL REFERENCES runs(id),
+    stage       TEXT NOT NULL,
+    started_ms  INTEGER NOT NULL,
+    finished_ms INTEGER,
+    PRIMARY KEY (run_id, stage)
+);
+CREATE TABLE jobs (
+    id          INTEGER PRIMARY KEY AUTOINCREMENT,
+    run_id      TEXT NOT NULL REFERENCES runs(id),
+    stage       TEXT NOT NULL,
+    kind        TEXT NOT NULL,              -- simulate, train, chains, validate
+    label       TEXT NOT NULL,              -- e.g. 'point 3', 'chains 0-1 segment 2'
+    spec        BLOB NOT NULL,              -- prost-encoded proto Job (kind, bundle, inputs)
+    cache_key   TEXT,                       -- simulations: hash of model + weather + values
+    state       TEXT NOT NULL,              -- queued, leased, done, failed, cancelled
+    lease_id    INTEGER,
+    failures    INTEGER NOT NULL DEFAULT 0,
+    outputs     TEXT,                       -- JSON [File]
+    result      TEXT,                       -- JSON from the worker
+    error       TEXT,
+    cached      INTEGER NOT NULL DEFAULT 0, -- 1: answered from the simulation cache
+    created_ms  INTEGER NOT NULL,
+    finished_ms INTEGER
+);
+CREATE INDEX jobs_queue ON jobs(state, id);
+CREATE INDEX jobs_run ON jobs(run_id, stage);
+CREATE TABLE leases (
+    id          INTEGER PRIMARY KEY AUTOINCREMENT,
+    job_id      INTEGER NOT NULL REFERENCES jobs(id),
+    worker_id   TEXT NOT NULL,
+    granted_ms  INTEGER NOT NULL,
+    expires_ms  INTEGER NOT NULL,
+    active      INTEGER NOT NULL DEFAULT 1
+);
+CREATE INDEX leases_active ON leases(active, expires_ms);
+CREATE TABLE attempts (
+    lease_id    INTEGER PRIMARY KEY REFERENCES leases(id),
+    job_id      INTEGER NOT NULL REFERENCES jobs(id),
+    worker_id   TEXT NOT NULL,
+    started_ms  INTEGER NOT NULL,
+    ended_ms    INTEGER,
+    outcome     TEXT,                       -- done, failed, lost, returned, stale
+    error       TEXT
+);
+CREATE TABLE artifacts (
+    sha256      TEXT PRIMARY KEY,
+    size        INTEGER NOT NULL,
+    created_ms  INTEGER NOT NULL
+);
+CREATE TABLE sim_cache (
+    key         TEXT PRIMARY KEY,
+    outputs     TEXT NOT NULL,              -- JSON [File]
+    result      TEXT
+);
+CREATE TABLE results (
+    run_id      TEXT NOT NULL REFERENCES runs(id),
+    path        TEXT NOT NULL,
+    sha256      TEXT NOT NULL,
+    size        INTEGER NOT NULL,
+    PRIMARY KEY (run_id, path)
+);
+"#];
+
+/// A file by relative path and content hash (the serde twin of `proto::FileRef`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct File {
+    pub path: String,
+    pub sha256: String,
+    pub size: u64,
+}
+
+impl From<&proto::FileRef> for File {
+    fn from(f: &proto::FileRef) -> File {
+        File {
+            path: f.path.clone(),
+            sha256: f.sha256.clone(),
+            size: f.size,
+        }
+    }
+}
+
+impl From<&File> for proto::FileRef {
+    fn from(f: &File) -> proto::FileRef {
+        proto::FileRef {
+            path: f.path.clone(),
+            sha256: f.sha256.clone(),
+            size: f.size,
+        }
+    }
+}
+
+/// Errors of the store.
+#[derive(Debug, thiserror::Error)]
+pub enum DbError {
+    #[error("database: {0}")]
+    Sql(#[from] rusqlite::Error),
+    #[error("database: {0}")]
+    Other(String),
+}
+
+type Result<T> = std::result::Result<T, DbError>;
+
+/// A run row.
+#[derive(Debug, Clone)]
+pub struct RunRow {
+    pub id: String,
+    pub name: String,
+    pub state: String,
+    pub stage: String,
+    pub error: Option<String>,
+    pub bundle: Vec<File>,
+    pub surrogate: Vec<File>,
+    pub chain_target: u64,
+    pub extensions: u32,
+    pub merge: Option<String>,
+    pub summary: Option<String>,
+    pub created_ms: u64,
+    pub finished_ms: Option<u64>,
+}
+
+/// A job row.
+#[derive(Debug, Clone)]
+pub struct JobRow {
+    pub id: u64,
+    pub run_id: String,
+    pub stage: String,
+    pub kind: String,
+    pub label: String,
+    pub spec: proto::Job,
+    pub state: String,
+    pub failures: u32,
+    pub outputs: Vec<File>,
+    pub result: Option<String>,
+    pub cached: bool,
+}
+
+/// What a job completion or failure changed.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Recorded; the run should be advanced.
+    Recorded(String),
+    /// Nothing changed (late duplicate, unknown lease, run no longer running).
+    Ignored,
+}
+
+/// The SQLite store (one connection; every call is short).
+pub struct Store {
+    conn: Mutex<Connection>,
+}
+
+fn files_json(f: &[File]) -> String {
+    serde_json::to_string(f).unwrap_or_else(|_| "[]".into())
+}
+
+fn parse_files(s: Option<String>) -> Vec<File> {
+    s.and_then(|s| serde_json::from_str(&s).ok())
+        .unwrap_or_default()
+}
+
+const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms";
+const JOB_COLS: &str =
+    "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
+
+fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
+    Ok(RunRow {
+        id: r.get(0)?,
+        name: r.get(1)?,
+        state: r.get(2)?,
+        stage: r.get(3)?,
+        error: r.get(4)?,
+        bundle: parse_files(r.get(5)?),
+        surrogate: parse_files(r.get(6)?),
+        chain_target: r.get::<_, i64>(7)? as u64,
+        extensions: r.get::<_, i64>(8)? as u32,
+        merge: r.get(9)?,
+        summary: r.get(10)?,
+        created_ms: r.get::<_, i64>(11)? as u64,
+        finished_ms: r.get::<_, Option<i64>>(12)?.map(|v| v as u64),
+    })
+}
+
+fn job_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRow> {
+    let spec: Vec<u8> = r.get(5)?;
+    Ok(JobRow {
+        id: r.get::<_, i64>(0)? as u64,
+        run_id: r.get(1)?,
+        stage: r.get(2)?,
+        kind: r.get(3)?,
+        label: r.get(4)?,
+        spec: proto::Job::decode(spec.as_slice()).unwrap_or_default(),
+        state: r.get(6)?,
+        failures: r.get::<_, i64>(7)? as u32,
+        outputs: parse_files(r.get(8)?),
+        result: r.get(9)?,
+        cached: r.get::<_, i64>(10)? != 0,
+    })
+}
+
+/// A new job to add.
+pub struct NewJob {
+    pub stage: &'static str,
+    pub kind: &'static str,
+    pub label: String,
+    pub spec: proto::Job,
+    pub cache_key: Option<String>,
+}
+
+impl Store {
+    /// Opens (creating and migrating) the database at `path`.
+    pub fn open(path: &Path) -> Result<Store> {
+        let mut conn = Connection::open(path)?;
+        conn.pragma_update(None, "journal_mode", "WAL")?;
+        conn.pragma_update(None, "synchronous", "FULL")?;
+        conn.pragma_update(None, "foreign_keys", "ON")?;
+        conn.busy_timeout(std::time::Duration::from_secs(10))?;
+        let version: i64 = conn.pragma_query_value(None, "user_version", |r| r.get(0))?;
+        if version as usize > MIGRATIONS.len() {
+            return Err(DbError::Other(format!(
+                "{} has schema version {version}, newer than this bemcal ({})",
+                path.display(),
+                MIGRATIONS.len()
+            )));
+        }
+        for (i, m) in MIGRATIONS.iter().enumerate().skip(version as usize) {
+            let tx = conn.transaction()?;
+            tx.execute_batch(m)?;
+            tx.pragma_update(None, "user_version", (i + 1) as i64)?;
+            tx.commit()?;
+        }
+        Ok(Store {
+            conn: Mutex::new(conn),
+        })
+    }
+
+    fn with<T>(&self, f: impl FnOnce(&mut Connection) -> Result<T>) -> Result<T> {
+        let mut c = self
+            .conn
+            .lock()
+            .map_err(|_| DbError::Other("store lock poisoned".into()))?;
+        f(&mut c)
+    }
+
+    /// Records a new run at stage `design`.
+    pub fn create_run(
+        &self,
+        id: &str,
+        name: &str,
+        bundle: &[File],
+        surrogate: &[File],
+        chain_target: u64,
+    ) -> Result<()> {
+        self.with(|c| {
+            let now = now_ms() as i64;
+            let tx = c.transaction()?;
+            tx.execute(
+                "INSERT INTO runs (id, name, state, stage, bundle, surrogate, chain_target, created_ms)
+                 VALUES (?1, ?2, 'running', 'design', ?3, ?4, ?5, ?6)",
+                params![id, name, files_json(bundle), files_json(surrogate), chain_target as i64, now],
+            )?;
+            tx.execute(
+                "INSERT INTO stages (run_id, stage, started_ms) VALUES (?1, 'design', ?2)",
+                params![id, now],
+            )?;
+            tx.commit()?;
+            Ok(())
+        })
+    }
+
+    pub fn run(&self, id: &str) -> Result<Option<RunRow>> {
+        self.with(|c| {
+            Ok(c.query_row(
+                &format!("SELECT {RUN_COLS} FROM runs WHERE id = ?1"),
+                [id],
+                run_row,
+            )
+            .optional()?)
+        })
+    }
+
+    pub fn runs(&self) -> Result<Vec<RunRow>> {
+        self.with(|c| {
+            let mut st = c.prepare(&format!("SELECT {RUN_COLS} FROM runs ORDER BY created_ms"))?;
+            let rows = st.query_map([], run_row)?.collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Ids of runs still running (to resume after a restart).
+    pub fn running_runs(&self) -> Result<Vec<String>> {
+        self.with(|c| {
+            let mut st = c.prepare("SELECT id FROM runs WHERE state = 'running'")?;
+            let rows = st
+                .query_map([], |r| r.get(0))?
+                .collect::<rusqlite::Result<Vec<String>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Moves a run to `stage`, closing the previous stage and opening the new one; jobs given
+    /// are added in the same transaction.
+    pub fn set_stage(&self, run: &str, stage: &str, jobs: Vec<NewJob>) -> Result<()> {
+        self.with(|c| {
+            let now = now_ms() as i64;
+            let tx = c.transaction()?;
+            tx.execute(
+                "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
+                params![run, now],
+            )?;
+            tx.execute(
+                "INSERT INTO stages (run_id, stage, started_ms) VALUES (?1, ?2, ?3)
+                 ON CONFLICT(run_id, stage) DO UPDATE SET finished_ms = NULL",
+                params![run, stage, now],
+            )?;
+            tx.execute(
+                "UPDATE runs SET stage = ?2 WHERE id = ?1",
+                params![run, stage],
+            )?;
+            for j in jobs {
+                insert_job(&tx, run, j)?;
+            }
+            tx.commit()?;
+            Ok(())
+        })
+    }
+
+    /// Adds jobs to a run without changing its stage.
+    pub fn add_jobs(&self, run: &str, jobs: Vec<NewJob>) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            for j in jobs {
+                insert_job(&tx, run, j)?;
+            }
+            tx.commit()?;
+            Ok(())
+        })
+    }
+
+    /// Stage durations (s) of a run, by stage name.
+    pub fn stage_seconds(&self, run: &str) -> Result<Vec<(String, f64)>> {
+        self.with(|c| {
+            let mut st = c.prepare(
+                "SELECT stage, started_ms, COALESCE(finished_ms, ?2) FROM stages WHERE run_id = ?1",
+            )?;
+            let rows = st
+                .query_map(params![run, now_ms() as i64], |r| {
+                    Ok((
+                        r.get::<_, String>(0)?,
+                        (r.get::<_, i64>(2)? - r.get::<_, i64>(1)?) as f64 / 1000.0,
+                    ))
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Ends a run: `done`, `failed` (with the reason) or `cancelled`. Open jobs are cancelled.
+    pub fn end_run(&self, run: &str, state: &str, error: Option<&str>) -> Result<bool> {
+        self.with(|c| {
+            let now = now_ms() as i64;
+            let tx = c.transaction()?;
+            let n = tx.execute(
+                "UPDATE runs SET state = ?2, error = COALESCE(?3, error), finished_ms = ?4
+                 WHERE id = ?1 AND state = 'running'",
+                params![run, state, error, now],
+            )?;
+            if n > 0 {
+                tx.execute(
+                    "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
+                    params![run, now],
+                )?;
+                tx.execute(
+                    "UPDATE jobs SET state = 'cancelled' WHERE run_id = ?1 AND state IN ('queued', 'leased')",
+                    [run],
+                )?;
+                tx.execute(
+                    "UPDATE leases SET active = 0 WHERE active = 1 AND job_id IN (SELECT id FROM jobs WHERE run_id = ?1)",
+                    [run],
+                )?;
+                if state == "done" {
+                    tx.execute("UPDATE runs SET stage = 'done' WHERE id = ?1", [run])?;
+                }
+            }
+            tx.commit()?;
+            Ok(n > 0)
+        })
+    }
+
+    pub fn set_merge(&self, run: &str, merge: &str) -> Result<()> {
+        self.with(|c| {
+            c.execute("UPDATE runs SET merge = ?2 WHERE id = ?1", params![run, merge])?;
+            Ok(())
+        })
+    }
+
+    /// Raises the chains' target (an extension because R-hat is above its target).
+    pub fn extend_chains(&self, run: &str, target: u64) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE runs SET chain_target = ?2, extensions = extensions + 1, merge = NULL WHERE id = ?1",
+                params![run, target as i64],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// Records the result files and summary of a finished run and marks it done.
+    pub fn finish_run(&self, run: &str, files: &[File], summary: &str) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            tx.execute("DELETE FROM results WHERE run_id = ?1", [run])?;
+            for f in files {
+                tx.execute(
+                    "INSERT INTO results (run_id, path, sha256, size) VALUES (?1, ?2, ?3, ?4)",
+                    params![run, f.path, f.sha256, f.size as i64],
+                )?;
+            }
+            tx.execute("UPDATE runs SET summary = ?2 WHERE id = ?1", params![run, summary])?;
+            tx.commit()?;
+            Ok(())
+        })?;
+        self.end_run(run, "done", None)?;
+        Ok(())
+    }
+
+    pub fn results(&self, run: &str) -> Result<Vec<File>> {
+        self.with(|c| {
+            let mut st =
+                c.prepare("SELECT path, sha256, size FROM results WHERE run_id = ?1 ORDER BY path")?;
+            let rows = st
+                .query_map([run], |r| {
+                    Ok(File {
+                        path: r.get(0)?,
+                        sha256: r.get(1)?,
+                        size: r.get::<_, i64>(2)? as u64,
+                    })
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Jobs of a run (optionally of one stage), in creation order.
+    pub fn jobs(&self, run: &str, stage: Option<&str>) -> Result<Vec<JobRow>> {
+        self.with(|c| {
+            let mut st = c.prepare(&format!(
+                "SELECT {JOB_COLS} FROM jobs WHERE run_id = ?1 AND (?2 IS NULL OR stage = ?2) ORDER BY id"
+            ))?;
+            let rows = st
+                .query_map(params![run, stage], job_row)?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Per job of a run: `(job id, attempts, worker of the live or finishing attempt)`.
+    pub fn job_attempts(&self, run: &str) -> Result<Vec<(u64, u32, String)>> {
+        self.with(|c| {
+            let mut st = c.prepare(
+                "SELECT j.id, COUNT(a.lease_id),
+                        COALESCE((SELECT worker_id FROM attempts b WHERE b.job_id = j.id
+                                  AND (b.outcome = 'done' OR b.outcome IS NULL)
+                                  ORDER BY b.lease_id DESC LIMIT 1), '')
+                 FROM jobs j LEFT JOIN attempts a ON a.job_id = j.id
+                 WHERE j.run_id = ?1 GROUP BY j.id ORDER BY j.id",
+            )?;
+            let rows = st
+                .query_map([run], |r| {
+                    Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u32, r.get(2)?))
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Number of attempts (leases granted) for a run's jobs.
+    pub fn attempts(&self, run: &str) -> Result<u64> {
+        self.with(|c| {
+            Ok(c.query_row(
+                "SELECT COUNT(*) FROM attempts a JOIN jobs j ON j.id = a.job_id WHERE j.run_id = ?1",
+                [run],
+                |r| r.get::<_, i64>(0),
+            )? as u64)
+        })
+    }
+
+    /// Counts of queued and leased jobs of running runs.
+    pub fn queue_depth(&self) -> Result<(u64, u64)> {
+        self.with(|c| {
+            let q = |s: &str| -> rusqlite::Result<i64> {
+                c.query_row("SELECT COUNT(*) FROM jobs WHERE state = ?1", [s], |r| r.get(0))
+            };
+            Ok((q("queued")? as u64, q("leased")? as u64))
+        })
+    }
+
+    /// Hands the oldest queued job of a running run to `worker` for `ttl_ms`.
+    pub fn lease(&self, worker: &str, ttl_ms: u64) -> Result<Option<proto::Job>> {
+        self.with(|c| {
+            let now = now_ms() as i64;
+            let tx = c.transaction()?;
+            let job = tx
+                .query_row(
+                    &format!(
+                        "SELECT {} FROM jobs j JOIN runs r ON r.id = j.run_id
+                         WHERE j.state = 'queued' AND r.state = 'running' ORDER BY j.id LIMIT 1",
+                        JOB_COLS
+                            .split(", ")
+                            .map(|c| format!("j.{c}"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                    [],
+                    job_row,
+                )
+                .optional()?;
+            let Some(job) = job else {
+                return Ok(None);
+            };
+            tx.execute(
+                "INSERT INTO leases (job_id, worker_id, granted_ms, expires_ms) VALUES (?1, ?2, ?3, ?4)",
+                params![job.id as i64, worker, now, now + ttl_ms as i64],
+            )?;
+            let lease = tx.last_insert_rowid();
+            tx.execute(
+                "INSERT INTO attempts (lease_id, job_id, worker_id, started_ms) VALUES (?1, ?2, ?3, ?4)",
+                params![lease, job.id as i64, worker, now],
+            )?;
+            tx.execute(
+                "UPDATE jobs SET state = 'leased', lease_id = ?2 WHERE id = ?1",
+                params![job.id as i64, lease],
+            )?;
+            tx.commit()?;
+            let mut spec = job.spec;
+            spec.job_id = job.id;
+            spec.lease_id = lease as u64;
+            spec.run_id = job.run_id;
+            spec.lease_ttl_ms = ttl_ms as u32;
+            Ok(Some(spec))
+        })
+    }
+
+    /// Extends a live lease; false when it is gone.
+    pub fn heartbeat(&self, lease: u64, ttl_ms: u64) -> Result<bool> {
+        self.with(|c| {
+            let n = c.execute(
+                "UPDATE leases SET expires_ms = ?2 WHERE id = ?1 AND active = 1
+                 AND job_id IN (SELECT id FROM jobs WHERE state = 'leased' AND lease_id = ?1)",
+                params![lease as i64, (now_ms() + ttl_ms) as i64],
+            )?;
+            Ok(n > 0)
+        })
+    }
+
+    /// Extends every active lease by `ttl_ms` from now (on start-up: workers could not
+    /// heartbeat while the coordinator was down).
+    pub fn refresh_leases(&self, ttl_ms: u64) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE leases SET expires_ms = ?1 WHERE active = 1",
+                [(now_ms() + ttl_ms) as i64],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// Records a finished job (durably) from lease `lease`. A job already done (a late
+    /// duplicate) is left as it is.
+    pub fn complete(&self, lease: u64, outputs: &[File], result: &str) -> Result<Outcome> {
+        self.with(|c| {
+            let now = now_ms() as i64;
+            let tx = c.transaction()?;
+            let row: Option<(i64, String, String, Option<String>, String)> = tx
+                .query_row(
+                    "SELECT j.id, j.state, j.run_id, j.cache_key, r.state FROM leases l
+                     JOIN jobs j ON j.id = l.job_id JOIN runs r ON r.id = j.run_id WHERE l.id = ?1",
+                    [lease as i64],
+                    |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)),
+                )
+                .optional()?;
+            let Some((job, state, run, key, run_state)) = row else {
+                return Ok(Outcome::Ignored);
+            };
+            let fresh = (state == "queued" || state == "leased") && run_state == "running";
+            tx.execute(
+                "UPDATE attempts SET ended_ms = ?2, outcome = ?3 WHERE lease_id = ?1",
+                params![lease as i64, now, if fresh { "done" } else { "stale" }],
+            )?;
+            tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
+            if !fresh {
+                tx.commit()?;
+                return Ok(Outcome::Ignored);
+            }
+            tx.execute(
+                "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, finished_ms = ?4, lease_id = NULL WHERE id = ?1",
+                params![job, files_json(outputs), result, now],
+            )?;
+            tx.execute(
+                "UPDATE leases SET active = 0 WHERE job_id = ?1",
+                [job],
+            )?;
+            if let Some(k) = key {
+                tx.execute(
+                    "INSERT OR REPLACE INTO sim_cache (key, outputs, result) VALUES (?1, ?2, ?3)",
+                    params![k, files_json(outputs), result],
+                )?;
+            }
+            tx.commit()?;
+            Ok(Outcome::Recorded(run))
+        })
+    }
+
+    /// Records a failed attempt. `requeue`: the worker gives the job back (not a failure).
+    /// After `max_failures` failures the job fails and so does its run, with the error.
+    pub fn fail(
+        &self,
+        lease: u64,
+        error: &str,
+        requeue: bool,
+        max_failures: u32,
+    ) -> Result<Outcome> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let out = fail_in(&tx, lease, error, if requeue { "returned" } else { "failed" }, max_failures)?;
+            tx.commit()?;
+            Ok(out)
+        })
+    }
+
+    /// Expires leases whose heartbeats stopped: their jobs are queued again (each loss counts
+    /// as a failed attempt). Returns the runs that changed.
+    pub fn expire(&self, max_failures: u32) -> Result<Vec<String>> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let expired: Vec<i64> = {
+                let mut st = tx.prepare(
+                    "SELECT id FROM leases WHERE active = 1 AND expires_ms < ?1",
+                )?;
+                let rows = st
+                    .query_map([now_ms() as i64], |r| r.get(0))?
+                    .collect::<rusqlite::Result<Vec<i64>>>()?;
+                rows
+            };
+            let mut runs = vec![];
+            for l in expired {
+                if let Outcome::Recorded(r) = fail_in(
+                    &tx,
+                    l as u64,
+                    "lease expired: the worker stopped sending heartbeats",
+                    "lost",
+                    max_failures,
+                )? {
+                    runs.push(r);
+                }
+            }
+            tx.commit()?;
+            Ok(runs)
+        })
+    }
+
+    /// Looks up the simulation cache.
+    pub fn cached_simulation(&self, key: &str) -> Result<Option<(Vec<File>, Option<String>)>> {
+        self.with(|c| {
+            Ok(c.query_row(
+                "SELECT outputs, result FROM sim_cache WHERE key = ?1",
+                [key],
+                |r| Ok((parse_files(r.get(0)?), r.get(1)?)),
+            )
+            .optional()?)
+        })
+    }
+
+    /// Notes an artifact the coordinator holds.
+    pub fn add_artifact(&self, sha: &str, size: u64) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "INSERT OR IGNORE INTO artifacts (sha256, size, created_ms) VALUES (?1, ?2, ?3)",
+                params![sha, size as i64, now_ms() as i64],
+            )?;
+            Ok(())
+        })
+    }
+}
+
+fn insert_job(tx: &rusqlite::Transaction<'_>, run: &str, j: NewJob) -> Result<()> {
+    let now = now_ms() as i64;
+    let cached = match &j.cache_key {
+        Some(k) => tx
+            .query_row(
+                "SELECT outputs, result FROM sim_cache WHERE key = ?1",
+                [k],
+                |r| Ok((r.get::<_, String>(0)?, r.get::<_, Option<String>>(1)?)),
+            )
+            .optional()?,
+        None => None,
+    };
+    let spec = j.spec.encode_to_vec();
+    match cached {
+        Some((outputs, result)) => {
+            tx.execute(
+                "INSERT INTO jobs (run_id, stage, kind, label, spec, cache_key, state, outputs, result, cached, created_ms, finished_ms)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'done', ?7, ?8, 1, ?9, ?9)",
+                params![run, j.stage, j.kind, j.label, spec, j.cache_key, outputs, result, now],
+            )?;
+        }
+        None => {
+            tx.execute(
+                "INSERT INTO jobs (run_id, stage, kind, label, spec, cache_key, state, created_ms)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'queued', ?7)",
+                params![run, j.stage, j.kind, j.label, spec, j.cache_key, now],
+            )?;
+        }
+    }
+    Ok(())
+}
+
+fn fail_in(
+    tx: &rusqlite::Transaction<'_>,
+    lease: u64,
+    error: &str,
+    outcome: &str,
+    max_failures: u32,
+) -> Result<Outcome> {
+    let now = now_ms() as i64;
+    let row: Option<(i64, String, Option<i64>, i64, String, String)> = tx
+        .query_row(
+            "SELECT j.id, j.state, j.lease_id, j.failures, j.run_id, j.label FROM leases l
+             JOIN jobs j ON j.id = l.job_id WHERE l.id = ?1 AND l.active = 1",
+            [lease as i64],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?)),
+        )
+        .optional()?;
+    tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
+    tx.execute(
+        "UPDATE attempts SET ended_ms = ?2, outcome = ?3, error = ?4 WHERE lease_id = ?1 AND ended_ms IS NULL",
+        params![lease as i64, now, outcome, error],
+    )?;
+    let Some((job, state, cur, failures, run, label)) = row else {
+        return Ok(Outcome::Ignored);
+    };
+    if state != "leased" || cur != Some(lease as i64) {
+        return Ok(Outcome::Ignored);
+    }
+    let failures = failures + if outcome == "returned" { 0 } else { 1 };
+    if failures >= max_failures as i64 {
+        tx.execute(
+            "UPDATE jobs SET state = 'failed', failures = ?2, error = ?3, lease_id = NULL, finished_ms = ?4 WHERE id = ?1",
+            params![job, failures, error, now],
+        )?;
+        let reason = format!("{label} failed {failures} times; last error: {error}");
+        tx.execute(
+            "UPDATE runs SET state = 'failed', error = ?2, finished_ms = ?3 WHERE id = ?1 AND state = 'running'",
+            params![run, reason, now],
+        )?;
+        tx.execute(
+            "UPDATE jobs SET state = 'cancelled' WHERE run_id = ?1 AND state IN ('queued', 'leased')",
+            [&run],
+        )?;
+        tx.execute(
+            "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
+            params![run, now],
+        )?;
+    } else {
+        tx.execute(
+            "UPDATE jobs SET state = 'queued', failures = ?2, error = ?3, lease_id = NULL WHERE id = ?1",
+            params![job, failures, error],
+        )?;
+    }
+    Ok(Outcome::Recorded(run))
+}

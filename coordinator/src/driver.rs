@@ -1,0 +1,575 @@
+//! The run driver: walks a run through its stages. It is called after every change (a job
+//! finished or failed, a submit, a restart) and is idempotent: it reads the durable state,
+//! does the cheap stages in-process (design, training set, merge and diagnostics, summary) and
+//! queues jobs for the expensive ones (EnergyPlus runs, training, chain segments, validation).
+//!
+//! A run's folders: `DATA/runs/<id>/project` (the bundle laid out) and `DATA/runs/<id>/out`
+//! (the same layout as the local `bemcal calibrate` output folder).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use bemcal_calibrate::pipeline::{write_summary, Calibration, ChainSummary, OutputMetrics, Timings};
+use bemcal_calibrate::posterior::Checkpoint;
+use bemcal_calibrate::Project;
+use bemcal_stats::mcmc::{ChainState, Draws};
+use bemcal_stats::summary::PosteriorSummary;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::artifacts::{safe_relative, ArtifactDir};
+use crate::bundle;
+use crate::db::{File, JobRow, NewJob, RunRow, Store};
+use crate::proto::{self, job::Kind};
+
+/// Settings of the coordinator that shape runs.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Lease length without a heartbeat, ms.
+    pub lease_ttl_ms: u64,
+    /// Failed attempts after which a job (and its run) fails.
+    pub max_failures: u32,
+    /// Chains per chain-segment job; 0 = all chains in one job (the same batches as the
+    /// single-process path, so the draws are bit-identical to it).
+    pub chains_per_job: usize,
+    /// Extend the chains while the max R-hat is above this (None: never).
+    pub rhat_target: Option<f64>,
+    /// At most this many extensions (each adds iterations - burn_in per chain).
+    pub max_extensions: u32,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            lease_ttl_ms: 30_000,
+            max_failures: 3,
+            chains_per_job: 0,
+            rhat_target: None,
+            max_extensions: 2,
+        }
+    }
+}
+
+/// Shared coordinator state.
+pub struct State {
+    pub store: Store,
+    pub artifacts: ArtifactDir,
+    pub data: PathBuf,
+    pub config: Config,
+    /// Asks the driver task to advance a run.
+    pub kick: tokio::sync::mpsc::UnboundedSender<String>,
+}
+
+/// Stages in order.
+pub const STAGES: &[&str] = &[
+    "design", "simulate", "train", "chains", "merge", "validate", "summary",
+];
+
+/// The merged chains, kept in the database between the merge and the summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct Merged {
+    posterior: PosteriorSummary,
+    sigma_delta_kwh: Vec<(String, f64)>,
+    estimate: Vec<f64>,
+    acceptance: Vec<f64>,
+    sigma_eta: Vec<f64>,
+    held_out: serde_json::Value,
+}
+
+type Result<T> = std::result::Result<T, String>;
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+impl State {
+    /// Folder of a run.
+    pub fn run_dir(&self, run: &str) -> PathBuf {
+        self.data.join("runs").join(run)
+    }
+
+    /// Stores bytes as an artifact (file + row).
+    pub fn put_artifact(&self, bytes: &[u8]) -> Result<String> {
+        let sha = self.artifacts.put(bytes, None).map_err(err)?;
+        self.store.add_artifact(&sha, bytes.len() as u64).map_err(err)?;
+        Ok(sha)
+    }
+
+    /// Advances `run` as far as it goes now; an error fails the run with its message.
+    pub fn advance(&self, run: &str) {
+        if let Err(e) = self.advance_inner(run) {
+            let _ = self.store.end_run(run, "failed", Some(&e));
+        }
+    }
+
+    fn load(&self, r: &RunRow) -> Result<Calibration> {
+        let dir = self.run_dir(&r.id);
+        let pdir = dir.join("project");
+        let pf = pdir.join(bundle::PROJECT_FILE);
+        if !pf.is_file() {
+            bundle::materialize(&r.bundle, &self.artifacts, &pdir)?;
+        }
+        let project = Project::load(&pf).map_err(err)?;
+        Calibration::load(project, &dir.join("out")).map_err(err)
+    }
+
+    /// Copies job outputs into the run's output folder.
+    fn place(&self, out: &Path, files: &[File]) -> Result<()> {
+        for f in files {
+            let p = out.join(safe_relative(&f.path)?);
+            let bytes = self.artifacts.read(&f.sha256).map_err(err)?;
+            bemcal_calibrate::write_atomic(&p, &bytes).map_err(err)?;
+        }
+        Ok(())
+    }
+
+    fn advance_inner(&self, run: &str) -> Result<()> {
+        loop {
+            let Some(r) = self.store.run(run).map_err(err)? else {
+                return Ok(());
+            };
+            if r.state != "running" {
+                return Ok(());
+            }
+            let progressed = match r.stage.as_str() {
+                "design" => self.stage_design(&r)?,
+                "simulate" => self.stage_simulate(&r)?,
+                "train" => self.stage_train(&r)?,
+                "chains" => self.stage_chains(&r)?,
+                "merge" => self.stage_merge(&r)?,
+                "validate" => self.stage_validate(&r)?,
+                "summary" => self.stage_summary(&r)?,
+                _ => false,
+            };
+            if !progressed {
+                return Ok(());
+            }
+        }
+    }
+
+    fn stage_design(&self, r: &RunRow) -> Result<bool> {
+        let cal = self.load(r)?;
+        let design = cal.design().map_err(err)?;
+        let inputs_hash = self.simulation_inputs_hash(r, &cal)?;
+        let jobs = design
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let values = serde_json::to_string(&cal.inputs.plan.values(x)).unwrap_or_default();
+                let key = hex::encode(Sha256::digest(format!("{inputs_hash}\n{values}")));
+                NewJob {
+                    stage: "simulate",
+                    kind: "simulate",
+                    label: format!("simulation of design point {i}"),
+                    spec: proto::Job {
+                        bundle: crate::client::refs(&r.bundle),
+                        kind: Some(Kind::Simulate(proto::SimulateJob {
+                            point: i as u32,
+                            values: x.clone(),
+                        })),
+                        ..Default::default()
+                    },
+                    cache_key: Some(key),
+                }
+            })
+            .collect();
+        self.store.set_stage(&r.id, "simulate", jobs).map_err(err)?;
+        Ok(true)
+    }
+
+    /// Hash of everything a simulation depends on besides the parameter values: the bundle's
+    /// files except the project file and the meters, and the weather file's content.
+    fn simulation_inputs_hash(&self, r: &RunRow, cal: &Calibration) -> Result<String> {
+        let meters = cal.project.meters.file.clone().unwrap_or_default();
+        let mut h = Sha256::new();
+        for f in &r.bundle {
+            if f.path != bundle::PROJECT_FILE && Path::new(&f.path) != meters {
+                h.update(format!("{} {}\n", f.path, f.sha256));
+            }
+        }
+        let w = std::fs::read(&cal.inputs.weather_path)
+            .map_err(|e| format!("{}: {e}", cal.inputs.weather_path.display()))?;
+        h.update(Sha256::digest(&w));
+        Ok(hex::encode(h.finalize()))
+    }
+
+    fn stage_simulate(&self, r: &RunRow) -> Result<bool> {
+        let jobs = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
+        if jobs.iter().any(|j| j.state != "done") {
+            return Ok(false);
+        }
+        let cal = self.load(r)?;
+        let design = cal.design().map_err(err)?;
+        let mut outputs = vec![];
+        for j in &jobs {
+            let Some(Kind::Simulate(s)) = &j.spec.kind else {
+                return Err(format!("job {} is not a simulation", j.id));
+            };
+            // Cached outputs may come from another run's point: name them after this one's.
+            let files: Vec<File> = j
+                .outputs
+                .iter()
+                .map(|f| File {
+                    path: format!("simulations/point_{:03}.json", s.point),
+                    ..f.clone()
+                })
+                .collect();
+            self.place(&cal.out, &files)?;
+            let (o, ran) = cal
+                .simulate_point(s.point as usize, &s.values)
+                .map_err(err)?;
+            if ran.is_some() {
+                return Err(format!(
+                    "design point {}: the worker's outputs did not match its parameter values",
+                    s.point
+                ));
+            }
+            outputs.push(o);
+        }
+        let dataset = cal.training_set(&design, &outputs).map_err(err)?;
+        if !r.surrogate.is_empty() {
+            self.place(&cal.out, &r.surrogate)?;
+            if !cal.has_surrogate() {
+                return Err("the surrogate given at submit is not a valid surrogate folder".into());
+            }
+            let jobs = self.chain_jobs(r, &cal.project, &[])?;
+            self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
+            return Ok(true);
+        }
+        let mut inputs = vec![];
+        for p in crate::client::walk(&dataset).map_err(err)? {
+            let bytes = std::fs::read(&p).map_err(err)?;
+            let rel = p.strip_prefix(&cal.out).map_err(err)?;
+            inputs.push(proto::FileRef {
+                path: rel.to_string_lossy().replace('\\', "/"),
+                sha256: self.put_artifact(&bytes)?,
+                size: bytes.len() as u64,
+            });
+        }
+        let job = NewJob {
+            stage: "train",
+            kind: "train",
+            label: "surrogate training".into(),
+            spec: proto::Job {
+                bundle: crate::client::refs(&r.bundle),
+                inputs,
+                kind: Some(Kind::Train(proto::TrainJob {})),
+                ..Default::default()
+            },
+            cache_key: None,
+        };
+        self.store.set_stage(&r.id, "train", vec![job]).map_err(err)?;
+        Ok(true)
+    }
+
+    fn surrogate_files(&self, r: &RunRow) -> Result<Vec<File>> {
+        if !r.surrogate.is_empty() {
+            return Ok(r.surrogate.clone());
+        }
+        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
+        jobs.iter()
+            .rev()
+            .find(|j| j.state == "done")
+            .map(|j| j.outputs.clone())
+            .ok_or_else(|| "no trained surrogate".to_string())
+    }
+
+    fn stage_train(&self, r: &RunRow) -> Result<bool> {
+        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
+        if jobs.is_empty() || jobs.iter().any(|j| j.state != "done") {
+            return Ok(false);
+        }
+        let cal = self.load(r)?;
+        self.place(&cal.out, &self.surrogate_files(r)?)?;
+        if !cal.has_surrogate() {
+            return Err("training produced no valid surrogate".into());
+        }
+        let jobs = self.chain_jobs(r, &cal.project, &[])?;
+        self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
+        Ok(true)
+    }
+
+    /// Next chain-segment jobs: for each group of chains whose latest segment is done and
+    /// short of the target, the following segment (from that segment's checkpoint).
+    fn chain_jobs(&self, r: &RunRow, project: &Project, done: &[JobRow]) -> Result<Vec<NewJob>> {
+        let m = &project.mcmc;
+        let n = m.chains;
+        let per = if self.config.chains_per_job == 0 {
+            n
+        } else {
+            self.config.chains_per_job.min(n)
+        };
+        let surrogate = self.surrogate_files(r)?;
+        let mut jobs = vec![];
+        for first in (0..n).step_by(per) {
+            let count = per.min(n - first);
+            let mine: Vec<&JobRow> = done
+                .iter()
+                .filter(|j| matches!(&j.spec.kind, Some(Kind::Chains(c)) if c.first_chain as usize == first))
+                .collect();
+            if mine.iter().any(|j| j.state != "done") {
+                continue;
+            }
+            let reached: u64 = mine
+                .iter()
+                .map(|j| match &j.spec.kind {
+                    Some(Kind::Chains(c)) => c.iterations,
+                    _ => 0,
+                })
+                .sum();
+            if reached >= r.chain_target {
+                continue;
+            }
+            let mut inputs = crate::client::refs(&surrogate);
+            if let Some(last) = mine.last() {
+                let states = last
+                    .outputs
+                    .iter()
+                    .find(|f| f.path == "states.json")
+                    .ok_or_else(|| format!("{}: no states.json", last.label))?;
+                inputs.push(states.into());
+            }
+            let seg = mine.len() as u32;
+            jobs.push(NewJob {
+                stage: "chains",
+                kind: "chains",
+                label: format!("chains {}-{} segment {seg}", first, first + count - 1),
+                spec: proto::Job {
+                    bundle: crate::client::refs(&r.bundle),
+                    inputs,
+                    kind: Some(Kind::Chains(proto::ChainSegmentJob {
+                        first_chain: first as u32,
+                        chains: count as u32,
+                        iterations: m.segment.min(r.chain_target - reached),
+                        segment: seg,
+                    })),
+                    ..Default::default()
+                },
+                cache_key: None,
+            });
+        }
+        Ok(jobs)
+    }
+
+    fn stage_chains(&self, r: &RunRow) -> Result<bool> {
+        let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let project = self.project(r)?;
+        let target_jobs = self.chain_jobs(r, &project, &jobs)?;
+        if !target_jobs.is_empty() {
+            self.store.add_jobs(&r.id, target_jobs).map_err(err)?;
+            return Ok(false);
+        }
+        if jobs.iter().any(|j| j.state != "done") {
+            return Ok(false);
+        }
+        self.store.set_stage(&r.id, "merge", vec![]).map_err(err)?;
+        Ok(true)
+    }
+
+    fn project(&self, r: &RunRow) -> Result<Project> {
+        let pdir = self.run_dir(&r.id).join("project");
+        let pf = pdir.join(bundle::PROJECT_FILE);
+        if !pf.is_file() {
+            bundle::materialize(&r.bundle, &self.artifacts, &pdir)?;
+        }
+        Project::load(&pf).map_err(err)
+    }
+
+        fn stage_merge(&self, r: &RunRow) -> Result<bool> {
+        let cal = self.load(r)?;
+        self.place(&cal.out, &self.surrogate_files(r)?)?;
+        let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let mut groups: Vec<(u32, Vec<&JobRow>)> = vec![];
+        for j in &jobs {
+            let Some(Kind::Chains(c)) = &j.spec.kind else {
+                continue;
+            };
+            match groups.iter_mut().find(|g| g.0 == c.first_chain) {
+                Some(g) => g.1.push(j),
+                None => groups.push((c.first_chain, vec![j])),
+            }
+        }
+        groups.sort_by_key(|g| g.0);
+        let mut states: Vec<ChainState> = vec![];
+        let mut draws: Vec<Draws> = vec![];
+        for (_, seg) in &groups {
+            let mut acc: Vec<Draws> = vec![];
+            let mut last_states = vec![];
+            for j in seg {
+                let get = |name: &str| -> Result<Vec<u8>> {
+                    let f = j
+                        .outputs
+                        .iter()
+                        .find(|f| f.path == name)
+                        .ok_or_else(|| format!("{}: no {name}", j.label))?;
+                    self.artifacts.read(&f.sha256).map_err(err)
+                };
+                let d: Vec<Draws> = serde_json::from_slice(&get("draws.json")?).map_err(err)?;
+                last_states = serde_json::from_slice(&get("states.json")?).map_err(err)?;
+                if acc.is_empty() {
+                    acc = d;
+                } else {
+                    for (a, b) in acc.iter_mut().zip(&d) {
+                        a.extend(b);
+                    }
+                }
+            }
+            states.extend(last_states);
+            draws.extend(acc);
+        }
+        let mut sampler = cal.sampler().map_err(err)?;
+        let chains = sampler.summarize(&draws).map_err(err)?;
+        if let Some(target) = self.config.rhat_target {
+            if chains.posterior.max_rhat > target && r.extensions < self.config.max_extensions {
+                let m = &cal.project.mcmc;
+                self.store
+                    .extend_chains(&r.id, r.chain_target + (m.iterations - m.burn_in))
+                    .map_err(err)?;
+                self.store.set_stage(&r.id, "chains", vec![]).map_err(err)?;
+                return Ok(true);
+            }
+        }
+        let ck = Checkpoint {
+            states: states.clone(),
+            draws,
+        };
+        let bytes = serde_json::to_vec(&ck).map_err(err)?;
+        bemcal_calibrate::write_atomic(&cal.out.join("chains.json"), &bytes).map_err(err)?;
+        let merged = Merged {
+            acceptance: states.iter().map(|s| s.acceptance_rate_post_burn_in()).collect(),
+            posterior: chains.posterior,
+            sigma_delta_kwh: chains.sigma_delta_kwh,
+            estimate: chains.estimate.clone(),
+            sigma_eta: sampler.sigma_eta.clone(),
+            held_out: sampler.held_out.clone(),
+        };
+        self.store
+            .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)
+            .map_err(err)?;
+        let mut v = vec![(0u32, "calibrated", chains.estimate)];
+        if cal.project.validation.initial {
+            v.push((1, "initial", cal.initial_point()));
+        }
+        let jobs = v
+            .into_iter()
+            .map(|(i, label, x)| NewJob {
+                stage: "validate",
+                kind: "validate",
+                label: format!("validation ({label})"),
+                spec: proto::Job {
+                    bundle: crate::client::refs(&r.bundle),
+                    kind: Some(Kind::Validate(proto::ValidateJob {
+                        index: i,
+                        label: label.into(),
+                        values: x,
+                    })),
+                    ..Default::default()
+                },
+                cache_key: None,
+            })
+            .collect();
+        self.store.set_stage(&r.id, "validate", jobs).map_err(err)?;
+        Ok(true)
+    }
+
+    fn stage_validate(&self, r: &RunRow) -> Result<bool> {
+        let jobs = self.store.jobs(&r.id, Some("validate")).map_err(err)?;
+        if jobs.iter().any(|j| j.state != "done") {
+            return Ok(false);
+        }
+        self.store.set_stage(&r.id, "summary", vec![]).map_err(err)?;
+        Ok(true)
+    }
+
+    fn stage_summary(&self, r: &RunRow) -> Result<bool> {
+        let cal = self.load(r)?;
+        let jobs = self.store.jobs(&r.id, Some("validate")).map_err(err)?;
+        let mut validation = vec![];
+        let mut initial = vec![];
+        for j in &jobs {
+            self.place(&cal.out, &j.outputs)?;
+            let m: Vec<OutputMetrics> =
+                serde_json::from_str(j.result.as_deref().unwrap_or("[]")).map_err(err)?;
+            match &j.spec.kind {
+                Some(Kind::Validate(v)) if v.label == "initial" => initial = m,
+                _ => validation = m,
+            }
+        }
+        let merged: Merged = serde_json::from_str(
+            r.merge
+                .as_deref()
+                .ok_or_else(|| "merged chains are missing".to_string())?,
+        )
+        .map_err(err)?;
+        let design = cal.design().map_err(err)?;
+        let secs = self.store.stage_seconds(&r.id).map_err(err)?;
+        let s = |name: &str| secs.iter().filter(|x| x.0 == name).map(|x| x.1).sum::<f64>();
+        let timings = Timings {
+            design_s: s("design"),
+            simulations_s: s("simulate"),
+            training_s: s("train"),
+            chains_s: s("chains"),
+            summary_s: s("merge"),
+            validation_s: s("validate"),
+            total_s: (crate::now_ms().saturating_sub(r.created_ms)) as f64 / 1000.0,
+        };
+        let chains = ChainSummary {
+            posterior: merged.posterior,
+            sigma_delta_kwh: merged.sigma_delta_kwh,
+            estimate: merged.estimate,
+        };
+        let summary = write_summary(
+            &cal,
+            &design,
+            &chains,
+            (&merged.sigma_eta, &merged.held_out),
+            merged.acceptance,
+            validation,
+            initial,
+            timings,
+        )
+        .map_err(err)?;
+        let mut files = vec![];
+        for p in crate::client::walk(&cal.out).map_err(err)? {
+            let rel = p
+                .strip_prefix(&cal.out)
+                .map_err(err)?
+                .to_string_lossy()
+                .replace('\\', "/");
+            if rel.ends_with(".partial") {
+                continue;
+            }
+            let bytes = std::fs::read(&p).map_err(err)?;
+            files.push(File {
+                path: rel,
+                sha256: self.put_artifact(&bytes)?,
+                size: bytes.len() as u64,
+            });
+        }
+        let json = serde_json::to_string_pretty(&summary).map_err(err)?;
+        self.store.finish_run(&r.id, &files, &json).map_err(err)?;
+        Ok(false)
+    }
+}
+
+/// Starts the driver: a task that advances runs one at a time, off the async threads.
+pub fn spawn_driver(
+    st: Arc<State>,
+    mut rx: tokio::sync::mpsc::UnboundedReceiver<String>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        while let Some(first) = rx.recv().await {
+            let mut runs = vec![first];
+            while let Ok(r) = rx.try_recv() {
+                if !runs.contains(&r) {
+                    runs.push(r);
+                }
+            }
+            for run in runs {
+                let st = st.clone();
+                let _ = tokio::task::spawn_blocking(move || st.advance(&run)).await;
+            }
+        }
+    })
+}

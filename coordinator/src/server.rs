@@ -1,0 +1,92 @@
+//! Starting the coordinator: the database, the driver, the lease reaper and the gRPC server
+//! (bearer token required; TLS when a certificate and key are given).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Identity, Server, ServerTlsConfig};
+
+use crate::artifacts::ArtifactDir;
+use crate::auth::CheckToken;
+use crate::db::Store;
+use crate::driver::{spawn_driver, Config, State};
+use crate::proto::coordinator_server::CoordinatorServer;
+use crate::service::Service;
+use crate::MAX_MESSAGE_BYTES;
+
+/// How to run a coordinator.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub listen: SocketAddr,
+    /// State: `coordinator.db`, `artifacts/`, `runs/`.
+    pub data: PathBuf,
+    pub token: String,
+    /// PEM certificate and key: serve TLS.
+    pub tls: Option<(PathBuf, PathBuf)>,
+    pub config: Config,
+}
+
+/// Serves until `shutdown` completes; `ready` gets the bound address (port 0 = ephemeral).
+pub async fn serve(
+    opts: Options,
+    ready: impl FnOnce(SocketAddr),
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&opts.data)?;
+    let store = Store::open(&opts.data.join("coordinator.db"))?;
+    // Workers could not heartbeat while we were down: give their leases a fresh TTL.
+    store.refresh_leases(opts.config.lease_ttl_ms)?;
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let st = Arc::new(State {
+        store,
+        artifacts: ArtifactDir::new(&opts.data.join("artifacts"))?,
+        data: opts.data.clone(),
+        config: opts.config.clone(),
+        kick: tx,
+    });
+    for r in st.store.running_runs()? {
+        let _ = st.kick.send(r);
+    }
+    spawn_driver(st.clone(), rx);
+    let reaper = st.clone();
+    tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let st = reaper.clone();
+            let runs = tokio::task::spawn_blocking(move || st.store.expire(st.config.max_failures))
+                .await
+                .ok()
+                .and_then(|r| r.ok())
+                .unwrap_or_default();
+            for r in runs {
+                let _ = reaper.kick.send(r);
+            }
+        }
+    });
+
+    let listener = tokio::net::TcpListener::bind(opts.listen).await?;
+    ready(listener.local_addr()?);
+    let svc = CoordinatorServer::new(Service { st })
+        .max_decoding_message_size(MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(MAX_MESSAGE_BYTES);
+    let svc = InterceptedService::new(svc, CheckToken::new(&opts.token));
+    let mut builder = Server::builder();
+    if let Some((cert, key)) = &opts.tls {
+        let cert = std::fs::read(cert)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", cert.display()))?;
+        let key =
+            std::fs::read(key).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", key.display()))?;
+        builder = builder.tls_config(ServerTlsConfig::new().identity(Identity::from_pem(cert, key)))?;
+    }
+    builder
+        .add_service(svc)
+        .serve_with_incoming_shutdown(
+            tokio_stream::wrappers::TcpListenerStream::new(listener),
+            shutdown,
+        )
+        .await?;
+    Ok(())
+}

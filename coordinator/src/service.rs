@@ -1,0 +1,392 @@
+//! The gRPC service: leases, heartbeats, completions, artifacts, submissions and run status.
+
+use std::pin::Pin;
+use std::sync::Arc;
+
+use tokio_stream::Stream;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::artifacts::{safe_relative, valid_sha};
+use crate::db::{File, Outcome, RunRow};
+use crate::driver::{State, STAGES};
+use crate::proto::coordinator_server::Coordinator;
+use crate::proto::*;
+use crate::{bundle, CHUNK_BYTES};
+
+/// Largest artifact accepted (bytes).
+pub const MAX_ARTIFACT_BYTES: u64 = 1 << 30;
+
+/// The coordinator service over the shared state.
+pub struct Service {
+    pub st: Arc<State>,
+}
+
+fn internal<E: std::fmt::Display>(e: E) -> Status {
+    Status::internal(e.to_string())
+}
+
+fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
+    files
+        .iter()
+        .map(|f| {
+            safe_relative(&f.path).map_err(Status::invalid_argument)?;
+            if !valid_sha(&f.sha256) || !st.artifacts.has(&f.sha256) {
+                return Err(Status::failed_precondition(format!(
+                    "{}: artifact {:?} was not uploaded",
+                    f.path, f.sha256
+                )));
+            }
+            Ok(File::from(f))
+        })
+        .collect()
+}
+
+fn check_worker(id: &str) -> Result<(), Status> {
+    if id.is_empty() || id.len() > 200 {
+        return Err(Status::invalid_argument("worker_id must be 1-200 characters"));
+    }
+    Ok(())
+}
+
+impl Service {
+    fn kick(&self, o: Outcome) {
+        if let Outcome::Recorded(run) = o {
+            let _ = self.st.kick.send(run);
+        }
+    }
+
+    /// The status of a run, with per-stage progress.
+    pub fn status(&self, r: &RunRow, with_results: bool) -> Result<RunStatus, Status> {
+        let jobs = self.st.store.jobs(&r.id, None).map_err(internal)?;
+        let cur = STAGES.iter().position(|s| *s == r.stage).unwrap_or(STAGES.len());
+        let stages = STAGES
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let mine: Vec<_> = jobs.iter().filter(|j| j.stage == *s).collect();
+                let state = if i < cur {
+                    "done"
+                } else if i == cur && r.state == "running" {
+                    "running"
+                } else if i == cur {
+                    r.state.as_str()
+                } else {
+                    "pending"
+                };
+                let (done, total) = if mine.is_empty() {
+                    let d = (i < cur) as u32;
+                    (d, 1)
+                } else {
+                    (
+                        mine.iter().filter(|j| j.state == "done").count() as u32,
+                        mine.len() as u32,
+                    )
+                };
+                StageProgress {
+                    stage: s.to_string(),
+                    state: state.to_string(),
+                    done,
+                    total,
+                    running: mine.iter().filter(|j| j.state == "leased").count() as u32,
+                }
+            })
+            .collect();
+        Ok(RunStatus {
+            run_id: r.id.clone(),
+            name: r.name.clone(),
+            state: r.state.clone(),
+            stage: r.stage.clone(),
+            error: r.error.clone().unwrap_or_default(),
+            stages,
+            results: if with_results {
+                crate::client::refs(&self.st.store.results(&r.id).map_err(internal)?)
+            } else {
+                vec![]
+            },
+            created_ms: r.created_ms,
+            finished_ms: r.finished_ms.unwrap_or(0),
+            jobs_total: jobs.len() as u32,
+            attempts_total: self.st.store.attempts(&r.id).map_err(internal)? as u32,
+            summary_json: if with_results {
+                r.summary.clone().unwrap_or_default()
+            } else {
+                String::new()
+            },
+            jobs: if with_results {
+                let att = self.st.store.job_attempts(&r.id).map_err(internal)?;
+                jobs.iter()
+                    .map(|j| {
+                        let a = att.iter().find(|a| a.0 == j.id);
+                        JobInfo {
+                            job_id: j.id,
+                            stage: j.stage.clone(),
+                            label: j.label.clone(),
+                            state: j.state.clone(),
+                            attempts: a.map_or(0, |a| a.1),
+                            worker: a.map_or(String::new(), |a| a.2.clone()),
+                            cached: j.cached,
+                            result_json: j.result.clone().unwrap_or_default(),
+                        }
+                    })
+                    .collect()
+            } else {
+                vec![]
+            },
+        })
+    }
+}
+
+type ChunkStream = Pin<Box<dyn Stream<Item = Result<Chunk, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl Coordinator for Service {
+    async fn health(&self, _: Request<HealthRequest>) -> Result<Response<HealthReply>, Status> {
+        let (q, l) = self.st.store.queue_depth().map_err(internal)?;
+        Ok(Response::new(HealthReply {
+            version: env!("CARGO_PKG_VERSION").into(),
+            queued_jobs: q,
+            leased_jobs: l,
+        }))
+    }
+
+    async fn lease(&self, req: Request<LeaseRequest>) -> Result<Response<LeaseReply>, Status> {
+        let r = req.into_inner();
+        check_worker(&r.worker_id)?;
+        if r.free_slots == 0 {
+            return Ok(Response::new(LeaseReply { job: None }));
+        }
+        let job = self
+            .st
+            .store
+            .lease(&r.worker_id, self.st.config.lease_ttl_ms)
+            .map_err(internal)?;
+        Ok(Response::new(LeaseReply { job }))
+    }
+
+    async fn heartbeat(
+        &self,
+        req: Request<HeartbeatRequest>,
+    ) -> Result<Response<HeartbeatReply>, Status> {
+        let r = req.into_inner();
+        let ok = self
+            .st
+            .store
+            .heartbeat(r.lease_id, self.st.config.lease_ttl_ms)
+            .map_err(internal)?;
+        Ok(Response::new(HeartbeatReply { ok }))
+    }
+
+    async fn complete(&self, req: Request<CompleteRequest>) -> Result<Response<Ack>, Status> {
+        let r = req.into_inner();
+        check_worker(&r.worker_id)?;
+        let outputs = check_files(&self.st, &r.outputs)?;
+        if r.result_json.len() > 1 << 20 {
+            return Err(Status::invalid_argument("result_json over 1 MiB"));
+        }
+        // Committed before the reply: a worker that hears "ok" may forget the job.
+        let o = self
+            .st
+            .store
+            .complete(r.lease_id, &outputs, &r.result_json)
+            .map_err(internal)?;
+        self.kick(o);
+        Ok(Response::new(Ack {}))
+    }
+
+    async fn fail(&self, req: Request<FailRequest>) -> Result<Response<Ack>, Status> {
+        let r = req.into_inner();
+        check_worker(&r.worker_id)?;
+        let error: String = r.error.chars().take(8000).collect();
+        let o = self
+            .st
+            .store
+            .fail(r.lease_id, &error, r.requeue, self.st.config.max_failures)
+            .map_err(internal)?;
+        self.kick(o);
+        Ok(Response::new(Ack {}))
+    }
+
+    async fn put_artifact(
+        &self,
+        req: Request<Streaming<Chunk>>,
+    ) -> Result<Response<ArtifactInfo>, Status> {
+        let mut stream = req.into_inner();
+        let first = stream
+            .message()
+            .await?
+            .ok_or_else(|| Status::invalid_argument("empty upload"))?;
+        if !valid_sha(&first.sha256) {
+            return Err(Status::invalid_argument("the first chunk must carry the sha256"));
+        }
+        if first.size > MAX_ARTIFACT_BYTES {
+            return Err(Status::resource_exhausted(format!(
+                "artifact of {} bytes is over the limit of {MAX_ARTIFACT_BYTES}",
+                first.size
+            )));
+        }
+        let mut bytes = Vec::with_capacity(first.size as usize);
+        bytes.extend_from_slice(&first.data);
+        while let Some(c) = stream.message().await? {
+            bytes.extend_from_slice(&c.data);
+            if bytes.len() as u64 > first.size {
+                return Err(Status::invalid_argument("more bytes than announced"));
+            }
+        }
+        if bytes.len() as u64 != first.size {
+            return Err(Status::invalid_argument(format!(
+                "{} bytes received, {} announced",
+                bytes.len(),
+                first.size
+            )));
+        }
+        let st = self.st.clone();
+        let sha = first.sha256.clone();
+        let size = bytes.len() as u64;
+        tokio::task::spawn_blocking(move || -> Result<(), Status> {
+            st.artifacts
+                .put(&bytes, Some(&sha))
+                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            st.store.add_artifact(&sha, size).map_err(internal)
+        })
+        .await
+        .map_err(internal)??;
+        Ok(Response::new(ArtifactInfo {
+            sha256: first.sha256,
+            size,
+        }))
+    }
+
+    type GetArtifactStream = ChunkStream;
+
+    async fn get_artifact(
+        &self,
+        req: Request<ArtifactRequest>,
+    ) -> Result<Response<Self::GetArtifactStream>, Status> {
+        let sha = req.into_inner().sha256;
+        if !valid_sha(&sha) {
+            return Err(Status::invalid_argument("not a sha256"));
+        }
+        let bytes = self
+            .st
+            .artifacts
+            .read(&sha)
+            .map_err(|_| Status::not_found(format!("no artifact {sha}")))?;
+        let size = bytes.len() as u64;
+        let mut chunks: Vec<Result<Chunk, Status>> = bytes
+            .chunks(CHUNK_BYTES)
+            .map(|c| {
+                Ok(Chunk {
+                    sha256: sha.clone(),
+                    size,
+                    data: c.to_vec(),
+                })
+            })
+            .collect();
+        if chunks.is_empty() {
+            chunks.push(Ok(Chunk {
+                sha256: sha,
+                size: 0,
+                data: vec![],
+            }));
+        }
+        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+    }
+
+    async fn missing_artifacts(
+        &self,
+        req: Request<ArtifactList>,
+    ) -> Result<Response<ArtifactList>, Status> {
+        let list = req.into_inner();
+        if list.sha256.len() > 100_000 {
+            return Err(Status::invalid_argument("too many hashes"));
+        }
+        Ok(Response::new(ArtifactList {
+            sha256: list
+                .sha256
+                .into_iter()
+                .filter(|s| !self.st.artifacts.has(s))
+                .collect(),
+        }))
+    }
+
+    async fn submit(&self, req: Request<SubmitRequest>) -> Result<Response<SubmitReply>, Status> {
+        let r = req.into_inner();
+        let bundle_files = check_files(&self.st, &r.bundle)?;
+        let surrogate = check_files(&self.st, &r.surrogate)?;
+        if let Some(f) = surrogate.iter().find(|f| !f.path.starts_with("surrogate/")) {
+            return Err(Status::invalid_argument(format!(
+                "surrogate file {} must be under surrogate/",
+                f.path
+            )));
+        }
+        let id = format!("r{}", &crate::auth::random_token()[..10]);
+        let st = self.st.clone();
+        let (idc, files) = (id.clone(), bundle_files.clone());
+        // Validate the way a run will load it: the project file, the model, the parameters,
+        // the meters CSV and the weather.
+        let project = tokio::task::spawn_blocking(move || -> Result<_, String> {
+            let dir = st.run_dir(&idc);
+            let pdir = dir.join("project");
+            let pf = bundle::materialize(&files, &st.artifacts, &pdir)?;
+            let project = bemcal_calibrate::Project::load(&pf).map_err(|e| e.to_string())?;
+            bemcal_calibrate::pipeline::load_inputs(&project).map_err(|e| e.to_string())?;
+            Ok(project)
+        })
+        .await
+        .map_err(internal)?;
+        let project = match project {
+            Ok(p) => p,
+            Err(e) => {
+                let dir = self.st.run_dir(&id);
+                let _ = std::fs::remove_dir_all(&dir);
+                let prefix = format!("{}/", dir.join("project").display());
+                return Err(Status::invalid_argument(format!(
+                    "invalid project: {}",
+                    e.replace(&prefix, "")
+                )));
+            }
+        };
+        self.st
+            .store
+            .create_run(&id, &project.name, &bundle_files, &surrogate, project.mcmc.iterations)
+            .map_err(internal)?;
+        let _ = self.st.kick.send(id.clone());
+        Ok(Response::new(SubmitReply { run_id: id }))
+    }
+
+    async fn list_runs(
+        &self,
+        _: Request<ListRunsRequest>,
+    ) -> Result<Response<ListRunsReply>, Status> {
+        let runs = self.st.store.runs().map_err(internal)?;
+        let runs = runs
+            .iter()
+            .map(|r| self.status(r, false))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Response::new(ListRunsReply { runs }))
+    }
+
+    async fn get_run(&self, req: Request<RunRequest>) -> Result<Response<RunStatus>, Status> {
+        let id = req.into_inner().run_id;
+        let r = self
+            .st
+            .store
+            .run(&id)
+            .map_err(internal)?
+            .ok_or_else(|| Status::not_found(format!("no run {id:?}")))?;
+        Ok(Response::new(self.status(&r, true)?))
+    }
+
+    async fn cancel(&self, req: Request<RunRequest>) -> Result<Response<RunStatus>, Status> {
+        let id = req.into_inner().run_id;
+        if self.st.store.run(&id).map_err(internal)?.is_none() {
+            return Err(Status::not_found(format!("no run {id:?}")));
+        }
+        self.st
+            .store
+            .end_run(&id, "cancelled", Some("cancelled by request"))
+            .map_err(internal)?;
+        let r = self.st.store.run(&id).map_err(internal)?.ok_or_else(|| Status::not_found(id))?;
+        Ok(Response::new(self.status(&r, false)?))
+    }
+}

@@ -1,0 +1,205 @@
+//! `bemcal coordinator`: serves runs to workers over gRPC; also the client options shared by
+//! `submit`, `status`, `watch`, `results`, `cancel` and `worker`, and the local mode of
+//! `bemcal calibrate --local-workers N`.
+
+use std::io::{BufRead, Write};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use anyhow::Context;
+use bemcal_calibrate::Summary;
+use bemcal_coordinator::auth::{load_token, random_token, TOKEN_ENV};
+use bemcal_coordinator::client::{self, Connect};
+use bemcal_coordinator::driver::Config;
+use bemcal_coordinator::server::{serve, Options};
+
+/// Serve calibration runs to pull-based workers (state in DATA/coordinator.db).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Address to listen on (port 0: any free port; the bound address is printed).
+    #[arg(long, default_value = "127.0.0.1:50051")]
+    pub listen: SocketAddr,
+    /// State folder (database, artifacts, run folders).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// File with the bearer token (default: env BEMCAL_TOKEN).
+    #[arg(long)]
+    pub token_file: Option<PathBuf>,
+    /// TLS certificate (PEM); with --tls-key, serve https.
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+    /// Seconds a lease lasts without a heartbeat.
+    #[arg(long, default_value_t = 30.0)]
+    pub lease_ttl: f64,
+    /// Failed attempts after which a job fails its run.
+    #[arg(long, default_value_t = 3)]
+    pub max_failures: u32,
+    /// Chains per chain-segment job (0: all in one job, bit-identical to the local path).
+    #[arg(long, default_value_t = 0)]
+    pub chains_per_job: usize,
+    /// Extend the chains while max R-hat is above this (off by default).
+    #[arg(long)]
+    pub rhat_target: Option<f64>,
+    /// Most extensions when --rhat-target is given.
+    #[arg(long, default_value_t = 2)]
+    pub max_extensions: u32,
+}
+
+/// Where the coordinator is and how to authenticate.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ClientArgs {
+    /// Coordinator URL.
+    #[arg(long, default_value = "http://127.0.0.1:50051")]
+    pub coordinator: String,
+    /// File with the bearer token (default: env BEMCAL_TOKEN).
+    #[arg(long)]
+    pub token_file: Option<PathBuf>,
+    /// CA certificate (PEM) for an https coordinator.
+    #[arg(long)]
+    pub tls_ca: Option<PathBuf>,
+}
+
+impl ClientArgs {
+    pub fn connect(&self) -> anyhow::Result<Connect> {
+        Ok(Connect {
+            url: self.coordinator.clone(),
+            token: load_token(self.token_file.as_deref())?,
+            tls_ca: self.tls_ca.clone(),
+        })
+    }
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let token = load_token(a.token_file.as_deref())?;
+    if a.lease_ttl.is_nan() || a.lease_ttl < 1.0 {
+        anyhow::bail!("--lease-ttl must be at least 1 s");
+    }
+    let opts = Options {
+        listen: a.listen,
+        data: a.data,
+        token,
+        tls: a.tls_cert.zip(a.tls_key),
+        config: Config {
+            lease_ttl_ms: (a.lease_ttl * 1000.0) as u64,
+            max_failures: a.max_failures.max(1),
+            chains_per_job: a.chains_per_job,
+            rhat_target: a.rhat_target,
+            max_extensions: a.max_extensions,
+        },
+    };
+    let rt = bemcal_coordinator::runtime()?;
+    rt.block_on(serve(
+        opts,
+        |addr| {
+            println!("listening on {addr}");
+            let _ = std::io::stdout().flush();
+        },
+        bemcal_coordinator::shutdown_signal(),
+    ))
+}
+
+/// Kills the local coordinator and workers when dropped (SIGTERM, then wait).
+struct Children(Vec<Child>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for c in self.0.iter().rev() {
+            // SAFETY: sending a signal to a child process we started.
+            unsafe {
+                libc::kill(c.id() as i32, libc::SIGTERM);
+            }
+        }
+        for c in self.0.iter_mut().rev() {
+            let t0 = std::time::Instant::now();
+            while t0.elapsed().as_secs() < 20 {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// `bemcal calibrate --local-workers N`: a coordinator and N worker processes on loopback run
+/// the calibration; the results land in `out` as with the single-process path. A surrogate
+/// already in `out/surrogate` is reused (as the local path does).
+pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Result<Summary> {
+    let exe = std::env::current_exe().context("locating the bemcal binary")?;
+    let base = out.join(".distributed");
+    std::fs::create_dir_all(&base)?;
+    let token = random_token();
+    let t0 = std::time::Instant::now();
+    let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
+    let mut coord = Command::new(&exe)
+        .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
+        .arg(base.join("coordinator"))
+        .env(TOKEN_ENV, &token)
+        .stdout(Stdio::piped())
+        .spawn()
+        .context("starting the coordinator")?;
+    let mut line = String::new();
+    std::io::BufReader::new(coord.stdout.take().context("coordinator stdout")?)
+        .read_line(&mut line)?;
+    let mut children = Children(vec![coord]);
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .with_context(|| format!("the coordinator did not start: {line:?}"))?
+        .to_string();
+    let url = format!("http://{addr}");
+    log(&format!("coordinator on {url}; starting {workers} workers"));
+    for i in 0..workers {
+        let w = Command::new(&exe)
+            .args(["worker", "--coordinator", &url, "--slots", "1", "--id"])
+            .arg(format!("local-{i}"))
+            .arg("--cache")
+            .arg(base.join(format!("worker-{i}")))
+            .env(TOKEN_ENV, &token)
+            .spawn()
+            .context("starting a worker")?;
+        children.0.push(w);
+    }
+    let connect = Connect {
+        url,
+        token,
+        tls_ca: None,
+    };
+    let surrogate = out.join("surrogate");
+    let reuse = bemcal_surrogate_meta_ok(&surrogate);
+    let rt = bemcal_coordinator::runtime()?;
+    let summary = rt.block_on(async {
+        let mut c = connect.client()?;
+        if reuse {
+            log("surrogate: reusing the one trained earlier");
+        }
+        let run = client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path()))
+            .await?;
+        log(&format!("run {run} submitted"));
+        let st = client::watch(&mut c, &run, |s| {
+            log(&format!("{} ({})", s.stage, s.state));
+            for l in client::progress_lines(s) {
+                eprintln!("{l}");
+            }
+        })
+        .await?;
+        if st.state != "done" {
+            anyhow::bail!("run {run} {}: {}", st.state, st.error);
+        }
+        let n = client::fetch_results(&mut c, &run, out).await?;
+        log(&format!("{n} result files written to {}", out.display()));
+        let s: Summary = serde_json::from_str(&st.summary_json)?;
+        Ok::<_, anyhow::Error>(s)
+    })?;
+    drop(children);
+    Ok(summary)
+}
+
+fn bemcal_surrogate_meta_ok(dir: &Path) -> bool {
+    bemcal_surrogate::SurrogateMeta::read(dir).is_ok()
+}

@@ -1,0 +1,26 @@
+//! `bemcal results`: downloads a finished run's files (the local `calibrate` layout).
+
+use std::path::PathBuf;
+
+use super::coordinator::ClientArgs;
+
+/// Download summary.json, draws.csv, posterior_predictive.csv, surrogate/, validation/, ...
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    pub run: String,
+    #[arg(long)]
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub client: ClientArgs,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let connect = a.client.connect()?;
+    let rt = bemcal_coordinator::runtime()?;
+    let n = rt.block_on(async {
+        let mut c = connect.client()?;
+        bemcal_coordinator::client::fetch_results(&mut c, &a.run, &a.out).await
+    })?;
+    println!("{n} files written to {}", a.out.display());
+    Ok(())
+}

@@ -1,0 +1,97 @@
+//! `bemcal status`: runs and their progress per stage.
+
+use super::coordinator::ClientArgs;
+use bemcal_coordinator::proto::{ListRunsRequest, RunRequest, RunStatus};
+
+/// Show one run (or all runs) with per-stage progress.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Run id (default: every run).
+    pub run: Option<String>,
+    #[command(flatten)]
+    pub client: ClientArgs,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A run's status as JSON.
+pub fn to_json(s: &RunStatus) -> serde_json::Value {
+    serde_json::json!({
+        "run": s.run_id,
+        "name": s.name,
+        "state": s.state,
+        "stage": s.stage,
+        "error": s.error,
+        "jobs": s.jobs_total,
+        "attempts": s.attempts_total,
+        "created_ms": s.created_ms,
+        "finished_ms": s.finished_ms,
+        "stages": s.stages.iter().map(|g| serde_json::json!({
+            "stage": g.stage, "state": g.state, "done": g.done, "total": g.total, "running": g.running,
+        })).collect::<Vec<_>>(),
+        "jobs": s.jobs.iter().map(|j| serde_json::json!({
+            "id": j.job_id, "stage": j.stage, "label": j.label, "state": j.state,
+            "attempts": j.attempts, "worker": j.worker, "cached": j.cached,
+            "result": serde_json::from_str::<serde_json::Value>(&j.result_json).unwrap_or_default(),
+        })).collect::<Vec<_>>(),
+        "results": s.results.iter().map(|f| serde_json::json!({
+            "path": f.path, "sha256": f.sha256, "size": f.size,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let connect = a.client.connect()?;
+    let rt = bemcal_coordinator::runtime()?;
+    let runs = rt.block_on(async {
+        let mut c = connect.client()?;
+        let runs = match &a.run {
+            Some(id) => vec![c
+                .get_run(RunRequest { run_id: id.clone() })
+                .await
+                .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+                .into_inner()],
+            None => {
+                c.list_runs(ListRunsRequest {})
+                    .await
+                    .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+                    .into_inner()
+                    .runs
+            }
+        };
+        Ok::<_, anyhow::Error>(runs)
+    })?;
+    if a.json {
+        let v: Vec<_> = runs.iter().map(to_json).collect();
+        let v = if a.run.is_some() {
+            v.into_iter().next().unwrap_or_default()
+        } else {
+            serde_json::Value::Array(v)
+        };
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    for s in &runs {
+        println!(
+            "{}  {:<24} {:<9} stage {:<9} jobs {:>3} attempts {:>3}{}",
+            s.run_id,
+            s.name,
+            s.state,
+            s.stage,
+            s.jobs_total,
+            s.attempts_total,
+            if s.error.is_empty() {
+                String::new()
+            } else {
+                format!("\n  error: {}", s.error)
+            }
+        );
+        if a.run.is_some() {
+            for l in bemcal_coordinator::client::progress_lines(s) {
+                println!("{l}");
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,29 @@
+//! `bemcal submit`: bundles a project's files, uploads them and starts a run; prints its id.
+
+use std::path::PathBuf;
+
+use super::coordinator::ClientArgs;
+
+/// Submit a calibration project to a coordinator (the files are validated there).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Project file (TOML).
+    pub project: PathBuf,
+    #[command(flatten)]
+    pub client: ClientArgs,
+    /// A trained surrogate folder to use instead of training one.
+    #[arg(long)]
+    pub surrogate: Option<PathBuf>,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let connect = a.client.connect()?;
+    let rt = bemcal_coordinator::runtime()?;
+    let id = rt.block_on(async {
+        let mut c = connect.client()?;
+        bemcal_coordinator::client::submit_project(&mut c, &a.project, a.surrogate.as_deref())
+            .await
+    })?;
+    println!("{id}");
+    Ok(())
+}

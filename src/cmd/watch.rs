@@ -1,0 +1,37 @@
+//! `bemcal watch`: follows a run, printing per-stage progress whenever it changes.
+
+use super::coordinator::ClientArgs;
+
+/// Follow a run until it ends (exit status 1 if it fails or is cancelled).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    pub run: String,
+    #[command(flatten)]
+    pub client: ClientArgs,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let connect = a.client.connect()?;
+    let rt = bemcal_coordinator::runtime()?;
+    let t0 = std::time::Instant::now();
+    let st = rt.block_on(async {
+        let mut c = connect.client()?;
+        bemcal_coordinator::client::watch(&mut c, &a.run, |s| {
+            println!(
+                "[{:>7.1} s] run {} {} (stage {})",
+                t0.elapsed().as_secs_f64(),
+                s.run_id,
+                s.state,
+                s.stage
+            );
+            for l in bemcal_coordinator::client::progress_lines(s) {
+                println!("{l}");
+            }
+        })
+        .await
+    })?;
+    if st.state != "done" {
+        anyhow::bail!("run {} {}: {}", st.run_id, st.state, st.error);
+    }
+    Ok(())
+}

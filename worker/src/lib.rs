@@ -1,0 +1,265 @@
+//! A bemcal worker: pulls jobs from the coordinator and runs them (EnergyPlus design points,
+//! surrogate training, chain segments, validation), with a heartbeat per job. Inputs arrive as
+//! content-addressed artifacts, fetched once into the cache folder; outputs go back as
+//! artifacts before the job is reported complete.
+//!
+//! On shutdown (SIGTERM) the worker leases nothing more, lets running jobs finish for up to
+//! `drain` and gives back the leases of those still running after that.
+
+pub mod cache;
+pub mod exec;
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use bemcal_coordinator::client::{upload_file, Client, Connect};
+use bemcal_coordinator::proto::{self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest};
+use tokio::sync::Semaphore;
+
+use crate::cache::Cache;
+
+/// How to run a worker.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub connect: Connect,
+    /// Jobs at once.
+    pub slots: usize,
+    /// Artifact cache and job folders.
+    pub cache: PathBuf,
+    pub worker_id: String,
+    /// How long running jobs may take to finish after a shutdown request.
+    pub drain: Duration,
+}
+
+/// Retries an RPC while the coordinator is unreachable (it may be restarting), for up to
+/// `patience`; other errors are returned at once.
+async fn retry<T, F, Fut>(patience: Duration, mut f: F) -> Result<T, tonic::Status>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<T, tonic::Status>>,
+{
+    let t0 = std::time::Instant::now();
+    loop {
+        match f().await {
+            Ok(v) => return Ok(v),
+            Err(e)
+                if matches!(
+                    e.code(),
+                    tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Cancelled
+                ) && t0.elapsed() < patience =>
+            {
+                tokio::time::sleep(Duration::from_millis(500)).await;
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Runs the worker until `shutdown` completes (then drains).
+pub async fn run(
+    opts: Options,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let client = opts.connect.client()?;
+    let cache = Arc::new(Cache::new(&opts.cache)?);
+    let stopping = Arc::new(AtomicBool::new(false));
+    let slots = Arc::new(Semaphore::new(opts.slots.max(1)));
+    let give_back = Arc::new(AtomicBool::new(false));
+    {
+        let stopping = stopping.clone();
+        tokio::spawn(async move {
+            shutdown.await;
+            stopping.store(true, Ordering::SeqCst);
+        });
+    }
+    let mut tasks = tokio::task::JoinSet::new();
+    while !stopping.load(Ordering::SeqCst) {
+        let permit = tokio::select! {
+            p = slots.clone().acquire_owned() => p?,
+            _ = tokio::time::sleep(Duration::from_millis(200)) => continue,
+        };
+        let mut c = client.clone();
+        let reply = c
+            .lease(LeaseRequest {
+                worker_id: opts.worker_id.clone(),
+                free_slots: (slots.available_permits() + 1) as u32,
+            })
+            .await;
+        let job = match reply {
+            Ok(r) => r.into_inner().job,
+            Err(e) if e.code() == tonic::Code::Unauthenticated => {
+                anyhow::bail!("the coordinator refused the token: {}", e.message())
+            }
+            Err(e) => {
+                eprintln!("worker {}: lease: {}", opts.worker_id, e.message());
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                continue;
+            }
+        };
+        let Some(job) = job else {
+            drop(permit);
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            continue;
+        };
+        let (client, cache, id, give_back) = (
+            client.clone(),
+            cache.clone(),
+            opts.worker_id.clone(),
+            give_back.clone(),
+        );
+        tasks.spawn(async move {
+            handle(client, cache, id, job, give_back).await;
+            drop(permit);
+        });
+        while tasks.try_join_next().is_some() {}
+    }
+    // Draining: let running jobs finish, then give back what is left.
+    let drained = tokio::time::timeout(opts.drain, async {
+        while tasks.join_next().await.is_some() {}
+    })
+    .await;
+    if drained.is_err() {
+        give_back.store(true, Ordering::SeqCst);
+        let _ = tokio::time::timeout(Duration::from_secs(10), async {
+            while tasks.join_next().await.is_some() {}
+        })
+        .await;
+    }
+    Ok(())
+}
+
+/// Runs one job: heartbeats while it runs, then uploads its outputs and reports.
+async fn handle(
+    mut client: Client,
+    cache: Arc<Cache>,
+    worker: String,
+    job: proto::Job,
+    give_back: Arc<AtomicBool>,
+) {
+    let lease = job.lease_id;
+    let ttl = Duration::from_millis(job.lease_ttl_ms.max(1000) as u64);
+    let beat = {
+        let mut c = client.clone();
+        let worker = worker.clone();
+        tokio::spawn(async move {
+            loop {
+                tokio::time::sleep(ttl / 3).await;
+                let r = c
+                    .heartbeat(HeartbeatRequest {
+                        worker_id: worker.clone(),
+                        lease_id: lease,
+                    })
+                    .await;
+                if let Ok(r) = r {
+                    if !r.into_inner().ok {
+                        return;
+                    }
+                }
+            }
+        })
+    };
+    let work = {
+        let (cache, client, job) = (cache.clone(), client.clone(), job.clone());
+        async move {
+            let (bundle, dir) = cache.prepare(client, &job).await?;
+            let job2 = job.clone();
+            let d2 = dir.clone();
+            let out = tokio::task::spawn_blocking(move || exec::execute(&job2, &bundle, &d2))
+                .await
+                .map_err(|e| format!("job panicked: {e}"))??;
+            Ok::<_, String>((dir, out))
+        }
+    };
+    let give_back_wait = async {
+        loop {
+            if give_back.load(Ordering::SeqCst) {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    };
+    let outcome = tokio::select! {
+        r = work => Some(r),
+        _ = give_back_wait => None,
+    };
+    let patience = Duration::from_secs(600);
+    match outcome {
+        None => {
+            let _ = client
+                .fail(FailRequest {
+                    worker_id: worker,
+                    lease_id: lease,
+                    error: "worker shutting down".into(),
+                    requeue: true,
+                })
+                .await;
+        }
+        Some(Ok((dir, (files, result)))) => {
+            let mut outputs = vec![];
+            let mut upload_err = None;
+            for (rel, path) in files {
+                let r = retry(patience, || {
+                    let (path, rel, mut c) = (path.clone(), rel.clone(), client.clone());
+                    async move {
+                        upload_file(&mut c, &path, &rel)
+                            .await
+                            .map_err(|e| tonic::Status::unavailable(e.to_string()))
+                    }
+                })
+                .await;
+                match r {
+                    Ok(f) => outputs.push(proto::FileRef::from(&f)),
+                    Err(e) => upload_err = Some(e.message().to_string()),
+                }
+            }
+            let r = match upload_err {
+                Some(e) => {
+                    retry(patience, || {
+                        let mut c = client.clone();
+                        let req = FailRequest {
+                            worker_id: worker.clone(),
+                            lease_id: lease,
+                            error: format!("uploading outputs: {e}"),
+                            requeue: false,
+                        };
+                        async move { c.fail(req).await }
+                    })
+                    .await
+                    .map(|_| ())
+                }
+                None => retry(patience, || {
+                    let mut c = client.clone();
+                    let req = CompleteRequest {
+                        worker_id: worker.clone(),
+                        lease_id: lease,
+                        outputs: outputs.clone(),
+                        result_json: result.clone(),
+                    };
+                    async move { c.complete(req).await }
+                })
+                .await
+                .map(|_| ()),
+            };
+            if let Err(e) = r {
+                eprintln!("worker {worker}: reporting job {}: {}", job.job_id, e.message());
+            }
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        Some(Err(e)) => {
+            let _ = retry(patience, || {
+                let mut c = client.clone();
+                let req = FailRequest {
+                    worker_id: worker.clone(),
+                    lease_id: lease,
+                    error: e.clone(),
+                    requeue: false,
+                };
+                async move { c.fail(req).await }
+            })
+            .await;
+        }
+    }
+    beat.abort();
+}
