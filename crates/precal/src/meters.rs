@@ -4,7 +4,7 @@
 //! # Rules (documented behaviour)
 //!
 //! * **Timestamps** are parsed with a chrono format string ([`MeterSpec::timestamp_format`],
-//!   default `%m/%d/%Y %H:%M`; single-digit months/days/hours such as `1/13/2011 0:00` parse
+//!   default `auto`: ISO 8601, else `%m/%d/%Y %H:%M`; single-digit months/days/hours such as `1/13/2011 0:00` parse
 //!   too) or `iso8601` (`2011-01-13T05:00`, `2011-01-13 05:00:00`, or RFC 3339 with a UTC offset,
 //!   which is converted to local standard time with the site's standard offset). A time of
 //!   `24:00` means 00:00 of the next day.
@@ -44,8 +44,11 @@ pub const HOURS: usize = 8760;
 
 const CUM_DAYS: [usize; 13] = [0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334, 365];
 
-/// Default timestamp format (`01/13/2011 05:00`).
-pub const DEFAULT_TIMESTAMP_FORMAT: &str = "%m/%d/%Y %H:%M";
+/// Default timestamp format: `auto` = ISO 8601, else US `%m/%d/%Y %H:%M` (`01/13/2011 05:00`).
+pub const DEFAULT_TIMESTAMP_FORMAT: &str = "auto";
+
+/// The US month/day/year form tried by `auto` after ISO 8601.
+pub const US_TIMESTAMP_FORMAT: &str = "%m/%d/%Y %H:%M";
 
 /// What a meter measures.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -302,7 +305,8 @@ pub struct MeterSpec {
     /// Timestamp column; default: the first header containing "time" or "date".
     #[serde(default)]
     pub timestamp_column: Option<String>,
-    /// chrono format string, or `iso8601`.
+    /// chrono format string, `iso8601`, or `auto` (the default: ISO 8601, else
+    /// `%m/%d/%Y %H:%M`).
     #[serde(default = "default_format")]
     pub timestamp_format: String,
     /// Hour-beginning or hour-ending stamps.
@@ -459,6 +463,15 @@ fn parse_timestamp(
         }
         _ => (s.to_string(), false),
     };
+    if format.eq_ignore_ascii_case("auto") {
+        return parse_timestamp(s, "iso8601", std_offset_h)
+            .or_else(|_| parse_timestamp(s, US_TIMESTAMP_FORMAT, std_offset_h))
+            .map_err(|_| {
+                format!(
+                    "timestamp '{s}' is neither ISO 8601 (2011-01-13T05:00) nor {US_TIMESTAMP_FORMAT} (01/13/2011 05:00); set timestamp_format"
+                )
+            });
+    }
     let mut offset = false;
     let dt = if format.eq_ignore_ascii_case("iso8601") || format.eq_ignore_ascii_case("iso") {
         if let Ok(dt) = chrono::DateTime::parse_from_rfc3339(&text) {
