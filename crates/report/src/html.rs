@@ -1,0 +1,822 @@
+//! Assembles the report: tables and inline SVG figures in one HTML string (pure).
+
+use std::fmt::Write as _;
+
+use crate::analysis;
+use crate::io::{CalibrationData, OutputMetrics, PrecalData};
+use crate::plots::{self, HourlyView, PriorPosterior};
+use crate::ReportError;
+
+/// ASHRAE Guideline 14 hourly NMBE limit, % (absolute value).
+pub const G14_NMBE_LIMIT: f64 = 10.0;
+/// ASHRAE Guideline 14 hourly CV-RMSE limit, %.
+pub const G14_CV_RMSE_LIMIT: f64 = 30.0;
+/// R-hat above this is flagged (chains have not mixed).
+pub const RHAT_LIMIT: f64 = 1.01;
+/// Bulk ESS below this is flagged.
+pub const ESS_LIMIT: f64 = 400.0;
+/// Width ratio (posterior 90 % interval / prior's) above this: the data barely informed it.
+pub const WIDTH_RATIO_LIMIT: f64 = 0.9;
+
+const CSS: &str = "
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}
+main{max-width:1160px;margin:0 auto;padding:16px 24px 48px;background:#fff}
+h1{font-size:24px;margin:8px 0 4px}h2{font-size:19px;margin:28px 0 8px;border-bottom:1px solid #ddd;padding-bottom:4px}
+h3{font-size:15px;margin:16px 0 6px}
+p.sub{color:#666;margin:0 0 12px}
+table{border-collapse:collapse;font-size:13px;margin:6px 0 10px}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}th{background:#f2f2f2}
+td.l,th.l{text-align:left}
+.pass{color:#1a7f37;font-weight:600}.fail{color:#c62828;font-weight:600}
+.flag{background:#fdecea}
+.badge{display:inline-block;padding:2px 8px;border-radius:10px;font-size:13px;font-weight:600}
+.ok{background:#e6f4ea;color:#1a7f37}.bad{background:#fdecea;color:#c62828}
+ul.warn li{margin:2px 0}
+.grid{display:flex;flex-wrap:wrap;gap:10px}
+figure{margin:4px 0;padding:0}figcaption{font-size:12.5px;color:#333;margin:2px 0 0}
+.legend{font-size:12.5px;margin:4px 0}.legend span{margin-right:14px;white-space:nowrap}
+.sw{display:inline-block;width:14px;height:10px;margin-right:4px;vertical-align:middle}
+.ln{display:inline-block;width:18px;height:0;border-top:2px solid;margin-right:4px;vertical-align:middle}
+svg{display:block}
+pre{font-size:11.5px;background:#f6f6f6;padding:8px;overflow-x:auto}
+nav a{margin-right:12px;font-size:13px}
+";
+
+/// Escapes text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn f(x: f64, digits: usize) -> String {
+    if x.is_finite() {
+        format!("{x:.digits$}")
+    } else {
+        "&ndash;".into()
+    }
+}
+
+/// A value with about four significant digits.
+fn g(x: f64) -> String {
+    if !x.is_finite() {
+        return "&ndash;".into();
+    }
+    let a = x.abs();
+    let d = if a >= 1000.0 {
+        0
+    } else if a >= 100.0 {
+        1
+    } else if a >= 10.0 {
+        2
+    } else if a >= 1.0 {
+        3
+    } else {
+        4
+    };
+    format!("{x:.d$}")
+}
+
+fn duration(s: f64) -> String {
+    if !s.is_finite() {
+        "&ndash;".into()
+    } else if s < 1.0 {
+        format!("{:.0} ms", s * 1000.0)
+    } else if s < 120.0 {
+        format!("{s:.1} s")
+    } else if s < 7200.0 {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{:.2} h", s / 3600.0)
+    }
+}
+
+fn rgb(c: plotters::style::RGBColor) -> String {
+    format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
+}
+
+fn legend(items: &[(plotters::style::RGBColor, &str, bool)]) -> String {
+    let mut s = String::from("<div class=\"legend\">");
+    for (c, label, line) in items {
+        if *line {
+            let _ = write!(
+                s,
+                "<span><i class=\"ln\" style=\"border-color:{}\"></i>{}</span>",
+                rgb(*c),
+                label
+            );
+        } else {
+            let _ = write!(
+                s,
+                "<span><i class=\"sw\" style=\"background:{}\"></i>{}</span>",
+                rgb(*c),
+                label
+            );
+        }
+    }
+    s.push_str("</div>");
+    s
+}
+
+/// A figure: the SVG inline (its namespace attribute dropped: HTML needs none, and the report
+/// then holds no URL at all) and a caption.
+fn figure(svg: &str, caption: &str) -> String {
+    let svg = svg.replacen(" xmlns=\"http://www.w3.org/2000/svg\"", "", 1);
+    format!("<figure>{svg}<figcaption>{caption}</figcaption></figure>")
+}
+
+fn g14_pass(m: &OutputMetrics) -> bool {
+    m.nmbe.abs() <= G14_NMBE_LIMIT && m.cv_rmse <= G14_CV_RMSE_LIMIT
+}
+
+fn pass_cell(m: Option<&OutputMetrics>) -> String {
+    match m {
+        None => "<td>&ndash;</td><td>&ndash;</td><td>&ndash;</td>".into(),
+        Some(m) => {
+            let nm = if m.nmbe.abs() <= G14_NMBE_LIMIT {
+                ""
+            } else {
+                " class=\"flag\""
+            };
+            let cv = if m.cv_rmse <= G14_CV_RMSE_LIMIT {
+                ""
+            } else {
+                " class=\"flag\""
+            };
+            let p = if g14_pass(m) {
+                "<td class=\"pass\">pass</td>"
+            } else {
+                "<td class=\"fail\">fail</td>"
+            };
+            format!(
+                "<td{nm}>{}</td><td{cv}>{}</td>{p}",
+                f(m.nmbe, 1),
+                f(m.cv_rmse, 1)
+            )
+        }
+    }
+}
+
+/// The whole report as one self-contained HTML document.
+pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<String, ReportError> {
+    let s = &cal.summary;
+    let post = &s.posterior;
+    let mut h = String::with_capacity(1 << 20);
+    let title = if s.project.is_empty() {
+        "calibration".to_string()
+    } else {
+        s.project.clone()
+    };
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+<meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">\
+<title>bemcal report: {}</title><style>{CSS}</style></head><body><main>\n",
+        esc(&title)
+    );
+    let n_chains = cal.draws.chains.len();
+    let n_draws = cal
+        .draws
+        .chains
+        .first()
+        .and_then(|c| c.first())
+        .map_or(0, Vec::len);
+    let conv = if s.converged {
+        "<span class=\"badge ok\">converged</span>"
+    } else {
+        "<span class=\"badge bad\">not converged</span>"
+    };
+    let _ = write!(
+        h,
+        "<h1>Calibration report: {} {conv}</h1><p class=\"sub\">{} &middot; outputs: {} &middot; \
+{} parameters &middot; {} chains &times; {} draws &middot; {} design points &middot; estimate: {}</p>\n",
+        esc(&title),
+        esc(&cal.dir.display().to_string()),
+        esc(&s.outputs.join(", ")),
+        s.parameters.len(),
+        n_chains,
+        n_draws,
+        s.design_points,
+        esc(&match &s.estimate {
+            serde_json::Value::String(x) => x.clone(),
+            serde_json::Value::Null => "?".into(),
+            v => v.to_string(),
+        })
+    );
+    h.push_str(
+        "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
+<a href=\"#parameters\">Parameters</a><a href=\"#prior-posterior\">Prior vs posterior</a>\
+<a href=\"#chains\">Chains</a><a href=\"#fit\">Measured vs calibrated</a><a href=\"#run\">Run</a>",
+    );
+    if precal.is_some() {
+        h.push_str("<a href=\"#precal\">Pre-calibration</a>");
+    }
+    h.push_str("</nav>\n");
+
+    // ---- warnings
+    let mut warn: Vec<String> = vec![];
+    for p in &post.parameters {
+        if p.rhat > RHAT_LIMIT {
+            warn.push(format!(
+                "<b>{}</b>: R-hat {:.3} &gt; {RHAT_LIMIT} &mdash; the chains disagree; run longer or check the trace plots.",
+                esc(&p.name),
+                p.rhat
+            ));
+        }
+    }
+    let low_ess: Vec<String> = post
+        .parameters
+        .iter()
+        .filter(|p| p.ess_bulk < ESS_LIMIT)
+        .map(|p| format!("{} ({:.0})", esc(&p.name), p.ess_bulk))
+        .collect();
+    if !low_ess.is_empty() {
+        warn.push(format!(
+            "Bulk ESS below {ESS_LIMIT:.0}: {} &mdash; posterior summaries are imprecise.",
+            low_ess.join(", ")
+        ));
+    }
+    for p in &post.parameters {
+        if p.width_ratio > WIDTH_RATIO_LIMIT {
+            warn.push(format!(
+                "<b>{}</b>: posterior 90 % interval is {:.0} % of the prior's &mdash; the meters did not inform it (not identifiable from these data).",
+                esc(&p.name),
+                100.0 * p.width_ratio
+            ));
+        }
+    }
+    for c in &post.correlated_pairs {
+        warn.push(format!(
+            "<b>{}</b> and <b>{}</b> are strongly correlated in the posterior (&rho; = {:+.2}): the data constrain a combination, not each one.",
+            esc(&c.a),
+            esc(&c.b),
+            c.rho
+        ));
+    }
+    for (k, a) in s.acceptance_rate.iter().enumerate() {
+        if !(0.05..=0.8).contains(a) {
+            warn.push(format!(
+                "Chain {k}: acceptance rate {:.1} % (outside 5&ndash;80 %): the proposal is badly scaled.",
+                100.0 * a
+            ));
+        }
+    }
+    for m in &s.validation {
+        if !g14_pass(m) {
+            warn.push(format!(
+                "Output <b>{}</b>: the calibrated model fails ASHRAE Guideline 14 (NMBE {:.1} %, CV-RMSE {:.1} %).",
+                esc(&m.output),
+                m.nmbe,
+                m.cv_rmse
+            ));
+        }
+    }
+    h.push_str("<h2 id=\"warnings\">Warnings</h2>");
+    if warn.is_empty() {
+        h.push_str("<p class=\"pass\">None: chains mixed, every parameter informed, every output passes.</p>");
+    } else {
+        h.push_str("<ul class=\"warn\">");
+        for w in &warn {
+            let _ = write!(h, "<li>{w}</li>");
+        }
+        h.push_str("</ul>");
+    }
+
+    // ---- metrics (Table 5)
+    let _ = write!(
+        h,
+        "<h2 id=\"metrics\">Goodness of fit (ASHRAE Guideline 14, hourly)</h2>\
+<p class=\"sub\">Limits: |NMBE| &le; {G14_NMBE_LIMIT:.0} %, CV-RMSE &le; {G14_CV_RMSE_LIMIT:.0} %. \
+Initial = EnergyPlus at the prior modes; calibrated = EnergyPlus at the estimate.</p>\
+<table><tr><th class=\"l\" rowspan=\"2\">output</th><th rowspan=\"2\">hours</th><th colspan=\"3\">initial</th>\
+<th colspan=\"3\">calibrated</th><th rowspan=\"2\">&sigma;<sub>&delta;</sub> kWh</th><th rowspan=\"2\">&sigma;<sub>&eta;</sub> kWh</th></tr>\
+<tr><th>NMBE %</th><th>CV-RMSE %</th><th>G14</th><th>NMBE %</th><th>CV-RMSE %</th><th>G14</th></tr>"
+    );
+    let lookup =
+        |v: &[(String, f64)], o: &str| v.iter().find(|x| x.0 == o).map_or(f64::NAN, |x| x.1);
+    for o in &s.outputs {
+        let i = s.initial.iter().find(|m| &m.output == o);
+        let c = s.validation.iter().find(|m| &m.output == o);
+        let n = c.or(i).map_or(0, |m| m.n);
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td>{n}</td>{}{}<td>{}</td><td>{}</td></tr>",
+            esc(o),
+            pass_cell(i),
+            pass_cell(c),
+            g(lookup(&s.sigma_delta_kwh, o)),
+            g(lookup(&s.sigma_eta_kwh, o)),
+        );
+    }
+    h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
+
+    // ---- parameters (Table 4)
+    h.push_str(
+        "<h2 id=\"parameters\">Estimated parameters</h2>\
+<table><tr><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>prior min</th><th>mode</th><th>max</th>\
+<th>prior 90 %</th><th>posterior mean &plusmn; sd</th><th>posterior 90 %</th><th>estimate</th>\
+<th>width ratio</th><th>R-hat</th><th>ESS bulk</th><th>ESS tail</th></tr>",
+    );
+    for (k, p) in s.parameters.iter().enumerate() {
+        let q = post
+            .parameters
+            .iter()
+            .find(|x| x.name == p.name)
+            .or(post.parameters.get(k));
+        let est = s
+            .calibrated_values
+            .iter()
+            .find(|x| x.0 == p.name)
+            .map_or(f64::NAN, |x| x.1);
+        let p5 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.05);
+        let p95 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.95);
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>",
+            esc(&p.name),
+            esc(&p.unit),
+            g(p.prior_min),
+            g(p.prior_mode),
+            g(p.prior_max),
+            g(p5),
+            g(p95)
+        );
+        match q {
+            Some(q) => {
+                let wr = if q.width_ratio > WIDTH_RATIO_LIMIT {
+                    " class=\"flag\""
+                } else {
+                    ""
+                };
+                let rh = if q.rhat > RHAT_LIMIT {
+                    " class=\"flag\""
+                } else {
+                    ""
+                };
+                let es = if q.ess_bulk < ESS_LIMIT {
+                    " class=\"flag\""
+                } else {
+                    ""
+                };
+                let _ = write!(
+                    h,
+                    "<td>{} &plusmn; {}</td><td>{}&ndash;{}</td><td><b>{}</b></td><td{wr}>{}</td><td{rh}>{}</td><td{es}>{}</td><td>{}</td></tr>",
+                    g(q.mean),
+                    g(q.sd),
+                    g(q.q5),
+                    g(q.q95),
+                    g(est),
+                    f(q.width_ratio, 2),
+                    f(q.rhat, 3),
+                    f(q.ess_bulk, 0),
+                    f(q.ess_tail, 0)
+                );
+            }
+            None => {
+                let _ = write!(h, "<td colspan=\"7\">no posterior summary</td></tr>");
+            }
+        }
+    }
+    h.push_str("</table>");
+    if !post.correlated_pairs.is_empty() {
+        h.push_str("<h3>Correlated pairs (|&rho;| &gt; 0.8)</h3><table><tr><th class=\"l\">a</th><th class=\"l\">b</th><th>&rho;</th></tr>");
+        for c in &post.correlated_pairs {
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:+.3}</td></tr>",
+                esc(&c.a),
+                esc(&c.b),
+                c.rho
+            );
+        }
+        h.push_str("</table>");
+    }
+
+    // ---- prior vs posterior (Fig. 10)
+    h.push_str("<h2 id=\"prior-posterior\">Prior vs posterior</h2>");
+    h.push_str(&legend(&[
+        (plots::PRIOR, "triangular prior", true),
+        (
+            plots::POSTERIOR,
+            "posterior (histogram + KDE, all chains)",
+            true,
+        ),
+        (plots::ESTIMATE, "estimate", true),
+    ]));
+    h.push_str(
+        "<p class=\"sub\">Light blue band: posterior 90 % interval.</p><div class=\"grid\">",
+    );
+    for (k, p) in s.parameters.iter().enumerate() {
+        let q = post
+            .parameters
+            .iter()
+            .find(|x| x.name == p.name)
+            .or(post.parameters.get(k));
+        let chains = cal
+            .draws
+            .column(&p.name)
+            .ok_or_else(|| ReportError::Parse {
+                path: cal.dir.join("draws.csv"),
+                msg: format!("no column for parameter '{}' named in summary.json", p.name),
+            })?;
+        let pooled: Vec<f64> = chains.iter().flat_map(|c| c.iter().copied()).collect();
+        let est = s
+            .calibrated_values
+            .iter()
+            .find(|x| x.0 == p.name)
+            .map(|x| x.1);
+        let svg = plots::prior_posterior(&PriorPosterior {
+            min: p.prior_min,
+            mode: p.prior_mode,
+            max: p.prior_max,
+            samples: &pooled,
+            estimate: est,
+            q5: q.map_or(f64::NAN, |q| q.q5),
+            q95: q.map_or(f64::NAN, |q| q.q95),
+            unit: &p.unit,
+        })?;
+        let cap = format!(
+            "<b>{}</b> &middot; estimate {} {}",
+            esc(&p.name),
+            est.map_or("&ndash;".into(), g),
+            esc(&p.unit)
+        );
+        h.push_str(&figure(&svg, &cap));
+    }
+    h.push_str("</div>\n");
+
+    // ---- chains
+    h.push_str("<h2 id=\"chains\">Chains: trace and rank plots</h2>");
+    let chain_items: Vec<(plotters::style::RGBColor, String)> = (0..n_chains)
+        .map(|k| {
+            (
+                plots::PALETTE[k % plots::PALETTE.len()],
+                format!("chain {k}"),
+            )
+        })
+        .collect();
+    let items: Vec<(plotters::style::RGBColor, &str, bool)> = chain_items
+        .iter()
+        .map(|(c, l)| (*c, l.as_str(), true))
+        .collect();
+    h.push_str(&legend(&items));
+    let acc: Vec<String> = s
+        .acceptance_rate
+        .iter()
+        .enumerate()
+        .map(|(k, a)| format!("chain {k}: {:.1} %", 100.0 * a))
+        .collect();
+    let _ = write!(
+        h,
+        "<p class=\"sub\">Well-mixed chains overlap in the trace and have flat rank histograms \
+(dashed: uniform). R-hat &gt; {RHAT_LIMIT} is flagged. Max R-hat {}, min bulk ESS {}. Acceptance: {}.</p>",
+        f(post.max_rhat, 3),
+        f(post.min_ess_bulk, 0),
+        if acc.is_empty() { "&ndash;".into() } else { acc.join(", ") }
+    );
+    let mut trace_cols: Vec<(String, String, f64)> = s
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let r = post
+                .parameters
+                .iter()
+                .find(|x| x.name == p.name)
+                .or(post.parameters.get(k))
+                .map_or(f64::NAN, |q| q.rhat);
+            (p.name.clone(), p.unit.clone(), r)
+        })
+        .collect();
+    for c in &cal.draws.columns {
+        if c.starts_with("sigma_delta_") {
+            trace_cols.push((c.clone(), "kWh".into(), f64::NAN));
+        } else if c == "log_posterior" {
+            trace_cols.push((c.clone(), String::new(), f64::NAN));
+        }
+    }
+    for (name, unit, rhat) in &trace_cols {
+        let Some(chains) = cal.draws.column(name) else {
+            continue;
+        };
+        let svg = plots::trace_rank(&chains, unit)?;
+        let flag = if rhat.is_finite() {
+            if *rhat > RHAT_LIMIT {
+                format!(" &middot; <span class=\"fail\">R-hat {rhat:.3} &gt; {RHAT_LIMIT}</span>")
+            } else {
+                format!(" &middot; <span class=\"pass\">R-hat {rhat:.3}</span>")
+            }
+        } else {
+            String::new()
+        };
+        h.push_str(&figure(&svg, &format!("<b>{}</b>{flag}", esc(name))));
+    }
+
+    // ---- measured vs calibrated (Fig. 11)
+    h.push_str("<h2 id=\"fit\">Hourly measured vs calibrated</h2>");
+    if cal.calibrated.is_none() {
+        h.push_str("<p class=\"fail\">No validation/calibrated.csv: the calibrated EnergyPlus run is not shown.</p>");
+    }
+    h.push_str(&legend(&[
+        (plots::MEASURED, "measured", true),
+        (
+            plots::CALIBRATED,
+            "calibrated (EnergyPlus at the estimate)",
+            true,
+        ),
+        (plots::POSTERIOR, "posterior predictive median", true),
+        (plots::POSTERIOR, "predictive 5&ndash;95 %", false),
+        (plots::GAP, "meter missing", false),
+    ]));
+    h.push_str("<p class=\"sub\">Year view: daily means (grey envelope: measured daily min&ndash;max; band: daily mean of the hourly 5 % and 95 % bounds). Weeks: every hour.</p>");
+    let pp = &cal.predictive;
+    for o in &s.outputs {
+        let col = |suf: &str| pp.get(&format!("{o}_{suf}")).unwrap_or(&[]);
+        let calibrated = cal
+            .calibrated
+            .as_ref()
+            .and_then(|c| c.get(o))
+            .map(|v| &v[..v.len().min(pp.timestamps.len())]);
+        let view = HourlyView {
+            timestamps: &pp.timestamps,
+            measured: col("measured"),
+            q5: col("q5"),
+            q50: col("q50"),
+            q95: col("q95"),
+            calibrated,
+            unit: "kWh per hour",
+        };
+        let missing = view.measured.iter().filter(|x| !x.is_finite()).count();
+        let m = s.validation.iter().find(|m| &m.output == o);
+        let _ = write!(
+            h,
+            "<h3>{}</h3><p class=\"sub\">{} h missing in the meter{}</p>",
+            esc(o),
+            missing,
+            m.map_or(String::new(), |m| format!(
+                " &middot; calibrated NMBE {:.1} %, CV-RMSE {:.1} % ({})",
+                m.nmbe,
+                m.cv_rmse,
+                if g14_pass(m) {
+                    "<span class=\"pass\">pass</span>"
+                } else {
+                    "<span class=\"fail\">fail</span>"
+                }
+            ))
+        );
+        h.push_str(&figure(
+            &plots::hourly_year(&view)?,
+            &format!("{}: the year, daily", esc(o)),
+        ));
+        h.push_str("<div class=\"grid\">");
+        for w in analysis::zoom_windows(&pp.timestamps, view.measured) {
+            let svg = plots::hourly_window(&view, &w)?;
+            h.push_str(&figure(&svg, &format!("{}: {}", esc(o), esc(&w.title))));
+        }
+        h.push_str("</div>\n");
+    }
+
+    // ---- run: timings, acceptance, surrogate
+    let t = &s.timings;
+    h.push_str("<h2 id=\"run\">Run</h2><h3>Timings per stage</h3><table><tr><th class=\"l\">stage</th><th>wall time</th><th>share</th></tr>");
+    for (name, v) in [
+        ("design (Latin hypercube)", t.design_s),
+        ("EnergyPlus design simulations", t.simulations_s),
+        ("surrogate training", t.training_s),
+        ("MCMC chains", t.chains_s),
+        ("posterior summary", t.summary_s),
+        ("validation simulations", t.validation_s),
+    ] {
+        let share = if t.total_s > 0.0 {
+            100.0 * v / t.total_s
+        } else {
+            f64::NAN
+        };
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{name}</td><td>{}</td><td>{} %</td></tr>",
+            duration(v),
+            f(share, 1)
+        );
+    }
+    let _ = write!(
+        h,
+        "<tr><th class=\"l\">total</th><th>{}</th><th></th></tr></table>",
+        duration(t.total_s)
+    );
+    h.push_str("<h3>Acceptance rate per chain</h3><table><tr>");
+    for k in 0..s.acceptance_rate.len() {
+        let _ = write!(h, "<th>chain {k}</th>");
+    }
+    h.push_str("</tr><tr>");
+    for a in &s.acceptance_rate {
+        let _ = write!(h, "<td>{:.1} %</td>", 100.0 * a);
+    }
+    h.push_str("</tr></table>");
+    if let Some(ms) = s
+        .surrogate_held_out
+        .get("metrics")
+        .and_then(|m| m.as_object())
+    {
+        h.push_str("<h3>Surrogate on held-out design points</h3><table><tr><th class=\"l\">output</th><th>NMBE %</th><th>CV-RMSE %</th><th>RMSE kWh</th></tr>");
+        for (o, m) in ms {
+            let v = |k: &str| m.get(k).and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(o),
+                f(v("nmbe_pct"), 1),
+                f(v("cv_rmse_pct"), 1),
+                g(v("rmse_kwh"))
+            );
+        }
+        h.push_str("</table>");
+    }
+
+    if let Some(p) = precal {
+        precal_section(&mut h, p)?;
+    }
+    h.push_str("<p class=\"sub\" style=\"margin-top:32px\">Written by bemcal report.</p></main></body></html>\n");
+    Ok(h)
+}
+
+fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
+    let _ = write!(
+        h,
+        "<h2 id=\"precal\">Pre-calibration</h2><p class=\"sub\">{}</p>",
+        esc(&p.dir.display().to_string())
+    );
+    // Day types in order of first appearance.
+    let mut types: Vec<String> = vec![];
+    for s in &p.schedule {
+        if !types.contains(&s.day_type) {
+            types.push(s.day_type.clone());
+        }
+    }
+
+    // Fig. 4: profiles per cluster.
+    h.push_str("<h3>Daily profile clusters</h3>");
+    let first = p
+        .calendar
+        .first()
+        .and_then(|d| chrono::NaiveDate::parse_from_str(&d.date, "%Y-%m-%d").ok());
+    let profiles: Option<Vec<Option<Vec<f64>>>> = p.schedule_series.as_ref().map(|series| {
+        let norm = analysis::quantile(series, 0.99);
+        p.calendar
+            .iter()
+            .map(|d| {
+                let day = chrono::NaiveDate::parse_from_str(&d.date, "%Y-%m-%d").ok()?;
+                let i = usize::try_from((day - first?).num_days()).ok()?;
+                let v = series.get(i * 24..i * 24 + 24)?;
+                (norm > 0.0).then(|| v.iter().map(|x| x / norm).collect())
+            })
+            .collect()
+    });
+    let mut whiskers: std::collections::HashMap<String, Vec<Vec<f64>>> = Default::default();
+    match &profiles {
+        None => h.push_str(
+            "<p class=\"sub\">No disaggregated.csv (schedule_series_kwh): profiles not shown.</p>",
+        ),
+        Some(profiles) => {
+            h.push_str(&legend(&[
+                (plots::PALETTE[0], "day (colour of its cluster)", true),
+                (plots::ESTIMATE, "outlier day", true),
+                (plots::MEASURED, "medoid", true),
+            ]));
+            let mut clusters: Vec<usize> = p.calendar.iter().filter_map(|d| d.cluster).collect();
+            clusters.sort_unstable();
+            clusters.dedup();
+            h.push_str("<div class=\"grid\">");
+            for (ci, &c) in clusters.iter().enumerate() {
+                let mut days = vec![];
+                let mut out = vec![];
+                let mut medoid = None;
+                let mut best = f64::INFINITY;
+                let mut label = String::new();
+                let mut n_cal: std::collections::BTreeMap<String, usize> = Default::default();
+                for (d, prof) in p.calendar.iter().zip(profiles) {
+                    if d.cluster != Some(c) {
+                        continue;
+                    }
+                    let Some(prof) = prof else { continue };
+                    label = d.label.clone();
+                    *n_cal.entry(d.calendar.clone()).or_default() += 1;
+                    if d.medoid_distance < best {
+                        best = d.medoid_distance;
+                        medoid = Some(days.len());
+                    }
+                    if !d.outlier {
+                        whiskers
+                            .entry(d.label.clone())
+                            .or_default()
+                            .push(prof.clone());
+                    }
+                    days.push(prof.clone());
+                    out.push(d.outlier);
+                }
+                let colour = types.iter().position(|t| *t == label).unwrap_or(ci);
+                let svg = plots::daily_profiles(&days, &out, medoid, colour)?;
+                let counts: Vec<String> = n_cal.iter().map(|(k, v)| format!("{v} {k}")).collect();
+                let n_out = out.iter().filter(|x| **x).count();
+                h.push_str(&figure(
+                    &svg,
+                    &format!(
+                        "cluster {c}: <b>{}</b> &middot; {} days ({}) &middot; {n_out} outliers",
+                        esc(&label),
+                        days.len(),
+                        esc(&counts.join(", "))
+                    ),
+                ));
+            }
+            h.push_str("</div>");
+        }
+    }
+
+    // Fig. 5: boxes per hour.
+    h.push_str("<h3>Hourly schedule fractions per day type</h3><p class=\"sub\">Box: quartiles over the day type's days; line: median; whiskers: range within 1.5 IQR. The quartiles become the triangular priors.</p><div class=\"grid\">");
+    for (k, t) in types.iter().enumerate() {
+        let hours: Vec<_> = p
+            .schedule
+            .iter()
+            .filter(|s| &s.day_type == t)
+            .cloned()
+            .collect();
+        let wh: Option<Vec<(f64, f64)>> = whiskers.get(t).map(|days| {
+            hours
+                .iter()
+                .map(|hr| {
+                    let iqr = hr.q3 - hr.q1;
+                    let vals: Vec<f64> = days
+                        .iter()
+                        .filter_map(|d| d.get(hr.hour).copied())
+                        .filter(|x| x.is_finite())
+                        .collect();
+                    let lo = vals
+                        .iter()
+                        .copied()
+                        .filter(|&x| x >= hr.q1 - 1.5 * iqr)
+                        .fold(f64::INFINITY, f64::min);
+                    let hi = vals
+                        .iter()
+                        .copied()
+                        .filter(|&x| x <= hr.q3 + 1.5 * iqr)
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    (lo.min(hr.q1), hi.max(hr.q3))
+                })
+                .collect()
+        });
+        let svg = plots::schedule_boxes(&hours, wh.as_deref(), k)?;
+        let n = hours.iter().map(|x| x.n_days).max().unwrap_or(0);
+        h.push_str(&figure(
+            &svg,
+            &format!("<b>{}</b> &middot; {n} days", esc(t)),
+        ));
+    }
+    h.push_str("</div>");
+
+    // Fig. 6: intervals.
+    h.push_str("<h3>Merged schedule intervals</h3><p class=\"sub\">Adjacent hours with similar quartiles merge into one calibrated schedule value; shaded: its triangular prior min&ndash;max, thick line: mode; dots: hourly medians.</p><div class=\"grid\">");
+    for (k, t) in types.iter().enumerate() {
+        let hours: Vec<_> = p
+            .schedule
+            .iter()
+            .filter(|s| &s.day_type == t)
+            .cloned()
+            .collect();
+        let ivs: Vec<_> = p
+            .intervals
+            .iter()
+            .filter(|s| &s.day_type == t)
+            .cloned()
+            .collect();
+        let svg = plots::schedule_intervals(&hours, &ivs, k)?;
+        h.push_str(&figure(
+            &svg,
+            &format!("<b>{}</b> &middot; {} intervals", esc(t), ivs.len()),
+        ));
+    }
+    h.push_str("</div>");
+    h.push_str("<table><tr><th class=\"l\">day type</th><th>hours</th><th>min</th><th>mode</th><th>max</th></tr>");
+    for iv in &p.intervals {
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td>{:02}&ndash;{:02}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+            esc(&iv.day_type),
+            iv.start_hour,
+            iv.end_hour,
+            iv.min,
+            iv.mode,
+            iv.max
+        );
+    }
+    h.push_str("</table>");
+    if let Some(t) = &p.summary_text {
+        let _ = write!(
+            h,
+            "<details><summary>summary.txt</summary><pre>{}</pre></details>",
+            esc(t)
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,592 @@
+//! Everything the report reads from disk: the calibration folder written by
+//! `bemcal calibrate --out DIR` and the optional pre-calibration folder written by
+//! `bemcal precalibrate --out PDIR`. The rest of the crate is pure (data in, text out).
+//!
+//! The structs mirror the files' formats (`summary.json` is `bemcal_calibrate::Summary`); they are
+//! deliberately lenient (optional sections default to empty) so a report can still be written for
+//! a partial folder, but the files the report cannot do without are required and their absence is
+//! an error naming the file.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::ReportError;
+
+/// A parameter's triangular prior (`summary.json` `parameters[]`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct PriorInfo {
+    /// Parameter name.
+    pub name: String,
+    /// Unit.
+    #[serde(default)]
+    pub unit: String,
+    /// Lower bound of the triangular prior.
+    pub prior_min: f64,
+    /// Mode of the triangular prior.
+    pub prior_mode: f64,
+    /// Upper bound of the triangular prior.
+    pub prior_max: f64,
+}
+
+/// A parameter's posterior summary (`summary.json` `posterior.parameters[]`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct PosteriorInfo {
+    /// Parameter name.
+    pub name: String,
+    /// Posterior mean.
+    pub mean: f64,
+    /// Posterior standard deviation.
+    pub sd: f64,
+    /// Posterior median.
+    pub median: f64,
+    /// 5 % quantile.
+    pub q5: f64,
+    /// 95 % quantile.
+    pub q95: f64,
+    /// Value at the MAP draw.
+    #[serde(default = "nan")]
+    pub map: f64,
+    /// Rank-normalised split R-hat.
+    #[serde(default = "nan")]
+    pub rhat: f64,
+    /// Bulk effective sample size.
+    #[serde(default = "nan")]
+    pub ess_bulk: f64,
+    /// Tail effective sample size.
+    #[serde(default = "nan")]
+    pub ess_tail: f64,
+    /// Posterior 90 % interval width over the prior's (1 = the data did not inform it).
+    #[serde(default = "nan")]
+    pub width_ratio: f64,
+}
+
+fn nan() -> f64 {
+    f64::NAN
+}
+
+/// A pair of parameters with a strong posterior correlation.
+#[derive(Debug, Clone, Deserialize)]
+pub struct CorrelatedPair {
+    /// First parameter.
+    pub a: String,
+    /// Second parameter.
+    pub b: String,
+    /// Pearson correlation of the draws.
+    pub rho: f64,
+}
+
+/// `summary.json` `posterior`.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PosteriorBlock {
+    /// Per parameter, in prior order.
+    pub parameters: Vec<PosteriorInfo>,
+    /// Pairs with |rho| > 0.8.
+    #[serde(default)]
+    pub correlated_pairs: Vec<CorrelatedPair>,
+    /// Largest R-hat.
+    #[serde(default = "nan")]
+    pub max_rhat: f64,
+    /// Smallest bulk ESS.
+    #[serde(default = "nan")]
+    pub min_ess_bulk: f64,
+}
+
+/// ASHRAE Guideline 14 metrics of one output.
+#[derive(Debug, Clone, Deserialize)]
+pub struct OutputMetrics {
+    /// Output name.
+    pub output: String,
+    /// Hours used.
+    #[serde(default)]
+    pub n: usize,
+    /// Mean of the measured values.
+    #[serde(default = "nan")]
+    pub mean_measured: f64,
+    /// NMBE, %.
+    pub nmbe: f64,
+    /// CV-RMSE, %.
+    pub cv_rmse: f64,
+}
+
+/// Wall time per stage, s (`summary.json` `timings`).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(default)]
+pub struct Timings {
+    /// Latin hypercube.
+    pub design_s: f64,
+    /// EnergyPlus design simulations.
+    pub simulations_s: f64,
+    /// Surrogate training.
+    pub training_s: f64,
+    /// MCMC chains.
+    pub chains_s: f64,
+    /// Posterior summary and predictive bands.
+    pub summary_s: f64,
+    /// Validation simulations.
+    pub validation_s: f64,
+    /// Whole run.
+    pub total_s: f64,
+}
+
+/// `summary.json` as written by `bemcal calibrate`.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Summary {
+    /// Project name.
+    #[serde(default)]
+    pub project: String,
+    /// Calibrated outputs (meters).
+    pub outputs: Vec<String>,
+    /// Priors, in calibration order.
+    pub parameters: Vec<PriorInfo>,
+    /// Posterior summary.
+    pub posterior: PosteriorBlock,
+    /// Estimated model-discrepancy sd per output, kWh.
+    #[serde(default)]
+    pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// Surrogate error sd per output, kWh.
+    #[serde(default)]
+    pub sigma_eta_kwh: Vec<(String, f64)>,
+    /// Acceptance rate per chain.
+    #[serde(default)]
+    pub acceptance_rate: Vec<f64>,
+    /// Which point estimate was validated (`map`, `mean`, `median`).
+    #[serde(default)]
+    pub estimate: serde_json::Value,
+    /// The calibrated parameter values.
+    #[serde(default)]
+    pub calibrated_values: Vec<(String, f64)>,
+    /// G14 metrics of the calibrated model.
+    #[serde(default)]
+    pub validation: Vec<OutputMetrics>,
+    /// G14 metrics of the initial model (prior modes).
+    #[serde(default)]
+    pub initial: Vec<OutputMetrics>,
+    /// Whether every R-hat and ESS criterion was met.
+    #[serde(default)]
+    pub converged: bool,
+    /// Number of design points.
+    #[serde(default)]
+    pub design_points: usize,
+    /// Surrogate held-out metrics (free form).
+    #[serde(default)]
+    pub surrogate_held_out: serde_json::Value,
+    /// Stage timings.
+    #[serde(default)]
+    pub timings: Timings,
+}
+
+/// `draws.csv`: `chain,draw,<columns>...`, grouped by chain.
+#[derive(Debug, Clone)]
+pub struct Draws {
+    /// Column names after `chain,draw` (parameters, `sigma_delta_*`, `log_posterior`).
+    pub columns: Vec<String>,
+    /// `chains[c][k]` = the draws of column `k` in chain `c`, in draw order.
+    pub chains: Vec<Vec<Vec<f64>>>,
+}
+
+impl Draws {
+    /// The draws of a column per chain, or `None` if there is no such column.
+    pub fn column(&self, name: &str) -> Option<Vec<&[f64]>> {
+        let k = self.columns.iter().position(|c| c == name)?;
+        Some(self.chains.iter().map(|c| c[k].as_slice()).collect())
+    }
+}
+
+/// An hourly table `timestamp,<column>...`; empty cells are NaN.
+#[derive(Debug, Clone)]
+pub struct Hourly {
+    /// Timestamps as written (`YYYY-MM-DDTHH:MM`).
+    pub timestamps: Vec<String>,
+    /// Column names after `timestamp`.
+    pub columns: Vec<String>,
+    /// `values[k]` = the series of column `k`.
+    pub values: Vec<Vec<f64>>,
+}
+
+impl Hourly {
+    /// A column's series, if present.
+    pub fn get(&self, name: &str) -> Option<&[f64]> {
+        let k = self.columns.iter().position(|c| c == name)?;
+        Some(&self.values[k])
+    }
+}
+
+/// Everything read from a calibration folder.
+#[derive(Debug, Clone)]
+pub struct CalibrationData {
+    /// The folder.
+    pub dir: PathBuf,
+    /// `summary.json`.
+    pub summary: Summary,
+    /// `draws.csv`.
+    pub draws: Draws,
+    /// `posterior_predictive.csv`.
+    pub predictive: Hourly,
+    /// `validation/calibrated.csv`, if the validation ran.
+    pub calibrated: Option<Hourly>,
+    /// `validation/initial.csv`, if the initial model was simulated.
+    pub initial: Option<Hourly>,
+}
+
+/// One row of `calendar.csv`.
+#[derive(Debug, Clone)]
+pub struct CalendarDay {
+    /// `YYYY-MM-DD`.
+    pub date: String,
+    /// Calendar day type (weekday, weekend, holiday).
+    pub calendar: String,
+    /// Cluster index (None when the day was skipped).
+    pub cluster: Option<usize>,
+    /// Day-type label of the cluster (`skipped` when not clustered).
+    pub label: String,
+    /// Flagged as an outlier.
+    pub outlier: bool,
+    /// DTW distance to the cluster medoid.
+    pub medoid_distance: f64,
+}
+
+/// One row of `schedule_priors.csv`.
+#[derive(Debug, Clone)]
+pub struct ScheduleHour {
+    /// Day type.
+    pub day_type: String,
+    /// Hour of day 0..23.
+    pub hour: usize,
+    /// Days used.
+    pub n_days: usize,
+    /// First quartile of the schedule fraction.
+    pub q1: f64,
+    /// Median.
+    pub median: f64,
+    /// Third quartile.
+    pub q3: f64,
+}
+
+/// One row of `intervals.csv`.
+#[derive(Debug, Clone)]
+pub struct ScheduleInterval {
+    /// Day type.
+    pub day_type: String,
+    /// First hour (inclusive).
+    pub start_hour: usize,
+    /// Last hour (exclusive).
+    pub end_hour: usize,
+    /// Triangular prior lower bound.
+    pub min: f64,
+    /// Mode.
+    pub mode: f64,
+    /// Upper bound.
+    pub max: f64,
+}
+
+/// Everything read from a pre-calibration folder.
+#[derive(Debug, Clone)]
+pub struct PrecalData {
+    /// The folder.
+    pub dir: PathBuf,
+    /// `calendar.csv`.
+    pub calendar: Vec<CalendarDay>,
+    /// `schedule_priors.csv`.
+    pub schedule: Vec<ScheduleHour>,
+    /// `intervals.csv`.
+    pub intervals: Vec<ScheduleInterval>,
+    /// The clustered series from `disaggregated.csv` (`schedule_series_kwh`), if present.
+    pub schedule_series: Option<Vec<f64>>,
+    /// `summary.txt`, if present.
+    pub summary_text: Option<String>,
+}
+
+fn require(path: &Path, what: &str) -> Result<(), ReportError> {
+    if path.is_file() {
+        Ok(())
+    } else {
+        Err(ReportError::Missing {
+            path: path.to_path_buf(),
+            what: what.to_string(),
+        })
+    }
+}
+
+fn read_text(path: &Path) -> Result<String, ReportError> {
+    std::fs::read_to_string(path).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn parse_err(path: &Path, msg: impl Into<String>) -> ReportError {
+    ReportError::Parse {
+        path: path.to_path_buf(),
+        msg: msg.into(),
+    }
+}
+
+fn num(path: &Path, line: usize, col: &str, s: &str) -> Result<f64, ReportError> {
+    let s = s.trim();
+    if s.is_empty() || s.eq_ignore_ascii_case("nan") {
+        return Ok(f64::NAN);
+    }
+    s.parse::<f64>().map_err(|_| {
+        parse_err(
+            path,
+            format!("line {line}, column '{col}': not a number: {s:?}"),
+        )
+    })
+}
+
+fn csv_reader(path: &Path) -> Result<csv::Reader<std::fs::File>, ReportError> {
+    csv::ReaderBuilder::new()
+        .flexible(false)
+        .from_path(path)
+        .map_err(|e| parse_err(path, e.to_string()))
+}
+
+fn headers(path: &Path, r: &mut csv::Reader<std::fs::File>) -> Result<Vec<String>, ReportError> {
+    Ok(r.headers()
+        .map_err(|e| parse_err(path, e.to_string()))?
+        .iter()
+        .map(|s| s.trim().to_string())
+        .collect())
+}
+
+fn col_index(path: &Path, h: &[String], name: &str) -> Result<usize, ReportError> {
+    h.iter().position(|c| c == name).ok_or_else(|| {
+        parse_err(
+            path,
+            format!("missing column '{name}' (header: {})", h.join(",")),
+        )
+    })
+}
+
+/// Reads `summary.json`.
+pub fn read_summary(path: &Path) -> Result<Summary, ReportError> {
+    require(
+        path,
+        "the calibration summary written by `bemcal calibrate`",
+    )?;
+    let text = read_text(path)?;
+    serde_json::from_str(&text).map_err(|e| parse_err(path, e.to_string()))
+}
+
+/// Reads `draws.csv`.
+pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
+    require(path, "the MCMC draws written by `bemcal calibrate`")?;
+    let mut r = csv_reader(path)?;
+    let h = headers(path, &mut r)?;
+    let ci = col_index(path, &h, "chain")?;
+    let di = col_index(path, &h, "draw")?;
+    let cols: Vec<usize> = (0..h.len()).filter(|&k| k != ci && k != di).collect();
+    let columns: Vec<String> = cols.iter().map(|&k| h[k].clone()).collect();
+    let mut chains: Vec<Vec<Vec<f64>>> = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let line = i + 2;
+        let rec = rec.map_err(|e| parse_err(path, e.to_string()))?;
+        let c = rec[ci].trim().parse::<usize>().map_err(|_| {
+            parse_err(
+                path,
+                format!("line {line}: chain {:?} is not an index", &rec[ci]),
+            )
+        })?;
+        while chains.len() <= c {
+            chains.push(vec![Vec::new(); cols.len()]);
+        }
+        for (j, &k) in cols.iter().enumerate() {
+            chains[c][j].push(num(path, line, &h[k], &rec[k])?);
+        }
+    }
+    chains.retain(|c| c.first().is_some_and(|v| !v.is_empty()));
+    if chains.is_empty() {
+        return Err(parse_err(path, "no draws"));
+    }
+    Ok(Draws { columns, chains })
+}
+
+/// Reads an hourly table `timestamp,<column>...`.
+pub fn read_hourly(path: &Path, what: &str) -> Result<Hourly, ReportError> {
+    require(path, what)?;
+    let mut r = csv_reader(path)?;
+    let h = headers(path, &mut r)?;
+    let ti = col_index(path, &h, "timestamp")?;
+    let cols: Vec<usize> = (0..h.len()).filter(|&k| k != ti).collect();
+    let mut timestamps = Vec::new();
+    let mut values = vec![Vec::new(); cols.len()];
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(path, e.to_string()))?;
+        timestamps.push(rec[ti].trim().to_string());
+        for (j, &k) in cols.iter().enumerate() {
+            values[j].push(num(path, i + 2, &h[k], &rec[k])?);
+        }
+    }
+    if timestamps.is_empty() {
+        return Err(parse_err(path, "no rows"));
+    }
+    Ok(Hourly {
+        timestamps,
+        columns: cols.iter().map(|&k| h[k].clone()).collect(),
+        values,
+    })
+}
+
+/// Reads a calibration folder: `summary.json`, `draws.csv` and `posterior_predictive.csv` are
+/// required; `validation/calibrated.csv` and `validation/initial.csv` are optional.
+pub fn read_calibration(dir: &Path) -> Result<CalibrationData, ReportError> {
+    if !dir.is_dir() {
+        return Err(ReportError::Missing {
+            path: dir.to_path_buf(),
+            what: "the calibration output folder (`bemcal calibrate PROJECT --out DIR`)".into(),
+        });
+    }
+    let summary = read_summary(&dir.join("summary.json"))?;
+    let draws = read_draws(&dir.join("draws.csv"))?;
+    let pp = dir.join("posterior_predictive.csv");
+    let predictive = read_hourly(
+        &pp,
+        "the posterior predictive bands written by `bemcal calibrate`",
+    )?;
+    for o in &summary.outputs {
+        for suffix in ["measured", "q5", "q50", "q95"] {
+            let c = format!("{o}_{suffix}");
+            if predictive.get(&c).is_none() {
+                return Err(parse_err(
+                    &pp,
+                    format!("missing column '{c}' for output '{o}' named in summary.json"),
+                ));
+            }
+        }
+    }
+    let opt = |name: &str| -> Result<Option<Hourly>, ReportError> {
+        let p = dir.join("validation").join(name);
+        if p.is_file() {
+            read_hourly(&p, "validation outputs").map(Some)
+        } else {
+            Ok(None)
+        }
+    };
+    Ok(CalibrationData {
+        dir: dir.to_path_buf(),
+        calibrated: opt("calibrated.csv")?,
+        initial: opt("initial.csv")?,
+        summary,
+        draws,
+        predictive,
+    })
+}
+
+/// Reads a pre-calibration folder: `calendar.csv`, `schedule_priors.csv` and `intervals.csv`
+/// are required; `disaggregated.csv` (for the daily profiles) and `summary.txt` are optional.
+pub fn read_precal(dir: &Path) -> Result<PrecalData, ReportError> {
+    if !dir.is_dir() {
+        return Err(ReportError::Missing {
+            path: dir.to_path_buf(),
+            what: "the pre-calibration folder (`bemcal precalibrate --out PDIR`)".into(),
+        });
+    }
+    let what = "written by `bemcal precalibrate`";
+
+    let p = dir.join("calendar.csv");
+    require(&p, &format!("the day-type calendar {what}"))?;
+    let mut r = csv_reader(&p)?;
+    let h = headers(&p, &mut r)?;
+    let [d, c, cl, l, o, m] = [
+        "date",
+        "calendar_day_type",
+        "cluster",
+        "label",
+        "outlier",
+        "medoid_distance",
+    ]
+    .map(|n| col_index(&p, &h, n));
+    let (d, c, cl, l, o, m) = (d?, c?, cl?, l?, o?, m?);
+    let mut calendar = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
+        calendar.push(CalendarDay {
+            date: rec[d].to_string(),
+            calendar: rec[c].to_string(),
+            cluster: rec[cl].trim().parse().ok(),
+            label: rec[l].to_string(),
+            outlier: rec[o].trim() == "true",
+            medoid_distance: num(&p, i + 2, "medoid_distance", &rec[m])?,
+        });
+    }
+
+    let p = dir.join("schedule_priors.csv");
+    require(&p, &format!("the per-hour schedule quartiles {what}"))?;
+    let mut r = csv_reader(&p)?;
+    let h = headers(&p, &mut r)?;
+    let idx: Vec<usize> = ["day_type", "hour", "n_days", "q1", "median", "q3"]
+        .iter()
+        .map(|n| col_index(&p, &h, n))
+        .collect::<Result<_, _>>()?;
+    let mut schedule = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
+        let line = i + 2;
+        schedule.push(ScheduleHour {
+            day_type: rec[idx[0]].to_string(),
+            hour: num(&p, line, "hour", &rec[idx[1]])? as usize,
+            n_days: num(&p, line, "n_days", &rec[idx[2]])? as usize,
+            q1: num(&p, line, "q1", &rec[idx[3]])?,
+            median: num(&p, line, "median", &rec[idx[4]])?,
+            q3: num(&p, line, "q3", &rec[idx[5]])?,
+        });
+    }
+
+    let p = dir.join("intervals.csv");
+    require(&p, &format!("the merged schedule intervals {what}"))?;
+    let mut r = csv_reader(&p)?;
+    let h = headers(&p, &mut r)?;
+    let idx: Vec<usize> = ["day_type", "start_hour", "end_hour", "min", "mode", "max"]
+        .iter()
+        .map(|n| col_index(&p, &h, n))
+        .collect::<Result<_, _>>()?;
+    let mut intervals = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
+        let line = i + 2;
+        intervals.push(ScheduleInterval {
+            day_type: rec[idx[0]].to_string(),
+            start_hour: num(&p, line, "start_hour", &rec[idx[1]])? as usize,
+            end_hour: num(&p, line, "end_hour", &rec[idx[2]])? as usize,
+            min: num(&p, line, "min", &rec[idx[3]])?,
+            mode: num(&p, line, "mode", &rec[idx[4]])?,
+            max: num(&p, line, "max", &rec[idx[5]])?,
+        });
+    }
+
+    let p = dir.join("disaggregated.csv");
+    let schedule_series = if p.is_file() {
+        let t = read_hourly(&p, "the disaggregated meters")?;
+        t.get("schedule_series_kwh").map(<[f64]>::to_vec)
+    } else {
+        None
+    };
+    let p = dir.join("summary.txt");
+    let summary_text = if p.is_file() {
+        Some(read_text(&p)?)
+    } else {
+        None
+    };
+    Ok(PrecalData {
+        dir: dir.to_path_buf(),
+        calendar,
+        schedule,
+        intervals,
+        schedule_series,
+        summary_text,
+    })
+}
+
+/// Writes the report atomically (temporary file + rename).
+pub fn write_html(path: &Path, html: &str) -> Result<(), ReportError> {
+    let tmp = path.with_extension("html.tmp");
+    std::fs::write(&tmp, html).map_err(|source| ReportError::Io {
+        path: tmp.clone(),
+        source,
+    })?;
+    std::fs::rename(&tmp, path).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}

@@ -1,0 +1,76 @@
+//! `report.html` for a calibration: one self-contained HTML file (inline SVG figures, inline
+//! CSS, no external resources) that people can read.
+//!
+//! It shows, from a folder written by `bemcal calibrate --out DIR`:
+//! warnings (R-hat, ESS, uninformed parameters, correlated pairs, acceptance, G14 failures);
+//! the initial and calibrated ASHRAE Guideline 14 metrics (the reference's Table 5); the
+//! estimated parameters with prior and posterior intervals (Table 4); prior vs posterior per
+//! parameter (Fig. 10); trace and rank plots per parameter; hourly measured vs calibrated with
+//! the posterior predictive band and the meter's gaps, as a daily year view plus one week per
+//! season at full resolution (Fig. 11); timings and acceptance rates. With a pre-calibration
+//! folder (`bemcal precalibrate --out PDIR`) it adds the daily profile clusters (Fig. 4), the
+//! per-hour schedule boxes (Fig. 5) and the merged intervals (Fig. 6).
+//!
+//! Layout: [`io`] does all file reading and writing; [`analysis`], [`plots`] (data in, SVG out)
+//! and [`html`] are pure.
+
+pub mod analysis;
+pub mod html;
+pub mod io;
+pub mod plots;
+
+use std::path::{Path, PathBuf};
+
+/// Why a report could not be written. Each variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// A required file or folder does not exist.
+    #[error("{}: missing ({what})", path.display())]
+    Missing {
+        /// The path looked for.
+        path: PathBuf,
+        /// What it should contain.
+        what: String,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A file is not in the expected format.
+    #[error("{}: {msg}", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        msg: String,
+    },
+    /// A figure could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] plots::PlotError),
+}
+
+/// Builds the report HTML for already-loaded data (pure).
+pub fn render(
+    cal: &io::CalibrationData,
+    precal: Option<&io::PrecalData>,
+) -> Result<String, ReportError> {
+    html::build(cal, precal)
+}
+
+/// Reads `calibration_dir` (and `precal_dir`, if given) and writes
+/// `calibration_dir/report.html`; returns its path.
+pub fn write_report(
+    calibration_dir: &Path,
+    precal_dir: Option<&Path>,
+) -> Result<PathBuf, ReportError> {
+    let cal = io::read_calibration(calibration_dir)?;
+    let pre = precal_dir.map(io::read_precal).transpose()?;
+    let text = render(&cal, pre.as_ref())?;
+    let path = calibration_dir.join("report.html");
+    io::write_html(&path, &text)?;
+    Ok(path)
+}
