@@ -12,6 +12,7 @@ pub mod metrics;
 pub mod params;
 pub mod precalibrate;
 pub mod predict;
+pub mod report;
 pub mod results;
 pub mod status;
 pub mod submit;
@@ -51,6 +52,8 @@ pub enum Command {
     Synthesize(synthesize::Args),
     /// ASHRAE Guideline 14 NMBE and CV-RMSE of simulated vs measured hourly CSVs.
     Metrics(metrics::Args),
+    /// A self-contained HTML report of a calibration folder (DIR/report.html).
+    Report(report::Args),
     /// Serve calibration runs to gRPC workers (state in SQLite).
     Coordinator(coordinator::Args),
     /// Pull and run jobs from a coordinator.
@@ -76,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Predict(a) => predict::run(a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Metrics(a) => metrics::run(a),
+        Command::Report(a) => report::run(a),
         Command::Design(a) => design::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Synthesize(a) => synthesize::run(a),
