@@ -80,14 +80,23 @@ segment = 100
 
 /// A project folder with synthetic meters.
 fn project(dir: &Path) -> PathBuf {
-    std::fs::copy(repo().join("examples/office/small.toml"), dir.join("model.toml")).unwrap();
+    std::fs::copy(
+        repo().join("examples/office/small.toml"),
+        dir.join("model.toml"),
+    )
+    .unwrap();
     std::fs::write(dir.join("project.toml"), PROJECT).unwrap();
     let s = bemcal()
         .args(["synthesize", "--model"])
         .arg(dir.join("model.toml"))
         .arg("--weather")
         .arg(golden_epw())
-        .args(["--set", "lighting_power_density=12.5", "--set", "cooling_setpoint_occupied=22.5"])
+        .args([
+            "--set",
+            "lighting_power_density=12.5",
+            "--set",
+            "cooling_setpoint_occupied=22.5",
+        ])
         .arg("--out")
         .arg(dir.join("meters.csv"))
         .output()
@@ -108,7 +117,14 @@ impl Drop for Proc {
 
 fn coordinator(data: &Path, listen: &str) -> (Proc, String) {
     let mut c = bemcal()
-        .args(["coordinator", "--listen", listen, "--lease-ttl", "3", "--data"])
+        .args([
+            "coordinator",
+            "--listen",
+            listen,
+            "--lease-ttl",
+            "3",
+            "--data",
+        ])
         .arg(data)
         .env("BEMCAL_TOKEN", TOKEN)
         .stdout(Stdio::piped())
@@ -118,7 +134,11 @@ fn coordinator(data: &Path, listen: &str) -> (Proc, String) {
     BufReader::new(c.stdout.take().unwrap())
         .read_line(&mut line)
         .unwrap();
-    let addr = line.trim().strip_prefix("listening on ").expect("address").to_string();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("address")
+        .to_string();
     (Proc(c), format!("http://{addr}"))
 }
 
@@ -149,7 +169,12 @@ fn status(url: &str, run: &str) -> serde_json::Value {
 }
 
 /// Polls the run's status until `pred` holds (or the run ends, or time runs out).
-fn wait_for(url: &str, run: &str, secs: u64, pred: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+fn wait_for(
+    url: &str,
+    run: &str,
+    secs: u64,
+    pred: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
     let t0 = Instant::now();
     loop {
         let s = status(url, run);
@@ -169,8 +194,18 @@ fn distributed_matches_single_process() {
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
     let local = tmp.path().join("local");
-    let o = bemcal().arg("calibrate").arg(&pf).arg("--out").arg(&local).output().unwrap();
-    assert!(o.status.success(), "local: {}", String::from_utf8_lossy(&o.stderr));
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&pf)
+        .arg("--out")
+        .arg(&local)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "local: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
@@ -200,14 +235,25 @@ fn distributed_matches_single_process() {
         "validation/initial.csv",
     ] {
         let a = std::fs::read(local.join(f)).unwrap_or_else(|e| panic!("local {f}: {e}"));
-        let b = std::fs::read(dist.join(f)).unwrap_or_else(|e| panic!("distributed {f}: {e}\n{log}"));
-        assert!(a == b, "{f} differs between the single-process and distributed runs");
+        let b =
+            std::fs::read(dist.join(f)).unwrap_or_else(|e| panic!("distributed {f}: {e}\n{log}"));
+        assert!(
+            a == b,
+            "{f} differs between the single-process and distributed runs"
+        );
     }
     let sa: serde_json::Value =
         serde_json::from_slice(&std::fs::read(local.join("summary.json")).unwrap()).unwrap();
     let sb: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dist.join("summary.json")).unwrap()).unwrap();
-    for k in ["posterior", "calibrated_values", "validation", "initial", "acceptance_rate", "sigma_delta_kwh"] {
+    for k in [
+        "posterior",
+        "calibrated_values",
+        "validation",
+        "initial",
+        "acceptance_rate",
+        "sigma_delta_kwh",
+    ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
 }
@@ -230,9 +276,11 @@ fn worker_killed_and_coordinator_restarted() {
 
     // Kill -9 w0 while it runs a simulation.
     let leased_by_w0 = |s: &serde_json::Value| {
-        s["jobs"].as_array().unwrap().iter().any(|j| {
-            j["stage"] == "simulate" && j["state"] == "leased" && j["worker"] == "w0"
-        })
+        s["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|j| j["stage"] == "simulate" && j["state"] == "leased" && j["worker"] == "w0")
     };
     let s = wait_for(&url, &run, 120, leased_by_w0);
     assert!(leased_by_w0(&s), "w0 never ran a simulation: {s}");
@@ -248,7 +296,13 @@ fn worker_killed_and_coordinator_restarted() {
 
     // Kill -9 the coordinator once a few simulations are done, then restart it on the same port.
     let s = wait_for(&url, &run, 300, |s| {
-        s["jobs"].as_array().unwrap().iter().filter(|j| j["state"] == "done").count() >= 3
+        s["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|j| j["state"] == "done")
+            .count()
+            >= 3
     });
     let port = url.rsplit(':').next().unwrap().to_string();
     drop(coord);
@@ -274,12 +328,22 @@ fn worker_killed_and_coordinator_restarted() {
     }
     for (id, attempts) in before {
         let j = jobs.iter().find(|j| j["id"] == id).unwrap();
-        assert_eq!(j["attempts"].as_u64().unwrap(), attempts, "job redone after restart: {j}");
+        assert_eq!(
+            j["attempts"].as_u64().unwrap(),
+            attempts,
+            "job redone after restart: {j}"
+        );
     }
     let out = tmp.path().join("results");
     let o = client(&["results", &run, "--out", out.to_str().unwrap()], &url);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in ["summary.json", "draws.csv", "posterior_predictive.csv", "surrogate", "validation/calibrated.csv"] {
+    for f in [
+        "summary.json",
+        "draws.csv",
+        "posterior_predictive.csv",
+        "surrogate",
+        "validation/calibrated.csv",
+    ] {
         assert!(out.join(f).exists(), "results lack {f}");
     }
 }
@@ -304,12 +368,26 @@ fn token_and_input_validation() {
         return;
     }
     let dir = tmp.path();
-    std::fs::copy(repo().join("examples/office/small.toml"), dir.join("model.toml")).unwrap();
-    std::fs::write(dir.join("meters.csv"), "timestamp,heating_kwh\n2021-01-01T00:00,1\n").unwrap();
+    std::fs::copy(
+        repo().join("examples/office/small.toml"),
+        dir.join("model.toml"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("meters.csv"),
+        "timestamp,heating_kwh\n2021-01-01T00:00,1\n",
+    )
+    .unwrap();
     let bad = PROJECT.replace("\"cooling_setpoint_occupied\"", "\"no_such_parameter\"");
     std::fs::write(dir.join("project.toml"), bad).unwrap();
-    let o = client(&["submit", dir.join("project.toml").to_str().unwrap()], &url);
+    let o = client(
+        &["submit", dir.join("project.toml").to_str().unwrap()],
+        &url,
+    );
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("invalid project") && err.contains("no_such_parameter"), "{err}");
+    assert!(
+        err.contains("invalid project") && err.contains("no_such_parameter"),
+        "{err}"
+    );
 }

@@ -12,7 +12,9 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 
 /// True when `s` looks like a sha256 in lowercase hex (so it is safe as a file name).
 pub fn valid_sha(s: &str) -> bool {
-    s.len() == 64 && s.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+    s.len() == 64
+        && s.bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
 /// A folder of artifacts.
@@ -74,9 +76,10 @@ pub fn safe_relative(p: &str) -> Result<PathBuf, String> {
     let path = Path::new(p);
     let ok = !p.is_empty()
         && p.len() < 512
-        && path.components().all(|c| matches!(c, std::path::Component::Normal(_)))
-        && p
-            .chars()
+        && path
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)))
+        && p.chars()
             .all(|c| c.is_ascii_alphanumeric() || "._-/ +".contains(c));
     if ok {
         Ok(path.into())

@@ -19,7 +19,10 @@ pub fn load_token(file: Option<&Path>) -> anyhow::Result<String> {
             .unwrap_or("")
             .trim()
             .to_string(),
-        None => std::env::var(TOKEN_ENV).unwrap_or_default().trim().to_string(),
+        None => std::env::var(TOKEN_ENV)
+            .unwrap_or_default()
+            .trim()
+            .to_string(),
     };
     if token.is_empty() {
         anyhow::bail!("no token: give --token-file FILE or set {TOKEN_ENV}");

@@ -19,7 +19,10 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
         .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", project_file.display()))?;
     let mut doc: toml::Table = toml::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: {}", project_file.display(), e.message()))?;
-    let base = project_file.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let base = project_file
+        .parent()
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
     let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
     let mut place = |p: &str| -> anyhow::Result<String> {
         let src = if Path::new(p).is_absolute() {
@@ -36,13 +39,23 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
                     .unwrap_or_else(|| "file".into());
                 let stem: String = stem
                     .chars()
-                    .map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' })
+                    .map(|c| {
+                        if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                            c
+                        } else {
+                            '_'
+                        }
+                    })
                     .collect();
                 format!("files/{}-{stem}", files.len())
             }
         };
         if !src.is_file() {
-            anyhow::bail!("{}: file {} not found", project_file.display(), src.display());
+            anyhow::bail!(
+                "{}: file {} not found",
+                project_file.display(),
+                src.display()
+            );
         }
         files.insert(name.clone(), src);
         Ok(name)
@@ -82,18 +95,25 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
             let dir = Path::new(&model_name).parent().unwrap_or(Path::new(""));
             let rel = dir.join(idf).to_string_lossy().replace('\\', "/");
             safe_relative(&rel).map_err(|e| {
-                anyhow::anyhow!("{}: [idf] path: {e} (keep the IDF beside the model)", model_src.display())
+                anyhow::anyhow!(
+                    "{}: [idf] path: {e} (keep the IDF beside the model)",
+                    model_src.display()
+                )
             })?;
             let src = model_src.parent().unwrap_or(Path::new(".")).join(idf);
             files.insert(rel, src);
         }
     }
-    let mut out = vec![(PROJECT_FILE.to_string(), toml::to_string(&doc)?.into_bytes())];
+    let mut out = vec![(
+        PROJECT_FILE.to_string(),
+        toml::to_string(&doc)?.into_bytes(),
+    )];
     for (name, src) in files {
         if name == PROJECT_FILE {
             anyhow::bail!("a project input may not be named {PROJECT_FILE}");
         }
-        let bytes = std::fs::read(&src).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", src.display()))?;
+        let bytes = std::fs::read(&src)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", src.display()))?;
         out.push((name, bytes));
     }
     Ok(out)

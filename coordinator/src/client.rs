@@ -44,9 +44,11 @@ impl Connect {
             ep = ep.tls_config(tls)?;
         }
         let channel = ep.connect_lazy();
-        Ok(CoordinatorClient::with_interceptor(channel, AddToken::new(&self.token)?)
-            .max_decoding_message_size(MAX_MESSAGE_BYTES)
-            .max_encoding_message_size(MAX_MESSAGE_BYTES))
+        Ok(
+            CoordinatorClient::with_interceptor(channel, AddToken::new(&self.token)?)
+                .max_decoding_message_size(MAX_MESSAGE_BYTES)
+                .max_encoding_message_size(MAX_MESSAGE_BYTES),
+        )
     }
 }
 
@@ -81,15 +83,17 @@ pub async fn upload(client: &mut Client, bytes: Vec<u8>) -> Result<String, tonic
         .await?
         .into_inner();
     if info.sha256 != sha {
-        return Err(tonic::Status::data_loss("artifact hash mismatch after upload"));
+        return Err(tonic::Status::data_loss(
+            "artifact hash mismatch after upload",
+        ));
     }
     Ok(sha)
 }
 
 /// Uploads a file as an artifact named `rel` (its relative path in a bundle or job folder).
 pub async fn upload_file(client: &mut Client, path: &Path, rel: &str) -> anyhow::Result<File> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+    let bytes =
+        std::fs::read(path).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
     let size = bytes.len() as u64;
     let sha = upload(client, bytes).await?;
     Ok(File {
@@ -119,7 +123,11 @@ pub async fn download(client: &mut Client, sha: &str) -> anyhow::Result<Vec<u8>>
 }
 
 /// Uploads every file under `dir` (recursively) with paths `prefix/<relative path>`.
-pub async fn upload_dir(client: &mut Client, dir: &Path, prefix: &str) -> anyhow::Result<Vec<File>> {
+pub async fn upload_dir(
+    client: &mut Client,
+    dir: &Path,
+    prefix: &str,
+) -> anyhow::Result<Vec<File>> {
     let mut out = vec![];
     for p in walk(dir)? {
         let rel = p

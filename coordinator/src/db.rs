@@ -313,7 +313,9 @@ impl Store {
     pub fn runs(&self) -> Result<Vec<RunRow>> {
         self.with(|c| {
             let mut st = c.prepare(&format!("SELECT {RUN_COLS} FROM runs ORDER BY created_ms"))?;
-            let rows = st.query_map([], run_row)?.collect::<rusqlite::Result<Vec<_>>>()?;
+            let rows = st
+                .query_map([], run_row)?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
             Ok(rows)
         })
     }
@@ -420,7 +422,10 @@ impl Store {
 
     pub fn set_merge(&self, run: &str, merge: &str) -> Result<()> {
         self.with(|c| {
-            c.execute("UPDATE runs SET merge = ?2 WHERE id = ?1", params![run, merge])?;
+            c.execute(
+                "UPDATE runs SET merge = ?2 WHERE id = ?1",
+                params![run, merge],
+            )?;
             Ok(())
         })
     }
@@ -447,7 +452,10 @@ impl Store {
                     params![run, f.path, f.sha256, f.size as i64],
                 )?;
             }
-            tx.execute("UPDATE runs SET summary = ?2 WHERE id = ?1", params![run, summary])?;
+            tx.execute(
+                "UPDATE runs SET summary = ?2 WHERE id = ?1",
+                params![run, summary],
+            )?;
             tx.commit()?;
             Ok(())
         })?;
@@ -457,8 +465,9 @@ impl Store {
 
     pub fn results(&self, run: &str) -> Result<Vec<File>> {
         self.with(|c| {
-            let mut st =
-                c.prepare("SELECT path, sha256, size FROM results WHERE run_id = ?1 ORDER BY path")?;
+            let mut st = c.prepare(
+                "SELECT path, sha256, size FROM results WHERE run_id = ?1 ORDER BY path",
+            )?;
             let rows = st
                 .query_map([run], |r| {
                     Ok(File {
@@ -498,7 +507,11 @@ impl Store {
             )?;
             let rows = st
                 .query_map([run], |r| {
-                    Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u32, r.get(2)?))
+                    Ok((
+                        r.get::<_, i64>(0)? as u64,
+                        r.get::<_, i64>(1)? as u32,
+                        r.get(2)?,
+                    ))
                 })?
                 .collect::<rusqlite::Result<Vec<_>>>()?;
             Ok(rows)
@@ -520,7 +533,9 @@ impl Store {
     pub fn queue_depth(&self) -> Result<(u64, u64)> {
         self.with(|c| {
             let q = |s: &str| -> rusqlite::Result<i64> {
-                c.query_row("SELECT COUNT(*) FROM jobs WHERE state = ?1", [s], |r| r.get(0))
+                c.query_row("SELECT COUNT(*) FROM jobs WHERE state = ?1", [s], |r| {
+                    r.get(0)
+                })
             };
             Ok((q("queued")? as u64, q("leased")? as u64))
         })
@@ -653,7 +668,13 @@ impl Store {
     ) -> Result<Outcome> {
         self.with(|c| {
             let tx = c.transaction()?;
-            let out = fail_in(&tx, lease, error, if requeue { "returned" } else { "failed" }, max_failures)?;
+            let out = fail_in(
+                &tx,
+                lease,
+                error,
+                if requeue { "returned" } else { "failed" },
+                max_failures,
+            )?;
             tx.commit()?;
             Ok(out)
         })
@@ -665,9 +686,8 @@ impl Store {
         self.with(|c| {
             let tx = c.transaction()?;
             let expired: Vec<i64> = {
-                let mut st = tx.prepare(
-                    "SELECT id FROM leases WHERE active = 1 AND expires_ms < ?1",
-                )?;
+                let mut st =
+                    tx.prepare("SELECT id FROM leases WHERE active = 1 AND expires_ms < ?1")?;
                 let rows = st
                     .query_map([now_ms() as i64], |r| r.get(0))?
                     .collect::<rusqlite::Result<Vec<i64>>>()?;
@@ -759,7 +779,16 @@ fn fail_in(
             "SELECT j.id, j.state, j.lease_id, j.failures, j.run_id, j.label FROM leases l
              JOIN jobs j ON j.id = l.job_id WHERE l.id = ?1 AND l.active = 1",
             [lease as i64],
-            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?, r.get(5)?)),
+            |r| {
+                Ok((
+                    r.get(0)?,
+                    r.get(1)?,
+                    r.get(2)?,
+                    r.get(3)?,
+                    r.get(4)?,
+                    r.get(5)?,
+                ))
+            },
         )
         .optional()?;
     tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;

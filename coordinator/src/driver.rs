@@ -9,7 +9,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use bemcal_calibrate::pipeline::{write_summary, Calibration, ChainSummary, OutputMetrics, Timings};
+use bemcal_calibrate::pipeline::{
+    write_summary, Calibration, ChainSummary, OutputMetrics, Timings,
+};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::Project;
 use bemcal_stats::mcmc::{ChainState, Draws};
@@ -91,7 +93,9 @@ impl State {
     /// Stores bytes as an artifact (file + row).
     pub fn put_artifact(&self, bytes: &[u8]) -> Result<String> {
         let sha = self.artifacts.put(bytes, None).map_err(err)?;
-        self.store.add_artifact(&sha, bytes.len() as u64).map_err(err)?;
+        self.store
+            .add_artifact(&sha, bytes.len() as u64)
+            .map_err(err)?;
         Ok(sha)
     }
 
@@ -259,7 +263,9 @@ impl State {
             },
             cache_key: None,
         };
-        self.store.set_stage(&r.id, "train", vec![job]).map_err(err)?;
+        self.store
+            .set_stage(&r.id, "train", vec![job])
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -376,7 +382,7 @@ impl State {
         Project::load(&pf).map_err(err)
     }
 
-        fn stage_merge(&self, r: &RunRow) -> Result<bool> {
+    fn stage_merge(&self, r: &RunRow) -> Result<bool> {
         let cal = self.load(r)?;
         self.place(&cal.out, &self.surrogate_files(r)?)?;
         let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
@@ -437,7 +443,10 @@ impl State {
         let bytes = serde_json::to_vec(&ck).map_err(err)?;
         bemcal_calibrate::write_atomic(&cal.out.join("chains.json"), &bytes).map_err(err)?;
         let merged = Merged {
-            acceptance: states.iter().map(|s| s.acceptance_rate_post_burn_in()).collect(),
+            acceptance: states
+                .iter()
+                .map(|s| s.acceptance_rate_post_burn_in())
+                .collect(),
             posterior: chains.posterior,
             sigma_delta_kwh: chains.sigma_delta_kwh,
             estimate: chains.estimate.clone(),
@@ -478,7 +487,9 @@ impl State {
         if jobs.iter().any(|j| j.state != "done") {
             return Ok(false);
         }
-        self.store.set_stage(&r.id, "summary", vec![]).map_err(err)?;
+        self.store
+            .set_stage(&r.id, "summary", vec![])
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -504,7 +515,12 @@ impl State {
         .map_err(err)?;
         let design = cal.design().map_err(err)?;
         let secs = self.store.stage_seconds(&r.id).map_err(err)?;
-        let s = |name: &str| secs.iter().filter(|x| x.0 == name).map(|x| x.1).sum::<f64>();
+        let s = |name: &str| {
+            secs.iter()
+                .filter(|x| x.0 == name)
+                .map(|x| x.1)
+                .sum::<f64>()
+        };
         let timings = Timings {
             design_s: s("design"),
             simulations_s: s("simulate"),

@@ -67,6 +67,26 @@ pub async fn serve(
         }
     });
 
+    // Standard gRPC health (grpc.health.v1, no token: Kubernetes probes cannot send one):
+    // SERVING while the database answers the query behind the Health RPC.
+    let (health, health_svc) = tonic_health::server::health_reporter();
+    let probe = st.clone();
+    tokio::spawn(async move {
+        loop {
+            let st = probe.clone();
+            let ok = tokio::task::spawn_blocking(move || st.store.queue_depth().is_ok())
+                .await
+                .unwrap_or(false);
+            let status = match ok {
+                true => tonic_health::ServingStatus::Serving,
+                false => tonic_health::ServingStatus::NotServing,
+            };
+            health.set_service_status("", status).await;
+            health.set_service_status("bemcal.v1.Coordinator", status).await;
+            tokio::time::sleep(Duration::from_secs(5)).await;
+        }
+    });
+
     let listener = tokio::net::TcpListener::bind(opts.listen).await?;
     ready(listener.local_addr()?);
     let svc = CoordinatorServer::new(Service { st })
@@ -77,11 +97,13 @@ pub async fn serve(
     if let Some((cert, key)) = &opts.tls {
         let cert = std::fs::read(cert)
             .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", cert.display()))?;
-        let key =
-            std::fs::read(key).map_err(|e| anyhow::anyhow!("cannot read {}: {e}", key.display()))?;
-        builder = builder.tls_config(ServerTlsConfig::new().identity(Identity::from_pem(cert, key)))?;
+        let key = std::fs::read(key)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", key.display()))?;
+        builder =
+            builder.tls_config(ServerTlsConfig::new().identity(Identity::from_pem(cert, key)))?;
     }
     builder
+        .add_service(health_svc)
         .add_service(svc)
         .serve_with_incoming_shutdown(
             tokio_stream::wrappers::TcpListenerStream::new(listener),

@@ -43,7 +43,9 @@ fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
 
 fn check_worker(id: &str) -> Result<(), Status> {
     if id.is_empty() || id.len() > 200 {
-        return Err(Status::invalid_argument("worker_id must be 1-200 characters"));
+        return Err(Status::invalid_argument(
+            "worker_id must be 1-200 characters",
+        ));
     }
     Ok(())
 }
@@ -58,7 +60,10 @@ impl Service {
     /// The status of a run, with per-stage progress.
     pub fn status(&self, r: &RunRow, with_results: bool) -> Result<RunStatus, Status> {
         let jobs = self.st.store.jobs(&r.id, None).map_err(internal)?;
-        let cur = STAGES.iter().position(|s| *s == r.stage).unwrap_or(STAGES.len());
+        let cur = STAGES
+            .iter()
+            .position(|s| *s == r.stage)
+            .unwrap_or(STAGES.len());
         let stages = STAGES
             .iter()
             .enumerate()
@@ -216,7 +221,9 @@ impl Coordinator for Service {
             .await?
             .ok_or_else(|| Status::invalid_argument("empty upload"))?;
         if !valid_sha(&first.sha256) {
-            return Err(Status::invalid_argument("the first chunk must carry the sha256"));
+            return Err(Status::invalid_argument(
+                "the first chunk must carry the sha256",
+            ));
         }
         if first.size > MAX_ARTIFACT_BYTES {
             return Err(Status::resource_exhausted(format!(
@@ -348,7 +355,13 @@ impl Coordinator for Service {
         };
         self.st
             .store
-            .create_run(&id, &project.name, &bundle_files, &surrogate, project.mcmc.iterations)
+            .create_run(
+                &id,
+                &project.name,
+                &bundle_files,
+                &surrogate,
+                project.mcmc.iterations,
+            )
             .map_err(internal)?;
         let _ = self.st.kick.send(id.clone());
         Ok(Response::new(SubmitReply { run_id: id }))
@@ -386,7 +399,12 @@ impl Coordinator for Service {
             .store
             .end_run(&id, "cancelled", Some("cancelled by request"))
             .map_err(internal)?;
-        let r = self.st.store.run(&id).map_err(internal)?.ok_or_else(|| Status::not_found(id))?;
+        let r = self
+            .st
+            .store
+            .run(&id)
+            .map_err(internal)?
+            .ok_or_else(|| Status::not_found(id))?;
         Ok(Response::new(self.status(&r, false)?))
     }
 }

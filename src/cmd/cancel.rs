@@ -16,9 +16,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let rt = bemcal_coordinator::runtime()?;
     let st = rt.block_on(async {
         let mut c = connect.client()?;
-        c.cancel(RunRequest { run_id: a.run.clone() })
-            .await
-            .map_err(|e| anyhow::anyhow!("{}", e.message()))
+        c.cancel(RunRequest {
+            run_id: a.run.clone(),
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("{}", e.message()))
     })?;
     println!("{} {}", st.get_ref().run_id, st.get_ref().state);
     Ok(())

@@ -178,8 +178,8 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
         if reuse {
             log("surrogate: reusing the one trained earlier");
         }
-        let run = client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path()))
-            .await?;
+        let run =
+            client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path())).await?;
         log(&format!("run {run} submitted"));
         let st = client::watch(&mut c, &run, |s| {
             log(&format!("{} ({})", s.stage, s.state));

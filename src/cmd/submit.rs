@@ -21,8 +21,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let rt = bemcal_coordinator::runtime()?;
     let id = rt.block_on(async {
         let mut c = connect.client()?;
-        bemcal_coordinator::client::submit_project(&mut c, &a.project, a.surrogate.as_deref())
-            .await
+        bemcal_coordinator::client::submit_project(&mut c, &a.project, a.surrogate.as_deref()).await
     })?;
     println!("{id}");
     Ok(())

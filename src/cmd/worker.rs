@@ -39,5 +39,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         drain: Duration::from_secs(a.drain),
     };
     let rt = bemcal_coordinator::runtime()?;
-    rt.block_on(bemcal_worker::run(opts, bemcal_coordinator::shutdown_signal()))
+    rt.block_on(bemcal_worker::run(
+        opts,
+        bemcal_coordinator::shutdown_signal(),
+    ))
 }

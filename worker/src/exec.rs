@@ -71,7 +71,12 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
             ))
         }
         Some(Kind::Validate(v)) => {
-            if !v.label.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') || v.label.is_empty() {
+            if !v
+                .label
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_')
+                || v.label.is_empty()
+            {
                 return Err(format!("bad validation label {:?}", v.label));
             }
             let i = v.index as usize;

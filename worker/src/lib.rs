@@ -15,7 +15,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use bemcal_coordinator::client::{upload_file, Client, Connect};
-use bemcal_coordinator::proto::{self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest};
+use bemcal_coordinator::proto::{
+    self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest,
+};
 use tokio::sync::Semaphore;
 
 use crate::cache::Cache;
@@ -215,20 +217,18 @@ async fn handle(
                 }
             }
             let r = match upload_err {
-                Some(e) => {
-                    retry(patience, || {
-                        let mut c = client.clone();
-                        let req = FailRequest {
-                            worker_id: worker.clone(),
-                            lease_id: lease,
-                            error: format!("uploading outputs: {e}"),
-                            requeue: false,
-                        };
-                        async move { c.fail(req).await }
-                    })
-                    .await
-                    .map(|_| ())
-                }
+                Some(e) => retry(patience, || {
+                    let mut c = client.clone();
+                    let req = FailRequest {
+                        worker_id: worker.clone(),
+                        lease_id: lease,
+                        error: format!("uploading outputs: {e}"),
+                        requeue: false,
+                    };
+                    async move { c.fail(req).await }
+                })
+                .await
+                .map(|_| ()),
                 None => retry(patience, || {
                     let mut c = client.clone();
                     let req = CompleteRequest {
@@ -243,7 +243,11 @@ async fn handle(
                 .map(|_| ()),
             };
             if let Err(e) = r {
-                eprintln!("worker {worker}: reporting job {}: {}", job.job_id, e.message());
+                eprintln!(
+                    "worker {worker}: reporting job {}: {}",
+                    job.job_id,
+                    e.message()
+                );
             }
             let _ = std::fs::remove_dir_all(&dir);
         }
