@@ -3,7 +3,7 @@
 
 /// Density of the triangular distribution `(min, mode, max)` at `x`.
 pub fn triangular_pdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
-    if !(max > min) || x < min || x > max {
+    if max.is_nan() || min.is_nan() || max <= min || x < min || x > max {
         return 0.0;
     }
     let h = 2.0 / (max - min);
@@ -22,7 +22,7 @@ pub fn triangular_pdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
 
 /// Quantile `p` of the triangular distribution `(min, mode, max)`.
 pub fn triangular_quantile(min: f64, mode: f64, max: f64, p: f64) -> f64 {
-    if !(max > min) {
+    if max.is_nan() || min.is_nan() || max <= min {
         return min;
     }
     let p = p.clamp(0.0, 1.0);
@@ -50,7 +50,7 @@ pub fn quantile(values: &[f64], q: f64) -> f64 {
 /// Histogram of `values` on `bins` equal bins over `[lo, hi]`, normalised to a density
 /// (area 1 over the values inside). Returns `(left edge, right edge, density)` per bin.
 pub fn density_histogram(values: &[f64], lo: f64, hi: f64, bins: usize) -> Vec<(f64, f64, f64)> {
-    if !(hi > lo) || bins == 0 {
+    if hi.is_nan() || lo.is_nan() || hi <= lo || bins == 0 {
         return vec![];
     }
     let w = (hi - lo) / bins as f64;
@@ -90,7 +90,7 @@ pub fn kde(values: &[f64], grid: &[f64]) -> Vec<f64> {
     let iqr = quantile(&v, 0.75) - quantile(&v, 0.25);
     let spread = if iqr > 0.0 { sd.min(iqr / 1.34) } else { sd };
     let h = 0.9 * spread * n.powf(-0.2);
-    if !(h > 0.0) {
+    if h.is_nan() || h <= 0.0 {
         return vec![0.0; grid.len()];
     }
     let c = 1.0 / (n * h * (2.0 * std::f64::consts::PI).sqrt());
@@ -253,9 +253,25 @@ pub fn zoom_windows(timestamps: &[String], measured: &[f64]) -> Vec<Window> {
             // No parsable dates: spread the weeks evenly over the series.
             None => (month as usize - 1) * n / 12,
         };
+        // A week mostly without meter data says little: move on a week at a time (up to 8).
+        let mut start = start;
+        for _ in 0..8 {
+            let end = (start + 168).min(n);
+            let missing = measured
+                .get(start..end)
+                .map_or(0, |w| w.iter().filter(|x| !x.is_finite()).count());
+            if end <= start || 2 * missing <= end - start {
+                break;
+            }
+            start += 168;
+        }
         if start + 24 < n {
+            let from = timestamps
+                .get(start)
+                .and_then(|t| t.get(..10))
+                .unwrap_or("?");
             out.push(Window {
-                title: format!("{name} week"),
+                title: format!("{name} week from {from}"),
                 start,
                 end: (start + 168).min(n),
             });
@@ -367,5 +383,12 @@ mod tests {
         // 2021-01-18 is the first Monday on or after 15 January.
         assert_eq!(ts[w[0].start], "2021-01-18T00:00");
         assert!(w[4].start <= 5000 && w[4].end >= 5100);
+        // A seasonal week inside a long gap moves past it.
+        let mut m = vec![1.0; 8760];
+        for x in &mut m[4000..4800] {
+            *x = f64::NAN;
+        }
+        let w = zoom_windows(&ts, &m);
+        assert!(w[2].start >= 4800 - 84, "{:?}", w[2]);
     }
 }

@@ -25,7 +25,7 @@ h1{font-size:24px;margin:8px 0 4px}h2{font-size:19px;margin:28px 0 8px;border-bo
 h3{font-size:15px;margin:16px 0 6px}
 p.sub{color:#666;margin:0 0 12px}
 table{border-collapse:collapse;font-size:13px;margin:6px 0 10px}
-th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}th{background:#f2f2f2}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right;white-space:nowrap}th{background:#f2f2f2;white-space:normal}
 td.l,th.l{text-align:left}
 .pass{color:#1a7f37;font-weight:600}.fail{color:#c62828;font-weight:600}
 .flag{background:#fdecea}
@@ -187,10 +187,10 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     } else {
         "<span class=\"badge bad\">not converged</span>"
     };
-    let _ = write!(
+    let _ = writeln!(
         h,
         "<h1>Calibration report: {} {conv}</h1><p class=\"sub\">{} &middot; outputs: {} &middot; \
-{} parameters &middot; {} chains &times; {} draws &middot; {} design points &middot; estimate: {}</p>\n",
+{} parameters &middot; {} chains &times; {} draws &middot; {} design points &middot; estimate: {}</p>",
         esc(&title),
         esc(&cal.dir.display().to_string()),
         esc(&s.outputs.join(", ")),

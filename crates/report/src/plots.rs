@@ -44,6 +44,8 @@ pub const ESTIMATE: RGBColor = RGBColor(200, 30, 30);
 pub const GAP: RGBColor = RGBColor(250, 215, 220);
 
 const FONT: &str = "sans-serif";
+const LIGHT_MESH: RGBColor = RGBColor(248, 248, 248);
+const BOLD_MESH: RGBColor = RGBColor(228, 228, 228);
 
 /// Draws into a fresh white `w` x `h` SVG and returns its text.
 fn render(
@@ -188,7 +190,7 @@ pub fn prior_posterior(p: &PriorPosterior<'_>) -> Result<String, PlotError> {
     grid.sort_by(f64::total_cmp);
     let dens = analysis::kde(p.samples, &grid);
     let prior: Vec<(f64, f64)> = {
-        let mut xs = vec![x_lo, p.min, p.mode, p.max, x_hi];
+        let mut xs = [x_lo, p.min, p.mode, p.max, x_hi];
         xs.sort_by(f64::total_cmp);
         xs.iter()
             .map(|&x| (x, analysis::triangular_pdf(p.min, p.mode, p.max, x)))
@@ -206,10 +208,13 @@ pub fn prior_posterior(p: &PriorPosterior<'_>) -> Result<String, PlotError> {
     render(340, 230, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(6)
+            .margin_right(16)
             .x_label_area_size(34)
             .y_label_area_size(44)
             .build_cartesian_2d(x_lo..x_hi, 0.0..y_max)?;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(5)
             .y_labels(4)
@@ -262,10 +267,13 @@ pub fn trace_rank(chains: &[&[f64]], unit: &str) -> Result<String, PlotError> {
         let (left, right) = root.split_horizontally(460);
         let mut c = ChartBuilder::on(&left)
             .margin(6)
+            .margin_right(16)
             .x_label_area_size(30)
             .y_label_area_size(52)
             .build_cartesian_2d(0.0..(n - 1) as f64, lo..hi)?;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(6)
             .y_labels(5)
@@ -286,10 +294,13 @@ pub fn trace_rank(chains: &[&[f64]], unit: &str) -> Result<String, PlotError> {
         }
         let mut r = ChartBuilder::on(&right)
             .margin(6)
+            .margin_right(16)
             .x_label_area_size(30)
             .y_label_area_size(40)
             .build_cartesian_2d(0.0..bins as f64, 0.0..r_max)?;
         r.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_mesh()
             .x_labels(3)
             .y_labels(4)
@@ -372,11 +383,14 @@ pub fn hourly_year(v: &HourlyView<'_>) -> Result<String, PlotError> {
     render(1100, 300, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
+            .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(56)
             .build_cartesian_2d(0.0..days as f64, y0..y1)?;
         let ts = v.timestamps;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(13)
             .y_labels(6)
@@ -442,11 +456,14 @@ pub fn hourly_window(v: &HourlyView<'_>, w: &Window) -> Result<String, PlotError
     render(540, 230, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
+            .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(50)
             .build_cartesian_2d(x0..x1, y0..y1)?;
         let ts = v.timestamps;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(8)
             .y_labels(5)
@@ -502,10 +519,13 @@ pub fn daily_profiles(
     render(420, 260, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
+            .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(44)
             .build_cartesian_2d(0.0..23.0, 0.0..y1)?;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .x_labels(7)
             .y_labels(6)
             .x_label_formatter(&|x| format!("{x:.0}"))
@@ -554,10 +574,13 @@ pub fn schedule_boxes(
     render(420, 260, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
+            .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(44)
             .build_cartesian_2d(0.0..24.0, 0.0..y1)?;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(7)
             .y_labels(6)
@@ -617,10 +640,13 @@ pub fn schedule_intervals(
     render(420, 260, |root| {
         let mut c = ChartBuilder::on(root)
             .margin(8)
+            .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(44)
             .build_cartesian_2d(0.0..24.0, 0.0..y1)?;
         c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
             .disable_x_mesh()
             .x_labels(7)
             .y_labels(6)
