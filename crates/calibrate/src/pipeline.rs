@@ -88,14 +88,7 @@ pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
     if let Some(p) = &project.priors {
         let path = project.resolve(p);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let pf: PriorsFile = toml::from_str(&text).map_err(|e| Error::Input {
-            path: path.clone(),
-            line: e
-                .span()
-                .map(|s| text[..s.start].matches('\n').count() + 1)
-                .unwrap_or(0),
-            message: e.message().to_string(),
-        })?;
+        let pf: PriorsFile = bemcal_energyplus::parse_toml(&text, &path).map_err(Error::from)?;
         if let Some(b) = &pf.schedule {
             let mut spec = model.spec().cloned().ok_or_else(|| Error::Input {
                 path: path.clone(),

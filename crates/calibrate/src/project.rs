@@ -230,14 +230,7 @@ impl Project {
             line: 0,
             message: format!("cannot read: {e}"),
         })?;
-        let mut p: Project = toml::from_str(&text).map_err(|e| Error::Input {
-            path: path.into(),
-            line: e
-                .span()
-                .map(|s| text[..s.start].matches('\n').count() + 1)
-                .unwrap_or(0),
-            message: e.message().to_string(),
-        })?;
+        let mut p: Project = bemcal_energyplus::parse_toml(&text, path).map_err(Error::from)?;
         p.base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         p.validate().map_err(|message| Error::Input {
             path: path.into(),

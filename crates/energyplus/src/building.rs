@@ -218,14 +218,7 @@ pub fn weekend_param(n: usize) -> String {
 impl BuildingSpec {
     /// Parses and validates a spec from TOML text.
     pub fn from_toml(text: &str, path: &std::path::Path) -> Result<BuildingSpec, Error> {
-        let spec: BuildingSpec = toml::from_str(text).map_err(|e| Error::Input {
-            path: path.to_path_buf(),
-            line: e
-                .span()
-                .map(|s| text[..s.start].matches('\n').count() + 1)
-                .unwrap_or(0),
-            message: e.message().to_string(),
-        })?;
+        let spec: BuildingSpec = crate::parse_toml(text, path)?;
         spec.validate().map_err(|message| Error::Input {
             path: path.to_path_buf(),
             line: 0,

@@ -62,6 +62,21 @@ pub enum Error {
     Timeout { dir: PathBuf, seconds: u64 },
 }
 
+/// Parses TOML text into `T`; an error names the file and the line of the offending key.
+pub fn parse_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &std::path::Path,
+) -> Result<T, Error> {
+    toml::from_str(text).map_err(|e| Error::Input {
+        path: path.to_path_buf(),
+        line: e
+            .span()
+            .map(|s| text[..s.start].matches('\n').count() + 1)
+            .unwrap_or(0),
+        message: e.message().to_string(),
+    })
+}
+
 pub(crate) fn io_err(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Error {
     let path = path.into();
     move |source| Error::Io { path, source }

@@ -116,28 +116,14 @@ impl Model {
 
     /// Parses a model file's text (`path` locates relative files and names errors).
     pub fn from_toml(text: &str, path: &Path, idd: &Idd) -> Result<Model, Error> {
-        let value: toml::Table = toml::from_str(text).map_err(|e| Error::Input {
-            path: path.into(),
-            line: e
-                .span()
-                .map(|s| text[..s.start].matches('\n').count() + 1)
-                .unwrap_or(0),
-            message: e.message().to_string(),
-        })?;
+        let value: toml::Table = crate::parse_toml(text, path)?;
         if !value.contains_key("idf") {
             let spec = BuildingSpec::from_toml(text, path)?;
             let mut m = Model::generated(spec);
             m.path = path.into();
             return Ok(m);
         }
-        let map: ParameterMap = toml::from_str(text).map_err(|e| Error::Input {
-            path: path.into(),
-            line: e
-                .span()
-                .map(|s| text[..s.start].matches('\n').count() + 1)
-                .unwrap_or(0),
-            message: e.message().to_string(),
-        })?;
+        let map: ParameterMap = crate::parse_toml(text, path)?;
         let idf_path = path.parent().unwrap_or(Path::new(".")).join(&map.idf.path);
         let idf_text = std::fs::read_to_string(&idf_path).map_err(io_err(&idf_path))?;
         let idf = Idf::parse(&idf_text, &idf_path)?;
