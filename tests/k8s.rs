@@ -159,11 +159,17 @@ fn every_manifest_parses_and_the_kustomization_lists_them() {
         }
         // Everything but the kustomization itself and the example Secret is deployed.
         if name != "kustomization.yaml" && name != "secret.example.yaml" {
-            assert!(listed.contains(&name), "{name} not in kustomization resources");
+            assert!(
+                listed.contains(&name),
+                "{name} not in kustomization resources"
+            );
         }
     }
     for r in &listed {
-        assert!(root().join("k8s").join(r).exists(), "{r} listed but missing");
+        assert!(
+            root().join("k8s").join(r).exists(),
+            "{r} listed but missing"
+        );
     }
     // The kinds the deployment needs.
     let objs = deployed();
@@ -221,8 +227,8 @@ fn service_container_listen_and_probe_ports_agree() {
     let sp = &svc["spec"]["ports"].as_sequence().unwrap()[0];
     assert_eq!(sp["targetPort"].as_u64(), Some(port));
     // The Service selects the coordinator's pods.
-    let labels = &find(&objs, "Deployment", "bemcal-coordinator")["spec"]["template"]["metadata"]
-        ["labels"];
+    let labels =
+        &find(&objs, "Deployment", "bemcal-coordinator")["spec"]["template"]["metadata"]["labels"];
     for (k, v) in svc["spec"]["selector"].as_mapping().unwrap() {
         assert_eq!(&labels[s(k)], v, "selector {k:?}");
     }
@@ -244,7 +250,9 @@ fn worker_points_at_the_coordinator_service() {
     let a = args(&objs, "bemcal-worker");
     assert_eq!(a[0], "worker");
     let url = flag(&a, "--coordinator");
-    let rest = url.strip_prefix("http://").expect("plain http inside the cluster");
+    let rest = url
+        .strip_prefix("http://")
+        .expect("plain http inside the cluster");
     let (host, port) = rest.trim_end_matches('/').rsplit_once(':').unwrap();
     let svc = find(&objs, "Service", "bemcal-coordinator");
     let name = s(&svc["metadata"]["name"]);
@@ -267,7 +275,10 @@ fn worker_points_at_the_coordinator_service() {
         ["terminationGracePeriodSeconds"]
         .as_u64()
         .unwrap();
-    assert!(grace >= drain + 10, "grace {grace} s < drain {drain} s + 10 s");
+    assert!(
+        grace >= drain + 10,
+        "grace {grace} s < drain {drain} s + 10 s"
+    );
 }
 
 #[test]
@@ -304,7 +315,11 @@ fn token_secret_key_matches_every_reference() {
 #[test]
 fn every_container_has_resource_requests_and_limits() {
     fn mem_bytes(q: &str) -> f64 {
-        for (suf, m) in [("Ki", 1024f64), ("Mi", 1024f64.powi(2)), ("Gi", 1024f64.powi(3))] {
+        for (suf, m) in [
+            ("Ki", 1024f64),
+            ("Mi", 1024f64.powi(2)),
+            ("Gi", 1024f64.powi(3)),
+        ] {
             if let Some(n) = q.strip_suffix(suf) {
                 return n.parse::<f64>().unwrap() * m;
             }
@@ -388,7 +403,11 @@ fn dockerfile_builds_bemcal_and_installs_its_runtime() {
         .map(str::trim)
         .filter(|l| !l.starts_with('#'))
         .collect();
-    let from: Vec<&str> = lines.iter().copied().filter(|l| l.starts_with("FROM ")).collect();
+    let from: Vec<&str> = lines
+        .iter()
+        .copied()
+        .filter(|l| l.starts_with("FROM "))
+        .collect();
     assert_eq!(from.len(), 2, "multi-stage: {from:?}");
     assert!(from[0].starts_with("FROM rust:1-bookworm AS "));
     assert!(from[1].starts_with("FROM python:3.11-slim-bookworm"));
@@ -397,8 +416,17 @@ fn dockerfile_builds_bemcal_and_installs_its_runtime() {
     assert!(df.contains("python/requirements.txt"));
     assert!(df.contains("-r /opt/bemcal/requirements.txt"));
     // The Makefile's exec bits for the EnergyPlus payload tools.
-    for t in ["energyplus", "ExpandObjects", "ConvertInputFormat", "EPMacro", "ReadVarsESO"] {
-        assert!(df.contains(&format!("$payload/{t}")) || df.contains(&format!("/{t}\"")), "{t}");
+    for t in [
+        "energyplus",
+        "ExpandObjects",
+        "ConvertInputFormat",
+        "EPMacro",
+        "ReadVarsESO",
+    ] {
+        assert!(
+            df.contains(&format!("$payload/{t}")) || df.contains(&format!("/{t}\"")),
+            "{t}"
+        );
     }
     assert!(df.contains("BEMCAL_VENV=/opt/bemcal/venv"));
     assert!(df.contains("COPY --from=build /usr/local/bin/bemcal /usr/local/bin/bemcal"));
@@ -419,7 +447,11 @@ fn dockerfile_builds_bemcal_and_installs_its_runtime() {
         let sc = &find(&objs, "Deployment", d)["spec"]["template"]["spec"]["securityContext"];
         assert_eq!(sc["runAsUser"].as_u64(), Some(uid), "{d}");
         assert_eq!(sc["runAsNonRoot"].as_bool(), Some(true), "{d}");
-        assert_eq!(container(&objs, d)["image"], "bemcal", "{d}: image (set by kustomize)");
+        assert_eq!(
+            container(&objs, d)["image"],
+            "bemcal",
+            "{d}: image (set by kustomize)"
+        );
     }
     // The ENTRYPOINT binary carries the subcommands the manifests run.
     for sub in ["coordinator", "worker", "status", "submit"] {
@@ -441,7 +473,10 @@ fn probes_pass_against_a_real_coordinator() {
     let objs = deployed();
     let mut a = args(&objs, "bemcal-coordinator");
     let dir = tempfile::tempdir().unwrap();
-    *a.iter_mut().skip_while(|x| *x != "--listen").nth(1).unwrap() = "127.0.0.1:0".into();
+    *a.iter_mut()
+        .skip_while(|x| *x != "--listen")
+        .nth(1)
+        .unwrap() = "127.0.0.1:0".into();
     *a.iter_mut().skip_while(|x| *x != "--data").nth(1).unwrap() =
         dir.path().join("data").to_str().unwrap().into();
     let token = "k8s-test-token-0123456789abcdef";
@@ -463,13 +498,22 @@ fn probes_pass_against_a_real_coordinator() {
         .read_line(&mut line)
         .unwrap();
     let _guard = Kill(child);
-    let addr = line.trim().strip_prefix("listening on ").unwrap().to_string();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .unwrap()
+        .to_string();
     let url = format!("http://{addr}");
 
     let coord = container(&objs, "bemcal-coordinator");
     let services: Vec<String> = ["startupProbe", "readinessProbe", "livenessProbe"]
         .iter()
-        .map(|p| coord[*p]["grpc"]["service"].as_str().unwrap_or("").to_string())
+        .map(|p| {
+            coord[*p]["grpc"]["service"]
+                .as_str()
+                .unwrap_or("")
+                .to_string()
+        })
         .collect();
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
