@@ -125,6 +125,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
+    surrogate_matches_torch_on_real_output(&out.join("surrogate"));
+
     // The initial model (prior modes) is reported beside the calibrated one.
     assert_eq!(summary["initial"].as_array().unwrap().len(), 3);
 
@@ -176,4 +178,44 @@ fn bad_project_is_a_clear_error() {
         !o.status.success() && e.contains("project.toml:7") && e.contains("chainz"),
         "{e}"
     );
+}
+
+/// The surrogate trained on real EnergyPlus output: held-out error reported per output, and
+/// Rust/ort agrees with PyTorch to 1e-4 relative on the trainer's parity windows.
+fn surrogate_matches_torch_on_real_output(dir: &Path) {
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("surrogate.json")).unwrap()).unwrap();
+    for o in ["heating_kwh", "cooling_kwh", "electricity_kwh"] {
+        let m = &meta["held_out"]["metrics"][o];
+        let rmse = m["rmse_kwh"].as_f64().unwrap_or(f64::NAN);
+        assert!(rmse.is_finite() && rmse > 0.0, "held-out RMSE of {o}: {m}");
+        assert!(m["cv_rmse_pct"].as_f64().is_some(), "held-out CV-RMSE of {o}: {m}");
+    }
+    let parity: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("parity.json")).unwrap()).unwrap();
+    let shape: Vec<usize> = parity["x_shape"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    let x: Vec<f32> = parity["x"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
+    let x = ndarray::Array3::from_shape_vec((shape[0], shape[1], shape[2]), x).unwrap();
+    let mut s = bemcal_surrogate::Surrogate::load(dir, 1).unwrap();
+    let y = s.run_windows(x.view()).unwrap();
+    let torch = parity["y_windows"].as_array().unwrap();
+    let (mut diff, mut scale) = (0.0f64, 0.0f64);
+    for (row, want) in y.rows().into_iter().zip(torch) {
+        for (a, b) in row.iter().zip(want.as_array().unwrap()) {
+            let b = b.as_f64().unwrap();
+            diff = diff.max((*a as f64 - b).abs());
+            scale = scale.max(b.abs());
+        }
+    }
+    assert!(diff / scale < 1e-4, "ort vs torch relative error {:.2e}", diff / scale);
 }

@@ -294,9 +294,20 @@ meters = ["Electricity:Facility"]
     let bad = map.replace("Watts per Floor Area", "Watts per Square Foot");
     std::fs::write(&path, bad).unwrap();
     let e = Model::load(&path, r.idd()).unwrap_err().to_string();
-    assert!(e.contains("mine.toml") && e.contains("has no field 'Watts per Square Foot'") && e.contains("Watts per Floor Area"), "{e}");
-    let bad = map.replace("object = \"Wall Insulation\"", "object = \"Wall Insulatoin\"");
+    assert!(
+        e.contains("mine.toml")
+            && e.contains("has no field 'Watts per Square Foot'")
+            && e.contains("Watts per Floor Area"),
+        "{e}"
+    );
+    let bad = map.replace(
+        "object = \"Wall Insulation\"",
+        "object = \"Wall Insulatoin\"",
+    );
     std::fs::write(&path, bad).unwrap();
     let e = Model::load(&path, r.idd()).unwrap_err().to_string();
-    assert!(e.contains("no object Wall Insulatoin of class Material"), "{e}");
+    assert!(
+        e.contains("no object Wall Insulatoin of class Material"),
+        "{e}"
+    );
 }
