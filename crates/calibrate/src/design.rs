@@ -22,6 +22,8 @@ pub struct Plan {
     pub units: Vec<String>,
     /// Values of every parameter that is not calibrated.
     pub fixed: ParameterValues,
+    /// Priors restricted by a constraint with a fixed parameter, as messages for the log.
+    pub restricted: Vec<String>,
 }
 
 impl Plan {
@@ -51,6 +53,7 @@ impl Plan {
             priors: vec![],
             units: vec![],
             fixed: ParameterValues::new(),
+            restricted: vec![],
         };
         for p in model.parameters() {
             let cal = if calibrate.is_empty() {
@@ -72,7 +75,49 @@ impl Plan {
         if plan.calibrated.is_empty() {
             return Err(Error::Config("no parameter left to calibrate".into()));
         }
+        plan.restrict_to_fixed(model)?;
         Ok(plan)
+    }
+
+    /// A constraint between a calibrated and a fixed parameter is a bound on the calibrated
+    /// one: its prior is restricted to the feasible range (a triangular prior on
+    /// [max(min, bound), max] or [min, min(max, bound)], mode clamped into it), so neither the
+    /// design nor the chains propose values EnergyPlus would refuse.
+    fn restrict_to_fixed(&mut self, model: &Model) -> Result<(), Error> {
+        for c in model.constraints() {
+            let lo_cal = self.calibrated.iter().position(|n| *n == c.lower);
+            let hi_cal = self.calibrated.iter().position(|n| *n == c.upper);
+            let (i, new_min, new_max) = match (lo_cal, hi_cal) {
+                (Some(i), None) => {
+                    let bound = self.fixed[&c.upper] - c.margin;
+                    (i, self.priors[i].min(), self.priors[i].max().min(bound))
+                }
+                (None, Some(j)) => {
+                    let bound = self.fixed[&c.lower] + c.margin;
+                    (j, self.priors[j].min().max(bound), self.priors[j].max())
+                }
+                _ => continue,
+            };
+            let p = self.priors[i];
+            if new_min == p.min() && new_max == p.max() {
+                continue;
+            }
+            if new_min >= new_max {
+                return Err(Error::Config(format!(
+                    "{} cannot satisfy '{} + {} <= {}' with the fixed value: its prior [{}, {}] lies entirely outside; {}",
+                    self.calibrated[i], c.lower, c.margin, c.upper, p.min(), p.max(), c.reason
+                )));
+            }
+            let mode = p.mode().clamp(new_min, new_max);
+            self.priors[i] = Triangular::new(new_min, mode, new_max).map_err(|e| {
+                Error::Config(format!("restricted prior of {}: {e}", self.calibrated[i]))
+            })?;
+            self.restricted.push(format!(
+                "prior of {} restricted to [{new_min}, {new_max}] (mode {mode}) by '{} + {} <= {}' with the fixed value",
+                self.calibrated[i], c.lower, c.margin, c.upper
+            ));
+        }
+        Ok(())
     }
 
     /// Full parameter values for a vector of calibrated values.
@@ -239,4 +284,50 @@ pub fn simulate_point(
 struct SavedRun {
     values: ParameterValues,
     outputs: HourlyOutputs,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bemcal_energyplus::BuildingSpec;
+
+    #[test]
+    fn constraint_with_a_fixed_parameter_restricts_the_prior() {
+        let model = Model::generated(BuildingSpec::default());
+        // Heating set-point fixed at its mode (21 C): cooling may not go below it.
+        let plan = Plan::new(
+            &model,
+            &["cooling_setpoint_occupied".into()],
+            &Default::default(),
+        )
+        .unwrap();
+        let p = plan.priors[0];
+        assert_eq!((p.min(), p.mode(), p.max()), (21.0, 24.0, 26.0));
+        assert_eq!(plan.restricted.len(), 1, "{:?}", plan.restricted);
+        let d = make_design(&plan, &model, 30, 3, 0).unwrap();
+        assert!(d.points.iter().all(|x| x[0] >= 21.0));
+
+        // Supply air calibrated, chilled water fixed at 6 C: supply air >= 9 C (prior 10-18 is
+        // already feasible, nothing changes).
+        let plan = Plan::new(&model, &["supply_air_temp".into()], &Default::default()).unwrap();
+        assert!(plan.restricted.is_empty());
+
+        // No feasible value at all is an error that says why.
+        let fixed: ParameterValues = [("heating_setpoint_occupied".to_string(), 27.0)].into();
+        let e = Plan::new(&model, &["cooling_setpoint_occupied".into()], &fixed).unwrap_err();
+        assert!(e.to_string().contains("lies entirely outside"), "{e}");
+    }
+
+    #[test]
+    fn unknown_or_doubly_assigned_parameters_are_refused() {
+        let model = Model::generated(BuildingSpec::default());
+        let e = Plan::new(&model, &["lighting".into()], &Default::default()).unwrap_err();
+        assert!(
+            e.to_string().contains("unknown parameter 'lighting'"),
+            "{e}"
+        );
+        let fixed: ParameterValues = [("shgc".to_string(), 0.4)].into();
+        let e = Plan::new(&model, &["shgc".into()], &fixed).unwrap_err();
+        assert!(e.to_string().contains("both calibrated and fixed"), "{e}");
+    }
 }

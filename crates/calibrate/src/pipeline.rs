@@ -731,6 +731,9 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         inp.weather_path.display()
     ));
 
+    for note in &inp.plan.restricted {
+        log(note);
+    }
     let t = Instant::now();
     let design = cal.design()?;
     timings.design_s = t.elapsed().as_secs_f64();
