@@ -13,6 +13,7 @@ tmp=$(mktemp -d)
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; rm -rf "$tmp"; }
 trap cleanup EXIT
+[ -n "${BENCH_DEBUG:-}" ] && set -x
 export BEMCAL_TOKEN=bench-token-0123456789abcdef
 
 cp examples/office/small.toml "$tmp/model.toml"
