@@ -90,6 +90,11 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
 
+    // Recovery: the estimate lies within 5 % of the prior range of the truth, and the truth lies
+    // in the 90 % posterior interval widened by 3 % of the prior range. The widening is the
+    // surrogate's systematic error: the likelihood (iid or AR(1)) conditions on the surrogate, so
+    // the posterior interval does not include the surrogate's own bias (measured here: up to
+    // ~2 % of the range with 8 design points).
     for (name, truth) in TRUTH {
         let p = summary["posterior"]["parameters"]
             .as_array()
@@ -97,17 +102,31 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
             .iter()
             .find(|p| p["name"] == name)
             .unwrap();
+        let r = summary["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap();
+        let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
         let (q5, q95) = (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap());
-        // The 90 % interval, widened by 1 % of the prior range for the surrogate's bias.
-        let slack = 0.01
-            * if name.starts_with("lighting") {
-                10.0
-            } else {
-                6.0
-            };
+        let estimate = summary["calibrated_values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|v| v[0] == name)
+            .unwrap()[1]
+            .as_f64()
+            .unwrap();
+        eprintln!("{name}: truth {truth}, estimate {estimate:.4}, 90 % [{q5:.4}, {q95:.4}]");
+        assert!(
+            (estimate - truth).abs() <= 0.05 * range,
+            "{name}: estimate {estimate} too far from truth {truth}\n{log}"
+        );
+        let slack = 0.03 * range;
         assert!(
             q5 - slack <= truth && truth <= q95 + slack,
-            "{name}: truth {truth} outside [{q5}, {q95}]\n{log}"
+            "{name}: truth {truth} outside [{q5}, {q95}] +- {slack}\n{log}"
         );
         assert!(
             p["width_ratio"].as_f64().unwrap() < 0.5,
@@ -189,7 +208,10 @@ fn surrogate_matches_torch_on_real_output(dir: &Path) {
         let m = &meta["held_out"]["metrics"][o];
         let rmse = m["rmse_kwh"].as_f64().unwrap_or(f64::NAN);
         assert!(rmse.is_finite() && rmse > 0.0, "held-out RMSE of {o}: {m}");
-        assert!(m["cv_rmse_pct"].as_f64().is_some(), "held-out CV-RMSE of {o}: {m}");
+        assert!(
+            m["cv_rmse_pct"].as_f64().is_some(),
+            "held-out CV-RMSE of {o}: {m}"
+        );
     }
     let parity: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("parity.json")).unwrap()).unwrap();
@@ -217,5 +239,9 @@ fn surrogate_matches_torch_on_real_output(dir: &Path) {
             scale = scale.max(b.abs());
         }
     }
-    assert!(diff / scale < 1e-4, "ort vs torch relative error {:.2e}", diff / scale);
+    assert!(
+        diff / scale < 1e-4,
+        "ort vs torch relative error {:.2e}",
+        diff / scale
+    );
 }

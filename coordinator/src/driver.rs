@@ -72,6 +72,8 @@ pub const STAGES: &[&str] = &[
 struct Merged {
     posterior: PosteriorSummary,
     sigma_delta_kwh: Vec<(String, f64)>,
+    #[serde(default)]
+    residual_ar1: Vec<(String, f64)>,
     estimate: Vec<f64>,
     acceptance: Vec<f64>,
     sigma_eta: Vec<f64>,
@@ -449,6 +451,7 @@ impl State {
                 .collect(),
             posterior: chains.posterior,
             sigma_delta_kwh: chains.sigma_delta_kwh,
+            residual_ar1: chains.residual_ar1,
             estimate: chains.estimate.clone(),
             sigma_eta: sampler.sigma_eta.clone(),
             held_out: sampler.held_out.clone(),
@@ -533,6 +536,7 @@ impl State {
         let chains = ChainSummary {
             posterior: merged.posterior,
             sigma_delta_kwh: merged.sigma_delta_kwh,
+            residual_ar1: merged.residual_ar1,
             estimate: merged.estimate,
         };
         let summary = write_summary(

@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::design::{make_design, simulate_design, simulate_point, write_design_csv, Plan};
 use crate::posterior::{run_chains, Posterior, SigmaDeltaBox};
-use crate::project::{Estimate, Project, SigmaDeltaMode};
+use crate::project::{Estimate, Project, Residuals, SigmaDeltaMode};
 use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
@@ -221,6 +221,9 @@ pub struct Summary {
     pub parameters: Vec<ParameterReport>,
     pub posterior: PosteriorSummary,
     pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// AR(1) coefficient of the hourly residuals at the MAP, per output (empty with iid).
+    #[serde(default)]
+    pub residual_ar1: Vec<(String, f64)>,
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
     pub estimate: Estimate,
@@ -476,6 +479,8 @@ impl Sampler<'_> {
             likelihood: &self.likelihood,
             sigma_box: (self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled)
                 .then_some(&self.sigma_box),
+            marginal: self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Marginal,
+            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
         }
     }
 
@@ -518,12 +523,14 @@ impl Sampler<'_> {
 
     /// The posterior and the evaluator, borrowed together.
     pub fn split(&mut self) -> (Posterior<'_>, &mut Evaluator) {
-        let sampled = self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled;
+        let mode = self.cal.project.mcmc.sigma_delta;
         let post = Posterior {
             plan: &self.cal.inputs.plan,
             model: &self.cal.inputs.model,
             likelihood: &self.likelihood,
-            sigma_box: sampled.then_some(&self.sigma_box),
+            sigma_box: (mode == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
+            marginal: mode == SigmaDeltaMode::Marginal,
+            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
         };
         (post, &mut self.evaluator)
     }
@@ -588,6 +595,7 @@ impl Sampler<'_> {
             draws,
             &sbox,
         )?;
+        let mut residual_ar1: Vec<(String, f64)> = vec![];
         let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
             Some(b) => (0..n_out)
                 .map(|k| {
@@ -600,6 +608,32 @@ impl Sampler<'_> {
                     (inp.outputs[k].clone(), v[v.len() / 2])
                 })
                 .collect(),
+            None if post.marginal => {
+                // Posterior mean of sigma_k^2 given the MAP parameters, InvGamma(n/2, SSR/2):
+                // SSR / (n - 2); sigma_delta is what is left after sigma_y and sigma_eta.
+                let y = eval.evaluate(&posterior.map_point)?;
+                let flat = y.as_slice().expect("contiguous prediction");
+                let ssr = post.likelihood.residual_sum_of_squares(flat);
+                if post.ar1 {
+                    residual_ar1 = inp
+                        .outputs
+                        .iter()
+                        .cloned()
+                        .zip(post.likelihood.ar1_coefficients(flat))
+                        .collect();
+                }
+                let n_obs = post.likelihood.n_observed();
+                inp.outputs
+                    .iter()
+                    .enumerate()
+                    .map(|(k, name)| {
+                        let total = ssr[k] / (n_obs[k] as f64 - 2.0).max(1.0);
+                        let z = &noise[k];
+                        let rest = total - z.sigma_y * z.sigma_y - z.sigma_eta * z.sigma_eta;
+                        (name.clone(), rest.max(0.0).sqrt())
+                    })
+                    .collect()
+            }
             None => inp
                 .outputs
                 .iter()
@@ -643,6 +677,7 @@ impl Sampler<'_> {
         Ok(ChainSummary {
             posterior,
             sigma_delta_kwh,
+            residual_ar1,
             estimate,
         })
     }
@@ -652,6 +687,8 @@ impl Sampler<'_> {
 pub struct ChainSummary {
     pub posterior: PosteriorSummary,
     pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
+    pub residual_ar1: Vec<(String, f64)>,
     /// The calibrated estimate (calibrated parameters, physical units).
     pub estimate: Vec<f64>,
 }
@@ -689,6 +726,7 @@ pub fn write_summary(
         converged: chains.posterior.max_rhat <= 1.01,
         posterior: chains.posterior.clone(),
         sigma_delta_kwh: chains.sigma_delta_kwh.clone(),
+        residual_ar1: chains.residual_ar1.clone(),
         sigma_eta_kwh: inp
             .outputs
             .iter()

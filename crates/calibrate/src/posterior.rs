@@ -47,7 +47,12 @@ pub struct Posterior<'a> {
     pub plan: &'a Plan,
     pub model: &'a Model,
     pub likelihood: &'a GaussianLikelihood,
+    /// Sampled `ln sigma_delta` dimensions (hyperparameter mode).
     pub sigma_box: Option<&'a SigmaDeltaBox>,
+    /// Integrate each output's variance out (Jeffreys prior) instead of fixing it.
+    pub marginal: bool,
+    /// With `marginal`: AR(1) residuals (phi profiled) instead of independent ones.
+    pub ar1: bool,
 }
 
 impl Posterior<'_> {
@@ -92,6 +97,8 @@ impl Posterior<'_> {
     /// ln likelihood given the surrogate's prediction (`hours x outputs`) for `u`.
     pub fn ln_likelihood(&self, u: &[f64], predicted: &[f32]) -> f64 {
         match self.sigma_box {
+            None if self.marginal && self.ar1 => self.likelihood.log_marginal_sigma_ar1(predicted),
+            None if self.marginal => self.likelihood.log_marginal_sigma(predicted),
             None => self.likelihood.log_likelihood(predicted),
             Some(b) => {
                 let d = self.plan.calibrated.len();
