@@ -82,7 +82,9 @@ pub async fn serve(
                 false => tonic_health::ServingStatus::NotServing,
             };
             health.set_service_status("", status).await;
-            health.set_service_status("bemcal.v1.Coordinator", status).await;
+            health
+                .set_service_status("bemcal.v1.Coordinator", status)
+                .await;
             tokio::time::sleep(Duration::from_secs(5)).await;
         }
     });
