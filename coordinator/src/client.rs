@@ -176,6 +176,18 @@ pub async fn submit_project(
     project_file: &Path,
     surrogate: Option<&Path>,
 ) -> anyhow::Result<String> {
+    submit_building(client, project_file, surrogate, "", "").await
+}
+
+/// Submits a project as building `building` of portfolio `portfolio` (empty: a lone run).
+/// In a portfolio an invalid project is not refused: it becomes a failed run with the reason.
+pub async fn submit_building(
+    client: &mut Client,
+    project_file: &Path,
+    surrogate: Option<&Path>,
+    portfolio: &str,
+    building: &str,
+) -> anyhow::Result<String> {
     let files = crate::bundle::collect(project_file)?;
     let mut bundle = vec![];
     for (rel, bytes) in files {
@@ -192,7 +204,12 @@ pub async fn submit_project(
         None => vec![],
     };
     let r = client
-        .submit(proto::SubmitRequest { bundle, surrogate })
+        .submit(proto::SubmitRequest {
+            bundle,
+            surrogate,
+            portfolio: portfolio.to_string(),
+            building: building.to_string(),
+        })
         .await
         .map_err(|e| anyhow::anyhow!("{}", e.message()))?;
     Ok(r.into_inner().run_id)

@@ -14,7 +14,8 @@ use crate::now_ms;
 use crate::proto;
 
 /// Migrations, in order; `user_version` = how many have been applied.
-const MIGRATIONS: &[&str] = &[r#"
+const MIGRATIONS: &[&str] = &[
+    r#"
 CREATE TABLE runs (
     id          TEXT PRIMARY KEY,
     name        TEXT NOT NULL,
@@ -92,7 +93,15 @@ CREATE TABLE results (
     size        INTEGER NOT NULL,
     PRIMARY KEY (run_id, path)
 );
-"#];
+"#,
+    r#"
+ALTER TABLE runs ADD COLUMN portfolio TEXT;           -- portfolio id (NULL: a lone run)
+ALTER TABLE runs ADD COLUMN building TEXT;            -- the building's name in its portfolio
+ALTER TABLE runs ADD COLUMN last_lease INTEGER NOT NULL DEFAULT 0; -- id of its latest lease
+CREATE INDEX runs_portfolio ON runs(portfolio);
+CREATE INDEX jobs_cache ON jobs(cache_key, state);
+"#,
+];
 
 /// A file by relative path and content hash (the serde twin of `proto::FileRef`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -149,6 +158,8 @@ pub struct RunRow {
     pub summary: Option<String>,
     pub created_ms: u64,
     pub finished_ms: Option<u64>,
+    pub portfolio: Option<String>,
+    pub building: Option<String>,
 }
 
 /// A job row.
@@ -190,7 +201,7 @@ fn parse_files(s: Option<String>) -> Vec<File> {
         .unwrap_or_default()
 }
 
-const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms";
+const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms, portfolio, building";
 const JOB_COLS: &str =
     "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
 
@@ -209,6 +220,8 @@ fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
         summary: r.get(10)?,
         created_ms: r.get::<_, i64>(11)? as u64,
         finished_ms: r.get::<_, Option<i64>>(12)?.map(|v| v as u64),
+        portfolio: r.get(13)?,
+        building: r.get(14)?,
     })
 }
 
@@ -296,6 +309,30 @@ impl Store {
             )?;
             tx.commit()?;
             Ok(())
+        })
+    }
+
+    /// Makes a run part of `portfolio` as building `building`.
+    pub fn set_portfolio(&self, id: &str, portfolio: &str, building: &str) -> Result<()> {
+        self.with(|c| {
+            c.execute(
+                "UPDATE runs SET portfolio = ?2, building = ?3 WHERE id = ?1",
+                params![id, portfolio, building],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// Runs of a portfolio, in submission order.
+    pub fn portfolio_runs(&self, portfolio: &str) -> Result<Vec<RunRow>> {
+        self.with(|c| {
+            let mut st = c.prepare(&format!(
+                "SELECT {RUN_COLS} FROM runs WHERE portfolio = ?1 ORDER BY created_ms, rowid"
+            ))?;
+            let rows = st
+                .query_map([portfolio], run_row)?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
         })
     }
 
@@ -541,7 +578,11 @@ impl Store {
         })
     }
 
-    /// Hands the oldest queued job of a running run to `worker` for `ttl_ms`.
+    /// Hands a queued job of a running run to `worker` for `ttl_ms`, fairly across runs: the
+    /// run with the fewest jobs leased now goes first, ties to the run served longest ago
+    /// (round-robin), and within a run the oldest job (its earliest stage first). A simulation
+    /// whose inputs (cache key) another job is simulating now waits: its outputs will be shared
+    /// when that one completes.
     pub fn lease(&self, worker: &str, ttl_ms: u64) -> Result<Option<proto::Job>> {
         self.with(|c| {
             let now = now_ms() as i64;
@@ -550,7 +591,12 @@ impl Store {
                 .query_row(
                     &format!(
                         "SELECT {} FROM jobs j JOIN runs r ON r.id = j.run_id
-                         WHERE j.state = 'queued' AND r.state = 'running' ORDER BY j.id LIMIT 1",
+                         WHERE j.state = 'queued' AND r.state = 'running'
+                           AND (j.cache_key IS NULL OR NOT EXISTS (
+                                SELECT 1 FROM jobs k WHERE k.cache_key = j.cache_key AND k.state = 'leased'))
+                         ORDER BY (SELECT COUNT(*) FROM jobs k WHERE k.run_id = j.run_id AND k.state = 'leased'),
+                                  r.last_lease, j.id
+                         LIMIT 1",
                         JOB_COLS
                             .split(", ")
                             .map(|c| format!("j.{c}"))
@@ -576,6 +622,10 @@ impl Store {
             tx.execute(
                 "UPDATE jobs SET state = 'leased', lease_id = ?2 WHERE id = ?1",
                 params![job.id as i64, lease],
+            )?;
+            tx.execute(
+                "UPDATE runs SET last_lease = ?2 WHERE id = ?1",
+                params![job.run_id, lease],
             )?;
             tx.commit()?;
             let mut spec = job.spec;
@@ -612,8 +662,15 @@ impl Store {
     }
 
     /// Records a finished job (durably) from lease `lease`. A job already done (a late
-    /// duplicate) is left as it is.
-    pub fn complete(&self, lease: u64, outputs: &[File], result: &str) -> Result<Outcome> {
+    /// duplicate) is left as it is. A simulation's outputs also answer every queued job with the
+    /// same cache key (other buildings of a portfolio with the same inputs); the runs of those
+    /// jobs are returned besides the outcome, to be advanced too.
+    pub fn complete(
+        &self,
+        lease: u64,
+        outputs: &[File],
+        result: &str,
+    ) -> Result<(Outcome, Vec<String>)> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -626,7 +683,7 @@ impl Store {
                 )
                 .optional()?;
             let Some((job, state, run, key, run_state)) = row else {
-                return Ok(Outcome::Ignored);
+                return Ok((Outcome::Ignored, vec![]));
             };
             let fresh = (state == "queued" || state == "leased") && run_state == "running";
             tx.execute(
@@ -636,7 +693,7 @@ impl Store {
             tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
             if !fresh {
                 tx.commit()?;
-                return Ok(Outcome::Ignored);
+                return Ok((Outcome::Ignored, vec![]));
             }
             tx.execute(
                 "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, finished_ms = ?4, lease_id = NULL WHERE id = ?1",
@@ -646,14 +703,29 @@ impl Store {
                 "UPDATE leases SET active = 0 WHERE job_id = ?1",
                 [job],
             )?;
+            let mut shared = vec![];
             if let Some(k) = key {
                 tx.execute(
                     "INSERT OR REPLACE INTO sim_cache (key, outputs, result) VALUES (?1, ?2, ?3)",
                     params![k, files_json(outputs), result],
                 )?;
+                shared = {
+                    let mut st = tx.prepare(
+                        "SELECT DISTINCT run_id FROM jobs WHERE cache_key = ?1 AND state = 'queued' AND run_id != ?2",
+                    )?;
+                    let rows = st
+                        .query_map(params![k, run], |r| r.get(0))?
+                        .collect::<rusqlite::Result<Vec<String>>>()?;
+                    rows
+                };
+                tx.execute(
+                    "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, cached = 1, finished_ms = ?4
+                     WHERE cache_key = ?1 AND state = 'queued'",
+                    params![k, files_json(outputs), result, now],
+                )?;
             }
             tx.commit()?;
-            Ok(Outcome::Recorded(run))
+            Ok((Outcome::Recorded(run), shared))
         })
     }
 
@@ -828,4 +900,100 @@ fn fail_in(
         )?;
     }
     Ok(Outcome::Recorded(run))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn store(name: &str) -> (Store, std::path::PathBuf) {
+        let dir = std::env::temp_dir().join(format!(
+            "bemcal-db-{name}-{}-{}",
+            std::process::id(),
+            now_ms()
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        (Store::open(&dir.join("coordinator.db")).unwrap(), dir)
+    }
+
+    fn jobs(n: usize, key: impl Fn(usize) -> Option<String>) -> Vec<NewJob> {
+        (0..n)
+            .map(|i| NewJob {
+                stage: "simulate",
+                kind: "simulate",
+                label: format!("point {i}"),
+                spec: proto::Job::default(),
+                cache_key: key(i),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn lease_alternates_between_runs_instead_of_draining_the_first() {
+        let (s, dir) = store("fair");
+        s.create_run("A", "big", &[], &[], 0).unwrap();
+        s.create_run("B", "small", &[], &[], 0).unwrap();
+        s.set_stage("A", "simulate", jobs(50, |_| None)).unwrap();
+        s.set_stage("B", "simulate", jobs(2, |_| None)).unwrap();
+        // Leases held (workers busy): A, B, A, B, then only A is left.
+        let held: Vec<proto::Job> = (0..6)
+            .map(|_| s.lease("w", 60_000).unwrap().unwrap())
+            .collect();
+        let order: Vec<&str> = held.iter().map(|j| j.run_id.as_str()).collect();
+        assert_eq!(order, ["A", "B", "A", "B", "A", "A"]);
+        // A third run arriving while A and B hold leases goes first (it has none leased).
+        s.create_run("C", "third", &[], &[], 0).unwrap();
+        s.set_stage("C", "simulate", jobs(2, |_| None)).unwrap();
+        assert_eq!(s.lease("w", 60_000).unwrap().unwrap().run_id, "C");
+        std::fs::remove_dir_all(dir).ok();
+
+        // One worker completing each job before the next lease: still round-robin.
+        let (s, dir) = store("fair1");
+        s.create_run("A", "big", &[], &[], 0).unwrap();
+        s.create_run("B", "small", &[], &[], 0).unwrap();
+        s.set_stage("A", "simulate", jobs(50, |_| None)).unwrap();
+        s.set_stage("B", "simulate", jobs(2, |_| None)).unwrap();
+        let mut order = vec![];
+        for _ in 0..6 {
+            let j = s.lease("w", 60_000).unwrap().unwrap();
+            order.push(j.run_id.clone());
+            s.complete(j.lease_id, &[], "{}").unwrap();
+        }
+        assert_eq!(order, ["A", "B", "A", "B", "A", "A"]);
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn identical_simulations_of_two_runs_run_once() {
+        let (s, dir) = store("share");
+        s.create_run("A", "a", &[], &[], 0).unwrap();
+        s.create_run("B", "b", &[], &[], 0).unwrap();
+        s.set_stage("A", "simulate", jobs(2, |i| Some(format!("k{i}"))))
+            .unwrap();
+        s.set_stage("B", "simulate", jobs(2, |i| Some(format!("k{i}"))))
+            .unwrap();
+        let j1 = s.lease("w1", 60_000).unwrap().unwrap();
+        let j2 = s.lease("w2", 60_000).unwrap().unwrap();
+        // The second lease is B's other simulation, not its copy of the first.
+        assert_eq!((j1.run_id.as_str(), j2.run_id.as_str()), ("A", "B"));
+        assert!(s.lease("w3", 60_000).unwrap().is_none(), "copies must wait");
+        let f = File {
+            path: "point.json".into(),
+            sha256: "ab".repeat(32),
+            size: 1,
+        };
+        let (o, shared) = s.complete(j1.lease_id, &[f.clone()], "{}").unwrap();
+        assert_eq!(o, Outcome::Recorded("A".into()));
+        assert_eq!(shared, vec!["B".to_string()]);
+        let (_, shared) = s.complete(j2.lease_id, &[f], "{}").unwrap();
+        assert_eq!(shared, vec!["A".to_string()]);
+        for run in ["A", "B"] {
+            let j = s.jobs(run, None).unwrap();
+            assert!(j.iter().all(|j| j.state == "done"), "{j:?}");
+            assert_eq!(j.iter().filter(|j| j.cached).count(), 1, "{j:?}");
+            assert!(j.iter().all(|j| j.outputs[0].path == "point.json"));
+        }
+        assert_eq!(s.attempts("A").unwrap() + s.attempts("B").unwrap(), 2);
+        std::fs::remove_dir_all(dir).ok();
+    }
 }

@@ -110,6 +110,16 @@ impl Service {
             },
             created_ms: r.created_ms,
             finished_ms: r.finished_ms.unwrap_or(0),
+            portfolio: r.portfolio.clone().unwrap_or_default(),
+            building: r.building.clone().unwrap_or_default(),
+            simulations_run: jobs
+                .iter()
+                .filter(|j| j.kind == "simulate" && j.state == "done" && !j.cached)
+                .count() as u32,
+            simulations_shared: jobs
+                .iter()
+                .filter(|j| j.kind == "simulate" && j.state == "done" && j.cached)
+                .count() as u32,
             jobs_total: jobs.len() as u32,
             attempts_total: self.st.store.attempts(&r.id).map_err(internal)? as u32,
             summary_json: if with_results {
@@ -189,12 +199,15 @@ impl Coordinator for Service {
             return Err(Status::invalid_argument("result_json over 1 MiB"));
         }
         // Committed before the reply: a worker that hears "ok" may forget the job.
-        let o = self
+        let (o, shared) = self
             .st
             .store
             .complete(r.lease_id, &outputs, &r.result_json)
             .map_err(internal)?;
         self.kick(o);
+        for run in shared {
+            let _ = self.st.kick.send(run);
+        }
         Ok(Response::new(Ack {}))
     }
 
@@ -347,10 +360,21 @@ impl Coordinator for Service {
                 let dir = self.st.run_dir(&id);
                 let _ = std::fs::remove_dir_all(&dir);
                 let prefix = format!("{}/", dir.join("project").display());
-                return Err(Status::invalid_argument(format!(
-                    "invalid project: {}",
-                    e.replace(&prefix, "")
-                )));
+                let msg = format!("invalid project: {}", e.replace(&prefix, ""));
+                if r.portfolio.is_empty() {
+                    return Err(Status::invalid_argument(msg));
+                }
+                // In a portfolio the building is reported as failed, with the loader's reason,
+                // and the other buildings go on.
+                let store = &self.st.store;
+                store
+                    .create_run(&id, &r.building, &bundle_files, &surrogate, 0)
+                    .map_err(internal)?;
+                store
+                    .set_portfolio(&id, &r.portfolio, &r.building)
+                    .map_err(internal)?;
+                store.end_run(&id, "failed", Some(&msg)).map_err(internal)?;
+                return Ok(Response::new(SubmitReply { run_id: id }));
             }
         };
         self.st
@@ -363,15 +387,27 @@ impl Coordinator for Service {
                 project.mcmc.iterations,
             )
             .map_err(internal)?;
+        if !r.portfolio.is_empty() {
+            self.st
+                .store
+                .set_portfolio(&id, &r.portfolio, &r.building)
+                .map_err(internal)?;
+        }
         let _ = self.st.kick.send(id.clone());
         Ok(Response::new(SubmitReply { run_id: id }))
     }
 
     async fn list_runs(
         &self,
-        _: Request<ListRunsRequest>,
+        req: Request<ListRunsRequest>,
     ) -> Result<Response<ListRunsReply>, Status> {
-        let runs = self.st.store.runs().map_err(internal)?;
+        let p = req.into_inner().portfolio;
+        let runs = if p.is_empty() {
+            self.st.store.runs()
+        } else {
+            self.st.store.portfolio_runs(&p)
+        }
+        .map_err(internal)?;
         let runs = runs
             .iter()
             .map(|r| self.status(r, false))

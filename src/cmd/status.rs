@@ -53,7 +53,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("{}", e.message()))?
                 .into_inner()],
             None => {
-                c.list_runs(ListRunsRequest {})
+                c.list_runs(ListRunsRequest::default())
                     .await
                     .map_err(|e| anyhow::anyhow!("{}", e.message()))?
                     .into_inner()
