@@ -12,6 +12,7 @@ pub mod bundle;
 pub mod client;
 pub mod db;
 pub mod driver;
+pub mod portfolio;
 pub mod server;
 pub mod service;
 

@@ -126,16 +126,17 @@ impl Drop for Children {
     }
 }
 
-/// `bemcal calibrate --local-workers N`: a coordinator and N worker processes on loopback run
-/// the calibration; the results land in `out` as with the single-process path. A surrogate
-/// already in `out/surrogate` is reused (as the local path does).
-pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Result<Summary> {
+/// Starts a coordinator (state in `out/.distributed/coordinator`) and `workers` worker processes
+/// on loopback; they stop when the returned guard is dropped.
+pub(crate) fn start_local(
+    out: &Path,
+    workers: usize,
+    log: &dyn Fn(&str),
+) -> anyhow::Result<(impl Drop, Connect)> {
     let exe = std::env::current_exe().context("locating the bemcal binary")?;
     let base = out.join(".distributed");
     std::fs::create_dir_all(&base)?;
     let token = random_token();
-    let t0 = std::time::Instant::now();
-    let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
     let mut coord = Command::new(&exe)
         .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
         .arg(base.join("coordinator"))
@@ -165,11 +166,23 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
             .context("starting a worker")?;
         children.0.push(w);
     }
-    let connect = Connect {
-        url,
-        token,
-        tls_ca: None,
-    };
+    Ok((
+        children,
+        Connect {
+            url,
+            token,
+            tls_ca: None,
+        },
+    ))
+}
+
+/// `bemcal calibrate --local-workers N`: a coordinator and N worker processes on loopback run
+/// the calibration; the results land in `out` as with the single-process path. A surrogate
+/// already in `out/surrogate` is reused (as the local path does).
+pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Result<Summary> {
+    let t0 = std::time::Instant::now();
+    let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
+    let (children, connect) = start_local(out, workers, &log)?;
     let surrogate = out.join("surrogate");
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
     let rt = bemcal_coordinator::runtime()?;

@@ -10,6 +10,7 @@ pub mod design;
 pub mod diagnose;
 pub mod metrics;
 pub mod params;
+pub mod portfolio;
 pub mod precalibrate;
 pub mod predict;
 pub mod report;
@@ -68,6 +69,8 @@ pub enum Command {
     Results(results::Args),
     /// Cancel a run.
     Cancel(cancel::Args),
+    /// Many buildings calibrated together: submit, run locally, status, results.
+    Portfolio(portfolio::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -90,5 +93,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Watch(a) => watch::run(a),
         Command::Results(a) => results::run(a),
         Command::Cancel(a) => cancel::run(a),
+        Command::Portfolio(a) => portfolio::run(a),
     }
 }

@@ -1,0 +1,442 @@
+//! Portfolios: many buildings (each its own project) calibrated together on one coordinator.
+//! A portfolio is a set of runs sharing a portfolio id; the lease order is fair across runs
+//! (`db::Store::lease`) and identical simulations are shared between them. This module reads
+//! the manifest, submits the buildings, follows their progress and writes the summary
+//! (`portfolio.csv`, `portfolio.json`, `portfolio.html`).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::client::{self, Client};
+use crate::proto::{self, RunStatus};
+
+/// One building of a manifest.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Building {
+    pub name: String,
+    /// Project file, relative to the manifest.
+    pub project: PathBuf,
+}
+
+/// `MANIFEST.toml`: `name = "..."` (optional) and `[[building]] name, project`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    #[serde(default)]
+    pub name: String,
+    #[serde(rename = "building", default)]
+    pub buildings: Vec<Building>,
+}
+
+/// Reads a manifest; project paths come back resolved against its folder.
+pub fn load_manifest(path: &Path) -> anyhow::Result<Manifest> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+    let mut m: Manifest =
+        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    if m.buildings.is_empty() {
+        anyhow::bail!("{}: no [[building]] entries", path.display());
+    }
+    let base = path.parent().unwrap_or(Path::new("."));
+    for (i, b) in m.buildings.iter_mut().enumerate() {
+        if b.name.is_empty()
+            || b.name.len() > 100
+            || b.name.starts_with('.')
+            || !b
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+        {
+            anyhow::bail!(
+                "{}: building {} has name {:?}: use 1-100 of A-Z a-z 0-9 - _ . (it names a folder)",
+                path.display(),
+                i + 1,
+                b.name
+            );
+        }
+        b.project = base.join(&b.project);
+    }
+    for (i, b) in m.buildings.iter().enumerate() {
+        if m.buildings[..i].iter().any(|o| o.name == b.name) {
+            anyhow::bail!(
+                "{}: building name {:?} is used twice",
+                path.display(),
+                b.name
+            );
+        }
+    }
+    if m.name.is_empty() {
+        m.name = path
+            .file_stem()
+            .map_or("portfolio".into(), |s| s.to_string_lossy().to_string());
+    }
+    Ok(m)
+}
+
+/// A new portfolio id.
+pub fn new_id() -> String {
+    format!("p{}", &crate::auth::random_token()[..10])
+}
+
+/// Submits every building; a building whose files cannot even be bundled here is returned
+/// with its error (the coordinator records the others, failed ones included).
+pub async fn submit(
+    c: &mut Client,
+    m: &Manifest,
+    id: &str,
+) -> anyhow::Result<Vec<(String, Result<String, String>)>> {
+    let mut out = vec![];
+    for b in &m.buildings {
+        let r = client::submit_building(c, &b.project, None, id, &b.name)
+            .await
+            .map_err(|e| format!("{e:#}"));
+        out.push((b.name.clone(), r));
+    }
+    Ok(out)
+}
+
+/// The runs of a portfolio with their summaries (one GetRun per run).
+pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Vec<RunStatus>> {
+    let runs = c
+        .list_runs(proto::ListRunsRequest {
+            portfolio: id.to_string(),
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+        .into_inner()
+        .runs;
+    if !full {
+        return Ok(runs);
+    }
+    let mut out = vec![];
+    for r in runs {
+        out.push(
+            c.get_run(proto::RunRequest { run_id: r.run_id })
+                .await
+                .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+                .into_inner(),
+        );
+    }
+    Ok(out)
+}
+
+fn progress(s: &RunStatus) -> String {
+    let g = s.stages.iter().find(|g| g.stage == s.stage);
+    match g {
+        Some(g) if s.state == "running" && g.total > 1 => {
+            format!("{} {}/{}", s.stage, g.done, g.total)
+        }
+        _ if s.state == "running" => s.stage.clone(),
+        _ if s.state == "failed" => format!("FAILED at {}: {}", s.stage, s.error),
+        _ => s.state.clone(),
+    }
+}
+
+/// Follows a portfolio until every run has ended, calling `log` with one line per building
+/// whenever its stage (or state) changes.
+pub async fn follow(
+    c: &mut Client,
+    id: &str,
+    log: &dyn Fn(&str),
+) -> anyhow::Result<Vec<RunStatus>> {
+    let mut last: Vec<(String, String)> = vec![];
+    loop {
+        let runs = statuses(c, id, false).await?;
+        for r in &runs {
+            let key = format!("{} {}", r.state, r.stage);
+            match last.iter_mut().find(|l| l.0 == r.run_id) {
+                Some(l) if l.1 == key => continue,
+                Some(l) => l.1 = key,
+                None => last.push((r.run_id.clone(), key)),
+            }
+            log(&format!("{}: {}", r.building, progress(r)));
+        }
+        if runs.iter().all(|r| r.state != "running") {
+            return statuses(c, id, true).await;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(1000)).await;
+    }
+}
+
+/// G14 metrics of one output at the calibrated parameters.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputRow {
+    pub output: String,
+    pub nmbe: f64,
+    pub cv_rmse: f64,
+    pub pass: bool,
+}
+
+/// One building in the summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct BuildingRow {
+    pub building: String,
+    pub run: String,
+    /// done, failed, cancelled, running.
+    pub state: String,
+    /// The stage reached (where it failed, for a failed one).
+    pub stage: String,
+    /// Why it failed: the loader's message or the job's error (EnergyPlus error lines).
+    pub error: Option<String>,
+    /// Every output passes ASHRAE Guideline 14 (None: no validation).
+    pub g14_pass: Option<bool>,
+    pub outputs: Vec<OutputRow>,
+    pub max_rhat: Option<f64>,
+    pub run_time_s: f64,
+    pub simulations_run: u32,
+    pub simulations_shared: u32,
+    /// The building's report, relative to the summary folder.
+    pub report: Option<String>,
+}
+
+/// `portfolio.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PortfolioSummary {
+    pub portfolio: String,
+    pub name: String,
+    pub buildings: usize,
+    pub done: usize,
+    pub failed: usize,
+    pub simulations_run: u32,
+    pub simulations_shared: u32,
+    pub rows: Vec<BuildingRow>,
+}
+
+/// The summary row of a run.
+pub fn row(s: &RunStatus) -> BuildingRow {
+    let summary: serde_json::Value = serde_json::from_str(&s.summary_json).unwrap_or_default();
+    let outputs: Vec<OutputRow> = summary["validation"]
+        .as_array()
+        .map(|v| {
+            v.iter()
+                .map(|o| OutputRow {
+                    output: o["output"].as_str().unwrap_or_default().to_string(),
+                    nmbe: o["nmbe"].as_f64().unwrap_or(f64::NAN),
+                    cv_rmse: o["cv_rmse"].as_f64().unwrap_or(f64::NAN),
+                    pass: o["pass"].as_bool().unwrap_or(false),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let elapsed = if s.finished_ms > 0 {
+        s.finished_ms.saturating_sub(s.created_ms)
+    } else {
+        crate::now_ms().saturating_sub(s.created_ms)
+    } as f64
+        / 1000.0;
+    BuildingRow {
+        building: if s.building.is_empty() {
+            s.name.clone()
+        } else {
+            s.building.clone()
+        },
+        run: s.run_id.clone(),
+        state: s.state.clone(),
+        stage: s.stage.clone(),
+        error: (!s.error.is_empty()).then(|| s.error.clone()),
+        g14_pass: (!outputs.is_empty()).then(|| outputs.iter().all(|o| o.pass)),
+        max_rhat: summary["posterior"]["max_rhat"].as_f64(),
+        run_time_s: summary["timings"]["total_s"].as_f64().unwrap_or(elapsed),
+        simulations_run: s.simulations_run,
+        simulations_shared: s.simulations_shared,
+        outputs,
+        report: None,
+    }
+}
+
+/// The summary of a portfolio's runs; `local_failures`: buildings that never reached the
+/// coordinator (their files could not be read), with the reason.
+pub fn summarize(
+    id: &str,
+    name: &str,
+    runs: &[RunStatus],
+    local_failures: &[(String, String)],
+) -> PortfolioSummary {
+    let mut rows: Vec<BuildingRow> = runs.iter().map(row).collect();
+    for (b, e) in local_failures {
+        rows.push(BuildingRow {
+            building: b.clone(),
+            run: String::new(),
+            state: "failed".into(),
+            stage: "submit".into(),
+            error: Some(e.clone()),
+            g14_pass: None,
+            outputs: vec![],
+            max_rhat: None,
+            run_time_s: 0.0,
+            simulations_run: 0,
+            simulations_shared: 0,
+            report: None,
+        });
+    }
+    PortfolioSummary {
+        portfolio: id.to_string(),
+        name: name.to_string(),
+        buildings: rows.len(),
+        done: rows.iter().filter(|r| r.state == "done").count(),
+        failed: rows.iter().filter(|r| r.state == "failed").count(),
+        simulations_run: rows.iter().map(|r| r.simulations_run).sum(),
+        simulations_shared: rows.iter().map(|r| r.simulations_shared).sum(),
+        rows,
+    }
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn html(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn num(v: Option<f64>, digits: usize) -> String {
+    v.filter(|v| v.is_finite())
+        .map_or(String::new(), |v| format!("{v:.digits$}"))
+}
+
+/// Output names over all rows, in first-seen order.
+fn output_names(p: &PortfolioSummary) -> Vec<String> {
+    let mut names: Vec<String> = vec![];
+    for r in &p.rows {
+        for o in &r.outputs {
+            if !names.contains(&o.output) {
+                names.push(o.output.clone());
+            }
+        }
+    }
+    names
+}
+
+/// Writes `portfolio.csv` (one line per building; per output NMBE, CV-RMSE and G14 pass),
+/// `portfolio.json` and `portfolio.html` (a self-contained table linking each report) in `dir`.
+pub fn write(dir: &Path, p: &PortfolioSummary) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let names = output_names(p);
+    let mut csv = String::from(
+        "building,run,state,stage,g14_pass,max_rhat,run_time_s,simulations_run,simulations_shared",
+    );
+    for n in &names {
+        csv.push_str(&format!(",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass"));
+    }
+    csv.push_str(",error\n");
+    for r in &p.rows {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{:.1},{},{}",
+            csv_field(&r.building),
+            r.run,
+            r.state,
+            r.stage,
+            r.g14_pass.map_or(String::new(), |b| b.to_string()),
+            num(r.max_rhat, 4),
+            r.run_time_s,
+            r.simulations_run,
+            r.simulations_shared
+        ));
+        for n in &names {
+            match r.outputs.iter().find(|o| &o.output == n) {
+                Some(o) => csv.push_str(&format!(
+                    ",{},{},{}",
+                    num(Some(o.nmbe), 3),
+                    num(Some(o.cv_rmse), 3),
+                    o.pass
+                )),
+                None => csv.push_str(",,,"),
+            }
+        }
+        csv.push_str(&format!(
+            ",{}\n",
+            csv_field(r.error.as_deref().unwrap_or(""))
+        ));
+    }
+    bemcal_calibrate::write_atomic(&dir.join("portfolio.csv"), csv.as_bytes())?;
+    bemcal_calibrate::write_atomic(
+        &dir.join("portfolio.json"),
+        serde_json::to_string_pretty(p)?.as_bytes(),
+    )?;
+    let mut h = format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>Portfolio {name}</title><style>\
+         body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}td.l,th.l{{text-align:left}}\
+         .pass{{color:#1a7f37}}.fail{{color:#b42318;font-weight:bold}}pre{{white-space:pre-wrap;margin:0;text-align:left;max-width:60em}}\
+         </style></head><body>\n<h1>Portfolio {name}</h1>\n<p>{n} buildings: {d} done, {f} failed; \
+         {sr} EnergyPlus design runs, {ss} shared between buildings. ASHRAE Guideline 14 (hourly): \
+         |NMBE| &le; 10 %, CV-RMSE &le; 30 %.</p>\n<table>\n<tr><th class=\"l\">building</th><th class=\"l\">state</th>\
+         <th>G14</th><th>max R-hat</th><th>run time (s)</th>",
+        name = html(&p.name),
+        n = p.buildings,
+        d = p.done,
+        f = p.failed,
+        sr = p.simulations_run,
+        ss = p.simulations_shared
+    );
+    for n in &names {
+        h.push_str(&format!(
+            "<th>{0} NMBE %</th><th>{0} CV-RMSE %</th>",
+            html(n)
+        ));
+    }
+    h.push_str("<th class=\"l\">report / error</th></tr>\n");
+    for r in &p.rows {
+        let g14 = match r.g14_pass {
+            Some(true) => "<span class=\"pass\">pass</span>",
+            Some(false) => "<span class=\"fail\">FAIL</span>",
+            None => "",
+        };
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{g14}</td><td>{}</td><td>{:.0}</td>",
+            html(&r.building),
+            if r.state == "failed" {
+                format!("<span class=\"fail\">failed</span> ({})", html(&r.stage))
+            } else {
+                html(&r.state)
+            },
+            num(r.max_rhat, 3),
+            r.run_time_s
+        ));
+        for n in &names {
+            match r.outputs.iter().find(|o| &o.output == n) {
+                Some(o) => {
+                    let c = if o.pass { "pass" } else { "fail" };
+                    h.push_str(&format!(
+                        "<td class=\"{c}\">{}</td><td class=\"{c}\">{}</td>",
+                        num(Some(o.nmbe), 1),
+                        num(Some(o.cv_rmse), 1)
+                    ))
+                }
+                None => h.push_str("<td></td><td></td>"),
+            }
+        }
+        let last = match (&r.report, &r.error) {
+            (_, Some(e)) => format!("<pre>{}</pre>", html(e)),
+            (Some(rep), None) => format!("<a href=\"{0}\">{0}</a>", html(rep)),
+            (None, None) => String::new(),
+        };
+        h.push_str(&format!("<td class=\"l\">{last}</td></tr>\n"));
+    }
+    h.push_str("</table>\n</body></html>\n");
+    bemcal_calibrate::write_atomic(&dir.join("portfolio.html"), h.as_bytes())?;
+    Ok(())
+}
+
+/// Downloads each finished building's files into `out/<building>/`.
+pub async fn fetch(c: &mut Client, runs: &[RunStatus], out: &Path) -> anyhow::Result<()> {
+    for r in runs.iter().filter(|r| r.state == "done") {
+        let name = if r.building.is_empty() {
+            &r.run_id
+        } else {
+            &r.building
+        };
+        let name = crate::artifacts::safe_relative(name).map_err(|e| anyhow::anyhow!(e))?;
+        client::fetch_results(c, &r.run_id, &out.join(name)).await?;
+    }
+    Ok(())
+}

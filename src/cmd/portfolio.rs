@@ -1,0 +1,223 @@
+//! `bemcal portfolio`: many buildings calibrated together (fair scheduling across buildings,
+//! identical simulations shared), with a summary per building.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_coordinator::client::Client;
+use bemcal_coordinator::portfolio::{self, PortfolioSummary};
+use bemcal_coordinator::proto::RunStatus;
+
+use super::coordinator::ClientArgs;
+
+/// Calibrate a portfolio of buildings (a manifest of projects).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    pub command: Sub,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Sub {
+    /// Submit every building of MANIFEST.toml to a coordinator; prints the portfolio id.
+    Submit {
+        /// `[[building]] name = "...", project = "path/to/project.toml"` (relative to it).
+        manifest: PathBuf,
+        #[command(flatten)]
+        client: ClientArgs,
+    },
+    /// Run a portfolio through a coordinator and worker processes on loopback; writes
+    /// OUT/<building>/ (with report.html), portfolio.csv, portfolio.json and portfolio.html.
+    Run {
+        manifest: PathBuf,
+        /// Worker processes.
+        #[arg(long, default_value_t = 2)]
+        local_workers: usize,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Per building: state, stage, G14 per output, NMBE, CV-RMSE, max R-hat, run time, errors.
+    Status {
+        portfolio: String,
+        #[command(flatten)]
+        client: ClientArgs,
+        /// Print portfolio.json to stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Download the finished buildings (OUT/<building>/, report.html) and the summary files.
+    Results {
+        portfolio: String,
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        client: ClientArgs,
+    },
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let rt = bemcal_coordinator::runtime()?;
+    match a.command {
+        Sub::Submit { manifest, client } => {
+            let m = portfolio::load_manifest(&manifest)?;
+            let connect = client.connect()?;
+            let id = portfolio::new_id();
+            let subs = rt.block_on(async {
+                let mut c = connect.client()?;
+                portfolio::submit(&mut c, &m, &id).await
+            })?;
+            for (b, r) in &subs {
+                match r {
+                    Ok(run) => eprintln!("{b}: run {run}"),
+                    Err(e) => eprintln!("{b}: not submitted: {e}"),
+                }
+            }
+            println!("{id}");
+            Ok(())
+        }
+        Sub::Status {
+            portfolio: id,
+            client,
+            json,
+        } => {
+            let connect = client.connect()?;
+            let runs = rt.block_on(async {
+                let mut c = connect.client()?;
+                portfolio::statuses(&mut c, &id, true).await
+            })?;
+            if runs.is_empty() {
+                anyhow::bail!("no portfolio {id:?} on the coordinator");
+            }
+            let p = portfolio::summarize(&id, &id, &runs, &[]);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&p)?);
+            } else {
+                print_table(&p);
+            }
+            Ok(())
+        }
+        Sub::Results {
+            portfolio: id,
+            out,
+            client,
+        } => {
+            let connect = client.connect()?;
+            let runs = rt.block_on(async {
+                let mut c = connect.client()?;
+                let runs = portfolio::statuses(&mut c, &id, true).await?;
+                portfolio::fetch(&mut c, &runs, &out).await?;
+                Ok::<_, anyhow::Error>(runs)
+            })?;
+            if runs.is_empty() {
+                anyhow::bail!("no portfolio {id:?} on the coordinator");
+            }
+            let p = finish(&out, &id, &id, &runs, &[])?;
+            print_table(&p);
+            Ok(())
+        }
+        Sub::Run {
+            manifest,
+            local_workers,
+            out,
+        } => {
+            let m = portfolio::load_manifest(&manifest)?;
+            let t0 = std::time::Instant::now();
+            let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
+            std::fs::create_dir_all(&out)?;
+            let (children, connect) =
+                super::coordinator::start_local(&out, local_workers.max(1), &log)?;
+            let id = portfolio::new_id();
+            let (runs, local_failures) = rt.block_on(async {
+                let mut c: Client = connect.client()?;
+                let subs = portfolio::submit(&mut c, &m, &id).await?;
+                let mut failed = vec![];
+                for (b, r) in subs {
+                    match r {
+                        Ok(run) => log(&format!("{b}: submitted as run {run}")),
+                        Err(e) => {
+                            log(&format!("{b}: FAILED before submission: {e}"));
+                            failed.push((b, e));
+                        }
+                    }
+                }
+                let runs = portfolio::follow(&mut c, &id, &log).await?;
+                portfolio::fetch(&mut c, &runs, &out).await?;
+                Ok::<_, anyhow::Error>((runs, failed))
+            })?;
+            drop(children);
+            let p = finish(&out, &id, &m.name, &runs, &local_failures)?;
+            print_table(&p);
+            log(&format!(
+                "portfolio {}: {} of {} buildings done, {} failed; wrote {}/portfolio.{{csv,json,html}}",
+                m.name,
+                p.done,
+                p.buildings,
+                p.failed,
+                out.display()
+            ));
+            Ok(())
+        }
+    }
+}
+
+/// Writes each finished building's report.html, then the summary files.
+fn finish(
+    out: &Path,
+    id: &str,
+    name: &str,
+    runs: &[RunStatus],
+    local_failures: &[(String, String)],
+) -> anyhow::Result<PortfolioSummary> {
+    let mut p = portfolio::summarize(id, name, runs, local_failures);
+    for r in p.rows.iter_mut().filter(|r| r.state == "done") {
+        let dir = out.join(&r.building);
+        match bemcal_report::write_report(&dir, None) {
+            Ok(_) => r.report = Some(format!("{}/report.html", r.building)),
+            Err(e) => eprintln!("{}: no report: {e}", r.building),
+        }
+    }
+    portfolio::write(out, &p)?;
+    Ok(p)
+}
+
+fn print_table(p: &PortfolioSummary) {
+    println!(
+        "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8}  outputs (NMBE % / CV-RMSE %)",
+        "building", "state", "stage", "G14", "R-hat", "time s"
+    );
+    for r in &p.rows {
+        let outs: Vec<String> = r
+            .outputs
+            .iter()
+            .map(|o| {
+                format!(
+                    "{} {:.1}/{:.1}{}",
+                    o.output,
+                    o.nmbe,
+                    o.cv_rmse,
+                    if o.pass { "" } else { " FAIL" }
+                )
+            })
+            .collect();
+        println!(
+            "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8.0}  {}",
+            r.building,
+            r.state,
+            r.stage,
+            match r.g14_pass {
+                Some(true) => "pass",
+                Some(false) => "FAIL",
+                None => "-",
+            },
+            r.max_rhat.map_or("-".into(), |v| format!("{v:.3}")),
+            r.run_time_s,
+            outs.join(", ")
+        );
+        if let Some(e) = &r.error {
+            println!("  error: {}", e.replace('\n', "\n         "));
+        }
+    }
+    println!(
+        "{} buildings: {} done, {} failed; simulations run {}, shared {}",
+        p.buildings, p.done, p.failed, p.simulations_run, p.simulations_shared
+    );
+}
