@@ -5,9 +5,14 @@
 //! their design simulations are shared; `annex` has another footprint and window-to-wall
 //! ratio; `broken` has a meters CSV with a non-numeric cell and must be reported as failed
 //! (naming the file and line) while the others finish.
+//!
+//! `portfolio_submit_status_results_on_a_coordinator`: the coordinator path (`portfolio
+//! submit`, `status --json`, `results`) without workers: invalid buildings are failed runs with
+//! the loader's reason, the valid one waits in its simulate stage.
 
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
 use std::time::Instant;
 
 fn bemcal() -> Command {
@@ -223,4 +228,142 @@ fn portfolio_of_small_buildings_with_one_broken() {
         assert!(log.contains(&format!("{name}: done")), "{log}");
     }
     assert!(log.contains("broken: FAILED"), "{log}");
+}
+
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+const TOKEN: &str = "test-token-portfolio-0123456789";
+
+#[test]
+fn portfolio_submit_status_results_on_a_coordinator() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    building(&root.join("good"), "good", "", (12.5, 22.5));
+    let bad_meters = root.join("bad-meters");
+    let bad_param = root.join("bad-param");
+    for d in [&bad_meters, &bad_param] {
+        std::fs::create_dir_all(d).unwrap();
+        for f in ["model.toml", "project.toml", "meters.csv"] {
+            std::fs::copy(root.join("good").join(f), d.join(f)).unwrap();
+        }
+    }
+    let meters = std::fs::read_to_string(root.join("good/meters.csv")).unwrap();
+    std::fs::write(
+        bad_meters.join("meters.csv"),
+        meters.replacen("\n2021-01-01T05:00,", "\n2021-01-01T05:00,oops,", 1),
+    )
+    .unwrap();
+    let project = std::fs::read_to_string(root.join("good/project.toml")).unwrap();
+    std::fs::write(
+        bad_param.join("project.toml"),
+        project.replace("\"cooling_setpoint_occupied\"", "\"no_such_parameter\""),
+    )
+    .unwrap();
+    let manifest = root.join("p.toml");
+    std::fs::write(
+        &manifest,
+        "[[building]]\nname = \"good\"\nproject = \"good/project.toml\"\n\
+         [[building]]\nname = \"bad-meters\"\nproject = \"bad-meters/project.toml\"\n\
+         [[building]]\nname = \"bad-param\"\nproject = \"bad-param/project.toml\"\n",
+    )
+    .unwrap();
+
+    let mut c = bemcal()
+        .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
+        .arg(root.join("data"))
+        .env("BEMCAL_TOKEN", TOKEN)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(c.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _coord = Proc(c);
+    let url = format!(
+        "http://{}",
+        line.trim().strip_prefix("listening on ").unwrap()
+    );
+    let cli = |args: &[&str]| {
+        let o = bemcal()
+            .args(args)
+            .args(["--coordinator", &url])
+            .env("BEMCAL_TOKEN", TOKEN)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let id = cli(&["portfolio", "submit", manifest.to_str().unwrap()]);
+    let id = id.trim();
+    assert!(id.starts_with('p'), "{id}");
+
+    // The valid building reaches its simulate stage (no workers: it waits there).
+    let t0 = Instant::now();
+    let p = loop {
+        let p: serde_json::Value =
+            serde_json::from_str(&cli(&["portfolio", "status", id, "--json"])).unwrap();
+        let good = p["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["building"] == "good")
+            .cloned();
+        if good.is_some_and(|g| g["stage"] == "simulate") || t0.elapsed().as_secs() > 60 {
+            break p;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(300));
+    };
+    let rows = p["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3, "{p:#}");
+    let row = |n: &str| rows.iter().find(|r| r["building"] == n).unwrap();
+    assert_eq!(row("good")["state"], "running", "{p:#}");
+    assert_eq!(row("good")["stage"], "simulate", "{p:#}");
+    let e = row("bad-meters")["error"].as_str().unwrap();
+    assert!(e.contains("meters.csv:7") && e.contains("oops"), "{e}");
+    let e = row("bad-param")["error"].as_str().unwrap();
+    assert!(e.contains("no_such_parameter"), "{e}");
+    assert_eq!(p["failed"], 2);
+
+    // Results of what has finished: the summary files (no building folders yet).
+    let out = root.join("out");
+    let table = cli(&["portfolio", "results", id, "--out", out.to_str().unwrap()]);
+    assert!(
+        table.contains("bad-param") && table.contains("no_such_parameter"),
+        "{table}"
+    );
+    let csv = std::fs::read_to_string(out.join("portfolio.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4, "{csv}");
+    assert!(out.join("portfolio.html").is_file() && out.join("portfolio.json").is_file());
+    assert!(!out.join("good").exists());
+
+    // Plain `status` lists the three runs; an unknown portfolio is an error.
+    assert_eq!(
+        cli(&["status"])
+            .lines()
+            .filter(|l| l.starts_with('r'))
+            .count(),
+        3
+    );
+    let o = bemcal()
+        .args(["portfolio", "status", "pnope", "--coordinator", &url])
+        .env("BEMCAL_TOKEN", TOKEN)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
 }

@@ -982,7 +982,9 @@ mod tests {
             sha256: "ab".repeat(32),
             size: 1,
         };
-        let (o, shared) = s.complete(j1.lease_id, &[f.clone()], "{}").unwrap();
+        let (o, shared) = s
+            .complete(j1.lease_id, std::slice::from_ref(&f), "{}")
+            .unwrap();
         assert_eq!(o, Outcome::Recorded("A".into()));
         assert_eq!(shared, vec!["B".to_string()]);
         let (_, shared) = s.complete(j2.lease_id, &[f], "{}").unwrap();
