@@ -94,6 +94,20 @@ struct Target<'a> {
     priors: &'a [Triangular],
     lik: &'a GaussianLikelihood,
     sigma_box: &'a SigmaDeltaBox,
+    /// The pipeline's default: variances integrated out, AR(1) residuals (no sigma dimensions).
+    /// `BENCH_SAMPLED_SIGMA=1` samples ln sigma_delta instead.
+    marginal: bool,
+}
+
+impl Target<'_> {
+    /// Number of sampled sigma coordinates.
+    fn k_sig(&self) -> usize {
+        if self.marginal {
+            0
+        } else {
+            self.sigma_box.lo.len()
+        }
+    }
 }
 
 impl Target<'_> {
@@ -114,7 +128,7 @@ impl Target<'_> {
             .zip(self.theta(u))
             .map(|(p, x)| p.ln_pdf(x))
             .sum();
-        for k in 0..b.lo.len() {
+        for k in 0..self.k_sig() {
             let ln_s = b.lo[k] + u[d + k] * (b.hi[k] - b.lo[k]);
             lp += ln_prior_log_sigma_delta(ln_s, b.scale[k], SigmaPrior::HalfCauchy);
         }
@@ -124,7 +138,7 @@ impl Target<'_> {
     /// Log posterior of a batch with one surrogate call; counts the evaluations.
     fn batch(&self, ev: &mut Evaluator, us: &[Vec<f64>], evals: &mut u64) -> Vec<f64> {
         let d = self.priors.len();
-        let k_out = self.sigma_box.lo.len();
+        let k_out = self.k_sig();
         let priors: Vec<f64> = us.iter().map(|u| self.ln_prior(u)).collect();
         let live: Vec<usize> = (0..us.len()).filter(|&i| priors[i].is_finite()).collect();
         let mut out = vec![f64::NEG_INFINITY; us.len()];
@@ -137,6 +151,13 @@ impl Target<'_> {
         let flat = pred.as_slice().expect("contiguous prediction");
         let per = flat.len() / thetas.len();
         for (b, &i) in live.iter().enumerate() {
+            if self.marginal {
+                out[i] = priors[i]
+                    + self
+                        .lik
+                        .log_marginal_sigma_ar1(&flat[b * per..(b + 1) * per]);
+                continue;
+            }
             let sd: Vec<f64> = (0..k_out)
                 .map(|k| self.sigma_box.sigma(k, us[i][d + k]))
                 .collect();
@@ -231,9 +252,19 @@ fn main() -> BoxResult<()> {
         priors: &priors,
         lik: &lik,
         sigma_box: &sigma_box,
+        marginal: std::env::var("BENCH_SAMPLED_SIGMA").map_or(true, |v| v != "1"),
     };
+    let k_sig = target.k_sig();
     println!(
-        "problem: {d} parameters + {k_out} log sigma_delta, {n_h} h x {k_out} outputs ({} observed), LSTM {} x {}, lookback {}",
+        "likelihood: {}",
+        if target.marginal {
+            "variances integrated out, AR(1) residuals (the pipeline's default)"
+        } else {
+            "sigma_delta sampled (half-Cauchy), iid residuals"
+        }
+    );
+    println!(
+        "problem: {d} parameters + {k_sig} log sigma_delta, {n_h} h x {k_out} outputs ({} observed), LSTM {} x {}, lookback {}",
         lik.n_observed().iter().sum::<usize>(),
         meta.model.layers,
         meta.model.hidden,
@@ -243,7 +274,7 @@ fn main() -> BoxResult<()> {
     // Chains: dispersed starts from the priors, sigma_delta coordinates at 0.6 (as the pipeline).
     let mut starts = dispersed_starts(&priors, a.chains, a.seed);
     for s in &mut starts {
-        s.extend(std::iter::repeat_n(0.6, k_out));
+        s.extend(std::iter::repeat_n(0.6, k_sig));
     }
     let config = MhConfig {
         burn_in: a.burn_in,
@@ -284,7 +315,7 @@ fn main() -> BoxResult<()> {
     let evals_per_s = evals as f64 / wall;
 
     // Diagnostics over the post-burn-in draws, every coordinate (sigma_delta included).
-    let dim = d + k_out;
+    let dim = d + k_sig;
     let (mut max_rhat, mut min_bulk, mut min_tail) = (0.0f64, f64::INFINITY, f64::INFINITY);
     let mut worst = (0usize, 0usize);
     let mut covered = 0;
