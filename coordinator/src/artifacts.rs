@@ -54,7 +54,10 @@ impl ArtifactDir {
             return Ok(got);
         }
         std::fs::create_dir_all(p.parent().expect("artifact folder"))?;
-        let tmp = p.with_extension(format!("partial{}", std::process::id()));
+        // Unique per call: two threads may store the same content at once.
+        static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = p.with_extension(format!("partial{}-{n}", std::process::id()));
         std::fs::write(&tmp, bytes)?;
         std::fs::rename(&tmp, &p)?;
         Ok(got)

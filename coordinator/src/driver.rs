@@ -573,23 +573,51 @@ impl State {
     }
 }
 
-/// Starts the driver: a task that advances runs one at a time, off the async threads.
+/// Runs advanced at the same time (each run by one task at a time).
+pub const DRIVER_PARALLEL: usize = 4;
+
+/// Starts the driver: advances runs off the async threads, up to [`DRIVER_PARALLEL`] runs at
+/// once (so one building's slow in-process stage, e.g. its merge, does not hold up the next
+/// jobs of the others in a portfolio), never the same run twice at once: a run kicked while it
+/// is being advanced is advanced again afterwards.
 pub fn spawn_driver(
     st: Arc<State>,
     mut rx: tokio::sync::mpsc::UnboundedReceiver<String>,
 ) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
-        while let Some(first) = rx.recv().await {
-            let mut runs = vec![first];
-            while let Ok(r) = rx.try_recv() {
-                if !runs.contains(&r) {
-                    runs.push(r);
+        // Run -> kicked again while being advanced.
+        let busy: Arc<std::sync::Mutex<std::collections::HashMap<String, bool>>> = Arc::default();
+        let permits = Arc::new(tokio::sync::Semaphore::new(DRIVER_PARALLEL));
+        while let Some(run) = rx.recv().await {
+            {
+                let mut b = busy.lock().unwrap_or_else(|e| e.into_inner());
+                if let Some(again) = b.get_mut(&run) {
+                    *again = true;
+                    continue;
                 }
+                b.insert(run.clone(), false);
             }
-            for run in runs {
-                let st = st.clone();
-                let _ = tokio::task::spawn_blocking(move || st.advance(&run)).await;
-            }
+            let (st, busy, permits) = (st.clone(), busy.clone(), permits.clone());
+            tokio::spawn(async move {
+                let _permit = permits.acquire_owned().await;
+                loop {
+                    let (st2, r) = (st.clone(), run.clone());
+                    let _ = tokio::task::spawn_blocking(move || st2.advance(&r)).await;
+                    let again = {
+                        let mut b = busy.lock().unwrap_or_else(|e| e.into_inner());
+                        if b.get(&run) == Some(&true) {
+                            b.insert(run.clone(), false);
+                            true
+                        } else {
+                            b.remove(&run);
+                            false
+                        }
+                    };
+                    if !again {
+                        break;
+                    }
+                }
+            });
         }
     })
 }
