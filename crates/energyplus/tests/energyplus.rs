@@ -20,12 +20,13 @@ fn runner() -> Option<Runner> {
 
 /// A one-storey, one-zone-per-floor box: the smallest model that exercises the whole HVAC.
 fn small_spec() -> BuildingSpec {
-    let mut s = BuildingSpec::default();
-    s.storeys = 1;
-    s.footprint_m = [20.0, 15.0];
-    s.zoning = Zoning::OnePerFloor;
-    s.timesteps_per_hour = 4;
-    s
+    BuildingSpec {
+        storeys: 1,
+        footprint_m: [20.0, 15.0],
+        zoning: Zoning::OnePerFloor,
+        timesteps_per_hour: 4,
+        ..BuildingSpec::default()
+    }
 }
 
 fn weather(r: &Runner) -> PathBuf {
