@@ -13,6 +13,7 @@ use bemcal_stats::lhs::Design;
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{dispersed_starts, run_segment_batch, ChainState, Draws, MhConfig};
 use bemcal_stats::metrics::{g14, G14Metrics};
+use bemcal_stats::optim::{maximise_batch, BfgsConfig};
 use bemcal_stats::prior::Prior;
 use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
 use bemcal_surrogate::{Evaluator, ParamSpec, Split, Surrogate, TrainOptions, TrainingSet};
@@ -22,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::design::{make_design, simulate_design, simulate_point, write_design_csv, Plan};
 use crate::posterior::{run_chains, Posterior, SigmaDeltaBox};
-use crate::project::{Estimate, Project, Residuals, SigmaDeltaMode};
+use crate::project::{ChainStart, Estimate, McmcSettings, Project, Residuals, SigmaDeltaMode};
 use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
@@ -489,11 +490,17 @@ impl Sampler<'_> {
         let m = &self.cal.project.mcmc;
         MhConfig {
             burn_in: m.burn_in,
-            // Adapt the covariance from the second half of burn-in only: the first half is the
-            // transient from dispersed starts (measured on peaked 10-D/40-D targets, crates/stats
-            // tests/mcmc_peaked.rs).
-            adapt_start: (m.burn_in / 2).max(100).min(m.burn_in),
+            adapt_start: match m.start {
+                // Keep the Laplace covariance of the optimum: in 40 dimensions a burn-in's AM
+                // estimate is far worse (proposal sds 0.07-0.6 of the truth's vs 0.37 = the
+                // optimal 2.38 / sqrt(d) with the Laplace one; crates/stats tests/mcmc_peaked.rs).
+                ChainStart::Optimised => m.burn_in,
+                // Adapt the covariance from the second half of burn-in only: the first half is
+                // the transient from dispersed starts (measured on peaked 10-D/40-D targets).
+                ChainStart::Prior => (m.burn_in / 2).max(100).min(m.burn_in),
+            },
             initial_sd: m.initial_sd,
+            independence: m.independence,
             ..MhConfig::default()
         }
     }
@@ -542,23 +549,9 @@ impl Sampler<'_> {
         first_chain: u64,
     ) -> Result<Vec<ChainState>, Error> {
         let config = self.config();
-        let seed = self.cal.project.mcmc.seed;
+        let m = self.cal.project.mcmc.clone();
         let (post, eval) = self.split();
-        let lps = post.ln_posterior_batch(eval, starts);
-        starts
-            .iter()
-            .zip(lps)
-            .enumerate()
-            .map(|(c, (s, lp))| {
-                Ok(ChainState::new(
-                    config.clone(),
-                    s.clone(),
-                    lp,
-                    seed,
-                    first_chain + c as u64,
-                )?)
-            })
-            .collect()
+        chains_at(&post, eval, starts, config, &m, first_chain)
     }
 
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
@@ -681,6 +674,56 @@ impl Sampler<'_> {
             estimate,
         })
     }
+}
+
+/// Chain states at `starts` (chain `c` gets random stream `first_chain + c`): optimised first
+/// with `start = "optimised"` (see [`ChainStart`]).
+pub fn chains_at(
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    starts: &[Vec<f64>],
+    config: MhConfig,
+    m: &McmcSettings,
+    first_chain: u64,
+) -> Result<Vec<ChainState>, Error> {
+    let lps = post.ln_posterior_batch(eval, starts);
+    if m.start == ChainStart::Optimised {
+        let cfg = BfgsConfig {
+            max_iterations: m.optimiser_iterations,
+            ..BfgsConfig::default()
+        };
+        let optima = maximise_batch(starts, &lps, &cfg, |us: &[Vec<f64>]| {
+            post.ln_posterior_batch(eval, us)
+        });
+        return optima
+            .into_iter()
+            .enumerate()
+            .map(|(c, o)| {
+                Ok(ChainState::with_proposal(
+                    config.clone(),
+                    o.point,
+                    o.log_density,
+                    &o.covariance,
+                    m.seed,
+                    first_chain + c as u64,
+                )?)
+            })
+            .collect();
+    }
+    starts
+        .iter()
+        .zip(lps)
+        .enumerate()
+        .map(|(c, (s, lp))| {
+            Ok(ChainState::new(
+                config.clone(),
+                s.clone(),
+                lp,
+                m.seed,
+                first_chain + c as u64,
+            )?)
+        })
+        .collect()
 }
 
 /// What [`Sampler::summarize`] returns.
@@ -830,11 +873,9 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         run_chains(
             &post,
             eval,
-            &starts,
-            config,
+            |post, eval| chains_at(post, eval, &starts, config, &project.mcmc, 0),
             project.mcmc.iterations,
             project.mcmc.segment,
-            project.mcmc.seed,
             &out.join("chains.json"),
             &|done, n| log(&format!("chains: {done}/{n} iterations")),
         )?

@@ -9,7 +9,7 @@
 use std::path::Path;
 
 use bemcal_stats::likelihood::{ln_prior_log_sigma_delta, GaussianLikelihood, SigmaPrior};
-use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws, MhConfig};
+use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws};
 use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
@@ -141,16 +141,13 @@ pub struct Checkpoint {
 }
 
 /// Runs the chains to `iterations`, checkpointing to `path` after every `segment` iterations;
-/// resumes from `path` when it exists. `starts` are unit-space starting points.
-#[allow(clippy::too_many_arguments)]
+/// resumes from `path` when it exists, else starts from the states `initial` builds.
 pub fn run_chains(
     post: &Posterior<'_>,
     eval: &mut Evaluator,
-    starts: &[Vec<f64>],
-    config: MhConfig,
+    initial: impl FnOnce(&Posterior<'_>, &mut Evaluator) -> Result<Vec<ChainState>, Error>,
     iterations: u64,
     segment: u64,
-    seed: u64,
     path: &Path,
     progress: &dyn Fn(u64, u64),
 ) -> Result<Checkpoint, Error> {
@@ -160,17 +157,7 @@ pub fn run_chains(
             message: format!("checkpoint {} is unreadable: {e}", path.display()),
         })?,
         Err(_) => {
-            let init = post.ln_posterior_batch(eval, starts);
-            let mut states = Vec::new();
-            for (c, (s, lp)) in starts.iter().zip(init).enumerate() {
-                states.push(ChainState::new(
-                    config.clone(),
-                    s.clone(),
-                    lp,
-                    seed,
-                    c as u64,
-                )?);
-            }
+            let states = initial(post, eval)?;
             Checkpoint {
                 draws: states.iter().map(|s| Draws::new(s.dim())).collect(),
                 states,

@@ -10,6 +10,7 @@
 //! - [`lhs`]: Latin hypercube design points with maximin improvement and constraint repair.
 //! - [`mcmc`]: random-walk Metropolis-Hastings (reference Algorithm 1) with adaptive covariance
 //!   during burn-in, checkpointable chain state, single-chain and batched stepping.
+//! - [`optim`]: posterior mode search (BFGS, finite differences) for the chains' starts.
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS (Vehtari et al. 2021).
 //! - [`summary`]: posterior summaries, width ratios, correlated pairs, predictive bands.
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
@@ -20,6 +21,7 @@ pub mod lhs;
 pub mod likelihood;
 pub mod mcmc;
 pub mod metrics;
+pub mod optim;
 pub mod prior;
 pub mod summary;
 

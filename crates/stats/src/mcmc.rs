@@ -21,15 +21,32 @@
 //!   half of burn-in), and the first AM refresh waits for `max(2 (d + 1), adapt_every)` states.
 //!   With `target_acceptance = None`, `lambda = 1` and `Cov` covers all of burn-in (the plain
 //!   Haario et al. 2001 scheme, bit-identical to the chains of earlier versions).
-//! - After burn-in `lambda` and `L` are frozen, so the recorded draws come from a
-//!   time-homogeneous Metropolis chain.
-//! - Randomness per iteration, in this order: `d` standard normals, then one uniform — the same
-//!   whether the proposal is in the support or not, so a chain's draws do not depend on how it
-//!   is stepped (alone, batched, or in checkpointed segments).
+//! - Independence kernel (`independence = p > 0`): once the AM covariance exists, each iteration
+//!   is, with probability `p`, an independence Metropolis-Hastings step (Tierney 1994, Ann. Stat.
+//!   22(4), Sec. 2.3.3) instead of a random-walk one: `u' = m + L_I z`, a Gaussian (or, with
+//!   `independence_dof = Some(nu)`, a Student-t `m + s L_I z`, `s = sqrt(nu / w)`,
+//!   `w ~ chi2(nu)`) centred at the AM mean `m` (or the optimum, [`ChainState::with_proposal`]),
+//!   shape `L_I L_I^T = c^2 (Cov + eps I)` (`c` = `independence_inflation`), accepted
+//!   with `ln U < [ln p(u') - ln q(u')] - [ln p(u) - ln q(u)]`. It is adapted with the AM
+//!   covariance during burn-in (adaptive independence MH, Holden, Hauge & Holden 2009; Giordani
+//!   & Kohn 2010) and frozen with it. Each kernel leaves the posterior invariant, so does their
+//!   random mixture (Tierney 1994, Sec. 2.4). Why: the random walk's autocorrelation time grows
+//!   like `d` (about `3.3 d` iterations at best, Roberts & Rosenthal 2001), which caps 4 x 8,000
+//!   draws at a bulk ESS near 300 in 38 dimensions; an independence proposal that matches a
+//!   nearly Gaussian posterior moves the whole point at once, whatever `d`. The random-walk
+//!   half keeps the chain local where the posterior is not Gaussian. Scale adaptation sees the
+//!   random-walk steps only.
+//! - After burn-in `lambda`, `L` and the independence proposal are frozen, so the recorded draws
+//!   come from a time-homogeneous Metropolis-Hastings chain.
+//! - Randomness per iteration, in this order: one uniform choosing the kernel (only with
+//!   `independence > 0` once the independence proposal exists), `d` standard normals, one
+//!   chi-square (independence steps only), then one uniform — the same whether the proposal is in
+//!   the support or not, so a chain's draws do not depend on how it is stepped (alone, batched,
+//!   or in checkpointed segments).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
+use rand_distr::{ChiSquared, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::prior::Triangular;
@@ -60,10 +77,27 @@ pub struct MhConfig {
     /// in `(0.5, 1]`.
     #[serde(default = "default_scale_decay")]
     pub scale_decay: f64,
+    /// Probability `p` of an independence step once the AM covariance exists (0: random walk
+    /// only, the reference's Algorithm 1; checkpoints written before this field existed
+    /// deserialise as 0).
+    #[serde(default)]
+    pub independence: f64,
+    /// Degrees of freedom `nu` of a Student-t independence proposal; `None` (the default):
+    /// Gaussian. In 40 dimensions a t with `nu = 7` accepted almost nothing even with the exact
+    /// covariance (its radius `sqrt(nu / w)` varies far more than the target's typical set is
+    /// wide), while the Gaussian at 1.1 x the Laplace scale is accepted about half the time.
+    #[serde(default)]
+    pub independence_dof: Option<f64>,
+    /// Inflation `c` of the independence proposal's scale over the AM covariance's.
+    #[serde(default = "default_independence_inflation")]
+    pub independence_inflation: f64,
 }
 
 fn default_scale_decay() -> f64 {
     0.6
+}
+fn default_independence_inflation() -> f64 {
+    1.1
 }
 
 impl Default for MhConfig {
@@ -77,6 +111,9 @@ impl Default for MhConfig {
             scale: None,
             target_acceptance: Some(0.234),
             scale_decay: default_scale_decay(),
+            independence: 0.0,
+            independence_dof: None,
+            independence_inflation: default_independence_inflation(),
         }
     }
 }
@@ -107,6 +144,22 @@ impl MhConfig {
         if !(self.scale_decay > 0.5 && self.scale_decay <= 1.0) {
             return Err(StatsError::Invalid(
                 "scale_decay must be in (0.5, 1]".into(),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.independence) {
+            return Err(StatsError::Invalid("independence must be in [0, 1)".into()));
+        }
+        if self
+            .independence_dof
+            .is_some_and(|nu| !(nu.is_finite() && nu > 0.0))
+        {
+            return Err(StatsError::Invalid(
+                "independence_dof must be positive".into(),
+            ));
+        }
+        if !(self.independence_inflation.is_finite() && self.independence_inflation > 0.0) {
+            return Err(StatsError::Invalid(
+                "independence_inflation must be positive".into(),
             ));
         }
         Ok(())
@@ -147,7 +200,27 @@ pub struct ChainState {
     /// Whether `chol` is an adaptive-Metropolis estimate (false: the initial diagonal).
     #[serde(default)]
     shape_adapted: bool,
+    /// Centre `m` of the independence proposal (empty until the first AM refresh).
+    #[serde(default, with = "f64_bits::vec")]
+    ind_mean: Vec<f64>,
+    /// Lower Cholesky factor `L_I` of its shape, row-major `d x d` (empty until ready).
+    #[serde(default, with = "f64_bits::vec")]
+    ind_chol: Vec<f64>,
+    /// Independence steps proposed and accepted after burn-in.
+    #[serde(default)]
+    ind_proposed: u64,
+    #[serde(default)]
+    ind_accepted: u64,
     rng: ChaCha8Rng,
+}
+
+/// What `propose` drew: which kernel, whether the point is in the support, `ln U`.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    inside: bool,
+    ln_u: f64,
+    /// Independence step: `ln q(u) - ln q(u')`, added to the acceptance ratio.
+    ln_q_ratio: Option<f64>,
 }
 
 /// Exact serialisation of `f64` values as their bit patterns.
@@ -299,8 +372,58 @@ impl ChainState {
             ln_lambda: 0.0,
             scale_steps: 0,
             shape_adapted: false,
+            ind_mean: Vec::new(),
+            ind_chol: Vec::new(),
+            ind_proposed: 0,
+            ind_accepted: 0,
             rng,
         })
+    }
+
+    /// A chain like [`ChainState::new`] whose proposals start from a Gaussian approximation of
+    /// the posterior, mean `start` and `covariance` (row-major `d x d`, e.g. the Laplace
+    /// covariance at an optimum, [`crate::optim`]): the random walk's shape is
+    /// `s_d covariance` instead of `initial_sd^2 I`, and with `independence > 0` the
+    /// independence proposal is the Student-t at `start` with shape
+    /// `independence_inflation^2 covariance`, ready from the first iteration. Both are kept
+    /// unless the AM covariance replaces them (set `adapt_start >= burn_in` to keep them for
+    /// the whole chain). Falls back to [`ChainState::new`] if `covariance` is not positive
+    /// definite.
+    pub fn with_proposal(
+        config: MhConfig,
+        start: Vec<f64>,
+        log_density: f64,
+        covariance: &[f64],
+        seed: u64,
+        stream: u64,
+    ) -> Result<Self> {
+        let mut st = ChainState::new(config, start, log_density, seed, stream)?;
+        let d = st.dim();
+        if covariance.len() != d * d {
+            return Err(StatsError::Shape(format!(
+                "proposal covariance of {} values for {d} dimensions",
+                covariance.len()
+            )));
+        }
+        let c: Vec<f64> = (0..d * d)
+            .map(|k| {
+                let (i, j) = (k / d, k % d);
+                0.5 * (covariance[k] + covariance[j * d + i])
+                    + if i == j { st.config.epsilon } else { 0.0 }
+            })
+            .collect();
+        if let Some(l) = cholesky(&c, d) {
+            let s_d = st.config.scale.unwrap_or(2.38 * 2.38 / d as f64);
+            st.chol = l.iter().map(|v| v * s_d.sqrt()).collect();
+            if st.config.independence > 0.0 {
+                st.ind_mean = st.position.clone();
+                st.ind_chol = l
+                    .iter()
+                    .map(|v| v * st.config.independence_inflation)
+                    .collect();
+            }
+        }
+        Ok(st)
     }
 
     /// The chain's settings.
@@ -340,6 +463,14 @@ impl ChainState {
         let n = self.iteration.saturating_sub(self.config.burn_in);
         self.accepted_post_burn_in as f64 / n as f64
     }
+    /// Acceptance rate of the independence steps after burn-in (NaN when none was proposed).
+    pub fn independence_acceptance_rate(&self) -> f64 {
+        self.ind_accepted as f64 / self.ind_proposed as f64
+    }
+    /// Independence steps proposed after burn-in.
+    pub fn independence_steps(&self) -> u64 {
+        self.ind_proposed
+    }
     /// Current global proposal scale `lambda` (1 without scale adaptation).
     pub fn proposal_scale(&self) -> f64 {
         self.ln_lambda.exp()
@@ -358,30 +489,87 @@ impl ChainState {
         c
     }
 
-    /// Draw the proposal into `buf`; returns (inside the support, ln U).
-    fn propose(&mut self, buf: &mut Vec<f64>) -> (bool, f64) {
+    /// Draw the proposal into `buf`.
+    fn propose(&mut self, buf: &mut Vec<f64>) -> Pending {
         let d = self.dim();
         buf.clear();
+        let independent = self.config.independence > 0.0
+            && !self.ind_chol.is_empty()
+            && self.rng.random::<f64>() < self.config.independence;
         let z: Vec<f64> = (0..d).map(|_| self.rng.sample(StandardNormal)).collect();
-        let lambda = self.ln_lambda.exp();
-        for i in 0..d {
-            let step: f64 = (0..=i).map(|k| self.chol[i * d + k] * z[k]).sum();
-            // lambda = 1 exactly without scale adaptation, so this is then `step` bit for bit.
-            buf.push(self.position[i] + lambda * step);
+        let mut ln_q_ratio = None;
+        if independent {
+            // Gaussian draw m + L_I z, or Student-t m + s L_I z with s = sqrt(nu / w),
+            // w ~ chi2(nu).
+            let nu = self.config.independence_dof;
+            let s = match nu {
+                Some(nu) => {
+                    let w: f64 = self
+                        .rng
+                        .sample(ChiSquared::new(nu).expect("nu validated positive"));
+                    (nu / w).sqrt()
+                }
+                None => 1.0,
+            };
+            for i in 0..d {
+                let step: f64 = (0..=i).map(|k| self.ind_chol[i * d + k] * z[k]).sum();
+                buf.push(self.ind_mean[i] + s * step);
+            }
+            let r2_new = s * s * z.iter().map(|v| v * v).sum::<f64>();
+            let r2_old = self.ind_mahalanobis2(&self.position);
+            // ln q(u) - ln q(u') (normalising constants cancel).
+            ln_q_ratio = Some(match nu {
+                Some(nu) => {
+                    -0.5 * (nu + d as f64) * ((r2_old / nu).ln_1p() - (r2_new / nu).ln_1p())
+                }
+                None => -0.5 * (r2_old - r2_new),
+            });
+        } else {
+            let lambda = self.ln_lambda.exp();
+            for i in 0..d {
+                let step: f64 = (0..=i).map(|k| self.chol[i * d + k] * z[k]).sum();
+                // lambda = 1 exactly without scale adaptation, so this is then `step` bit for bit.
+                buf.push(self.position[i] + lambda * step);
+            }
         }
         let u: f64 = self.rng.random();
         let inside = buf.iter().all(|v| (0.0..=1.0).contains(v));
-        (inside, u.ln())
+        Pending {
+            inside,
+            ln_u: u.ln(),
+            ln_q_ratio,
+        }
+    }
+
+    /// `|L_I^-1 (x - m)|^2` by forward substitution.
+    fn ind_mahalanobis2(&self, x: &[f64]) -> f64 {
+        let d = self.dim();
+        let l = &self.ind_chol;
+        let mut y = vec![0.0; d];
+        for i in 0..d {
+            let s: f64 = (0..i).map(|k| l[i * d + k] * y[k]).sum();
+            y[i] = (x[i] - self.ind_mean[i] - s) / l[i * d + i];
+        }
+        y.iter().map(|v| v * v).sum()
     }
 
     /// Accept or reject, adapt, and record. `lp` is `None` for an out-of-support proposal.
-    fn finish(&mut self, proposal: &[f64], ln_u: f64, lp: Option<f64>, draws: &mut Draws) {
-        // Acceptance probability min(1, p(u') / p(u)); 0 outside the support or for NaN.
+    fn finish(&mut self, proposal: &[f64], pending: Pending, lp: Option<f64>, draws: &mut Draws) {
+        let Pending {
+            ln_u, ln_q_ratio, ..
+        } = pending;
+        let post_burn_in = self.iteration >= self.config.burn_in;
+        if ln_q_ratio.is_some() && post_burn_in {
+            self.ind_proposed += 1;
+        }
+        // Acceptance probability min(1, p(u') q(u) / (p(u) q(u'))) (q = 1 for the symmetric
+        // random walk); 0 outside the support or for NaN.
         let mut alpha = 0.0;
+        let q = ln_q_ratio.unwrap_or(0.0);
 
         if let Some(lp) = lp {
             if !lp.is_nan() {
-                let r = lp - self.log_density;
+                let r = lp - self.log_density + q;
                 alpha = if r >= 0.0 {
                     1.0
                 } else if r.is_nan() {
@@ -390,13 +578,16 @@ impl ChainState {
                     r.exp()
                 };
             }
-            // Metropolis acceptance (Algorithm 1, step 6) for a symmetric proposal.
-            if !lp.is_nan() && ln_u < lp - self.log_density {
+            // Metropolis-Hastings acceptance (Algorithm 1, step 6).
+            if !lp.is_nan() && ln_u < lp - self.log_density + q {
                 self.position.copy_from_slice(proposal);
                 self.log_density = lp;
                 self.accepted += 1;
-                if self.iteration >= self.config.burn_in {
+                if post_burn_in {
                     self.accepted_post_burn_in += 1;
+                    if ln_q_ratio.is_some() {
+                        self.ind_accepted += 1;
+                    }
                 }
             }
         }
@@ -419,10 +610,13 @@ impl ChainState {
             }
             Some(target) => {
                 // Robbins-Monro on ln lambda (Andrieu & Thoms 2008, Algorithm 4, with the
-                // covariance part of AM below): ln lambda += gamma_k (alpha_k - target).
-                self.scale_steps += 1;
-                let gamma = (self.scale_steps as f64).powf(-self.config.scale_decay);
-                self.ln_lambda = (self.ln_lambda + gamma * (alpha - target)).clamp(-40.0, 10.0);
+                // covariance part of AM below): ln lambda += gamma_k (alpha_k - target), over
+                // the random-walk steps.
+                if ln_q_ratio.is_none() {
+                    self.scale_steps += 1;
+                    let gamma = (self.scale_steps as f64).powf(-self.config.scale_decay);
+                    self.ln_lambda = (self.ln_lambda + gamma * (alpha - target)).clamp(-40.0, 10.0);
+                }
                 // AM covariance of the states from `adapt_start` on only: the states before it
                 // are the transient from a start far in the tails, whose spread would make the
                 // frozen proposal far too wide (Haario et al. 2001 use all states; discarding
@@ -490,6 +684,12 @@ impl ChainState {
             }
         }
         if let Some(l) = cholesky(&c, d) {
+            if self.config.independence > 0.0 {
+                // L_I = (c / sqrt(s_d)) L: the same covariance, at the inflation's scale.
+                let f = self.config.independence_inflation / s_d.sqrt();
+                self.ind_chol = l.iter().map(|v| v * f).collect();
+                self.ind_mean = self.adapt_mean.clone();
+            }
             self.chol = l;
             self.shape_adapted = true;
         }
@@ -500,9 +700,9 @@ impl ChainState {
 /// only for proposals inside `[0, 1]^d`; post-burn-in states are appended to `draws`.
 pub fn step<F: FnMut(&[f64]) -> f64>(state: &mut ChainState, target: &mut F, draws: &mut Draws) {
     let mut buf = Vec::with_capacity(state.dim());
-    let (inside, ln_u) = state.propose(&mut buf);
-    let lp = inside.then(|| target(&buf));
-    state.finish(&buf, ln_u, lp, draws);
+    let pending = state.propose(&mut buf);
+    let lp = pending.inside.then(|| target(&buf));
+    state.finish(&buf, pending, lp, draws);
 }
 
 /// Advance one chain by `n` iterations; returns the post-burn-in draws of this segment.
@@ -540,15 +740,14 @@ pub fn step_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     let mut pending = Vec::with_capacity(states.len());
     for s in states.iter_mut() {
         let mut buf = Vec::with_capacity(s.dim());
-        let (inside, ln_u) = s.propose(&mut buf);
         // An out-of-support proposal is kept only to finish the step; it is never evaluated.
-        pending.push((inside, ln_u));
+        pending.push(s.propose(&mut buf));
         proposals.push(buf);
     }
     let batch: Vec<Vec<f64>> = proposals
         .iter()
         .zip(&pending)
-        .filter(|(_, (inside, _))| *inside)
+        .filter(|(_, p)| p.inside)
         .map(|(p, _)| p.clone())
         .collect();
     let lps = if batch.is_empty() {
@@ -564,13 +763,13 @@ pub fn step_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         )));
     }
     let mut next = lps.into_iter();
-    for ((s, (inside, ln_u)), (p, d)) in states
+    for ((s, pend), (p, d)) in states
         .iter_mut()
         .zip(pending)
         .zip(proposals.iter().zip(draws.iter_mut()))
     {
-        let lp = if inside { next.next() } else { None };
-        s.finish(p, ln_u, lp, d);
+        let lp = if pend.inside { next.next() } else { None };
+        s.finish(p, pend, lp, d);
     }
     Ok(())
 }

@@ -4,6 +4,7 @@
 
 use bemcal_stats::diagnostics;
 use bemcal_stats::mcmc::{self, ChainState, Draws, MhConfig};
+use bemcal_stats::optim::{self, BfgsConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -57,22 +58,69 @@ impl Peaked {
 
 struct Outcome {
     acceptance: Vec<f64>,
+    ind_acceptance: Vec<f64>,
     rhat: Vec<f64>,
     ess: Vec<f64>,
     max_z: f64,
 }
 
 fn run(g: &Peaked, cfg: &MhConfig, chains: usize, iters: u64, seed: u64) -> Outcome {
+    run_from(g, cfg, chains, iters, seed, false)
+}
+
+/// `optimise`: start each chain at the BFGS optimum from its uniform start, with the
+/// optimiser's covariance as the first proposal shape.
+fn run_from(
+    g: &Peaked,
+    cfg: &MhConfig,
+    chains: usize,
+    iters: u64,
+    seed: u64,
+    optimise: bool,
+) -> Outcome {
     let d = g.mean.len();
-    let mut states: Vec<ChainState> = (0..chains)
+    let starts: Vec<Vec<f64>> = (0..chains)
         .map(|c| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0xabcd);
             rng.set_stream(c as u64);
-            let s: Vec<f64> = (0..d).map(|_| rng.random::<f64>()).collect();
-            let lp = g.ln_pdf(&s);
-            ChainState::new(cfg.clone(), s, lp, seed, c as u64).unwrap()
+            (0..d).map(|_| rng.random::<f64>()).collect()
         })
         .collect();
+    let lps: Vec<f64> = starts.iter().map(|s| g.ln_pdf(s)).collect();
+    let mut states: Vec<ChainState> = if optimise {
+        let opt = optim::maximise_batch(&starts, &lps, &BfgsConfig::default(), |us| {
+            us.iter().map(|u| g.ln_pdf(u)).collect()
+        });
+        if std::env::var("PEAKED_DIAG").is_ok() {
+            for o in &opt {
+                eprintln!(
+                    "  optimum lp {:.1} (max 0) after {} iterations, {} evaluations",
+                    o.log_density, o.iterations, o.evaluations
+                );
+            }
+        }
+        opt.into_iter()
+            .enumerate()
+            .map(|(c, o)| {
+                ChainState::with_proposal(
+                    cfg.clone(),
+                    o.point,
+                    o.log_density,
+                    &o.covariance,
+                    seed,
+                    c as u64,
+                )
+                .unwrap()
+            })
+            .collect()
+    } else {
+        starts
+            .into_iter()
+            .zip(lps)
+            .enumerate()
+            .map(|(c, (s, lp))| ChainState::new(cfg.clone(), s, lp, seed, c as u64).unwrap())
+            .collect()
+    };
     let draws: Vec<Draws> = mcmc::run_segment_batch(&mut states, iters, |pts: &[Vec<f64>]| {
         pts.iter().map(|p| g.ln_pdf(p)).collect()
     })
@@ -96,6 +144,10 @@ fn run(g: &Peaked, cfg: &MhConfig, chains: usize, iters: u64, seed: u64) -> Outc
         acceptance: states
             .iter()
             .map(|s| s.acceptance_rate_post_burn_in())
+            .collect(),
+        ind_acceptance: states
+            .iter()
+            .map(|s| s.independence_acceptance_rate())
             .collect(),
         rhat: Vec::new(),
         ess: Vec::new(),
@@ -127,9 +179,11 @@ fn report(name: &str, o: &Outcome) {
     let max = |v: &[f64]| v.iter().copied().fold(f64::MIN, f64::max);
     let min = |v: &[f64]| v.iter().copied().fold(f64::MAX, f64::min);
     eprintln!(
-        "{name}: acceptance {:.3}..{:.3}, max R-hat {:.4}, min bulk ESS {:.0}, max |z| {:.2}",
+        "{name}: acceptance {:.3}..{:.3} (independence {:.3}..{:.3}), max R-hat {:.4}, min bulk ESS {:.0}, max |z| {:.2}",
         min(&o.acceptance),
         max(&o.acceptance),
+        min(&o.ind_acceptance),
+        max(&o.ind_acceptance),
         max(&o.rhat),
         min(&o.ess),
         o.max_z
@@ -163,25 +217,81 @@ fn peaked_correlated_10d_from_uniform_starts() {
     );
 }
 
+/// The chain target on the 40-D analogue of the paper-size problem: 4 chains x 10,000
+/// iterations (2,000 burn-in) with R-hat <= 1.01 and bulk ESS >= 400 for every coordinate.
+/// Random-walk chains from uniform starts reach neither (max R-hat 3.8-4.4, min bulk ESS 4, see
+/// the benchmark below); each start optimised first (BFGS + a finite-difference Hessian, 3,362
+/// evaluations per chain), the Laplace covariance as proposal shape and half the steps
+/// independence proposals from that Gaussian: max R-hat 1.004-1.005, min bulk ESS 2,300-2,700.
+#[test]
+fn peaked_correlated_40d_meets_the_chain_target_from_optimised_starts() {
+    let g = Peaked::new(40, 8);
+    let cfg = MhConfig {
+        burn_in: 2000,
+        adapt_start: 2000,
+        independence: 0.5,
+        ..hard_config()
+    };
+    for seed in [17, 18] {
+        let o = run_from(&g, &cfg, 4, 10_000, seed, true);
+        report(&format!("40-D optimised, seed {seed}"), &o);
+        for (j, r) in o.rhat.iter().enumerate() {
+            assert!(*r <= 1.01, "coordinate {j}: R-hat {r}");
+        }
+        for (j, e) in o.ess.iter().enumerate() {
+            assert!(*e >= 400.0, "coordinate {j}: bulk ESS {e}");
+        }
+        assert!(
+            o.max_z < 4.5,
+            "a mean is {} MC standard errors off",
+            o.max_z
+        );
+    }
+}
+
 /// The paper-size problem (40 dims). Prints acceptance, R-hat and bulk ESS per setting.
 #[test]
 #[ignore = "benchmark of the paper-size problem; run with --release -- --ignored --nocapture"]
 fn peaked_correlated_40d_benchmark() {
     let g = Peaked::new(40, 8);
-    for (burn, iters) in [
-        (2000, 8000),
-        (10_000, 10_000),
-        (20_000, 10_000),
-        (20_000, 40_000),
-    ] {
+    let settings: Vec<(u64, u64, f64)> = match std::env::var("PEAKED_SETTINGS") {
+        // "burn,iters,independence;..."
+        Ok(v) => v
+            .split(';')
+            .map(|t| {
+                let f: Vec<&str> = t.split(',').collect();
+                (
+                    f[0].parse().unwrap(),
+                    f[1].parse().unwrap(),
+                    f[2].parse().unwrap(),
+                )
+            })
+            .collect(),
+        Err(_) => vec![
+            (2000, 8000, 0.0),
+            (10_000, 10_000, 0.0),
+            (20_000, 10_000, 0.0),
+            (20_000, 40_000, 0.0),
+            (2000, 8000, 0.5),
+            (5000, 5000, 0.5),
+        ],
+    };
+    let opt = std::env::var("PEAKED_OPT").is_ok();
+    for (burn, iters, p) in settings {
         for seed in [17, 18] {
             let cfg = MhConfig {
                 burn_in: burn,
-                adapt_start: burn / 2,
+                adapt_start: if opt { burn } else { burn / 2 },
+                independence: p,
                 ..hard_config()
             };
-            let o = run(&g, &cfg, 4, burn + iters, seed);
-            report(&format!("40-D burn-in {burn} + {iters}, seed {seed}"), &o);
+            let o = run_from(&g, &cfg, 4, burn + iters, seed, opt);
+            report(
+                &format!(
+                    "40-D burn-in {burn} + {iters}, independence {p}, optimised {opt}, seed {seed}"
+                ),
+                &o,
+            );
         }
     }
 }
