@@ -197,12 +197,13 @@ pub struct McmcSettings {
     pub segment: u64,
     /// Posterior draws evaluated for the predictive bands.
     pub predictive_draws: usize,
-    /// Where chains start: `optimised` (default) or `prior`.
+    /// Where chains start: `prior` (default) or `optimised`.
     pub start: ChainStart,
     /// BFGS iterations per chain before sampling (`start = "optimised"`).
     pub optimiser_iterations: usize,
-    /// Probability of an independence step from the Laplace approximation (0: random walk
-    /// only, the reference's Algorithm 1).
+    /// Probability of an independence step (0, the default: random walk only, the reference's
+    /// Algorithm 1). With `start = "optimised"` the independence proposal is the Laplace
+    /// Gaussian of the optimum (0.5 is what the 40-D test uses); otherwise the AM estimate.
     pub independence: f64,
 }
 
@@ -212,13 +213,16 @@ pub struct McmcSettings {
 pub enum ChainStart {
     /// Each chain's prior draw is first optimised (BFGS, finite differences through the
     /// surrogate) and the chain starts at that optimum with the Laplace covariance as its
-    /// proposal shape (Pathfinder-style initialisation). Why: the paper-size posterior is so
-    /// peaked that chains from prior draws were still climbing after 10,000 iterations (the
-    /// demo: R-hat 3.8, bulk ESS 4); on a 40-D analogue this start gives R-hat <= 1.005 and
-    /// bulk ESS >= 2,300 with 4 x 8,000 draws (crates/stats tests/mcmc_peaked.rs).
+    /// proposal shape (Pathfinder-style initialisation). On a smooth, peaked 40-D posterior
+    /// this turns R-hat 4 / bulk ESS 4 into R-hat <= 1.005 / bulk ESS >= 2,300 with 4 x 8,000
+    /// draws (crates/stats tests/mcmc_peaked.rs). Not the default because on the demo's
+    /// posterior (a 20-point surrogate with 38 % held-out CV-RMSE) BFGS stopped in poorer local
+    /// optima (log posterior -113,950 and -115,390 for two chains, vs -111,850 to -111,990 for
+    /// chains from prior draws) and the Laplace Gaussian's independence steps were never
+    /// accepted: that posterior is rugged, not Gaussian.
     Optimised,
     /// Chains start at prior draws and learn their proposal by adaptive Metropolis during
-    /// burn-in (the reference's procedure).
+    /// burn-in (the reference's procedure; the default).
     Prior,
 }
 
@@ -236,9 +240,9 @@ impl Default for McmcSettings {
             initial_sd: 0.02,
             segment: 500,
             predictive_draws: 100,
-            start: ChainStart::Optimised,
+            start: ChainStart::Prior,
             optimiser_iterations: 60,
-            independence: 0.5,
+            independence: 0.0,
         }
     }
 }
