@@ -127,6 +127,17 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
 
     // The initial model (prior modes) is reported beside the calibrated one.
     assert_eq!(summary["initial"].as_array().unwrap().len(), 3);
+    // So is the surrogate at the estimate: on this well-learned small problem it fits the meters
+    // as EnergyPlus does (both pass), which tells a user the surrogate is not the bottleneck.
+    let sur = summary["surrogate_at_estimate"].as_array().unwrap();
+    assert_eq!(sur.len(), 3);
+    for v in sur {
+        assert!(v["nmbe"].as_f64().unwrap().is_finite(), "{v}");
+        assert!(
+            v["pass"].as_bool().unwrap(),
+            "surrogate at the estimate: {v}"
+        );
+    }
 
     // A rerun reuses every finished stage: no EnergyPlus design run, no training.
     let again = bemcal()

@@ -32,12 +32,13 @@ fn metrics_table_and_json() {
          2021-01-01T00:00,10,4,1\n2021-01-01T01:00,12,6,1\n\
          2021-01-01T02:00,8,,1\n2021-01-01T03:00,10,2,1\n",
     );
+    // Rows match by time, whatever the ISO 8601 spelling (`bemcal predict` writes seconds).
     let s = write(
         &dir,
         "s.csv",
         "timestamp,heating_kwh,cooling_kwh\n\
-         2021-01-01T00:00,9,5\n2021-01-01T01:00,12,3\n\
-         2021-01-01T02:00,10,NaN\n2021-01-01T03:00,11,2\n",
+         2021-01-01T00:00:00,9,5\n2021-01-01 01:00,12,3\n\
+         2021-01-01T02:00:00,10,NaN\n2021-01-01T03:00,11,2\n",
     );
     let out = bemcal(&["metrics", "--measured", &m, "--simulated", &s, "--json"]);
     assert!(
@@ -66,13 +67,30 @@ fn metrics_table_and_json() {
 #[test]
 fn metrics_bad_cell_names_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
-    let m = write(&dir, "m.csv", "timestamp,heating_kwh\nt0,1\nt1,abc\n");
-    let s = write(&dir, "s.csv", "timestamp,heating_kwh\nt0,1\nt1,2\n");
+    let m = write(
+        &dir,
+        "m.csv",
+        "timestamp,heating_kwh\n2021-01-01T00:00,1\n2021-01-01T01:00,abc\n",
+    );
+    let s = write(
+        &dir,
+        "s.csv",
+        "timestamp,heating_kwh\n2021-01-01T00:00,1\n2021-01-01T01:00,2\n",
+    );
     let out = bemcal(&["metrics", "--measured", &m, "--simulated", &s]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("m.csv:3") && err.contains("heating_kwh") && err.contains("abc"),
+        "{err}"
+    );
+    // A timestamp that is not a time names its file, line and column.
+    let bad = write(&dir, "bad.csv", "timestamp,heating_kwh\nt0,1\n");
+    let out = bemcal(&["metrics", "--measured", &bad, "--simulated", &s]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.csv:2") && err.contains("timestamp") && err.contains("t0"),
         "{err}"
     );
 }

@@ -75,6 +75,8 @@ struct Merged {
     #[serde(default)]
     residual_ar1: Vec<(String, f64)>,
     estimate: Vec<f64>,
+    #[serde(default)]
+    surrogate_at_estimate: Vec<OutputMetrics>,
     acceptance: Vec<f64>,
     sigma_eta: Vec<f64>,
     held_out: serde_json::Value,
@@ -453,6 +455,7 @@ impl State {
             sigma_delta_kwh: chains.sigma_delta_kwh,
             residual_ar1: chains.residual_ar1,
             estimate: chains.estimate.clone(),
+            surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
             sigma_eta: sampler.sigma_eta.clone(),
             held_out: sampler.held_out.clone(),
         };
@@ -538,6 +541,7 @@ impl State {
             sigma_delta_kwh: merged.sigma_delta_kwh,
             residual_ar1: merged.residual_ar1,
             estimate: merged.estimate,
+            surrogate_at_estimate: merged.surrogate_at_estimate,
         };
         let summary = write_summary(
             &cal,

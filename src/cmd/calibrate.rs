@@ -72,21 +72,28 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");
     println!(
-        "{:<18} {:>22} {:>22}",
-        "output", "initial NMBE / CV-RMSE", "calibrated NMBE / CV"
+        "{:<18} {:>22} {:>22}      {:>22}",
+        "output", "initial NMBE / CV-RMSE", "calibrated NMBE / CV", "surrogate at estimate"
     );
+    let pair = |m: Option<&bemcal_calibrate::pipeline::OutputMetrics>| {
+        m.map_or("-".to_string(), |i| {
+            format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
+        })
+    };
     for v in &s.validation {
         let init = s.initial.iter().find(|i| i.output == v.output);
-        let i = init.map_or("-".to_string(), |i| {
-            format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
-        });
+        let sur = s
+            .surrogate_at_estimate
+            .iter()
+            .find(|i| i.output == v.output);
         println!(
-            "{:<18} {:>22} {:>6.1} % / {:5.1} % {}",
+            "{:<18} {:>22} {:>6.1} % / {:5.1} % {:4} {:>22}",
             v.output,
-            i,
+            pair(init),
             v.metrics.nmbe,
             v.metrics.cv_rmse,
-            if v.metrics.pass { "pass" } else { "FAIL" }
+            if v.metrics.pass { "pass" } else { "FAIL" },
+            pair(sur)
         );
     }
     let t = &s.timings;

@@ -104,6 +104,25 @@ struct Row {
     pass: bool,
 }
 
+/// An ISO 8601 local timestamp, `YYYY-MM-DDTHH:MM[:SS]` (or with a space for `T`).
+fn parse_timestamp(path: &Path, line: usize, v: &str) -> anyhow::Result<chrono::NaiveDateTime> {
+    let v = v.trim();
+    for f in [
+        "%Y-%m-%dT%H:%M:%S",
+        "%Y-%m-%dT%H:%M",
+        "%Y-%m-%d %H:%M:%S",
+        "%Y-%m-%d %H:%M",
+    ] {
+        if let Ok(t) = chrono::NaiveDateTime::parse_from_str(v, f) {
+            return Ok(t);
+        }
+    }
+    bail!(
+        "{}:{line}: column 'timestamp': `{v}` is not an ISO 8601 time (expected YYYY-MM-DDTHH:MM or YYYY-MM-DDTHH:MM:SS)",
+        path.display()
+    )
+}
+
 /// Run `bemcal metrics`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let meas = Table::read(&args.measured)?;
@@ -124,9 +143,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             sim.path.display()
         );
     }
-    let mut sim_rows: HashMap<&str, usize> = HashMap::new();
+    // Rows are matched by time, not by text: `2021-01-01T00:00` (EnergyPlus validation CSVs)
+    // and `2021-01-01T00:00:00` (`bemcal predict`) are the same hour.
+    let mut sim_rows: HashMap<chrono::NaiveDateTime, usize> = HashMap::new();
     for (k, (line, f)) in sim.rows.iter().enumerate() {
-        if sim_rows.insert(f[st].as_str(), k).is_some() {
+        let t = parse_timestamp(&sim.path, *line, &f[st])?;
+        if sim_rows.insert(t, k).is_some() {
             bail!(
                 "{}:{line}: duplicate timestamp `{}`",
                 sim.path.display(),
@@ -134,11 +156,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
+    let mut meas_times = Vec::with_capacity(meas.rows.len());
+    for (line, f) in &meas.rows {
+        meas_times.push(parse_timestamp(&meas.path, *line, &f[mt])?);
+    }
     let mut results = Vec::new();
     for &(i, j) in &outputs {
         let (mut y, mut yhat) = (Vec::new(), Vec::new());
-        for (line, f) in &meas.rows {
-            let Some(&k) = sim_rows.get(f[mt].as_str()) else {
+        for ((line, f), t) in meas.rows.iter().zip(&meas_times) {
+            let Some(&k) = sim_rows.get(t) else {
                 continue;
             };
             let (sline, sf) = &sim.rows[k];

@@ -231,6 +231,12 @@ pub struct Summary {
     pub calibrated_values: Vec<(String, f64)>,
     pub validation: Vec<OutputMetrics>,
     pub initial: Vec<OutputMetrics>,
+    /// Guideline 14 of the surrogate's prediction at the estimate against the meters: next to
+    /// `validation` (EnergyPlus at the same point) it separates surrogate error from
+    /// calibration error (the surrogate fitting the meters while EnergyPlus does not means the
+    /// surrogate, not the posterior, is the bottleneck: more design points or training).
+    #[serde(default)]
+    pub surrogate_at_estimate: Vec<OutputMetrics>,
     pub converged: bool,
     pub design_points: usize,
     pub design_repair: bemcal_stats::lhs::RepairReport,
@@ -667,11 +673,21 @@ impl Sampler<'_> {
             Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
             Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
         };
+        let y = eval.evaluate(&estimate)?;
+        let mut surrogate_at_estimate = vec![];
+        for (k, name) in inp.outputs.iter().enumerate() {
+            let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
+            surrogate_at_estimate.push(OutputMetrics {
+                output: name.clone(),
+                metrics: g14(&inp.measured[k], &pred)?,
+            });
+        }
         Ok(ChainSummary {
             posterior,
             sigma_delta_kwh,
             residual_ar1,
             estimate,
+            surrogate_at_estimate,
         })
     }
 }
@@ -734,6 +750,8 @@ pub struct ChainSummary {
     pub residual_ar1: Vec<(String, f64)>,
     /// The calibrated estimate (calibrated parameters, physical units).
     pub estimate: Vec<f64>,
+    /// Guideline 14 of the surrogate at the estimate against the meters.
+    pub surrogate_at_estimate: Vec<OutputMetrics>,
 }
 
 /// Assembles `summary.json` from the stages' results and writes it.
@@ -787,6 +805,7 @@ pub fn write_summary(
             .collect(),
         validation,
         initial,
+        surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         design_points: design.points.len(),
         design_repair: design.repair,
         surrogate_held_out: sampler_info.1.clone(),

@@ -162,6 +162,9 @@ pub struct Summary {
     /// G14 metrics of the initial model (prior modes).
     #[serde(default)]
     pub initial: Vec<OutputMetrics>,
+    /// G14 metrics of the surrogate's prediction at the estimate.
+    #[serde(default)]
+    pub surrogate_at_estimate: Vec<OutputMetrics>,
     /// Whether every R-hat and ESS criterion was met.
     #[serde(default)]
     pub converged: bool,
