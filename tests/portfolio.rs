@@ -133,7 +133,15 @@ fn portfolio_of_small_buildings_with_one_broken() {
     let wall = t0.elapsed().as_secs_f64();
     let log = String::from_utf8_lossy(&run.stderr);
     let table = String::from_utf8_lossy(&run.stdout);
-    assert!(run.status.success(), "portfolio run failed:\n{log}");
+    // One building failed, so the exit status is non-zero, after every result was written.
+    assert!(
+        !run.status.success(),
+        "a failed building must fail the command:\n{log}"
+    );
+    assert!(
+        log.contains("1 of 4 buildings failed") && out.join("portfolio.json").exists(),
+        "{log}"
+    );
     eprintln!("{log}\n{table}\nportfolio wall time {wall:.0} s");
 
     let p: serde_json::Value =

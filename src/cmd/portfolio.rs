@@ -27,6 +27,7 @@ pub enum Sub {
     },
     /// Run a portfolio through a coordinator and worker processes on loopback; writes
     /// OUT/<building>/ (with report.html), portfolio.csv, portfolio.json and portfolio.html.
+    /// Exits non-zero if any building failed (after writing everything that finished).
     Run {
         manifest: PathBuf,
         /// Worker processes.
@@ -154,6 +155,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 p.failed,
                 out.display()
             ));
+            // Every finished building's results are written above; a failed one still makes
+            // the exit status non-zero, so that scripts and CI notice it.
+            if p.failed > 0 {
+                anyhow::bail!(
+                    "{} of {} buildings failed (reasons in {}/portfolio.csv); the others' results are written",
+                    p.failed,
+                    p.buildings,
+                    out.display()
+                );
+            }
             Ok(())
         }
     }
