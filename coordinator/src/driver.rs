@@ -191,6 +191,11 @@ impl State {
     fn simulation_inputs_hash(&self, r: &RunRow, cal: &Calibration) -> Result<String> {
         let meters = cal.project.meters.file.clone().unwrap_or_default();
         let mut h = Sha256::new();
+        // A cached simulation is only valid for the generator/runner that made it.
+        h.update(format!(
+            "simulation revision {}\n",
+            bemcal_energyplus::SIMULATION_REVISION
+        ));
         for f in &r.bundle {
             if f.path != bundle::PROJECT_FILE && Path::new(&f.path) != meters {
                 h.update(format!("{} {}\n", f.path, f.sha256));

@@ -26,6 +26,11 @@ pub use model::Model;
 pub use params::{ParameterDef, ParameterValues, TriangularPrior};
 pub use runner::{RunOptions, Runner};
 
+/// Revision of what the runner and the model generator make of a given spec and parameter
+/// values. Caches of simulation results key on it: bump it whenever the same inputs would now
+/// simulate differently.
+pub const SIMULATION_REVISION: u32 = 1;
+
 /// Errors of the simulation layer. Each names the file, line, parameter or run directory
 /// concerned.
 #[derive(Debug, thiserror::Error)]
