@@ -1,5 +1,8 @@
-//! Experiment: does simulating a few posterior draws and retraining shrink the surrogate's
-//! error near the posterior? (Not part of the pipeline.)
+//! Experiment for the surrogate-refinement idea (not part of the pipeline): simulate `K`
+//! posterior draws of a finished calibration in EnergyPlus, add them to the design, retrain the
+//! surrogate in place. Then compare the new surrogate at the estimate with EnergyPlus there.
+//!
+//!     refine_probe PROJECT.toml CALIBRATION_DIR K      (a copy of the folder: it is modified)
 use bemcal_calibrate::pipeline::Calibration;
 use bemcal_calibrate::project::Project;
 use std::path::Path;
@@ -29,7 +32,7 @@ fn main() {
         .collect();
     eprintln!("{} columns, {} draws, {k} picks", header.len(), rows.len());
     let t = std::time::Instant::now();
-    let results: Vec<_> = std::thread::scope(|s| {
+    let results: Vec<(Vec<f64>, _)> = std::thread::scope(|s| {
         let hs: Vec<_> = picks
             .chunks(k.div_ceil(2))
             .enumerate()
@@ -38,7 +41,15 @@ fn main() {
                 s.spawn(move || {
                     ch.iter()
                         .enumerate()
-                        .map(|(j, x)| cal.simulate_point(n0 + c * k.div_ceil(2) + j, x).unwrap().0)
+                        .filter_map(|(j, x)| {
+                            match cal.simulate_point(n0 + c * k.div_ceil(2) + j, x) {
+                                Ok((o, _)) => Some((x.clone(), o)),
+                                Err(e) => {
+                                    eprintln!("draw skipped: {e}");
+                                    None
+                                }
+                            }
+                        })
                         .collect::<Vec<_>>()
                 })
             })
@@ -46,7 +57,7 @@ fn main() {
         hs.into_iter().flat_map(|h| h.join().unwrap()).collect()
     });
     eprintln!("{k} simulations in {:.0} s", t.elapsed().as_secs_f64());
-    for (x, o) in picks.into_iter().zip(results) {
+    for (x, o) in results {
         design.points.push(x);
         sims.push(o);
     }
