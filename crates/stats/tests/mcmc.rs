@@ -127,8 +127,8 @@ fn recovers_correlated_2d_gaussian() {
     check_recovery(&g, &cov, &draws);
 }
 
-#[test]
-fn recovers_10d_gaussian() {
+/// A 10-D Gaussian with AR(1)-like correlations 0.6^|i-j| and sds 0.02-0.056, and its covariance.
+fn gaussian_10d() -> (Gaussian, Vec<f64>) {
     let d = 10;
     let sd: Vec<f64> = (0..d).map(|i| 0.02 + 0.004 * i as f64).collect();
     let mut cov = vec![0.0; d * d];
@@ -138,7 +138,12 @@ fn recovers_10d_gaussian() {
         }
     }
     let mean: Vec<f64> = (0..d).map(|i| 0.3 + 0.04 * i as f64).collect();
-    let g = Gaussian::new(mean, &cov);
+    (Gaussian::new(mean, &cov), cov)
+}
+
+#[test]
+fn recovers_10d_gaussian() {
+    let (g, cov) = gaussian_10d();
     let cfg = MhConfig {
         burn_in: 10_000,
         adapt_start: 1000,
@@ -176,17 +181,18 @@ fn deterministic_for_a_seed() {
     assert_ne!(run(3).points, run(4).points);
 }
 
-#[test]
-fn segments_with_checkpoints_equal_one_run() {
+/// Runs 1,500 iterations of a chain with `cfg` at once and in checkpointed segments (split
+/// inside burn-in, right at its end and after it; each checkpoint through JSON), asserts that
+/// both give the same state and bit-identical draws, and returns the final state.
+fn assert_segments_equal_one_run(cfg: MhConfig) -> ChainState {
     let start = vec![0.2, 0.7, 0.9];
     let lp = banana(&start);
-    let mut whole = ChainState::new(cfg_small(), start.clone(), lp, 9, 2).unwrap();
+    let mut whole = ChainState::new(cfg.clone(), start.clone(), lp, 9, 2).unwrap();
     let all = mcmc::run_segment(&mut whole, 1500, banana);
     assert_eq!(all.len(), 1100);
 
-    let mut st = ChainState::new(cfg_small(), start, lp, 9, 2).unwrap();
+    let mut st = ChainState::new(cfg, start, lp, 9, 2).unwrap();
     let mut pieces = Draws::new(3);
-    // Split inside burn-in, right at the end of burn-in, and after it; checkpoint through JSON.
     for n in [123, 277, 1, 599, 500] {
         pieces.extend(&mcmc::run_segment(&mut st, n, banana));
         let json = serde_json::to_string(&st).unwrap();
@@ -195,6 +201,12 @@ fn segments_with_checkpoints_equal_one_run() {
     assert_eq!(st, whole);
     assert_eq!(pieces.points, all.points, "draws differ bit for bit");
     assert_eq!(pieces.log_density, all.log_density);
+    whole
+}
+
+#[test]
+fn segments_with_checkpoints_equal_one_run() {
+    assert_segments_equal_one_run(cfg_small());
 }
 
 #[test]
@@ -250,17 +262,8 @@ fn dispersed_starts_are_seeded_per_chain() {
 #[test]
 fn mixture_from_the_optimum_recovers_10d_gaussian() {
     use bemcal_stats::optim::{maximise_batch, BfgsConfig};
-    let d = 10;
-    let sd: Vec<f64> = (0..d).map(|i| 0.02 + 0.004 * i as f64).collect();
-    let mut cov = vec![0.0; d * d];
-    for i in 0..d {
-        for j in 0..d {
-            cov[i * d + j] = 0.6f64.powi((i as i32 - j as i32).abs()) * sd[i] * sd[j];
-        }
-    }
-    let mean: Vec<f64> = (0..d).map(|i| 0.3 + 0.04 * i as f64).collect();
-    let g = Gaussian::new(mean, &cov);
-    let flat = vec![Triangular::new(0.0, 0.5, 1.0).unwrap(); d];
+    let (g, cov) = gaussian_10d();
+    let flat = vec![Triangular::new(0.0, 0.5, 1.0).unwrap(); g.d];
     let starts = mcmc::dispersed_starts(&flat, 4, 21);
     let lps: Vec<f64> = starts.iter().map(|s| g.ln_pdf(s)).collect();
     let optima = maximise_batch(&starts, &lps, &BfgsConfig::default(), |us| {
@@ -343,22 +346,9 @@ fn mixture_on_a_bounded_banana_matches_random_walk() {
 
 #[test]
 fn mixture_checkpoints_resume_bit_identically() {
-    let cfg = MhConfig {
+    let end = assert_segments_equal_one_run(MhConfig {
         independence: 0.5,
         ..cfg_small()
-    };
-    let start = vec![0.2, 0.7, 0.9];
-    let lp = banana(&start);
-    let mut whole = ChainState::new(cfg.clone(), start.clone(), lp, 9, 2).unwrap();
-    let all = mcmc::run_segment(&mut whole, 1500, banana);
-    assert!(whole.independence_steps() > 300);
-    let mut st = ChainState::new(cfg, start, lp, 9, 2).unwrap();
-    let mut pieces = Draws::new(3);
-    for n in [123, 277, 1, 599, 500] {
-        pieces.extend(&mcmc::run_segment(&mut st, n, banana));
-        let json = serde_json::to_string(&st).unwrap();
-        st = serde_json::from_str(&json).unwrap();
-    }
-    assert_eq!(st, whole);
-    assert_eq!(pieces.points, all.points, "draws differ bit for bit");
+    });
+    assert!(end.independence_steps() > 300);
 }
