@@ -20,43 +20,14 @@ use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo};
+use common::{bemcal, golden_epw, have_engine, repo, small_project};
 
 const TOKEN: &str = "test-token-0123456789abcdef";
 
-const PROJECT: &str = r#"name = "small-synthetic"
-model = "model.toml"
-weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
-calibrate = ["lighting_power_density", "cooling_setpoint_occupied"]
-[meters]
-file = "meters.csv"
-timestamp_column = "timestamp"
-timestamp_format = "iso8601"
-convention = "hour_beginning"
-dst = "none"
-[[meters.columns]]
-column = "heating_kwh"
-role = "heating"
-unit = "kWh"
-[[meters.columns]]
-column = "cooling_kwh"
-role = "cooling"
-unit = "kWh"
-[[meters.columns]]
-column = "electricity_kwh"
-role = "electricity"
-unit = "kWh"
-[design]
-points = 6
-[surrogate]
-epochs = 3
-threads = 1
-[mcmc]
-chains = 2
-iterations = 300
-burn_in = 100
-segment = 100
-"#;
+/// The small two-parameter project (6 design points, short chains).
+fn project_text() -> String {
+    small_project("small-synthetic", 6)
+}
 
 /// A project folder with synthetic meters.
 fn project(dir: &Path) -> PathBuf {
@@ -65,7 +36,7 @@ fn project(dir: &Path) -> PathBuf {
         dir.join("model.toml"),
     )
     .unwrap();
-    std::fs::write(dir.join("project.toml"), PROJECT).unwrap();
+    std::fs::write(dir.join("project.toml"), project_text()).unwrap();
     let s = bemcal()
         .args(["synthesize", "--model"])
         .arg(dir.join("model.toml"))
@@ -358,7 +329,7 @@ fn token_and_input_validation() {
         "timestamp,heating_kwh\n2021-01-01T00:00,1\n",
     )
     .unwrap();
-    let bad = PROJECT.replace("\"cooling_setpoint_occupied\"", "\"no_such_parameter\"");
+    let bad = project_text().replace("\"cooling_setpoint_occupied\"", "\"no_such_parameter\"");
     std::fs::write(dir.join("project.toml"), bad).unwrap();
     let o = client(
         &["submit", dir.join("project.toml").to_str().unwrap()],

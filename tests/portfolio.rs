@@ -16,43 +16,9 @@ use std::process::{Child, Stdio};
 use std::time::Instant;
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo};
+use common::{bemcal, golden_epw, have_engine, repo, small_project};
 
 const POINTS: u64 = 5;
-
-const PROJECT: &str = r#"name = "NAME"
-model = "model.toml"
-weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
-calibrate = ["lighting_power_density", "cooling_setpoint_occupied"]
-[meters]
-file = "meters.csv"
-timestamp_column = "timestamp"
-timestamp_format = "iso8601"
-convention = "hour_beginning"
-dst = "none"
-[[meters.columns]]
-column = "heating_kwh"
-role = "heating"
-unit = "kWh"
-[[meters.columns]]
-column = "cooling_kwh"
-role = "cooling"
-unit = "kWh"
-[[meters.columns]]
-column = "electricity_kwh"
-role = "electricity"
-unit = "kWh"
-[design]
-points = 5
-[surrogate]
-epochs = 3
-threads = 1
-[mcmc]
-chains = 2
-iterations = 300
-burn_in = 100
-segment = 100
-"#;
 
 /// A building folder: model (the small office, optionally with another footprint and
 /// window-to-wall ratio), project and synthetic meters at `truth`.
@@ -64,7 +30,11 @@ fn building(dir: &Path, name: &str, model_extra: &str, truth: (f64, f64)) {
         model.push_str(model_extra);
     }
     std::fs::write(dir.join("model.toml"), model).unwrap();
-    std::fs::write(dir.join("project.toml"), PROJECT.replace("NAME", name)).unwrap();
+    std::fs::write(
+        dir.join("project.toml"),
+        small_project(name, POINTS as usize),
+    )
+    .unwrap();
     let s = bemcal()
         .args(["synthesize", "--model"])
         .arg(dir.join("model.toml"))

@@ -30,3 +30,44 @@ pub fn golden_epw() -> PathBuf {
         .unwrap();
     PathBuf::from(String::from_utf8(out.stdout).unwrap().trim())
 }
+
+/// Project text of the small two-parameter calibration (lighting density and cooling set-point
+/// of `examples/office/small.toml` against `meters.csv`), with a tiny surrogate and short chains:
+/// the end-to-end tests' common case.
+pub fn small_project(name: &str, points: usize) -> String {
+    format!(
+        r#"name = "{name}"
+model = "model.toml"
+weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
+calibrate = ["lighting_power_density", "cooling_setpoint_occupied"]
+[meters]
+file = "meters.csv"
+timestamp_column = "timestamp"
+timestamp_format = "iso8601"
+convention = "hour_beginning"
+dst = "none"
+[[meters.columns]]
+column = "heating_kwh"
+role = "heating"
+unit = "kWh"
+[[meters.columns]]
+column = "cooling_kwh"
+role = "cooling"
+unit = "kWh"
+[[meters.columns]]
+column = "electricity_kwh"
+role = "electricity"
+unit = "kWh"
+[design]
+points = {points}
+[surrogate]
+epochs = 3
+threads = 1
+[mcmc]
+chains = 2
+iterations = 300
+burn_in = 100
+segment = 100
+"#
+    )
+}
