@@ -315,20 +315,7 @@ fn main() -> BoxResult<()> {
                 .collect::<Vec<_>>(),
             t_start.elapsed().as_secs_f64()
         );
-        optima
-            .into_iter()
-            .enumerate()
-            .map(|(c, o)| {
-                ChainState::with_proposal(
-                    config.clone(),
-                    o.point,
-                    o.log_density,
-                    &o.covariance,
-                    a.seed,
-                    c as u64,
-                )
-            })
-            .collect::<Result<_, _>>()?
+        bemcal_stats::mcmc::chains_at_optima(&config, optima, a.seed, 0)?
     };
     let mut draws: Vec<Draws> = states.iter().map(|s| Draws::new(s.dim())).collect();
     let segment = 500u64;

@@ -11,7 +11,9 @@ use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
 use bemcal_precal::meters::{read_meters, MeterRole};
 use bemcal_stats::lhs::Design;
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
-use bemcal_stats::mcmc::{dispersed_starts, run_segment_batch, ChainState, Draws, MhConfig};
+use bemcal_stats::mcmc::{
+    chains_at_optima, dispersed_starts, run_segment_batch, ChainState, Draws, MhConfig,
+};
 use bemcal_stats::metrics::{g14, G14Metrics};
 use bemcal_stats::optim::{maximise_batch, BfgsConfig};
 use bemcal_stats::prior::Prior;
@@ -711,20 +713,7 @@ pub fn chains_at(
         let optima = maximise_batch(starts, &lps, &cfg, |us: &[Vec<f64>]| {
             post.ln_posterior_batch(eval, us)
         });
-        return optima
-            .into_iter()
-            .enumerate()
-            .map(|(c, o)| {
-                Ok(ChainState::with_proposal(
-                    config.clone(),
-                    o.point,
-                    o.log_density,
-                    &o.covariance,
-                    m.seed,
-                    first_chain + c as u64,
-                )?)
-            })
-            .collect();
+        return Ok(chains_at_optima(&config, optima, m.seed, first_chain)?);
     }
     starts
         .iter()

@@ -304,7 +304,7 @@ impl Draws {
 
 /// In-place lower Cholesky factor of a symmetric positive-definite row-major `d x d` matrix;
 /// `None` if not positive definite.
-fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
+pub(crate) fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
@@ -786,6 +786,31 @@ pub fn run_segment_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         step_batch(states, &mut target, &mut draws)?;
     }
     Ok(draws)
+}
+
+/// Chains started at optima ([`crate::optim::maximise_batch`]), each with its Laplace
+/// covariance as proposal ([`ChainState::with_proposal`]); chain `c` gets random stream
+/// `first_stream + c`.
+pub fn chains_at_optima(
+    config: &MhConfig,
+    optima: Vec<crate::optim::Optimum>,
+    seed: u64,
+    first_stream: u64,
+) -> Result<Vec<ChainState>> {
+    optima
+        .into_iter()
+        .enumerate()
+        .map(|(c, o)| {
+            ChainState::with_proposal(
+                config.clone(),
+                o.point,
+                o.log_density,
+                &o.covariance,
+                seed,
+                first_stream + c as u64,
+            )
+        })
+        .collect()
 }
 
 /// Dispersed starting points for `n_chains` chains: each a draw from the priors (inverse CDF),

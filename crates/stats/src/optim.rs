@@ -68,10 +68,6 @@ pub struct Optimum {
     pub evaluations: usize,
 }
 
-fn to_unit(z: &[f64]) -> Vec<f64> {
-    z.iter().map(|v| v.clamp(0.0, 1.0)).collect()
-}
-
 /// One start's search state (minimising `f = -ln p`).
 struct Search {
     z: Vec<f64>,
@@ -99,8 +95,7 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         if zs.is_empty() {
             return Vec::new();
         }
-        let us: Vec<Vec<f64>> = zs.iter().map(|z| to_unit(z)).collect();
-        target(&us)
+        target(zs)
             .into_iter()
             .map(|lp| if lp.is_finite() { -lp } else { f64::INFINITY })
             .collect()
@@ -128,14 +123,15 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         .collect();
 
     // Gradients at the starts.
-    gradients(&mut searches, cfg, &mut eval);
+    let live: Vec<usize> = (0..searches.len()).filter(|&i| !searches[i].done).collect();
+    gradients_of(&mut searches, &live, cfg, &mut eval);
     for _ in 0..cfg.max_iterations {
         let active: Vec<usize> = (0..searches.len()).filter(|&i| !searches[i].done).collect();
         if active.is_empty() {
             break;
         }
-        // Search directions p = -H g, capped in max norm.
-        let mut dirs: Vec<Vec<f64>> = vec![Vec::new(); searches.len()];
+        // Search directions p = -H g, capped in max norm, with their slopes g^T p.
+        let mut dirs: Vec<(Vec<f64>, f64)> = vec![(Vec::new(), 0.0); searches.len()];
         for &i in &active {
             let s = &searches[i];
             // Coordinates at a bound whose descent points out of the box stay there this
@@ -165,8 +161,7 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
                 p.iter_mut().for_each(|v| *v *= k);
                 slope *= k;
             }
-            let _ = slope;
-            dirs[i] = p;
+            dirs[i] = (p, slope);
         }
         // Backtracking line search, all active starts in lockstep.
         let mut alpha: Vec<f64> = vec![1.0; searches.len()];
@@ -181,7 +176,7 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
                 .map(|&i| {
                     let s = &searches[i];
                     (0..d)
-                        .map(|r| (s.z[r] + alpha[i] * dirs[i][r]).clamp(0.0, 1.0))
+                        .map(|r| (s.z[r] + alpha[i] * dirs[i].0[r]).clamp(0.0, 1.0))
                         .collect()
                 })
                 .collect();
@@ -190,9 +185,8 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             for ((&i, z), f) in searching.iter().zip(trials).zip(fs) {
                 let s = &mut searches[i];
                 s.evaluations += 1;
-                let slope: f64 = dirs[i].iter().zip(&s.g).map(|(a, b)| a * b).sum();
                 // Armijo: f(z + a p) <= f(z) + c1 a g^T p (Nocedal & Wright Eq. 3.4).
-                if f.is_finite() && f <= s.f + 1e-4 * alpha[i] * slope.min(0.0) {
+                if f.is_finite() && f <= s.f + 1e-4 * alpha[i] * dirs[i].1.min(0.0) {
                     accepted[i] = Some((z, f));
                 } else {
                     alpha[i] *= 0.5;
@@ -300,7 +294,7 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
                 }
             }
             Optimum {
-                point: to_unit(&s.z),
+                point: s.z.clone(),
                 log_density: -s.f,
                 covariance,
                 iterations: s.iterations,
@@ -341,23 +335,7 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
 /// Inverse of a symmetric positive-definite matrix through its Cholesky factor; `None` if it
 /// is not positive definite (or has non-finite entries).
 fn spd_inverse(a: &[f64], d: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; d * d];
-    for i in 0..d {
-        for j in 0..=i {
-            let mut s = a[i * d + j];
-            for k in 0..j {
-                s -= l[i * d + k] * l[j * d + k];
-            }
-            if i == j {
-                if !(s.is_finite() && s > 0.0) {
-                    return None;
-                }
-                l[i * d + i] = s.sqrt();
-            } else {
-                l[i * d + j] = s / l[j * d + j];
-            }
-        }
-    }
+    let l = crate::mcmc::cholesky(a, d)?;
     // Columns of L^-1, then A^-1 = L^-T L^-1.
     let mut linv = vec![0.0; d * d];
     for c in 0..d {
@@ -378,15 +356,6 @@ fn spd_inverse(a: &[f64], d: usize) -> Option<Vec<f64>> {
         }
     }
     Some(inv)
-}
-
-fn gradients<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
-    searches: &mut [Search],
-    cfg: &BfgsConfig,
-    eval: &mut F,
-) {
-    let idx: Vec<usize> = (0..searches.len()).filter(|&i| !searches[i].done).collect();
-    gradients_of(searches, &idx, cfg, eval);
 }
 
 /// Forward-difference gradients of the searches `idx`, one batched call.

@@ -275,21 +275,7 @@ fn mixture_from_the_optimum_recovers_10d_gaussian() {
         independence: 0.5,
         ..MhConfig::default()
     };
-    let mut states: Vec<ChainState> = optima
-        .into_iter()
-        .enumerate()
-        .map(|(c, o)| {
-            ChainState::with_proposal(
-                cfg.clone(),
-                o.point,
-                o.log_density,
-                &o.covariance,
-                21,
-                c as u64,
-            )
-            .unwrap()
-        })
-        .collect();
+    let mut states = mcmc::chains_at_optima(&cfg, optima, 21, 0).unwrap();
     let draws = mcmc::run_segment_batch(&mut states, 1000 + 10_000, |pts: &[Vec<f64>]| {
         pts.iter().map(|p| g.ln_pdf(p)).collect()
     })

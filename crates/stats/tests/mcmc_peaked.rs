@@ -99,20 +99,7 @@ fn run_from(
                 );
             }
         }
-        opt.into_iter()
-            .enumerate()
-            .map(|(c, o)| {
-                ChainState::with_proposal(
-                    cfg.clone(),
-                    o.point,
-                    o.log_density,
-                    &o.covariance,
-                    seed,
-                    c as u64,
-                )
-                .unwrap()
-            })
-            .collect()
+        mcmc::chains_at_optima(cfg, opt, seed, 0).unwrap()
     } else {
         starts
             .into_iter()
