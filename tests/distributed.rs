@@ -14,13 +14,11 @@
 //! - `token_and_input_validation`: a call with a wrong token is refused; a project with an
 //!   unknown parameter is refused at submit with a clear message.
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo, small_project};
+use common::{bemcal, golden_epw, have_engine, repo, small_project, Proc};
 
 const TOKEN: &str = "test-token-0123456789abcdef";
 
@@ -57,40 +55,8 @@ fn project(dir: &Path) -> PathBuf {
 }
 
 /// Kills (SIGKILL) and reaps a child when dropped.
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 fn coordinator(data: &Path, listen: &str) -> (Proc, String) {
-    let mut c = bemcal()
-        .args([
-            "coordinator",
-            "--listen",
-            listen,
-            "--lease-ttl",
-            "3",
-            "--data",
-        ])
-        .arg(data)
-        .env("BEMCAL_TOKEN", TOKEN)
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(c.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on ")
-        .expect("address")
-        .to_string();
-    (Proc(c), format!("http://{addr}"))
+    common::coordinator(data, listen, TOKEN, &["--lease-ttl", "3"])
 }
 
 fn worker(url: &str, id: &str, cache: &Path) -> Proc {

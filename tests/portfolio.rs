@@ -10,9 +10,7 @@
 //! submit`, `status --json`, `results`) without workers: invalid buildings are failed runs with
 //! the loader's reason, the valid one waits in its simulate stage.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Stdio};
 use std::time::Instant;
 
 mod common;
@@ -188,15 +186,6 @@ fn portfolio_of_small_buildings_with_one_broken() {
     assert!(log.contains("broken: FAILED"), "{log}");
 }
 
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 const TOKEN: &str = "test-token-portfolio-0123456789";
 
 #[test]
@@ -237,22 +226,7 @@ fn portfolio_submit_status_results_on_a_coordinator() {
     )
     .unwrap();
 
-    let mut c = bemcal()
-        .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
-        .arg(root.join("data"))
-        .env("BEMCAL_TOKEN", TOKEN)
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(c.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let _coord = Proc(c);
-    let url = format!(
-        "http://{}",
-        line.trim().strip_prefix("listening on ").unwrap()
-    );
+    let (_coord, url) = common::coordinator(&root.join("data"), "127.0.0.1:0", TOKEN, &[]);
     let cli = |args: &[&str]| {
         let o = bemcal()
             .args(args)

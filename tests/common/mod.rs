@@ -1,8 +1,9 @@
 //! Helpers shared by the end-to-end tests that run the `bemcal` binary.
 #![allow(dead_code)] // each test binary uses a subset
 
-use std::path::PathBuf;
-use std::process::Command;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 
 /// The `bemcal` binary built for these tests.
 pub fn bemcal() -> Command {
@@ -70,4 +71,38 @@ burn_in = 100
 segment = 100
 "#
     )
+}
+
+/// A child process killed (and reaped) when dropped, so a failing test leaves nothing running.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A `bemcal coordinator` on `listen` with its state in `data`, `token` as its bearer token and
+/// `extra` arguments; returns it with its URL (read from its "listening on" line).
+pub fn coordinator(data: &Path, listen: &str, token: &str, extra: &[&str]) -> (Proc, String) {
+    let mut c = bemcal()
+        .args(["coordinator", "--listen", listen])
+        .args(extra)
+        .arg("--data")
+        .arg(data)
+        .env("BEMCAL_TOKEN", token)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(c.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .expect("address")
+        .to_string();
+    (Proc(c), format!("http://{addr}"))
 }
