@@ -15,6 +15,7 @@ for key, label in [
     ("simulations_s", "design points (EnergyPlus)"),
     ("training_s", "surrogate training (PyTorch)"),
     ("chains_s", "chains (optimisation + MH)"),
+    ("refinement_s", "refinement draws (EnergyPlus)"),
     ("summary_s", "summary + predictive bands"),
     ("validation_s", "validation (EnergyPlus x 2)"),
     ("total_s", "total"),

@@ -8,6 +8,9 @@
 //!   the output folder, as the local path reuses it) because two trainings are not bit-identical.
 //!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
 //!   posterior must then be identical to the single-process ones.
+//! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
+//!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
+//!   and simulate the same draws and measure the same surrogate error there.
 //! - `worker_killed_and_coordinator_restarted`: kill -9 a worker in the middle of a simulation
 //!   and the coordinator in the middle of the run; the run completes, the lost simulation is
 //!   done by the other worker, and no job finished before the restart is run again.
@@ -173,6 +176,90 @@ fn distributed_matches_single_process() {
     ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
+}
+
+#[test]
+fn refinement_round_local_and_distributed() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    let text = format!(
+        "{}[refine]\nrounds = 1\npoints = 3\niterations = 200\nburn_in = 100\n",
+        project_text()
+    );
+    std::fs::write(&pf, text).unwrap();
+    let local = tmp.path().join("local");
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&pf)
+        .arg("--out")
+        .arg(&local)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "local: {log}");
+    assert!(log.contains("refinement round 1: 3/3 simulations"), "{log}");
+
+    let summary = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+    };
+    let sa = summary(&local);
+    let rounds = sa["refinement"].as_array().unwrap();
+    assert_eq!(rounds.len(), 1, "{}", sa["refinement"]);
+    let r1 = &rounds[0];
+    let added = r1["points"].as_array().unwrap();
+    assert_eq!(added.len() + r1["failed"].as_array().unwrap().len(), 3);
+    assert!(!added.is_empty());
+    // Keys after the 6 design points; each a saved simulation with the draw's values.
+    for (j, p) in added.iter().enumerate() {
+        let i = p["index"].as_u64().unwrap() as usize;
+        assert_eq!(i, 6 + j);
+        assert!(local.join(format!("simulations/point_{i:03}.json")).is_file());
+    }
+    // The retrained surrogate learned from 6 + the added points; the first one is kept.
+    let ds: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(local.join("dataset/dataset.json")).unwrap())
+            .unwrap();
+    assert_eq!(ds["n_points"].as_u64().unwrap() as usize, 6 + added.len(), "{ds}");
+    let first = local.join("refine/round_1/surrogate");
+    assert!(first.join("surrogate.json").is_file());
+    assert!(local.join("refine/round_1/chains.json").is_file());
+    for m in r1["surrogate_error"].as_array().unwrap() {
+        assert!(m["cv_rmse"].as_f64().unwrap().is_finite(), "{m}");
+    }
+    assert!(sa["timings"]["refinement_s"].as_f64().unwrap() > 0.0);
+
+    // The distributed run, given the same first surrogate, picks and simulates the same draws.
+    let dist = tmp.path().join("dist");
+    std::fs::create_dir_all(dist.join("surrogate")).unwrap();
+    for e in std::fs::read_dir(&first).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dist.join("surrogate").join(e.file_name())).unwrap();
+    }
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(&pf)
+        .args(["--local-workers", "2", "--out"])
+        .arg(&dist)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "distributed: {log}");
+    let sb = summary(&dist);
+    assert_eq!(sa["refinement"], sb["refinement"], "refinement rounds differ");
+    for p in added {
+        let f = format!("simulations/point_{:03}.json", p["index"].as_u64().unwrap());
+        assert_eq!(
+            std::fs::read(local.join(&f)).unwrap(),
+            std::fs::read(dist.join(&f)).unwrap(),
+            "{f}"
+        );
+    }
+    assert!(sb["timings"]["refinement_s"].as_f64().unwrap() > 0.0);
+    assert!(sb["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
 }
 
 #[test]

@@ -101,6 +101,10 @@ ALTER TABLE runs ADD COLUMN last_lease INTEGER NOT NULL DEFAULT 0; -- id of its 
 CREATE INDEX runs_portfolio ON runs(portfolio);
 CREATE INDEX jobs_cache ON jobs(cache_key, state);
 "#,
+    r#"
+ALTER TABLE runs ADD COLUMN refine TEXT;              -- JSON RefineLog: finished refinement rounds
+ALTER TABLE stages ADD COLUMN seconds_before REAL NOT NULL DEFAULT 0; -- earlier visits of a stage
+"#,
 ];
 
 /// A file by relative path and content hash (the serde twin of `proto::FileRef`).
@@ -160,6 +164,8 @@ pub struct RunRow {
     pub finished_ms: Option<u64>,
     pub portfolio: Option<String>,
     pub building: Option<String>,
+    /// JSON `RefineLog` of the finished surrogate refinement rounds (None: none yet).
+    pub refine: Option<String>,
 }
 
 /// A job row.
@@ -201,7 +207,7 @@ fn parse_files(s: Option<String>) -> Vec<File> {
         .unwrap_or_default()
 }
 
-const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms, portfolio, building";
+const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms, portfolio, building, refine";
 const JOB_COLS: &str =
     "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
 
@@ -222,6 +228,7 @@ fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
         finished_ms: r.get::<_, Option<i64>>(12)?.map(|v| v as u64),
         portfolio: r.get(13)?,
         building: r.get(14)?,
+        refine: r.get(15)?,
     })
 }
 
@@ -369,8 +376,21 @@ impl Store {
     }
 
     /// Moves a run to `stage`, closing the previous stage and opening the new one; jobs given
-    /// are added in the same transaction.
+    /// are added in the same transaction. A stage visited again (chains of a later refinement
+    /// round, an extension) keeps the seconds of its earlier visits.
     pub fn set_stage(&self, run: &str, stage: &str, jobs: Vec<NewJob>) -> Result<()> {
+        self.set_stage_refined(run, stage, jobs, None)
+    }
+
+    /// [`Self::set_stage`], also recording the refinement log `refine` (JSON) in the same
+    /// transaction when given.
+    pub fn set_stage_refined(
+        &self,
+        run: &str,
+        stage: &str,
+        jobs: Vec<NewJob>,
+        refine: Option<&str>,
+    ) -> Result<()> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -380,13 +400,22 @@ impl Store {
             )?;
             tx.execute(
                 "INSERT INTO stages (run_id, stage, started_ms) VALUES (?1, ?2, ?3)
-                 ON CONFLICT(run_id, stage) DO UPDATE SET finished_ms = NULL",
+                 ON CONFLICT(run_id, stage) DO UPDATE SET
+                    seconds_before = seconds_before
+                        + (COALESCE(finished_ms, excluded.started_ms) - started_ms) / 1000.0,
+                    started_ms = excluded.started_ms, finished_ms = NULL",
                 params![run, stage, now],
             )?;
             tx.execute(
                 "UPDATE runs SET stage = ?2 WHERE id = ?1",
                 params![run, stage],
             )?;
+            if let Some(refine) = refine {
+                tx.execute(
+                    "UPDATE runs SET refine = ?2 WHERE id = ?1",
+                    params![run, refine],
+                )?;
+            }
             for j in jobs {
                 insert_job(&tx, run, j)?;
             }
@@ -411,13 +440,14 @@ impl Store {
     pub fn stage_seconds(&self, run: &str) -> Result<Vec<(String, f64)>> {
         self.with(|c| {
             let mut st = c.prepare(
-                "SELECT stage, started_ms, COALESCE(finished_ms, ?2) FROM stages WHERE run_id = ?1",
+                "SELECT stage, started_ms, COALESCE(finished_ms, ?2), seconds_before FROM stages WHERE run_id = ?1",
             )?;
             let rows = st
                 .query_map(params![run, now_ms() as i64], |r| {
                     Ok((
                         r.get::<_, String>(0)?,
-                        (r.get::<_, i64>(2)? - r.get::<_, i64>(1)?) as f64 / 1000.0,
+                        r.get::<_, f64>(3)?
+                            + (r.get::<_, i64>(2)? - r.get::<_, i64>(1)?) as f64 / 1000.0,
                     ))
                 })?
                 .collect::<rusqlite::Result<Vec<_>>>()?;

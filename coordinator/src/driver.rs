@@ -10,10 +10,14 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use bemcal_calibrate::pipeline::{
-    write_summary, Calibration, ChainSummary, OutputMetrics, Timings,
+    fallback_note, write_summary, Calibration, ChainSummary, OutputMetrics, Timings,
 };
 use bemcal_calibrate::posterior::Checkpoint;
+use bemcal_calibrate::refine::{
+    pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound, REFINE_FILE,
+};
 use bemcal_calibrate::Project;
+use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::mcmc::{ChainState, Draws};
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
@@ -64,7 +68,7 @@ pub struct State {
 
 /// Stages in order.
 pub const STAGES: &[&str] = &[
-    "design", "simulate", "train", "chains", "merge", "validate", "summary",
+    "design", "simulate", "train", "chains", "merge", "refine", "validate", "summary",
 ];
 
 /// The merged chains, kept in the database between the merge and the summary.
@@ -80,12 +84,32 @@ struct Merged {
     acceptance: Vec<f64>,
     sigma_eta: Vec<f64>,
     held_out: serde_json::Value,
+    /// Draws validated instead when EnergyPlus fails at the estimate.
+    #[serde(default)]
+    fallbacks: Vec<Vec<f64>>,
 }
 
 type Result<T> = std::result::Result<T, String>;
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
+}
+
+/// A finished simulation job, read back: the point's key in `simulations/`, its values, and
+/// its outputs (or, for a refinement draw EnergyPlus failed on, the failure).
+struct Simulated {
+    index: usize,
+    values: Vec<f64>,
+    outputs: std::result::Result<HourlyOutputs, String>,
+}
+
+/// The failure a tolerant (refinement) simulation job reported in its result, if any.
+fn reported_failure(j: &JobRow) -> Option<String> {
+    if !j.outputs.is_empty() {
+        return None;
+    }
+    let v: serde_json::Value = serde_json::from_str(j.result.as_deref()?).ok()?;
+    v.get("error").and_then(|e| e.as_str()).map(str::to_string)
 }
 
 impl State {
@@ -145,6 +169,7 @@ impl State {
                 "train" => self.stage_train(&r)?,
                 "chains" => self.stage_chains(&r)?,
                 "merge" => self.stage_merge(&r)?,
+                "refine" => self.stage_refine(&r)?,
                 "validate" => self.stage_validate(&r)?,
                 "summary" => self.stage_summary(&r)?,
                 _ => false,
@@ -163,27 +188,124 @@ impl State {
             .points
             .iter()
             .enumerate()
-            .map(|(i, x)| {
-                let values = serde_json::to_string(&cal.inputs.plan.values(x)).unwrap_or_default();
-                let key = hex::encode(Sha256::digest(format!("{inputs_hash}\n{values}")));
-                NewJob {
-                    stage: "simulate",
-                    kind: "simulate",
-                    label: format!("simulation of design point {i}"),
-                    spec: proto::Job {
-                        bundle: crate::client::refs(&r.bundle),
-                        kind: Some(Kind::Simulate(proto::SimulateJob {
-                            point: i as u32,
-                            values: x.clone(),
-                        })),
-                        ..Default::default()
-                    },
-                    cache_key: Some(key),
-                }
-            })
+            .map(|(i, x)| self.simulation_job(r, &cal, &inputs_hash, i, x, 0))
             .collect();
         self.store.set_stage(&r.id, "simulate", jobs).map_err(err)?;
         Ok(true)
+    }
+
+    /// The job simulating point `i` at `x`: a design point (`refine_round` 0) or a posterior
+    /// draw of refinement round `refine_round`, cached by inputs and values (a refinement job
+    /// may report an EnergyPlus failure as its result, so its key is kept apart).
+    fn simulation_job(
+        &self,
+        r: &RunRow,
+        cal: &Calibration,
+        inputs_hash: &str,
+        i: usize,
+        x: &[f64],
+        refine_round: u32,
+    ) -> NewJob {
+        let values = serde_json::to_string(&cal.inputs.plan.values(x)).unwrap_or_default();
+        let tolerant = if refine_round > 0 { "refine\n" } else { "" };
+        let key = hex::encode(Sha256::digest(format!("{tolerant}{inputs_hash}\n{values}")));
+        NewJob {
+            stage: if refine_round > 0 { "refine" } else { "simulate" },
+            kind: "simulate",
+            label: if refine_round > 0 {
+                format!("simulation of posterior draw {i} (refinement round {refine_round})")
+            } else {
+                format!("simulation of design point {i}")
+            },
+            spec: proto::Job {
+                bundle: crate::client::refs(&r.bundle),
+                kind: Some(Kind::Simulate(proto::SimulateJob {
+                    point: i as u32,
+                    values: x.to_vec(),
+                    refine_round,
+                })),
+                ..Default::default()
+            },
+            cache_key: Some(key),
+        }
+    }
+
+    /// Places the outputs of finished simulation jobs in the run's `simulations/` and reads
+    /// them back (checking they belong to the job's values).
+    fn simulated(&self, cal: &Calibration, jobs: &[JobRow]) -> Result<Vec<Simulated>> {
+        let mut out = vec![];
+        for j in jobs {
+            let Some(Kind::Simulate(s)) = &j.spec.kind else {
+                return Err(format!("job {} is not a simulation", j.id));
+            };
+            if let Some(e) = reported_failure(j) {
+                out.push(Simulated {
+                    index: s.point as usize,
+                    values: s.values.clone(),
+                    outputs: Err(e),
+                });
+                continue;
+            }
+            // Cached outputs may come from another run's point: name them after this one's.
+            let files: Vec<File> = j
+                .outputs
+                .iter()
+                .map(|f| File {
+                    path: format!("simulations/point_{:03}.json", s.point),
+                    ..f.clone()
+                })
+                .collect();
+            self.place(&cal.out, &files)?;
+            let (o, ran) = cal
+                .simulate_point(s.point as usize, &s.values)
+                .map_err(err)?;
+            if ran.is_some() {
+                return Err(format!(
+                    "point {}: the worker's outputs did not match its parameter values",
+                    s.point
+                ));
+            }
+            out.push(Simulated {
+                index: s.point as usize,
+                values: s.values.clone(),
+                outputs: Ok(o),
+            });
+        }
+        Ok(out)
+    }
+
+    /// The refinement rounds finished so far.
+    fn refine_log(&self, r: &RunRow) -> Result<RefineLog> {
+        match &r.refine {
+            Some(j) => serde_json::from_str(j).map_err(|e| format!("refinement log: {e}")),
+            None => Ok(RefineLog::default()),
+        }
+    }
+
+    /// The training job for the training set in `dataset`.
+    fn train_job(&self, r: &RunRow, cal: &Calibration, dataset: &Path) -> Result<NewJob> {
+        let mut inputs = vec![];
+        for p in crate::client::walk(dataset).map_err(err)? {
+            let bytes = std::fs::read(&p).map_err(err)?;
+            let rel = p.strip_prefix(&cal.out).map_err(err)?;
+            inputs.push(proto::FileRef {
+                path: rel.to_string_lossy().replace('\\', "/"),
+                sha256: self.put_artifact(&bytes)?,
+                size: bytes.len() as u64,
+            });
+        }
+        Ok(NewJob {
+            stage: "train",
+            kind: "train",
+            label: "surrogate training".into(),
+            spec: proto::Job {
+                bundle: crate::client::refs(&r.bundle),
+                inputs,
+                kind: Some(Kind::Train(proto::TrainJob {})),
+                ..Default::default()
+            },
+            cache_key: None,
+        })
     }
 
     /// Hash of everything a simulation depends on besides the parameter values: the bundle's
@@ -214,80 +336,39 @@ impl State {
         }
         let cal = self.load(r)?;
         let design = cal.design().map_err(err)?;
-        let mut outputs = vec![];
-        for j in &jobs {
-            let Some(Kind::Simulate(s)) = &j.spec.kind else {
-                return Err(format!("job {} is not a simulation", j.id));
-            };
-            // Cached outputs may come from another run's point: name them after this one's.
-            let files: Vec<File> = j
-                .outputs
-                .iter()
-                .map(|f| File {
-                    path: format!("simulations/point_{:03}.json", s.point),
-                    ..f.clone()
-                })
-                .collect();
-            self.place(&cal.out, &files)?;
-            let (o, ran) = cal
-                .simulate_point(s.point as usize, &s.values)
-                .map_err(err)?;
-            if ran.is_some() {
-                return Err(format!(
-                    "design point {}: the worker's outputs did not match its parameter values",
-                    s.point
-                ));
-            }
-            outputs.push(o);
-        }
+        let outputs = self
+            .simulated(&cal, &jobs)?
+            .into_iter()
+            .map(|s| s.outputs)
+            .collect::<Result<Vec<_>>>()?;
         let dataset = cal.training_set(&design, &outputs).map_err(err)?;
         if !r.surrogate.is_empty() {
             self.place(&cal.out, &r.surrogate)?;
             if !cal.has_surrogate() {
                 return Err("the surrogate given at submit is not a valid surrogate folder".into());
             }
-            let jobs = self.chain_jobs(r, &cal.project, &[])?;
+            let jobs = self.chain_jobs(r, &cal.project)?;
             self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
             return Ok(true);
         }
-        let mut inputs = vec![];
-        for p in crate::client::walk(&dataset).map_err(err)? {
-            let bytes = std::fs::read(&p).map_err(err)?;
-            let rel = p.strip_prefix(&cal.out).map_err(err)?;
-            inputs.push(proto::FileRef {
-                path: rel.to_string_lossy().replace('\\', "/"),
-                sha256: self.put_artifact(&bytes)?,
-                size: bytes.len() as u64,
-            });
-        }
-        let job = NewJob {
-            stage: "train",
-            kind: "train",
-            label: "surrogate training".into(),
-            spec: proto::Job {
-                bundle: crate::client::refs(&r.bundle),
-                inputs,
-                kind: Some(Kind::Train(proto::TrainJob {})),
-                ..Default::default()
-            },
-            cache_key: None,
-        };
+        let job = self.train_job(r, &cal, &dataset)?;
         self.store
             .set_stage(&r.id, "train", vec![job])
             .map_err(err)?;
         Ok(true)
     }
 
+    /// The current surrogate: the latest trained one (refinement retrains), else the one
+    /// given at submit.
     fn surrogate_files(&self, r: &RunRow) -> Result<Vec<File>> {
+        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
+        if let Some(j) = jobs.iter().rev().find(|j| j.state == "done") {
+            return Ok(j.outputs.clone());
+        }
         if !r.surrogate.is_empty() {
             return Ok(r.surrogate.clone());
         }
-        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
-        jobs.iter()
-            .rev()
-            .find(|j| j.state == "done")
-            .map(|j| j.outputs.clone())
-            .ok_or_else(|| "no trained surrogate".to_string())
+        Err("no trained surrogate".to_string())
     }
 
     fn stage_train(&self, r: &RunRow) -> Result<bool> {
@@ -300,14 +381,17 @@ impl State {
         if !cal.has_surrogate() {
             return Err("training produced no valid surrogate".into());
         }
-        let jobs = self.chain_jobs(r, &cal.project, &[])?;
+        let jobs = self.chain_jobs(r, &cal.project)?;
         self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
         Ok(true)
     }
 
-    /// Next chain-segment jobs: for each group of chains whose latest segment is done and
-    /// short of the target, the following segment (from that segment's checkpoint).
-    fn chain_jobs(&self, r: &RunRow, project: &Project, done: &[JobRow]) -> Result<Vec<NewJob>> {
+    /// Next chain-segment jobs of the current refinement round: for each group of chains whose
+    /// latest segment is done and short of the round's target, the following segment (from
+    /// that segment's checkpoint; a round's first segment starts where the same chains ended
+    /// in the previous round, `warm.json`).
+    fn chain_jobs(&self, r: &RunRow, project: &Project) -> Result<Vec<NewJob>> {
+        let done = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
         let m = &project.mcmc;
         let n = m.chains;
         let per = if self.config.chains_per_job == 0 {
@@ -315,14 +399,32 @@ impl State {
         } else {
             self.config.chains_per_job.min(n)
         };
+        let round = self.refine_log(r)?.rounds.len() as u32;
+        let target = if round < project.refine.rounds {
+            project.refine.iterations
+        } else {
+            r.chain_target
+        };
         let surrogate = self.surrogate_files(r)?;
+        let group = |first: usize, round: u32| -> Vec<&JobRow> {
+            done.iter()
+                .filter(|j| {
+                    matches!(&j.spec.kind, Some(Kind::Chains(c))
+                        if c.first_chain as usize == first && c.round == round)
+                })
+                .collect()
+        };
+        let states_of = |j: &JobRow| -> Result<File> {
+            j.outputs
+                .iter()
+                .find(|f| f.path == "states.json")
+                .cloned()
+                .ok_or_else(|| format!("{}: no states.json", j.label))
+        };
         let mut jobs = vec![];
         for first in (0..n).step_by(per) {
             let count = per.min(n - first);
-            let mine: Vec<&JobRow> = done
-                .iter()
-                .filter(|j| matches!(&j.spec.kind, Some(Kind::Chains(c)) if c.first_chain as usize == first))
-                .collect();
+            let mine = group(first, round);
             if mine.iter().any(|j| j.state != "done") {
                 continue;
             }
@@ -333,31 +435,45 @@ impl State {
                     _ => 0,
                 })
                 .sum();
-            if reached >= r.chain_target {
+            if reached >= target {
                 continue;
             }
             let mut inputs = crate::client::refs(&surrogate);
             if let Some(last) = mine.last() {
-                let states = last
-                    .outputs
-                    .iter()
-                    .find(|f| f.path == "states.json")
-                    .ok_or_else(|| format!("{}: no states.json", last.label))?;
-                inputs.push(states.into());
+                inputs.push((&states_of(last)?).into());
+            } else if round > 0 {
+                let before = group(first, round - 1);
+                let last = before
+                    .last()
+                    .ok_or_else(|| format!("chains {first}: no chains of round {}", round - 1))?;
+                let mut warm: proto::FileRef = (&states_of(last)?).into();
+                warm.path = "warm.json".into();
+                inputs.push(warm);
             }
             let seg = mine.len() as u32;
+            let label = if round < project.refine.rounds {
+                format!(
+                    "chains {}-{} segment {seg} (refinement round {})",
+                    first,
+                    first + count - 1,
+                    round + 1
+                )
+            } else {
+                format!("chains {}-{} segment {seg}", first, first + count - 1)
+            };
             jobs.push(NewJob {
                 stage: "chains",
                 kind: "chains",
-                label: format!("chains {}-{} segment {seg}", first, first + count - 1),
+                label,
                 spec: proto::Job {
                     bundle: crate::client::refs(&r.bundle),
                     inputs,
                     kind: Some(Kind::Chains(proto::ChainSegmentJob {
                         first_chain: first as u32,
                         chains: count as u32,
-                        iterations: m.segment.min(r.chain_target - reached),
+                        iterations: m.segment.min(target - reached),
                         segment: seg,
+                        round,
                     })),
                     ..Default::default()
                 },
@@ -370,7 +486,7 @@ impl State {
     fn stage_chains(&self, r: &RunRow) -> Result<bool> {
         let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
         let project = self.project(r)?;
-        let target_jobs = self.chain_jobs(r, &project, &jobs)?;
+        let target_jobs = self.chain_jobs(r, &project)?;
         if !target_jobs.is_empty() {
             self.store.add_jobs(&r.id, target_jobs).map_err(err)?;
             return Ok(false);
@@ -395,11 +511,16 @@ impl State {
         let cal = self.load(r)?;
         self.place(&cal.out, &self.surrogate_files(r)?)?;
         let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let log = self.refine_log(r)?;
+        let round = log.rounds.len() as u32;
         let mut groups: Vec<(u32, Vec<&JobRow>)> = vec![];
         for j in &jobs {
             let Some(Kind::Chains(c)) = &j.spec.kind else {
                 continue;
             };
+            if c.round != round {
+                continue;
+            }
             match groups.iter_mut().find(|g| g.0 == c.first_chain) {
                 Some(g) => g.1.push(j),
                 None => groups.push((c.first_chain, vec![j])),
@@ -434,6 +555,22 @@ impl State {
             draws.extend(acc);
         }
         let mut sampler = cal.sampler().map_err(err)?;
+        if round < cal.project.refine.rounds {
+            // Refinement round `round + 1`: simulate posterior draws of these chains.
+            let post = sampler.posterior();
+            let design = cal.design().map_err(err)?;
+            let first = design.points.len() + log.points().count();
+            let hash = self.simulation_inputs_hash(r, &cal)?;
+            let jobs = pick_draws(&draws, cal.project.refine.points)
+                .iter()
+                .enumerate()
+                .map(|(j, u)| {
+                    self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), round + 1)
+                })
+                .collect();
+            self.store.set_stage(&r.id, "refine", jobs).map_err(err)?;
+            return Ok(true);
+        }
         let chains = sampler.summarize(&draws).map_err(err)?;
         if let Some(target) = self.config.rhat_target {
             if chains.posterior.max_rhat > target && r.extensions < self.config.max_extensions {
@@ -463,33 +600,92 @@ impl State {
             surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
             sigma_eta: sampler.sigma_eta.clone(),
             held_out: sampler.held_out.clone(),
+            fallbacks: chains.fallbacks.clone(),
         };
         self.store
             .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)
             .map_err(err)?;
-        let mut v = vec![(0u32, "calibrated", chains.estimate)];
+        let mut jobs = vec![validation_job(r, 0, "calibrated", chains.estimate)];
         if cal.project.validation.initial {
-            v.push((1, "initial", cal.initial_point()));
+            jobs.push(validation_job(r, 1, "initial", cal.initial_point()));
         }
-        let jobs = v
-            .into_iter()
-            .map(|(i, label, x)| NewJob {
-                stage: "validate",
-                kind: "validate",
-                label: format!("validation ({label})"),
-                spec: proto::Job {
-                    bundle: crate::client::refs(&r.bundle),
-                    kind: Some(Kind::Validate(proto::ValidateJob {
-                        index: i,
-                        label: label.into(),
-                        values: x,
-                    })),
-                    ..Default::default()
-                },
-                cache_key: None,
-            })
-            .collect();
         self.store.set_stage(&r.id, "validate", jobs).map_err(err)?;
+        Ok(true)
+    }
+
+    /// End of a refinement round: once its posterior draws are simulated, records the round
+    /// (with the current surrogate's error at the draws), builds the grown training set and
+    /// queues the retraining, in one transaction.
+    fn stage_refine(&self, r: &RunRow) -> Result<bool> {
+        let mut log = self.refine_log(r)?;
+        let round = log.rounds.len() as u32 + 1;
+        let in_round = |j: &JobRow| {
+            matches!(&j.spec.kind, Some(Kind::Simulate(s)) if s.refine_round == round)
+        };
+        let jobs: Vec<JobRow> = self
+            .store
+            .jobs(&r.id, Some("refine"))
+            .map_err(err)?
+            .into_iter()
+            .filter(in_round)
+            .collect();
+        if jobs.iter().any(|j| j.state != "done") {
+            return Ok(false);
+        }
+        let cal = self.load(r)?;
+        self.place(&cal.out, &self.surrogate_files(r)?)?;
+        let mut points = vec![];
+        let mut failed = vec![];
+        let mut outputs = vec![];
+        for s in self.simulated(&cal, &jobs)? {
+            match s.outputs {
+                Ok(o) => {
+                    points.push(RefinePoint {
+                        index: s.index,
+                        values: s.values,
+                    });
+                    outputs.push(o);
+                }
+                Err(error) => failed.push(FailedPoint {
+                    values: s.values,
+                    error,
+                }),
+            }
+        }
+        let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
+        let predicted = cal.sampler().map_err(err)?.predict(&xs).map_err(err)?;
+        let surrogate_error = pooled_error(&cal.inputs.outputs, &outputs, &predicted).map_err(err)?;
+        log.rounds.push(RefineRound {
+            round,
+            points,
+            failed,
+            surrogate_error,
+        });
+        // The grown training set: design points, then every round's draws.
+        let design = cal.design().map_err(err)?;
+        let mut sims = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
+        sims.extend(self.store.jobs(&r.id, Some("refine")).map_err(err)?);
+        let by_index: std::collections::HashMap<usize, HourlyOutputs> = self
+            .simulated(&cal, &sims)?
+            .into_iter()
+            .filter_map(|s| s.outputs.ok().map(|o| (s.index, o)))
+            .collect();
+        let full = cal.full_design(&design, &log);
+        let indices = (0..design.points.len()).chain(log.points().map(|p| p.index));
+        let outputs = indices
+            .map(|i| {
+                by_index
+                    .get(&i)
+                    .cloned()
+                    .ok_or_else(|| format!("point {i}: no simulation"))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let dataset = cal.training_set(&full, &outputs).map_err(err)?;
+        let job = self.train_job(r, &cal, &dataset)?;
+        let json = serde_json::to_string(&log).map_err(err)?;
+        self.store
+            .set_stage_refined(&r.id, "train", vec![job], Some(&json))
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -498,10 +694,36 @@ impl State {
         if jobs.iter().any(|j| j.state != "done") {
             return Ok(false);
         }
+        // EnergyPlus failed at the estimate (and at the fallbacks so far): the next-best draw.
+        let tried: Vec<&JobRow> = jobs.iter().filter(|j| is_calibrated(j)).collect();
+        let failures: Vec<String> = tried.iter().filter_map(|j| reported_failure(j)).collect();
+        if failures.len() == tried.len() {
+            let merged = self.merged(r)?;
+            let Some(x) = merged.fallbacks.get(failures.len() - 1) else {
+                return Err(format!(
+                    "validation: EnergyPlus failed at the estimate and at the next {} draws: {}",
+                    failures.len() - 1,
+                    failures.join(" | ")
+                ));
+            };
+            let job = validation_job(r, failures.len() as u32 + 1, "calibrated", x.clone());
+            self.store.add_jobs(&r.id, vec![job]).map_err(err)?;
+            return Ok(false);
+        }
         self.store
             .set_stage(&r.id, "summary", vec![])
             .map_err(err)?;
         Ok(true)
+    }
+
+    /// The merged chains recorded at the merge.
+    fn merged(&self, r: &RunRow) -> Result<Merged> {
+        serde_json::from_str(
+            r.merge
+                .as_deref()
+                .ok_or_else(|| "merged chains are missing".to_string())?,
+        )
+        .map_err(err)
     }
 
     fn stage_summary(&self, r: &RunRow) -> Result<bool> {
@@ -509,22 +731,34 @@ impl State {
         let jobs = self.store.jobs(&r.id, Some("validate")).map_err(err)?;
         let mut validation = vec![];
         let mut initial = vec![];
+        let mut merged = self.merged(r)?;
+        let mut estimate_note = None;
+        let failures: Vec<String> = jobs.iter().filter_map(reported_failure).collect();
         for j in &jobs {
+            if reported_failure(j).is_some() {
+                continue;
+            }
             self.place(&cal.out, &j.outputs)?;
             let m: Vec<OutputMetrics> =
                 serde_json::from_str(j.result.as_deref().unwrap_or("[]")).map_err(err)?;
             match &j.spec.kind {
                 Some(Kind::Validate(v)) if v.label == "initial" => initial = m,
-                _ => validation = m,
+                Some(Kind::Validate(v)) => {
+                    if !failures.is_empty() {
+                        merged.estimate = v.values.clone();
+                        estimate_note = Some(fallback_note(&failures));
+                    }
+                    validation = m
+                }
+                _ => {}
             }
         }
-        let merged: Merged = serde_json::from_str(
-            r.merge
-                .as_deref()
-                .ok_or_else(|| "merged chains are missing".to_string())?,
-        )
-        .map_err(err)?;
         let design = cal.design().map_err(err)?;
+        let log = self.refine_log(r)?;
+        if !log.rounds.is_empty() {
+            let json = serde_json::to_vec_pretty(&log).map_err(err)?;
+            bemcal_calibrate::write_atomic(&cal.out.join(REFINE_FILE), &json).map_err(err)?;
+        }
         let secs = self.store.stage_seconds(&r.id).map_err(err)?;
         let s = |name: &str| {
             secs.iter()
@@ -539,6 +773,7 @@ impl State {
             chains_s: s("chains"),
             summary_s: s("merge"),
             validation_s: s("validate"),
+            refinement_s: s("refine"),
             total_s: (crate::now_ms().saturating_sub(r.created_ms)) as f64 / 1000.0,
         };
         let chains = ChainSummary {
@@ -547,6 +782,8 @@ impl State {
             residual_ar1: merged.residual_ar1,
             estimate: merged.estimate,
             surrogate_at_estimate: merged.surrogate_at_estimate,
+            fallbacks: merged.fallbacks,
+            estimate_note,
         };
         let summary = write_summary(
             &cal,
@@ -580,6 +817,32 @@ impl State {
         self.store.finish_run(&r.id, &files, &json).map_err(err)?;
         Ok(false)
     }
+}
+
+/// A validation job; the calibrated model's tolerates an EnergyPlus failure (the driver then
+/// validates the next-best draw).
+fn validation_job(r: &RunRow, index: u32, label: &str, values: Vec<f64>) -> NewJob {
+    NewJob {
+        stage: "validate",
+        kind: "validate",
+        label: format!("validation ({label})"),
+        spec: proto::Job {
+            bundle: crate::client::refs(&r.bundle),
+            kind: Some(Kind::Validate(proto::ValidateJob {
+                index,
+                label: label.into(),
+                values,
+                tolerate_failure: label == "calibrated",
+            })),
+            ..Default::default()
+        },
+        cache_key: None,
+    }
+}
+
+/// A validation job of the calibrated model (the estimate or a fallback draw).
+fn is_calibrated(j: &JobRow) -> bool {
+    matches!(&j.spec.kind, Some(Kind::Validate(v)) if v.label == "calibrated")
 }
 
 /// Runs advanced at the same time (each run by one task at a time).

@@ -96,10 +96,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             pair(sur)
         );
     }
+    for r in &s.refinement {
+        println!(
+            "\nrefinement round {}: {} posterior draws added, {} failed in EnergyPlus; surrogate vs EnergyPlus at them (NMBE / CV-RMSE): {}",
+            r.round,
+            r.points.len(),
+            r.failed.len(),
+            r.surrogate_error
+                .iter()
+                .map(|m| format!("{} {}", m.output, pair(Some(m))))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let t = &s.timings;
     println!(
-        "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, summary {:.0} s, validation {:.0} s, total {:.0} s",
-        t.design_s, t.simulations_s, t.training_s, t.chains_s, t.summary_s, t.validation_s, t.total_s
+        "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, refinement {:.0} s, summary {:.0} s, validation {:.0} s, total {:.0} s",
+        t.design_s, t.simulations_s, t.training_s, t.chains_s, t.refinement_s, t.summary_s, t.validation_s, t.total_s
     );
     println!(
         "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/",

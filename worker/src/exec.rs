@@ -23,7 +23,13 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
     match &job.kind {
         Some(Kind::Simulate(s)) => {
             let i = s.point as usize;
-            let (_, secs) = cal.simulate_point(i, &s.values).map_err(err)?;
+            let secs = match cal.simulate_point(i, &s.values) {
+                Ok((_, secs)) => secs,
+                Err(e) if s.refine_round > 0 => {
+                    return Ok((vec![], serde_json::json!({ "error": e.to_string() }).to_string()))
+                }
+                Err(e) => return Err(e.to_string()),
+            };
             let rel = format!("simulations/point_{i:03}.json");
             Ok((
                 vec![(rel.clone(), work.join(&rel))],
@@ -47,12 +53,26 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 let bytes = std::fs::read(&states_path).map_err(err)?;
                 serde_json::from_slice(&bytes).map_err(|e| format!("states.json: {e}"))?
             } else {
-                let starts = sampler.starts();
                 let (a, n) = (c.first_chain as usize, c.chains as usize);
-                let mine = starts
-                    .get(a..a + n)
-                    .ok_or_else(|| format!("chains {a}..{} of {}", a + n, starts.len()))?;
-                sampler.new_chains(mine, a as u64).map_err(err)?
+                // A refinement round's chains start where the previous round's ended
+                // (`warm.json`: those chains' states); round 0 at dispersed prior draws.
+                let warm_path = work.join("warm.json");
+                let mine: Vec<Vec<f64>> = if warm_path.is_file() {
+                    let bytes = std::fs::read(&warm_path).map_err(err)?;
+                    let warm: Vec<ChainState> = serde_json::from_slice(&bytes)
+                        .map_err(|e| format!("warm.json: {e}"))?;
+                    warm.iter().map(|s| s.position().to_vec()).collect()
+                } else {
+                    let starts = sampler.starts();
+                    starts
+                        .get(a..a + n)
+                        .ok_or_else(|| format!("chains {a}..{} of {}", a + n, starts.len()))?
+                        .to_vec()
+                };
+                if mine.len() != n {
+                    return Err(format!("{} starting points for {n} chains", mine.len()));
+                }
+                sampler.new_chains(&mine, a as u64, c.round).map_err(err)?
             };
             let draws = sampler.advance(&mut states, c.iterations).map_err(err)?;
             let out_states = work.join("out/states.json");
@@ -80,7 +100,13 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 return Err(format!("bad validation label {:?}", v.label));
             }
             let i = v.index as usize;
-            let m = cal.validate(i, &v.label, &v.values).map_err(err)?;
+            let m = match cal.validate(i, &v.label, &v.values) {
+                Ok(m) => m,
+                Err(e) if v.tolerate_failure => {
+                    return Ok((vec![], serde_json::json!({ "error": e.to_string() }).to_string()))
+                }
+                Err(e) => return Err(e.to_string()),
+            };
             let a = format!("validation/point_{i:03}.json");
             let b = format!("validation/{}.csv", v.label);
             Ok((

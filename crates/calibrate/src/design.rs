@@ -208,27 +208,10 @@ pub fn simulate_design(
     parallel: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SimulatedDesign, Error> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(parallel)
-        .build()
-        .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
-    let done = AtomicUsize::new(0);
-    let n = design.points.len();
-    let results: Vec<Result<(HourlyOutputs, Option<f64>), Error>> = pool.install(|| {
-        design
-            .points
-            .par_iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let r = simulate_point(runner, model, &plan.values(x), weather, dir, i);
-                progress(done.fetch_add(1, Ordering::SeqCst) + 1, n);
-                r
-            })
-            .collect()
-    });
+    let indexed: Vec<(usize, Vec<f64>)> = design.points.iter().cloned().enumerate().collect();
+    let results = simulate_points(runner, model, plan, &indexed, weather, dir, parallel, progress)?;
     let mut out = SimulatedDesign {
-        outputs: Vec::with_capacity(n),
+        outputs: Vec::with_capacity(indexed.len()),
         reused: 0,
         seconds: vec![],
     };
@@ -244,6 +227,38 @@ pub fn simulate_design(
         out.outputs.push(o);
     }
     Ok(out)
+}
+
+/// Simulates (or reloads) the points `(i, x)`, under the keys `i` in `dir`, with `parallel`
+/// EnergyPlus processes; one result per point, in order (a failed run does not stop the others).
+#[allow(clippy::too_many_arguments)]
+pub fn simulate_points(
+    runner: &Runner,
+    model: &Model,
+    plan: &Plan,
+    points: &[(usize, Vec<f64>)],
+    weather: &Path,
+    dir: &Path,
+    parallel: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Vec<Result<(HourlyOutputs, Option<f64>), Error>>, Error> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(parallel)
+        .build()
+        .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
+    let done = AtomicUsize::new(0);
+    let n = points.len();
+    Ok(pool.install(|| {
+        points
+            .par_iter()
+            .map(|(i, x)| {
+                let r = simulate_point(runner, model, &plan.values(x), weather, dir, *i);
+                progress(done.fetch_add(1, Ordering::SeqCst) + 1, n);
+                r
+            })
+            .collect()
+    }))
 }
 
 /// Runs (or reloads) one parameter set in `dir`, under the key `i`.

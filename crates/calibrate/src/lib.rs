@@ -9,6 +9,7 @@ pub mod design;
 pub mod pipeline;
 pub mod posterior;
 pub mod project;
+pub mod refine;
 pub mod synth;
 
 use std::path::{Path, PathBuf};

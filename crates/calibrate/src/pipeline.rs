@@ -205,6 +205,10 @@ pub struct Timings {
     pub chains_s: f64,
     pub summary_s: f64,
     pub validation_s: f64,
+    /// Refinement rounds: simulating posterior draws (their retraining is in `training_s`,
+    /// their preliminary chains in `chains_s`).
+    #[serde(default)]
+    pub refinement_s: f64,
     pub total_s: f64,
 }
 
@@ -230,6 +234,9 @@ pub struct Summary {
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
     pub estimate: Estimate,
+    /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate_note: Option<String>,
     pub calibrated_values: Vec<(String, f64)>,
     pub validation: Vec<OutputMetrics>,
     pub initial: Vec<OutputMetrics>,
@@ -243,6 +250,9 @@ pub struct Summary {
     pub design_points: usize,
     pub design_repair: bemcal_stats::lhs::RepairReport,
     pub surrogate_held_out: serde_json::Value,
+    /// Surrogate refinement rounds (empty without `[refine]`).
+    #[serde(default)]
+    pub refinement: Vec<crate::refine::RefineRound>,
     pub timings: Timings,
 }
 
@@ -493,24 +503,46 @@ impl Sampler<'_> {
         }
     }
 
-    /// MH settings of the project.
+    /// MH settings of the project (the final chains').
     pub fn config(&self) -> MhConfig {
+        self.config_for(self.cal.project.refine.rounds)
+    }
+
+    /// MH settings of the chains on the surrogate of refinement round `round` (0 = the
+    /// hypercube's): the last round's are the project's `[mcmc]`; earlier (preliminary) rounds
+    /// use `[refine]`'s shorter burn-in.
+    pub fn config_for(&self, round: u32) -> MhConfig {
         let m = &self.cal.project.mcmc;
+        let burn_in = if round < self.cal.project.refine.rounds {
+            self.cal.project.refine.burn_in
+        } else {
+            m.burn_in
+        };
         MhConfig {
-            burn_in: m.burn_in,
+            burn_in,
             adapt_start: match m.start {
                 // Keep the Laplace covariance of the optimum: in 40 dimensions a burn-in's AM
                 // estimate is far worse (proposal sds 0.07-0.6 of the truth's vs 0.37 = the
                 // optimal 2.38 / sqrt(d) with the Laplace one; crates/stats tests/mcmc_peaked.rs).
-                ChainStart::Optimised => m.burn_in,
+                ChainStart::Optimised => burn_in,
                 // Adapt the covariance from the second half of burn-in only: the first half is
                 // the transient from dispersed starts (measured on peaked 10-D/40-D targets).
-                ChainStart::Prior => (m.burn_in / 2).max(100).min(m.burn_in),
+                ChainStart::Prior => (burn_in / 2).max(100).min(burn_in),
             },
             initial_sd: m.initial_sd,
             independence: m.independence,
             ..MhConfig::default()
         }
+    }
+
+    /// MCMC settings of round `round`: a round's chains get their own random streams (the
+    /// last round of a project without refinement keeps the project's seed).
+    pub fn settings_for(&self, round: u32) -> McmcSettings {
+        let mut m = self.cal.project.mcmc.clone();
+        if round > 0 {
+            m.seed = m.seed.wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
+        }
+        m
     }
 
     /// Dispersed, feasible starting points (unit space), one per chain.
@@ -550,16 +582,36 @@ impl Sampler<'_> {
         (post, &mut self.evaluator)
     }
 
-    /// New chain states at `starts`; chain `c` gets random stream `first_chain + c`.
+    /// New chain states at `starts` for the chains of round `round` (see [`Self::config_for`]);
+    /// chain `c` gets random stream `first_chain + c`.
     pub fn new_chains(
         &mut self,
         starts: &[Vec<f64>],
         first_chain: u64,
+        round: u32,
     ) -> Result<Vec<ChainState>, Error> {
-        let config = self.config();
-        let m = self.cal.project.mcmc.clone();
+        let config = self.config_for(round);
+        let m = self.settings_for(round);
         let (post, eval) = self.split();
         chains_at(&post, eval, starts, config, &m, first_chain)
+    }
+
+    /// The surrogate's hourly outputs at `points` (physical calibrated values):
+    /// `[point][output][hour]`.
+    pub fn predict(&mut self, points: &[Vec<f64>]) -> Result<Vec<Vec<Vec<f64>>>, Error> {
+        let (n_h, n_out) = (self.cal.inputs.features.len(), self.cal.inputs.outputs.len());
+        let mut out = vec![];
+        for chunk in points.chunks(8) {
+            let y = self.evaluator.evaluate_batch(chunk)?;
+            for b in 0..chunk.len() {
+                out.push(
+                    (0..n_out)
+                        .map(|k| (0..n_h).map(|h| f64::from(y[[b, h, k]])).collect())
+                        .collect(),
+                );
+            }
+        }
+        Ok(out)
     }
 
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
@@ -684,12 +736,20 @@ impl Sampler<'_> {
                 metrics: g14(&inp.measured[k], &pred)?,
             });
         }
+        let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
+            .iter()
+            .map(|u| post.theta(u))
+            .filter(|x| x != &estimate)
+            .take(FALLBACKS)
+            .collect();
         Ok(ChainSummary {
             posterior,
             sigma_delta_kwh,
             residual_ar1,
             estimate,
             surrogate_at_estimate,
+            fallbacks,
+            estimate_note: None,
         })
     }
 }
@@ -741,6 +801,21 @@ pub struct ChainSummary {
     pub estimate: Vec<f64>,
     /// Guideline 14 of the surrogate at the estimate against the meters.
     pub surrogate_at_estimate: Vec<OutputMetrics>,
+    /// Where EnergyPlus cannot simulate the estimate, the draws validated instead, best first:
+    /// the next distinct draws by log posterior (physical units).
+    pub fallbacks: Vec<Vec<f64>>,
+    /// Set when a fallback draw replaced the estimate (why).
+    pub estimate_note: Option<String>,
+}
+
+/// What summary.json says when the estimate was replaced by the next-best draw.
+pub fn fallback_note(failures: &[String]) -> String {
+    format!(
+        "EnergyPlus could not simulate the estimate; calibrated_values and validation are those \
+         of the next-best posterior draw that it could simulate (by log posterior; {} failed: {})",
+        failures.len(),
+        failures.join(" | ")
+    )
 }
 
 /// Assembles `summary.json` from the stages' results and writes it.
@@ -785,6 +860,7 @@ pub fn write_summary(
             .collect(),
         acceptance_rate: acceptance,
         estimate: cal.project.validation.estimate,
+        estimate_note: chains.estimate_note.clone(),
         calibrated_values: inp
             .plan
             .calibrated
@@ -798,6 +874,7 @@ pub fn write_summary(
         design_points: design.points.len(),
         design_repair: design.repair,
         surrogate_held_out: sampler_info.1.clone(),
+        refinement: cal.refine_log()?.rounds,
         timings,
     };
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
@@ -853,42 +930,151 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         sims.reused
     ));
 
-    let t = Instant::now();
-    cal.training_set(&design, &sims.outputs)?;
-    if cal.has_surrogate() {
-        log("surrogate: reusing the one trained earlier");
-    } else {
-        log("training the surrogate (PyTorch)...");
-        cal.train()?;
+    // Refinement points of rounds finished earlier (a rerun): their saved simulations.
+    let mut refined = cal.refine_log()?;
+    let mut outputs = sims.outputs;
+    for p in refined.points() {
+        outputs.push(cal.simulate_point(p.index, &p.values)?.0);
     }
-    let mut sampler = cal.sampler()?;
-    timings.training_s = t.elapsed().as_secs_f64();
-    log(&format!(
-        "surrogate: held-out RMSE (sigma_eta) {}",
-        inp.outputs
-            .iter()
-            .zip(&sampler.sigma_eta)
-            .map(|(n, s)| format!("{n} {s:.2} kWh"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    ));
+    let rounds = project.refine.rounds;
+    let (mut sampler, ck) = loop {
+        let round = refined.rounds.len() as u32;
+        let full = cal.full_design(&design, &refined);
+        let t = Instant::now();
+        cal.training_set(&full, &outputs)?;
+        if cal.has_surrogate() {
+            log("surrogate: reusing the one trained earlier");
+        } else {
+            log(&format!(
+                    "training the surrogate (PyTorch) on {} points...",
+                    full.points.len()
+                ),
+            );
+            cal.train()?;
+        }
+        let mut sampler = cal.sampler()?;
+        timings.training_s += t.elapsed().as_secs_f64();
+        log(&format!(
+            "surrogate: held-out RMSE (sigma_eta) {}",
+            inp.outputs
+                .iter()
+                .zip(&sampler.sigma_eta)
+                .map(|(n, s)| format!("{n} {s:.2} kWh"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
 
-    let t = Instant::now();
-    let starts = sampler.starts();
-    let config = sampler.config();
-    let ck = {
-        let (post, eval) = sampler.split();
-        run_chains(
-            &post,
-            eval,
-            |post, eval| chains_at(post, eval, &starts, config, &project.mcmc, 0),
-            project.mcmc.iterations,
-            project.mcmc.segment,
-            &out.join("chains.json"),
-            &|done, n| log(&format!("chains: {done}/{n} iterations")),
-        )?
+        let t = Instant::now();
+        // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
+        let starts = match round {
+            0 => sampler.starts(),
+            r => crate::refine::last_positions(&cal.chains_path(r - 1))?,
+        };
+        let config = sampler.config_for(round);
+        let settings = sampler.settings_for(round);
+        let last = round >= rounds;
+        let iterations = if last {
+            project.mcmc.iterations
+        } else {
+            project.refine.iterations
+        };
+        let path = cal.chains_path(round);
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        let label = if last {
+            "chains".to_string()
+        } else {
+            format!("refinement round {} chains", round + 1)
+        };
+        let ck = {
+            let (post, eval) = sampler.split();
+            run_chains(
+                &post,
+                eval,
+                |post, eval| chains_at(post, eval, &starts, config, &settings, 0),
+                iterations,
+                project.mcmc.segment,
+                &path,
+                &|done, n| log(&format!("{label}: {done}/{n} iterations")),
+            )?
+        };
+        timings.chains_s += t.elapsed().as_secs_f64();
+        if last {
+            break (sampler, ck);
+        }
+
+        // Refinement round `round + 1`: simulate posterior draws, record, retrain.
+        let t = Instant::now();
+        let post = sampler.posterior();
+        let picks: Vec<Vec<f64>> = crate::refine::pick_draws(&ck.draws, project.refine.points)
+            .iter()
+            .map(|u| post.theta(u))
+            .collect();
+        let first = full.points.len();
+        let indexed: Vec<(usize, Vec<f64>)> = picks
+            .iter()
+            .enumerate()
+            .map(|(j, x)| (first + j, x.clone()))
+            .collect();
+        let results = crate::design::simulate_points(
+            &inp.runner,
+            &inp.model,
+            &inp.plan,
+            &indexed,
+            &inp.weather_path,
+            &cal.simulations_dir(),
+            project.design.parallel,
+            &|done, n| log(&format!("refinement round {}: {done}/{n} simulations", round + 1)),
+        )?;
+        let mut points = vec![];
+        let mut failed = vec![];
+        let mut new_outputs = vec![];
+        for ((i, x), r) in indexed.into_iter().zip(results) {
+            match r {
+                Ok((o, _)) => {
+                    points.push(crate::refine::RefinePoint { index: i, values: x });
+                    new_outputs.push(o);
+                }
+                Err(e) => {
+                    log(&format!("refinement: posterior draw left out, EnergyPlus failed: {e}"));
+                    failed.push(crate::refine::FailedPoint {
+                        values: x,
+                        error: e.to_string(),
+                    });
+                }
+            }
+        }
+        let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
+        let predicted = sampler.predict(&xs)?;
+        let surrogate_error = crate::refine::pooled_error(&inp.outputs, &new_outputs, &predicted)?;
+        log(&format!(
+            "refinement round {}: {} posterior draws simulated ({} failed); surrogate vs EnergyPlus there: {}",
+            round + 1,
+            points.len(),
+            failed.len(),
+            surrogate_error
+                .iter()
+                .map(|m| format!(
+                    "{} NMBE {:.1} % CV-RMSE {:.1} %",
+                    m.output, m.metrics.nmbe, m.metrics.cv_rmse
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        drop(sampler);
+        timings.refinement_s += t.elapsed().as_secs_f64();
+        outputs.extend(new_outputs);
+        cal.record_round(
+            &mut refined,
+            crate::refine::RefineRound {
+                round: round + 1,
+                points,
+                failed,
+                surrogate_error,
+            },
+        )?;
     };
-    timings.chains_s = t.elapsed().as_secs_f64();
     let acceptance: Vec<f64> = ck
         .states
         .iter()
@@ -908,7 +1094,38 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 
     let t = Instant::now();
     log("validation: EnergyPlus at the calibrated parameters");
-    let validation = cal.validate(0, "calibrated", &chains.estimate)?;
+    let mut chains = chains;
+    let mut failures: Vec<String> = vec![];
+    let candidates: Vec<Vec<f64>> = std::iter::once(chains.estimate.clone())
+        .chain(chains.fallbacks.iter().cloned())
+        .collect();
+    let mut validation = None;
+    for (k, x) in candidates.iter().enumerate() {
+        // Keys: 0 the estimate, 1 the initial model, 2.. the fallback draws.
+        let i = if k == 0 { 0 } else { k + 1 };
+        match cal.validate(i, "calibrated", x) {
+            Ok(m) => {
+                if k > 0 {
+                    chains.estimate_note = Some(fallback_note(&failures));
+                    chains.estimate = x.clone();
+                }
+                validation = Some(m);
+                break;
+            }
+            Err(e) => {
+                log(&format!("validation: EnergyPlus failed at candidate {k}: {e}"));
+                failures.push(e.to_string());
+            }
+        }
+    }
+    let validation = validation.ok_or_else(|| Error::Stage {
+        stage: "validation",
+        message: format!(
+            "EnergyPlus failed at the estimate and at the next {} draws: {}",
+            candidates.len() - 1,
+            failures.join(" | ")
+        ),
+    })?;
     let initial = if project.validation.initial {
         log("validation: EnergyPlus at the initial parameters (prior modes)");
         cal.validate(1, "initial", &cal.initial_point())?
@@ -928,6 +1145,28 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         initial,
         timings,
     )
+}
+
+/// Draws tried, in order, when EnergyPlus fails at the estimate.
+pub const FALLBACKS: usize = 3;
+
+/// Up to `k` distinct draws (unit space) in decreasing log posterior.
+fn best_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let mut all: Vec<(f64, &[f64])> = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| (d.log_density[i], d.point(i))))
+        .collect();
+    all.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut out: Vec<Vec<f64>> = vec![];
+    for (_, p) in all {
+        if out.len() >= k {
+            break;
+        }
+        if !out.iter().any(|q| q.as_slice() == p) {
+            out.push(p.to_vec());
+        }
+    }
+    out
 }
 
 fn mean_sd(s: &[f64]) -> (f64, f64) {

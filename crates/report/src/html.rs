@@ -588,6 +588,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         ("EnergyPlus design simulations", t.simulations_s),
         ("surrogate training", t.training_s),
         ("MCMC chains", t.chains_s),
+        ("refinement simulations", t.refinement_s),
         ("posterior summary", t.summary_s),
         ("validation simulations", t.validation_s),
     ] {
@@ -608,6 +609,39 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         "<tr><th class=\"l\">total</th><th>{}</th><th></th></tr></table>",
         duration(t.total_s)
     );
+    if !s.refinement.is_empty() {
+        h.push_str("<h3>Surrogate refinement</h3><p class=\"sub\">Each round simulates posterior \
+draws in EnergyPlus, adds them to the training set and retrains; shown is the round's surrogate \
+(before retraining) against EnergyPlus at those draws, their hours pooled.</p>\
+<table><tr><th>round</th><th>draws added</th><th>failed</th>");
+        for o in &s.outputs {
+            let _ = write!(h, "<th>{} NMBE / CV-RMSE %</th>", esc(o));
+        }
+        h.push_str("</tr>");
+        for r in &s.refinement {
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td>{}</td><td>{}</td>",
+                r.round,
+                r.points.len(),
+                r.failed.len()
+            );
+            for o in &s.outputs {
+                let m = r.surrogate_error.iter().find(|m| &m.output == o);
+                let _ = write!(
+                    h,
+                    "<td>{}</td>",
+                    m.map_or("-".to_string(), |m| format!(
+                        "{} / {}",
+                        f(m.nmbe, 1),
+                        f(m.cv_rmse, 1)
+                    ))
+                );
+            }
+            h.push_str("</tr>");
+        }
+        h.push_str("</table>");
+    }
     h.push_str("<h3>Acceptance rate per chain</h3><table><tr>");
     for k in 0..s.acceptance_rate.len() {
         let _ = write!(h, "<th>chain {k}</th>");

@@ -125,6 +125,8 @@ pub struct Timings {
     pub summary_s: f64,
     /// Validation simulations.
     pub validation_s: f64,
+    /// Simulating refinement rounds' posterior draws.
+    pub refinement_s: f64,
     /// Whole run.
     pub total_s: f64,
 }
@@ -174,9 +176,28 @@ pub struct Summary {
     /// Surrogate held-out metrics (free form).
     #[serde(default)]
     pub surrogate_held_out: serde_json::Value,
+    /// Surrogate refinement rounds.
+    #[serde(default)]
+    pub refinement: Vec<RefineRound>,
     /// Stage timings.
     #[serde(default)]
     pub timings: Timings,
+}
+
+/// A surrogate refinement round (`summary.json` `refinement`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct RefineRound {
+    /// 1-based.
+    pub round: u32,
+    /// Posterior draws added to the training set (free form: index, values).
+    #[serde(default)]
+    pub points: Vec<serde_json::Value>,
+    /// Posterior draws EnergyPlus failed on.
+    #[serde(default)]
+    pub failed: Vec<serde_json::Value>,
+    /// The round's surrogate against EnergyPlus at the added draws.
+    #[serde(default)]
+    pub surrogate_error: Vec<OutputMetrics>,
 }
 
 /// `draws.csv`: `chain,draw,<columns>...`, grouped by chain.

@@ -1,0 +1,238 @@
+//! Surrogate refinement near the posterior (sequential design; `[refine]` in the project).
+//!
+//! A Latin hypercube over the priors makes the surrogate accurate on average over the prior,
+//! not where the posterior is. A refinement round takes posterior draws of the current chains,
+//! simulates them in EnergyPlus, adds them to the training set (as design points after the
+//! hypercube's) and retrains; the next round's chains start where the previous ones ended.
+//! This is the "sequential design" of computer-model calibration (e.g. Kennedy & O'Hagan's
+//! successors; here with the reference's LSTM surrogate and likelihood unchanged).
+//!
+//! Files in the output folder: `refine.json` (the [`RefineLog`]: one entry per finished round,
+//! written last, so a round is either recorded whole or redone) and `refine/round_R/` with the
+//! round's preliminary `chains.json` and the `surrogate/` its chains used.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_energyplus::HourlyOutputs;
+use bemcal_stats::lhs::Design;
+use bemcal_stats::mcmc::Draws;
+use serde::{Deserialize, Serialize};
+
+use crate::pipeline::{Calibration, OutputMetrics};
+use crate::{write_atomic, Error};
+
+/// File of the refinement log in the output folder.
+pub const REFINE_FILE: &str = "refine.json";
+
+/// Every finished refinement round, in order.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RefineLog {
+    pub rounds: Vec<RefineRound>,
+}
+
+/// One finished round.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RefineRound {
+    /// 1-based.
+    pub round: u32,
+    /// Posterior draws simulated and added to the training set.
+    pub points: Vec<RefinePoint>,
+    /// Posterior draws whose EnergyPlus run failed (left out, with EnergyPlus's message).
+    pub failed: Vec<FailedPoint>,
+    /// Guideline 14 of the round's surrogate (before retraining) against EnergyPlus at the
+    /// added points, all points' hours pooled: the surrogate's error where the posterior is,
+    /// out of sample (the held-out RMSE measures it over the prior).
+    pub surrogate_error: Vec<OutputMetrics>,
+}
+
+/// A posterior draw added as a design point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefinePoint {
+    /// Key in `simulations/` (after the hypercube's points).
+    pub index: usize,
+    /// Calibrated parameter values (physical units, plan order).
+    pub values: Vec<f64>,
+}
+
+/// A posterior draw EnergyPlus could not simulate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FailedPoint {
+    pub values: Vec<f64>,
+    pub error: String,
+}
+
+impl RefineLog {
+    /// All added points, in round order.
+    pub fn points(&self) -> impl Iterator<Item = &RefinePoint> {
+        self.rounds.iter().flat_map(|r| r.points.iter())
+    }
+}
+
+/// Up to `k` distinct draws for refinement (unit space), from chains' post-burn-in draws: the
+/// highest-posterior draw first (the MAP estimate lives there), then each chain's last draw
+/// (where the next round's chains start), then draws evenly spaced through the merged chains.
+/// Repeated draws (rejected MH moves) count once.
+pub fn pick_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let mut picks: Vec<Vec<f64>> = vec![];
+    let add = |p: &[f64], picks: &mut Vec<Vec<f64>>| {
+        if picks.len() < k && !picks.iter().any(|q| q.as_slice() == p) {
+            picks.push(p.to_vec());
+        }
+    };
+    let best = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| (d.log_density[i], d.point(i))))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some((_, p)) = best {
+        add(p, &mut picks);
+    }
+    for d in draws.iter().filter(|d| !d.is_empty()) {
+        add(d.point(d.len() - 1), &mut picks);
+    }
+    let all: Vec<&[f64]> = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| d.point(i)))
+        .collect();
+    // Evenly spaced, then the rest in order, until k distinct points or no more draws.
+    let step = (all.len() / k.max(1)).max(1);
+    for p in all.iter().skip(step / 2).step_by(step).chain(all.iter()) {
+        if picks.len() >= k {
+            break;
+        }
+        add(p, &mut picks);
+    }
+    picks
+}
+
+impl Calibration {
+    /// The finished refinement rounds (`refine.json`; none when it does not exist).
+    pub fn refine_log(&self) -> Result<RefineLog, Error> {
+        let path = self.out.join(REFINE_FILE);
+        match std::fs::read(&path) {
+            Ok(bytes) => serde_json::from_slice(&bytes).map_err(|e| Error::Input {
+                path,
+                line: 0,
+                message: format!("unreadable refinement log: {e}"),
+            }),
+            Err(_) => Ok(RefineLog::default()),
+        }
+    }
+
+    /// Folder of refinement round `round` (1-based).
+    pub fn refine_dir(&self, round: u32) -> PathBuf {
+        self.out.join("refine").join(format!("round_{round}"))
+    }
+
+    /// Checkpoint of the chains that run on the surrogate of round `round` (0 = the
+    /// hypercube's): `refine/round_{round+1}/chains.json` for the preliminary rounds, the
+    /// output folder's `chains.json` for the last.
+    pub fn chains_path(&self, round: u32) -> PathBuf {
+        if round < self.project.refine.rounds {
+            self.refine_dir(round + 1).join("chains.json")
+        } else {
+            self.out.join("chains.json")
+        }
+    }
+
+    /// The hypercube's design with the refinement points appended (the training set's points).
+    pub fn full_design(&self, design: &Design, log: &RefineLog) -> Design {
+        let mut d = design.clone();
+        for p in log.points() {
+            d.points.push(p.values.clone());
+        }
+        d
+    }
+
+    /// Records a finished round: the surrogate its chains used moves to `refine/round_R/` (so
+    /// the next stage trains a new one on the grown training set), then the round is appended
+    /// to `refine.json`. In that order: a crash in between only makes a rerun redo the round
+    /// from its checkpointed chains and saved simulations.
+    pub fn record_round(&self, log: &mut RefineLog, round: RefineRound) -> Result<(), Error> {
+        let dir = self.refine_dir(round.round);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let (from, to) = (self.surrogate_dir(), dir.join("surrogate"));
+        if from.exists() {
+            if to.exists() {
+                std::fs::remove_dir_all(&to).map_err(|e| Error::io(&to, e))?;
+            }
+            std::fs::rename(&from, &to).map_err(|e| Error::io(&from, e))?;
+        }
+        log.rounds.push(round);
+        let json = serde_json::to_vec_pretty(log).map_err(|e| Error::Config(e.to_string()))?;
+        write_atomic(&self.out.join(REFINE_FILE), &json)
+    }
+}
+
+/// Guideline 14 of `predicted` against EnergyPlus's `simulated` outputs, hours of all points
+/// pooled, per output (EnergyPlus in the role of the meters).
+pub fn pooled_error(
+    outputs: &[String],
+    simulated: &[HourlyOutputs],
+    predicted: &[Vec<Vec<f64>>],
+) -> Result<Vec<OutputMetrics>, Error> {
+    let mut m = vec![];
+    for (k, name) in outputs.iter().enumerate() {
+        let mut truth = vec![];
+        let mut pred = vec![];
+        for (s, p) in simulated.iter().zip(predicted) {
+            let series = s.get(name).ok_or_else(|| Error::Stage {
+                stage: "refinement",
+                message: format!("simulation has no output {name}"),
+            })?;
+            truth.extend_from_slice(series);
+            pred.extend_from_slice(&p[k]);
+        }
+        m.push(OutputMetrics {
+            output: name.clone(),
+            metrics: bemcal_stats::metrics::g14(&truth, &pred)?,
+        });
+    }
+    Ok(m)
+}
+
+/// Positions where the chains of `path` ended (unit space), to start the next round's chains.
+pub fn last_positions(path: &Path) -> Result<Vec<Vec<f64>>, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let ck: crate::posterior::Checkpoint =
+        serde_json::from_slice(&bytes).map_err(|e| Error::Stage {
+            stage: "refinement",
+            message: format!("checkpoint {} is unreadable: {e}", path.display()),
+        })?;
+    Ok(ck.states.iter().map(|s| s.position().to_vec()).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chain(points: &[[f64; 2]], lp: &[f64]) -> Draws {
+        let mut d = Draws::new(2);
+        for (p, l) in points.iter().zip(lp) {
+            d.points.extend_from_slice(p);
+            d.log_density.push(*l);
+        }
+        d
+    }
+
+    #[test]
+    fn picks_the_map_then_chain_ends_then_spread_draws_without_repeats() {
+        let a = chain(
+            &[[0.1, 0.1], [0.1, 0.1], [0.2, 0.2], [0.3, 0.3]],
+            &[-5.0, -5.0, -1.0, -4.0],
+        );
+        let b = chain(
+            &[[0.6, 0.6], [0.7, 0.7], [0.7, 0.7], [0.8, 0.8]],
+            &[-3.0, -2.0, -2.0, -6.0],
+        );
+        let p = pick_draws(&[a.clone(), b.clone()], 3);
+        assert_eq!(p, vec![vec![0.2, 0.2], vec![0.3, 0.3], vec![0.8, 0.8]]);
+        let p = pick_draws(&[a.clone(), b.clone()], 10);
+        // Only 6 distinct draws exist.
+        assert_eq!(p.len(), 6);
+        let mut sorted = p.clone();
+        sorted.sort_by(|x, y| x[0].total_cmp(&y[0]));
+        sorted.dedup();
+        assert_eq!(sorted.len(), 6);
+        assert!(pick_draws(&[Draws::new(2)], 4).is_empty());
+    }
+}
