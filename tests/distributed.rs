@@ -105,6 +105,25 @@ fn wait_for(
     }
 }
 
+/// `bemcal calibrate` of `pf` into `out`: on this process without `surrogate`; with it, through
+/// 2 local workers, given that surrogate (copied into `out/surrogate`). Returns its log.
+fn calibrate(pf: &Path, out: &Path, surrogate: Option<&Path>) -> String {
+    let mut c = bemcal();
+    c.arg("calibrate").arg(pf);
+    if let Some(from) = surrogate {
+        std::fs::create_dir_all(out.join("surrogate")).unwrap();
+        for e in std::fs::read_dir(from).unwrap() {
+            let e = e.unwrap();
+            std::fs::copy(e.path(), out.join("surrogate").join(e.file_name())).unwrap();
+        }
+        c.args(["--local-workers", "2"]);
+    }
+    let o = c.arg("--out").arg(out).output().unwrap();
+    let log = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{}: {log}", out.display());
+    log
+}
+
 #[test]
 fn distributed_matches_single_process() {
     if !have_engine() {
@@ -114,35 +133,10 @@ fn distributed_matches_single_process() {
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
     let local = tmp.path().join("local");
-    let o = bemcal()
-        .arg("calibrate")
-        .arg(&pf)
-        .arg("--out")
-        .arg(&local)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "local: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-
+    calibrate(&pf, &local, None);
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
-    std::fs::create_dir_all(dist.join("surrogate")).unwrap();
-    for e in std::fs::read_dir(local.join("surrogate")).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), dist.join("surrogate").join(e.file_name())).unwrap();
-    }
-    let o = bemcal()
-        .arg("calibrate")
-        .arg(&pf)
-        .args(["--local-workers", "2", "--out"])
-        .arg(&dist)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "distributed: {log}");
+    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
 
     for f in [
         "design.csv",
@@ -192,15 +186,7 @@ fn refinement_round_local_and_distributed() {
     );
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
-    let o = bemcal()
-        .arg("calibrate")
-        .arg(&pf)
-        .arg("--out")
-        .arg(&local)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "local: {log}");
+    let log = calibrate(&pf, &local, None);
     assert!(log.contains("refinement round 1: 3/3 simulations"), "{log}");
 
     let summary = |dir: &Path| -> serde_json::Value {
@@ -217,13 +203,19 @@ fn refinement_round_local_and_distributed() {
     for (j, p) in added.iter().enumerate() {
         let i = p["index"].as_u64().unwrap() as usize;
         assert_eq!(i, 6 + j);
-        assert!(local.join(format!("simulations/point_{i:03}.json")).is_file());
+        assert!(local
+            .join(format!("simulations/point_{i:03}.json"))
+            .is_file());
     }
     // The retrained surrogate learned from 6 + the added points; the first one is kept.
     let ds: serde_json::Value =
         serde_json::from_slice(&std::fs::read(local.join("dataset/dataset.json")).unwrap())
             .unwrap();
-    assert_eq!(ds["n_points"].as_u64().unwrap() as usize, 6 + added.len(), "{ds}");
+    assert_eq!(
+        ds["n_points"].as_u64().unwrap() as usize,
+        6 + added.len(),
+        "{ds}"
+    );
     let first = local.join("refine/round_1/surrogate");
     assert!(first.join("surrogate.json").is_file());
     assert!(local.join("refine/round_1/chains.json").is_file());
@@ -234,22 +226,12 @@ fn refinement_round_local_and_distributed() {
 
     // The distributed run, given the same first surrogate, picks and simulates the same draws.
     let dist = tmp.path().join("dist");
-    std::fs::create_dir_all(dist.join("surrogate")).unwrap();
-    for e in std::fs::read_dir(&first).unwrap() {
-        let e = e.unwrap();
-        std::fs::copy(e.path(), dist.join("surrogate").join(e.file_name())).unwrap();
-    }
-    let o = bemcal()
-        .arg("calibrate")
-        .arg(&pf)
-        .args(["--local-workers", "2", "--out"])
-        .arg(&dist)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "distributed: {log}");
+    calibrate(&pf, &dist, Some(&first));
     let sb = summary(&dist);
-    assert_eq!(sa["refinement"], sb["refinement"], "refinement rounds differ");
+    assert_eq!(
+        sa["refinement"], sb["refinement"],
+        "refinement rounds differ"
+    );
     for p in added {
         let f = format!("simulations/point_{:03}.json", p["index"].as_u64().unwrap());
         assert_eq!(

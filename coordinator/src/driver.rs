@@ -14,7 +14,8 @@ use bemcal_calibrate::pipeline::{
 };
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{
-    pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound, REFINE_FILE,
+    next_starts, pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound,
+    REFINE_FILE,
 };
 use bemcal_calibrate::Project;
 use bemcal_energyplus::HourlyOutputs;
@@ -210,7 +211,11 @@ impl State {
         let tolerant = if refine_round > 0 { "refine\n" } else { "" };
         let key = hex::encode(Sha256::digest(format!("{tolerant}{inputs_hash}\n{values}")));
         NewJob {
-            stage: if refine_round > 0 { "refine" } else { "simulate" },
+            stage: if refine_round > 0 {
+                "refine"
+            } else {
+                "simulate"
+            },
             kind: "simulate",
             label: if refine_round > 0 {
                 format!("simulation of posterior draw {i} (refinement round {refine_round})")
@@ -399,7 +404,8 @@ impl State {
         } else {
             self.config.chains_per_job.min(n)
         };
-        let round = self.refine_log(r)?.rounds.len() as u32;
+        let log = self.refine_log(r)?;
+        let round = log.rounds.len() as u32;
         let target = if round < project.refine.rounds {
             project.refine.iterations
         } else {
@@ -441,14 +447,18 @@ impl State {
             let mut inputs = crate::client::refs(&surrogate);
             if let Some(last) = mine.last() {
                 inputs.push((&states_of(last)?).into());
-            } else if round > 0 {
-                let before = group(first, round - 1);
-                let last = before
-                    .last()
-                    .ok_or_else(|| format!("chains {first}: no chains of round {}", round - 1))?;
-                let mut warm: proto::FileRef = (&states_of(last)?).into();
-                warm.path = "warm.json".into();
-                inputs.push(warm);
+            } else if let Some(prev) = log.rounds.last() {
+                // Where the previous round's chains ended (or restarted: `next_starts`).
+                let mine = prev
+                    .starts
+                    .get(first..first + count)
+                    .ok_or_else(|| format!("chains {first}: no starting points"))?;
+                let bytes = serde_json::to_vec(mine).map_err(err)?;
+                inputs.push(proto::FileRef {
+                    path: "warm.json".into(),
+                    sha256: self.put_artifact(&bytes)?,
+                    size: bytes.len() as u64,
+                });
             }
             let seg = mine.len() as u32;
             let label = if round < project.refine.rounds {
@@ -507,12 +517,10 @@ impl State {
         Project::load(&pf).map_err(err)
     }
 
-    fn stage_merge(&self, r: &RunRow) -> Result<bool> {
-        let cal = self.load(r)?;
-        self.place(&cal.out, &self.surrogate_files(r)?)?;
+    /// The chains of refinement round `round`, merged: each chain's last state and all its
+    /// draws, segments in order.
+    fn merged_chains(&self, r: &RunRow, round: u32) -> Result<(Vec<ChainState>, Vec<Draws>)> {
         let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
-        let log = self.refine_log(r)?;
-        let round = log.rounds.len() as u32;
         let mut groups: Vec<(u32, Vec<&JobRow>)> = vec![];
         for j in &jobs {
             let Some(Kind::Chains(c)) = &j.spec.kind else {
@@ -554,6 +562,15 @@ impl State {
             states.extend(last_states);
             draws.extend(acc);
         }
+        Ok((states, draws))
+    }
+
+    fn stage_merge(&self, r: &RunRow) -> Result<bool> {
+        let cal = self.load(r)?;
+        self.place(&cal.out, &self.surrogate_files(r)?)?;
+        let log = self.refine_log(r)?;
+        let round = log.rounds.len() as u32;
+        let (states, draws) = self.merged_chains(r, round)?;
         let mut sampler = cal.sampler().map_err(err)?;
         if round < cal.project.refine.rounds {
             // Refinement round `round + 1`: simulate posterior draws of these chains.
@@ -619,9 +636,8 @@ impl State {
     fn stage_refine(&self, r: &RunRow) -> Result<bool> {
         let mut log = self.refine_log(r)?;
         let round = log.rounds.len() as u32 + 1;
-        let in_round = |j: &JobRow| {
-            matches!(&j.spec.kind, Some(Kind::Simulate(s)) if s.refine_round == round)
-        };
+        let in_round =
+            |j: &JobRow| matches!(&j.spec.kind, Some(Kind::Simulate(s)) if s.refine_round == round);
         let jobs: Vec<JobRow> = self
             .store
             .jobs(&r.id, Some("refine"))
@@ -654,12 +670,18 @@ impl State {
         }
         let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
         let predicted = cal.sampler().map_err(err)?.predict(&xs).map_err(err)?;
-        let surrogate_error = pooled_error(&cal.inputs.outputs, &outputs, &predicted).map_err(err)?;
+        let surrogate_error =
+            pooled_error(&cal.inputs.outputs, &outputs, &predicted).map_err(err)?;
+        let (states, draws) = self.merged_chains(r, round - 1)?;
+        let last: Vec<Vec<f64>> = states.iter().map(|s| s.position().to_vec()).collect();
+        let (starts, restarted) = next_starts(&draws, &last, cal.project.refine.restart_below);
         log.rounds.push(RefineRound {
             round,
             points,
             failed,
             surrogate_error,
+            starts,
+            restarted,
         });
         // The grown training set: design points, then every round's draws.
         let design = cal.design().map_err(err)?;

@@ -26,7 +26,10 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
             let secs = match cal.simulate_point(i, &s.values) {
                 Ok((_, secs)) => secs,
                 Err(e) if s.refine_round > 0 => {
-                    return Ok((vec![], serde_json::json!({ "error": e.to_string() }).to_string()))
+                    return Ok((
+                        vec![],
+                        serde_json::json!({ "error": e.to_string() }).to_string(),
+                    ))
                 }
                 Err(e) => return Err(e.to_string()),
             };
@@ -54,14 +57,12 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 serde_json::from_slice(&bytes).map_err(|e| format!("states.json: {e}"))?
             } else {
                 let (a, n) = (c.first_chain as usize, c.chains as usize);
-                // A refinement round's chains start where the previous round's ended
-                // (`warm.json`: those chains' states); round 0 at dispersed prior draws.
+                // A refinement round's chains start where the coordinator says (`warm.json`:
+                // where the previous round's ended, or restarted); round 0 at prior draws.
                 let warm_path = work.join("warm.json");
                 let mine: Vec<Vec<f64>> = if warm_path.is_file() {
                     let bytes = std::fs::read(&warm_path).map_err(err)?;
-                    let warm: Vec<ChainState> = serde_json::from_slice(&bytes)
-                        .map_err(|e| format!("warm.json: {e}"))?;
-                    warm.iter().map(|s| s.position().to_vec()).collect()
+                    serde_json::from_slice(&bytes).map_err(|e| format!("warm.json: {e}"))?
                 } else {
                     let starts = sampler.starts();
                     starts
@@ -103,7 +104,10 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
             let m = match cal.validate(i, &v.label, &v.values) {
                 Ok(m) => m,
                 Err(e) if v.tolerate_failure => {
-                    return Ok((vec![], serde_json::json!({ "error": e.to_string() }).to_string()))
+                    return Ok((
+                        vec![],
+                        serde_json::json!({ "error": e.to_string() }).to_string(),
+                    ))
                 }
                 Err(e) => return Err(e.to_string()),
             };

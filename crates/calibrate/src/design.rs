@@ -209,7 +209,9 @@ pub fn simulate_design(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<SimulatedDesign, Error> {
     let indexed: Vec<(usize, Vec<f64>)> = design.points.iter().cloned().enumerate().collect();
-    let results = simulate_points(runner, model, plan, &indexed, weather, dir, parallel, progress)?;
+    let results = simulate_points(
+        runner, model, plan, &indexed, weather, dir, parallel, progress,
+    )?;
     let mut out = SimulatedDesign {
         outputs: Vec::with_capacity(indexed.len()),
         reused: 0,

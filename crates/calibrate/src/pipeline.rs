@@ -540,7 +540,9 @@ impl Sampler<'_> {
     pub fn settings_for(&self, round: u32) -> McmcSettings {
         let mut m = self.cal.project.mcmc.clone();
         if round > 0 {
-            m.seed = m.seed.wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
+            m.seed = m
+                .seed
+                .wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
         }
         m
     }
@@ -599,7 +601,10 @@ impl Sampler<'_> {
     /// The surrogate's hourly outputs at `points` (physical calibrated values):
     /// `[point][output][hour]`.
     pub fn predict(&mut self, points: &[Vec<f64>]) -> Result<Vec<Vec<Vec<f64>>>, Error> {
-        let (n_h, n_out) = (self.cal.inputs.features.len(), self.cal.inputs.outputs.len());
+        let (n_h, n_out) = (
+            self.cal.inputs.features.len(),
+            self.cal.inputs.outputs.len(),
+        );
         let mut out = vec![];
         for chunk in points.chunks(8) {
             let y = self.evaluator.evaluate_batch(chunk)?;
@@ -946,10 +951,9 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
             log("surrogate: reusing the one trained earlier");
         } else {
             log(&format!(
-                    "training the surrogate (PyTorch) on {} points...",
-                    full.points.len()
-                ),
-            );
+                "training the surrogate (PyTorch) on {} points...",
+                full.points.len()
+            ));
             cal.train()?;
         }
         let mut sampler = cal.sampler()?;
@@ -968,7 +972,11 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
         let starts = match round {
             0 => sampler.starts(),
-            r => crate::refine::last_positions(&cal.chains_path(r - 1))?,
+            _ => refined
+                .rounds
+                .last()
+                .map(|r| r.starts.clone())
+                .unwrap_or_default(),
         };
         let config = sampler.config_for(round);
         let settings = sampler.settings_for(round);
@@ -1025,7 +1033,12 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
             &inp.weather_path,
             &cal.simulations_dir(),
             project.design.parallel,
-            &|done, n| log(&format!("refinement round {}: {done}/{n} simulations", round + 1)),
+            &|done, n| {
+                log(&format!(
+                    "refinement round {}: {done}/{n} simulations",
+                    round + 1
+                ))
+            },
         )?;
         let mut points = vec![];
         let mut failed = vec![];
@@ -1033,11 +1046,16 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         for ((i, x), r) in indexed.into_iter().zip(results) {
             match r {
                 Ok((o, _)) => {
-                    points.push(crate::refine::RefinePoint { index: i, values: x });
+                    points.push(crate::refine::RefinePoint {
+                        index: i,
+                        values: x,
+                    });
                     new_outputs.push(o);
                 }
                 Err(e) => {
-                    log(&format!("refinement: posterior draw left out, EnergyPlus failed: {e}"));
+                    log(&format!(
+                        "refinement: posterior draw left out, EnergyPlus failed: {e}"
+                    ));
                     failed.push(crate::refine::FailedPoint {
                         values: x,
                         error: e.to_string(),
@@ -1063,6 +1081,15 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 .join(", ")
         ));
         drop(sampler);
+        let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
+        let (starts, restarted) =
+            crate::refine::next_starts(&ck.draws, &last, project.refine.restart_below);
+        for (c, gap) in &restarted {
+            log(&format!(
+                "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
+                round + 1
+            ));
+        }
         timings.refinement_s += t.elapsed().as_secs_f64();
         outputs.extend(new_outputs);
         cal.record_round(
@@ -1072,6 +1099,8 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 points,
                 failed,
                 surrogate_error,
+                starts,
+                restarted,
             },
         )?;
     };
@@ -1113,7 +1142,9 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 break;
             }
             Err(e) => {
-                log(&format!("validation: EnergyPlus failed at candidate {k}: {e}"));
+                log(&format!(
+                    "validation: EnergyPlus failed at candidate {k}: {e}"
+                ));
                 failures.push(e.to_string());
             }
         }

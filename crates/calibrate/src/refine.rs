@@ -11,7 +11,7 @@
 //! written last, so a round is either recorded whole or redone) and `refine/round_R/` with the
 //! round's preliminary `chains.json` and the `surrogate/` its chains used.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::lhs::Design;
@@ -43,6 +43,13 @@ pub struct RefineRound {
     /// added points, all points' hours pooled: the surrogate's error where the posterior is,
     /// out of sample (the held-out RMSE measures it over the prior).
     pub surrogate_error: Vec<OutputMetrics>,
+    /// Where the next round's chains start (unit space), one per chain: see [`next_starts`].
+    #[serde(default)]
+    pub starts: Vec<Vec<f64>>,
+    /// Chains restarted in the best chain's mode (see [`next_starts`]) with how many nats their
+    /// best log posterior was below the best chain's.
+    #[serde(default)]
+    pub restarted: Vec<(usize, f64)>,
 }
 
 /// A posterior draw added as a design point.
@@ -102,6 +109,49 @@ pub fn pick_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
         add(p, &mut picks);
     }
     picks
+}
+
+/// Where the next round's chains start: each chain where it ended (`last`), except a chain
+/// whose best log posterior is more than `gap` nats below the best chain's: it is stuck in a
+/// mode carrying under e^-gap of the posterior mass, and restarts at one of the best chain's
+/// draws (distinct draws spread over its second half). Returns the starts and the restarted
+/// chains with their gaps.
+pub fn next_starts(
+    draws: &[Draws],
+    last: &[Vec<f64>],
+    gap: f64,
+) -> (Vec<Vec<f64>>, Vec<(usize, f64)>) {
+    let best_lp: Vec<f64> = draws
+        .iter()
+        .map(|d| {
+            d.log_density
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max)
+        })
+        .collect();
+    let Some((best, top)) = best_lp
+        .iter()
+        .copied()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+    else {
+        return (last.to_vec(), vec![]);
+    };
+    let stuck: Vec<usize> = (0..last.len())
+        .filter(|&c| best_lp.get(c).is_some_and(|lp| top - lp > gap))
+        .collect();
+    let mut starts = last.to_vec();
+    let d = &draws[best];
+    let half = d.len() / 2;
+    for (k, &c) in stuck.iter().enumerate() {
+        let i = half + (d.len() - half) * k / (stuck.len() + 1);
+        if i < d.len() {
+            starts[c] = d.point(i).to_vec();
+        }
+    }
+    let restarted = stuck.iter().map(|&c| (c, top - best_lp[c])).collect();
+    (starts, restarted)
 }
 
 impl Calibration {
@@ -190,17 +240,6 @@ pub fn pooled_error(
     Ok(m)
 }
 
-/// Positions where the chains of `path` ended (unit space), to start the next round's chains.
-pub fn last_positions(path: &Path) -> Result<Vec<Vec<f64>>, Error> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let ck: crate::posterior::Checkpoint =
-        serde_json::from_slice(&bytes).map_err(|e| Error::Stage {
-            stage: "refinement",
-            message: format!("checkpoint {} is unreadable: {e}", path.display()),
-        })?;
-    Ok(ck.states.iter().map(|s| s.position().to_vec()).collect())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,5 +273,25 @@ mod tests {
         sorted.dedup();
         assert_eq!(sorted.len(), 6);
         assert!(pick_draws(&[Draws::new(2)], 4).is_empty());
+    }
+
+    #[test]
+    fn chains_far_below_the_best_restart_in_its_mode() {
+        let a = chain(
+            &[[0.1, 0.1], [0.2, 0.2], [0.3, 0.3], [0.4, 0.4]],
+            &[-9.0, -1.0, -2.0, -3.0],
+        );
+        let b = chain(&[[0.6, 0.6], [0.7, 0.7]], &[-30.0, -25.0]);
+        let c = chain(&[[0.8, 0.8], [0.9, 0.9]], &[-12.0, -15.0]);
+        let last = vec![vec![0.4, 0.4], vec![0.7, 0.7], vec![0.9, 0.9]];
+        let (starts, restarted) = next_starts(&[a.clone(), b.clone(), c.clone()], &last, 20.0);
+        // b is 24 nats below a: restarted at a draw of a's second half; c (11 below) stays.
+        assert_eq!(restarted, vec![(1, 24.0)]);
+        assert_eq!(starts[0], last[0]);
+        assert_eq!(starts[1], vec![0.3, 0.3]);
+        assert_eq!(starts[2], last[2]);
+        let (starts, restarted) = next_starts(&[a, b, c], &last, 1e9);
+        assert!(restarted.is_empty());
+        assert_eq!(starts, last);
     }
 }

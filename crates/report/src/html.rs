@@ -610,10 +610,12 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         duration(t.total_s)
     );
     if !s.refinement.is_empty() {
-        h.push_str("<h3>Surrogate refinement</h3><p class=\"sub\">Each round simulates posterior \
+        h.push_str(
+            "<h3>Surrogate refinement</h3><p class=\"sub\">Each round simulates posterior \
 draws in EnergyPlus, adds them to the training set and retrains; shown is the round's surrogate \
 (before retraining) against EnergyPlus at those draws, their hours pooled.</p>\
-<table><tr><th>round</th><th>draws added</th><th>failed</th>");
+<table><tr><th>round</th><th>draws added</th><th>failed</th>",
+        );
         for o in &s.outputs {
             let _ = write!(h, "<th>{} NMBE / CV-RMSE %</th>", esc(o));
         }
