@@ -447,7 +447,7 @@ impl State {
             let mut inputs = crate::client::refs(&surrogate);
             if let Some(last) = mine.last() {
                 inputs.push((&states_of(last)?).into());
-            } else if let Some(prev) = log.rounds.last() {
+            } else if let Some(prev) = log.rounds.last().filter(|p| !p.starts.is_empty()) {
                 // Where the previous round's chains ended (or restarted: `next_starts`).
                 let mine = prev
                     .starts

@@ -970,13 +970,10 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 
         let t = Instant::now();
         // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
-        let starts = match round {
-            0 => sampler.starts(),
-            _ => refined
-                .rounds
-                .last()
-                .map(|r| r.starts.clone())
-                .unwrap_or_default(),
+        // (A log from before starts were recorded gives prior draws again.)
+        let starts = match refined.rounds.last() {
+            Some(r) if !r.starts.is_empty() => r.starts.clone(),
+            _ => sampler.starts(),
         };
         let config = sampler.config_for(round);
         let settings = sampler.settings_for(round);
