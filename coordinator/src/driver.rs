@@ -99,6 +99,8 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 /// A finished simulation job, read back: the point's key in `simulations/`, its values, and
 /// its outputs (or, for a refinement draw EnergyPlus failed on, the failure).
 struct Simulated {
+    /// 0 for a design point, else the refinement round of the draw.
+    refine_round: u32,
     index: usize,
     values: Vec<f64>,
     outputs: std::result::Result<HourlyOutputs, String>,
@@ -245,6 +247,7 @@ impl State {
             };
             if let Some(e) = reported_failure(j) {
                 out.push(Simulated {
+                    refine_round: s.refine_round,
                     index: s.point as usize,
                     values: s.values.clone(),
                     outputs: Err(e),
@@ -271,6 +274,7 @@ impl State {
                 ));
             }
             out.push(Simulated {
+                refine_round: s.refine_round,
                 index: s.point as usize,
                 values: s.values.clone(),
                 outputs: Ok(o),
@@ -650,21 +654,25 @@ impl State {
         }
         let cal = self.load(r)?;
         self.place(&cal.out, &self.surrogate_files(r)?)?;
+        // Every simulation so far (design points, then every round's draws), read back once.
+        let mut sims = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
+        sims.extend(self.store.jobs(&r.id, Some("refine")).map_err(err)?);
+        let simulated = self.simulated(&cal, &sims)?;
         let mut points = vec![];
         let mut failed = vec![];
         let mut outputs = vec![];
-        for s in self.simulated(&cal, &jobs)? {
-            match s.outputs {
+        for s in simulated.iter().filter(|s| s.refine_round == round) {
+            match &s.outputs {
                 Ok(o) => {
                     points.push(RefinePoint {
                         index: s.index,
-                        values: s.values,
+                        values: s.values.clone(),
                     });
-                    outputs.push(o);
+                    outputs.push(o.clone());
                 }
                 Err(error) => failed.push(FailedPoint {
-                    values: s.values,
-                    error,
+                    values: s.values.clone(),
+                    error: error.clone(),
                 }),
             }
         }
@@ -685,10 +693,7 @@ impl State {
         });
         // The grown training set: design points, then every round's draws.
         let design = cal.design().map_err(err)?;
-        let mut sims = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
-        sims.extend(self.store.jobs(&r.id, Some("refine")).map_err(err)?);
-        let by_index: std::collections::HashMap<usize, HourlyOutputs> = self
-            .simulated(&cal, &sims)?
+        let by_index: std::collections::HashMap<usize, HourlyOutputs> = simulated
             .into_iter()
             .filter_map(|s| s.outputs.ok().map(|o| (s.index, o)))
             .collect();
