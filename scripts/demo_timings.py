@@ -6,7 +6,7 @@ path = sys.argv[1]
 try:
     s = json.load(open(path))
 except FileNotFoundError:
-    print(f"whole calibration: no {path} yet: run `make demo` (about 20 min) or BENCH_DEMO=1 make bench")
+    print(f"whole calibration: no {path} yet: run `make demo` (about an hour) or BENCH_DEMO=1 make bench")
     sys.exit(0)
 t = s["timings"]
 post = s["posterior"]["parameters"]
