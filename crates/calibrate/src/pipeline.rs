@@ -503,11 +503,6 @@ impl Sampler<'_> {
         }
     }
 
-    /// MH settings of the project (the final chains').
-    pub fn config(&self) -> MhConfig {
-        self.config_for(self.cal.project.refine.rounds)
-    }
-
     /// MH settings of the chains on the surrogate of refinement round `round` (0 = the
     /// hypercube's): the last round's are the project's `[mcmc]`; earlier (preliminary) rounds
     /// use `[refine]`'s shorter burn-in.
