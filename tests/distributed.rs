@@ -242,6 +242,27 @@ fn refinement_round_local_and_distributed() {
     }
     assert!(sb["timings"]["refinement_s"].as_f64().unwrap() > 0.0);
     assert!(sb["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
+
+    // Both retrainings warm-started from the first surrogate's weights, on a nested split:
+    // every point held out from the first surrogate is still held out.
+    let json = |p: PathBuf| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap()
+    };
+    let held = |m: &serde_json::Value| -> Vec<u64> {
+        let pts = m["held_out"]["points"].as_array().unwrap();
+        pts.iter().map(|v| v.as_u64().unwrap()).collect()
+    };
+    let before = held(&json(first.join("surrogate.json")));
+    assert!(first.join("weights.pt").is_file());
+    for dir in [&local, &dist] {
+        let m = json(dir.join("surrogate/surrogate.json"));
+        assert!(m["training"]["init"].is_string(), "{}", m["training"]);
+        let after = held(&m);
+        assert!(
+            before.iter().all(|i| after.contains(i)),
+            "{before:?} vs {after:?}"
+        );
+    }
 }
 
 #[test]

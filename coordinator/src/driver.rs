@@ -291,8 +291,15 @@ impl State {
         }
     }
 
-    /// The training job for the training set in `dataset`.
-    fn train_job(&self, r: &RunRow, cal: &Calibration, dataset: &Path) -> Result<NewJob> {
+    /// The training job for the training set in `dataset`; `init`: the weights file of the
+    /// surrogate to warm-start from (a refinement round's retraining).
+    fn train_job(
+        &self,
+        r: &RunRow,
+        cal: &Calibration,
+        dataset: &Path,
+        init: Option<&File>,
+    ) -> Result<NewJob> {
         let mut inputs = vec![];
         for p in crate::client::walk(dataset).map_err(err)? {
             let bytes = std::fs::read(&p).map_err(err)?;
@@ -303,6 +310,15 @@ impl State {
                 size: bytes.len() as u64,
             });
         }
+        let mut train = proto::TrainJob::default();
+        if let Some(w) = init {
+            train.init = WARM_START_DIR.into();
+            inputs.push(proto::FileRef {
+                path: format!("{WARM_START_DIR}/{}", bemcal_surrogate::WEIGHTS_FILE),
+                sha256: w.sha256.clone(),
+                size: w.size,
+            });
+        }
         Ok(NewJob {
             stage: "train",
             kind: "train",
@@ -310,7 +326,7 @@ impl State {
             spec: proto::Job {
                 bundle: crate::client::refs(&r.bundle),
                 inputs,
-                kind: Some(Kind::Train(proto::TrainJob {})),
+                kind: Some(Kind::Train(train)),
                 ..Default::default()
             },
             cache_key: None,
@@ -360,7 +376,7 @@ impl State {
             self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
             return Ok(true);
         }
-        let job = self.train_job(r, &cal, &dataset)?;
+        let job = self.train_job(r, &cal, &dataset, None)?;
         self.store
             .set_stage(&r.id, "train", vec![job])
             .map_err(err)?;
@@ -708,7 +724,16 @@ impl State {
             })
             .collect::<Result<Vec<_>>>()?;
         let dataset = cal.training_set(&full, &outputs).map_err(err)?;
-        let job = self.train_job(r, &cal, &dataset)?;
+        // Warm start from the weights of the surrogate this round's chains used.
+        let weights = format!("surrogate/{}", bemcal_surrogate::WEIGHTS_FILE);
+        let init = match cal.project.surrogate.warm_start {
+            true => self
+                .surrogate_files(r)?
+                .into_iter()
+                .find(|f| f.path == weights),
+            false => None,
+        };
+        let job = self.train_job(r, &cal, &dataset, init.as_ref())?;
         let json = serde_json::to_string(&log).map_err(err)?;
         self.store
             .set_stage_refined(&r.id, "train", vec![job], Some(&json))
@@ -871,6 +896,9 @@ fn validation_job(r: &RunRow, index: u32, label: &str, values: Vec<f64>) -> NewJ
 fn is_calibrated(j: &JobRow) -> bool {
     matches!(&j.spec.kind, Some(Kind::Validate(v)) if v.label == "calibrated")
 }
+
+/// Where a warm-started training job finds the previous surrogate's weights (job-relative).
+const WARM_START_DIR: &str = "init";
 
 /// Runs advanced at the same time (each run by one task at a time).
 pub const DRIVER_PARALLEL: usize = 4;

@@ -21,6 +21,9 @@ def parser():
     ap.add_argument("--time-features", choices=TIME_FEATURES, default="none")
     ap.add_argument("--device", choices=("auto", "cpu", "cuda"), default="cpu")
     ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    ap.add_argument("--init", default=None,
+                    help="warm start: a previous surrogate directory whose weights.pt (same parameters, "
+                         "outputs and architecture) the training starts from")
     ap.add_argument("--compare-time-features", action="store_true",
                     help="train once per time-feature mode on the same design into OUT/<mode> and "
                          "print the held-out accuracy of each side by side")

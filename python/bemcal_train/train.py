@@ -71,6 +71,40 @@ def metrics(pred_kwh, true_kwh, names):
     return res
 
 
+WEIGHTS = "weights.pt"
+
+
+def save_weights(model, scale, names, n_features, path):
+    """The trained weights and the output scale they predict in (for a later warm start)."""
+    torch.save({"state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+                "scale": [float(s) for s in scale], "output_names": list(names),
+                "n_features": int(n_features)}, path)
+
+
+def warm_start(model, init_dir, scale, n_features, names):
+    """Loads ``init_dir/weights.pt`` into ``model``. The head is rescaled by old / new output
+    scale so that the warm-started model predicts the same kWh as the one it came from (the
+    scale, each output's maximum over the training points, can grow as points are added)."""
+    path = os.path.join(init_dir, WEIGHTS)
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise SystemExit(f"--init {init_dir}: no {WEIGHTS} there (a surrogate trained before warm "
+                         f"starts existed); train from scratch instead")
+    if saved["output_names"] != list(names) or saved["n_features"] != n_features:
+        raise SystemExit(f"--init {path}: trained for outputs {saved['output_names']} and "
+                         f"{saved['n_features']} features, this dataset has {list(names)} and {n_features}")
+    try:
+        model.load_state_dict(saved["state_dict"])
+    except RuntimeError as e:
+        raise SystemExit(f"--init {path}: architecture differs ({e})")
+    ratio = torch.as_tensor(np.asarray(saved["scale"]) / scale, dtype=torch.float32)
+    with torch.no_grad():
+        model.head.weight.mul_(ratio.to(model.head.weight.device)[:, None])
+        model.head.bias.mul_(ratio.to(model.head.bias.device))
+    print(f"warm start from {path} (head rescaled by {ratio.tolist()})", flush=True)
+
+
 def train(args):
     t_start = time.time()
     torch.manual_seed(args.seed)
@@ -99,6 +133,9 @@ def train(args):
 
     n_features = n_params + hourly.shape[1]
     model = Surrogate(n_features, len(names), args.hidden, args.layers).to(device)
+    init = getattr(args, "init", None)
+    if init:
+        warm_start(model, init, scale, n_features, names)
     opt = torch.optim.Adam(model.parameters(), lr=args.lr)
     T = hourly.shape[0]
     tr_point = torch.as_tensor(np.repeat(train_pts, T), device=device)
@@ -134,7 +171,8 @@ def train(args):
             if bad >= args.patience:
                 print(f"early stop: no held-out improvement in {args.patience} epochs (best epoch {best_epoch})")
                 break
-    model.load_state_dict(best_state)
+    if best_state is not None:  # (--epochs 0 keeps the initial, e.g. warm-started, weights)
+        model.load_state_dict(best_state)
     train_seconds = time.time() - t_start
 
     # Held-out accuracy in kWh, with the same non-negativity clamp the exported graph applies.
@@ -149,6 +187,7 @@ def train(args):
 
     os.makedirs(args.out, exist_ok=True)
     model = model.cpu().eval()
+    save_weights(model, scale, names, n_features, os.path.join(args.out, WEIGHTS))
     files = export_all(model, n_params, hourly.shape[1], scale, nonnegative, args.out)
 
     # Parity fixture: a few windows of the first held-out point, and its whole year.
@@ -229,7 +268,7 @@ def train(args):
         "int8": int8,
         "training": {"seed": args.seed, "epochs_max": args.epochs, "epochs_run": len(history),
                      "best_epoch": best_epoch, "patience": args.patience, "batch_size": args.batch_size,
-                     "lr": args.lr, "optimizer": "adam", "loss": "mse on scaled targets",
+                     "lr": args.lr, "optimizer": "adam", "init": init, "loss": "mse on scaled targets",
                      "device": str(device), "threads": torch.get_num_threads(), "seconds": train_seconds,
                      "torch_version": torch.__version__, "train_points": train_pts,
                      "history": history},

@@ -39,8 +39,17 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 serde_json::json!({ "seconds": secs }).to_string(),
             ))
         }
-        Some(Kind::Train(_)) => {
-            cal.train().map_err(err)?;
+        Some(Kind::Train(t)) => {
+            let init = if t.init.is_empty() {
+                None
+            } else {
+                let rel = Path::new(&t.init);
+                if rel.is_absolute() || rel.components().any(|c| c.as_os_str() == "..") {
+                    return Err(format!("bad warm-start folder {:?}", t.init));
+                }
+                Some(work.join(rel))
+            };
+            cal.train(init.as_deref()).map_err(err)?;
             let dir = cal.surrogate_dir();
             let mut files = vec![];
             for p in walk(&dir).map_err(err)? {

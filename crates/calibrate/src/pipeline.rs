@@ -373,7 +373,10 @@ impl Calibration {
             .map(|(n, p)| ParamSpec::new(n.clone(), p.min(), p.max(), p.mode()))
             .collect();
         let sp = &self.project.surrogate;
-        let split = Split::by_design_point(n_pts, sp.held_out_fraction, sp.seed)?;
+        // Nested over refinement rounds (see `Split::nested`): the hypercube's points split as
+        // always, each appended draw keeps its side in every later round.
+        let n_base = self.project.design.points.min(n_pts);
+        let split = Split::nested(n_base, n_pts, sp.held_out_fraction, sp.seed)?;
         let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
             .with_split(split)?;
         let dir = self.out.join("dataset");
@@ -391,8 +394,10 @@ impl Calibration {
         bemcal_surrogate::SurrogateMeta::read(&self.surrogate_dir()).is_ok()
     }
 
-    /// Stage 4, one job: trains the surrogate on `dataset/` into `surrogate/`.
-    pub fn train(&self) -> Result<(), Error> {
+    /// Stage 4, one job: trains the surrogate on `dataset/` into `surrogate/`, starting from
+    /// the weights in the surrogate folder `init` when given (a refinement round's warm start,
+    /// see [`Calibration::warm_start`]).
+    pub fn train(&self, init: Option<&Path>) -> Result<(), Error> {
         let sp = &self.project.surrogate;
         let opts = TrainOptions {
             epochs: sp.epochs,
@@ -402,6 +407,7 @@ impl Calibration {
             time_features: sp.time_features.parse().map_err(Error::Config)?,
             threads: sp.threads,
             quiet: true,
+            init: init.map(Path::to_path_buf),
             ..TrainOptions::default()
         };
         bemcal_surrogate::train(&self.out.join("dataset"), &self.surrogate_dir(), &opts)?;
@@ -949,7 +955,11 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 "training the surrogate (PyTorch) on {} points...",
                 full.points.len()
             ));
-            cal.train()?;
+            let init = cal.warm_start(&refined);
+            if let Some(dir) = &init {
+                log(&format!("  warm start from {}", dir.display()));
+            }
+            cal.train(init.as_deref())?;
         }
         let mut sampler = cal.sampler()?;
         timings.training_s += t.elapsed().as_secs_f64();

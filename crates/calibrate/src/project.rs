@@ -127,6 +127,10 @@ pub struct SurrogateSettings {
     pub threads: usize,
     /// Fraction of design points held out (split by design point).
     pub held_out_fraction: f64,
+    /// A refinement round's retraining starts from the previous round's weights (default
+    /// true) instead of a random initialisation. The held-out split is nested across rounds,
+    /// so the held-out error stays out-of-sample either way.
+    pub warm_start: bool,
 }
 
 impl Default for SurrogateSettings {
@@ -139,6 +143,7 @@ impl Default for SurrogateSettings {
             time_features: "hour+schedule".into(),
             threads: 2,
             held_out_fraction: 0.2,
+            warm_start: true,
         }
     }
 }

@@ -193,6 +193,20 @@ impl Calibration {
         d
     }
 
+    /// The surrogate folder a retraining after the rounds in `log` warm-starts from: the last
+    /// round's surrogate, when `surrogate.warm_start` is on and its weights were kept (a
+    /// surrogate trained before warm starts existed has none: train from scratch).
+    pub fn warm_start(&self, log: &RefineLog) -> Option<PathBuf> {
+        if !self.project.surrogate.warm_start {
+            return None;
+        }
+        let last = log.rounds.last()?;
+        let dir = self.refine_dir(last.round).join("surrogate");
+        dir.join(bemcal_surrogate::WEIGHTS_FILE)
+            .is_file()
+            .then_some(dir)
+    }
+
     /// Records a finished round: the surrogate its chains used moves to `refine/round_R/` (so
     /// the next stage trains a new one on the grown training set), then the round is appended
     /// to `refine.json`. In that order: a crash in between only makes a rerun redo the round

@@ -151,6 +151,36 @@ impl Split {
             held_out,
         })
     }
+
+    /// The split of a training set that grows by appended points (surrogate refinement): the
+    /// first `n_base` points (the Latin hypercube) split as [`Split::by_design_point`], each
+    /// later point `i` held out by its own seeded coin (probability `held_out_fraction`). Nested:
+    /// a point's side never changes as points are added, so a surrogate warm-started from an
+    /// earlier round's weights has never trained on a point now held out (its held-out error,
+    /// sigma_eta, stays out-of-sample). Pure; deterministic in `seed`.
+    pub fn nested(
+        n_base: usize,
+        n_points: usize,
+        held_out_fraction: f64,
+        seed: u64,
+    ) -> Result<Split, DatasetError> {
+        if n_base > n_points {
+            return Err(invalid(format!(
+                "{n_base} base points but only {n_points} in all"
+            )));
+        }
+        let mut split = Split::by_design_point(n_base, held_out_fraction, seed)?;
+        for i in n_base..n_points {
+            let mut state = seed ^ (i as u64).wrapping_mul(0xD1B5_4A32_D192_ED03);
+            let u = (splitmix64(&mut state) >> 11) as f64 / (1u64 << 53) as f64;
+            if u < held_out_fraction {
+                split.held_out.push(i);
+            } else {
+                split.train.push(i);
+            }
+        }
+        Ok(split)
+    }
 }
 
 fn splitmix64(state: &mut u64) -> u64 {
@@ -451,6 +481,20 @@ mod tests {
         let c = Split::by_design_point(20, 0.2, 8).unwrap();
         assert_ne!(a.held_out, c.held_out);
         assert!(Split::by_design_point(1, 0.2, 0).is_err());
+        // Nested: the base split is by_design_point's, and growing never moves a point.
+        let base = Split::by_design_point(20, 0.2, 7).unwrap();
+        let n28 = Split::nested(20, 28, 0.2, 7).unwrap();
+        let n44 = Split::nested(20, 44, 0.2, 7).unwrap();
+        assert_eq!(Split::nested(20, 20, 0.2, 7).unwrap(), base);
+        assert!(n28.held_out.iter().all(|i| n44.held_out.contains(i)));
+        assert!(n28.train.iter().all(|i| n44.train.contains(i)));
+        assert_eq!(n44.train.len() + n44.held_out.len(), 44);
+        let extra_held = n44.held_out.iter().filter(|&&i| i >= 20).count();
+        assert!(
+            (1..=12).contains(&extra_held),
+            "{extra_held} of 24 appended points held out"
+        );
+        assert!(Split::nested(21, 20, 0.2, 7).is_err());
         assert_eq!(
             Split::by_design_point(2, 0.01, 0).unwrap().held_out.len(),
             1

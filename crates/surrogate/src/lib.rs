@@ -15,4 +15,4 @@ pub mod train;
 
 pub use dataset::{DatasetError, DatasetMeta, ParamSpec, Split, TrainingSet};
 pub use surrogate::{Evaluator, Precision, Surrogate, SurrogateError, SurrogateMeta};
-pub use train::{train, TimeFeatures, TrainOptions, TrainReport};
+pub use train::{train, TimeFeatures, TrainOptions, TrainReport, WEIGHTS_FILE};

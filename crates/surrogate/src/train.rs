@@ -80,6 +80,10 @@ impl std::str::FromStr for TimeFeatures {
     }
 }
 
+/// The trained weights (PyTorch `state_dict` and output scale) in a surrogate folder, kept for
+/// a later warm start; the ONNX graphs are what bemcal evaluates.
+pub const WEIGHTS_FILE: &str = "weights.pt";
+
 /// Trainer options (defaults: reference Table 3 with early stopping).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrainOptions {
@@ -101,6 +105,9 @@ pub struct TrainOptions {
     pub python: Option<PathBuf>,
     /// Do not echo the trainer's output (it still goes into the error on failure).
     pub quiet: bool,
+    /// Warm start: a previous surrogate folder holding [`WEIGHTS_FILE`] (same parameters,
+    /// outputs and architecture); `None` trains from a random initialisation.
+    pub init: Option<PathBuf>,
 }
 
 impl Default for TrainOptions {
@@ -115,6 +122,7 @@ impl Default for TrainOptions {
             threads: 0,
             python: None,
             quiet: false,
+            init: None,
         }
     }
 }
@@ -187,8 +195,11 @@ pub fn train(
         .args(["--batch-size", &opts.batch_size.to_string()])
         .args(["--time-features", opts.time_features.as_str()])
         .args(["--device", &opts.device])
-        .args(["--threads", &opts.threads.to_string()])
-        .env("PYTHONPATH", pkg.path())
+        .args(["--threads", &opts.threads.to_string()]);
+    if let Some(init) = &opts.init {
+        cmd.arg("--init").arg(init);
+    }
+    cmd.env("PYTHONPATH", pkg.path())
         .env("PYTHONDONTWRITEBYTECODE", "1");
     let start = std::time::Instant::now();
     let (ok, log) = if opts.quiet {

@@ -69,6 +69,44 @@ fn train_small(
 }
 
 #[test]
+fn warm_start_continues_from_the_saved_weights() {
+    let Some((tmp, first)) = train_small(TimeFeatures::None) else {
+        return;
+    };
+    let dir = tmp.path().join("model");
+    assert!(dir.join(bemcal_surrogate::WEIGHTS_FILE).is_file());
+    // No epochs from the saved weights: the same model, so the same held-out error.
+    let opts = TrainOptions {
+        epochs: 0,
+        seed: 3,
+        batch_size: 512,
+        threads: 1,
+        quiet: true,
+        init: Some(dir.clone()),
+        ..TrainOptions::default()
+    };
+    let again = train(&tmp.path().join("dataset"), &tmp.path().join("warm"), &opts).unwrap();
+    for o in &first.meta.outputs {
+        let (a, b) = (
+            first.meta.held_out.metrics[&o.name].rmse_kwh,
+            again.meta.held_out.metrics[&o.name].rmse_kwh,
+        );
+        assert!((a - b).abs() <= 1e-5 * a, "{}: {a} vs {b}", o.name);
+    }
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("warm/surrogate.json")).unwrap())
+            .unwrap();
+    assert_eq!(meta["training"]["init"], dir.to_str().unwrap());
+    // A folder without weights is refused with a message that says so.
+    let opts = TrainOptions {
+        init: Some(tmp.path().join("dataset")),
+        ..opts
+    };
+    let e = train(&tmp.path().join("dataset"), &tmp.path().join("bad"), &opts).unwrap_err();
+    assert!(e.to_string().contains("weights.pt"), "{e}");
+}
+
+#[test]
 fn trains_exports_and_matches_torch() {
     let Some((tmp, report)) = train_small(TimeFeatures::HourSchedule) else {
         return;
