@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use bemcal_calibrate::pipeline::Calibration;
 use bemcal_calibrate::Project;
+use bemcal_coordinator::artifacts::safe_relative;
 use bemcal_coordinator::client::walk;
 use bemcal_coordinator::proto::{self, job::Kind};
 use bemcal_stats::mcmc::ChainState;
@@ -40,14 +41,9 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
             ))
         }
         Some(Kind::Train(t)) => {
-            let init = if t.init.is_empty() {
-                None
-            } else {
-                let rel = Path::new(&t.init);
-                if rel.is_absolute() || rel.components().any(|c| c.as_os_str() == "..") {
-                    return Err(format!("bad warm-start folder {:?}", t.init));
-                }
-                Some(work.join(rel))
+            let init = match t.init.as_str() {
+                "" => None,
+                rel => Some(work.join(safe_relative(rel)?)),
             };
             cal.train(init.as_deref()).map_err(err)?;
             let dir = cal.surrogate_dir();
