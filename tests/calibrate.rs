@@ -203,35 +203,10 @@ fn surrogate_matches_torch_on_real_output(dir: &Path) {
             "held-out CV-RMSE of {o}: {m}"
         );
     }
-    let parity: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("parity.json")).unwrap()).unwrap();
-    let shape: Vec<usize> = parity["x_shape"]
-        .as_array()
+    let parity = bemcal_surrogate::ParityFixture::read(dir).unwrap();
+    let e = bemcal_surrogate::Surrogate::load(dir, 1)
         .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap() as usize)
-        .collect();
-    let x: Vec<f32> = parity["x"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap() as f32)
-        .collect();
-    let x = ndarray::Array3::from_shape_vec((shape[0], shape[1], shape[2]), x).unwrap();
-    let mut s = bemcal_surrogate::Surrogate::load(dir, 1).unwrap();
-    let y = s.run_windows(x.view()).unwrap();
-    let torch = parity["y_windows"].as_array().unwrap();
-    let (mut diff, mut scale) = (0.0f64, 0.0f64);
-    for (row, want) in y.rows().into_iter().zip(torch) {
-        for (a, b) in row.iter().zip(want.as_array().unwrap()) {
-            let b = b.as_f64().unwrap();
-            diff = diff.max((*a as f64 - b).abs());
-            scale = scale.max(b.abs());
-        }
-    }
-    assert!(
-        diff / scale < 1e-4,
-        "ort vs torch relative error {:.2e}",
-        diff / scale
-    );
+        .parity_error(&parity)
+        .unwrap();
+    assert!(e < 1e-4, "ort vs torch relative error {e:.2e}");
 }

@@ -7,12 +7,16 @@
 //!   which writes the ONNX graphs and `surrogate.json` ([`SurrogateMeta`]).
 //! * [`surrogate`]: [`Surrogate::load`] and [`Evaluator`], the per-proposal hot path.
 //! * [`predict`]: CSV output of an evaluation.
+//! * [`parity`]: the trainer's PyTorch outputs, against which every trained surrogate's graphs
+//!   are checked.
 
 pub mod dataset;
+pub mod parity;
 pub mod predict;
 pub mod surrogate;
 pub mod train;
 
 pub use dataset::{DatasetError, DatasetMeta, ParamSpec, Split, TrainingSet};
+pub use parity::{ParityFixture, PARITY_FILE, PARITY_TOLERANCE};
 pub use surrogate::{Evaluator, Precision, Surrogate, SurrogateError, SurrogateMeta};
 pub use train::{train, TimeFeatures, TrainOptions, TrainReport, WEIGHTS_FILE};

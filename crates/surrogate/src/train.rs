@@ -8,7 +8,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use crate::surrogate::{SurrogateError, SurrogateMeta};
+use crate::parity::{ParityFixture, PARITY_FILE, PARITY_TOLERANCE};
+use crate::surrogate::{Surrogate, SurrogateError, SurrogateMeta};
 
 /// Variable naming the Python interpreter explicitly.
 pub const PYTHON_VAR: &str = "BEMCAL_PYTHON";
@@ -232,6 +233,18 @@ pub fn train(
     }
     let seconds = start.elapsed().as_secs_f64();
     let meta = SurrogateMeta::read(out_dir)?;
+    // The graphs as ONNX Runtime runs them here must reproduce the PyTorch network.
+    let fixture = ParityFixture::read(out_dir)?;
+    let error = Surrogate::load(out_dir, 1)?.parity_error(&fixture)?;
+    if error.is_nan() || error > PARITY_TOLERANCE {
+        return Err(SurrogateError::Metadata {
+            path: out_dir.join(PARITY_FILE),
+            message: format!(
+                "ONNX Runtime here disagrees with PyTorch on the exported network: relative error \
+                 {error:.2e} > {PARITY_TOLERANCE:.0e} (is the ONNX Runtime library the pinned one?)"
+            ),
+        });
+    }
     Ok(TrainReport {
         out_dir: out_dir.to_path_buf(),
         meta,

@@ -4,29 +4,11 @@
 
 mod common;
 
-use bemcal_surrogate::{train, Precision, Surrogate, SurrogateError, TimeFeatures, TrainOptions};
-use ndarray::{Array3, ArrayView2};
-
-fn rel_err(a: ArrayView2<'_, f32>, b: &[Vec<f64>]) -> f64 {
-    let mut max_diff = 0.0f64;
-    let mut max_abs = 0.0f64;
-    for (row_a, row_b) in a.rows().into_iter().zip(b) {
-        for (x, y) in row_a.iter().zip(row_b) {
-            max_diff = max_diff.max((*x as f64 - y).abs());
-            max_abs = max_abs.max(y.abs());
-        }
-    }
-    max_diff / max_abs.max(1e-12)
-}
-
-fn params_of(parity: &serde_json::Value) -> Vec<f64> {
-    parity["params_raw"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect()
-}
+use bemcal_surrogate::parity::relative_error;
+use bemcal_surrogate::{
+    train, ParityFixture, Precision, Surrogate, SurrogateError, TimeFeatures, TrainOptions,
+};
+use ndarray::Array3;
 
 fn environment_ready() -> bool {
     if bemcal_surrogate::train::find_python().is_none() {
@@ -127,48 +109,14 @@ fn trains_exports_and_matches_torch() {
     assert_eq!(meta.n_features, 3 + 5 + 4);
 
     let dir = tmp.path().join("model");
-    let parity: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("parity.json")).unwrap()).unwrap();
-    let to_vv = |v: &serde_json::Value| -> Vec<Vec<f64>> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|r| {
-                r.as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap())
-                    .collect()
-            })
-            .collect()
-    };
-    let shape: Vec<usize> = parity["x_shape"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_u64().unwrap() as usize)
-        .collect();
-    let x: Vec<f32> = parity["x"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap() as f32)
-        .collect();
-    let x = Array3::from_shape_vec((shape[0], shape[1], shape[2]), x).unwrap();
-
+    let parity = ParityFixture::read(&dir).unwrap();
     let mut s = Surrogate::load(&dir, 1).expect("loads");
-    // Plain graph on explicit windows.
-    let y = s.run_windows(x.view()).unwrap();
-    let e = rel_err(y.view(), &to_vv(&parity["y_windows"]));
+    // Plain graph on explicit windows (train() has checked this too).
+    let e = s.parity_error(&parity).unwrap();
     assert!(e < 1e-4, "plain graph vs torch: relative error {e:.2e}");
 
     // Structured hot path over the whole year.
-    let params: Vec<f64> = parity["params_raw"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_f64().unwrap())
-        .collect();
+    let params = parity.params_raw.clone();
     let weather = common::synthetic_weather(8760);
     // The evaluator's default is the fused graph.
     assert_eq!(s.hot_path_file(), "surrogate_fused.onnx");
@@ -176,7 +124,7 @@ fn trains_exports_and_matches_torch() {
     let hourly = meta.hourly_inputs(&weather);
     let np = meta.params.len();
     let mut pn = vec![0f32; np];
-    meta.normalise_params(&params_of(&parity), &mut pn).unwrap();
+    meta.normalise_params(&params, &mut pn).unwrap();
     let mut xy = Array3::<f32>::zeros((8760, 3, meta.n_features));
     for t in 0..8760usize {
         for st in 0..3usize {
@@ -191,7 +139,6 @@ fn trains_exports_and_matches_torch() {
     }
     let y_plain_year = s.run_windows(xy.view()).unwrap();
     let mut ev = s.bind(&weather).unwrap();
-    let y_year = to_vv(&parity["y_year"]);
     let y = ev.evaluate(&params).unwrap().to_owned();
     assert_eq!(y.dim(), (8760, 3));
     let max_y = y_plain_year.iter().fold(0f32, |m, v| m.max(v.abs()));
@@ -203,7 +150,7 @@ fn trains_exports_and_matches_torch() {
         e < 1e-4,
         "fused graph vs plain graph: relative error {e:.2e}"
     );
-    let e = rel_err(y.view(), &y_year);
+    let e = relative_error(y.view(), &parity.y_year);
     assert!(
         e < 1e-4,
         "structured graph vs torch: relative error {e:.2e}"
