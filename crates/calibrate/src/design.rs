@@ -231,6 +231,9 @@ pub fn simulate_design(
     Ok(out)
 }
 
+/// One point's simulation: its hourly outputs and the EnergyPlus wall time (`None`: reloaded).
+pub type PointRun = Result<(HourlyOutputs, Option<f64>), Error>;
+
 /// Simulates (or reloads) the points `(i, x)`, under the keys `i` in `dir`, with `parallel`
 /// EnergyPlus processes; one result per point, in order (a failed run does not stop the others).
 #[allow(clippy::too_many_arguments)]
@@ -243,7 +246,7 @@ pub fn simulate_points(
     dir: &Path,
     parallel: usize,
     progress: &(dyn Fn(usize, usize) + Sync),
-) -> Result<Vec<Result<(HourlyOutputs, Option<f64>), Error>>, Error> {
+) -> Result<Vec<PointRun>, Error> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(parallel)
@@ -271,7 +274,7 @@ pub fn simulate_point(
     weather: &Path,
     dir: &Path,
     i: usize,
-) -> Result<(HourlyOutputs, Option<f64>), Error> {
+) -> PointRun {
     let saved = dir.join(format!("point_{i:03}.json"));
     if let Ok(text) = std::fs::read_to_string(&saved) {
         if let Ok(o) = serde_json::from_str::<SavedRun>(&text) {

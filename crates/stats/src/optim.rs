@@ -253,9 +253,9 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             }
             z
         };
-        for k in 0..d {
-            hess_points.push(shifted(&[(k, step[k])]));
-            hess_points.push(shifted(&[(k, 2.0 * step[k])]));
+        for (k, &h) in step.iter().enumerate() {
+            hess_points.push(shifted(&[(k, h)]));
+            hess_points.push(shifted(&[(k, 2.0 * h)]));
         }
         for i in 0..d {
             for j in 0..i {
@@ -405,7 +405,7 @@ fn fd_step(z: &[f64], k: usize, cfg: &BfgsConfig) -> f64 {
 /// the scaling `H_0 = (s^T y / y^T y) I` (Eq. 6.20).
 fn bfgs_update(h: &mut [f64], s: &[f64], y: &[f64], updated: &mut bool, d: usize) {
     let sy: f64 = s.iter().zip(y).map(|(a, b)| a * b).sum();
-    if !(sy > 1e-12) {
+    if sy.is_nan() || sy <= 1e-12 {
         return;
     }
     if !*updated {
@@ -457,13 +457,13 @@ mod tests {
         };
         let out = maximise_batch(&starts, &lp0, &cfg, |us| us.iter().map(|u| lp(u)).collect());
         for o in &out {
-            for k in 0..3 {
-                assert!((o.point[k] - mean[k]).abs() < 0.05 * sd[k], "{:?}", o.point);
+            for (k, (m, s)) in mean.iter().zip(&sd).enumerate() {
+                assert!((o.point[k] - m).abs() < 0.05 * s, "{:?}", o.point);
             }
             // Variances within 25 % of the truth.
-            for k in 0..3 {
+            for (k, s) in sd.iter().enumerate() {
                 let v = o.covariance[k * 3 + k];
-                assert!((v / (sd[k] * sd[k]) - 1.0).abs() < 0.25, "var {k}: {v}");
+                assert!((v / (s * s) - 1.0).abs() < 0.25, "var {k}: {v}");
             }
             assert!(o.evaluations > 0 && o.iterations > 0);
         }
