@@ -1,6 +1,7 @@
 //! The figures, each a pure function from data to an SVG string (plotters, SVG backend).
 //! Legends live in the HTML next to each figure so the small multiples stay compact.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::series::DashedLineSeries;
@@ -500,6 +501,43 @@ pub fn hourly_window(v: &HourlyView<'_>, w: &Window) -> Result<String, PlotError
     })
 }
 
+/// A chart with `f64` axes on an SVG area.
+type XyChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The hour-of-day axes of the day-type figures (the reference's Figs. 4-6): x from 0 to `x1`
+/// h, y from 0 to `y1` labelled `y_desc`; vertical grid lines only with `x_mesh`.
+fn hour_of_day_axes<'a, 'b>(
+    root: &'a Area<'b>,
+    x1: f64,
+    y1: f64,
+    y_desc: &str,
+    x_mesh: bool,
+) -> Result<XyChart<'a, 'b>, DynErr> {
+    let mut c = ChartBuilder::on(root)
+        .margin(8)
+        .margin_right(22)
+        .x_label_area_size(30)
+        .y_label_area_size(44)
+        .build_cartesian_2d(0.0..x1, 0.0..y1)?;
+    let mut mesh = c.configure_mesh();
+    mesh.light_line_style(LIGHT_MESH)
+        .bold_line_style(BOLD_MESH)
+        .x_labels(7)
+        .y_labels(6)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.1}"))
+        .x_desc("hour of day")
+        .y_desc(y_desc)
+        .label_style((FONT, 11))
+        .axis_desc_style((FONT, 11));
+    if !x_mesh {
+        mesh.disable_x_mesh();
+    }
+    mesh.draw()?;
+    Ok(c)
+}
+
 /// One day type's normalised daily profiles (the reference's Fig. 4): every day thin, outlier
 /// days red, the medoid thick.
 pub fn daily_profiles(
@@ -517,24 +555,7 @@ pub fn daily_profiles(
         * 1.05;
     let col = PALETTE[colour % PALETTE.len()];
     render(420, 260, |root| {
-        let mut c = ChartBuilder::on(root)
-            .margin(8)
-            .margin_right(22)
-            .x_label_area_size(30)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..23.0, 0.0..y1)?;
-        c.configure_mesh()
-            .light_line_style(LIGHT_MESH)
-            .bold_line_style(BOLD_MESH)
-            .x_labels(7)
-            .y_labels(6)
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.1}"))
-            .x_desc("hour of day")
-            .y_desc("normalised load")
-            .label_style((FONT, 11))
-            .axis_desc_style((FONT, 11))
-            .draw()?;
+        let mut c = hour_of_day_axes(root, 23.0, y1, "normalised load", true)?;
         for (d, prof) in days.iter().enumerate() {
             let out = outliers.get(d).copied().unwrap_or(false);
             let style = if out {
@@ -572,25 +593,7 @@ pub fn schedule_boxes(
         .fold(1.0, f64::max)
         * 1.05;
     render(420, 260, |root| {
-        let mut c = ChartBuilder::on(root)
-            .margin(8)
-            .margin_right(22)
-            .x_label_area_size(30)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..24.0, 0.0..y1)?;
-        c.configure_mesh()
-            .light_line_style(LIGHT_MESH)
-            .bold_line_style(BOLD_MESH)
-            .disable_x_mesh()
-            .x_labels(7)
-            .y_labels(6)
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.1}"))
-            .x_desc("hour of day")
-            .y_desc("schedule fraction")
-            .label_style((FONT, 11))
-            .axis_desc_style((FONT, 11))
-            .draw()?;
+        let mut c = hour_of_day_axes(root, 24.0, y1, "schedule fraction", false)?;
         for (i, h) in hours.iter().enumerate() {
             let xc = h.hour as f64 + 0.5;
             if let Some((lo, hi)) = whiskers.and_then(|w| w.get(i)).copied() {
@@ -638,25 +641,7 @@ pub fn schedule_intervals(
         .fold(1.0, f64::max)
         * 1.05;
     render(420, 260, |root| {
-        let mut c = ChartBuilder::on(root)
-            .margin(8)
-            .margin_right(22)
-            .x_label_area_size(30)
-            .y_label_area_size(44)
-            .build_cartesian_2d(0.0..24.0, 0.0..y1)?;
-        c.configure_mesh()
-            .light_line_style(LIGHT_MESH)
-            .bold_line_style(BOLD_MESH)
-            .disable_x_mesh()
-            .x_labels(7)
-            .y_labels(6)
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.1}"))
-            .x_desc("hour of day")
-            .y_desc("schedule fraction")
-            .label_style((FONT, 11))
-            .axis_desc_style((FONT, 11))
-            .draw()?;
+        let mut c = hour_of_day_axes(root, 24.0, y1, "schedule fraction", false)?;
         for iv in intervals {
             let (a, b) = (
                 iv.start_hour as f64,
