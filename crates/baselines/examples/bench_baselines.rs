@@ -86,34 +86,6 @@ fn mem_kib(key: &str) -> f64 {
         .unwrap_or(0.0)
 }
 
-/// Synthetic year of weather when no EPW is given (as in the surrogate benchmark).
-fn synthetic_weather() -> HourlyFeatures {
-    use bemcal_weather::DayType;
-    let tau = std::f64::consts::TAU;
-    let n = N_HOURS;
-    HourlyFeatures {
-        dry_bulb_c: (0..n)
-            .map(|t| 10.0 - 12.0 * (tau * t as f64 / 8760.0).cos())
-            .collect(),
-        rel_humidity_pct: (0..n)
-            .map(|t| 60.0 + 20.0 * (tau * t as f64 / 24.0).cos())
-            .collect(),
-        wind_speed_m_s: (0..n).map(|t| 3.0 + (t % 7) as f64 * 0.3).collect(),
-        global_horizontal_wh_m2: (0..n)
-            .map(|t| (600.0 * (tau * ((t % 24) as f64 - 6.0) / 24.0).sin()).max(0.0))
-            .collect(),
-        day_type: (0..n)
-            .map(|t| {
-                if (t / 24) % 7 >= 5 {
-                    DayType::Weekend
-                } else {
-                    DayType::Weekday
-                }
-            })
-            .collect(),
-    }
-}
-
 /// Weather rows scaled to `[0, 1]` per feature (the GP inputs).
 fn scaled_weather(f: &HourlyFeatures) -> Mat<f64> {
     let rows: Vec<[f64; 5]> = (0..f.len()).map(|t| f.row(t)).collect();
@@ -164,7 +136,7 @@ fn main() -> BoxResult<()> {
             let epw = Epw::read(p)?;
             HourlyFeatures::from_epw(&epw, &Calendar::new(2021, Holidays::UsFederal))
         }
-        None => synthetic_weather(),
+        None => HourlyFeatures::synthetic(N_HOURS),
     };
     let wx = scaled_weather(&features);
     println!(

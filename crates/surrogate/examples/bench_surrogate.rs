@@ -9,34 +9,8 @@
 use std::time::Instant;
 
 use bemcal_surrogate::{Precision, Surrogate};
-use bemcal_weather::{DayType, HourlyFeatures};
+use bemcal_weather::HourlyFeatures;
 use ndarray::Array3;
-
-fn weather() -> HourlyFeatures {
-    let tau = std::f64::consts::TAU;
-    let n = 8760;
-    HourlyFeatures {
-        dry_bulb_c: (0..n)
-            .map(|t| 10.0 - 12.0 * (tau * t as f64 / 8760.0).cos())
-            .collect(),
-        rel_humidity_pct: (0..n)
-            .map(|t| 60.0 + 20.0 * (tau * t as f64 / 24.0).cos())
-            .collect(),
-        wind_speed_m_s: (0..n).map(|t| 3.0 + (t % 7) as f64 * 0.3).collect(),
-        global_horizontal_wh_m2: (0..n)
-            .map(|t| (600.0 * (tau * ((t % 24) as f64 - 6.0) / 24.0).sin()).max(0.0))
-            .collect(),
-        day_type: (0..n)
-            .map(|t| {
-                if (t / 24) % 7 >= 5 {
-                    DayType::Weekend
-                } else {
-                    DayType::Weekday
-                }
-            })
-            .collect(),
-    }
-}
 
 /// Best rate (calls x per_call per second) over 4 rounds of `seconds / 4`: the machine may be
 /// shared; the best round is the least disturbed.
@@ -86,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
 
     // Plain graph on the full year of windows (the exported `x` -> `y` LSTM).
-    let w = weather();
+    let w = HourlyFeatures::synthetic(8760);
     let hourly = meta.hourly_inputs(&w);
     let p0 = proposal();
     let mut pn = vec![0f32; np];

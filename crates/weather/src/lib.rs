@@ -369,6 +369,31 @@ impl HourlyFeatures {
         }
     }
 
+    /// A smooth synthetic year of `n` hours (seasonal dry bulb, daily humidity and sun, a
+    /// weekly wind pattern, Saturdays and Sundays as weekends from hour 0 a Monday), for
+    /// benchmarks that time the surrogate and need no real climate.
+    pub fn synthetic(n: usize) -> HourlyFeatures {
+        let tau = std::f64::consts::TAU;
+        HourlyFeatures {
+            dry_bulb_c: (0..n)
+                .map(|t| 10.0 - 12.0 * (tau * t as f64 / 8760.0).cos())
+                .collect(),
+            rel_humidity_pct: (0..n)
+                .map(|t| 60.0 + 20.0 * (tau * t as f64 / 24.0).cos())
+                .collect(),
+            wind_speed_m_s: (0..n).map(|t| 3.0 + (t % 7) as f64 * 0.3).collect(),
+            global_horizontal_wh_m2: (0..n)
+                .map(|t| (600.0 * (tau * ((t % 24) as f64 - 6.0) / 24.0).sin()).max(0.0))
+                .collect(),
+            day_type: (0..n)
+                .map(|t| match (t / 24) % 7 {
+                    5 | 6 => DayType::Weekend,
+                    _ => DayType::Weekday,
+                })
+                .collect(),
+        }
+    }
+
     /// Number of hours.
     pub fn len(&self) -> usize {
         self.dry_bulb_c.len()
@@ -394,6 +419,25 @@ impl HourlyFeatures {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn synthetic_year_has_weekends_and_its_cycles() {
+        let f = HourlyFeatures::synthetic(8760);
+        assert_eq!(f.len(), 8760);
+        let day = |d: usize| f.day_type[d * 24 + 12];
+        assert_eq!(
+            (day(4), day(5), day(6), day(7)),
+            (
+                DayType::Weekday,
+                DayType::Weekend,
+                DayType::Weekend,
+                DayType::Weekday
+            )
+        );
+        assert!(f.dry_bulb_c[0] < -1.9 && f.dry_bulb_c[4380] > 21.9);
+        assert_eq!(f.global_horizontal_wh_m2[0], 0.0);
+        assert!(f.global_horizontal_wh_m2[12] > 599.0);
+    }
 
     fn shared_epw(name: &str) -> Option<PathBuf> {
         let p = Path::new(env!("CARGO_MANIFEST_DIR"))
