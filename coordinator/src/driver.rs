@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use bemcal_calibrate::pipeline::{
-    fallback_note, write_summary, Calibration, ChainSummary, OutputMetrics, Timings,
+    fallback_note, moved_chains, write_summary, Calibration, ChainSummary, MovedChain,
+    OutputMetrics, Timings,
 };
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{
@@ -88,6 +89,9 @@ struct Merged {
     /// Draws validated instead when EnergyPlus fails at the estimate.
     #[serde(default)]
     fallbacks: Vec<Vec<f64>>,
+    /// Chains started in the best optimum's mode.
+    #[serde(default)]
+    moved_chains: Vec<MovedChain>,
 }
 
 type Result<T> = std::result::Result<T, String>;
@@ -638,6 +642,7 @@ impl State {
             sigma_eta: sampler.sigma_eta.clone(),
             held_out: sampler.held_out.clone(),
             fallbacks: chains.fallbacks.clone(),
+            moved_chains: moved_chains(&states),
         };
         self.store
             .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)
@@ -836,6 +841,7 @@ impl State {
             surrogate_at_estimate: merged.surrogate_at_estimate,
             fallbacks: merged.fallbacks,
             estimate_note,
+            moved_chains: merged.moved_chains,
         };
         let summary = write_summary(
             &cal,

@@ -70,6 +70,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             c.a, c.b, c.rho
         );
     }
+    for m in &s.moved_chains {
+        println!(
+            "note: chain {} started in the best optimum's mode (its own optimum was {:.0} nats lower; mcmc.restart_below)",
+            m.chain, m.nats_below
+        );
+    }
     println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");
     println!(
         "{:<18} {:>22} {:>22}      {:>22}",

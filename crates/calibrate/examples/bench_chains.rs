@@ -326,7 +326,7 @@ fn main() -> BoxResult<()> {
                 .collect::<Vec<_>>(),
             t_start.elapsed().as_secs_f64()
         );
-        bemcal_stats::mcmc::chains_at_optima(&config, optima, a.seed, 0)?
+        bemcal_stats::mcmc::chains_at_optima(&config, optima, a.seed, 0, 20.0)?
     };
     let mut draws: Vec<Draws> = states.iter().map(|s| Draws::new(s.dim())).collect();
     let segment = 500u64;

@@ -233,6 +233,9 @@ pub struct Summary {
     pub residual_ar1: Vec<(String, f64)>,
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
+    /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moved_chains: Vec<MovedChain>,
     pub estimate: Estimate,
     /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -756,6 +759,7 @@ impl Sampler<'_> {
             surrogate_at_estimate,
             fallbacks,
             estimate_note: None,
+            moved_chains: vec![],
         })
     }
 }
@@ -779,7 +783,13 @@ pub fn chains_at(
         let optima = maximise_batch(starts, &lps, &cfg, |us: &[Vec<f64>]| {
             post.ln_posterior_batch(eval, us)
         });
-        return Ok(chains_at_optima(&config, optima, m.seed, first_chain)?);
+        return Ok(chains_at_optima(
+            &config,
+            optima,
+            m.seed,
+            first_chain,
+            m.restart_below,
+        )?);
     }
     starts
         .iter()
@@ -812,6 +822,28 @@ pub struct ChainSummary {
     pub fallbacks: Vec<Vec<f64>>,
     /// Set when a fallback draw replaced the estimate (why).
     pub estimate_note: Option<String>,
+    /// Chains started in the best optimum's mode ([`moved_chains`] of the final states).
+    pub moved_chains: Vec<MovedChain>,
+}
+
+/// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
+/// (`mcmc.restart_below`, [`bemcal_stats::optim::keep_best_modes`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MovedChain {
+    pub chain: usize,
+    pub nats_below: f64,
+}
+
+/// The chains of `states` that were moved to the best optimum's mode.
+pub fn moved_chains(states: &[ChainState]) -> Vec<MovedChain> {
+    states
+        .iter()
+        .enumerate()
+        .filter_map(|(chain, s)| {
+            s.moved_from_mode()
+                .map(|nats_below| MovedChain { chain, nats_below })
+        })
+        .collect()
 }
 
 /// What summary.json says when the estimate was replaced by the next-best draw.
@@ -867,6 +899,7 @@ pub fn write_summary(
         acceptance_rate: acceptance,
         estimate: cal.project.validation.estimate,
         estimate_note: chains.estimate_note.clone(),
+        moved_chains: chains.moved_chains.clone(),
         calibrated_values: inp
             .plan
             .calibrated
@@ -1116,7 +1149,14 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     ));
 
     let t = Instant::now();
-    let chains = sampler.summarize(&ck.draws)?;
+    let mut chains = sampler.summarize(&ck.draws)?;
+    chains.moved_chains = moved_chains(&ck.states);
+    for m in &chains.moved_chains {
+        log(&format!(
+            "chains: chain {} started in the best optimum's mode (its own was {:.0} nats lower)",
+            m.chain, m.nats_below
+        ));
+    }
     timings.summary_s = t.elapsed().as_secs_f64();
     log(&format!(
         "posterior: max R-hat {:.3}, min bulk ESS {:.0}",
@@ -1125,7 +1165,6 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 
     let t = Instant::now();
     log("validation: EnergyPlus at the calibrated parameters");
-    let mut chains = chains;
     let mut failures: Vec<String> = vec![];
     let candidates: Vec<Vec<f64>> = std::iter::once(chains.estimate.clone())
         .chain(chains.fallbacks.iter().cloned())

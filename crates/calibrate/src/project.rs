@@ -212,6 +212,12 @@ pub struct McmcSettings {
     /// Algorithm 1). With `start = "optimised"` the independence proposal is the Laplace
     /// Gaussian of the optimum (0.5 is what the 40-D test uses); otherwise the AM estimate.
     pub independence: f64,
+    /// With `start = "optimised"`: a chain whose optimum is more than this many nats below
+    /// the best chain's starts in the best one's mode instead (such a mode holds about
+    /// e^-restart_below of the best one's mass; the summary lists the chains moved, and R-hat
+    /// then measures mixing within the best mode). A large value keeps every chain at its own
+    /// optimum.
+    pub restart_below: f64,
 }
 
 /// Where chains start.
@@ -250,6 +256,7 @@ impl Default for McmcSettings {
             start: ChainStart::Prior,
             optimiser_iterations: 60,
             independence: 0.0,
+            restart_below: 20.0,
         }
     }
 }
@@ -374,6 +381,12 @@ impl Project {
                 self.mcmc.independence
             ));
         }
+        if self.mcmc.restart_below.is_nan() || self.mcmc.restart_below < 0.0 {
+            return Err(format!(
+                "mcmc.restart_below = {} must be a number of nats >= 0",
+                self.mcmc.restart_below
+            ));
+        }
         if self.refine.rounds > 0 {
             if self.refine.points == 0 {
                 return Err("refine.points must be at least 1 when refine.rounds > 0".into());
@@ -442,6 +455,15 @@ mod tests {
         let p: Project = bemcal_energyplus::parse_toml(&text, Path::new("project.toml"))
             .map_err(|e| e.to_string())?;
         p.validate().map(|_| p)
+    }
+
+    #[test]
+    fn the_shipped_example_projects_load() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/office");
+        for name in ["project.toml", "quick.toml"] {
+            let p = Project::load(&dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert!(dir.join(&p.model).is_file(), "{name}: model {:?}", p.model);
+        }
     }
 
     #[test]

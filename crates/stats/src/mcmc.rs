@@ -211,6 +211,10 @@ pub struct ChainState {
     ind_proposed: u64,
     #[serde(default)]
     ind_accepted: u64,
+    /// How many nats below the best optimum this chain's own optimum was, when the chain was
+    /// started in the best one's mode instead ([`crate::optim::keep_best_modes`]).
+    #[serde(default)]
+    moved_from_mode: Option<f64>,
     rng: ChaCha8Rng,
 }
 
@@ -376,6 +380,7 @@ impl ChainState {
             ind_chol: Vec::new(),
             ind_proposed: 0,
             ind_accepted: 0,
+            moved_from_mode: None,
             rng,
         })
     }
@@ -445,6 +450,11 @@ impl ChainState {
     /// Iterations completed.
     pub fn iteration(&self) -> u64 {
         self.iteration
+    }
+    /// Set when the chain was started in the best optimum's mode instead of its own: how many
+    /// nats lower its own was (see [`chains_at_optima`]).
+    pub fn moved_from_mode(&self) -> Option<f64> {
+        self.moved_from_mode
     }
     /// Whether the next iteration is still burn-in.
     pub fn in_burn_in(&self) -> bool {
@@ -790,14 +800,18 @@ pub fn run_segment_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
 
 /// Chains started at optima ([`crate::optim::maximise_batch`]), each with its Laplace
 /// covariance as proposal ([`ChainState::with_proposal`]); chain `c` gets random stream
-/// `first_stream + c`.
+/// `first_stream + c`. An optimum more than `restart_below` nats below the best one is
+/// replaced by the best ([`crate::optim::keep_best_modes`]; the chain records the gap,
+/// [`ChainState::moved_from_mode`]); `f64::INFINITY` keeps every optimum.
 pub fn chains_at_optima(
     config: &MhConfig,
-    optima: Vec<crate::optim::Optimum>,
+    mut optima: Vec<crate::optim::Optimum>,
     seed: u64,
     first_stream: u64,
+    restart_below: f64,
 ) -> Result<Vec<ChainState>> {
-    optima
+    let moved = crate::optim::keep_best_modes(&mut optima, restart_below);
+    let mut states = optima
         .into_iter()
         .enumerate()
         .map(|(c, o)| {
@@ -810,7 +824,11 @@ pub fn chains_at_optima(
                 first_stream + c as u64,
             )
         })
-        .collect()
+        .collect::<Result<Vec<_>>>()?;
+    for (c, gap) in moved {
+        states[c].moved_from_mode = Some(gap);
+    }
+    Ok(states)
 }
 
 /// Dispersed starting points for `n_chains` chains: each a draw from the priors (inverse CDF),

@@ -82,6 +82,36 @@ struct Search {
     done: bool,
 }
 
+/// Mode pruning for chains started at optima: every optimum more than `gap` nats below the
+/// best one is replaced by the best one (point, log density and Laplace covariance). For modes
+/// of similar curvature, a mode `gap` nats lower holds about e^-gap of the best one's mass, so
+/// a chain started there contributes nothing to the posterior but keeps R-hat high; the chains
+/// moved to the best mode still differ through their random streams. Returns the index of each
+/// replaced optimum with its gap. A non-finite gap keeps every optimum.
+pub fn keep_best_modes(optima: &mut [Optimum], gap: f64) -> Vec<(usize, f64)> {
+    let Some(best) =
+        (0..optima.len()).max_by(|&a, &b| optima[a].log_density.total_cmp(&optima[b].log_density))
+    else {
+        return vec![];
+    };
+    let top = optima[best].log_density;
+    if !gap.is_finite() || !top.is_finite() {
+        return vec![];
+    }
+    let mut moved = vec![];
+    for i in 0..optima.len() {
+        let below = top - optima[i].log_density;
+        if below > gap {
+            let b = &optima[best];
+            let (point, covariance) = (b.point.clone(), b.covariance.clone());
+            let o = &mut optima[i];
+            (o.point, o.log_density, o.covariance) = (point, top, covariance);
+            moved.push((i, below));
+        }
+    }
+    moved
+}
+
 /// Maximise `target` (a log density on `[0, 1]^d`, called with a batch of points and returning
 /// one value each) from every start; non-finite values count as `-inf`.
 pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
@@ -434,6 +464,40 @@ fn bfgs_update(h: &mut [f64], s: &[f64], y: &[f64], updated: &mut bool, d: usize
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn optima_far_below_the_best_move_to_the_best_mode() {
+        let at = |x: f64, lp: f64| Optimum {
+            point: vec![x],
+            log_density: lp,
+            covariance: vec![x * 0.01],
+            iterations: 1,
+            evaluations: 1,
+        };
+        let mut optima = vec![
+            at(0.2, -130.0),
+            at(0.5, -100.0),
+            at(0.7, -110.0),
+            at(0.9, f64::NEG_INFINITY),
+        ];
+        let moved = keep_best_modes(&mut optima, 20.0);
+        assert_eq!(moved[0], (0, 30.0));
+        assert_eq!(moved[1].0, 3);
+        assert_eq!(moved.len(), 2);
+        assert_eq!(
+            (
+                optima[0].point[0],
+                optima[0].log_density,
+                optima[0].covariance[0]
+            ),
+            (0.5, -100.0, 0.005)
+        );
+        assert_eq!(optima[2].point, vec![0.7]);
+        assert_eq!(optima[3].point, vec![0.5]);
+        let mut same = vec![at(0.2, -130.0), at(0.5, -100.0)];
+        assert!(keep_best_modes(&mut same, f64::INFINITY).is_empty());
+        assert_eq!(same[0].point, vec![0.2]);
+    }
 
     /// A correlated Gaussian in the cube: the optimum is its mean and the inverse-Hessian
     /// estimate approaches its covariance.

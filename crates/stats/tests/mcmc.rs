@@ -275,7 +275,7 @@ fn mixture_from_the_optimum_recovers_10d_gaussian() {
         independence: 0.5,
         ..MhConfig::default()
     };
-    let mut states = mcmc::chains_at_optima(&cfg, optima, 21, 0).unwrap();
+    let mut states = mcmc::chains_at_optima(&cfg, optima, 21, 0, f64::INFINITY).unwrap();
     let draws = mcmc::run_segment_batch(&mut states, 1000 + 10_000, |pts: &[Vec<f64>]| {
         pts.iter().map(|p| g.ln_pdf(p)).collect()
     })
@@ -337,4 +337,60 @@ fn mixture_checkpoints_resume_bit_identically() {
         ..cfg_small()
     });
     assert!(end.independence_steps() > 300);
+}
+
+/// Mode pruning at optimised starts (`chains_at_optima` with `restart_below`): two Gaussian
+/// modes, the second 50 nats lower; the two chains whose BFGS ends there start in the major
+/// mode instead, say so, and all four chains then agree.
+#[test]
+fn optima_far_below_the_best_start_in_its_mode() {
+    use bemcal_stats::optim::{maximise_batch, BfgsConfig};
+    let lnp = |u: &[f64]| {
+        let q = |m: f64| u.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (2.0 * 0.03 * 0.03);
+        let (a, b) = (-q(0.3), -q(0.7) - 50.0);
+        a.max(b) + (1.0 + (-(a - b).abs()).exp()).ln()
+    };
+    let starts = vec![
+        vec![0.25, 0.3],
+        vec![0.35, 0.32],
+        vec![0.72, 0.7],
+        vec![0.68, 0.66],
+    ];
+    let lps: Vec<f64> = starts.iter().map(|s| lnp(s)).collect();
+    let optima = maximise_batch(&starts, &lps, &BfgsConfig::default(), |us| {
+        us.iter().map(|u| lnp(u)).collect()
+    });
+    let cfg = MhConfig {
+        burn_in: 500,
+        adapt_start: 500,
+        ..MhConfig::default()
+    };
+    let mut states = mcmc::chains_at_optima(&cfg, optima, 5, 0, 20.0).unwrap();
+    let moved: Vec<Option<f64>> = states.iter().map(|s| s.moved_from_mode()).collect();
+    assert_eq!(moved[..2], [None, None]);
+    for gap in moved[2..].iter() {
+        let gap = gap.expect("a chain at the minor mode is moved");
+        assert!((gap - 50.0).abs() < 1.0, "gap {gap}");
+    }
+    let draws = mcmc::run_segment_batch(&mut states, 2500, |pts: &[Vec<f64>]| {
+        pts.iter().map(|p| lnp(p)).collect()
+    })
+    .unwrap();
+    for j in 0..2 {
+        let cols: Vec<Vec<f64>> = draws.iter().map(|d| d.column(j)).collect();
+        let g = bemcal_stats::diagnostics::diagnose(&cols).unwrap();
+        assert!(g.rhat < 1.05, "coordinate {j}: R-hat {}", g.rhat);
+        assert!(
+            (g.mean - 0.3).abs() < 0.01,
+            "coordinate {j}: mean {}",
+            g.mean
+        );
+    }
+    // Without pruning the chains stay in both modes.
+    let optima = maximise_batch(&starts, &lps, &BfgsConfig::default(), |us| {
+        us.iter().map(|u| lnp(u)).collect()
+    });
+    let kept = mcmc::chains_at_optima(&cfg, optima, 5, 0, f64::INFINITY).unwrap();
+    assert!(kept.iter().all(|s| s.moved_from_mode().is_none()));
+    assert!(kept[2].position()[0] > 0.6);
 }

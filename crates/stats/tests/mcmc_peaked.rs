@@ -99,7 +99,7 @@ fn run_from(
                 );
             }
         }
-        mcmc::chains_at_optima(cfg, opt, seed, 0).unwrap()
+        mcmc::chains_at_optima(cfg, opt, seed, 0, f64::INFINITY).unwrap()
     } else {
         starts
             .into_iter()
