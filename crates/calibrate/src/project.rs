@@ -216,7 +216,8 @@ pub struct McmcSettings {
     /// the best chain's starts in the best one's mode instead (such a mode holds about
     /// e^-restart_below of the best one's mass; the summary lists the chains moved, and R-hat
     /// then measures mixing within the best mode). A large value keeps every chain at its own
-    /// optimum.
+    /// optimum. Through the coordinator the chains compared are those of one chain job: all of
+    /// them unless `--chains-per-job` splits them.
     pub restart_below: f64,
 }
 
