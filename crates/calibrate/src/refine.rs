@@ -130,27 +130,19 @@ pub fn next_starts(
                 .fold(f64::NEG_INFINITY, f64::max)
         })
         .collect();
-    let Some((best, top)) = best_lp
-        .iter()
-        .copied()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-    else {
+    let Some((best, below)) = bemcal_stats::mcmc::far_below_best(&best_lp, gap) else {
         return (last.to_vec(), vec![]);
     };
-    let stuck: Vec<usize> = (0..last.len())
-        .filter(|&c| best_lp.get(c).is_some_and(|lp| top - lp > gap))
-        .collect();
+    let restarted: Vec<(usize, f64)> = below.into_iter().filter(|&(c, _)| c < last.len()).collect();
     let mut starts = last.to_vec();
     let d = &draws[best];
     let half = d.len() / 2;
-    for (k, &c) in stuck.iter().enumerate() {
-        let i = half + (d.len() - half) * k / (stuck.len() + 1);
+    for (k, &(c, _)) in restarted.iter().enumerate() {
+        let i = half + (d.len() - half) * k / (restarted.len() + 1);
         if i < d.len() {
             starts[c] = d.point(i).to_vec();
         }
     }
-    let restarted = stuck.iter().map(|&c| (c, top - best_lp[c])).collect();
     (starts, restarted)
 }
 

@@ -89,25 +89,15 @@ struct Search {
 /// moved to the best mode still differ through their random streams. Returns the index of each
 /// replaced optimum with its gap. A non-finite gap keeps every optimum.
 pub fn keep_best_modes(optima: &mut [Optimum], gap: f64) -> Vec<(usize, f64)> {
-    let Some(best) =
-        (0..optima.len()).max_by(|&a, &b| optima[a].log_density.total_cmp(&optima[b].log_density))
-    else {
+    let lps: Vec<f64> = optima.iter().map(|o| o.log_density).collect();
+    let Some((best, moved)) = crate::mcmc::far_below_best(&lps, gap) else {
         return vec![];
     };
-    let top = optima[best].log_density;
-    if !gap.is_finite() || !top.is_finite() {
-        return vec![];
-    }
-    let mut moved = vec![];
-    for i in 0..optima.len() {
-        let below = top - optima[i].log_density;
-        if below > gap {
-            let b = &optima[best];
-            let (point, covariance) = (b.point.clone(), b.covariance.clone());
-            let o = &mut optima[i];
-            (o.point, o.log_density, o.covariance) = (point, top, covariance);
-            moved.push((i, below));
-        }
+    let b = optima[best].clone();
+    for &(i, _) in &moved {
+        let o = &mut optima[i];
+        (o.point, o.log_density, o.covariance) =
+            (b.point.clone(), b.log_density, b.covariance.clone());
     }
     moved
 }
