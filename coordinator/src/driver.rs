@@ -10,8 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use bemcal_calibrate::pipeline::{
-    fallback_note, moved_chains, write_summary, Calibration, ChainSummary, MovedChain,
-    OutputMetrics, Timings,
+    fallback_note, write_summary, Calibration, ChainSummary, MovedChain, OutputMetrics, Timings,
 };
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{
@@ -612,7 +611,7 @@ impl State {
             self.store.set_stage(&r.id, "refine", jobs).map_err(err)?;
             return Ok(true);
         }
-        let chains = sampler.summarize(&draws).map_err(err)?;
+        let chains = sampler.summarize(&states, &draws).map_err(err)?;
         if let Some(target) = self.config.rhat_target {
             if chains.posterior.max_rhat > target && r.extensions < self.config.max_extensions {
                 let m = &cal.project.mcmc;
@@ -642,7 +641,7 @@ impl State {
             sigma_eta: sampler.sigma_eta.clone(),
             held_out: sampler.held_out.clone(),
             fallbacks: chains.fallbacks.clone(),
-            moved_chains: moved_chains(&states),
+            moved_chains: chains.moved_chains.clone(),
         };
         self.store
             .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)

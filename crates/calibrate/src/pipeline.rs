@@ -631,8 +631,13 @@ impl Sampler<'_> {
         })?)
     }
 
-    /// Stage 6: merged chains -> posterior summary, draws.csv and posterior predictive bands.
-    pub fn summarize(&mut self, draws: &[Draws]) -> Result<ChainSummary, Error> {
+    /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
+    /// and posterior predictive bands.
+    pub fn summarize(
+        &mut self,
+        states: &[ChainState],
+        draws: &[Draws],
+    ) -> Result<ChainSummary, Error> {
         let cal = self.cal;
         let inp = &cal.inputs;
         let d = inp.plan.calibrated.len();
@@ -759,7 +764,7 @@ impl Sampler<'_> {
             surrogate_at_estimate,
             fallbacks,
             estimate_note: None,
-            moved_chains: vec![],
+            moved_chains: moved_chains(states),
         })
     }
 }
@@ -822,7 +827,7 @@ pub struct ChainSummary {
     pub fallbacks: Vec<Vec<f64>>,
     /// Set when a fallback draw replaced the estimate (why).
     pub estimate_note: Option<String>,
-    /// Chains started in the best optimum's mode ([`moved_chains`] of the final states).
+    /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
     pub moved_chains: Vec<MovedChain>,
 }
 
@@ -1149,8 +1154,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     ));
 
     let t = Instant::now();
-    let mut chains = sampler.summarize(&ck.draws)?;
-    chains.moved_chains = moved_chains(&ck.states);
+    let mut chains = sampler.summarize(&ck.states, &ck.draws)?;
     for m in &chains.moved_chains {
         log(&format!(
             "chains: chain {} started in the best optimum's mode (its own was {:.0} nats lower)",

@@ -87,7 +87,7 @@ struct Search {
 /// of similar curvature, a mode `gap` nats lower holds about e^-gap of the best one's mass, so
 /// a chain started there contributes nothing to the posterior but keeps R-hat high; the chains
 /// moved to the best mode still differ through their random streams. Returns the index of each
-/// replaced optimum with its gap. A non-finite gap keeps every optimum.
+/// replaced optimum with its gap. `f64::INFINITY` keeps every optimum.
 pub fn keep_best_modes(optima: &mut [Optimum], gap: f64) -> Vec<(usize, f64)> {
     let lps: Vec<f64> = optima.iter().map(|o| o.log_density).collect();
     let Some((best, moved)) = crate::mcmc::far_below_best(&lps, gap) else {
