@@ -306,9 +306,9 @@ impl Draws {
     }
 }
 
-/// In-place lower Cholesky factor of a symmetric positive-definite row-major `d x d` matrix;
-/// `None` if not positive definite.
-pub(crate) fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
+/// Lower Cholesky factor `L` (row-major `d x d`) of a symmetric positive-definite row-major
+/// `d x d` matrix; `None` if not positive definite.
+pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; d * d];
     for i in 0..d {
         for j in 0..=i {
