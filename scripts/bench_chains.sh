@@ -2,7 +2,8 @@
 # Chains on the paper-size problem (issue 4): 4 adaptive MH chains over the 38-parameter
 # LSTM surrogate (variances integrated out, AR(1) residuals, as the pipeline; BENCH_SAMPLED_SIGMA=1
 # samples 3 log sigma_delta instead; BENCH_OPTIMISED=1 starts from BFGS optima with the
-# independence mixture), synthetic observations at a hidden truth.
+# independence mixture, and BENCH_OPTIMA=FILE keeps the optima for the next run), synthetic
+# observations at a hidden truth.
 #
 #   scripts/bench_chains.sh [SURROGATE_DIR] [THREADS=2]
 #   FULL=1 scripts/bench_chains.sh      # the target run: 4 x 10,000 iterations, 2,000 burn-in
