@@ -300,7 +300,11 @@ fn main() -> BoxResult<()> {
             a.burn_in
         },
         initial_sd: 0.02,
-        independence: if prior_starts { 0.0 } else { 0.5 },
+        independence: if prior_starts {
+            0.0
+        } else {
+            std::env::var("BENCH_INDEPENDENCE").map_or(Ok(0.5), |v| v.parse())?
+        },
         ..MhConfig::default()
     };
     let mut evals = 0u64;
@@ -413,10 +417,15 @@ fn main() -> BoxResult<()> {
     }
     for (c, s) in states.iter().enumerate() {
         println!(
-            "chain {c}: acceptance {:.3} (independence steps {:.3} of {}), final log posterior {:.1}",
+            "chain {c}: acceptance {:.3} (independence steps {:.3} of {}{}), final log posterior {:.1}",
             s.acceptance_rate_post_burn_in(),
             s.independence_acceptance_rate(),
             s.independence_steps(),
+            if s.independence_dropped() {
+                "; dropped after burn-in"
+            } else {
+                ""
+            },
             s.log_density()
         );
     }

@@ -211,6 +211,8 @@ pub struct McmcSettings {
     /// Probability of an independence step (0, the default: random walk only, the reference's
     /// Algorithm 1). With `start = "optimised"` the independence proposal is the Laplace
     /// Gaussian of the optimum (0.5 is what the 40-D test uses); otherwise the AM estimate.
+    /// A chain whose independence steps are accepted less than 1 % of the time during burn-in
+    /// takes random-walk steps only afterwards (`stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE`).
     pub independence: f64,
     /// With `start = "optimised"`: a chain whose optimum is more than this many nats below
     /// the best chain's starts in the best one's mode instead (such a mode holds about
