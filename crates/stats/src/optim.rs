@@ -249,8 +249,8 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         }
     }
 
-    // Laplace covariance at each optimum (see [`laplace_batch`]); the BFGS estimate where the
-    // Hessian cannot be made positive definite or `hessian` is off.
+    // Laplace covariance at each optimum (see [`laplace_batch`]); the BFGS estimate where it
+    // has none (a non-finite difference) or `hessian` is off.
     let live: Vec<usize> = (0..searches.len())
         .filter(|&i| cfg.hessian && searches[i].f.is_finite())
         .collect();
@@ -325,8 +325,8 @@ pub fn maximise_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
 /// A Laplace approximation's covariance at one point ([`laplace_batch`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Laplace {
-    /// Inverse of the negative log density's Hessian, row-major `d x d`; `None` when the
-    /// finite-difference Hessian could not be made positive definite.
+    /// Inverse of the negative log density's (repaired) Hessian, row-major `d x d`; `None`
+    /// when a difference was not finite or the eigendecomposition failed.
     pub covariance: Option<Vec<f64>>,
     /// Eigen-directions left at [`LAPLACE_MIN_PRECISION`]: flat even along their line probe.
     pub floored: usize,
@@ -404,20 +404,31 @@ pub fn laplace_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         }
         z
     };
+    // Two points per coordinate: x + a_k, and x - a_k (central) or x + 2 a_k (one-sided).
+    let diagonal = |x: &[f64], a: &[f64], central: &[bool], pts: &mut Vec<Vec<f64>>| {
+        for k in 0..x.len() {
+            pts.push(shifted(x, &[(k, a[k])]));
+            let other = if central[k] { -a[k] } else { 2.0 * a[k] };
+            pts.push(shifted(x, &[(k, other)]));
+        }
+    };
+    // The second difference of those two points about f0 (central: f(+) + f(-) - 2 f0;
+    // one-sided: f(2a) - 2 f(a) + f0).
+    let second = |plus: f64, other: f64, f0: f64, central: bool| {
+        if central {
+            plus + other - 2.0 * f0
+        } else {
+            other - 2.0 * plus + f0
+        }
+    };
     // Pass 1: pilot curvatures along each coordinate.
     let mut pts = Vec::new();
     let mut steps1 = Vec::new();
     for (x, sd) in points.iter().zip(pilot_sd) {
         let h: Vec<f64> = sd.iter().map(|s| clamp_step(0.5 * s)).collect();
         let (a, central) = signed(x, &h);
-        for k in 0..x.len() {
-            pts.push(shifted(x, &[(k, a[k])]));
-            pts.push(shifted(
-                x,
-                &[(k, if central[k] { -a[k] } else { 2.0 * a[k] })],
-            ));
-        }
-        steps1.push(a);
+        diagonal(x, &a, &central, &mut pts);
+        steps1.push((a, central));
     }
     let f1 = if pts.is_empty() {
         Vec::new()
@@ -426,18 +437,11 @@ pub fn laplace_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     };
     let mut at = 0;
     let mut steps = Vec::new();
-    for ((x, f0), a) in points.iter().zip(log_density).zip(&steps1) {
+    for ((x, &f0), (a, central)) in points.iter().zip(log_density).zip(&steps1) {
         let h: Vec<f64> = (0..x.len())
             .map(|k| {
                 let (p, q) = (f1[at + 2 * k], f1[at + 2 * k + 1]);
-                // Central: p + q - 2 f0; one-sided (a, 2a): q - 2 p + f0.
-                let central = x[k] - a[k].abs() >= 0.0 && x[k] + a[k].abs() <= 1.0;
-                let second = if central {
-                    p + q - 2.0 * f0
-                } else {
-                    q - 2.0 * p + f0
-                };
-                let c = -second / (a[k] * a[k]);
+                let c = -second(p, q, f0, central[k]) / (a[k] * a[k]);
                 if c > 0.0 {
                     clamp_step((2.0 * LAPLACE_STEP_DROP / c).sqrt())
                 } else {
@@ -455,13 +459,7 @@ pub fn laplace_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         let d = x.len();
         let (a, central) = signed(x, h);
         let first = pts.len();
-        for k in 0..d {
-            pts.push(shifted(x, &[(k, a[k])]));
-            pts.push(shifted(
-                x,
-                &[(k, if central[k] { -a[k] } else { 2.0 * a[k] })],
-            ));
-        }
+        diagonal(x, &a, &central, &mut pts);
         for i in 0..d {
             for j in 0..i {
                 pts.push(shifted(x, &[(i, a[i]), (j, a[j])]));
@@ -497,12 +495,7 @@ pub fn laplace_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             // Negative log density's Hessian.
             let mut hess = vec![0.0; d * d];
             for k in 0..d {
-                let second = if central[k] {
-                    plus(k) + other(k) - 2.0 * f0
-                } else {
-                    other(k) - 2.0 * plus(k) + f0
-                };
-                hess[k * d + k] = -second / (a[k] * a[k]);
+                hess[k * d + k] = -second(plus(k), other(k), f0, central[k]) / (a[k] * a[k]);
             }
             let mut m = 2 * d;
             for i in 0..d {
@@ -582,6 +575,7 @@ pub fn laplace_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             floored[p] += 1;
         }
         if let Some((_, lam)) = eig[p].as_mut() {
+            // A probe into -inf (a constraint) makes the curvature infinite: keep it finite.
             lam[k] = curvature.min(f64::MAX);
         }
     }
