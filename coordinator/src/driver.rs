@@ -91,6 +91,9 @@ struct Merged {
     /// Chains started in the best optimum's mode.
     #[serde(default)]
     moved_chains: Vec<MovedChain>,
+    /// Chains whose independence kernel was switched off after burn-in.
+    #[serde(default)]
+    independence_dropped: Vec<usize>,
 }
 
 type Result<T> = std::result::Result<T, String>;
@@ -642,6 +645,7 @@ impl State {
             held_out: sampler.held_out.clone(),
             fallbacks: chains.fallbacks.clone(),
             moved_chains: chains.moved_chains.clone(),
+            independence_dropped: chains.independence_dropped.clone(),
         };
         self.store
             .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)
@@ -841,6 +845,7 @@ impl State {
             fallbacks: merged.fallbacks,
             estimate_note,
             moved_chains: merged.moved_chains,
+            independence_dropped: merged.independence_dropped,
         };
         let summary = write_summary(
             &cal,

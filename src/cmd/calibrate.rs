@@ -76,6 +76,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             m.chain, m.nats_below
         );
     }
+    if !s.independence_dropped.is_empty() {
+        println!(
+            "note: chains {:?} switched their independence steps off after burn-in (accepted under 1 %): random-walk draws only",
+            s.independence_dropped
+        );
+    }
     println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");
     println!(
         "{:<18} {:>22} {:>22}      {:>22}",

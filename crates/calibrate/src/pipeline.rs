@@ -236,6 +236,10 @@ pub struct Summary {
     /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub moved_chains: Vec<MovedChain>,
+    /// Chains whose independence kernel was switched off after burn-in (accepted under 1 %,
+    /// `stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE`): their recorded draws are random-walk steps.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub independence_dropped: Vec<usize>,
     pub estimate: Estimate,
     /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -765,6 +769,7 @@ impl Sampler<'_> {
             fallbacks,
             estimate_note: None,
             moved_chains: moved_chains(states),
+            independence_dropped: independence_dropped(states),
         })
     }
 }
@@ -829,6 +834,9 @@ pub struct ChainSummary {
     pub estimate_note: Option<String>,
     /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
     pub moved_chains: Vec<MovedChain>,
+    /// Chains whose independence kernel was switched off after burn-in
+    /// ([`independence_dropped`] of the states).
+    pub independence_dropped: Vec<usize>,
 }
 
 /// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
@@ -848,6 +856,13 @@ pub fn moved_chains(states: &[ChainState]) -> Vec<MovedChain> {
             s.moved_from_mode()
                 .map(|nats_below| MovedChain { chain, nats_below })
         })
+        .collect()
+}
+
+/// The chains of `states` whose independence kernel was switched off at the end of burn-in.
+pub fn independence_dropped(states: &[ChainState]) -> Vec<usize> {
+    (0..states.len())
+        .filter(|&c| states[c].independence_dropped())
         .collect()
 }
 
@@ -905,6 +920,7 @@ pub fn write_summary(
         estimate: cal.project.validation.estimate,
         estimate_note: chains.estimate_note.clone(),
         moved_chains: chains.moved_chains.clone(),
+        independence_dropped: chains.independence_dropped.clone(),
         calibrated_values: inp
             .plan
             .calibrated
@@ -1159,6 +1175,12 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         log(&format!(
             "chains: chain {} started in the best optimum's mode (its own was {:.0} nats lower)",
             m.chain, m.nats_below
+        ));
+    }
+    if !chains.independence_dropped.is_empty() {
+        log(&format!(
+            "chains: independence steps switched off after burn-in (accepted under 1 %) in chains {:?}",
+            chains.independence_dropped
         ));
     }
     timings.summary_s = t.elapsed().as_secs_f64();
