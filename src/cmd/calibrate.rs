@@ -78,8 +78,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     if !s.independence_dropped.is_empty() {
         println!(
-            "note: chains {:?} switched their independence steps off after burn-in (accepted under 1 %): random-walk draws only",
-            s.independence_dropped
+            "note: chains {:?} switched their independence steps off after burn-in (accepted under {} %): random-walk draws only",
+            s.independence_dropped,
+            bemcal_stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE * 100.0
         );
     }
     println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");

@@ -1179,7 +1179,8 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     }
     if !chains.independence_dropped.is_empty() {
         log(&format!(
-            "chains: independence steps switched off after burn-in (accepted under 1 %) in chains {:?}",
+            "chains: independence steps switched off after burn-in (accepted under {} %) in chains {:?}",
+            bemcal_stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE * 100.0,
             chains.independence_dropped
         ));
     }
