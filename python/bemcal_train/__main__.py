@@ -1,4 +1,5 @@
-"""Command line: python -m bemcal_train --dataset DIR --out DIR [options]."""
+"""Command line: python -m bemcal_train --dataset DIR --out DIR [options], or
+python -m bemcal_train --add-vjp SURROGATE_DIR (the gradient graph for an older surrogate)."""
 
 import argparse
 import sys
@@ -31,6 +32,14 @@ def parser():
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--add-vjp"]:
+        if len(argv) != 2:
+            raise SystemExit("usage: python -m bemcal_train --add-vjp SURROGATE_DIR")
+        from .export import add_vjp
+
+        add_vjp(argv[1])
+        return 0
     args = parser().parse_args(argv)
     from .train import train
 

@@ -14,6 +14,10 @@
   n_hourly] -> ``y`` [n_chunks, chunk, n_outputs] kWh. The evaluator's default (float) and its
   int8 option (per-column int8 weights, VNNI); the int8 error against float is measured by the
   trainer and recorded in surrogate.json.
+* ``surrogate_vjp.onnx`` (``fused.build_fused_vjp``): ``p``, ``xw`` as the fused graph's and a
+  cotangent ``v`` [n_chunks, chunk, n_outputs] -> ``g`` [1, n_params] = ``v . dy/dp``: the
+  gradient of any function of the outputs through the surrogate (gradient-based samplers and
+  optimisers); checked against torch autograd by the trainer.
 """
 
 import os
@@ -25,7 +29,7 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 
 from . import LOOKBACK
-from .fused import CHUNK, build_fused, chunked_hourly
+from .fused import CHUNK, build_fused, build_fused_vjp, chunked_hourly
 from .model import Denormalised
 
 OPSET = 17
@@ -33,6 +37,7 @@ PLAIN = "surrogate.onnx"
 FAST = "surrogate_fast.onnx"
 FUSED = "surrogate_fused.onnx"
 FUSED_INT8 = "surrogate_fused_int8.onnx"
+VJP = "surrogate_vjp.onnx"
 # torch gate blocks (i, f, g, o) -> ONNX LSTM order (i, o, f, c)
 ONNX_GATES = [0, 3, 1, 2]
 
@@ -128,7 +133,34 @@ def export_all(model, n_params, n_hourly, scale, nonnegative, out_dir):
             onnx.save(build_fused(model, n_params, n_hourly, scale, nonnegative, int8=int8),
                       os.path.join(out_dir, name))
             files[key] = name
+        onnx.save(build_fused_vjp(model, n_params, n_hourly, scale, nonnegative), os.path.join(out_dir, VJP))
+        files["vjp"] = VJP
     return files
+
+
+def vjp_check(model, out_dir, vjp_file, p_row, hourly, scale, nonnegative, seed=0):
+    """max |g_onnx - g_torch| / max |g_torch| for the VJP graph at parameter row ``p_row``
+    (normalised) with a random cotangent over the year: ``g_torch`` from autograd through the
+    plain model. None without onnxruntime."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        return None
+    T, n_p = hourly.shape[0], len(p_row)
+    v = np.random.default_rng(seed).normal(size=(T, len(scale))).astype(np.float32)
+    pt = torch.tensor(np.asarray(p_row, dtype=np.float32), requires_grad=True)
+    idx = np.maximum(np.arange(T)[:, None] - (LOOKBACK - 1) + np.arange(LOOKBACK)[None], 0)
+    x = torch.cat([pt[None, None, :].expand(T, LOOKBACK, n_p),
+                   torch.as_tensor(hourly[idx], dtype=torch.float32)], dim=2)
+    y = Denormalised(model.cpu().eval(), scale, nonnegative)(x)
+    (y * torch.as_tensor(v)).sum().backward()
+    ref = pt.grad.numpy()
+    xc = chunked_hourly(hourly.astype(np.float32), CHUNK)
+    vc = np.zeros((xc.shape[0] * CHUNK, v.shape[1]), np.float32)
+    vc[:T] = v
+    s = ort.InferenceSession(os.path.join(out_dir, vjp_file), providers=["CPUExecutionProvider"])
+    g = s.run(["g"], {"p": pt.detach().numpy()[None], "xw": xc, "v": vc.reshape(xc.shape[0], CHUNK, -1)})[0][0]
+    return float(np.max(np.abs(g - ref)) / max(float(np.max(np.abs(ref))), 1e-12))
 
 
 def windows_step_major(hourly):
@@ -160,3 +192,37 @@ def run_onnx(out_dir, files, x, p_rows, hourly, threads=1):
             ys = [s.run(["y"], {"p": p[None].astype(np.float32), "xw": xc})[0] for p in p_rows]
             res[key] = np.stack([y.reshape(-1, y.shape[-1])[:T] for y in ys])
     return res
+
+
+def add_vjp(out_dir):
+    """Adds ``surrogate_vjp.onnx`` to a surrogate trained before the VJP graph existed (from its
+    ``weights.pt``), checks it against autograd on random normalised inputs and records it in
+    ``surrogate.json`` (``files.vjp``, ``onnxruntime_check.vjp_vs_torch``)."""
+    import json
+
+    from .model import Surrogate
+
+    meta_path = os.path.join(out_dir, "surrogate.json")
+    with open(meta_path) as f:
+        meta = json.load(f)
+    try:
+        saved = torch.load(os.path.join(out_dir, "weights.pt"), map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise SystemExit(f"--add-vjp {out_dir}: no weights.pt there; retrain the surrogate")
+    n_params, n_features = len(meta["params"]), int(meta["n_features"])
+    model = Surrogate(n_features, len(saved["scale"]), meta["model"]["hidden"], meta["model"]["layers"])
+    model.load_state_dict(saved["state_dict"])
+    model.eval()
+    scale, nonneg = np.asarray(saved["scale"]), bool(meta["nonnegative"])
+    onnx.save(build_fused_vjp(model, n_params, n_features - n_params, scale, nonneg), os.path.join(out_dir, VJP))
+    rng = np.random.default_rng(0)
+    hourly = rng.normal(size=(3 * CHUNK + 7, n_features - n_params)).astype(np.float32)
+    err = vjp_check(model, out_dir, VJP, rng.uniform(size=n_params), hourly, scale, nonneg)
+    meta["files"]["vjp"] = VJP
+    if not meta.get("onnxruntime_check"):
+        meta["onnxruntime_check"] = {}
+    meta["onnxruntime_check"]["vjp_vs_torch"] = err
+    with open(meta_path, "w") as f:
+        json.dump(meta, f, indent=1)
+    print(f"wrote {os.path.join(out_dir, VJP)} (vs autograd: {err:.2e})")
+    return err

@@ -64,9 +64,18 @@ class _G:
         self.nodes.append(helper.make_node(op, inputs, [out], name=out, domain=domain, **attrs))
         return out
 
+    def gemm(self, a, w, base, act, c=None):
+        """act(a @ w.T + c) with w [N, K] float64 numpy; c an initializer bias or a tensor."""
+        wn = self.init(self.name("w"), w.T)
+        out = self.op("Gemm", [a, wn, c] if c is not None else [a, wn], base=base)
+        return self.op(act, [out]) if act else out
 
-def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk=CHUNK):
-    """The fused graph (see the module doc) as an ``onnx.ModelProto``."""
+
+def _forward(model, n_params, scale, nonnegative, int8, chunk):
+    """Builds the per-chunk forward pass into a fresh ``_G``; returns it with the intermediates
+    the VJP needs (``t``: per layer and step the gate activations, ``c``, ``tanh c``, ``c_prev``;
+    ``hr``, ``z``). The chunk body reads ``xc`` [R, n_hourly] and writes ``yc``; the nodes named
+    ``param_projection``, ``pb*`` compute the per-proposal ``W_p . p + b`` outside it."""
     lstm = model.lstm
     H = lstm.hidden_size
     if lstm.num_layers != 2:
@@ -83,12 +92,6 @@ def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk
 
     def prev(x):
         return g.op("Gather", [x, idx], base="prev", axis=0)
-
-    def gemm(a, w, bias_name, act, c=None):
-        """act(a @ w.T + c) with w [N, K] float64 numpy; c an initializer bias or a tensor."""
-        wn = g.init(g.name("w"), w.T)
-        out = g.op("Gemm", [a, wn, c] if c is not None else [a, wn], base=bias_name)
-        return g.op(act, [out]) if act else out
 
     def qgemm(aq, w, act, bias=None):
         """act(dequant(aq) @ w.T + bias): aq = (q, scale, zero point) of the input."""
@@ -111,9 +114,11 @@ def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk
         """c = f * c_prev + i * g (or i * g from zero state); h = o * tanh(c)."""
         ig = g.op("Mul", [gates["i"], gates["g"]])
         c = ig if c_prev is None else g.op("Add", [g.op("Mul", [gates["f"], c_prev]), ig], base="c")
-        h = g.op("Mul", [gates["o"], g.op("Tanh", [c])], base="h")
-        return h, c
+        tc = g.op("Tanh", [c])
+        h = g.op("Mul", [gates["o"], tc], base="h")
+        return h, {"gates": gates, "c": c, "tc": tc, "c_prev": c_prev}
 
+    t = {1: [], 2: []}
     # ---- layer 1 ----
     w0 = sd["weight_ih_l0"]
     b0 = sd["bias_ih_l0"] + sd["bias_hh_l0"]
@@ -123,20 +128,22 @@ def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk
     pbs = [pb + f"_{k}" for k in "ifgo"]
     g.nodes.append(helper.make_node("Split", [pb, splits], pbs, name="pb_split", axis=1))
     pbg = dict(zip("ifgo", pbs))
-    a0 = {k: gemm("xc", blk(w0[:, n_params:], k), "a0", None, pbg[k]) for k in "ifgo"}
+    a0 = {k: g.gemm("xc", blk(w0[:, n_params:], k), "a0", None, pbg[k]) for k in "ifgo"}
     r0 = sd["weight_hh_l0"]
     # step 1 (zero state)
-    h, c = cell({k: g.op(ACT[k], [a0[k]]) for k in "igo"}, None)
+    h, rec = cell({k: g.op(ACT[k], [a0[k]]) for k in "igo"}, None)
+    t[1].append(rec)
     layer1 = [h]
     for _ in range(LOOKBACK - 1):
-        hp, cp = prev(h), prev(c)
+        hp, cp = prev(h), prev(rec["c"])
         if int8:
             hq = quant(hp)
             z = {k: g.op("Add", [qgemm(hq, blk(r0, k), None), a0[k]]) for k in "ifgo"}
             gates = {k: g.op(ACT[k], [z[k]]) for k in "ifgo"}
         else:
-            gates = {k: gemm(hp, blk(r0, k), "z1", ACT[k], a0[k]) for k in "ifgo"}
-        h, c = cell(gates, cp)
+            gates = {k: g.gemm(hp, blk(r0, k), "z1", ACT[k], a0[k]) for k in "ifgo"}
+        h, rec = cell(gates, cp)
+        t[1].append(rec)
         layer1.append(h)
     # ---- layer 2 ----
     w1, r1 = sd["weight_ih_l1"], sd["weight_hh_l1"]
@@ -147,40 +154,59 @@ def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk
         xq = quant(x)
         gates = {k: qgemm(xq, blk(w1, k), ACT[k], blk(b1, k)) for k in "igo"}
     else:
-        gates = {k: gemm(x, blk(w1, k), "z2", ACT[k], g.init(g.name("b"), blk(b1, k))) for k in "igo"}
-    h, c = cell(gates, None)
+        gates = {k: g.gemm(x, blk(w1, k), "z2", ACT[k], g.init(g.name("b"), blk(b1, k))) for k in "igo"}
+    h, rec = cell(gates, None)
+    t[2].append(rec)
     for s in range(1, LOOKBACK):
         xs = g.op("Concat", [layer1[s], prev(h)], base="xh2", axis=1)
-        cp = prev(c)
+        cp = prev(rec["c"])
         if int8:
             xq = quant(xs)
             gates = {k: qgemm(xq, blk(wr1, k), ACT[k], blk(b1, k)) for k in "ifgo"}
         else:
-            gates = {k: gemm(xs, blk(wr1, k), "z2", ACT[k], g.init(g.name("b"), blk(b1, k))) for k in "ifgo"}
-        h, c = cell(gates, cp)
+            gates = {k: g.gemm(xs, blk(wr1, k), "z2", ACT[k], g.init(g.name("b"), blk(b1, k))) for k in "ifgo"}
+        h, rec = cell(gates, cp)
+        t[2].append(rec)
     # ---- head: relu -> linear -> (relu) ; kWh scale folded into the head (scale > 0) ----
     s = np.asarray(scale, dtype=np.float64)
     wfc = model.head.weight.detach().cpu().numpy().astype(np.float64) * s[:, None]
     bfc = model.head.bias.detach().cpu().numpy().astype(np.float64) * s
     hr = g.op("Slice", [h, g.init("two", [LOOKBACK - 1], np.int64), g.init("rows", [R], np.int64),
                         g.init("ax0", [0], np.int64)], base="windows")
-    z = gemm(g.op("Relu", [hr]), wfc, "head", None, g.init("b_fc", bfc))
+    z = g.gemm(g.op("Relu", [hr]), wfc, "head", None, g.init("b_fc", bfc))
     g.nodes.append(helper.make_node("Relu" if nonnegative else "Identity", [z], ["yc"], name="out"))
-    # The chunk body: everything above except the per-proposal parameter projection.
-    body_nodes = [n for n in g.nodes if n.name not in ("param_projection", "pb", "pb_split")
-                  and not n.name.startswith("param_projection") and not n.name.startswith("pb_")]
-    outer = [n for n in g.nodes if n not in body_nodes]
-    body_inits = [i for i in g.inits if i.name not in ("w_p", "b_0", "split4")]
-    outer_inits = [i for i in g.inits if i.name in ("w_p", "b_0", "split4")]
+    weights = {"w0": w0[:, :n_params], "r0": r0, "w1": w1, "wr1": wr1, "wfc": wfc}
+    return g, {"t": t, "hr": hr, "z": z, "H": H, "R": R, "n_out": len(s), "weights": weights}
+
+
+_OUTER = ("w_p", "b_0", "split4")
+
+
+def _split_outer(g):
+    """(outer nodes, body nodes, outer initializers, body initializers): the per-proposal
+    parameter projection stays outside the Scan, everything else is the chunk body."""
+    outer_names = lambda n: n.name in ("param_projection", "pb", "pb_split") or \
+        n.name.startswith("param_projection") or n.name.startswith("pb_")
+    body = [n for n in g.nodes if not outer_names(n)]
+    outer = [n for n in g.nodes if outer_names(n)]
+    return (outer, body, [i for i in g.inits if i.name in _OUTER],
+            [i for i in g.inits if i.name not in _OUTER])
+
+
+def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk=CHUNK):
+    """The fused graph (see the module doc) as an ``onnx.ModelProto``."""
+    g, f = _forward(model, n_params, scale, nonnegative, int8, chunk)
+    R, n_out = f["R"], f["n_out"]
+    outer, body_nodes, outer_inits, body_inits = _split_outer(g)
     body = helper.make_graph(
         body_nodes, "chunk", [helper.make_tensor_value_info("xc", TensorProto.FLOAT, [R, n_hourly])],
-        [helper.make_tensor_value_info("yc", TensorProto.FLOAT, [chunk, len(s)])], initializer=body_inits)
+        [helper.make_tensor_value_info("yc", TensorProto.FLOAT, [chunk, n_out])], initializer=body_inits)
     scan = helper.make_node("Scan", ["xw"], ["y"], name="chunks", body=body, num_scan_inputs=1)
     graph = helper.make_graph(
         outer + [scan], "bemcal_surrogate_fused" + ("_int8" if int8 else ""),
         [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, n_params]),
          helper.make_tensor_value_info("xw", TensorProto.FLOAT, ["chunks", R, n_hourly])],
-        [helper.make_tensor_value_info("y", TensorProto.FLOAT, ["chunks", chunk, len(s)])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, ["chunks", chunk, n_out])],
         initializer=outer_inits)
     opsets = [helper.make_opsetid("", OPSET)]
     if int8:
@@ -189,6 +215,118 @@ def build_fused(model, n_params, n_hourly, scale, nonnegative, int8=False, chunk
     m.ir_version = 8
     if not int8:
         onnx.checker.check_model(m)
+    return m
+
+
+def build_fused_vjp(model, n_params, n_hourly, scale, nonnegative, chunk=CHUNK):
+    """The vector-Jacobian product of the fused graph (``surrogate_vjp.onnx``): inputs ``p``
+    [1, n_params] and ``xw`` as the fused graph's, and ``v`` [n_chunks, chunk, n_outputs] (a
+    cotangent on ``y``, e.g. d ln L / dy in 1 / kWh, 0 on padding rows) -> ``g`` [1, n_params]
+    = ``v . dy/dp`` (p normalised). The forward pass of each chunk, then reverse-mode
+    differentiation written out by hand (no autograd in the graph): LSTM cell backward
+    (c = f c' + i g, h = o tanh c; sigmoid' = s (1 - s), tanh' = 1 - t^2), the shared steps'
+    ``prev`` Gather reversed (row u's gradient goes to row u - 1; row 0 also keeps row 1's), and
+    the parameters' gradient accumulated at layer 1's input projection, the only place ``p``
+    enters: ``g = W_p^T sum_(rows, steps) d a``. About 3 forward passes of arithmetic."""
+    g, f = _forward(model, n_params, scale, nonnegative, False, chunk)
+    H, R, n_out, t, W = f["H"], f["R"], f["n_out"], f["t"], f["weights"]
+    one = g.init("one", np.array(1.0))
+    axis0 = g.init("axis0", np.array([0], dtype=np.int64), np.int64)
+    zero_row = g.init("zero_row", np.zeros((1, H)))
+    e0 = g.init("e0", np.eye(R)[:, :1])  # [R, 1]: 1 at row 0
+    sl = lambda x, a, b: g.op("Slice", [x, g.init(g.name("s"), [a], np.int64), g.init(g.name("e"), [b], np.int64),
+                                        axis0], base="sl")
+    add = lambda a, b: b if a is None else (a if b is None else g.op("Add", [a, b]))
+    mul = lambda a, b: g.op("Mul", [a, b])
+    dsig = lambda s: mul(s, g.op("Sub", [one, s]))
+    dtanh = lambda th: g.op("Sub", [one, mul(th, th)])
+    gates_w = lambda w, ks: np.concatenate([w[GATE[k] * H:(GATE[k] + 1) * H] for k in ks], axis=0)
+
+    def mask(x):
+        return g.op("Cast", [g.op("Greater", [x, g.init(g.name("zero"), np.array(0.0))])], to=TensorProto.FLOAT)
+
+    def unprev(d):
+        """Gradient w.r.t. X of prev(X)[u] = X[max(u - 1, 0)]."""
+        shifted = g.op("Concat", [sl(d, 1, R), zero_row], axis=0)
+        return g.op("Add", [shifted, mul(sl(d, 0, 1), e0)])
+
+    def cell_back(rec, dh, dc_in):
+        """(gate pre-activation gradients, dc_prev) of one cell."""
+        gt = rec["gates"]
+        do = mul(dh, rec["tc"])
+        dc = add(mul(mul(dh, gt["o"]), dtanh(rec["tc"])), dc_in)
+        da = {"o": mul(do, dsig(gt["o"])), "i": mul(mul(dc, gt["g"]), dsig(gt["i"])),
+              "g": mul(mul(dc, gt["i"]), dtanh(gt["g"]))}
+        dc_prev = None
+        if rec["c_prev"] is not None:
+            da["f"] = mul(mul(dc, rec["c_prev"]), dsig(gt["f"]))
+            dc_prev = mul(dc, gt["f"])
+        return da, dc_prev
+
+    def through(da, w):
+        """sum_k da_k @ block_k(w): the gradient of the cell's input, w [4H, K]."""
+        ks = [k for k in "ifgo" if k in da]
+        cat = g.op("Concat", [da[k] for k in ks], axis=1)
+        return g.gemm(cat, gates_w(w, ks).T, "bwd", None)
+
+    # head
+    dz = mul("vc", mask(f["z"])) if nonnegative else "vc"
+    dhr = mul(g.gemm(dz, W["wfc"].T, "bwd_head", None), mask(f["hr"]))
+    dh = g.op("Pad", [dhr, g.init("pad_top", np.array([LOOKBACK - 1, 0, 0, 0]), np.int64)])
+    # layer 2, last step first
+    dl1 = [None] * LOOKBACK
+    dc = None
+    for s in reversed(range(LOOKBACK)):
+        da, dc_prev = cell_back(t[2][s], dh, dc)
+        if s == 0:
+            dl1[0] = through(da, W["w1"])
+            break
+        dxs = through(da, W["wr1"])  # [R, 2H] = [d layer1[s]; d prev(h)]
+        dl1[s] = g.op("Slice", [dxs, g.init(g.name("s"), [0], np.int64), g.init(g.name("e"), [H], np.int64),
+                                      g.init(g.name("a"), [1], np.int64)], base="sl")
+        dh = unprev(g.op("Slice", [dxs, g.init(g.name("s"), [H], np.int64), g.init(g.name("e"), [2 * H], np.int64),
+                                   g.init(g.name("a"), [1], np.int64)], base="sl"))
+        dc = unprev(dc_prev)
+    # layer 1, last step first; d pb = sum over rows and steps of the gate gradients
+    dpb = {k: None for k in "ifgo"}
+    dh_rec, dc = None, None
+    for s in reversed(range(LOOKBACK)):
+        da, dc_prev = cell_back(t[1][s], add(dl1[s], dh_rec), dc)
+        for k, v in da.items():
+            dpb[k] = add(dpb[k], g.op("ReduceSum", [v, axis0], keepdims=1))
+        if s > 0:
+            dh_rec = unprev(through(da, W["r0"]))
+            dc = unprev(dc_prev)
+    gpb = g.op("Concat", [dpb[k] for k in "ifgo"], axis=1)  # f: from steps 2 and 3
+    g.nodes.append(helper.make_node("Identity", [gpb], ["gc"], name="gc"))
+    outer, body_nodes, outer_inits, body_inits = _split_outer(g)
+    body_nodes = [n for n in body_nodes if n.name != "out"]  # yc is not a body output here
+    body = helper.make_graph(
+        body_nodes, "chunk_vjp",
+        [helper.make_tensor_value_info("xc", TensorProto.FLOAT, [R, n_hourly]),
+         helper.make_tensor_value_info("vc", TensorProto.FLOAT, [chunk, n_out])],
+        [helper.make_tensor_value_info("gc", TensorProto.FLOAT, [1, 4 * H])], initializer=body_inits)
+    scan = helper.make_node("Scan", ["xw", "v"], ["gpb_chunks"], name="chunks", body=body, num_scan_inputs=2)
+    tail = [
+        helper.make_node("ReduceSum", ["gpb_chunks", "axes01"], ["gpb_sum"], keepdims=0, name="sum_chunks"),
+        helper.make_node("Unsqueeze", ["gpb_sum", "axes0_outer"], ["gpb_row"], name="row"),
+        helper.make_node("MatMul", ["gpb_row", "w_pT"], ["g"], name="to_params"),
+    ]
+    outer_inits = outer_inits + [
+        numpy_helper.from_array(np.array([0, 1], dtype=np.int64), "axes01"),
+        numpy_helper.from_array(np.array([0], dtype=np.int64), "axes0_outer"),
+        numpy_helper.from_array(np.ascontiguousarray(W["w0"], dtype=np.float32), "w_pT"),
+    ]
+    graph = helper.make_graph(
+        outer + [scan] + tail, "bemcal_surrogate_vjp",
+        [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, n_params]),
+         helper.make_tensor_value_info("xw", TensorProto.FLOAT, ["chunks", R, n_hourly]),
+         helper.make_tensor_value_info("v", TensorProto.FLOAT, ["chunks", chunk, n_out])],
+        [helper.make_tensor_value_info("g", TensorProto.FLOAT, [1, n_params])],
+        initializer=outer_inits)
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="bemcal_train")
+    m.ir_version = 8
+    onnx.checker.check_model(m)
     return m
 
 

@@ -10,7 +10,7 @@ import torch
 from . import FORMAT, FORMAT_VERSION, LOOKBACK
 from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
                    weather_stats, window_index)
-from .export import export_all, run_onnx
+from .export import export_all, run_onnx, vjp_check
 from .fused import CHUNK
 from .model import Denormalised, Surrogate
 
@@ -210,6 +210,10 @@ def train(args):
                  "plain_vs_torch": rel(onx["plain"], y_win), "fast_vs_torch": rel(onx["fast"], y_held)}
         if "fused" in onx:
             check["fused_vs_torch"] = rel(onx["fused"], y_held)
+        if "vjp" in files:
+            check["vjp_vs_torch"] = vjp_check(model, args.out, files["vjp"], p_norm[held_pts[0]], hourly,
+                                              scale, nonnegative, args.seed)
+            print(f"onnxruntime check: vjp gradient {check['vjp_vs_torch']:.2e} (max |diff| / max |g|)")
         print(f"onnxruntime check (max |diff| / max |y|): plain {check['plain_vs_torch']:.2e}, "
               f"fast {check['fast_vs_torch']:.2e}, fused {check.get('fused_vs_torch', float('nan')):.2e}")
         if "fused_int8" in onx:

@@ -27,6 +27,10 @@
 //!   error against the float graph is in the metadata (`int8`).
 //! * `surrogate_fast_int8.onnx` (older surrogates): the fast graph with dynamically quantised
 //!   int8 weights, used for [`Precision::Int8`] when there is no fused int8 graph.
+//! * `surrogate_vjp.onnx` (optional): the fused graph's vector-Jacobian product, `p`, `xw` and a
+//!   cotangent `v` on `y` -> `g = v . dy/dp` (forward pass, then the LSTM's reverse-mode
+//!   derivative written out by hand; about 2.3 forward passes), for gradient-based samplers:
+//!   [`Evaluator::vjp_batch`]. Checked against torch autograd by the trainer (`vjp_vs_torch`).
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -150,6 +154,10 @@ pub struct GraphFiles {
     /// The fused graph with int8 weights.
     #[serde(default)]
     pub fused_int8: Option<String>,
+    /// `p`, chunked `xw`, a cotangent `v` on chunked `y` -> `g = v . dy/dp` [1, n_params]:
+    /// the fused graph's vector-Jacobian product (gradients through the surrogate).
+    #[serde(default)]
+    pub vjp: Option<String>,
 }
 
 /// Which fast graph the [`Evaluator`] runs.
@@ -458,6 +466,56 @@ impl SurrogateMeta {
 /// One worker's runs: (proposal, first chunk, end chunk, its rows of the output).
 type Runs<'a> = Vec<(usize, usize, usize, &'a mut [f32])>;
 
+/// The flat (proposal, chunk) items `0..n_proposals * n_chunks` split into `workers` contiguous
+/// ranges, each as runs `(proposal, first chunk, end chunk)` of one proposal's chunks.
+fn split_runs(
+    n_proposals: usize,
+    n_chunks: usize,
+    workers: usize,
+) -> Vec<Vec<(usize, usize, usize)>> {
+    let total = n_proposals * n_chunks;
+    let workers = workers.min(total).max(1);
+    (0..workers)
+        .map(|w| {
+            let (a, b) = (w * total / workers, (w + 1) * total / workers);
+            let mut runs = Vec::new();
+            let mut k = a;
+            while k < b {
+                let (i, c0) = (k / n_chunks, k % n_chunks);
+                let c1 = (c0 + (b - k)).min(n_chunks);
+                runs.push((i, c0, c1));
+                k += c1 - c0;
+            }
+            runs
+        })
+        .collect()
+}
+
+/// Runs `job` for each worker's runs on its own session, the first on this thread and the rest
+/// on scoped threads; results in worker order.
+fn run_on_sessions<J: Send, T: Send>(
+    sessions: &mut [Session],
+    jobs: Vec<J>,
+    job: impl Fn(&mut Session, J) -> Result<T> + Sync,
+) -> Result<Vec<T>> {
+    let mut pairs = sessions.iter_mut().zip(jobs);
+    let first = pairs.next();
+    let job = &job;
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = pairs
+            .map(|(session, runs)| scope.spawn(move || job(session, runs)))
+            .collect();
+        let mine = first.map(|(session, runs)| job(session, runs));
+        mine.into_iter()
+            .chain(
+                handles
+                    .into_iter()
+                    .map(|h| h.join().expect("evaluator worker panicked")),
+            )
+            .collect()
+    })
+}
+
 /// The fused graph: one single-threaded session per worker thread.
 struct Fused {
     sessions: Vec<Session>,
@@ -473,6 +531,8 @@ pub struct Surrogate {
     plain: Session,
     fast: Session,
     fused: Option<Fused>,
+    /// The VJP graph, when the surrogate has one (same threading as `fused`).
+    vjp: Option<Fused>,
 }
 
 impl std::fmt::Debug for Surrogate {
@@ -642,12 +702,44 @@ impl Surrogate {
                 })
             }
         };
+        let vjp = match (&meta.files.vjp, &fused) {
+            (Some(file), Some(fz)) => {
+                let sessions = (0..threads.max(1))
+                    .map(|_| session_with(&dir, file, 1, false))
+                    .collect::<Result<Vec<_>>>()?;
+                let path = f(file);
+                let s0 = &sessions[0];
+                check_io(s0, &path, true, "p", &[Some(1), Some(np)])?;
+                check_io(
+                    s0,
+                    &path,
+                    true,
+                    "xw",
+                    &[None, Some((fz.chunk + LOOKBACK - 1) as i64), Some(nh)],
+                )?;
+                check_io(
+                    s0,
+                    &path,
+                    true,
+                    "v",
+                    &[None, Some(fz.chunk as i64), Some(no)],
+                )?;
+                check_io(s0, &path, false, "g", &[Some(1), Some(np)])?;
+                Some(Fused {
+                    sessions,
+                    chunk: fz.chunk,
+                    file: file.clone(),
+                })
+            }
+            _ => None,
+        };
         Ok(Surrogate {
             meta,
             dir,
             plain,
             fast,
             fused,
+            vjp,
         })
     }
 
@@ -839,34 +931,29 @@ impl Evaluator {
         let xc = self.xc.as_ref().expect("bound with the fused graph");
         let (n_chunks, n_hours, chunk) = (xc.dim().0, self.n_hours, fused.chunk);
         let n_out = self.out.dim().2;
-        let total = params.len() * n_chunks;
-        let workers = fused.sessions.len().min(total);
         // Worker w takes the flat (proposal, chunk) items [w * total / workers, ...): contiguous
         // runs of one proposal's chunks, written to disjoint rows of `out`.
-        let mut jobs: Vec<Runs<'_>> = Vec::new();
         let mut outs: Vec<_> = self
             .out
             .outer_iter_mut()
             .map(|o| Some(o.into_slice().expect("standard layout")))
             .collect();
-        for w in 0..workers {
-            let (a, b) = (w * total / workers, (w + 1) * total / workers);
-            let mut runs = Vec::new();
-            let mut k = a;
-            while k < b {
-                let (i, c0) = (k / n_chunks, k % n_chunks);
-                let c1 = (c0 + (b - k)).min(n_chunks);
-                let rows = (c1 * chunk).min(n_hours) - c0 * chunk;
-                let rest = outs[i].take().expect("disjoint runs");
-                let (mine, tail) = rest.split_at_mut(rows * n_out);
-                outs[i] = Some(tail);
-                runs.push((i, c0, c1, mine));
-                k += c1 - c0;
-            }
-            jobs.push(runs);
-        }
+        let jobs: Vec<Runs<'_>> = split_runs(params.len(), n_chunks, fused.sessions.len())
+            .into_iter()
+            .map(|runs| {
+                runs.into_iter()
+                    .map(|(i, c0, c1)| {
+                        let rows = (c1 * chunk).min(n_hours) - c0 * chunk;
+                        let rest = outs[i].take().expect("disjoint runs");
+                        let (mine, tail) = rest.split_at_mut(rows * n_out);
+                        outs[i] = Some(tail);
+                        (i, c0, c1, mine)
+                    })
+                    .collect()
+            })
+            .collect();
         let ps = &ps;
-        let run = |session: &mut Session, runs: Runs<'_>| {
+        run_on_sessions(&mut fused.sessions, jobs, |session, runs: Runs<'_>| {
             for (i, c0, c1, dst) in runs {
                 let x = xc.slice(s![c0..c1, .., ..]);
                 let outputs = session
@@ -890,25 +977,96 @@ impl Evaluator {
                 dst.copy_from_slice(&src[..dst.len()]);
             }
             Ok(())
-        };
-        let mut sessions = fused.sessions.iter_mut();
-        let mut jobs = jobs.into_iter();
-        let first = (sessions.next().expect("one session"), jobs.next());
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = sessions
-                .zip(jobs)
-                .map(|(session, runs)| scope.spawn(|| run(session, runs)))
-                .collect();
-            let mine = match first.1 {
-                Some(runs) => run(first.0, runs),
-                None => Ok(()),
-            };
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("evaluator worker panicked"))
-                .chain(std::iter::once(mine))
-                .collect::<Result<Vec<()>>>()
-                .map(|_| ())
         })
+        .map(|_| ())
+    }
+
+    /// Whether the surrogate has the VJP graph ([`Evaluator::vjp_batch`]).
+    pub fn has_gradient(&self) -> bool {
+        self.surrogate.vjp.is_some()
+    }
+
+    /// Vector-Jacobian products: for each parameter vector `params[i]` (raw values) and its
+    /// cotangent `cotangents[i]` (`[n_hours, n_outputs]`, e.g. `d ln L / d y` in 1 / kWh), the
+    /// gradient `sum_(t, k) v_tk dy_tk / d theta_j` with respect to the raw parameters. The
+    /// (proposal, chunk) pairs are split over the threads as in [`Evaluator::evaluate_batch`]
+    /// and the partial sums added. About 2.3 forward evaluations of arithmetic.
+    ///
+    /// # Errors
+    /// Without a VJP graph (surrogates trained before it existed: `python -m bemcal_train
+    /// --add-vjp DIR` adds it), or on shape mismatches.
+    pub fn vjp_batch<P: AsRef<[f64]>>(
+        &mut self,
+        params: &[P],
+        cotangents: ArrayView3<'_, f32>,
+    ) -> Result<Vec<Vec<f64>>> {
+        let meta = &self.surrogate.meta;
+        let np = meta.params.len();
+        let n_out = meta.outputs.len();
+        let Some(vjp) = self.surrogate.vjp.as_mut() else {
+            return Err(SurrogateError::Metadata {
+                path: self.surrogate.dir.join(METADATA_FILE),
+                message: "no gradient graph (files.vjp): retrain, or add it with \
+                          `python -m bemcal_train --add-vjp DIR`"
+                    .into(),
+            });
+        };
+        if cotangents.dim() != (params.len(), self.n_hours, n_out) {
+            return Err(SurrogateError::Input(format!(
+                "cotangents have shape {:?}, expected [{}, {}, {n_out}]",
+                cotangents.dim(),
+                params.len(),
+                self.n_hours
+            )));
+        }
+        let mut ps = vec![0f32; params.len() * np];
+        for (p, row) in params.iter().zip(ps.chunks_mut(np)) {
+            meta.normalise_params(p.as_ref(), row)?;
+        }
+        let xc = self.xc.as_ref().expect("bound with the fused graph");
+        let (n_chunks, chunk) = (xc.dim().0, vjp.chunk);
+        // Chunked cotangents, zero on the rows past the last hour.
+        let mut vc = Array3::<f32>::zeros((params.len() * n_chunks, chunk, n_out));
+        for i in 0..params.len() {
+            for t in 0..self.n_hours {
+                for k in 0..n_out {
+                    vc[[i * n_chunks + t / chunk, t % chunk, k]] = cotangents[[i, t, k]];
+                }
+            }
+        }
+        let (ps, vc) = (&ps, &vc);
+        let jobs = split_runs(params.len(), n_chunks, vjp.sessions.len());
+        let parts = run_on_sessions(&mut vjp.sessions, jobs, |session, runs| {
+            let mut part = Vec::new();
+            for (i, c0, c1) in runs {
+                let outputs = session
+                    .run(ort::inputs![
+                        "p" => TensorRef::from_array_view(([1usize, np], &ps[i * np..(i + 1) * np]))
+                            .map_err(ort_err)?,
+                        "xw" => TensorRef::from_array_view(xc.slice(s![c0..c1, .., ..])).map_err(ort_err)?,
+                        "v" => TensorRef::from_array_view(
+                            vc.slice(s![i * n_chunks + c0..i * n_chunks + c1, .., ..])
+                        ).map_err(ort_err)?,
+                    ])
+                    .map_err(ort_err)?;
+                let g = outputs["g"].try_extract_array::<f32>().map_err(ort_err)?;
+                if g.shape() != [1, np] {
+                    return Err(SurrogateError::Ort(format!(
+                        "gradient graph returned shape {:?}, expected [1, {np}]",
+                        g.shape()
+                    )));
+                }
+                part.push((i, g.iter().map(|&v| f64::from(v)).collect::<Vec<f64>>()));
+            }
+            Ok(part)
+        })?;
+        // d p_norm / d theta = 1 / (max - min).
+        let mut grads = vec![vec![0.0; np]; params.len()];
+        for (i, g) in parts.into_iter().flatten() {
+            for ((o, v), spec) in grads[i].iter_mut().zip(g).zip(&meta.params) {
+                *o += v / (spec.max - spec.min);
+            }
+        }
+        Ok(grads)
     }
 }

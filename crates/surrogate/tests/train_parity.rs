@@ -206,6 +206,50 @@ fn trains_exports_and_matches_torch() {
         );
     }
 
+    // The VJP graph: the trainer checked it against torch autograd; here its gradient of the
+    // year's total kWh against central differences of the fused graph (raw parameters, so the
+    // 1 / (max - min) chain rule is included), and 1 vs 3 workers splitting the chunks.
+    let meta_json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("surrogate.json")).unwrap())
+            .unwrap();
+    let e = meta_json["onnxruntime_check"]["vjp_vs_torch"]
+        .as_f64()
+        .unwrap();
+    // (a float32 sum over 26,280 hour-outputs with a random-sign cotangent: cancellation makes
+    // its relative error larger than the outputs' 1e-7)
+    assert!(e < 1e-3, "vjp graph vs torch autograd: {e:.2e}");
+    assert!(ev.has_gradient());
+    let ones = Array3::<f32>::ones((2, 8760, 3));
+    let g1 = ev
+        .vjp_batch(&[params.clone(), modes.clone()], ones.view())
+        .unwrap();
+    let g3 = ev3
+        .vjp_batch(&[params.clone(), modes.clone()], ones.view())
+        .unwrap();
+    let total = |ev: &mut bemcal_surrogate::Evaluator, x: &[f64]| -> f64 {
+        ev.evaluate(x).unwrap().iter().map(|&v| f64::from(v)).sum()
+    };
+    for (j, spec) in meta.params.iter().enumerate() {
+        let h = 0.01 * (spec.max - spec.min);
+        let (mut up, mut dn) = (params.clone(), params.clone());
+        up[j] += h;
+        dn[j] -= h;
+        let fd = (total(&mut ev, &up) - total(&mut ev, &dn)) / (2.0 * h);
+        let scale = g1[0].iter().fold(0f64, |m, v| m.max(v.abs()));
+        assert!(
+            (g1[0][j] - fd).abs() < 0.01 * scale,
+            "d total / d {}: vjp {} vs central difference {fd}",
+            spec.name,
+            g1[0][j]
+        );
+        for i in 0..2 {
+            assert!(
+                (g1[i][j] - g3[i][j]).abs() <= 1e-4 * scale,
+                "3 workers vs 1"
+            );
+        }
+    }
+
     // Wrong parameter count is a clear error.
     let e = ev.evaluate(&[1.0]).unwrap_err().to_string();
     assert!(
