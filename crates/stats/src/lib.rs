@@ -10,6 +10,8 @@
 //! - [`lhs`]: Latin hypercube design points with maximin improvement and constraint repair.
 //! - [`mcmc`]: random-walk Metropolis-Hastings (reference Algorithm 1) with adaptive covariance
 //!   during burn-in, checkpointable chain state, single-chain and batched stepping.
+//! - [`hmc`]: Hamiltonian Monte Carlo in the logit of the unit space (gradients through the
+//!   surrogate's VJP graph), dual-averaging step size, checkpointable, batched over chains.
 //! - [`optim`]: posterior mode search (BFGS, finite differences) for the chains' starts.
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS (Vehtari et al. 2021).
 //! - [`summary`]: posterior summaries, width ratios, correlated pairs, predictive bands.
@@ -17,6 +19,7 @@
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 
 pub mod diagnostics;
+pub mod hmc;
 pub mod lhs;
 pub mod likelihood;
 pub mod mcmc;

@@ -297,6 +297,116 @@ impl GaussianLikelihood {
         a
     }
 
+    /// [`GaussianLikelihood::log_likelihood`] and its gradient with respect to the predictions,
+    /// written into `grad` (`hours x outputs`, 0 at missing hours): `d ln L / d f_kt = r_kt /
+    /// sigma_k^2`.
+    ///
+    /// # Panics
+    /// If `predicted` or `grad` does not have `hours x outputs` values.
+    pub fn log_likelihood_gradient(&self, predicted: &[f32], grad: &mut [f32]) -> f64 {
+        self.check_len(predicted);
+        self.check_len(grad);
+        let var: Vec<f64> = self.noise.iter().map(OutputNoise::variance).collect();
+        self.residual_gradient(predicted, grad, |k, r| r / var[k]);
+        self.log_likelihood(predicted)
+    }
+
+    /// [`GaussianLikelihood::log_marginal_sigma`] and its gradient with respect to the
+    /// predictions: `d ln p / d f_kt = n_k r_kt / SSR_k`.
+    ///
+    /// # Panics
+    /// As [`GaussianLikelihood::log_likelihood_gradient`].
+    pub fn log_marginal_sigma_gradient(&self, predicted: &[f32], grad: &mut [f32]) -> f64 {
+        self.check_len(predicted);
+        self.check_len(grad);
+        let w: Vec<f64> = (0..self.n_outputs)
+            .map(|k| self.n_obs[k] as f64 / self.ssr(predicted, k).max(f64::MIN_POSITIVE))
+            .collect();
+        self.residual_gradient(predicted, grad, |k, r| w[k] * r);
+        self.log_marginal_sigma(predicted)
+    }
+
+    /// `grad[t] = g(k, r_t)` at observed hours (r = y - f), 0 elsewhere.
+    fn residual_gradient(
+        &self,
+        predicted: &[f32],
+        grad: &mut [f32],
+        g: impl Fn(usize, f64) -> f64,
+    ) {
+        for (t, o) in grad.iter_mut().enumerate() {
+            *o = if self.present[t] {
+                g(
+                    t % self.n_outputs,
+                    self.observed[t] - f64::from(predicted[t]),
+                ) as f32
+            } else {
+                0.0
+            };
+        }
+    }
+
+    /// [`GaussianLikelihood::log_marginal_sigma_ar1`] and its gradient with respect to the
+    /// predictions, phi's dependence on them included. With `r = y - f`, `e_t = r_t - phi
+    /// r_(t-1)` and `D = pp - first` (so `phi = rp / D`, where `dS / dphi = 0`):
+    /// `d ln p / d r_t = -n / (2 S) dS/dr_t - R phi / (1 - phi^2) dphi/dr_t`, `dS/dr_t = 2 e_t`
+    /// (within a run) `- 2 phi e_(t+1)` (when `t + 1` continues the run) `+ 2 (1 - phi^2) r_t`
+    /// (first of a run), `dphi/dr_t = (d rp/dr_t - phi dD/dr_t) / D`; a clamped or zero phi is
+    /// constant. O(n).
+    ///
+    /// # Panics
+    /// As [`GaussianLikelihood::log_likelihood_gradient`].
+    pub fn log_marginal_sigma_ar1_gradient(&self, predicted: &[f32], grad: &mut [f32]) -> f64 {
+        self.check_len(predicted);
+        self.check_len(grad);
+        let stride = self.n_outputs;
+        let mut r = vec![None::<f64>; self.n_hours];
+        for k in 0..self.n_outputs {
+            let a = self.ar1_sums(predicted, k);
+            let den = a.pp - a.first;
+            let phi = a.profile_phi();
+            let free = den > 0.0 && phi.abs() < 0.999;
+            let n = self.n_obs[k] as f64;
+            let ss = a.s(phi).max(f64::MIN_POSITIVE);
+            for (t, v) in r.iter_mut().enumerate() {
+                let i = t * stride + k;
+                *v = self.present[i].then(|| self.observed[i] - f64::from(predicted[i]));
+            }
+            for t in 0..self.n_hours {
+                let Some(rt) = r[t] else {
+                    grad[t * stride + k] = 0.0;
+                    continue;
+                };
+                let prev = if t > 0 { r[t - 1] } else { None };
+                let next = r.get(t + 1).copied().flatten();
+                let mut ds = 0.0;
+                let (mut drp, mut dd) = (0.0, 0.0);
+                match prev {
+                    Some(p) => {
+                        ds += 2.0 * (rt - phi * p);
+                        drp += p;
+                    }
+                    None => {
+                        ds += 2.0 * (1.0 - phi * phi) * rt;
+                        dd -= 2.0 * rt;
+                    }
+                }
+                if let Some(q) = next {
+                    ds -= 2.0 * phi * (q - phi * rt);
+                    drp += q;
+                    dd += 2.0 * rt;
+                }
+                let mut dl = -0.5 * n / ss * ds;
+                if free {
+                    let dphi = (drp - phi * dd) / den;
+                    dl -= a.runs * phi / (1.0 - phi * phi) * dphi;
+                }
+                // d / d f = -d / d r
+                grad[t * stride + k] = (-dl) as f32;
+            }
+        }
+        self.log_marginal_sigma_ar1(predicted)
+    }
+
     /// Sum of squared residuals per output over the observed hours.
     pub fn residual_sum_of_squares(&self, predicted: &[f32]) -> Vec<f64> {
         self.check_len(predicted);
@@ -398,6 +508,82 @@ pub fn ln_prior_log_sigma_delta(log_sigma: f64, scale: f64, family: SigmaPrior) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gradients_match_central_differences() {
+        // Two outputs, 60 hours, gaps (a run boundary and a lone hour), AR(1)-like residuals so
+        // phi is free; central differences at f32-exact steps of 1/64.
+        let (n_h, n_out) = (60, 2);
+        let mut obs = vec![0.0; n_h * n_out];
+        let mut pred = vec![0f32; n_h * n_out];
+        let mut mask = vec![true; n_h * n_out];
+        let mut e = 0.0f64;
+        for t in 0..n_h {
+            e = 0.6 * e + ((t * 7919 % 23) as f64 / 23.0 - 0.5);
+            for k in 0..n_out {
+                pred[t * n_out + k] = 5.0 + (t as f32 * 0.3 + k as f32).sin();
+                obs[t * n_out + k] = f64::from(pred[t * n_out + k]) + e * (1.0 + k as f64);
+            }
+        }
+        for t in [10, 11, 12, 30, 59] {
+            mask[t * n_out] = false;
+        }
+        mask[41 * n_out + 1] = false;
+        let noise = vec![
+            OutputNoise {
+                sigma_y: 0.1,
+                sigma_delta: 0.3,
+                sigma_eta: 0.2
+            };
+            n_out
+        ];
+        let lik = GaussianLikelihood::with_mask(&obs, &mask, &noise).unwrap();
+        type Grad = fn(&GaussianLikelihood, &[f32], &mut [f32]) -> f64;
+        type Value = fn(&GaussianLikelihood, &[f32]) -> f64;
+        let cases: [(&str, Grad, Value); 3] = [
+            (
+                "fixed",
+                GaussianLikelihood::log_likelihood_gradient,
+                GaussianLikelihood::log_likelihood,
+            ),
+            (
+                "marginal",
+                GaussianLikelihood::log_marginal_sigma_gradient,
+                GaussianLikelihood::log_marginal_sigma,
+            ),
+            (
+                "ar1",
+                GaussianLikelihood::log_marginal_sigma_ar1_gradient,
+                GaussianLikelihood::log_marginal_sigma_ar1,
+            ),
+        ];
+        let phi = lik.ar1_coefficients(&pred);
+        assert!(
+            phi.iter().all(|p| p.abs() > 0.1 && p.abs() < 0.99),
+            "{phi:?}"
+        );
+        for (name, grad_fn, value_fn) in cases {
+            let mut g = vec![0f32; pred.len()];
+            let v = grad_fn(&lik, &pred, &mut g);
+            assert_eq!(v, value_fn(&lik, &pred), "{name}: value");
+            let h = 1.0 / 64.0;
+            let scale = g.iter().fold(0f32, |m, x| m.max(x.abs())) as f64;
+            for i in 0..pred.len() {
+                let (mut up, mut dn) = (pred.clone(), pred.clone());
+                up[i] += h;
+                dn[i] -= h;
+                let fd = (value_fn(&lik, &up) - value_fn(&lik, &dn)) / (2.0 * h as f64);
+                assert!(
+                    (f64::from(g[i]) - fd).abs() < 2e-3 * scale,
+                    "{name} at {i}: gradient {} vs central difference {fd}",
+                    g[i]
+                );
+                if !mask[i] {
+                    assert_eq!(g[i], 0.0);
+                }
+            }
+        }
+    }
 
     #[test]
     fn ln_gamma_matches_known_values() {

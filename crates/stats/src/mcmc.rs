@@ -251,7 +251,7 @@ struct Pending {
 }
 
 /// Exact serialisation of `f64` values as their bit patterns.
-mod f64_bits {
+pub(crate) mod f64_bits {
     use serde::{Deserialize, Deserializer, Serializer};
 
     pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
@@ -323,7 +323,7 @@ impl Draws {
         self.points.extend_from_slice(&later.points);
         self.log_density.extend_from_slice(&later.log_density);
     }
-    fn push(&mut self, x: &[f64], lp: f64) {
+    pub(crate) fn push(&mut self, x: &[f64], lp: f64) {
         self.points.extend_from_slice(x);
         self.log_density.push(lp);
     }

@@ -107,6 +107,19 @@ impl Triangular {
         self.pdf(x).ln()
     }
 
+    /// `d ln pdf / dx` inside the support (`1 / (x - min)` below the mode, `-1 / (max - x)`
+    /// above it; at the mode the side the density continues on); 0 outside.
+    pub fn d_ln_pdf(&self, x: f64) -> f64 {
+        let (a, c, b) = (self.min, self.mode, self.max);
+        if !(a < x && x < b) {
+            0.0
+        } else if x < c || (x == c && c == b) {
+            1.0 / (x - a)
+        } else {
+            -1.0 / (b - x)
+        }
+    }
+
     /// Cumulative distribution function.
     pub fn cdf(&self, x: f64) -> f64 {
         let (a, c, b) = (self.min, self.mode, self.max);
@@ -218,6 +231,28 @@ pub fn ln_prior_unit(dists: &[Triangular], u: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn d_ln_pdf_matches_central_differences() {
+        for t in [
+            Triangular::new(1.0, 2.0, 5.0).unwrap(),
+            Triangular::new(0.0, 0.0, 1.0).unwrap(),
+            Triangular::new(0.0, 1.0, 1.0).unwrap(),
+        ] {
+            for x in [0.3, 0.7, 1.5, 2.5, 4.9] {
+                if !(t.min() < x - 1e-4 && x + 1e-4 < t.max()) || (x - t.mode()).abs() < 1e-3 {
+                    continue;
+                }
+                let fd = (t.ln_pdf(x + 1e-6) - t.ln_pdf(x - 1e-6)) / 2e-6;
+                assert!(
+                    (t.d_ln_pdf(x) - fd).abs() < 1e-5 * fd.abs().max(1.0),
+                    "{t:?} at {x}"
+                );
+            }
+            assert_eq!(t.d_ln_pdf(t.max() + 1.0), 0.0);
+        }
+    }
+
     use rand::SeedableRng;
 
     #[test]
