@@ -9,6 +9,7 @@ for b in scripts/bench_energyplus.sh scripts/bench_surrogate.sh scripts/bench_dt
 done
 bash scripts/bench_baselines.sh
 bash scripts/bench_chains.sh
+BENCH_HMC=1 bash scripts/bench_chains.sh
 bash scripts/bench_workers.sh
 echo
 # The whole calibration by stage (issue 8): the demo is the paper-size problem (20-zone model,

@@ -154,6 +154,56 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{log2}"
     );
     assert!(log2.contains("reusing the one trained earlier"), "{log2}");
+
+    // The same posterior with HMC (gradients through the surrogate's VJP graph), from optimised
+    // starts: short chains, the same recovery and Guideline 14.
+    let project = std::fs::read_to_string(dir.join("project.toml"))
+        .unwrap()
+        .replace(
+            "iterations = 1500\nburn_in = 500\n",
+            "iterations = 80\nburn_in = 30\nkernel = \"hmc\"\nstart = \"optimised\"\n",
+        );
+    std::fs::write(dir.join("project.toml"), project).unwrap();
+    std::fs::remove_file(out.join("chains.json")).unwrap();
+    let hmc = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let log3 = String::from_utf8_lossy(&hmc.stderr);
+    assert!(hmc.status.success(), "{log3}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    for a in summary["acceptance_rate"].as_array().unwrap() {
+        assert!(a.as_f64().unwrap() > 0.5, "HMC acceptance {a}\n{log3}");
+    }
+    for (name, truth) in TRUTH {
+        let r = summary["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap();
+        let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
+        let estimate = summary["calibrated_values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|v| v[0] == name)
+            .unwrap()[1]
+            .as_f64()
+            .unwrap();
+        eprintln!("HMC {name}: truth {truth}, estimate {estimate:.4}");
+        assert!(
+            (estimate - truth).abs() <= 0.05 * range,
+            "HMC {name}: estimate {estimate} too far from truth {truth}\n{log3}"
+        );
+    }
+    for v in summary["validation"].as_array().unwrap() {
+        assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
+    }
 }
 
 #[test]

@@ -19,7 +19,8 @@ use bemcal_calibrate::refine::{
 };
 use bemcal_calibrate::Project;
 use bemcal_energyplus::HourlyOutputs;
-use bemcal_stats::mcmc::{ChainState, Draws};
+use bemcal_stats::chain::Chain;
+use bemcal_stats::mcmc::Draws;
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -545,7 +546,7 @@ impl State {
 
     /// The chains of refinement round `round`, merged: each chain's last state and all its
     /// draws, segments in order.
-    fn merged_chains(&self, r: &RunRow, round: u32) -> Result<(Vec<ChainState>, Vec<Draws>)> {
+    fn merged_chains(&self, r: &RunRow, round: u32) -> Result<(Vec<Chain>, Vec<Draws>)> {
         let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
         let mut groups: Vec<(u32, Vec<&JobRow>)> = vec![];
         for j in &jobs {
@@ -561,7 +562,7 @@ impl State {
             }
         }
         groups.sort_by_key(|g| g.0);
-        let mut states: Vec<ChainState> = vec![];
+        let mut states: Vec<Chain> = vec![];
         let mut draws: Vec<Draws> = vec![];
         for (_, seg) in &groups {
             let mut acc: Vec<Draws> = vec![];

@@ -8,7 +8,7 @@ use bemcal_calibrate::Project;
 use bemcal_coordinator::artifacts::safe_relative;
 use bemcal_coordinator::client::walk;
 use bemcal_coordinator::proto::{self, job::Kind};
-use bemcal_stats::mcmc::ChainState;
+use bemcal_stats::chain::Chain;
 
 /// Output files (`relative path`, file) and a small JSON result.
 pub type Outputs = (Vec<(String, PathBuf)>, String);
@@ -57,7 +57,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
         Some(Kind::Chains(c)) => {
             let mut sampler = cal.sampler().map_err(err)?;
             let states_path = work.join("states.json");
-            let mut states: Vec<ChainState> = if states_path.is_file() {
+            let mut states: Vec<Chain> = if states_path.is_file() {
                 let bytes = std::fs::read(&states_path).map_err(err)?;
                 serde_json::from_slice(&bytes).map_err(|e| format!("states.json: {e}"))?
             } else {

@@ -19,6 +19,10 @@
 //! under 15 minutes. `BENCH_OPTIMISED=1` also prints a check of the Laplace Gaussian at the
 //! first optimum (predicted against actual log-posterior changes at 8 of its draws) and, with
 //! `BENCH_OPTIMA=FILE`, reuses the optima stored in FILE (or stores them there).
+//! `BENCH_HMC=1` (with `BENCH_OPTIMISED=1`): exact-gradient BFGS through the surrogate's VJP
+//! graph, a gradient check, then HMC chains (`stats::hmc`) instead of Metropolis-Hastings
+//! (`BENCH_HMC_TIME`, `BENCH_HMC_TARGET`, `BENCH_HMC_LENGTH_JITTER`, `BENCH_HMC_ADAPT=0`
+//! override the defaults).
 
 use std::time::Instant;
 
@@ -136,6 +140,65 @@ impl Target<'_> {
             lp += ln_prior_log_sigma_delta(ln_s, b.scale[k], SigmaPrior::HalfCauchy);
         }
         lp
+    }
+
+    /// Log posterior and its unit-space gradient of a batch (marginal AR(1) likelihood only):
+    /// one surrogate call and one VJP call; counts both.
+    fn batch_grad(
+        &self,
+        ev: &mut Evaluator,
+        us: &[Vec<f64>],
+        evals: &mut u64,
+        grads: &mut u64,
+    ) -> Vec<(f64, Vec<f64>)> {
+        assert!(self.marginal, "HMC runs with the marginal likelihood");
+        let mut out: Vec<(f64, Vec<f64>)> = us
+            .iter()
+            .map(|u| {
+                let inside = u.iter().all(|v| (0.0..=1.0).contains(v));
+                let lp = if inside {
+                    self.ln_prior(u)
+                } else {
+                    f64::NEG_INFINITY
+                };
+                let g = self
+                    .priors
+                    .iter()
+                    .zip(u)
+                    .map(|(p, &v)| p.d_ln_pdf(p.from_unit(v)) * p.width())
+                    .collect();
+                (lp, g)
+            })
+            .collect();
+        let live: Vec<usize> = (0..us.len()).filter(|&i| out[i].0.is_finite()).collect();
+        if live.is_empty() {
+            return out;
+        }
+        let thetas: Vec<Vec<f64>> = live.iter().map(|&i| self.theta(&us[i])).collect();
+        *evals += thetas.len() as u64;
+        *grads += thetas.len() as u64;
+        let pred = ev.evaluate_batch(&thetas).expect("surrogate evaluation");
+        let mut cot = ndarray::Array3::<f32>::zeros(pred.dim());
+        let per = pred.len() / thetas.len();
+        {
+            let flat = pred.as_slice().expect("contiguous prediction");
+            let cflat = cot.as_slice_mut().expect("contiguous");
+            for (b, &i) in live.iter().enumerate() {
+                out[i].0 += self.lik.log_marginal_sigma_ar1_gradient(
+                    &flat[b * per..(b + 1) * per],
+                    &mut cflat[b * per..(b + 1) * per],
+                );
+            }
+        }
+        let g = ev
+            .vjp_batch(&thetas, cot.view())
+            .expect("surrogate gradient");
+        for (gb, &i) in g.iter().zip(&live) {
+            for ((o, gj), p) in out[i].1.iter_mut().zip(gb).zip(self.priors) {
+                *o += gj * p.width();
+            }
+        }
+        out
     }
 
     /// Log posterior of a batch with one surrogate call; counts the evaluations.
@@ -341,12 +404,37 @@ fn main() -> BoxResult<()> {
                     .collect()
             }
             None => {
-                let o = bemcal_stats::optim::maximise_batch(
-                    &starts,
-                    &init,
-                    &bemcal_stats::optim::BfgsConfig::default(),
-                    |us: &[Vec<f64>]| target.batch(&mut ev, us, &mut evals),
-                );
+                let cfg = bemcal_stats::optim::BfgsConfig::default();
+                // BENCH_HMC=1: BFGS with the VJP gradient (as the pipeline when the surrogate
+                // has the gradient graph); else finite differences.
+                let o = if std::env::var("BENCH_HMC").is_ok_and(|v| v == "1") {
+                    let cell = std::cell::RefCell::new((&mut ev, &mut evals, 0u64));
+                    let o = bemcal_stats::optim::maximise_batch_with_gradient(
+                        &starts,
+                        &init,
+                        &cfg,
+                        |us: &[Vec<f64>]| {
+                            let c = &mut *cell.borrow_mut();
+                            target.batch(c.0, us, c.1)
+                        },
+                        &mut |us: &[Vec<f64>]| {
+                            let c = &mut *cell.borrow_mut();
+                            target.batch_grad(c.0, us, c.1, &mut c.2)
+                        },
+                    );
+                    eprintln!(
+                        "  BFGS with VJP gradients: {} gradient calls",
+                        cell.borrow().2
+                    );
+                    o
+                } else {
+                    bemcal_stats::optim::maximise_batch(
+                        &starts,
+                        &init,
+                        &cfg,
+                        |us: &[Vec<f64>]| target.batch(&mut ev, us, &mut evals),
+                    )
+                };
                 if let Some(f) = &cache {
                     let v: Vec<_> = o
                         .iter()
@@ -358,6 +446,11 @@ fn main() -> BoxResult<()> {
             }
         };
         laplace_check(&optima[0], |us| target.batch(&mut ev, us, &mut evals));
+        if std::env::var("BENCH_HMC").is_ok_and(|v| v == "1") {
+            return run_hmc(
+                &a, &target, &mut ev, optima, &priors, &truth, &meta, t_start, evals,
+            );
+        }
         eprintln!(
             "  optimised starts: log posterior {:?}, {evals} evaluations, {:.0} s",
             optima
@@ -522,4 +615,158 @@ fn laplace_check<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
                 .join(" ")
         );
     }
+}
+
+/// `BENCH_HMC=1`: HMC chains (crates/stats/src/hmc.rs) from the optima with the Laplace
+/// covariance as metric; gradients through the surrogate's VJP graph.
+#[allow(clippy::too_many_arguments)]
+fn run_hmc(
+    a: &Args,
+    target: &Target<'_>,
+    ev: &mut Evaluator,
+    optima: Vec<bemcal_stats::optim::Optimum>,
+    priors: &[Triangular],
+    truth: &[f64],
+    meta: &bemcal_surrogate::SurrogateMeta,
+    t_start: Instant,
+    mut evals: u64,
+) -> BoxResult<()> {
+    use bemcal_stats::hmc::{run_segment_batch as hmc_segment, HmcConfig, HmcState};
+    let env = |k: &str, default: f64| -> BoxResult<f64> {
+        Ok(std::env::var(k).map_or(Ok(default), |v| v.parse())?)
+    };
+    let cfg = HmcConfig {
+        burn_in: a.burn_in,
+        integration_time: env("BENCH_HMC_TIME", HmcConfig::default().integration_time)?,
+        max_leapfrog_steps: env("BENCH_HMC_MAX_STEPS", 32.0)? as u32,
+        adapt_metric: env("BENCH_HMC_ADAPT", 1.0)? == 1.0,
+        target_acceptance: env("BENCH_HMC_TARGET", HmcConfig::default().target_acceptance)?,
+        length_jitter: env(
+            "BENCH_HMC_LENGTH_JITTER",
+            HmcConfig::default().length_jitter,
+        )?,
+        ..HmcConfig::default()
+    };
+    println!("HMC: {cfg:?}");
+    let mut grads = 0u64;
+    // Gradient check at a point 0.01 off the first optimum: the VJP gradient along random
+    // directions against central differences of the log posterior.
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let x0: Vec<f64> = optima[0]
+        .point
+        .iter()
+        .map(|&u| (u + 0.01 * rng.sample::<f64, _>(StandardNormal)).clamp(0.02, 0.98))
+        .collect();
+    let (_, g0) = target
+        .batch_grad(ev, std::slice::from_ref(&x0), &mut evals, &mut grads)
+        .remove(0);
+    for _ in 0..3 {
+        let v: Vec<f64> = (0..x0.len()).map(|_| rng.sample(StandardNormal)).collect();
+        let h = 1e-4;
+        let pm: Vec<Vec<f64>> = [h, -h]
+            .iter()
+            .map(|s| x0.iter().zip(&v).map(|(x, vi)| x + s * vi).collect())
+            .collect();
+        let f = target.batch(ev, &pm, &mut evals);
+        let fd = (f[0] - f[1]) / (2.0 * h);
+        let an: f64 = g0.iter().zip(&v).map(|(g, vi)| g * vi).sum();
+        eprintln!("  gradient check: directional derivative {an:.2} (VJP) vs {fd:.2} (central difference)");
+    }
+    let t_chains = Instant::now();
+    let pts: Vec<Vec<f64>> = optima.iter().map(|o| o.point.clone()).collect();
+    let init = target.batch_grad(ev, &pts, &mut evals, &mut grads);
+    let mut states: Vec<HmcState> = optima
+        .iter()
+        .zip(&init)
+        .enumerate()
+        .map(|(c, (o, (lp, g)))| {
+            HmcState::new(
+                cfg.clone(),
+                &o.point,
+                Some(&o.covariance),
+                *lp,
+                g,
+                a.seed,
+                c as u64,
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    let mut draws: Vec<Draws> = states.iter().map(|s| Draws::new(s.dim())).collect();
+    let mut done = 0u64;
+    let mut tgt = |us: &[Vec<f64>]| target.batch_grad(ev, us, &mut evals, &mut grads);
+    while done < a.iterations {
+        let n = 25u64.min(a.iterations - done);
+        let seg = hmc_segment(&mut states, n, &mut tgt)?;
+        for (dr, s) in draws.iter_mut().zip(&seg) {
+            dr.extend(s);
+        }
+        done += n;
+        eprintln!(
+            "  {done}/{} iterations, {:.0} s, step sizes {:?}, leapfrog steps {:?}, load {}",
+            a.iterations,
+            t_start.elapsed().as_secs_f64(),
+            states
+                .iter()
+                .map(|s| (s.step_size() * 1000.0).round() / 1000.0)
+                .collect::<Vec<_>>(),
+            states
+                .iter()
+                .map(|s| s.leapfrog_steps())
+                .collect::<Vec<_>>(),
+            loadavg()
+        );
+    }
+    let wall = t_start.elapsed().as_secs_f64();
+    let chains_wall = t_chains.elapsed().as_secs_f64();
+    let d = priors.len();
+    let (mut max_rhat, mut min_bulk, mut min_tail, mut covered) =
+        (0.0f64, f64::INFINITY, f64::INFINITY, 0);
+    let mut worst = (0usize, 0usize);
+    for j in 0..d {
+        let cols: Vec<Vec<f64>> = draws.iter().map(|dr| dr.column(j)).collect();
+        let g = diagnose(&cols)?;
+        if g.rhat > max_rhat {
+            (max_rhat, worst.0) = (g.rhat, j);
+        }
+        if g.ess_bulk < min_bulk {
+            (min_bulk, worst.1) = (g.ess_bulk, j);
+        }
+        min_tail = min_tail.min(g.ess_tail);
+        if (g.q5..=g.q95).contains(&priors[j].to_unit(truth[j])) {
+            covered += 1;
+        }
+    }
+    for (c, s) in states.iter().enumerate() {
+        println!(
+            "chain {c}: acceptance {:.3} (mean accept stat {:.3}), step size {:.4}, {} leapfrog steps, divergent {:?}, final log posterior {:.1}",
+            s.acceptance_rate_post_burn_in(),
+            s.mean_accept_stat(),
+            s.step_size(),
+            s.leapfrog_steps(),
+            s.divergent(),
+            s.log_density()
+        );
+    }
+    println!(
+        "run: HMC, {} chains x {} iterations ({} burn-in): {grads} gradients, {evals} evaluations in all",
+        a.chains, a.iterations, a.burn_in
+    );
+    println!("chains: {chains_wall:.1} s ({:.2} gradients per second); total wall time with the optimisation: {wall:.1} s", grads as f64 / chains_wall);
+    println!(
+        "max R-hat: {max_rhat:.4} ({}); min bulk ESS: {min_bulk:.0} ({}); min tail ESS: {min_tail:.0}",
+        meta.params[worst.0].name, meta.params[worst.1].name
+    );
+    println!(
+        "min bulk ESS per second of chains: {:.3}; truth inside the 90 % interval for {covered}/{d} parameters",
+        min_bulk / chains_wall
+    );
+    println!(
+        "criteria: R-hat <= {TARGET_RHAT}: {}, bulk ESS >= {TARGET_ESS}: {}, chains within {:.0} min: {}",
+        max_rhat <= TARGET_RHAT,
+        min_bulk >= TARGET_ESS,
+        TARGET_SECONDS / 60.0,
+        chains_wall < TARGET_SECONDS
+    );
+    println!("load average at end {}", loadavg());
+    Ok(())
 }

@@ -8,6 +8,7 @@
 
 use std::path::Path;
 
+use bemcal_stats::chain::Chain;
 use bemcal_stats::likelihood::{ln_prior_log_sigma_delta, GaussianLikelihood, SigmaPrior};
 use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws};
 use bemcal_surrogate::Evaluator;
@@ -133,10 +134,82 @@ impl Posterior<'_> {
     }
 }
 
+impl Posterior<'_> {
+    /// Log posterior and its unit-space gradient of several points: one batched surrogate call,
+    /// the likelihood's gradient with respect to the predictions (`fixed`, `marginal`, AR(1)),
+    /// and one batched VJP call through the surrogate (`d theta / d u = max - min`). Points
+    /// outside the box or failing a constraint get `-inf`.
+    ///
+    /// # Errors
+    /// With sampled `sigma_delta` (no gradient for those coordinates), or a surrogate without
+    /// its VJP graph.
+    pub fn ln_posterior_grad_batch(
+        &self,
+        eval: &mut Evaluator,
+        us: &[Vec<f64>],
+    ) -> Result<Vec<(f64, Vec<f64>)>, Error> {
+        if self.sigma_box.is_some() {
+            return Err(Error::Config(
+                "mcmc.sampler = \"hmc\" needs mcmc.sigma_delta = \"marginal\" or \"fixed\" \
+                 (sampled sigma_delta coordinates have no gradient)"
+                    .into(),
+            ));
+        }
+        let priors = &self.plan.priors;
+        let mut out: Vec<(f64, Vec<f64>)> = us
+            .iter()
+            .map(|u| {
+                let inside = u.iter().all(|v| (0.0..=1.0).contains(v));
+                let lp = if inside {
+                    self.ln_prior(u)
+                } else {
+                    f64::NEG_INFINITY
+                };
+                let g = priors
+                    .iter()
+                    .zip(u)
+                    .map(|(p, &v)| p.d_ln_pdf(p.from_unit(v)) * p.width())
+                    .collect();
+                (lp, g)
+            })
+            .collect();
+        let live: Vec<usize> = (0..us.len()).filter(|&i| out[i].0.is_finite()).collect();
+        if live.is_empty() {
+            return Ok(out);
+        }
+        let thetas: Vec<Vec<f64>> = live.iter().map(|&i| self.theta(&us[i])).collect();
+        let pred = eval.evaluate_batch(&thetas)?;
+        let mut cot = ndarray::Array3::<f32>::zeros(pred.dim());
+        let per = pred.len() / thetas.len();
+        {
+            let flat = pred.as_slice().expect("contiguous prediction");
+            let cflat = cot.as_slice_mut().expect("contiguous");
+            for (b, &i) in live.iter().enumerate() {
+                let (y, g) = (
+                    &flat[b * per..(b + 1) * per],
+                    &mut cflat[b * per..(b + 1) * per],
+                );
+                out[i].0 += match (self.marginal, self.ar1) {
+                    (true, true) => self.likelihood.log_marginal_sigma_ar1_gradient(y, g),
+                    (true, false) => self.likelihood.log_marginal_sigma_gradient(y, g),
+                    (false, _) => self.likelihood.log_likelihood_gradient(y, g),
+                };
+            }
+        }
+        let grads = eval.vjp_batch(&thetas, cot.view())?;
+        for (g, &i) in grads.iter().zip(&live) {
+            for ((o, gj), p) in out[i].1.iter_mut().zip(g).zip(priors) {
+                *o += gj * p.width();
+            }
+        }
+        Ok(out)
+    }
+}
+
 /// Checkpoint of all chains: states and the draws so far.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Checkpoint {
-    pub states: Vec<ChainState>,
+    pub states: Vec<Chain>,
     pub draws: Vec<Draws>,
 }
 
@@ -145,7 +218,7 @@ pub struct Checkpoint {
 pub fn run_chains(
     post: &Posterior<'_>,
     eval: &mut Evaluator,
-    initial: impl FnOnce(&Posterior<'_>, &mut Evaluator) -> Result<Vec<ChainState>, Error>,
+    initial: impl FnOnce(&Posterior<'_>, &mut Evaluator) -> Result<Vec<Chain>, Error>,
     iterations: u64,
     segment: u64,
     path: &Path,
@@ -171,9 +244,7 @@ pub fn run_chains(
             break;
         }
         let n = segment.min(iterations - done);
-        let seg = run_segment_batch(&mut ck.states, n, |us: &[Vec<f64>]| {
-            post.ln_posterior_batch(eval, us)
-        })?;
+        let seg = advance_chains(post, eval, &mut ck.states, n)?;
         for (d, s) in ck.draws.iter_mut().zip(&seg) {
             d.extend(s);
         }
@@ -181,4 +252,58 @@ pub fn run_chains(
         crate::write_atomic(path, &bytes)?;
     }
     Ok(ck)
+}
+
+/// Advances chains of one kernel by `n` iterations with batched targets: log posteriors for
+/// Metropolis-Hastings, log posteriors and gradients for HMC. Returns this segment's draws.
+///
+/// # Errors
+/// Chains of both kernels in one call; an HMC chain whose gradient evaluation failed (the
+/// states are left as they were before the failing iteration's end, draws of earlier
+/// iterations are lost to the caller: rerun from the last checkpoint).
+pub fn advance_chains(
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    states: &mut [Chain],
+    n: u64,
+) -> Result<Vec<Draws>, Error> {
+    let mh: Option<Vec<ChainState>> = states
+        .iter()
+        .map(|c| match c {
+            Chain::Mh(s) => Some(s.clone()),
+            Chain::Hmc(_) => None,
+        })
+        .collect();
+    if let Some(mut mh) = mh {
+        let draws = run_segment_batch(&mut mh, n, |us: &[Vec<f64>]| {
+            post.ln_posterior_batch(eval, us)
+        })?;
+        for (c, s) in states.iter_mut().zip(mh) {
+            *c = Chain::Mh(s);
+        }
+        return Ok(draws);
+    }
+    let hmc: Option<Vec<bemcal_stats::hmc::HmcState>> = states
+        .iter()
+        .map(|c| match c {
+            Chain::Hmc(s) => Some(s.clone()),
+            Chain::Mh(_) => None,
+        })
+        .collect();
+    let Some(mut hmc) = hmc else {
+        return Err(Error::Config(
+            "chains of both kernels (mh and hmc) in one checkpoint".into(),
+        ));
+    };
+    let mut failed = None;
+    let draws = bemcal_stats::hmc::run_segment_batch(&mut hmc, n, &mut |us: &[Vec<f64>]| {
+        crate::pipeline::grad_or_reject(post, eval, us, &mut failed)
+    })?;
+    if let Some(e) = failed {
+        return Err(e);
+    }
+    for (c, s) in states.iter_mut().zip(hmc) {
+        *c = Chain::Hmc(s);
+    }
+    Ok(draws)
 }

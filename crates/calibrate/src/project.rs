@@ -221,6 +221,28 @@ pub struct McmcSettings {
     /// optimum. Through the coordinator the chains compared are those of one chain job: all of
     /// them unless `--chains-per-job` splits them.
     pub restart_below: f64,
+    /// The transition kernel: `mh` (default: random-walk Metropolis-Hastings, the reference's
+    /// Algorithm 1, with the adaptive and independence variants above) or `hmc` (Hamiltonian
+    /// Monte Carlo with gradients through the surrogate's VJP graph, `stats::hmc`; needs
+    /// `sigma_delta = "marginal"` or `"fixed"`). An HMC iteration is a whole trajectory
+    /// (`ceil(hmc_integration_time / step)` gradients, about 8 at paper size, each costing
+    /// about 3.3 surrogate evaluations), so set `iterations` and `burn_in` for it in hundreds,
+    /// not thousands (e.g. 400 and 150). With `start = "optimised"` the Laplace covariance is
+    /// its initial metric.
+    pub kernel: Kernel,
+    /// HMC trajectory length in the whitened space (`kernel = "hmc"`).
+    pub hmc_integration_time: f64,
+}
+
+/// The chains' transition kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kernel {
+    /// Random-walk (and independence) Metropolis-Hastings.
+    #[default]
+    Mh,
+    /// Hamiltonian Monte Carlo.
+    Hmc,
 }
 
 /// Where chains start.
@@ -260,6 +282,8 @@ impl Default for McmcSettings {
             optimiser_iterations: 60,
             independence: 0.0,
             restart_below: 20.0,
+            kernel: Kernel::Mh,
+            hmc_integration_time: 2.0,
         }
     }
 }
@@ -382,6 +406,19 @@ impl Project {
             return Err(format!(
                 "mcmc.independence = {} must be in [0, 1)",
                 self.mcmc.independence
+            ));
+        }
+        if self.mcmc.kernel == Kernel::Hmc && self.mcmc.sigma_delta == SigmaDeltaMode::Sampled {
+            return Err(
+                "mcmc.kernel = \"hmc\" needs mcmc.sigma_delta = \"marginal\" or \"fixed\" \
+                 (sampled sigma_delta coordinates have no gradient through the surrogate)"
+                    .into(),
+            );
+        }
+        if !(self.mcmc.hmc_integration_time.is_finite() && self.mcmc.hmc_integration_time > 0.0) {
+            return Err(format!(
+                "mcmc.hmc_integration_time = {} must be positive",
+                self.mcmc.hmc_integration_time
             ));
         }
         if self.mcmc.restart_below.is_nan() || self.mcmc.restart_below < 0.0 {

@@ -10,6 +10,7 @@
 //! - [`lhs`]: Latin hypercube design points with maximin improvement and constraint repair.
 //! - [`mcmc`]: random-walk Metropolis-Hastings (reference Algorithm 1) with adaptive covariance
 //!   during burn-in, checkpointable chain state, single-chain and batched stepping.
+//! - [`chain`]: one chain of either kernel (what the pipeline checkpoints and merges).
 //! - [`hmc`]: Hamiltonian Monte Carlo in the logit of the unit space (gradients through the
 //!   surrogate's VJP graph), dual-averaging step size, checkpointable, batched over chains.
 //! - [`optim`]: posterior mode search (BFGS, finite differences) for the chains' starts.
@@ -18,6 +19,7 @@
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 
+pub mod chain;
 pub mod diagnostics;
 pub mod hmc;
 pub mod lhs;

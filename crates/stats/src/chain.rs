@@ -1,0 +1,137 @@
+//! One chain of either kernel, as the pipeline stores, checkpoints and merges it: random-walk /
+//! independence Metropolis-Hastings ([`crate::mcmc`]) or HMC ([`crate::hmc`]).
+//!
+//! Serialised as the bare state of its kernel, so a checkpoint written before HMC existed (a
+//! bare [`ChainState`]) reads as [`Chain::Mh`]; an HMC state is told apart by its `z` field.
+//! (Not `#[serde(untagged)]`: serde's buffer for untagged enums cannot hold the RNG's `u128`
+//! word position; the state is buffered as a JSON value instead.)
+
+use serde::{Deserialize, Deserializer, Serialize};
+
+use crate::hmc::HmcState;
+use crate::mcmc::ChainState;
+
+/// A chain's complete state.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Chain {
+    /// Metropolis-Hastings (reference Algorithm 1 and its adaptive variants).
+    Mh(ChainState),
+    /// Hamiltonian Monte Carlo with gradients through the surrogate.
+    Hmc(HmcState),
+}
+
+impl Chain {
+    /// Dimension of the sampled space.
+    pub fn dim(&self) -> usize {
+        match self {
+            Chain::Mh(s) => s.dim(),
+            Chain::Hmc(s) => s.dim(),
+        }
+    }
+    /// Unit-space position.
+    pub fn position(&self) -> Vec<f64> {
+        match self {
+            Chain::Mh(s) => s.position().to_vec(),
+            Chain::Hmc(s) => s.position(),
+        }
+    }
+    /// Log posterior at the position.
+    pub fn log_density(&self) -> f64 {
+        match self {
+            Chain::Mh(s) => s.log_density(),
+            Chain::Hmc(s) => s.log_density(),
+        }
+    }
+    /// Iterations done.
+    pub fn iteration(&self) -> u64 {
+        match self {
+            Chain::Mh(s) => s.iteration(),
+            Chain::Hmc(s) => s.iteration(),
+        }
+    }
+    /// Acceptance rate after burn-in.
+    pub fn acceptance_rate_post_burn_in(&self) -> f64 {
+        match self {
+            Chain::Mh(s) => s.acceptance_rate_post_burn_in(),
+            Chain::Hmc(s) => s.acceptance_rate_post_burn_in(),
+        }
+    }
+    /// See [`ChainState::moved_from_mode`].
+    pub fn moved_from_mode(&self) -> Option<f64> {
+        match self {
+            Chain::Mh(s) => s.moved_from_mode(),
+            Chain::Hmc(s) => s.moved_from_mode(),
+        }
+    }
+    /// See [`ChainState::independence_dropped`] (never for HMC).
+    pub fn independence_dropped(&self) -> bool {
+        match self {
+            Chain::Mh(s) => s.independence_dropped(),
+            Chain::Hmc(_) => false,
+        }
+    }
+    /// Divergent trajectories after burn-in (HMC; 0 for Metropolis-Hastings).
+    pub fn divergent_post_burn_in(&self) -> u64 {
+        match self {
+            Chain::Mh(_) => 0,
+            Chain::Hmc(s) => s.divergent().1,
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Chain {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let v = serde_json::Value::deserialize(d)?;
+        if v.get("z").is_some() {
+            HmcState::deserialize(v)
+                .map(Chain::Hmc)
+                .map_err(D::Error::custom)
+        } else {
+            ChainState::deserialize(v)
+                .map(Chain::Mh)
+                .map_err(D::Error::custom)
+        }
+    }
+}
+
+impl From<ChainState> for Chain {
+    fn from(s: ChainState) -> Self {
+        Chain::Mh(s)
+    }
+}
+
+impl From<HmcState> for Chain {
+    fn from(s: HmcState) -> Self {
+        Chain::Hmc(s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hmc::HmcConfig;
+    use crate::mcmc::MhConfig;
+
+    #[test]
+    fn old_checkpoints_read_as_mh_and_hmc_round_trips() {
+        let mh = ChainState::new(MhConfig::default(), vec![0.5, 0.4], -1.0, 1, 0).unwrap();
+        let json = serde_json::to_string(&mh).unwrap();
+        let back: Chain = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, Chain::Mh(mh));
+        let hmc = HmcState::new(
+            HmcConfig::default(),
+            &[0.5, 0.4],
+            None,
+            -1.0,
+            &[0.0, 1.0],
+            1,
+            0,
+        )
+        .unwrap();
+        let c = Chain::Hmc(hmc);
+        let back: Chain = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+    }
+}
