@@ -81,22 +81,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
             .iter()
             .find(|p| p["name"] == name)
             .unwrap();
-        let r = summary["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap();
-        let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
+        let (range, estimate) = range_and_estimate(&summary, name);
         let (q5, q95) = (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap());
-        let estimate = summary["calibrated_values"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|v| v[0] == name)
-            .unwrap()[1]
-            .as_f64()
-            .unwrap();
         eprintln!("{name}: truth {truth}, estimate {estimate:.4}, 90 % [{q5:.4}, {q95:.4}]");
         assert!(
             (estimate - truth).abs() <= 0.05 * range,
@@ -180,21 +166,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         assert!(a.as_f64().unwrap() > 0.5, "HMC acceptance {a}\n{log3}");
     }
     for (name, truth) in TRUTH {
-        let r = summary["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap();
-        let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
-        let estimate = summary["calibrated_values"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|v| v[0] == name)
-            .unwrap()[1]
-            .as_f64()
-            .unwrap();
+        let (range, estimate) = range_and_estimate(&summary, name);
         eprintln!("HMC {name}: truth {truth}, estimate {estimate:.4}");
         assert!(
             (estimate - truth).abs() <= 0.05 * range,
@@ -204,6 +176,26 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
+}
+
+/// A parameter's prior range and its calibrated value in summary.json.
+fn range_and_estimate(summary: &serde_json::Value, name: &str) -> (f64, f64) {
+    let r = summary["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap();
+    let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
+    let estimate = summary["calibrated_values"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v[0] == name)
+        .unwrap()[1]
+        .as_f64()
+        .unwrap();
+    (range, estimate)
 }
 
 #[test]

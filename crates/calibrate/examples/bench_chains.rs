@@ -161,12 +161,7 @@ impl Target<'_> {
                 } else {
                     f64::NEG_INFINITY
                 };
-                let g = self
-                    .priors
-                    .iter()
-                    .zip(u)
-                    .map(|(p, &v)| p.d_ln_pdf(p.from_unit(v)) * p.width())
-                    .collect();
+                let g = bemcal_stats::prior::grad_ln_prior_unit(self.priors, u);
                 (lp, g)
             })
             .collect();

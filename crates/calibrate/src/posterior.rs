@@ -165,11 +165,7 @@ impl Posterior<'_> {
                 } else {
                     f64::NEG_INFINITY
                 };
-                let g = priors
-                    .iter()
-                    .zip(u)
-                    .map(|(p, &v)| p.d_ln_pdf(p.from_unit(v)) * p.width())
-                    .collect();
+                let g = bemcal_stats::prior::grad_ln_prior_unit(priors, u);
                 (lp, g)
             })
             .collect();

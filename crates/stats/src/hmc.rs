@@ -470,19 +470,12 @@ impl HmcState {
     }
 
     fn adapt_update(&mut self) {
-        let d = self.dim();
-        self.adapt_n += 1;
-        let n = self.adapt_n as f64;
-        let delta: Vec<f64> = (0..d).map(|i| self.z[i] - self.adapt_mean[i]).collect();
-        for (m, dl) in self.adapt_mean.iter_mut().zip(&delta) {
-            *m += dl / n;
-        }
-        for i in 0..d {
-            let after = self.z[i] - self.adapt_mean[i];
-            for (j, dj) in delta.iter().enumerate() {
-                self.adapt_m2[i * d + j] += dj * after;
-            }
-        }
+        crate::mcmc::welford_update(
+            &mut self.adapt_n,
+            &mut self.adapt_mean,
+            &mut self.adapt_m2,
+            &self.z,
+        );
     }
 
     /// Metric = `(n C + d M0) / (n + d)`: the window's covariance shrunk towards the initial

@@ -329,6 +329,25 @@ impl Draws {
     }
 }
 
+/// Welford's running mean and sum of outer products (`m2`, row-major `d x d`, symmetric up
+/// to rounding) updated with the state `x`; `n` counts the states.
+pub(crate) fn welford_update(n: &mut u64, mean: &mut [f64], m2: &mut [f64], x: &[f64]) {
+    let d = x.len();
+    *n += 1;
+    let nf = *n as f64;
+    let delta: Vec<f64> = (0..d).map(|i| x[i] - mean[i]).collect();
+    for (m, dl) in mean.iter_mut().zip(&delta) {
+        *m += dl / nf;
+    }
+    for i in 0..d {
+        let after_i = x[i] - mean[i];
+        for (j, dj) in delta.iter().enumerate() {
+            // Symmetric update: M2 += delta_before x delta_after.
+            m2[j * d + i] += dj * after_i;
+        }
+    }
+}
+
 /// Lower Cholesky factor `L` (row-major `d x d`) of a symmetric positive-definite row-major
 /// `d x d` matrix; `None` if not positive definite.
 pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
@@ -707,22 +726,12 @@ impl ChainState {
 
     /// Welford update of the running mean and covariance with the current state.
     fn adapt_update(&mut self) {
-        let d = self.dim();
-        self.adapt_n += 1;
-        let n = self.adapt_n as f64;
-        let delta: Vec<f64> = (0..d)
-            .map(|i| self.position[i] - self.adapt_mean[i])
-            .collect();
-        for (m, dl) in self.adapt_mean.iter_mut().zip(&delta) {
-            *m += dl / n;
-        }
-        for i in 0..d {
-            let after_i = self.position[i] - self.adapt_mean[i];
-            for (j, dj) in delta.iter().enumerate() {
-                // Symmetric update: M2 += delta_before x delta_after.
-                self.adapt_m2[j * d + i] += dj * after_i;
-            }
-        }
+        welford_update(
+            &mut self.adapt_n,
+            &mut self.adapt_mean,
+            &mut self.adapt_m2,
+            &self.position,
+        );
     }
 
     /// Haario et al. (2001) Eq. (2.1): `C_t = s_d Cov(X_0..X_{t-1}) + s_d eps I_d`.

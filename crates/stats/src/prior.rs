@@ -120,6 +120,11 @@ impl Triangular {
         }
     }
 
+    /// `d ln pdf(from_unit(u)) / du`: [`Triangular::d_ln_pdf`] times the width.
+    pub fn d_ln_pdf_unit(&self, u: f64) -> f64 {
+        self.d_ln_pdf(self.from_unit(u)) * self.width()
+    }
+
     /// Cumulative distribution function.
     pub fn cdf(&self, x: f64) -> f64 {
         let (a, c, b) = (self.min, self.mode, self.max);
@@ -226,6 +231,15 @@ pub fn ln_prior_unit(dists: &[Triangular], u: &[f64]) -> f64 {
             }
         })
         .sum()
+}
+
+/// Gradient of [`ln_prior_unit`] with respect to the unit-space point (0 outside the supports).
+pub fn grad_ln_prior_unit(dists: &[Triangular], u: &[f64]) -> Vec<f64> {
+    dists
+        .iter()
+        .zip(u)
+        .map(|(p, &v)| p.d_ln_pdf_unit(v))
+        .collect()
 }
 
 #[cfg(test)]
