@@ -57,17 +57,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
 
     let out = dir.join("out");
-    let run = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "calibrate failed:\n{log}");
-    let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let (log, summary) = calibrate(dir, &out);
 
     // Recovery: the estimate lies within 5 % of the prior range of the truth, and the truth lies
     // in the 90 % posterior interval widened by 3 % of the prior range. The widening is the
@@ -151,17 +141,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         );
     std::fs::write(dir.join("project.toml"), project).unwrap();
     std::fs::remove_file(out.join("chains.json")).unwrap();
-    let hmc = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let log3 = String::from_utf8_lossy(&hmc.stderr);
-    assert!(hmc.status.success(), "{log3}");
-    let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let (log3, summary) = calibrate(dir, &out);
     for a in summary["acceptance_rate"].as_array().unwrap() {
         assert!(a.as_f64().unwrap() > 0.5, "HMC acceptance {a}\n{log3}");
     }
@@ -176,6 +156,22 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
+}
+
+/// `bemcal calibrate DIR/project.toml --out OUT`, which must succeed: its log and summary.json.
+fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
+    let run = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert!(run.status.success(), "calibrate failed:\n{log}");
+    let summary =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    (log, summary)
 }
 
 /// A parameter's prior range and its calibrated value in summary.json.

@@ -231,6 +231,22 @@ pub trait GradientTarget {
     fn evaluate(&mut self, points: &[Vec<f64>]) -> Vec<(f64, Vec<f64>)>;
 }
 
+/// `target` at `points`, checked to return one value per point.
+fn evaluate_checked<T: GradientTarget + ?Sized>(
+    target: &mut T,
+    points: &[Vec<f64>],
+) -> Result<Vec<(f64, Vec<f64>)>> {
+    let values = target.evaluate(points);
+    if values.len() != points.len() {
+        return Err(StatsError::Shape(format!(
+            "target returned {} values for {} points",
+            values.len(),
+            points.len()
+        )));
+    }
+    Ok(values)
+}
+
 impl<F: FnMut(&[Vec<f64>]) -> Vec<(f64, Vec<f64>)>> GradientTarget for F {
     fn evaluate(&mut self, points: &[Vec<f64>]) -> Vec<(f64, Vec<f64>)> {
         self(points)
@@ -556,14 +572,7 @@ pub fn step_batch<T: GradientTarget + ?Sized>(
             }
             points.push(tr.z.iter().map(|&v| sigmoid(v)).collect::<Vec<f64>>());
         }
-        let values = target.evaluate(&points);
-        if values.len() != points.len() {
-            return Err(StatsError::Shape(format!(
-                "target returned {} values for {} points",
-                values.len(),
-                points.len()
-            )));
-        }
+        let values = evaluate_checked(target, &points)?;
         for ((&c, u), (lp, g)) in live.iter().zip(&points).zip(values) {
             let tr = &mut trs[c];
             tr.done += 1;
@@ -603,14 +612,7 @@ pub fn chains_at_optima<T: GradientTarget + ?Sized>(
 ) -> Result<Vec<HmcState>> {
     let moved = crate::optim::keep_best_modes(&mut optima, restart_below);
     let points: Vec<Vec<f64>> = optima.iter().map(|o| o.point.clone()).collect();
-    let values = target.evaluate(&points);
-    if values.len() != points.len() {
-        return Err(StatsError::Shape(format!(
-            "target returned {} values for {} points",
-            values.len(),
-            points.len()
-        )));
-    }
+    let values = evaluate_checked(target, &points)?;
     let mut states = optima
         .iter()
         .zip(values)
