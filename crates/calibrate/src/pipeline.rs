@@ -791,7 +791,6 @@ pub fn chains_at(
     m: &McmcSettings,
     first_chain: u64,
 ) -> Result<Vec<Chain>, Error> {
-    let lps = post.ln_posterior_batch(eval, starts);
     if m.kernel == Kernel::Hmc && !eval.has_gradient() {
         return Err(Error::Config(format!(
             "mcmc.kernel = \"hmc\" needs the surrogate's gradient graph, and {} has none \
@@ -801,6 +800,27 @@ pub fn chains_at(
             eval.surrogate().dir().display()
         )));
     }
+    if m.kernel == Kernel::Hmc && m.start == ChainStart::Prior {
+        // The gradient call gives the starts' log posteriors too.
+        let values = post.ln_posterior_grad_batch(eval, starts)?;
+        return starts
+            .iter()
+            .zip(values)
+            .enumerate()
+            .map(|(c, (s, (lp, g)))| {
+                Ok(Chain::from(HmcState::new(
+                    hmc_config.clone(),
+                    s,
+                    None,
+                    lp,
+                    &g,
+                    m.seed,
+                    first_chain + c as u64,
+                )?))
+            })
+            .collect();
+    }
+    let lps = post.ln_posterior_batch(eval, starts);
     if m.start == ChainStart::Optimised {
         let cfg = BfgsConfig {
             max_iterations: m.optimiser_iterations,
@@ -817,7 +837,7 @@ pub fn chains_at(
                 &cfg,
                 |us: &[Vec<f64>]| post.ln_posterior_batch(&mut cell.borrow_mut(), us),
                 &mut |us: &[Vec<f64>]| {
-                    grad_or_reject(post, &mut cell.borrow_mut(), us, &mut failed)
+                    post.ln_posterior_grad_or_reject(&mut cell.borrow_mut(), us, &mut failed)
                 },
             );
             if let Some(e) = failed {
@@ -842,7 +862,7 @@ pub fn chains_at(
                     m.seed,
                     first_chain,
                     m.restart_below,
-                    &mut |us: &[Vec<f64>]| grad_or_reject(post, eval, us, &mut failed),
+                    &mut |us: &[Vec<f64>]| post.ln_posterior_grad_or_reject(eval, us, &mut failed),
                 );
                 if let Some(e) = failed {
                     return Err(e);
@@ -851,60 +871,20 @@ pub fn chains_at(
             }
         });
     }
-    match m.kernel {
-        Kernel::Mh => starts
-            .iter()
-            .zip(lps)
-            .enumerate()
-            .map(|(c, (s, lp))| {
-                Ok(Chain::from(ChainState::new(
-                    config.clone(),
-                    s.clone(),
-                    lp,
-                    m.seed,
-                    first_chain + c as u64,
-                )?))
-            })
-            .collect(),
-        Kernel::Hmc => {
-            let values = post.ln_posterior_grad_batch(eval, starts)?;
-            starts
-                .iter()
-                .zip(values)
-                .enumerate()
-                .map(|(c, (s, (lp, g)))| {
-                    Ok(Chain::from(HmcState::new(
-                        hmc_config.clone(),
-                        s,
-                        None,
-                        lp,
-                        &g,
-                        m.seed,
-                        first_chain + c as u64,
-                    )?))
-                })
-                .collect()
-        }
-    }
-}
-
-/// [`Posterior::ln_posterior_grad_batch`] for a sampler: an evaluation error rejects the points
-/// (`-inf`, as [`Posterior::ln_posterior_batch`] does) and is kept in `failed` for the caller.
-pub(crate) fn grad_or_reject(
-    post: &Posterior<'_>,
-    eval: &mut Evaluator,
-    us: &[Vec<f64>],
-    failed: &mut Option<Error>,
-) -> Vec<(f64, Vec<f64>)> {
-    match post.ln_posterior_grad_batch(eval, us) {
-        Ok(v) => v,
-        Err(e) => {
-            failed.get_or_insert(e);
-            us.iter()
-                .map(|u| (f64::NEG_INFINITY, vec![0.0; u.len()]))
-                .collect()
-        }
-    }
+    starts
+        .iter()
+        .zip(lps)
+        .enumerate()
+        .map(|(c, (s, lp))| {
+            Ok(Chain::from(ChainState::new(
+                config.clone(),
+                s.clone(),
+                lp,
+                m.seed,
+                first_chain + c as u64,
+            )?))
+        })
+        .collect()
 }
 
 /// What [`Sampler::summarize`] returns.

@@ -202,6 +202,28 @@ impl Posterior<'_> {
     }
 }
 
+impl Posterior<'_> {
+    /// [`Posterior::ln_posterior_grad_batch`] for a sampler's callback: an evaluation error
+    /// rejects the points (`-inf`, as [`Posterior::ln_posterior_batch`] does) and is kept in
+    /// `failed` (the first one) for the caller to return.
+    pub fn ln_posterior_grad_or_reject(
+        &self,
+        eval: &mut Evaluator,
+        us: &[Vec<f64>],
+        failed: &mut Option<Error>,
+    ) -> Vec<(f64, Vec<f64>)> {
+        match self.ln_posterior_grad_batch(eval, us) {
+            Ok(v) => v,
+            Err(e) => {
+                failed.get_or_insert(e);
+                us.iter()
+                    .map(|u| (f64::NEG_INFINITY, vec![0.0; u.len()]))
+                    .collect()
+            }
+        }
+    }
+}
+
 /// Checkpoint of all chains: states and the draws so far.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Checkpoint {
@@ -293,7 +315,7 @@ pub fn advance_chains(
     };
     let mut failed = None;
     let draws = bemcal_stats::hmc::run_segment_batch(&mut hmc, n, &mut |us: &[Vec<f64>]| {
-        crate::pipeline::grad_or_reject(post, eval, us, &mut failed)
+        post.ln_posterior_grad_or_reject(eval, us, &mut failed)
     })?;
     if let Some(e) = failed {
         return Err(e);
