@@ -265,6 +265,84 @@ fn refinement_round_local_and_distributed() {
     }
 }
 
+/// A design point EnergyPlus cannot simulate, made on purpose: the lighting prior reaches
+/// below zero, where EnergyPlus refuses the `Lights` object (a Severe in input processing, then
+/// a Fatal). The hypercube point in the lowest stratum fails; the calibration records it with
+/// EnergyPlus's lines, simulates a spare hypercube point in its place and runs to its end, the
+/// same way in the single-process and the distributed path.
+#[test]
+fn failed_design_point_is_replaced_local_and_distributed() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    let model = tmp.path().join("model.toml");
+    let text = std::fs::read_to_string(&model).unwrap();
+    std::fs::write(
+        &model,
+        format!("{text}\n[priors.lighting_power_density]\nmin = -12.0\nmode = 12.5\nmax = 20.0\n"),
+    )
+    .unwrap();
+    let local = tmp.path().join("local");
+    let log = calibrate(&pf, &local, None);
+    assert!(log.contains("EnergyPlus failed"), "{log}");
+    assert!(log.contains("replaced by spare hypercube points"), "{log}");
+    let summary = |dir: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+    };
+    let sa = summary(&local);
+    let d = &sa["design"];
+    let failed = d["failed"].as_array().unwrap();
+    assert!(!failed.is_empty(), "{d}");
+    for f in failed {
+        let lpd = f["values"][0].as_f64().unwrap();
+        assert!(lpd < 0.0, "only negative lighting fails: {f}");
+        assert!(f["error"].as_str().unwrap().contains("watts_per_floor_area"), "{f}");
+    }
+    assert_eq!(d["simulated"], 6, "{d}");
+    assert!(d["dropped"].as_array().unwrap().is_empty(), "{d}");
+    let replaced = d["replaced"].as_array().unwrap();
+    assert!(!replaced.is_empty(), "{d}");
+    assert!(d["reasons"][0]["reason"].as_str().unwrap().contains("Lights"), "{d}");
+    assert!(d["suggestions"].as_array().unwrap().iter().any(|s| s.as_str().unwrap().contains("prior")), "{d}");
+    assert_eq!(sa["design_points"], 6);
+    assert!(sa["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
+    // The replacement's simulation is saved under its slot with positive lighting.
+    let slot = replaced[0].as_u64().unwrap();
+    let saved: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(local.join(format!("simulations/point_{slot:03}.json"))).unwrap(),
+    )
+    .unwrap();
+    assert!(saved["values"]["lighting_power_density"].as_f64().unwrap() > 0.0);
+
+    // The same design through the coordinator and two workers (same first surrogate).
+    let dist = tmp.path().join("dist");
+    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
+    let sb = summary(&dist);
+    // The same design, failures and replacements (the error texts name each run's own folder).
+    for k in ["reasons", "replaced", "dropped", "simulated", "suggestions"] {
+        assert_eq!(sa["design"][k], sb["design"][k], "{k}\n{log}");
+    }
+    let slots_values = |s: &serde_json::Value| -> Vec<(serde_json::Value, serde_json::Value)> {
+        let f = s["design"]["failed"].as_array().unwrap();
+        f.iter().map(|f| (f["slot"].clone(), f["values"].clone())).collect()
+    };
+    assert_eq!(slots_values(&sa), slots_values(&sb));
+    for f in ["draws.csv", "simulations/point_000.json", "simulations/point_005.json"] {
+        assert_eq!(
+            std::fs::read(local.join(f)).unwrap(),
+            std::fs::read(dist.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+    // A rerun reuses every simulation, the failed one included: nothing runs again.
+    let log = calibrate(&pf, &local, None);
+    assert!(log.contains("failed in an earlier run"), "{log}");
+    assert!(log.contains("simulations: 0 run"), "{log}");
+}
+
 #[test]
 fn worker_killed_and_coordinator_restarted() {
     if !have_engine() {

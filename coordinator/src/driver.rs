@@ -17,6 +17,7 @@ use bemcal_calibrate::refine::{
     next_starts, pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound,
     REFINE_FILE,
 };
+use bemcal_calibrate::replacement::{Attempt, Step};
 use bemcal_calibrate::Project;
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
@@ -194,11 +195,13 @@ impl State {
         let cal = self.load(r)?;
         let design = cal.design().map_err(err)?;
         let inputs_hash = self.simulation_inputs_hash(r, &cal)?;
-        let jobs = design
-            .points
+        let Step::Simulate(wave) = cal.design_step(&design, &cal.spares().map_err(err)?, &[])
+        else {
+            return Err("design: nothing to simulate".into());
+        };
+        let jobs = wave
             .iter()
-            .enumerate()
-            .map(|(i, x)| self.simulation_job(r, &cal, &inputs_hash, i, x, 0))
+            .map(|(i, x)| self.simulation_job(r, &cal, &inputs_hash, *i, x, 0))
             .collect();
         self.store.set_stage(&r.id, "simulate", jobs).map_err(err)?;
         Ok(true)
@@ -217,8 +220,9 @@ impl State {
         refine_round: u32,
     ) -> NewJob {
         let values = serde_json::to_string(&cal.inputs.plan.values(x)).unwrap_or_default();
-        let tolerant = if refine_round > 0 { "refine\n" } else { "" };
-        let key = hex::encode(Sha256::digest(format!("{tolerant}{inputs_hash}\n{values}")));
+        // Every simulation job reports an EnergyPlus failure as its result (cached with it:
+        // the same inputs fail the same way).
+        let key = hex::encode(Sha256::digest(format!("tolerant\n{inputs_hash}\n{values}")));
         NewJob {
             stage: if refine_round > 0 {
                 "refine"
@@ -367,13 +371,49 @@ impl State {
             return Ok(false);
         }
         let cal = self.load(r)?;
-        let design = cal.design().map_err(err)?;
-        let outputs = self
-            .simulated(&cal, &jobs)?
-            .into_iter()
-            .map(|s| s.outputs)
+        let hypercube = cal.design().map_err(err)?;
+        // Every attempt so far, in the order the waves were queued: the rule of
+        // `bemcal_calibrate::replacement` says what comes next, as in the local pipeline.
+        let simulated = self.simulated(&cal, &jobs)?;
+        let attempts: Vec<Attempt> = simulated
+            .iter()
+            .map(|s| Attempt {
+                slot: s.index,
+                values: s.values.clone(),
+                error: s.outputs.as_ref().err().cloned(),
+            })
+            .collect();
+        let outcome = match cal.design_step(&hypercube, &cal.spares().map_err(err)?, &attempts) {
+            Step::Simulate(wave) => {
+                let hash = self.simulation_inputs_hash(r, &cal)?;
+                let jobs = wave
+                    .iter()
+                    .map(|(i, x)| self.simulation_job(r, &cal, &hash, *i, x, 0))
+                    .collect();
+                self.store.add_jobs(&r.id, jobs).map_err(err)?;
+                return Ok(false);
+            }
+            Step::Failed(message) => return Err(format!("design: {message}")),
+            Step::Done(outcome) => outcome,
+        };
+        cal.record_outcome(&outcome).map_err(err)?;
+        // The last attempt of each settled slot is its success; place it last so that its
+        // file is the one left in `simulations/`.
+        let mut by_slot: std::collections::HashMap<usize, HourlyOutputs> = Default::default();
+        for s in simulated {
+            if let Ok(o) = s.outputs {
+                by_slot.insert(s.index, o);
+            }
+        }
+        let outputs = outcome
+            .slots
+            .iter()
+            .map(|i| by_slot.remove(i).ok_or_else(|| format!("design point {i}: no simulation")))
             .collect::<Result<Vec<_>>>()?;
-        let dataset = cal.training_set(&design, &outputs).map_err(err)?;
+        let design = outcome.design(&hypercube, &cal.inputs.plan.priors);
+        let dataset = cal
+            .training_set(design.points.len(), &design, &outputs)
+            .map_err(err)?;
         if !r.surrogate.is_empty() {
             self.place(&cal.out, &r.surrogate)?;
             if !cal.has_surrogate() {
@@ -602,8 +642,7 @@ impl State {
         if round < cal.project.refine.rounds {
             // Refinement round `round + 1`: simulate posterior draws of these chains.
             let post = sampler.posterior();
-            let design = cal.design().map_err(err)?;
-            let first = design.points.len() + log.points().count();
+            let first = cal.next_refine_key(&log);
             let hash = self.simulation_inputs_hash(r, &cal)?;
             let jobs = pick_draws(&draws, cal.project.refine.points)
                 .iter()
@@ -717,13 +756,13 @@ impl State {
             restarted,
         });
         // The grown training set: design points, then every round's draws.
-        let design = cal.design().map_err(err)?;
+        let (outcome, design) = cal.settled_design().map_err(err)?;
         let by_index: std::collections::HashMap<usize, HourlyOutputs> = simulated
             .into_iter()
             .filter_map(|s| s.outputs.ok().map(|o| (s.index, o)))
             .collect();
         let full = cal.full_design(&design, &log);
-        let indices = (0..design.points.len()).chain(log.points().map(|p| p.index));
+        let indices = outcome.slots.iter().copied().chain(log.points().map(|p| p.index));
         let outputs = indices
             .map(|i| {
                 by_index
@@ -732,7 +771,9 @@ impl State {
                     .ok_or_else(|| format!("point {i}: no simulation"))
             })
             .collect::<Result<Vec<_>>>()?;
-        let dataset = cal.training_set(&full, &outputs).map_err(err)?;
+        let dataset = cal
+            .training_set(design.points.len(), &full, &outputs)
+            .map_err(err)?;
         // Warm start from the weights of the surrogate this round's chains used.
         let weights = format!("surrogate/{}", bemcal_surrogate::WEIGHTS_FILE);
         let init = match cal.project.surrogate.warm_start {
@@ -814,7 +855,7 @@ impl State {
                 _ => {}
             }
         }
-        let design = cal.design().map_err(err)?;
+        let (_, design) = cal.settled_design().map_err(err)?;
         let log = self.refine_log(r)?;
         if !log.rounds.is_empty() {
             let json = serde_json::to_vec_pretty(&log).map_err(err)?;

@@ -61,16 +61,37 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .clone()
             .unwrap_or_else(|| a.out.with_extension("runs"));
         let t0 = std::time::Instant::now();
+        // Points EnergyPlus cannot simulate are replaced as in a calibration, with the
+        // project defaults (`[design] replacements`, `min_success`).
+        let defaults = bemcal_calibrate::project::DesignSettings::default();
+        let spares = make_design(
+            &plan,
+            &model,
+            a.points,
+            bemcal_calibrate::replacement::spare_seed(a.seed),
+            a.maximin,
+        )?;
+        let policy = bemcal_calibrate::replacement::Policy {
+            replacements: defaults.replacements,
+            min_success: defaults.min_success,
+        };
         let sims = simulate_design(
             &runner,
             &model,
             &plan,
-            &design,
+            (&design, &spares),
+            policy,
             w,
             &runs,
             a.parallel,
-            &|d, n| eprintln!("simulated {d}/{n}"),
+            &|m: &str| eprintln!("{m}"),
         )?;
+        bemcal_calibrate::pipeline::log_design_outcome(&sims.outcome, &|m: &str| eprintln!("{m}"));
+        for &slot in &sims.outcome.slots {
+            for note in bemcal_calibrate::design::point_notes(&runs, slot) {
+                eprintln!("design point {slot}: used despite: {note}");
+            }
+        }
         let wall = t0.elapsed().as_secs_f64();
         println!(
             "simulated {} points ({} reused) in {:.1} s wall, {:.1} s EnergyPlus per point, {:.0} points/hour; outputs in {}",

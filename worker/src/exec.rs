@@ -24,15 +24,16 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
     match &job.kind {
         Some(Kind::Simulate(s)) => {
             let i = s.point as usize;
+            // An EnergyPlus failure is the job's result, not a failed job: the driver replaces
+            // the design point (or leaves the refinement draw out) with the reason recorded.
             let secs = match cal.simulate_point(i, &s.values) {
                 Ok((_, secs)) => secs,
-                Err(e) if s.refine_round > 0 => {
+                Err(e) => {
                     return Ok((
                         vec![],
                         serde_json::json!({ "error": e.to_string() }).to_string(),
                     ))
                 }
-                Err(e) => return Err(e.to_string()),
             };
             let rel = format!("simulations/point_{i:03}.json");
             Ok((

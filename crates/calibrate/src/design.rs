@@ -10,7 +10,9 @@ use bemcal_stats::prior::Triangular;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::replacement::{self, Attempt, Outcome, Policy, Step};
 use crate::Error;
+use bemcal_energyplus::errfile::failure_reason;
 
 /// Which parameters are calibrated and the values of the others.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -184,9 +186,12 @@ pub fn write_design_csv(path: &Path, plan: &Plan, design: &Design) -> Result<(),
     crate::write_atomic(path, s.as_bytes())
 }
 
-/// Result of simulating a design.
+/// A design simulated to its end (see [`crate::replacement`]).
 #[derive(Debug)]
 pub struct SimulatedDesign {
+    /// The settled slots, their points and the failures on the way.
+    pub outcome: Outcome,
+    /// Outputs of each settled slot, in the order of `outcome.slots`.
     pub outputs: Vec<HourlyOutputs>,
     /// Points taken from an earlier run of the same directory.
     pub reused: usize,
@@ -194,41 +199,160 @@ pub struct SimulatedDesign {
     pub seconds: Vec<f64>,
 }
 
+/// Failed attempts of a design, kept in its simulations folder so that a rerun neither repeats
+/// them nor chooses different replacements.
+pub const FAILURES_FILE: &str = "failures.json";
+
+/// The settled design of a simulations folder ([`Outcome`]), written when the design is done.
+pub const OUTCOME_FILE: &str = "design.json";
+
+/// Simulates a design to its end: the hypercube's points, then spares for the points
+/// EnergyPlus could not simulate, as [`replacement::next_step`] says, with `parallel`
+/// EnergyPlus processes. Point `i` is saved as `dir/point_iii.json` when it succeeds; failures
+/// go to `dir/failures.json`; a later call reuses both (an interrupted design resumes where it
+/// stopped). Errors when too few points could be simulated, with the reasons grouped.
 #[allow(clippy::too_many_arguments)]
-/// Simulates every design point with `parallel` EnergyPlus processes. Point `i` runs in
-/// `dir/point_iii/`; its outputs are saved to `dir/point_iii.json` when it succeeds, and a later
-/// call finds them there (so an interrupted design resumes where it stopped).
 pub fn simulate_design(
     runner: &Runner,
     model: &Model,
     plan: &Plan,
-    design: &Design,
+    (hypercube, spares): (&Design, &Design),
+    policy: Policy,
     weather: &Path,
     dir: &Path,
     parallel: usize,
-    progress: &(dyn Fn(usize, usize) + Sync),
+    log: &(dyn Fn(&str) + Sync),
 ) -> Result<SimulatedDesign, Error> {
-    let indexed: Vec<(usize, Vec<f64>)> = design.points.iter().cloned().enumerate().collect();
-    let results = simulate_points(
-        runner, model, plan, &indexed, weather, dir, parallel, progress,
-    )?;
-    let mut out = SimulatedDesign {
-        outputs: Vec::with_capacity(indexed.len()),
-        reused: 0,
-        seconds: vec![],
-    };
-    for (i, r) in results.into_iter().enumerate() {
-        let (o, secs) = r.map_err(|e| Error::Stage {
-            stage: "design",
-            message: format!("design point {i}: {e}"),
-        })?;
-        match secs {
-            Some(s) => out.seconds.push(s),
-            None => out.reused += 1,
+    let failures_path = dir.join(FAILURES_FILE);
+    let known: Vec<Attempt> = std::fs::read_to_string(&failures_path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    let mut attempts: Vec<Attempt> = vec![];
+    let mut outputs = std::collections::BTreeMap::new();
+    let (mut reused, mut seconds) = (0, vec![]);
+    loop {
+        let wave = match replacement::next_step(plan, hypercube, spares, policy, &attempts) {
+            Step::Simulate(wave) => wave,
+            Step::Done(outcome) => {
+                let json = serde_json::to_vec_pretty(&outcome)
+                    .map_err(|e| Error::Config(e.to_string()))?;
+                crate::write_atomic(&dir.join(OUTCOME_FILE), &json)?;
+                let outputs = outcome
+                    .slots
+                    .iter()
+                    .map(|s| outputs.remove(s).expect("a settled slot has outputs"))
+                    .collect();
+                return Ok(SimulatedDesign {
+                    outcome,
+                    outputs,
+                    reused,
+                    seconds,
+                });
+            }
+            Step::Failed(message) => {
+                return Err(Error::Stage {
+                    stage: "design",
+                    message,
+                })
+            }
+        };
+        let failed_before = |(s, x): &(usize, Vec<f64>)| {
+            known
+                .iter()
+                .find(|a| a.slot == *s && &a.values == x && a.error.is_some())
+        };
+        let to_run: Vec<(usize, Vec<f64>)> = wave
+            .iter()
+            .filter(|p| failed_before(p).is_none())
+            .cloned()
+            .collect();
+        let replacing = !attempts.is_empty();
+        let results = simulate_points(
+            runner,
+            model,
+            plan,
+            &to_run,
+            weather,
+            dir,
+            parallel,
+            &|done, n| {
+                if replacing {
+                    log(&format!("simulations (replacements): {done}/{n}"))
+                } else {
+                    log(&format!("simulations: {done}/{n}"))
+                }
+            },
+        )?;
+        let mut results = to_run.iter().map(|p| p.0).zip(results);
+        for p in &wave {
+            if let Some(a) = failed_before(p) {
+                log(&format!(
+                    "design point {}: failed in an earlier run ({}), not repeated",
+                    p.0,
+                    failure_reason(a.error.as_deref().unwrap_or_default())
+                ));
+                attempts.push(a.clone());
+                continue;
+            }
+            let (slot, r) = results.next().expect("one result per point run");
+            debug_assert_eq!(slot, p.0);
+            match r {
+                Ok((o, secs)) => {
+                    match secs {
+                        Some(s) => seconds.push(s),
+                        None => reused += 1,
+                    }
+                    outputs.insert(slot, o);
+                    attempts.push(Attempt {
+                        slot,
+                        values: p.1.clone(),
+                        error: None,
+                    });
+                }
+                Err(e) => {
+                    let text = e.to_string();
+                    log(&format!(
+                        "design point {slot}: EnergyPlus failed ({}); it will be replaced                          if it has replacements left",
+                        failure_reason(&text)
+                    ));
+                    attempts.push(Attempt {
+                        slot,
+                        values: p.1.clone(),
+                        error: Some(text),
+                    });
+                }
+            }
         }
-        out.outputs.push(o);
+        let mut failures: Vec<Attempt> = known.clone();
+        for a in attempts.iter().filter(|a| a.error.is_some()) {
+            if !failures.contains(a) {
+                failures.push(a.clone());
+            }
+        }
+        if !failures.is_empty() {
+            let json =
+                serde_json::to_vec_pretty(&failures).map_err(|e| Error::Config(e.to_string()))?;
+            crate::write_atomic(&failures_path, &json)?;
+        }
     }
-    Ok(out)
+}
+
+/// The settled design of simulations folder `dir` (written by [`simulate_design`] or a
+/// coordinator when the design was done), if any.
+pub fn read_outcome(dir: &Path) -> Option<Outcome> {
+    let text = std::fs::read_to_string(dir.join(OUTCOME_FILE)).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// Severe messages EnergyPlus wrote in the saved run of point `i` that left its results usable
+/// (see `bemcal_energyplus::errfile`), for the summary.
+pub fn point_notes(dir: &Path, i: usize) -> Vec<String> {
+    std::fs::read_to_string(dir.join(format!("point_{i:03}.json")))
+        .ok()
+        .and_then(|t| serde_json::from_str::<SavedRun>(&t).ok())
+        .map(|r| r.notes)
+        .unwrap_or_default()
 }
 
 /// One point's simulation: its hourly outputs and the EnergyPlus wall time (`None`: reloaded).
@@ -293,6 +417,7 @@ pub fn simulate_point(
     let json = serde_json::to_vec(&SavedRun {
         values: values.clone(),
         outputs: r.outputs.clone(),
+        notes: r.notes.clone(),
     })
     .map_err(|e| Error::Config(e.to_string()))?;
     crate::write_atomic(&saved, &json)?;
@@ -304,6 +429,9 @@ pub fn simulate_point(
 struct SavedRun {
     values: ParameterValues,
     outputs: HourlyOutputs,
+    /// Usable Severe messages of the run (`RunResult::notes`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    notes: Vec<String>,
 }
 
 #[cfg(test)]

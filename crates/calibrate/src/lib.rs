@@ -10,6 +10,7 @@ pub mod pipeline;
 pub mod posterior;
 pub mod project;
 pub mod refine;
+pub mod replacement;
 pub mod synth;
 
 use std::path::{Path, PathBuf};

@@ -23,7 +23,11 @@ use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 
-use crate::design::{make_design, simulate_design, simulate_point, write_design_csv, Plan};
+use crate::design::{
+    make_design, read_outcome, simulate_design, simulate_point, write_design_csv, Plan,
+    OUTCOME_FILE,
+};
+use crate::replacement::{Attempt, Outcome, Policy};
 use crate::posterior::{advance_chains, run_chains, Posterior, SigmaDeltaBox};
 use crate::project::{
     ChainStart, Estimate, Kernel, McmcSettings, Project, Residuals, SigmaDeltaMode,
@@ -258,11 +262,89 @@ pub struct Summary {
     pub converged: bool,
     pub design_points: usize,
     pub design_repair: bemcal_stats::lhs::RepairReport,
+    /// What EnergyPlus made of the design: failed runs, replacements, usable warnings.
+    #[serde(default)]
+    pub design: DesignReport,
     pub surrogate_held_out: serde_json::Value,
     /// Surrogate refinement rounds (empty without `[refine]`).
     #[serde(default)]
     pub refinement: Vec<crate::refine::RefineRound>,
     pub timings: Timings,
+}
+
+/// The design stage's record in `summary.json`: which design points EnergyPlus could not
+/// simulate and why, what replaced them, and the Severe messages accepted as usable.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct DesignReport {
+    /// Hypercube points (slots).
+    pub slots: usize,
+    /// Slots with a simulated point (trained on).
+    pub simulated: usize,
+    /// Every failed EnergyPlus run: slot, values and error text.
+    pub failed: Vec<Attempt>,
+    /// Failures grouped by reason, largest first.
+    pub reasons: Vec<FailureGroup>,
+    /// Slots simulated at a spare point after failing.
+    pub replaced: Vec<usize>,
+    /// Slots left without a point.
+    pub dropped: Vec<usize>,
+    /// What a user could change (from the reasons and where the failures lie in the priors).
+    pub suggestions: Vec<String>,
+    /// Severe messages after which a design point's results were used, with why.
+    pub notes: Vec<PointNote>,
+}
+
+/// Failures of one reason.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FailureGroup {
+    pub reason: String,
+    pub count: usize,
+    pub points: Vec<usize>,
+}
+
+/// A Severe message accepted as usable at a design point.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PointNote {
+    pub point: usize,
+    pub message: String,
+}
+
+impl DesignReport {
+    /// The report of a settled design; usable messages are read from the saved runs.
+    pub fn new(cal: &Calibration, outcome: &Outcome) -> DesignReport {
+        let dir = cal.simulations_dir();
+        let plan = &cal.inputs.plan;
+        DesignReport {
+            slots: outcome.slots.len() + outcome.dropped.len(),
+            simulated: outcome.slots.len(),
+            failed: outcome.failed.clone(),
+            reasons: outcome
+                .reasons()
+                .into_iter()
+                .map(|(reason, points, count)| FailureGroup {
+                    reason,
+                    count,
+                    points,
+                })
+                .collect(),
+            replaced: outcome.replaced.iter().map(|r| r.0).collect(),
+            dropped: outcome.dropped.clone(),
+            suggestions: crate::replacement::suggestions(
+                &plan.priors,
+                &plan.calibrated,
+                &outcome.failed,
+            ),
+            notes: outcome
+                .slots
+                .iter()
+                .flat_map(|&point| {
+                    crate::design::point_notes(&dir, point)
+                        .into_iter()
+                        .map(move |message| PointNote { point, message })
+                })
+                .collect(),
+        }
+    }
 }
 
 /// A parameter's prior next to its posterior.
@@ -330,6 +412,70 @@ impl Calibration {
         Ok(d)
     }
 
+    /// The spare hypercube that replaces design points EnergyPlus cannot simulate
+    /// ([`crate::replacement`]; deterministic for the project's seed).
+    pub fn spares(&self) -> Result<Design, Error> {
+        let p = &self.project.design;
+        make_design(
+            &self.inputs.plan,
+            &self.inputs.model,
+            p.points,
+            crate::replacement::spare_seed(p.seed),
+            p.maximin_iterations,
+        )
+    }
+
+    /// What to do about design points that fail (`[design]` replacements and floor).
+    pub fn design_policy(&self) -> Policy {
+        Policy {
+            replacements: self.project.design.replacements,
+            min_success: self.project.design.min_success,
+        }
+    }
+
+    /// The next step of the design after `attempts` (the one rule both drivers follow).
+    pub fn design_step(
+        &self,
+        hypercube: &Design,
+        spares: &Design,
+        attempts: &[Attempt],
+    ) -> crate::replacement::Step {
+        crate::replacement::next_step(
+            &self.inputs.plan,
+            hypercube,
+            spares,
+            self.design_policy(),
+            attempts,
+        )
+    }
+
+    /// Records the settled design in the simulations folder (`design.json`).
+    pub fn record_outcome(&self, outcome: &Outcome) -> Result<(), Error> {
+        let json = serde_json::to_vec_pretty(outcome).map_err(|e| Error::Config(e.to_string()))?;
+        write_atomic(&self.simulations_dir().join(OUTCOME_FILE), &json)
+    }
+
+    /// The settled design (after replacements) and the points trained on: errors if the
+    /// design stage has not finished.
+    pub fn settled_design(&self) -> Result<(Outcome, Design), Error> {
+        let outcome = read_outcome(&self.simulations_dir()).ok_or_else(|| Error::Stage {
+            stage: "design",
+            message: format!(
+                "no settled design in {}",
+                self.simulations_dir().join(OUTCOME_FILE).display()
+            ),
+        })?;
+        let design = outcome.design(&self.design()?, &self.inputs.plan.priors);
+        Ok((outcome, design))
+    }
+
+    /// The simulation key of the first posterior draw of the next refinement round, after the
+    /// rounds in `log`: after every hypercube slot and every earlier round's draws (a dropped
+    /// design point keeps its slot, so keys never collide).
+    pub fn next_refine_key(&self, log: &crate::refine::RefineLog) -> usize {
+        self.project.design.points + log.points().count()
+    }
+
     /// Folder of the design-point simulations.
     pub fn simulations_dir(&self) -> PathBuf {
         self.out.join("simulations")
@@ -354,7 +500,13 @@ impl Calibration {
     }
 
     /// Stage 3: the training set from the design and its simulated outputs; writes `dataset/`.
-    pub fn training_set(&self, design: &Design, sims: &[HourlyOutputs]) -> Result<PathBuf, Error> {
+    /// The first `base` points are the settled design's, the rest refinement draws.
+    pub fn training_set(
+        &self,
+        base: usize,
+        design: &Design,
+        sims: &[HourlyOutputs],
+    ) -> Result<PathBuf, Error> {
         let inp = &self.inputs;
         let n_pts = design.points.len();
         let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
@@ -384,8 +536,7 @@ impl Calibration {
         let sp = &self.project.surrogate;
         // Nested over refinement rounds (see `Split::nested`): the hypercube's points split as
         // always, each appended draw keeps its side in every later round.
-        let n_base = self.project.design.points.min(n_pts);
-        let split = Split::nested(n_base, n_pts, sp.held_out_fraction, sp.seed)?;
+        let split = Split::nested(base.min(n_pts), n_pts, sp.held_out_fraction, sp.seed)?;
         let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
             .with_split(split)?;
         let dir = self.out.join("dataset");
@@ -1003,6 +1154,10 @@ pub fn write_summary(
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         design_points: design.points.len(),
         design_repair: design.repair,
+        design: cal
+            .settled_design()
+            .map(|(o, _)| DesignReport::new(cal, &o))
+            .unwrap_or_default(),
         surrogate_held_out: sampler_info.1.clone(),
         refinement: cal.refine_log()?.rounds,
         timings,
@@ -1031,14 +1186,15 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         log(note);
     }
     let t = Instant::now();
-    let design = cal.design()?;
+    let hypercube = cal.design()?;
+    let spares = cal.spares()?;
     timings.design_s = t.elapsed().as_secs_f64();
     log(&format!(
         "design: {} points over {} parameters (constraint repair: {} swaps, {} cells resampled)",
-        design.points.len(),
+        hypercube.points.len(),
         inp.plan.calibrated.len(),
-        design.repair.swaps,
-        design.repair.resampled_in_stratum + design.repair.resampled_outside_stratum
+        hypercube.repair.swaps,
+        hypercube.repair.resampled_in_stratum + hypercube.repair.resampled_outside_stratum
     ));
 
     let t = Instant::now();
@@ -1046,11 +1202,12 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         &inp.runner,
         &inp.model,
         &inp.plan,
-        &design,
+        (&hypercube, &spares),
+        cal.design_policy(),
         &inp.weather_path,
         &cal.simulations_dir(),
         project.design.parallel,
-        &|done, n| log(&format!("simulations: {done}/{n}")),
+        log,
     )?;
     timings.simulations_s = t.elapsed().as_secs_f64();
     log(&format!(
@@ -1059,6 +1216,9 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         sims.seconds.iter().sum::<f64>() / sims.seconds.len().max(1) as f64,
         sims.reused
     ));
+    log_design_outcome(&sims.outcome, log);
+    let design = sims.outcome.design(&hypercube, &inp.plan.priors);
+    let base = design.points.len();
 
     // Refinement points of rounds finished earlier (a rerun): their saved simulations.
     let mut refined = cal.refine_log()?;
@@ -1071,7 +1231,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         let round = refined.rounds.len() as u32;
         let full = cal.full_design(&design, &refined);
         let t = Instant::now();
-        cal.training_set(&full, &outputs)?;
+        cal.training_set(base, &full, &outputs)?;
         if cal.has_surrogate() {
             log("surrogate: reusing the one trained earlier");
         } else {
@@ -1146,7 +1306,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
             .iter()
             .map(|u| post.theta(u))
             .collect();
-        let first = full.points.len();
+        let first = cal.next_refine_key(&refined);
         let indexed: Vec<(usize, Vec<f64>)> = picks
             .iter()
             .enumerate()
@@ -1326,6 +1486,25 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         initial,
         timings,
     )
+}
+
+/// Logs what became of the design points EnergyPlus could not simulate.
+pub fn log_design_outcome(outcome: &Outcome, log: Log<'_>) {
+    if outcome.failed.is_empty() {
+        return;
+    }
+    log(&format!(
+        "design: {} EnergyPlus run(s) failed; {} point(s) replaced by spare hypercube points, \
+         {} dropped ({} of {} design points simulated)",
+        outcome.failed.len(),
+        outcome.replaced.len(),
+        outcome.dropped.len(),
+        outcome.slots.len(),
+        outcome.slots.len() + outcome.dropped.len()
+    ));
+    for (reason, slots, n) in outcome.reasons() {
+        log(&format!("design:   {n} x {reason} (design points {slots:?})"));
+    }
 }
 
 /// Draws tried, in order, when EnergyPlus fails at the estimate.

@@ -96,6 +96,12 @@ pub struct DesignSettings {
     pub maximin_iterations: usize,
     /// EnergyPlus runs at once (one core each).
     pub parallel: usize,
+    /// A design point EnergyPlus cannot simulate is replaced by a spare hypercube point up to
+    /// this many times (`crate::replacement`); then it is dropped.
+    pub replacements: usize,
+    /// The calibration goes on only if at least this share of the design points could be
+    /// simulated (after replacements); otherwise it stops with the failures grouped by reason.
+    pub min_success: f64,
 }
 
 impl Default for DesignSettings {
@@ -105,6 +111,8 @@ impl Default for DesignSettings {
             seed: 1,
             maximin_iterations: 1000,
             parallel: 2,
+            replacements: 2,
+            min_success: 0.8,
         }
     }
 }
@@ -384,6 +392,12 @@ impl Project {
         }
         if self.design.parallel == 0 {
             return Err("design.parallel must be at least 1".into());
+        }
+        if !(self.design.min_success > 0.0 && self.design.min_success <= 1.0) {
+            return Err(format!(
+                "design.min_success = {}: expected a share in (0, 1], such as 0.8",
+                self.design.min_success
+            ));
         }
         if self.mcmc.chains == 0 {
             return Err("mcmc.chains must be at least 1".into());

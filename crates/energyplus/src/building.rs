@@ -19,6 +19,26 @@ use crate::idf::{num, Idf};
 use crate::params::{Constraint, ParameterDef, ParameterValues, TriangularPrior};
 use crate::Error;
 
+/// Maximum warm-up days (`Building`). EnergyPlus's default of 25 is too few for heavy
+/// constructions at some points of the priors (a 3-storey 50 x 30 m building's top floor still
+/// failed the loads tolerance after 25 days); days past convergence are never run, so this
+/// only costs where it is needed.
+pub const MAX_WARMUP_DAYS: u32 = 50;
+
+/// Design conditions at which HVAC is sized, fixed whatever the sampled operating values
+/// (sizing follows the thermostat's design-day values, the coils' design set-points and the
+/// chilled-water loop's design temperature): the sampled set-points then operate equipment of
+/// one size, instead of resizing it at every design point. Sizing at sampled values made the
+/// cooling-coil UA calculation fail at low cooling set-points. These are the priors' modes of
+/// the occupied set-points and ASHRAE's usual 12.8 C supply air / 6.7 C chilled water.
+pub const DESIGN_COOLING_SETPOINT_C: f64 = 24.0;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_HEATING_SETPOINT_C: f64 = 21.0;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_SUPPLY_AIR_C: f64 = 12.8;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_CHILLED_WATER_C: f64 = 6.7;
+
 /// Zoning of each storey.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -437,7 +457,7 @@ impl BuildingSpec {
                 "0.04",
                 "0.4",
                 "FullInteriorAndExterior",
-                "25",
+                &MAX_WARMUP_DAYS.to_string(),
                 "6",
             ],
         );
@@ -517,9 +537,15 @@ impl BuildingSpec {
             (&self.weekend_boundaries, &we),
         );
         let [o0, o1] = self.occupied_hours;
-        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64| {
+        // Weekdays switch between the occupied and unoccupied values; the sizing days hold the
+        // fixed design value all day, so that equipment is sized at design conditions whatever
+        // the sampled operating set-points (see `design_conditions`).
+        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64, design: f64| {
             let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
-            f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
+            f.push("For: SummerDesignDay WinterDesignDay".into());
+            f.push("Until: 24:00".into());
+            f.push(num(design));
+            f.push("For: Weekdays".into());
             if o0 > 0 {
                 f.push(format!("Until: {o0:02}:00"));
                 f.push(num(unocc));
@@ -541,6 +567,7 @@ impl BuildingSpec {
             "Temperature",
             get("heating_setpoint_occupied")?,
             get("heating_setpoint_unoccupied")?,
+            DESIGN_HEATING_SETPOINT_C,
         );
         occ_sched(
             &mut m,
@@ -548,6 +575,7 @@ impl BuildingSpec {
             "Temperature",
             get("cooling_setpoint_occupied")?,
             get("cooling_setpoint_unoccupied")?,
+            DESIGN_COOLING_SETPOINT_C,
         );
         let oa_occ = get("outdoor_air_ach_occupied")?;
         let oa_unocc = get("outdoor_air_ach_unoccupied")?;
@@ -556,7 +584,7 @@ impl BuildingSpec {
         } else {
             0.0
         };
-        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac);
+        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, 1.0);
         let chw = get("chilled_water_supply_temp")?;
         constant(&mut m, "CHW Setpoint", "Temperature", chw);
         constant(&mut m, "HW Setpoint", "Temperature", 80.0);
@@ -777,7 +805,6 @@ impl BuildingSpec {
             m.add("HVACTemplate:Zone:VAV", &f);
         }
         for ahu in 1..=ahus {
-            let s = sat(ahu)?;
             let mut f = vec![
                 format!("AHU{ahu}"),
                 "Always On".into(),
@@ -790,11 +817,11 @@ impl BuildingSpec {
                 "ChilledWater".into(),
                 "".into(),
                 format!("AHU{ahu} Supply Air"),
-                num(s),
+                num(DESIGN_SUPPLY_AIR_C),
                 "HotWater".into(),
                 "".into(),
                 format!("AHU{ahu} Preheat"),
-                num((s - 2.0).min(10.0)),
+                num((DESIGN_SUPPLY_AIR_C - 2.0).min(10.0)),
                 "".into(),
                 "".into(),
                 "None".into(),
@@ -822,7 +849,7 @@ impl BuildingSpec {
                 "Default".into(),
                 "".into(),
                 "CHW Setpoint".into(),
-                num(chw),
+                num(DESIGN_CHILLED_WATER_C),
             ],
         );
         m.add(

@@ -10,6 +10,7 @@
 
 pub mod building;
 pub mod engine;
+pub mod errfile;
 pub mod idd;
 pub mod idf;
 pub mod meters;
@@ -29,7 +30,7 @@ pub use runner::{RunOptions, Runner};
 /// Revision of what the runner and the model generator make of a given spec and parameter
 /// values. Caches of simulation results key on it: bump it whenever the same inputs would now
 /// simulate differently.
-pub const SIMULATION_REVISION: u32 = 1;
+pub const SIMULATION_REVISION: u32 = 2;
 
 /// Errors of the simulation layer. Each names the file, line, parameter or run directory
 /// concerned.

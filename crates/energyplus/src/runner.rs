@@ -6,6 +6,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::engine::Engine;
+use crate::errfile::{Class, ErrFile};
 use crate::idd::Idd;
 use crate::idf::Idf;
 use crate::meters::{read_meter_csv, HourlyOutputs, OutputSpec};
@@ -48,6 +49,9 @@ pub struct RunResult {
     pub seconds: f64,
     /// Warning count from `eplusout.err`.
     pub warnings: usize,
+    /// Severe messages after which the results are still usable (see
+    /// [`crate::errfile::classify`]): the message's first line and why it was accepted.
+    pub notes: Vec<String>,
 }
 
 impl Runner {
@@ -106,14 +110,32 @@ impl Runner {
             .stdin(Stdio::null());
         let status = run_with_timeout(cmd, dir, self.options.timeout)?;
         let err = read_err_file(dir)?;
-        if !err.problems.is_empty() {
+        let mut notes = vec![];
+        let mut bad: Vec<String> = vec![];
+        let mut fatal = false;
+        for (m, class) in err.classified() {
+            match class {
+                Class::Usable { reason } => notes.push(format!("{} ({reason})", m.lines[0])),
+                Class::Fatal => {
+                    fatal = true;
+                    bad.extend(m.lines.iter().cloned());
+                }
+                Class::Invalidating => bad.extend(m.lines.iter().cloned()),
+            }
+        }
+        if !bad.is_empty() {
+            let what = if fatal {
+                "EnergyPlus stopped"
+            } else {
+                "results invalid"
+            };
             return Err(Error::Simulation {
                 dir: dir.into(),
                 message: format!(
-                    "{} severe/fatal error(s) in eplusout.err (exit code {status})",
-                    err.problems.len()
+                    "{what}: {} severe/fatal message(s) in eplusout.err (exit code {status})",
+                    err.problems.len() - notes.len()
                 ),
-                details: err.problems.into_iter().take(12).collect(),
+                details: bad.into_iter().take(12).collect(),
             });
         }
         if status != 0 || !err.completed {
@@ -137,6 +159,7 @@ impl Runner {
             dir: dir.into(),
             seconds: t0.elapsed().as_secs_f64(),
             warnings: err.warnings,
+            notes,
         })
     }
 
@@ -221,13 +244,6 @@ fn run_with_timeout(mut cmd: Command, dir: &Path, timeout: Duration) -> Result<i
     }
 }
 
-struct ErrFile {
-    problems: Vec<String>,
-    warnings: usize,
-    completed: bool,
-    tail: Vec<String>,
-}
-
 /// Reads `eplusout.err`: `** Severe` / `** Fatal` lines with their `**   ~~~` continuations.
 fn read_err_file(dir: &Path) -> Result<ErrFile, Error> {
     let path = dir.join("eplusout.err");
@@ -242,34 +258,5 @@ fn read_err_file(dir: &Path) -> Result<ErrFile, Error> {
             .map(String::from)
             .collect(),
     })?;
-    let mut problems = Vec::new();
-    let mut in_problem = false;
-    let mut warnings = 0;
-    for line in text.lines() {
-        let t = line.trim_start();
-        if t.starts_with("** Severe") || t.starts_with("**  Fatal") || t.starts_with("** Fatal") {
-            problems.push(t.to_string());
-            in_problem = true;
-        } else if t.starts_with("**   ~~~") && in_problem {
-            problems.push(t.to_string());
-        } else {
-            in_problem = false;
-            if t.starts_with("** Warning") {
-                warnings += 1;
-            }
-        }
-    }
-    let completed = text.contains("EnergyPlus Completed Successfully");
-    let tail = text
-        .lines()
-        .rev()
-        .take(6)
-        .map(String::from)
-        .collect::<Vec<_>>();
-    Ok(ErrFile {
-        problems,
-        warnings,
-        completed,
-        tail: tail.into_iter().rev().collect(),
-    })
+    Ok(ErrFile::parse(&text))
 }

@@ -159,6 +159,28 @@ fn min_distance(d2: &[Vec<f64>]) -> f64 {
     m.sqrt()
 }
 
+/// The candidate farthest from every point of `existing` (maximin: the largest distance to its
+/// nearest neighbour), all in probability space `p = F(x)`, where the hypercube's own maximin
+/// criterion works (Morris & Mitchell 1995); `None` when there is no candidate. Ties go to the
+/// first. Used to replace a design point that could not be simulated while keeping the design
+/// space-filling.
+pub fn farthest_candidate(existing: &[Vec<f64>], candidates: &[Vec<f64>]) -> Option<usize> {
+    let nearest = |c: &[f64]| {
+        existing
+            .iter()
+            .map(|e| e.iter().zip(c).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut best: Option<(usize, f64)> = None;
+    for (i, c) in candidates.iter().enumerate() {
+        let d = nearest(c);
+        if best.is_none_or(|(_, b)| d > b) {
+            best = Some((i, d));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
 /// A Latin hypercube of `n` design points over `priors`, seeded by `seed` (`ChaCha8Rng`).
 ///
 /// Errors if `n == 0`, there are no priors, a constraint names a missing parameter, or some
@@ -395,4 +417,18 @@ fn maximin(w: &mut Work, rng: &mut ChaCha8Rng, iterations: usize) -> (usize, f64
         }
     }
     (accepted, best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn farthest_candidate_is_the_maximin_one() {
+        let existing = vec![vec![0.1, 0.1], vec![0.9, 0.9]];
+        let candidates = vec![vec![0.2, 0.2], vec![0.9, 0.1], vec![0.5, 0.5]];
+        assert_eq!(farthest_candidate(&existing, &candidates), Some(1));
+        assert_eq!(farthest_candidate(&existing, &[]), None);
+        assert_eq!(farthest_candidate(&[], &candidates), Some(0));
+    }
 }
