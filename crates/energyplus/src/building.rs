@@ -25,20 +25,6 @@ use crate::Error;
 /// only costs where it is needed.
 pub const MAX_WARMUP_DAYS: u32 = 50;
 
-/// Design conditions at which HVAC is sized, fixed whatever the sampled operating values
-/// (sizing follows the thermostat's design-day values, the coils' design set-points and the
-/// chilled-water loop's design temperature): the sampled set-points then operate equipment of
-/// one size, instead of resizing it at every design point. Sizing at sampled values made the
-/// cooling-coil UA calculation fail at low cooling set-points. These are the priors' modes of
-/// the occupied set-points and ASHRAE's usual 12.8 C supply air / 6.7 C chilled water.
-pub const DESIGN_COOLING_SETPOINT_C: f64 = 24.0;
-/// See [`DESIGN_COOLING_SETPOINT_C`].
-pub const DESIGN_HEATING_SETPOINT_C: f64 = 21.0;
-/// See [`DESIGN_COOLING_SETPOINT_C`].
-pub const DESIGN_SUPPLY_AIR_C: f64 = 12.8;
-/// See [`DESIGN_COOLING_SETPOINT_C`].
-pub const DESIGN_CHILLED_WATER_C: f64 = 6.7;
-
 /// Zoning of each storey.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -466,7 +452,12 @@ impl BuildingSpec {
             "GlobalGeometryRules",
             &["UpperLeftCorner", "Counterclockwise", "Relative"],
         );
-        // Sizing from the weather file itself (no .ddy needed).
+        // Sizing from the weather file itself (no .ddy needed), on weekdays, at the sampled
+        // set-points. Two ways of sizing at fixed design conditions were tried (issue 17,
+        // docs/benchmarks.md): design-day set-points made the VAV boxes reheat at full flow all
+        // year, so that the cooling set-point no longer moved any result; fixed 12.8 C / 6.7 C
+        // coil design temperatures made the coil-UA calculation fail more often. Points where
+        // sizing fails are replaced (`bemcal_calibrate::replacement`).
         m.add(
             "SizingPeriod:WeatherFileConditionType",
             &["Summer Extreme", "SummerExtreme", "Monday", "No", "No"],
@@ -537,15 +528,9 @@ impl BuildingSpec {
             (&self.weekend_boundaries, &we),
         );
         let [o0, o1] = self.occupied_hours;
-        // Weekdays switch between the occupied and unoccupied values; the sizing days hold the
-        // fixed design value all day, so that equipment is sized at design conditions whatever
-        // the sampled operating set-points (see `design_conditions`).
-        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64, design: f64| {
+        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64| {
             let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
-            f.push("For: SummerDesignDay WinterDesignDay".into());
-            f.push("Until: 24:00".into());
-            f.push(num(design));
-            f.push("For: Weekdays".into());
+            f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
             if o0 > 0 {
                 f.push(format!("Until: {o0:02}:00"));
                 f.push(num(unocc));
@@ -567,7 +552,6 @@ impl BuildingSpec {
             "Temperature",
             get("heating_setpoint_occupied")?,
             get("heating_setpoint_unoccupied")?,
-            DESIGN_HEATING_SETPOINT_C,
         );
         occ_sched(
             &mut m,
@@ -575,7 +559,6 @@ impl BuildingSpec {
             "Temperature",
             get("cooling_setpoint_occupied")?,
             get("cooling_setpoint_unoccupied")?,
-            DESIGN_COOLING_SETPOINT_C,
         );
         let oa_occ = get("outdoor_air_ach_occupied")?;
         let oa_unocc = get("outdoor_air_ach_unoccupied")?;
@@ -584,7 +567,7 @@ impl BuildingSpec {
         } else {
             0.0
         };
-        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, 1.0);
+        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac);
         let chw = get("chilled_water_supply_temp")?;
         constant(&mut m, "CHW Setpoint", "Temperature", chw);
         constant(&mut m, "HW Setpoint", "Temperature", 80.0);
@@ -805,6 +788,7 @@ impl BuildingSpec {
             m.add("HVACTemplate:Zone:VAV", &f);
         }
         for ahu in 1..=ahus {
+            let s = sat(ahu)?;
             let mut f = vec![
                 format!("AHU{ahu}"),
                 "Always On".into(),
@@ -817,11 +801,11 @@ impl BuildingSpec {
                 "ChilledWater".into(),
                 "".into(),
                 format!("AHU{ahu} Supply Air"),
-                num(DESIGN_SUPPLY_AIR_C),
+                num(s),
                 "HotWater".into(),
                 "".into(),
                 format!("AHU{ahu} Preheat"),
-                num((DESIGN_SUPPLY_AIR_C - 2.0).min(10.0)),
+                num((s - 2.0).min(10.0)),
                 "".into(),
                 "".into(),
                 "None".into(),
@@ -849,7 +833,7 @@ impl BuildingSpec {
                 "Default".into(),
                 "".into(),
                 "CHW Setpoint".into(),
-                num(DESIGN_CHILLED_WATER_C),
+                num(chw),
             ],
         );
         m.add(
