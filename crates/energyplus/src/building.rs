@@ -25,6 +25,21 @@ use crate::Error;
 /// only costs where it is needed.
 pub const MAX_WARMUP_DAYS: u32 = 50;
 
+/// Design conditions at which HVAC is sized, fixed whatever the sampled operating values: the
+/// thermostat on the sizing days, the cooling coils' design supply air (the preheat coil's 2 K
+/// below it) and the chilled-water loop's design temperature. Equipment is then sized once for
+/// the building and its loads and operated at the sampled set-points. Sizing at the sampled
+/// values made design points fail (coil-UA calculation at low cooling set-points) and made the
+/// set-points act through equipment size instead of operation. The occupied set-points'
+/// prior modes, and ASHRAE's usual 12.8 C supply air from 6.7 C chilled water.
+pub const DESIGN_COOLING_SETPOINT_C: f64 = 24.0;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_HEATING_SETPOINT_C: f64 = 21.0;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_SUPPLY_AIR_C: f64 = 12.8;
+/// See [`DESIGN_COOLING_SETPOINT_C`].
+pub const DESIGN_CHILLED_WATER_C: f64 = 6.7;
+
 /// Zoning of each storey.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -452,19 +467,17 @@ impl BuildingSpec {
             "GlobalGeometryRules",
             &["UpperLeftCorner", "Counterclockwise", "Relative"],
         );
-        // Sizing from the weather file itself (no .ddy needed), on weekdays, at the sampled
-        // set-points. Two ways of sizing at fixed design conditions were tried (issue 17,
-        // docs/benchmarks.md): design-day set-points made the VAV boxes reheat at full flow all
-        // year, so that the cooling set-point no longer moved any result; fixed 12.8 C / 6.7 C
-        // coil design temperatures made the coil-UA calculation fail more often. Points where
-        // sizing fails are replaced (`bemcal_calibrate::replacement`).
+        // Sizing from the weather file itself (no .ddy needed), on days of the design-day
+        // types: there the thermostat holds its fixed design set-points (see
+        // `DESIGN_COOLING_SETPOINT_C`), so equipment is sized once for the building and its
+        // loads, and the sampled set-points only operate it.
         m.add(
             "SizingPeriod:WeatherFileConditionType",
-            &["Summer Extreme", "SummerExtreme", "Monday", "No", "No"],
+            &["Summer Extreme", "SummerExtreme", "SummerDesignDay", "No", "No"],
         );
         m.add(
             "SizingPeriod:WeatherFileConditionType",
-            &["Winter Extreme", "WinterExtreme", "Monday", "No", "No"],
+            &["Winter Extreme", "WinterExtreme", "WinterDesignDay", "No", "No"],
         );
         m.add("Sizing:Parameters", &["1.2", "1.2"]);
         let jan1 = chrono_weekday_name(year);
@@ -528,9 +541,24 @@ impl BuildingSpec {
             (&self.weekend_boundaries, &we),
         );
         let [o0, o1] = self.occupied_hours;
-        let occ_sched = |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64| {
+        // Weekdays switch between the occupied and unoccupied values; with a `design` value the
+        // sizing days hold it all day instead of following the weekday pattern.
+        let occ_sched = |m: &mut Idf,
+                         name: &str,
+                         limits: &str,
+                         occ: f64,
+                         unocc: f64,
+                         design: Option<f64>| {
             let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
-            f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
+            match design {
+                Some(d) => {
+                    f.push("For: SummerDesignDay WinterDesignDay".into());
+                    f.push("Until: 24:00".into());
+                    f.push(num(d));
+                    f.push("For: Weekdays".into());
+                }
+                None => f.push("For: Weekdays SummerDesignDay WinterDesignDay".into()),
+            }
             if o0 > 0 {
                 f.push(format!("Until: {o0:02}:00"));
                 f.push(num(unocc));
@@ -552,6 +580,7 @@ impl BuildingSpec {
             "Temperature",
             get("heating_setpoint_occupied")?,
             get("heating_setpoint_unoccupied")?,
+            Some(DESIGN_HEATING_SETPOINT_C),
         );
         occ_sched(
             &mut m,
@@ -559,6 +588,7 @@ impl BuildingSpec {
             "Temperature",
             get("cooling_setpoint_occupied")?,
             get("cooling_setpoint_unoccupied")?,
+            Some(DESIGN_COOLING_SETPOINT_C),
         );
         let oa_occ = get("outdoor_air_ach_occupied")?;
         let oa_unocc = get("outdoor_air_ach_unoccupied")?;
@@ -567,7 +597,7 @@ impl BuildingSpec {
         } else {
             0.0
         };
-        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac);
+        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, None);
         let chw = get("chilled_water_supply_temp")?;
         constant(&mut m, "CHW Setpoint", "Temperature", chw);
         constant(&mut m, "HW Setpoint", "Temperature", 80.0);
@@ -781,14 +811,16 @@ impl BuildingSpec {
                 "".into(),
                 "Reverse".into(),
             ];
-            f.resize(20, String::new());
-            f.push("Outdoor Air".into()); // for control
+            // Outdoor air for sizing only. Given "for control" too, the terminal raises its
+            // minimum flow until the zone gets its outdoor air at the AHU's outdoor-air
+            // fraction, which with a fixed minimum outdoor-air flow holds every box at its
+            // maximum flow all year: the VAV system then runs as constant-volume reheat and
+            // the zone set-points move nothing but the sizing (measured, issue 17).
             f.resize(32, String::new());
             f.push("Outdoor Air".into()); // for sizing
             m.add("HVACTemplate:Zone:VAV", &f);
         }
         for ahu in 1..=ahus {
-            let s = sat(ahu)?;
             let mut f = vec![
                 format!("AHU{ahu}"),
                 "Always On".into(),
@@ -801,11 +833,11 @@ impl BuildingSpec {
                 "ChilledWater".into(),
                 "".into(),
                 format!("AHU{ahu} Supply Air"),
-                num(s),
+                num(DESIGN_SUPPLY_AIR_C),
                 "HotWater".into(),
                 "".into(),
                 format!("AHU{ahu} Preheat"),
-                num((s - 2.0).min(10.0)),
+                num(DESIGN_SUPPLY_AIR_C - 2.0),
                 "".into(),
                 "".into(),
                 "None".into(),
@@ -833,7 +865,7 @@ impl BuildingSpec {
                 "Default".into(),
                 "".into(),
                 "CHW Setpoint".into(),
-                num(chw),
+                num(DESIGN_CHILLED_WATER_C),
             ],
         );
         m.add(

@@ -252,32 +252,42 @@ fn severe_error_with_exit_code_zero_is_a_failure() {
 }
 
 /// The "did not converge after 25 warmup days" made on purpose: two warm-up days leave
-/// the small model's cooling load 1.6-3.9 times the tolerance from converged. That is within
-/// `errfile::WARMUP_MARGIN`: the run is a success, the message is a note, and the results are
-/// those of a converged run but for the first days of January.
+/// the small model's cooling load 0.43 and its temperature 2 K from converged, against
+/// tolerances widened to 0.1 and 0.5 K (the IDD maximum): not converged, but within `errfile::WARMUP_MARGIN`
+/// (with EnergyPlus's 0.04 the same run is 10.6x its tolerance and refused, see
+/// `severe_error_with_exit_code_zero_is_a_failure`). The run is a success, the message a note,
+/// and its results are those of a converged run to 1 %.
 #[test]
 fn warm_up_severe_within_the_margin_is_a_note_and_its_results_are_used() {
     let Some(r) = runner() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let model = Model::generated(small_spec());
     let base = model.instantiate(&Default::default(), r.idd()).unwrap();
-    let mut idf = base.clone();
-    let b = idf.objects.iter_mut().find(|o| o.class == "Building").unwrap();
-    b.fields[6] = "2".into();
-    b.fields[7] = "1".into();
-    let short = r.run(&idf, &weather(&r), model.outputs(), &tmp.path().join("w2")).unwrap();
-    assert!(
-        short.notes.iter().any(|n| n.contains("did not converge after 2 warmup days")
-            && n.contains("within the margin")),
-        "{:?}",
-        short.notes
-    );
+    let short = (2..=6)
+        .find_map(|days| {
+            let mut idf = base.clone();
+            let b = idf.objects.iter_mut().find(|o| o.class == "Building").unwrap();
+            b.fields[3] = "0.1".into();
+            b.fields[4] = "0.5".into();
+            b.fields[6] = days.to_string();
+            b.fields[7] = "1".into();
+            let dir = tmp.path().join(format!("w{days}"));
+            let run = r.run(&idf, &weather(&r), model.outputs(), &dir);
+            eprintln!("{days} warm-up days: {:?}", run.as_ref().map(|x| &x.notes));
+            run.ok().filter(|x| {
+                x.notes.iter().any(|n| {
+                    n.contains(&format!("did not converge after {days} warmup days"))
+                        && n.contains("within the margin")
+                })
+            })
+        })
+        .expect("a run with a usable warm-up Severe");
     assert_eq!(short.outputs.hours(), 8760);
     let full = r.run(&base, &weather(&r), model.outputs(), &tmp.path().join("w50")).unwrap();
     assert!(full.notes.is_empty(), "{:?}", full.notes);
     for (name, t) in full.outputs.totals() {
         let t2 = total(&short.outputs, &name);
-        eprintln!("{name}: {t:.0} kWh converged, {t2:.0} kWh after 2 warm-up days");
+        eprintln!("{name}: {t:.0} kWh converged, {t2:.0} kWh with the warm-up note");
         assert!((t2 - t).abs() <= 0.01 * t.abs().max(1.0), "{name}: {t} vs {t2}");
     }
 }
