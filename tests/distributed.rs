@@ -299,15 +299,44 @@ fn failed_design_point_is_replaced_local_and_distributed() {
     for f in failed {
         let lpd = f["values"][0].as_f64().unwrap();
         assert!(lpd < 0.0, "only negative lighting fails: {f}");
-        assert!(f["error"].as_str().unwrap().contains("watts_per_floor_area"), "{f}");
+        assert!(
+            f["error"]
+                .as_str()
+                .unwrap()
+                .contains("watts_per_floor_area"),
+            "{f}"
+        );
     }
     assert_eq!(d["simulated"], 6, "{d}");
     assert!(d["dropped"].as_array().unwrap().is_empty(), "{d}");
     let replaced = d["replaced"].as_array().unwrap();
     assert!(!replaced.is_empty(), "{d}");
-    assert!(d["reasons"][0]["reason"].as_str().unwrap().contains("Lights"), "{d}");
-    assert!(d["suggestions"].as_array().unwrap().iter().any(|s| s.as_str().unwrap().contains("prior")), "{d}");
+    assert!(
+        d["reasons"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("Lights"),
+        "{d}"
+    );
+    assert!(
+        d["suggestions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s.as_str().unwrap().contains("prior")),
+        "{d}"
+    );
     assert_eq!(sa["design_points"], 6);
+    // Where EnergyPlus failed, the chains refuse proposals: one ball per failed point.
+    let balls = d["invalid_region"]["balls"].as_array().unwrap();
+    assert_eq!(balls.len(), failed.len(), "{d}");
+    assert!(log.contains("are refused"), "{log}");
+    // The report shows the failed points and the warning.
+    let r = bemcal().arg("report").arg(&local).output().unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let html = std::fs::read_to_string(local.join("report.html")).unwrap();
+    assert!(html.contains("Design points EnergyPlus could not simulate"));
+    assert!(html.contains("watts_per_floor_area"));
     assert!(sa["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
     // The replacement's simulation is saved under its slot with positive lighting.
     let slot = replaced[0].as_u64().unwrap();
@@ -322,15 +351,28 @@ fn failed_design_point_is_replaced_local_and_distributed() {
     let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
     let sb = summary(&dist);
     // The same design, failures and replacements (the error texts name each run's own folder).
-    for k in ["reasons", "replaced", "dropped", "simulated", "suggestions"] {
+    for k in [
+        "reasons",
+        "replaced",
+        "dropped",
+        "simulated",
+        "suggestions",
+        "invalid_region",
+    ] {
         assert_eq!(sa["design"][k], sb["design"][k], "{k}\n{log}");
     }
     let slots_values = |s: &serde_json::Value| -> Vec<(serde_json::Value, serde_json::Value)> {
         let f = s["design"]["failed"].as_array().unwrap();
-        f.iter().map(|f| (f["slot"].clone(), f["values"].clone())).collect()
+        f.iter()
+            .map(|f| (f["slot"].clone(), f["values"].clone()))
+            .collect()
     };
     assert_eq!(slots_values(&sa), slots_values(&sb));
-    for f in ["draws.csv", "simulations/point_000.json", "simulations/point_005.json"] {
+    for f in [
+        "draws.csv",
+        "simulations/point_000.json",
+        "simulations/point_005.json",
+    ] {
         assert_eq!(
             std::fs::read(local.join(f)).unwrap(),
             std::fs::read(dist.join(f)).unwrap(),

@@ -408,7 +408,11 @@ impl State {
         let outputs = outcome
             .slots
             .iter()
-            .map(|i| by_slot.remove(i).ok_or_else(|| format!("design point {i}: no simulation")))
+            .map(|i| {
+                by_slot
+                    .remove(i)
+                    .ok_or_else(|| format!("design point {i}: no simulation"))
+            })
             .collect::<Result<Vec<_>>>()?;
         let design = outcome.design(&hypercube, &cal.inputs.plan.priors);
         let dataset = cal
@@ -458,6 +462,23 @@ impl State {
         Ok(true)
     }
 
+    /// `simulations/design.json` of a run whose design is settled, as a job input.
+    fn settled_design_file(&self, r: &RunRow) -> Result<Option<proto::FileRef>> {
+        let path = self
+            .run_dir(&r.id)
+            .join("out")
+            .join("simulations")
+            .join(bemcal_calibrate::design::OUTCOME_FILE);
+        let Ok(bytes) = std::fs::read(&path) else {
+            return Ok(None);
+        };
+        Ok(Some(proto::FileRef {
+            path: format!("simulations/{}", bemcal_calibrate::design::OUTCOME_FILE),
+            sha256: self.put_artifact(&bytes)?,
+            size: bytes.len() as u64,
+        }))
+    }
+
     /// Next chain-segment jobs of the current refinement round: for each group of chains whose
     /// latest segment is done and short of the round's target, the following segment (from
     /// that segment's checkpoint; a round's first segment starts where the same chains ended
@@ -479,6 +500,7 @@ impl State {
             r.chain_target
         };
         let surrogate = self.surrogate_files(r)?;
+        let settled = self.settled_design_file(r)?;
         let group = |first: usize, round: u32| -> Vec<&JobRow> {
             done.iter()
                 .filter(|j| {
@@ -512,6 +534,10 @@ impl State {
                 continue;
             }
             let mut inputs = crate::client::refs(&surrogate);
+            // The settled design: where EnergyPlus failed, the chains refuse proposals.
+            if let Some(f) = &settled {
+                inputs.push(f.clone());
+            }
             if let Some(last) = mine.last() {
                 inputs.push((&states_of(last)?).into());
             } else if let Some(prev) = log.rounds.last().filter(|p| !p.starts.is_empty()) {
@@ -762,7 +788,11 @@ impl State {
             .filter_map(|s| s.outputs.ok().map(|o| (s.index, o)))
             .collect();
         let full = cal.full_design(&design, &log);
-        let indices = outcome.slots.iter().copied().chain(log.points().map(|p| p.index));
+        let indices = outcome
+            .slots
+            .iter()
+            .copied()
+            .chain(log.points().map(|p| p.index));
         let outputs = indices
             .map(|i| {
                 by_index

@@ -26,6 +26,10 @@ pub struct Plan {
     pub fixed: ParameterValues,
     /// Priors restricted by a constraint with a fixed parameter, as messages for the log.
     pub restricted: Vec<String>,
+    /// Where EnergyPlus could not simulate design points (set once the design is settled):
+    /// the chains refuse proposals there ([`Plan::refused`]).
+    #[serde(default)]
+    pub invalid: crate::replacement::InvalidRegion,
 }
 
 impl Plan {
@@ -56,6 +60,7 @@ impl Plan {
             units: vec![],
             fixed: ParameterValues::new(),
             restricted: vec![],
+            invalid: Default::default(),
         };
         for p in model.parameters() {
             let cal = if calibrate.is_empty() {
@@ -143,6 +148,12 @@ impl Plan {
                 Some(PairConstraint::new(i, j, -c.margin))
             })
             .collect()
+    }
+
+    /// Why the chains refuse calibrated values `x`: they lie where EnergyPlus could not
+    /// simulate a design point ([`crate::replacement::InvalidRegion`]); `None` if they do not.
+    pub fn refused(&self, x: &[f64]) -> Option<&crate::replacement::InvalidBall> {
+        self.invalid.refuses(&self.priors, x)
     }
 
     /// True if the full parameter set satisfies every model constraint.

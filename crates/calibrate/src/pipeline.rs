@@ -27,11 +27,11 @@ use crate::design::{
     make_design, read_outcome, simulate_design, simulate_point, write_design_csv, Plan,
     OUTCOME_FILE,
 };
-use crate::replacement::{Attempt, Outcome, Policy};
 use crate::posterior::{advance_chains, run_chains, Posterior, SigmaDeltaBox};
 use crate::project::{
     ChainStart, Estimate, Kernel, McmcSettings, Project, Residuals, SigmaDeltaMode,
 };
+use crate::replacement::{Attempt, Outcome, Policy};
 use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
@@ -292,6 +292,9 @@ pub struct DesignReport {
     pub suggestions: Vec<String>,
     /// Severe messages after which a design point's results were used, with why.
     pub notes: Vec<PointNote>,
+    /// Where the chains refused proposals because EnergyPlus failed there.
+    #[serde(default)]
+    pub invalid_region: crate::replacement::InvalidRegion,
 }
 
 /// Failures of one reason.
@@ -343,6 +346,7 @@ impl DesignReport {
                         .map(move |message| PointNote { point, message })
                 })
                 .collect(),
+            invalid_region: plan.invalid.clone(),
         }
     }
 }
@@ -391,11 +395,22 @@ impl Calibration {
     pub fn load(project: Project, out: &Path) -> Result<Calibration, Error> {
         std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
         let inputs = load_inputs(&project)?;
-        Ok(Calibration {
+        let mut cal = Calibration {
             project,
             inputs,
             out: out.to_path_buf(),
-        })
+        };
+        if let Some(outcome) = read_outcome(&cal.simulations_dir()) {
+            cal.learn_invalid_region(&outcome);
+        }
+        Ok(cal)
+    }
+
+    /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
+    /// the chains refuse proposals there (see [`crate::replacement::InvalidRegion`]).
+    pub fn learn_invalid_region(&mut self, outcome: &Outcome) {
+        self.inputs.plan.invalid =
+            crate::replacement::InvalidRegion::from_outcome(outcome, &self.inputs.plan.priors);
     }
 
     /// Stage 1: the design (deterministic for the project's seed); writes `design.csv`.
@@ -727,7 +742,11 @@ impl Sampler<'_> {
         let modes: Vec<f64> = plan.priors.iter().map(|p| p.to_unit(p.mode())).collect();
         for s in &mut starts {
             let mut tries = 0;
-            while !plan.feasible(&cal.inputs.model, &post.theta(s)) && tries < 50 {
+            let ok = |s: &[f64]| {
+                let x = post.theta(s);
+                plan.feasible(&cal.inputs.model, &x) && plan.refused(&x).is_none()
+            };
+            while !ok(s) && tries < 50 {
                 for (u, m) in s.iter_mut().zip(&modes) {
                     *u = 0.5 * (*u + m);
                 }
@@ -1170,7 +1189,7 @@ pub fn write_summary(
 /// Runs the whole calibration of `project` into `out` on this machine.
 pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
     let t_all = Instant::now();
-    let cal = Calibration::load(project.clone(), out)?;
+    let mut cal = Calibration::load(project.clone(), out)?;
     let inp = &cal.inputs;
     let mut timings = Timings::default();
     log(&format!(
@@ -1219,6 +1238,16 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     log_design_outcome(&sims.outcome, log);
     let design = sims.outcome.design(&hypercube, &inp.plan.priors);
     let base = design.points.len();
+    cal.learn_invalid_region(&sims.outcome);
+    let cal = cal;
+    let inp = &cal.inputs;
+    if !inp.plan.invalid.balls.is_empty() {
+        log(&format!(
+            "chains: proposals near the {} design point(s) EnergyPlus could not simulate are \
+             refused (summary.json design.invalid_region)",
+            inp.plan.invalid.balls.len()
+        ));
+    }
 
     // Refinement points of rounds finished earlier (a rerun): their saved simulations.
     let mut refined = cal.refine_log()?;
@@ -1503,7 +1532,9 @@ pub fn log_design_outcome(outcome: &Outcome, log: Log<'_>) {
         outcome.slots.len() + outcome.dropped.len()
     ));
     for (reason, slots, n) in outcome.reasons() {
-        log(&format!("design:   {n} x {reason} (design points {slots:?})"));
+        log(&format!(
+            "design:   {n} x {reason} (design points {slots:?})"
+        ));
     }
 }
 

@@ -75,7 +75,7 @@ impl Posterior<'_> {
     /// ln prior of a unit-space point (constant Jacobians dropped); -inf if a constraint fails.
     pub fn ln_prior(&self, u: &[f64]) -> f64 {
         let theta = self.theta(u);
-        if !self.plan.feasible(self.model, &theta) {
+        if !self.plan.feasible(self.model, &theta) || self.plan.refused(&theta).is_some() {
             return f64::NEG_INFINITY;
         }
         let mut lp: f64 = self

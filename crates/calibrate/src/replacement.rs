@@ -78,7 +78,11 @@ impl Outcome {
     pub fn design(&self, hypercube: &Design, priors: &[Triangular]) -> Design {
         let mut d = hypercube.clone();
         d.points = self.points.clone();
-        d.probabilities = self.points.iter().map(|x| probabilities(priors, x)).collect();
+        d.probabilities = self
+            .points
+            .iter()
+            .map(|x| probabilities(priors, x))
+            .collect();
         d
     }
 
@@ -119,7 +123,10 @@ pub fn next_step(
         return Step::Simulate(untried);
     }
     // Later waves: a spare for every failed slot with replacements left.
-    let mut tried: Vec<Vec<f64>> = attempts.iter().map(|a| probabilities(priors, &a.values)).collect();
+    let mut tried: Vec<Vec<f64>> = attempts
+        .iter()
+        .map(|a| probabilities(priors, &a.values))
+        .collect();
     let mut unused: Vec<&Vec<f64>> = spares
         .points
         .iter()
@@ -145,7 +152,11 @@ pub fn next_step(
     let mut out = Outcome {
         slots: vec![],
         points: vec![],
-        failed: attempts.iter().filter(|a| a.error.is_some()).cloned().collect(),
+        failed: attempts
+            .iter()
+            .filter(|a| a.error.is_some())
+            .cloned()
+            .collect(),
         replaced: vec![],
         dropped: vec![],
     };
@@ -166,6 +177,77 @@ pub fn next_step(
     } else {
         Step::Failed(failure_message(plan, policy, n, &out))
     }
+}
+
+/// Where the model could not be simulated, learned from the design's failures: a ball in
+/// probability space around each point EnergyPlus refused (a model failure, not a time limit),
+/// of radius half its distance to the nearest point it simulated. The chains refuse proposals
+/// inside (their log prior is -inf there, as outside a constraint), so that the posterior does
+/// not settle where the surrogate extrapolates and EnergyPlus would fail again. A ball and not
+/// the failed point's whole neighbourhood: between a failure and a success the model's edge is
+/// unknown, and half-way is the nearest-neighbour guess.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct InvalidRegion {
+    pub balls: Vec<InvalidBall>,
+}
+
+/// One failed point's ball.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InvalidBall {
+    /// The failed point, physical units (plan order).
+    pub values: Vec<f64>,
+    /// Radius in probability space (`p = F(x)` per parameter).
+    pub radius: f64,
+    /// Why EnergyPlus failed there ([`failure_reason`]).
+    pub reason: String,
+}
+
+impl InvalidRegion {
+    /// The region of a settled design.
+    pub fn from_outcome(outcome: &Outcome, priors: &[Triangular]) -> InvalidRegion {
+        let ok: Vec<Vec<f64>> = outcome
+            .points
+            .iter()
+            .map(|x| probabilities(priors, x))
+            .collect();
+        let balls = outcome
+            .failed
+            .iter()
+            .filter(|a| is_model_failure(a.error.as_deref().unwrap_or_default()))
+            .filter_map(|a| {
+                let c = probabilities(priors, &a.values);
+                let nearest = ok
+                    .iter()
+                    .map(|o| distance(o, &c))
+                    .fold(f64::INFINITY, f64::min);
+                nearest.is_finite().then(|| InvalidBall {
+                    values: a.values.clone(),
+                    radius: 0.5 * nearest,
+                    reason: failure_reason(a.error.as_deref().unwrap_or_default()),
+                })
+            })
+            .collect();
+        InvalidRegion { balls }
+    }
+
+    /// The ball `x` (physical units) lies in, if any.
+    pub fn refuses(&self, priors: &[Triangular], x: &[f64]) -> Option<&InvalidBall> {
+        if self.balls.is_empty() {
+            return None;
+        }
+        let p = probabilities(priors, x);
+        self.balls
+            .iter()
+            .find(|b| distance(&probabilities(priors, &b.values), &p) < b.radius)
+    }
+}
+
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
 }
 
 fn probabilities(priors: &[Triangular], x: &[f64]) -> Vec<f64> {
@@ -247,7 +329,10 @@ pub fn suggestions(priors: &[Triangular], names: &[String], failed: &[Attempt]) 
     if model_failures.len() >= 2 {
         for (i, p) in priors.iter().enumerate() {
             let q: Vec<f64> = model_failures.iter().map(|a| p.cdf(a.values[i])).collect();
-            let name = names.get(i).cloned().unwrap_or_else(|| format!("parameter {i}"));
+            let name = names
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("parameter {i}"));
             if q.iter().all(|&v| v <= 0.25) {
                 out.push(format!(
                     "the failed points all have low {name} (below its prior's 25th percentile, \
@@ -288,46 +373,79 @@ mod tests {
             units: vec!["-".into(), "C".into()],
             fixed: Default::default(),
             restricted: vec![],
+            invalid: Default::default(),
         };
         (plan, h, s)
     }
 
     fn ok(slot: usize, values: &[f64]) -> Attempt {
-        Attempt { slot, values: values.to_vec(), error: None }
+        Attempt {
+            slot,
+            values: values.to_vec(),
+            error: None,
+        }
     }
 
     fn bad(slot: usize, values: &[f64], e: &str) -> Attempt {
-        Attempt { slot, values: values.to_vec(), error: Some(e.into()) }
+        Attempt {
+            slot,
+            values: values.to_vec(),
+            error: Some(e.into()),
+        }
     }
 
-    const POLICY: Policy = Policy { replacements: 2, min_success: 0.8 };
+    const POLICY: Policy = Policy {
+        replacements: 2,
+        min_success: 0.8,
+    };
     const SEVERE: &str = "EnergyPlus failed in /x/point_001: results invalid\n   ** Severe  ** Calculation of cooling coil design UA failed for coil AHU2 COOLING COIL";
 
     #[test]
     fn a_failed_point_is_replaced_by_the_farthest_spare_then_the_design_is_done() {
         let (plan, h, s) = setup(6);
         let priors = plan.priors.clone();
-        let Step::Simulate(wave0) = next_step(&plan, &h, &s, POLICY, &[]) else { panic!() };
+        let Step::Simulate(wave0) = next_step(&plan, &h, &s, POLICY, &[]) else {
+            panic!()
+        };
         assert_eq!(wave0.len(), 6);
         let mut attempts: Vec<Attempt> = wave0
             .iter()
-            .map(|(i, x)| if *i == 1 { bad(*i, x, SEVERE) } else { ok(*i, x) })
+            .map(|(i, x)| {
+                if *i == 1 {
+                    bad(*i, x, SEVERE)
+                } else {
+                    ok(*i, x)
+                }
+            })
             .collect();
-        let Step::Simulate(wave1) = next_step(&plan, &h, &s, POLICY, &attempts) else { panic!() };
+        let Step::Simulate(wave1) = next_step(&plan, &h, &s, POLICY, &attempts) else {
+            panic!()
+        };
         assert_eq!(wave1.len(), 1);
         assert_eq!(wave1[0].0, 1);
         assert!(s.points.contains(&wave1[0].1));
         // The chosen spare is the maximin one among all spares.
-        let tried: Vec<Vec<f64>> = attempts.iter().map(|a| probabilities(&priors, &a.values)).collect();
+        let tried: Vec<Vec<f64>> = attempts
+            .iter()
+            .map(|a| probabilities(&priors, &a.values))
+            .collect();
         let cands: Vec<Vec<f64>> = s.points.iter().map(|x| probabilities(&priors, x)).collect();
-        assert_eq!(s.points[farthest_candidate(&tried, &cands).unwrap()], wave1[0].1);
+        assert_eq!(
+            s.points[farthest_candidate(&tried, &cands).unwrap()],
+            wave1[0].1
+        );
         attempts.push(ok(1, &wave1[0].1));
-        let Step::Done(out) = next_step(&plan, &h, &s, POLICY, &attempts) else { panic!() };
+        let Step::Done(out) = next_step(&plan, &h, &s, POLICY, &attempts) else {
+            panic!()
+        };
         assert_eq!(out.slots, (0..6).collect::<Vec<_>>());
         assert_eq!(out.points[1], wave1[0].1);
         assert_eq!(out.replaced, vec![(1, 1)]);
         assert_eq!(out.failed.len(), 1);
-        assert_eq!(out.reasons()[0].0, "Calculation of cooling coil design UA failed for coil AHU# COOLING COIL");
+        assert_eq!(
+            out.reasons()[0].0,
+            "Calculation of cooling coil design UA failed for coil AHU# COOLING COIL"
+        );
         assert_eq!(out.design(&h, &priors).points.len(), 6);
     }
 
@@ -338,7 +456,11 @@ mod tests {
         loop {
             match next_step(&plan, &h, &s, POLICY, &attempts) {
                 Step::Simulate(wave) => attempts.extend(wave.into_iter().map(|(i, x)| {
-                    if i == 3 { bad(i, &x, SEVERE) } else { ok(i, &x) }
+                    if i == 3 {
+                        bad(i, &x, SEVERE)
+                    } else {
+                        ok(i, &x)
+                    }
                 })),
                 Step::Done(out) => {
                     assert_eq!(out.dropped, vec![3]);
@@ -354,14 +476,21 @@ mod tests {
         let msg = loop {
             match next_step(&plan, &h, &s, POLICY, &attempts) {
                 Step::Simulate(wave) => attempts.extend(wave.into_iter().map(|(i, x)| {
-                    if i < 3 { bad(i, &x, SEVERE) } else { ok(i, &x) }
+                    if i < 3 {
+                        bad(i, &x, SEVERE)
+                    } else {
+                        ok(i, &x)
+                    }
                 })),
                 Step::Done(out) => panic!("{out:?}"),
                 Step::Failed(m) => break m,
             }
         };
         assert!(msg.contains("only 7 of 10 design points"), "{msg}");
-        assert!(msg.contains("9 x Calculation of cooling coil design UA"), "{msg}");
+        assert!(
+            msg.contains("9 x Calculation of cooling coil design UA"),
+            "{msg}"
+        );
         assert!(msg.contains("what to change"), "{msg}");
     }
 
@@ -375,5 +504,40 @@ mod tests {
         let hints = suggestions(&priors, &["shgc".into(), "sat".into()], &failed);
         assert!(hints.iter().any(|h| h.contains("low shgc")), "{hints:?}");
         assert!(!hints.iter().any(|h| h.contains("sat")), "{hints:?}");
+    }
+
+    #[test]
+    fn the_invalid_region_is_a_ball_half_way_to_the_nearest_success() {
+        let (plan, _, _) = setup(4);
+        let priors = &plan.priors;
+        let outcome = Outcome {
+            slots: vec![0, 1],
+            points: vec![vec![0.5, 20.0], vec![0.9, 20.0]],
+            failed: vec![
+                bad(2, &[0.1, 20.0], SEVERE),
+                bad(
+                    3,
+                    &[0.5, 28.0],
+                    "EnergyPlus exceeded its time limit of 900 s in /x",
+                ),
+            ],
+            replaced: vec![],
+            dropped: vec![2, 3],
+        };
+        let r = InvalidRegion::from_outcome(&outcome, priors);
+        assert_eq!(
+            r.balls.len(),
+            1,
+            "a time limit says nothing about the model"
+        );
+        // F(0.1) = 0.02, F(0.5) = 0.5: radius 0.24 in probability.
+        assert!(
+            (r.balls[0].radius - 0.24).abs() < 1e-12,
+            "{}",
+            r.balls[0].radius
+        );
+        assert!(r.refuses(priors, &[0.15, 20.0]).is_some());
+        assert!(r.refuses(priors, &[0.5, 20.0]).is_none());
+        assert!(r.refuses(priors, &[0.1, 28.0]).is_none());
     }
 }

@@ -473,11 +473,23 @@ impl BuildingSpec {
         // loads, and the sampled set-points only operate it.
         m.add(
             "SizingPeriod:WeatherFileConditionType",
-            &["Summer Extreme", "SummerExtreme", "SummerDesignDay", "No", "No"],
+            &[
+                "Summer Extreme",
+                "SummerExtreme",
+                "SummerDesignDay",
+                "No",
+                "No",
+            ],
         );
         m.add(
             "SizingPeriod:WeatherFileConditionType",
-            &["Winter Extreme", "WinterExtreme", "WinterDesignDay", "No", "No"],
+            &[
+                "Winter Extreme",
+                "WinterExtreme",
+                "WinterDesignDay",
+                "No",
+                "No",
+            ],
         );
         m.add("Sizing:Parameters", &["1.2", "1.2"]);
         let jan1 = chrono_weekday_name(year);
@@ -543,37 +555,33 @@ impl BuildingSpec {
         let [o0, o1] = self.occupied_hours;
         // Weekdays switch between the occupied and unoccupied values; with a `design` value the
         // sizing days hold it all day instead of following the weekday pattern.
-        let occ_sched = |m: &mut Idf,
-                         name: &str,
-                         limits: &str,
-                         occ: f64,
-                         unocc: f64,
-                         design: Option<f64>| {
-            let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
-            match design {
-                Some(d) => {
-                    f.push("For: SummerDesignDay WinterDesignDay".into());
-                    f.push("Until: 24:00".into());
-                    f.push(num(d));
-                    f.push("For: Weekdays".into());
+        let occ_sched =
+            |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64, design: Option<f64>| {
+                let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
+                match design {
+                    Some(d) => {
+                        f.push("For: SummerDesignDay WinterDesignDay".into());
+                        f.push("Until: 24:00".into());
+                        f.push(num(d));
+                        f.push("For: Weekdays".into());
+                    }
+                    None => f.push("For: Weekdays SummerDesignDay WinterDesignDay".into()),
                 }
-                None => f.push("For: Weekdays SummerDesignDay WinterDesignDay".into()),
-            }
-            if o0 > 0 {
-                f.push(format!("Until: {o0:02}:00"));
-                f.push(num(unocc));
-            }
-            f.push(format!("Until: {o1:02}:00"));
-            f.push(num(occ));
-            if o1 < 24 {
+                if o0 > 0 {
+                    f.push(format!("Until: {o0:02}:00"));
+                    f.push(num(unocc));
+                }
+                f.push(format!("Until: {o1:02}:00"));
+                f.push(num(occ));
+                if o1 < 24 {
+                    f.push("Until: 24:00".into());
+                    f.push(num(unocc));
+                }
+                f.push("For: AllOtherDays".into());
                 f.push("Until: 24:00".into());
                 f.push(num(unocc));
-            }
-            f.push("For: AllOtherDays".into());
-            f.push("Until: 24:00".into());
-            f.push(num(unocc));
-            m.add("Schedule:Compact", &f);
-        };
+                m.add("Schedule:Compact", &f);
+            };
         occ_sched(
             &mut m,
             "Heating Setpoint",
@@ -597,7 +605,14 @@ impl BuildingSpec {
         } else {
             0.0
         };
-        occ_sched(&mut m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, None);
+        occ_sched(
+            &mut m,
+            "Outdoor Air Fraction",
+            "Fraction",
+            1.0,
+            oa_frac,
+            None,
+        );
         let chw = get("chilled_water_supply_temp")?;
         constant(&mut m, "CHW Setpoint", "Temperature", chw);
         constant(&mut m, "HW Setpoint", "Temperature", 80.0);

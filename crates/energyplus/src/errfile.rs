@@ -247,7 +247,10 @@ mod tests {
         assert_eq!(e.problems.len(), 1);
         assert_eq!(e.problems[0].lines.len(), 7);
         assert_eq!(e.warnings, 2);
-        assert_eq!(e.warning_kinds, vec![("Zone \"..\" has no air flow.".to_string(), 2)]);
+        assert_eq!(
+            e.warning_kinds,
+            vec![("Zone \"..\" has no air flow.".to_string(), 2)]
+        );
         match &e.classified()[0].1 {
             Class::Usable { reason } => assert!(reason.contains("1.8x"), "{reason}"),
             c => panic!("{c:?}"),
@@ -275,7 +278,10 @@ mod tests {
         let done = text.replace("EnergyPlus Terminated", "EnergyPlus Completed Successfully");
         let e = ErrFile::parse(&done.replace("   **  Fatal  ** Program terminates\n", ""));
         assert_eq!(e.classified()[0].1, Class::Invalidating);
-        let shown = format!("EnergyPlus failed in /tmp/x/point_004: results invalid: 1 message\n{}", e.problems[0].lines.join("\n"));
+        let shown = format!(
+            "EnergyPlus failed in /tmp/x/point_004: results invalid: 1 message\n{}",
+            e.problems[0].lines.join("\n")
+        );
         assert_eq!(
             failure_reason(&shown),
             "Calculation of cooling coil design UA failed for coil AHU# COOLING COIL"

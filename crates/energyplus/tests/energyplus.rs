@@ -266,7 +266,11 @@ fn warm_up_severe_within_the_margin_is_a_note_and_its_results_are_used() {
     let short = (2..=6)
         .find_map(|days| {
             let mut idf = base.clone();
-            let b = idf.objects.iter_mut().find(|o| o.class == "Building").unwrap();
+            let b = idf
+                .objects
+                .iter_mut()
+                .find(|o| o.class == "Building")
+                .unwrap();
             b.fields[3] = "0.1".into();
             b.fields[4] = "0.5".into();
             b.fields[6] = days.to_string();
@@ -283,12 +287,22 @@ fn warm_up_severe_within_the_margin_is_a_note_and_its_results_are_used() {
         })
         .expect("a run with a usable warm-up Severe");
     assert_eq!(short.outputs.hours(), 8760);
-    let full = r.run(&base, &weather(&r), model.outputs(), &tmp.path().join("w50")).unwrap();
+    let full = r
+        .run(
+            &base,
+            &weather(&r),
+            model.outputs(),
+            &tmp.path().join("w50"),
+        )
+        .unwrap();
     assert!(full.notes.is_empty(), "{:?}", full.notes);
     for (name, t) in full.outputs.totals() {
         let t2 = total(&short.outputs, &name);
         eprintln!("{name}: {t:.0} kWh converged, {t2:.0} kWh with the warm-up note");
-        assert!((t2 - t).abs() <= 0.01 * t.abs().max(1.0), "{name}: {t} vs {t2}");
+        assert!(
+            (t2 - t).abs() <= 0.01 * t.abs().max(1.0),
+            "{name}: {t} vs {t2}"
+        );
     }
 }
 

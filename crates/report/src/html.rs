@@ -272,6 +272,16 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
             ));
         }
     }
+    let d = &s.design;
+    if !d.failed.is_empty() {
+        warn.push(format!(
+            "EnergyPlus could not simulate {} design run(s): {} point(s) replaced by spare \
+             hypercube points, {} dropped (<a href=\"#design\">design</a>).",
+            d.failed.len(),
+            d.replaced.len(),
+            d.dropped.len()
+        ));
+    }
     h.push_str("<h2 id=\"warnings\">Warnings</h2>");
     if warn.is_empty() {
         h.push_str("<p class=\"pass\">None: chains mixed, every parameter informed, every output passes.</p>");
@@ -281,6 +291,58 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
             let _ = write!(h, "<li>{w}</li>");
         }
         h.push_str("</ul>");
+    }
+
+    // ---- design points EnergyPlus could not simulate: where the model is not valid
+    if !d.failed.is_empty() || !d.notes.is_empty() {
+        h.push_str(
+            "<h2 id=\"design\">Design points EnergyPlus could not simulate</h2>\
+<p class=\"sub\">Each failed run was replaced by the spare hypercube point farthest from every \
+point tried; the chains refuse proposals near the points where EnergyPlus failed. Values in \
+calibration order.</p>",
+        );
+        if !d.failed.is_empty() {
+            h.push_str("<table><tr><th>point</th><th class=\"l\">values</th><th class=\"l\">EnergyPlus</th></tr>");
+            for f in &d.failed {
+                let values: Vec<String> = s
+                    .parameters
+                    .iter()
+                    .zip(&f.values)
+                    .map(|(p, v)| format!("{} {}", esc(&p.name), g(*v)))
+                    .collect();
+                let first = f
+                    .error
+                    .as_deref()
+                    .unwrap_or_default()
+                    .lines()
+                    .find(|l| l.contains("Severe") || l.contains("Fatal"))
+                    .unwrap_or_default();
+                let _ = write!(
+                    h,
+                    "<tr><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td></tr>",
+                    f.slot,
+                    values.join(", "),
+                    esc(first)
+                );
+            }
+            h.push_str("</table>");
+        }
+        if !d.suggestions.is_empty() {
+            h.push_str("<ul>");
+            for sg in &d.suggestions {
+                let _ = write!(h, "<li>{}</li>", esc(sg));
+            }
+            h.push_str("</ul>");
+        }
+        if !d.notes.is_empty() {
+            h.push_str(
+                "<p class=\"sub\">Severe messages after which the results were used:</p><ul>",
+            );
+            for n in &d.notes {
+                let _ = write!(h, "<li>point {}: {}</li>", n.point, esc(&n.message));
+            }
+            h.push_str("</ul>");
+        }
     }
 
     // ---- metrics (Table 5)

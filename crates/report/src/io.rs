@@ -131,6 +131,56 @@ pub struct Timings {
     pub total_s: f64,
 }
 
+/// `summary.json` `design`: the design points EnergyPlus could not simulate.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct DesignBlock {
+    /// Hypercube points.
+    #[serde(default)]
+    pub slots: usize,
+    /// Failed runs: slot, values (calibration order) and error text.
+    #[serde(default)]
+    pub failed: Vec<FailedRun>,
+    /// Failures grouped by reason.
+    #[serde(default)]
+    pub reasons: Vec<FailureGroup>,
+    /// Slots simulated at a spare point.
+    #[serde(default)]
+    pub replaced: Vec<usize>,
+    /// Slots left without a point.
+    #[serde(default)]
+    pub dropped: Vec<usize>,
+    /// What a user could change.
+    #[serde(default)]
+    pub suggestions: Vec<String>,
+    /// Severe messages accepted as usable.
+    #[serde(default)]
+    pub notes: Vec<PointNote>,
+}
+
+/// A failed EnergyPlus run of the design.
+#[derive(Debug, Clone, Deserialize)]
+pub struct FailedRun {
+    pub slot: usize,
+    pub values: Vec<f64>,
+    #[serde(default)]
+    pub error: Option<String>,
+}
+
+/// Failures of one reason.
+#[derive(Debug, Clone, Deserialize)]
+pub struct FailureGroup {
+    pub reason: String,
+    pub count: usize,
+    pub points: Vec<usize>,
+}
+
+/// A usable Severe message of a design point.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PointNote {
+    pub point: usize,
+    pub message: String,
+}
+
 /// `summary.json` as written by `bemcal calibrate`.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Summary {
@@ -173,6 +223,9 @@ pub struct Summary {
     /// Number of design points.
     #[serde(default)]
     pub design_points: usize,
+    /// What EnergyPlus made of the design (failed runs, replacements, usable warnings).
+    #[serde(default)]
+    pub design: DesignBlock,
     /// Surrogate held-out metrics (free form).
     #[serde(default)]
     pub surrogate_held_out: serde_json::Value,
