@@ -246,9 +246,7 @@ pub fn simulate_design(
         let wave = match replacement::next_step(plan, hypercube, spares, policy, &attempts) {
             Step::Simulate(wave) => wave,
             Step::Done(outcome) => {
-                let json = serde_json::to_vec_pretty(&outcome)
-                    .map_err(|e| Error::Config(e.to_string()))?;
-                crate::write_atomic(&dir.join(OUTCOME_FILE), &json)?;
+                write_outcome(dir, &outcome)?;
                 let outputs = outcome
                     .slots
                     .iter()
@@ -354,6 +352,12 @@ pub fn simulate_design(
 pub fn read_outcome(dir: &Path) -> Option<Outcome> {
     let text = std::fs::read_to_string(dir.join(OUTCOME_FILE)).ok()?;
     serde_json::from_str(&text).ok()
+}
+
+/// Writes the settled design of simulations folder `dir` (`design.json`).
+pub fn write_outcome(dir: &Path, outcome: &Outcome) -> Result<(), Error> {
+    let json = serde_json::to_vec_pretty(outcome).map_err(|e| Error::Config(e.to_string()))?;
+    crate::write_atomic(&dir.join(OUTCOME_FILE), &json)
 }
 
 /// Severe messages EnergyPlus wrote in the saved run of point `i` that left its results usable

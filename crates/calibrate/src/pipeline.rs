@@ -24,14 +24,14 @@ use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 
 use crate::design::{
-    make_design, read_outcome, simulate_design, simulate_point, write_design_csv, Plan,
-    OUTCOME_FILE,
+    make_design, read_outcome, simulate_design, simulate_point, write_design_csv, write_outcome,
+    Plan, OUTCOME_FILE,
 };
 use crate::posterior::{advance_chains, run_chains, Posterior, SigmaDeltaBox};
 use crate::project::{
     ChainStart, Estimate, Kernel, McmcSettings, Project, Residuals, SigmaDeltaMode,
 };
-use crate::replacement::{Attempt, Outcome, Policy};
+use crate::replacement::{Attempt, FailureGroup, Outcome, Policy};
 use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
@@ -297,14 +297,6 @@ pub struct DesignReport {
     pub invalid_region: crate::replacement::InvalidRegion,
 }
 
-/// Failures of one reason.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct FailureGroup {
-    pub reason: String,
-    pub count: usize,
-    pub points: Vec<usize>,
-}
-
 /// A Severe message accepted as usable at a design point.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PointNote {
@@ -318,18 +310,10 @@ impl DesignReport {
         let dir = cal.simulations_dir();
         let plan = &cal.inputs.plan;
         DesignReport {
-            slots: outcome.slots.len() + outcome.dropped.len(),
+            slots: outcome.slot_count(),
             simulated: outcome.slots.len(),
             failed: outcome.failed.clone(),
-            reasons: outcome
-                .reasons()
-                .into_iter()
-                .map(|(reason, points, count)| FailureGroup {
-                    reason,
-                    count,
-                    points,
-                })
-                .collect(),
+            reasons: outcome.reasons(),
             replaced: outcome.replaced.iter().map(|r| r.0).collect(),
             dropped: outcome.dropped.clone(),
             suggestions: crate::replacement::suggestions(
@@ -466,8 +450,7 @@ impl Calibration {
 
     /// Records the settled design in the simulations folder (`design.json`).
     pub fn record_outcome(&self, outcome: &Outcome) -> Result<(), Error> {
-        let json = serde_json::to_vec_pretty(outcome).map_err(|e| Error::Config(e.to_string()))?;
-        write_atomic(&self.simulations_dir().join(OUTCOME_FILE), &json)
+        write_outcome(&self.simulations_dir(), outcome)
     }
 
     /// The settled design (after replacements) and the points trained on: errors if the
@@ -1173,9 +1156,8 @@ pub fn write_summary(
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         design_points: design.points.len(),
         design_repair: design.repair,
-        design: cal
-            .settled_design()
-            .map(|(o, _)| DesignReport::new(cal, &o))
+        design: read_outcome(&cal.simulations_dir())
+            .map(|o| DesignReport::new(cal, &o))
             .unwrap_or_default(),
         surrogate_held_out: sampler_info.1.clone(),
         refinement: cal.refine_log()?.rounds,
@@ -1529,11 +1511,12 @@ pub fn log_design_outcome(outcome: &Outcome, log: Log<'_>) {
         outcome.replaced.len(),
         outcome.dropped.len(),
         outcome.slots.len(),
-        outcome.slots.len() + outcome.dropped.len()
+        outcome.slot_count()
     ));
-    for (reason, slots, n) in outcome.reasons() {
+    for g in outcome.reasons() {
         log(&format!(
-            "design:   {n} x {reason} (design points {slots:?})"
+            "design:   {} x {} (design points {:?})",
+            g.count, g.reason, g.points
         ));
     }
 }

@@ -86,9 +86,14 @@ impl Outcome {
         d
     }
 
-    /// Failures grouped by reason, largest group first: `(reason, slots, count)`.
-    pub fn reasons(&self) -> Vec<(String, Vec<usize>, usize)> {
+    /// Failures grouped by reason, largest group first.
+    pub fn reasons(&self) -> Vec<FailureGroup> {
         group_reasons(&self.failed)
+    }
+
+    /// The hypercube's slots, settled or dropped.
+    pub fn slot_count(&self) -> usize {
+        self.slots.len() + self.dropped.len()
     }
 }
 
@@ -254,21 +259,33 @@ fn probabilities(priors: &[Triangular], x: &[f64]) -> Vec<f64> {
     priors.iter().zip(x).map(|(p, v)| p.cdf(*v)).collect()
 }
 
-fn group_reasons(failed: &[Attempt]) -> Vec<(String, Vec<usize>, usize)> {
-    let mut groups: Vec<(String, Vec<usize>, usize)> = vec![];
+/// Failures of one reason ([`failure_reason`]): how many runs, at which slots.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FailureGroup {
+    pub reason: String,
+    pub count: usize,
+    pub points: Vec<usize>,
+}
+
+fn group_reasons(failed: &[Attempt]) -> Vec<FailureGroup> {
+    let mut groups: Vec<FailureGroup> = vec![];
     for a in failed {
-        let r = failure_reason(a.error.as_deref().unwrap_or_default());
-        match groups.iter_mut().find(|g| g.0 == r) {
+        let reason = failure_reason(a.error.as_deref().unwrap_or_default());
+        match groups.iter_mut().find(|g| g.reason == reason) {
             Some(g) => {
-                if !g.1.contains(&a.slot) {
-                    g.1.push(a.slot);
+                if !g.points.contains(&a.slot) {
+                    g.points.push(a.slot);
                 }
-                g.2 += 1;
+                g.count += 1;
             }
-            None => groups.push((r, vec![a.slot], 1)),
+            None => groups.push(FailureGroup {
+                reason,
+                count: 1,
+                points: vec![a.slot],
+            }),
         }
     }
-    groups.sort_by(|a, b| b.2.cmp(&a.2));
+    groups.sort_by(|a, b| b.count.cmp(&a.count));
     groups
 }
 
@@ -282,8 +299,11 @@ fn failure_message(plan: &Plan, policy: Policy, n: usize, out: &Outcome) -> Stri
         policy.min_success,
         out.failed.len()
     );
-    for (reason, slots, count) in group_reasons(&out.failed) {
-        s.push_str(&format!("\n  {count} x {reason} (design points {slots:?})"));
+    for g in group_reasons(&out.failed) {
+        s.push_str(&format!(
+            "\n  {} x {} (design points {:?})",
+            g.count, g.reason, g.points
+        ));
     }
     let hints = suggestions(&plan.priors, &plan.calibrated, &out.failed);
     if !hints.is_empty() {
@@ -299,7 +319,10 @@ fn failure_message(plan: &Plan, policy: Policy, n: usize, out: &Outcome) -> Stri
 /// points lie (`names[i]` is the parameter of `priors[i]`).
 pub fn suggestions(priors: &[Triangular], names: &[String], failed: &[Attempt]) -> Vec<String> {
     let mut out = vec![];
-    let reasons: Vec<String> = group_reasons(failed).into_iter().map(|g| g.0).collect();
+    let reasons: Vec<String> = group_reasons(failed)
+        .into_iter()
+        .map(|g| g.reason)
+        .collect();
     for r in &reasons {
         let l = r.to_lowercase();
         let hint = if l.contains("warmup") || l.contains("warm-up") {
@@ -443,7 +466,7 @@ mod tests {
         assert_eq!(out.replaced, vec![(1, 1)]);
         assert_eq!(out.failed.len(), 1);
         assert_eq!(
-            out.reasons()[0].0,
+            out.reasons()[0].reason,
             "Calculation of cooling coil design UA failed for coil AHU# COOLING COIL"
         );
         assert_eq!(out.design(&h, &priors).points.len(), 6);
