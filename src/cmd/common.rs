@@ -40,3 +40,17 @@ pub fn write_hourly_csv(path: &Path, year: i32, outputs: &HourlyOutputs) -> anyh
     w.flush()?;
     Ok(())
 }
+
+/// A weather reference: a path, or `bundled:FILE` from EnergyPlus's `WeatherData`.
+pub fn resolve_weather_ref(reference: &str) -> anyhow::Result<std::path::PathBuf> {
+    let Some(name) = reference.strip_prefix("bundled:") else {
+        return Ok(std::path::PathBuf::from(reference));
+    };
+    let engine = Engine::locate()?;
+    engine.bundled_weather(name).with_context(|| {
+        format!(
+            "'{reference}': no such file in {}",
+            engine.root.join("WeatherData").display()
+        )
+    })
+}

@@ -21,6 +21,7 @@ pub mod submit;
 pub mod synthesize;
 pub mod train;
 pub mod watch;
+pub mod weather;
 pub mod worker;
 
 /// Bayesian calibration of EnergyPlus building energy models against hourly meters.
@@ -37,6 +38,8 @@ pub enum Command {
     Simulate(simulate::Args),
     /// List a model's calibration parameters and priors.
     Params(params::Args),
+    /// An EPW of the metered year from measured weather (ISD-lite or a station CSV) and a TMY.
+    Weather(weather::Args),
     /// Pre-calibration: meters -> bases, day types, schedule priors (priors.toml).
     Precalibrate(precalibrate::Args),
     /// Design points: a Latin hypercube over the priors, optionally simulated.
@@ -77,6 +80,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::Params(a) => params::run(a),
+        Command::Weather(a) => weather::run(a),
         Command::Precalibrate(a) => precalibrate::run(a),
         Command::Train(a) => train::run(a),
         Command::Predict(a) => predict::run(a),

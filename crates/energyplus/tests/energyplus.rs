@@ -368,3 +368,52 @@ meters = ["Electricity:Facility"]
         "{e}"
     );
 }
+
+/// An EPW of 2017 built from the Minneapolis ISD-lite observations (UTC) merged onto the TMY3
+/// file: EnergyPlus reads it without a Severe (horizontal infrared left for EnergyPlus to
+/// derive), and the year's weather moves the results against the typical year's.
+#[test]
+fn energyplus_runs_on_an_epw_built_from_isd_lite() {
+    use bemcal_weather::measured::{build_epw, BuildOptions, Stamp};
+    let Some(r) = runner() else { return };
+    let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data");
+    let tmy = shared.join("epw/USA_MN_Minneapolis-St.Paul.Intl.AP.726580_TMY3.epw");
+    let isd = shared.join("noaa_isd_lite_2017/726580-14922-2017.gz");
+    if !tmy.exists() || !isd.exists() {
+        eprintln!("shared data not present; skipping");
+        return;
+    }
+    let tmy_text = std::fs::read_to_string(&tmy).unwrap();
+    let obs = bemcal_weather::station::read_isd_lite(&isd, 254.0).unwrap();
+    let opts = BuildOptions {
+        year: 2017,
+        max_interpolated_gap_h: 6,
+        stamp: Stamp::Instant,
+        interval_min: 60,
+        source: "ISD-lite 726580-14922-2017".into(),
+    };
+    let (text, _) = build_epw(&tmy_text, &tmy, &obs, &opts).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let built = tmp.path().join("msp2017.epw");
+    std::fs::write(&built, text).unwrap();
+    let model = Model::generated(BuildingSpec {
+        year: 2017,
+        ..small_spec()
+    });
+    let idf = model.instantiate(&ParameterValues::new(), r.idd()).unwrap();
+    let actual = r
+        .run(&idf, &built, model.outputs(), &tmp.path().join("a"))
+        .unwrap();
+    let typical = r
+        .run(&idf, &tmy, model.outputs(), &tmp.path().join("t"))
+        .unwrap();
+    let (ha, ht) = (
+        total(&actual.outputs, "heating_kwh"),
+        total(&typical.outputs, "heating_kwh"),
+    );
+    eprintln!("heating 2017 {ha:.0} kWh, TMY3 {ht:.0} kWh");
+    assert!(
+        ha > 0.0 && (ha - ht).abs() / ht > 0.02,
+        "2017 {ha}, TMY {ht}"
+    );
+}

@@ -7,6 +7,10 @@
 //! into day types (weekday, weekend, holiday) for a chosen calendar year, because typical-year
 //! (TMY) files mix source years and so carry no usable weekday.
 
+pub mod measured;
+pub mod solar;
+pub mod station;
+
 use std::fmt;
 use std::path::{Path, PathBuf};
 
