@@ -74,6 +74,22 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
             doc.insert("weather".into(), n.into());
         }
     }
+    if let Some(mw) = doc
+        .get_mut("measured_weather")
+        .and_then(|v| v.as_table_mut())
+    {
+        if let Some(f) = str_at(mw, "csv") {
+            let n = place(&f)?;
+            mw.insert("csv".into(), n.into());
+        }
+        if let Some(list) = mw.get_mut("isd_lite").and_then(|v| v.as_array_mut()) {
+            for item in list.iter_mut() {
+                if let Some(f) = item.as_str().map(str::to_string) {
+                    *item = place(&f)?.into();
+                }
+            }
+        }
+    }
     if let Some(m) = doc.get_mut("meters").and_then(|v| v.as_table_mut()) {
         if let Some(f) = str_at(m, "file") {
             let n = place(&f)?;
@@ -136,4 +152,43 @@ pub fn materialize(files: &[File], store: &ArtifactDir, dir: &Path) -> Result<Pa
         std::fs::write(&p, bytes).map_err(|e| format!("{}: {e}", p.display()))?;
     }
     Ok(dir.join(PROJECT_FILE))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn measured_weather_files_travel_with_the_project() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let outside = tempfile::tempdir().unwrap();
+        let isd = outside.path().join("726580-14922-2017.gz");
+        for (name, text) in [
+            ("model.toml", "storeys = 1\n"),
+            ("meters.csv", "timestamp,e\n"),
+            ("tmy.epw", "LOCATION\n"),
+        ] {
+            std::fs::write(d.join(name), text).unwrap();
+        }
+        std::fs::write(&isd, b"isd").unwrap();
+        std::fs::write(
+            d.join("p.toml"),
+            format!(
+                "model = \"model.toml\"\nweather = \"tmy.epw\"\n\
+                 [measured_weather]\nisd_lite = [\"{}\"]\n[meters]\nfile = \"meters.csv\"\n",
+                isd.display()
+            ),
+        )
+        .unwrap();
+        let files = collect(&d.join("p.toml")).unwrap();
+        let names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
+        let renamed = names
+            .iter()
+            .find(|n| n.ends_with("726580-14922-2017.gz"))
+            .expect("ISD-lite file bundled");
+        let project = String::from_utf8(files[0].1.clone()).unwrap();
+        assert!(project.contains(renamed), "{project}");
+        assert_eq!(files.iter().find(|(n, _)| n == renamed).unwrap().1, b"isd");
+    }
 }

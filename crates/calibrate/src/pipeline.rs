@@ -41,6 +41,8 @@ pub struct Inputs {
     pub model: Model,
     pub plan: Plan,
     pub weather_path: PathBuf,
+    /// How the EPW was built from `[measured_weather]` (None: the project's EPW as it is).
+    pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
     pub features: HourlyFeatures,
     pub year: i32,
     /// Calibration outputs (model output names) and their measured series (kWh, NaN = missing).
@@ -88,6 +90,49 @@ pub fn resolve_weather(project: &Project, engine: &Engine) -> Result<PathBuf, Er
         });
     }
     Ok(project.resolve(Path::new(&project.weather)))
+}
+
+/// The weather a calibration simulates with: the project's EPW, or with `[measured_weather]`
+/// the EPW of `year` built from the measured weather onto it (written beside the project as
+/// `measured-weather/YEAR.epw` with its report `YEAR.json`, rewritten only when it changes).
+pub fn weather_for(
+    project: &Project,
+    engine: &Engine,
+    year: i32,
+) -> Result<(PathBuf, Option<bemcal_weather::measured::BuildReport>), Error> {
+    use bemcal_weather::measured::{build_epw, BuildOptions, Stamp};
+    let tmy = resolve_weather(project, engine)?;
+    let Some(m) = &project.measured_weather else {
+        return Ok((tmy, None));
+    };
+    let tmy_text = std::fs::read_to_string(&tmy).map_err(|e| Error::Input {
+        path: tmy.clone(),
+        line: 0,
+        message: format!("cannot read: {e}"),
+    })?;
+    let location = Epw::parse(&tmy_text, &tmy)?.location;
+    let source = m.source(project);
+    let observations = source.observations(&location)?;
+    let year = m.year.unwrap_or(year);
+    let opts = BuildOptions {
+        year,
+        max_interpolated_gap_h: m.max_gap_h,
+        stamp: match source {
+            bemcal_weather::station::Source::IsdLite(_) => Stamp::Instant,
+            _ => m.stamp,
+        },
+        interval_min: 60,
+        source: source.describe(),
+    };
+    let (text, report) = build_epw(&tmy_text, &tmy, &observations, &opts)?;
+    let path = project.resolve(Path::new(&format!("measured-weather/{year}.epw")));
+    let report_json =
+        serde_json::to_vec_pretty(&report).map_err(|e| Error::Config(e.to_string()))?;
+    if std::fs::read(&path).ok().as_deref() != Some(text.as_bytes()) {
+        write_atomic(&path, text.as_bytes())?;
+        write_atomic(&path.with_extension("json"), &report_json)?;
+    }
+    Ok((path, Some(report)))
 }
 
 /// Loads the model and applies a priors file to it.
@@ -142,12 +187,12 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let runner = Runner::new(engine, RunOptions::default())?;
     let model = load_model(project, &runner)?;
     let plan = Plan::new(&model, &project.calibrate, &project.fixed)?;
-    let weather_path = resolve_weather(project, runner.engine())?;
-    let epw = Epw::read(&weather_path)?;
     let calendar = model
         .spec()
         .map(|s| s.calendar())
         .unwrap_or(Calendar::new(2021, Holidays::UsFederal));
+    let (weather_path, measured_weather) = weather_for(project, runner.engine(), calendar.year)?;
+    let epw = Epw::read(&weather_path)?;
     let features = HourlyFeatures::from_epw(&epw, &calendar);
     let meters_path = project.meters_file();
     let data = read_meters(
@@ -195,6 +240,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         model,
         plan,
         weather_path,
+        measured_weather,
         features,
         year: calendar.year,
         outputs,
@@ -230,6 +276,9 @@ pub struct OutputMetrics {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     pub project: String,
+    /// The EPW built from `[measured_weather]`: where each field came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
     pub outputs: Vec<String>,
     pub parameters: Vec<ParameterReport>,
     pub posterior: PosteriorSummary,
@@ -1114,6 +1163,7 @@ pub fn write_summary(
     let inp = &cal.inputs;
     let summary = Summary {
         project: cal.project.name.clone(),
+        measured_weather: inp.measured_weather.clone(),
         outputs: inp.outputs.clone(),
         parameters: inp
             .plan

@@ -50,8 +50,14 @@ pub struct Project {
     pub name: String,
     /// Model file (building spec or `[idf]` parameter map).
     pub model: PathBuf,
-    /// EPW path, or `bundled:FILE` for a weather file shipped with EnergyPlus.
+    /// EPW path, or `bundled:FILE` for a weather file shipped with EnergyPlus. With
+    /// `[measured_weather]`, the site's typical-year file that the measured weather is merged
+    /// onto.
     pub weather: String,
+    /// Measured weather of the metered year (ISD-lite files or a station CSV): the calibration
+    /// builds its EPW (`bemcal weather`) and simulates with it.
+    #[serde(default)]
+    pub measured_weather: Option<MeasuredWeather>,
     /// Priors file from pre-calibration (schedule boundaries and parameter priors).
     #[serde(default)]
     pub priors: Option<PathBuf>,
@@ -83,6 +89,86 @@ pub struct Project {
 
 fn default_name() -> String {
     "calibration".into()
+}
+
+/// `[measured_weather]`: the observations an EPW of the metered year is built from
+/// (`bemcal_weather::measured`), either NOAA ISD-lite files or a CSV with a column map.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasuredWeather {
+    /// NOAA ISD-lite station-year files (UTC; gzipped or not).
+    #[serde(default)]
+    pub isd_lite: Vec<PathBuf>,
+    /// A CSV of measured weather, read with `timestamp_column`, `time_zone`, `stamp` and
+    /// `columns`.
+    #[serde(default)]
+    pub csv: Option<PathBuf>,
+    #[serde(default = "default_weather_timestamp")]
+    pub timestamp_column: String,
+    #[serde(default)]
+    pub timestamp_format: Option<String>,
+    /// `utc`, `local_standard` or an IANA zone (`America/Denver`).
+    #[serde(default = "default_weather_zone")]
+    pub time_zone: bemcal_weather::station::TimeBasis,
+    #[serde(default)]
+    pub stamp: bemcal_weather::measured::Stamp,
+    #[serde(default)]
+    pub columns: Vec<bemcal_weather::station::CsvColumn>,
+    /// The year to build; by default the model's calendar year.
+    #[serde(default)]
+    pub year: Option<i32>,
+    /// Gaps up to this many hours are interpolated; longer ones come from the TMY file.
+    #[serde(default = "default_max_gap")]
+    pub max_gap_h: usize,
+}
+
+fn default_weather_timestamp() -> String {
+    "timestamp".into()
+}
+
+fn default_weather_zone() -> bemcal_weather::station::TimeBasis {
+    bemcal_weather::station::TimeBasis::Utc
+}
+
+fn default_max_gap() -> usize {
+    6
+}
+
+impl MeasuredWeather {
+    /// The observations' source, with paths resolved against the project's folder.
+    pub fn source(&self, project: &Project) -> bemcal_weather::station::Source {
+        use bemcal_weather::station::{CsvSpec, Source};
+        match &self.csv {
+            Some(file) => Source::Csv {
+                file: project.resolve(file),
+                spec: CsvSpec {
+                    timestamp_column: self.timestamp_column.clone(),
+                    timestamp_format: self.timestamp_format.clone(),
+                    time_zone: self.time_zone,
+                    stamp: self.stamp,
+                    columns: self.columns.clone(),
+                },
+            },
+            None => Source::IsdLite(self.isd_lite.iter().map(|p| project.resolve(p)).collect()),
+        }
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        match (&self.csv, self.isd_lite.is_empty()) {
+            (Some(_), false) => {
+                Err("[measured_weather]: give isd_lite or csv, not both".into())
+            }
+            (None, true) => Err(
+                "[measured_weather]: give isd_lite = [\"FILE.gz\"] or csv = \"FILE\" with columns"
+                    .into(),
+            ),
+            (Some(_), true) if self.columns.is_empty() => Err(
+                "[measured_weather] csv: give columns = [{ column = \"...\", field = \"dry_bulb\", unit = \"C\" }, ...]"
+                    .into(),
+            ),
+            _ => Ok(()),
+        }
+    }
 }
 
 /// Design points.
@@ -384,6 +470,9 @@ impl Project {
 
     /// Checks settings that serde cannot.
     pub fn validate(&self) -> Result<(), String> {
+        if let Some(m) = &self.measured_weather {
+            m.validate()?;
+        }
         if self.design.points < 3 {
             return Err(format!(
                 "design.points = {}, need at least 3",
