@@ -100,6 +100,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         assert!(out.join(f).exists(), "{f} missing");
     }
     surrogate_matches_torch_on_real_output(&out.join("surrogate"));
+    calibrated_model_reproduces_the_validation(dir, &out);
 
     // The initial model (prior modes) is reported beside the calibrated one.
     assert_eq!(summary["initial"].as_array().unwrap().len(), 3);
@@ -247,4 +248,63 @@ fn surrogate_matches_torch_on_real_output(dir: &Path) {
         .parity_error(&parity)
         .unwrap();
     assert!(e < 1e-4, "ort vs torch relative error {e:.2e}");
+}
+
+/// The calibrated model a user takes away: `calibrated.idf` runs in EnergyPlus as it is (HVAC
+/// templates already expanded), and `bemcal simulate --values calibrated.toml` reproduces the
+/// validation run at the estimate hour by hour.
+fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
+    let text = std::fs::read_to_string(out.join("calibrated.idf")).unwrap();
+    let idf = bemcal_energyplus::idf::Idf::parse(&text, &out.join("calibrated.idf")).unwrap();
+    assert!(
+        !idf.has_class_prefix("HVACTemplate:"),
+        "calibrated.idf still has HVAC templates"
+    );
+    let engine = bemcal_energyplus::Engine::locate().unwrap();
+    let run_dir = dir.join("calibrated-run");
+    let e = std::process::Command::new(&engine.executable)
+        .arg("-w")
+        .arg(golden_epw())
+        .arg("-d")
+        .arg(&run_dir)
+        .arg(out.join("calibrated.idf"))
+        .output()
+        .unwrap();
+    let err = std::fs::read_to_string(run_dir.join("eplusout.err")).unwrap_or_default();
+    assert!(
+        e.status.success() && err.contains("Completed Successfully") && !err.contains("** Severe"),
+        "EnergyPlus on calibrated.idf:\n{}",
+        err.lines().rev().take(10).collect::<Vec<_>>().join("\n")
+    );
+    let again = dir.join("again.csv");
+    let sim = bemcal()
+        .args(["simulate", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .arg("--values")
+        .arg(out.join("calibrated.toml"))
+        .arg("--out")
+        .arg(&again)
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let read = |p: &Path| -> Vec<Vec<f64>> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').skip(1).map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let (a, b) = (read(&out.join("validation/calibrated.csv")), read(&again));
+    assert_eq!(a.len(), 8760);
+    assert_eq!(
+        a, b,
+        "simulate --values calibrated.toml differs from the validation run"
+    );
 }

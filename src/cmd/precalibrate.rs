@@ -39,6 +39,23 @@ pub struct Args {
     /// Largest number of schedule intervals per day type.
     #[arg(long)]
     pub max_intervals: Option<usize>,
+    /// Holidays of the calendar the day types are compared with: us_federal, uk, none, or a
+    /// file of dates (YYYY-MM-DD per line).
+    #[arg(long)]
+    pub holidays: Option<String>,
+}
+
+/// `--holidays`: a table's name or a file of dates.
+pub fn parse_holidays(s: &str) -> anyhow::Result<bemcal_weather::Holidays> {
+    use bemcal_weather::Holidays;
+    Ok(match s {
+        "us_federal" => Holidays::UsFederal,
+        "uk" | "uk_england_wales" => Holidays::UkEnglandWales,
+        "none" => Holidays::None,
+        file => Holidays::Dates(bemcal_weather::read_holiday_list(std::path::Path::new(
+            file,
+        ))?),
+    })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -67,6 +84,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.max_intervals.is_some() {
         opts.schedule.max_intervals = args.max_intervals;
+    }
+    if let Some(h) = &args.holidays {
+        opts.schedule.holidays = parse_holidays(h)?;
     }
     let outdoor: Vec<f64> = epw.hours.iter().map(|h| h.dry_bulb_c).collect();
     let result = bemcal_precal::pipeline::run(meters, &outdoor, &opts)?;

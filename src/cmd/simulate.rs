@@ -16,6 +16,10 @@ pub struct Args {
     /// EnergyPlus weather file (EPW).
     #[arg(long)]
     pub weather: PathBuf,
+    /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines) or
+    /// its `summary.json` (its calibrated values); --set overrides them.
+    #[arg(long)]
+    pub values: Option<PathBuf>,
     /// Parameter value, NAME=VALUE (repeatable); others stay at their prior mode.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
@@ -32,7 +36,11 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let (model, runner) = common::load_model(&a.model)?;
-    let given = parse_assignments(&a.set)?;
+    let mut given = match &a.values {
+        Some(p) => read_values(p)?,
+        None => Default::default(),
+    };
+    given.extend(parse_assignments(&a.set)?);
     let idf = model.instantiate(&given, runner.idd())?;
     let tmp = tempfile::tempdir().context("creating a temporary run directory")?;
     let dir = a.keep.clone().unwrap_or_else(|| tmp.path().join("run"));
@@ -59,4 +67,33 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!("wrote {}", a.out.display());
     }
     Ok(())
+}
+
+/// Parameter values from `calibrated.toml` (name = value) or `summary.json` (calibrated_values).
+fn read_values(
+    path: &std::path::Path,
+) -> anyhow::Result<bemcal_energyplus::params::ParameterValues> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    if path.extension().is_some_and(|e| e == "json") {
+        #[derive(serde::Deserialize)]
+        struct Calibrated {
+            calibrated_values: Vec<(String, f64)>,
+        }
+        let s: Calibrated = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: expected a calibration's summary.json with calibrated_values",
+                path.display()
+            )
+        })?;
+        return Ok(s.calibrated_values.into_iter().collect());
+    }
+    let table: std::collections::BTreeMap<String, f64> =
+        toml::from_str(&text).with_context(|| {
+            format!(
+                "{}: expected NAME = NUMBER lines (a calibration's calibrated.toml)",
+                path.display()
+            )
+        })?;
+    Ok(table.into_iter().collect())
 }

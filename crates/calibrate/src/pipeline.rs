@@ -1213,9 +1213,40 @@ pub fn write_summary(
         refinement: cal.refine_log()?.rounds,
         timings,
     };
+    write_calibrated_model(cal, &chains.estimate)?;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
     write_atomic(&cal.out.join("summary.json"), &json)?;
     Ok(summary)
+}
+
+/// The calibrated model a user takes away: `calibrated.idf` (the model at `estimate`, the
+/// validated calibrated values, with the fixed values) and `calibrated.toml` (every parameter
+/// value, readable by `bemcal simulate --values`).
+pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let values = inp.plan.values(estimate);
+    let idf = inp.model.instantiate(&values, inp.runner.idd())?;
+    let scratch = cal.out.join("calibrated.expand");
+    let _ = std::fs::remove_dir_all(&scratch);
+    let simulated = inp.runner.simulated_input(&idf, &scratch)?;
+    let _ = std::fs::remove_dir_all(&scratch);
+    write_atomic(
+        &cal.out.join("calibrated.idf"),
+        simulated.to_text().as_bytes(),
+    )?;
+    let mut toml = format!(
+        "# Parameter values of the calibrated model of '{}' (estimate: {}; calibrated and fixed).\n\
+         # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\
+         # or run EnergyPlus on calibrated.idf (HVAC templates expanded) with that weather file.\n",
+        cal.project.name,
+        format!("{:?}", cal.project.validation.estimate).to_lowercase(),
+        inp.model.path.display(),
+        inp.weather_path.display()
+    );
+    for (name, v) in &values {
+        toml.push_str(&format!("{name} = {v}\n"));
+    }
+    write_atomic(&cal.out.join("calibrated.toml"), toml.as_bytes())
 }
 
 /// Runs the whole calibration of `project` into `out` on this machine.

@@ -285,7 +285,7 @@ fn group_reasons(failed: &[Attempt]) -> Vec<FailureGroup> {
             }),
         }
     }
-    groups.sort_by(|a, b| b.count.cmp(&a.count));
+    groups.sort_by_key(|g| std::cmp::Reverse(g.count));
     groups
 }
 

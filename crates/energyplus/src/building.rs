@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use bemcal_weather::{us_federal_holidays, Calendar, Holidays};
+use bemcal_weather::{Calendar, Holidays};
 use chrono::Datelike;
 
 use crate::idf::{num, Idf};
@@ -104,6 +104,10 @@ pub struct BuildingSpec {
     /// calendar gives the surrogate its day types.
     #[serde(default)]
     pub holidays: Holidays,
+    /// A file of holiday dates (`bemcal_weather::read_holiday_list`), relative to the spec;
+    /// its dates replace `holidays`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holidays_file: Option<std::path::PathBuf>,
     /// Overrides of default priors, by parameter name.
     #[serde(default)]
     pub priors: std::collections::BTreeMap<String, TriangularPrior>,
@@ -239,7 +243,19 @@ pub fn weekend_param(n: usize) -> String {
 impl BuildingSpec {
     /// Parses and validates a spec from TOML text.
     pub fn from_toml(text: &str, path: &std::path::Path) -> Result<BuildingSpec, Error> {
-        let spec: BuildingSpec = crate::parse_toml(text, path)?;
+        let mut spec: BuildingSpec = crate::parse_toml(text, path)?;
+        if let Some(file) = &spec.holidays_file {
+            let file = path
+                .parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join(file);
+            let dates = bemcal_weather::read_holiday_list(&file).map_err(|e| Error::Input {
+                path: path.to_path_buf(),
+                line: 0,
+                message: format!("holidays_file: {e}"),
+            })?;
+            spec.holidays = Holidays::Dates(dates);
+        }
         spec.validate().map_err(|message| Error::Input {
             path: path.to_path_buf(),
             line: 0,
@@ -414,7 +430,7 @@ impl BuildingSpec {
 
     /// The calendar the model simulates (year and holidays).
     pub fn calendar(&self) -> Calendar {
-        Calendar::new(self.year, self.holidays)
+        Calendar::new(self.year, self.holidays.clone())
     }
 
     /// Zone names, floor by floor.
@@ -511,11 +527,7 @@ impl BuildingSpec {
                 "Yes",
             ],
         );
-        let holidays = match self.holidays {
-            Holidays::None => vec![],
-            Holidays::UsFederal => us_federal_holidays(year),
-        };
-        for (i, d) in holidays.iter().filter(|d| d.year() == year).enumerate() {
+        for (i, d) in self.holidays.dates(year).iter().enumerate() {
             m.add(
                 "RunPeriodControl:SpecialDays",
                 &[
@@ -1275,6 +1287,51 @@ mod tests {
         let p = s.parameters();
         assert_eq!(p.len(), 38, "16 engineering + 12 weekday + 10 weekend");
         assert_eq!(s.zone_names().len(), 20);
+    }
+
+    /// The model's holidays (`RunPeriodControl:SpecialDays`) follow the spec's calendar: the UK
+    /// table, or a file of dates beside the spec.
+    #[test]
+    fn special_days_follow_the_spec_holidays() {
+        let special = |s: &BuildingSpec| -> Vec<String> {
+            let v = complete_values(&s.parameters(), &Default::default()).unwrap();
+            let idf = s.to_idf(&v).unwrap();
+            idf.of_class("RunPeriodControl:SpecialDays")
+                .map(|o| o.fields[1].clone())
+                .collect()
+        };
+        let uk = BuildingSpec::from_toml(
+            "storeys = 1\nfootprint_m = [20.0, 15.0]\nyear = 2017\nholidays = \"uk\"\n",
+            std::path::Path::new("m.toml"),
+        )
+        .unwrap();
+        assert_eq!(
+            special(&uk),
+            ["1/2", "4/14", "4/17", "5/1", "5/29", "8/28", "12/25", "12/26"]
+        );
+        let dir = std::env::temp_dir().join(format!("bemcal-spec-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("breaks.csv"),
+            "date,name\n2017-10-23,half term\n2017-10-27,\n",
+        )
+        .unwrap();
+        let text = "storeys = 1\nfootprint_m = [20.0, 15.0]\nyear = 2017\nholidays_file = \"breaks.csv\"\n";
+        let listed = BuildingSpec::from_toml(text, &dir.join("m.toml")).unwrap();
+        assert_eq!(special(&listed), ["10/23", "10/27"]);
+        assert_eq!(
+            listed.calendar().day_type(10, 23),
+            Some(bemcal_weather::DayType::Holiday)
+        );
+        std::fs::write(dir.join("breaks.csv"), "2017-13-01\n").unwrap();
+        let e = BuildingSpec::from_toml(text, &dir.join("m.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("holidays_file") && e.contains("breaks.csv:1:"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -75,6 +75,21 @@ impl Runner {
         &self.idd
     }
 
+    /// The IDF EnergyPlus is given for `idf`: HVAC templates expanded (ExpandObjects runs in
+    /// `dir`) and, with [`RunOptions::fast_coils`], the coils' faster analysis. This is the
+    /// model as simulated, runnable with `energyplus -w EPW` and nothing else.
+    pub fn simulated_input(&self, idf: &Idf, dir: &Path) -> Result<Idf, Error> {
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let mut model = idf.clone();
+        if model.has_class_prefix("HVACTemplate:") {
+            model = self.expand(&model, dir)?;
+        }
+        if self.options.fast_coils {
+            self.speed_up_coils(&mut model);
+        }
+        Ok(model)
+    }
+
     /// Runs `idf` with `weather` in `dir` (created; must not hold an earlier run) and reads the
     /// hourly `outputs`.
     pub fn run(
@@ -94,13 +109,7 @@ impl Runner {
         }
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         std::fs::copy(weather, dir.join("in.epw")).map_err(io_err(weather))?;
-        let mut model = idf.clone();
-        if model.has_class_prefix("HVACTemplate:") {
-            model = self.expand(&model, dir)?;
-        }
-        if self.options.fast_coils {
-            self.speed_up_coils(&mut model);
-        }
+        let model = self.simulated_input(idf, dir)?;
         let input = dir.join("model.idf");
         std::fs::write(&input, model.to_text()).map_err(io_err(&input))?;
         let mut cmd = Command::new(&self.engine.executable);

@@ -238,7 +238,7 @@ pub fn cluster_days(
         }
         None => choose_k(&dm, opts.k_min.max(2)..=opts.k_max.max(2))?,
     };
-    let cal = Calendar::new(year, opts.holidays);
+    let cal = Calendar::new(year, opts.holidays.clone());
     let cal_type = |d: usize| {
         let date = day_date(year, d);
         use chrono::Datelike;
