@@ -28,6 +28,13 @@
 //!   error).
 //! * **Units** ([`EnergyUnit`]): power units are hourly means (kW over an hour = kWh), energy
 //!   units are converted to kWh.
+//! * **Sub-hourly meters** (15-minute AMI, or any interval dividing the hour): the interval is the
+//!   most common step between stamps. Hour-ending means interval-ending (a stamp is shifted back
+//!   one interval, and `auto` recognises the first stamp at 00:15 on January 1); daylight saving
+//!   is undone per stamp (the first occurrence of a stamp in the repeated hour is daylight
+//!   time); the readings of an hour are summed for energy units and averaged for power units,
+//!   and an hour with missing readings is the mean of those present scaled to the hour (counted
+//!   in the notes). An exact repeat of a stamp is the duplicate.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -134,6 +141,15 @@ pub enum EnergyUnit {
 }
 
 impl EnergyUnit {
+    /// True for power units (a reading is a mean rate), false for energy units (a reading is
+    /// the energy of its interval).
+    pub fn is_power(self) -> bool {
+        matches!(
+            self,
+            EnergyUnit::W | EnergyUnit::KW | EnergyUnit::MW | EnergyUnit::Ton
+        )
+    }
+
     /// Factor converting one hour's value in this unit to kWh.
     pub fn to_kwh(self) -> f64 {
         match self {
@@ -562,6 +578,29 @@ pub fn read_meters(
     parse_meters(&text, path, spec, year, std_offset_h)
 }
 
+/// The meter's reading interval in minutes: the most common step between consecutive distinct
+/// stamps, when it divides the hour (5, 10, 15, 20, 30 min); 60 otherwise.
+fn reading_interval_min(rows: &[Row]) -> u32 {
+    let mut stamps: Vec<NaiveDateTime> =
+        rows.iter().filter(|r| !r.offset).map(|r| r.clock).collect();
+    stamps.sort();
+    stamps.dedup();
+    let mut counts: HashMap<i64, usize> = HashMap::new();
+    for w in stamps.windows(2) {
+        *counts.entry((w[1] - w[0]).num_minutes()).or_default() += 1;
+    }
+    let mode = counts
+        .into_iter()
+        .max_by_key(|&(m, n)| (n, -m))
+        .map(|(m, _)| m)
+        .unwrap_or(60);
+    if (1..60).contains(&mode) && 60 % mode == 0 {
+        mode as u32
+    } else {
+        60
+    }
+}
+
 struct Row {
     line: u64,
     clock: NaiveDateTime,
@@ -681,13 +720,27 @@ pub fn parse_meters(
         return Err(file_err("no data rows".into()));
     }
 
+    // Reading interval: sub-hourly meters (15-minute AMI) are aggregated to hours.
+    let interval_min = reading_interval_min(&rows);
+    let per_hour = (60 / interval_min) as u32;
+    if per_hour > 1 {
+        notes.push(format!(
+            "readings every {interval_min} min: {per_hour} per hour aggregated to hourly kWh \
+             (energy units summed, power units averaged; an hour with missing readings is the \
+             mean of those present, scaled to the hour)"
+        ));
+    }
+
     // Hour convention.
     let convention = match spec.convention {
         HourConvention::Auto => {
             let min = rows.iter().map(|r| r.clock).min().expect("rows");
             let max = rows.iter().map(|r| r.clock).max().expect("rows");
-            let jan1 = |t: NaiveDateTime, h: u32| t.month() == 1 && t.day() == 1 && t.hour() == h;
-            let ending = saw_24 || jan1(min, 1) || (jan1(max, 0) && max.year() > min.year());
+            let jan1 = |t: NaiveDateTime, m: u32| {
+                t.month() == 1 && t.day() == 1 && t.hour() * 60 + t.minute() == m
+            };
+            let ending =
+                saw_24 || jan1(min, interval_min) || (jan1(max, 0) && max.year() > min.year());
             notes.push(format!(
                 "hour convention detected: {} (earliest stamp {min}, latest {max})",
                 if ending {
@@ -705,8 +758,9 @@ pub fn parse_meters(
         c => c,
     };
     if convention == HourConvention::HourEnding {
+        // A stamp ends its interval: an hour for hourly meters, 15 minutes for 15-minute ones.
         for r in &mut rows {
-            r.clock -= Duration::hours(1);
+            r.clock -= Duration::minutes(interval_min as i64);
         }
     }
 
@@ -738,7 +792,7 @@ pub fn parse_meters(
                     .count()
             };
             let skipped = count(spring, 2) == 0 && count(spring, 1) > 0 && count(spring, 3) > 0;
-            let repeated = count(fall, 1) >= 2;
+            let repeated = count(fall, 1) > per_hour as usize;
             let us = skipped || repeated;
             notes.push(format!(
                 "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
@@ -763,7 +817,7 @@ pub fn parse_meters(
         let (spring, fall) = dst_days.ok_or_else(|| file_err("no DST dates".into()))?;
         let start = spring.and_hms_opt(3, 0, 0).expect("time");
         let end = fall.and_hms_opt(1, 0, 0).expect("time");
-        let mut seen_repeat = false;
+        let mut seen_repeat = std::collections::HashSet::new();
         let mut moved = 0usize;
         for r in &mut rows {
             if r.offset {
@@ -771,11 +825,9 @@ pub fn parse_meters(
             }
             let in_dst = if r.clock >= start && r.clock < end {
                 true
-            } else if r.clock == end {
-                // First occurrence of the repeated hour is still DST.
-                let first = !seen_repeat;
-                seen_repeat = true;
-                first
+            } else if r.clock >= end && r.clock < end + Duration::hours(1) {
+                // First occurrence of a stamp in the repeated hour is still DST.
+                seen_repeat.insert(r.clock)
             } else {
                 false
             };
@@ -794,6 +846,7 @@ pub fn parse_meters(
     let mut sums = vec![vec![f64::NAN; HOURS]; n];
     let mut counts = vec![vec![0u32; HOURS]; n];
     let mut slot_line = vec![0u64; HOURS];
+    let mut stamp_line: HashMap<NaiveDateTime, u64> = HashMap::new();
     let (mut outside, mut feb29, mut dups) = (0usize, 0usize, 0usize);
     for r in &rows {
         let Some(t) = slot_of(year, r.clock) else {
@@ -805,7 +858,26 @@ pub fn parse_meters(
             continue;
         };
         let dup = slot_line[t] != 0;
-        if dup {
+        if per_hour > 1 {
+            // Several readings per slot are expected: an exact repeat of a stamp is the
+            // duplicate.
+            if let Some(first) = stamp_line.insert(r.clock, r.line) {
+                dups += 1;
+                if spec.duplicates == DuplicatePolicy::Error {
+                    return Err(row_err(
+                        r.line,
+                        &ts_name,
+                        format!(
+                            "duplicate reading {} (standard time): line {first} has the same stamp; \
+                             set meters.duplicates = \"first\" to keep the first",
+                            r.clock
+                        ),
+                    ));
+                }
+                continue;
+            }
+            slot_line[t] = r.line;
+        } else if dup {
             dups += 1;
             if spec.duplicates == DuplicatePolicy::Error {
                 return Err(row_err(
@@ -856,6 +928,13 @@ pub fn parse_meters(
             };
             let v = v * col.unit.to_kwh();
             let (s, c) = (&mut sums[k][t], &mut counts[k][t]);
+            if per_hour > 1 {
+                if v.is_finite() {
+                    *s = if *c == 0 { v } else { *s + v };
+                    *c += 1;
+                }
+                continue;
+            }
             if !dup {
                 *s = v;
                 *c = u32::from(v.is_finite());
@@ -876,7 +955,28 @@ pub fn parse_meters(
             }
         }
     }
-    if spec.duplicates == DuplicatePolicy::Mean {
+    if per_hour > 1 {
+        let mut partial = 0usize;
+        for (k, col) in columns.iter().enumerate() {
+            let scale = if col.unit.is_power() {
+                1.0
+            } else {
+                per_hour as f64
+            };
+            for t in 0..HOURS {
+                let c = counts[k][t];
+                if c > 0 {
+                    partial += usize::from(c < per_hour);
+                    sums[k][t] = sums[k][t] / c as f64 * scale;
+                }
+            }
+        }
+        if partial > 0 {
+            notes.push(format!(
+                "{partial} meter-hours had fewer than {per_hour} readings (scaled from those present)"
+            ));
+        }
+    } else if spec.duplicates == DuplicatePolicy::Mean {
         for k in 0..n {
             for t in 0..HOURS {
                 if counts[k][t] > 1 {

@@ -172,3 +172,77 @@ fn rsf_example_project_matches_auto_detection_and_writes_outputs() {
     assert_eq!(cal.lines().count(), 366);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// 15-minute AMI readings, interval-ending, in local clock time with US daylight saving, made
+/// from the RSF's real hourly whole-building load (each hour's energy spread over its four
+/// quarters, the local clock shifted in summer): read back, they are the hourly meter again,
+/// whether the column is energy per quarter (kWh, summed) or mean power (kW, averaged).
+#[test]
+fn fifteen_minute_meters_in_clock_time_aggregate_to_the_hourly_meter() {
+    use chrono::{Duration, NaiveDate};
+    let Some((csv, _)) = rsf() else {
+        return;
+    };
+    let hourly = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
+    let e = &hourly.get(&MeterRole::Electricity).unwrap().values;
+    let dst_start = NaiveDate::from_ymd_opt(2011, 3, 13)
+        .unwrap()
+        .and_hms_opt(2, 0, 0)
+        .unwrap();
+    let dst_end = NaiveDate::from_ymd_opt(2011, 11, 6)
+        .unwrap()
+        .and_hms_opt(1, 0, 0)
+        .unwrap();
+    let start = NaiveDate::from_ymd_opt(2011, 1, 1)
+        .unwrap()
+        .and_hms_opt(0, 0, 0)
+        .unwrap();
+    let mut text = String::from("time,kwh,kw\n");
+    for (t, v) in e.iter().enumerate().take(8759) {
+        for q in 0..4 {
+            // The quarter's start in standard time, on the local clock, stamped at its end.
+            let begin = start + Duration::hours(t as i64) + Duration::minutes(15 * q);
+            let in_dst = begin >= dst_start && begin < dst_end;
+            let stamp = begin + Duration::hours(i64::from(in_dst)) + Duration::minutes(15);
+            text.push_str(&format!(
+                "{},{},{}\n",
+                stamp.format("%Y-%m-%d %H:%M"),
+                v / 4.0,
+                v
+            ));
+        }
+    }
+    // Stated conventions, and the same detected: the first stamp 00:15 on January 1 says
+    // interval-ending, the missing spring 02:00-02:45 stamps say the US clock.
+    let stated = "convention = \"hour_ending\"\ndst = \"us\"\n";
+    for (column, unit, conventions) in [
+        ("kwh", "kWh", stated),
+        ("kw", "kW", stated),
+        ("kwh", "kWh", ""),
+    ] {
+        let spec: MeterSpec = toml::from_str(&format!(
+            "timestamp_column = \"time\"\n{conventions}\
+             [[columns]]\ncolumn = \"{column}\"\nrole = \"electricity\"\nunit = \"{unit}\"\n"
+        ))
+        .unwrap();
+        let m = bemcal_precal::meters::parse_meters(
+            &text,
+            Path::new("ami.csv"),
+            &spec,
+            Some(2011),
+            None,
+        )
+        .unwrap();
+        assert!(
+            m.notes.iter().any(|n| n.contains("every 15 min")),
+            "{:?}",
+            m.notes
+        );
+        let got = &m.get(&MeterRole::Electricity).unwrap().values;
+        let worst = (0..8759)
+            .map(|t| (got[t] - e[t]).abs())
+            .fold(0.0_f64, f64::max);
+        assert!(worst < 1e-9, "{unit}: worst hourly difference {worst} kWh");
+        assert!(got[8759].is_nan());
+    }
+}
