@@ -722,7 +722,7 @@ pub fn parse_meters(
 
     // Reading interval: sub-hourly meters (15-minute AMI) are aggregated to hours.
     let interval_min = reading_interval_min(&rows);
-    let per_hour = (60 / interval_min) as u32;
+    let per_hour = 60 / interval_min;
     if per_hour > 1 {
         notes.push(format!(
             "readings every {interval_min} min: {per_hour} per hour aggregated to hourly kWh \
