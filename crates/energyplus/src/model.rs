@@ -35,13 +35,79 @@ use crate::meters::OutputSpec;
 use crate::params::{complete_values, Constraint, ParameterDef, ParameterValues, TriangularPrior};
 use crate::{io_err, Error};
 
-/// One field a parameter sets: in every object of `class` named `object` (or all with `*`).
+/// One field a parameter sets: in every object of `class` whose name matches `object` (a name,
+/// `*` for all, or a pattern with `*` wildcards such as `Office*`, case-insensitive).
+///
+/// `edit` says how the parameter's value enters the field: `set` (the default: the field is
+/// the value), `scale` (the field of the user's IDF times the value: `Lights` of every zone
+/// scaled by one multiplier) or `offset` (the field plus the value: set-points moved by a few
+/// degrees). With `scale` or `offset`, `field = "*"` edits every numeric field of the object
+/// (the values of a `Schedule:Compact`, leaving its `Through:`/`For:`/`Until:` fields).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldTarget {
     pub class: String,
     pub object: String,
     pub field: String,
+    #[serde(default)]
+    pub edit: Edit,
+}
+
+/// How a parameter's value enters a field ([`FieldTarget`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Edit {
+    /// The field becomes the value.
+    #[default]
+    Set,
+    /// The field of the user's IDF is multiplied by the value.
+    Scale,
+    /// The value is added to the field of the user's IDF.
+    Offset,
+}
+
+impl FieldTarget {
+    /// True when `name` matches `object` (`*` wildcards, case-insensitive).
+    fn matches(&self, name: Option<&str>) -> bool {
+        let Some(name) = name else {
+            return self.object == "*";
+        };
+        glob_match(
+            &self.object.to_ascii_lowercase(),
+            &name.to_ascii_lowercase(),
+        )
+    }
+
+    /// The field positions this target edits in `o` (IDD `index`, or every numeric field for
+    /// `field = "*"`).
+    fn positions(&self, o: &crate::idf::IdfObject, index: Option<usize>) -> Vec<usize> {
+        match index {
+            Some(i) => vec![i],
+            None => (1..o.fields.len())
+                .filter(|&i| o.fields[i].trim().parse::<f64>().is_ok())
+                .collect(),
+        }
+    }
+}
+
+/// `*`-wildcard match of a whole string.
+fn glob_match(pattern: &str, s: &str) -> bool {
+    let parts: Vec<&str> = pattern.split('*').collect();
+    if parts.len() == 1 {
+        return pattern == s;
+    }
+    let (first, last) = (parts[0], parts[parts.len() - 1]);
+    if !s.starts_with(first) || !s[first.len()..].ends_with(last) {
+        return false;
+    }
+    let mut rest = &s[first.len()..s.len() - last.len()];
+    for part in &parts[1..parts.len() - 1] {
+        match rest.find(part) {
+            Some(k) => rest = &rest[k + part.len()..],
+            None => return false,
+        }
+    }
+    true
 }
 
 /// A parameter of a user IDF and the fields it sets.
@@ -144,7 +210,13 @@ impl Model {
                 return Err(err(format!("parameter {}: no targets", p.name)));
             }
             for t in &p.targets {
-                if idd.field_index(&t.class, &t.field).is_none() {
+                if t.field == "*" && t.edit == Edit::Set {
+                    return Err(err(format!(
+                        "parameter {}: field = \"*\" needs edit = \"scale\" or \"offset\"",
+                        p.name
+                    )));
+                }
+                if t.field != "*" && idd.field_index(&t.class, &t.field).is_none() {
                     let known = idd.fields(&t.class).map(|f| f.join(", "));
                     return Err(err(format!(
                         "parameter {}: class '{}' has no field '{}'{}",
@@ -156,13 +228,35 @@ impl Model {
                             .unwrap_or_else(|| " (unknown class)".into())
                     )));
                 }
-                let n = idf
+                let index = (t.field != "*")
+                    .then(|| idd.field_index(&t.class, &t.field))
+                    .flatten();
+                let matched: Vec<_> = idf
                     .of_class(&t.class)
-                    .filter(|o| {
-                        t.object == "*"
-                            || o.name().is_some_and(|n| n.eq_ignore_ascii_case(&t.object))
-                    })
-                    .count();
+                    .filter(|o| t.matches(o.name()))
+                    .collect();
+                if t.edit != Edit::Set {
+                    for o in &matched {
+                        let positions = t.positions(o, index);
+                        let bad = positions.iter().find(|&&i| {
+                            o.fields
+                                .get(i)
+                                .is_none_or(|f| f.trim().parse::<f64>().is_err())
+                        });
+                        if positions.is_empty() || bad.is_some() {
+                            return Err(err(format!(
+                                "parameter {}: edit = \"{:?}\" needs a number in {} '{}' field '{}' (found '{}')",
+                                p.name,
+                                t.edit,
+                                t.class,
+                                o.name().unwrap_or(""),
+                                t.field,
+                                bad.and_then(|&i| o.fields.get(i)).map_or("", |f| f.as_str())
+                            )));
+                        }
+                    }
+                }
+                let n = matched.len();
                 if n == 0 {
                     return Err(err(format!(
                         "parameter {}: {} has no object {} of class {}",
@@ -248,20 +342,34 @@ impl Model {
             Source::Mapped { idf, map } => {
                 let mut out = idf.clone();
                 for p in &map.parameters {
-                    let value = num(v[&p.name]);
+                    let value = v[&p.name];
                     for t in &p.targets {
-                        let i = idd
-                            .field_index(&t.class, &t.field)
-                            .expect("checked at load");
-                        for o in out.objects.iter_mut().filter(|o| {
-                            o.class.eq_ignore_ascii_case(&t.class)
-                                && (t.object == "*"
-                                    || o.name().is_some_and(|n| n.eq_ignore_ascii_case(&t.object)))
-                        }) {
-                            if o.fields.len() <= i {
-                                o.fields.resize(i + 1, String::new());
+                        let index = (t.field != "*").then(|| {
+                            idd.field_index(&t.class, &t.field)
+                                .expect("checked at load")
+                        });
+                        // Relative edits start from the user's IDF, so edits never compound.
+                        for (o, original) in
+                            out.objects.iter_mut().zip(&idf.objects).filter(|(o, _)| {
+                                o.class.eq_ignore_ascii_case(&t.class) && t.matches(o.name())
+                            })
+                        {
+                            for i in t.positions(original, index) {
+                                if o.fields.len() <= i {
+                                    o.fields.resize(i + 1, String::new());
+                                }
+                                let base = || {
+                                    original.fields[i]
+                                        .trim()
+                                        .parse::<f64>()
+                                        .expect("checked at load")
+                                };
+                                o.fields[i] = match t.edit {
+                                    Edit::Set => num(value),
+                                    Edit::Scale => num(base() * value),
+                                    Edit::Offset => num(base() + value),
+                                };
                             }
-                            o.fields[i] = value.clone();
                         }
                     }
                 }

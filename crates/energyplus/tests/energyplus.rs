@@ -417,3 +417,109 @@ fn energyplus_runs_on_an_epw_built_from_isd_lite() {
         "2017 {ha}, TMY {ht}"
     );
 }
+
+/// Relative `[idf]` edits of a user's IDF: one multiplier scales the lighting power of every
+/// `Lights` object, one offset moves every value of the cooling set-point schedules (matched by
+/// a name pattern); EnergyPlus's cooling answers the offset. Non-numeric targets are refused at
+/// load, naming the object and field.
+#[test]
+fn relative_idf_edits_scale_and_offset_the_users_values() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let generated = Model::generated(small_spec());
+    let idf = generated.instantiate(&Default::default(), r.idd()).unwrap();
+    std::fs::write(tmp.path().join("mine.idf"), idf.to_text()).unwrap();
+    let map = r#"
+[idf]
+path = "mine.idf"
+
+[[parameter]]
+name = "lighting_multiplier"
+prior = { min = 0.5, mode = 1.0, max = 1.5 }
+targets = [{ class = "Lights", object = "*", field = "Watts per Floor Area", edit = "scale" }]
+
+[[parameter]]
+name = "cooling_setpoint_offset"
+unit = "K"
+prior = { min = -2.0, mode = 0.0, max = 2.0 }
+targets = [{ class = "Schedule:Compact", object = "cool*", field = "*", edit = "offset" }]
+
+[[output]]
+name = "cooling_kwh"
+meters = ["DistrictCooling:Facility"]
+
+[[output]]
+name = "lighting_kwh"
+meters = ["InteriorLights:Electricity"]
+"#;
+    let path = tmp.path().join("mine.toml");
+    std::fs::write(&path, map).unwrap();
+    let model = Model::load(&path, r.idd()).unwrap();
+    let at = |m: f64, o: f64| {
+        let given: ParameterValues = [
+            ("lighting_multiplier".to_string(), m),
+            ("cooling_setpoint_offset".to_string(), o),
+        ]
+        .into();
+        model.instantiate(&given, r.idd()).unwrap()
+    };
+    let lpd = |idf: &bemcal_energyplus::idf::Idf| -> Vec<f64> {
+        idf.of_class("Lights")
+            .map(|o| o.fields[5].parse().unwrap())
+            .collect()
+    };
+    let original = lpd(&idf);
+    assert!(!original.is_empty());
+    for (a, b) in lpd(&at(0.5, 0.0)).iter().zip(&original) {
+        assert!((a - 0.5 * b).abs() < 1e-9, "{a} vs {b}");
+    }
+    let cooling_schedule = |idf: &bemcal_energyplus::idf::Idf| -> Vec<String> {
+        idf.of_class("Schedule:Compact")
+            .find(|o| o.name() == Some("Cooling Setpoint"))
+            .unwrap()
+            .fields
+            .clone()
+    };
+    let moved = cooling_schedule(&at(1.0, 1.5));
+    let before = cooling_schedule(&idf);
+    assert_eq!(moved.len(), before.len());
+    for (a, b) in moved.iter().zip(&before) {
+        match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(x), Ok(y)) => assert!((x - y - 1.5).abs() < 1e-9, "{a} vs {b}"),
+            _ => assert_eq!(a, b), // Through:, For:, Until: and the type limits stay
+        }
+    }
+    // The heating schedule does not match "cool*".
+    let heating = |idf: &bemcal_energyplus::idf::Idf| {
+        idf.of_class("Schedule:Compact")
+            .find(|o| o.name() == Some("Heating Setpoint"))
+            .unwrap()
+            .fields
+            .clone()
+    };
+    assert_eq!(heating(&at(1.0, 1.5)), heating(&idf));
+    let cool = |o: f64, d: &str| {
+        let out = simulate(
+            &r,
+            &model,
+            &[("cooling_setpoint_offset", o)],
+            &tmp.path().join(d),
+        )
+        .unwrap();
+        total(&out, "cooling_kwh")
+    };
+    let (lo, hi) = (cool(-2.0, "lo"), cool(2.0, "hi"));
+    eprintln!("cooling with set-points -2 K: {lo:.0} kWh, +2 K: {hi:.0} kWh");
+    assert!(lo > 1.1 * hi, "cooling {lo} (-2 K) vs {hi} (+2 K)");
+
+    let bad = map.replace(
+        "field = \"Watts per Floor Area\"",
+        "field = \"Schedule Name\"",
+    );
+    std::fs::write(&path, bad).unwrap();
+    let e = Model::load(&path, r.idd()).unwrap_err().to_string();
+    assert!(
+        e.contains("needs a number in Lights") && e.contains("Schedule Name"),
+        "{e}"
+    );
+}
