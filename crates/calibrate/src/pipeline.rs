@@ -48,6 +48,82 @@ pub struct Inputs {
     /// Calibration outputs (model output names) and their measured series (kWh, NaN = missing).
     pub outputs: Vec<String>,
     pub measured: Vec<Vec<f64>>,
+    /// Per output, the hourly load (kWh) in its meter that the model does not have
+    /// (`[[bases]]`; zeros without one): the model plus this is compared with the meter.
+    pub bases: Vec<Vec<f64>>,
+    /// What each base is, for the summary.
+    pub base_reports: Vec<BaseReport>,
+}
+
+/// A base load in `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BaseReport {
+    pub output: String,
+    /// `submeter data_center` or `constant 102 kWh/h`.
+    pub source: String,
+    /// Over the hours it is known, kWh.
+    pub annual_kwh: f64,
+    /// Hours the meter is compared without it (a sub-meter gap): those hours count as missing.
+    pub missing_hours: usize,
+}
+
+impl Inputs {
+    /// The part of meter `k` the model simulates: the meter less its base (NaN where either is
+    /// missing). The likelihood compares the surrogate with this.
+    pub fn model_share(&self, k: usize) -> Vec<f64> {
+        self.measured[k]
+            .iter()
+            .zip(&self.bases[k])
+            .map(|(m, b)| m - b)
+            .collect()
+    }
+
+    /// A model output `sim` of output `k` with its base added: what the meter is compared with.
+    pub fn with_base(&self, k: usize, sim: &[f64]) -> Vec<f64> {
+        sim.iter().zip(&self.bases[k]).map(|(s, b)| s + b).collect()
+    }
+}
+
+/// The hourly bases of `outputs` from the project's `[[bases]]` and the meters.
+fn bases_of(
+    project: &Project,
+    outputs: &[String],
+    data: &bemcal_precal::meters::MeterData,
+) -> Result<(Vec<Vec<f64>>, Vec<BaseReport>), Error> {
+    let hours = data.series.first().map_or(0, |s| s.values.len());
+    let mut bases = vec![vec![0.0; hours]; outputs.len()];
+    let mut reports = vec![];
+    for b in &project.bases {
+        let k = outputs.iter().position(|o| o == &b.output).ok_or_else(|| {
+            Error::Config(format!(
+                "[[bases]] output = \"{}\": not a calibrated output (outputs: {outputs:?})",
+                b.output
+            ))
+        })?;
+        let (series, source): (Vec<f64>, String) = match (&b.submeter, b.kwh_per_hour) {
+            (Some(name), _) => {
+                let s = data.submeter(name).ok_or_else(|| {
+                    Error::Config(format!(
+                        "[[bases]] submeter = \"{name}\": the meters have no such sub-meter (they have: {})",
+                        data.series.iter().map(|s| s.role.name().to_string()).collect::<Vec<_>>().join(", ")
+                    ))
+                })?;
+                (s.values.clone(), format!("submeter {name}"))
+            }
+            (None, Some(v)) => (vec![v; hours], format!("constant {v} kWh/h")),
+            (None, None) => unreachable!("validated"),
+        };
+        for (acc, v) in bases[k].iter_mut().zip(&series) {
+            *acc += v;
+        }
+        reports.push(BaseReport {
+            output: b.output.clone(),
+            source,
+            annual_kwh: series.iter().filter(|v| v.is_finite()).sum(),
+            missing_hours: series.iter().filter(|v| !v.is_finite()).count(),
+        });
+    }
+    Ok((bases, reports))
 }
 
 /// The priors file written by `bemcal precalibrate`.
@@ -235,6 +311,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
                 .collect::<Vec<_>>()
         )));
     }
+    let (bases, base_reports) = bases_of(project, &outputs, &data)?;
     Ok(Inputs {
         runner,
         model,
@@ -245,6 +322,8 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         year: calendar.year,
         outputs,
         measured,
+        bases,
+        base_reports,
     })
 }
 
@@ -279,6 +358,9 @@ pub struct Summary {
     /// The EPW built from `[measured_weather]`: where each field came from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
+    /// Loads in the meters that the model does not have, added to its outputs (`[[bases]]`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bases: Vec<BaseReport>,
     pub outputs: Vec<String>,
     pub parameters: Vec<ParameterReport>,
     pub posterior: PosteriorSummary,
@@ -641,12 +723,14 @@ impl Calibration {
         let sigma_eta = meta.sigma_eta_kwh();
         let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
         let mut observed = vec![f64::NAN; n_h * n_out];
-        for (k, s) in inp.measured.iter().enumerate() {
+        // The surrogate predicts the model's share of each meter (the meter less its base).
+        let shares: Vec<Vec<f64>> = (0..n_out).map(|k| inp.model_share(k)).collect();
+        for (k, s) in shares.iter().enumerate() {
             for (h, v) in s.iter().enumerate() {
                 observed[h * n_out + k] = *v;
             }
         }
-        let stats: Vec<(f64, f64)> = inp.measured.iter().map(|s| mean_sd(s)).collect();
+        let stats: Vec<(f64, f64)> = shares.iter().map(|s| mean_sd(s)).collect();
         let m = &self.project.mcmc;
         let noise: Vec<OutputNoise> = stats
             .iter()
@@ -690,7 +774,7 @@ impl Calibration {
             let sim = o.get(name).expect("model output");
             m.push(OutputMetrics {
                 output: name.clone(),
-                metrics: g14(&inp.measured[k], sim)?,
+                metrics: g14(&inp.measured[k], &inp.with_base(k, sim))?,
             });
         }
         Ok(m)
@@ -938,8 +1022,12 @@ impl Sampler<'_> {
             }
         }
         let mut bands = vec![];
-        for p in &pred {
-            bands.push(predictive_bands(p, picks.len(), n_h)?);
+        for (k, p) in pred.iter().enumerate() {
+            let mut b = predictive_bands(p, picks.len(), n_h)?;
+            for q in [&mut b.q5, &mut b.q50, &mut b.q95] {
+                *q = inp.with_base(k, q);
+            }
+            bands.push(b);
         }
         write_bands_csv(
             &cal.out.join("posterior_predictive.csv"),
@@ -959,7 +1047,7 @@ impl Sampler<'_> {
             let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
             surrogate_at_estimate.push(OutputMetrics {
                 output: name.clone(),
-                metrics: g14(&inp.measured[k], &pred)?,
+                metrics: g14(&inp.measured[k], &inp.with_base(k, &pred))?,
             });
         }
         let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
@@ -1164,6 +1252,7 @@ pub fn write_summary(
     let summary = Summary {
         project: cal.project.name.clone(),
         measured_weather: inp.measured_weather.clone(),
+        bases: inp.base_reports.clone(),
         outputs: inp.outputs.clone(),
         parameters: inp
             .plan

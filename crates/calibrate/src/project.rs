@@ -72,6 +72,10 @@ pub struct Project {
     /// Model output name -> meter role (`heating`, `cooling`, `electricity` or a sub-meter).
     #[serde(default)]
     pub outputs: BTreeMap<String, String>,
+    /// Loads in a meter that the model does not have (a data center, labs, process loads):
+    /// the calibration compares the model plus these bases with the meter (`[[bases]]`).
+    #[serde(default)]
+    pub bases: Vec<Base>,
     #[serde(default)]
     pub design: DesignSettings,
     #[serde(default)]
@@ -89,6 +93,24 @@ pub struct Project {
 
 fn default_name() -> String {
     "calibration".into()
+}
+
+/// `[[bases]]`: a load in a meter that the model does not simulate, added to the model's output
+/// before it is compared with the meter (in the likelihood, the posterior predictive and
+/// Guideline 14 validation), so the meter is used whole and the model is not bent to reach a
+/// load it cannot have. Fixed, not calibrated: a measured sub-meter is data, and a constant
+/// from pre-calibration (its base-load estimates) is the user's stated knowledge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Base {
+    /// The model output whose meter holds the load (`electricity_kwh`).
+    pub output: String,
+    /// A sub-meter of the meters file measuring the load, hour by hour (`data_center`).
+    #[serde(default)]
+    pub submeter: Option<String>,
+    /// Or a constant load, kWh per hour (kW).
+    #[serde(default)]
+    pub kwh_per_hour: Option<f64>,
 }
 
 /// `[measured_weather]`: the observations an EPW of the metered year is built from
@@ -472,6 +494,24 @@ impl Project {
     pub fn validate(&self) -> Result<(), String> {
         if let Some(m) = &self.measured_weather {
             m.validate()?;
+        }
+        for b in &self.bases {
+            match (&b.submeter, b.kwh_per_hour) {
+                (Some(_), None) => {}
+                (None, Some(v)) if v.is_finite() && v >= 0.0 => {}
+                (None, Some(v)) => {
+                    return Err(format!(
+                        "[[bases]] output = \"{}\": kwh_per_hour = {v}, expected a load >= 0",
+                        b.output
+                    ))
+                }
+                _ => {
+                    return Err(format!(
+                        "[[bases]] output = \"{}\": give submeter = \"NAME\" or kwh_per_hour = NUMBER (one of them)",
+                        b.output
+                    ))
+                }
+            }
         }
         if self.design.points < 3 {
             return Err(format!(
