@@ -102,17 +102,21 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
     let model_text = std::fs::read_to_string(&model_src)
         .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", model_src.display()))?;
     if let Ok(mt) = toml::from_str::<toml::Table>(&model_text) {
-        if let Some(idf) = mt
+        // A building spec's calendar files are relative to it, like an [idf] path.
+        let beside_model = ["holidays_file", "day_types_file"]
+            .iter()
+            .filter_map(|k| mt.get(*k).and_then(|v| v.as_str()));
+        let idf_path = mt
             .get("idf")
             .and_then(|v| v.as_table())
             .and_then(|t| t.get("path"))
-            .and_then(|v| v.as_str())
-        {
+            .and_then(|v| v.as_str());
+        for idf in idf_path.into_iter().chain(beside_model) {
             let dir = Path::new(&model_name).parent().unwrap_or(Path::new(""));
             let rel = dir.join(idf).to_string_lossy().replace('\\', "/");
             safe_relative(&rel).map_err(|e| {
                 anyhow::anyhow!(
-                    "{}: [idf] path: {e} (keep the IDF beside the model)",
+                    "{}: '{idf}': {e} (keep the model's files beside it)",
                     model_src.display()
                 )
             })?;
@@ -159,13 +163,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn measured_weather_files_travel_with_the_project() {
+    fn measured_weather_and_calendar_files_travel_with_the_project() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();
         let outside = tempfile::tempdir().unwrap();
         let isd = outside.path().join("726580-14922-2017.gz");
         for (name, text) in [
-            ("model.toml", "storeys = 1\n"),
+            (
+                "model.toml",
+                "storeys = 1\nday_types_file = \"calendar.csv\"\n",
+            ),
+            ("calendar.csv", "date,label\n"),
             ("meters.csv", "timestamp,e\n"),
             ("tmy.epw", "LOCATION\n"),
         ] {
@@ -190,5 +198,7 @@ mod tests {
         let project = String::from_utf8(files[0].1.clone()).unwrap();
         assert!(project.contains(renamed), "{project}");
         assert_eq!(files.iter().find(|(n, _)| n == renamed).unwrap().1, b"isd");
+        // The building spec's day-type calendar travels beside it.
+        assert!(names.contains(&"calendar.csv"), "{names:?}");
     }
 }

@@ -108,6 +108,15 @@ pub struct BuildingSpec {
     /// its dates replace `holidays`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holidays_file: Option<std::path::PathBuf>,
+    /// The day-type calendar the meters show (pre-calibration's `calendar.csv`: date and
+    /// label), relative to the spec: each listed date runs the schedule of its label instead of
+    /// the weekday/weekend rule (a school's breaks, a Friday-Saturday weekend, a lab open on
+    /// Saturdays). Read into `observed_day_types`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub day_types_file: Option<std::path::PathBuf>,
+    /// The dates `day_types_file` lists and their day types.
+    #[serde(skip)]
+    pub observed_day_types: std::collections::BTreeMap<chrono::NaiveDate, bemcal_weather::DayType>,
     /// Overrides of default priors, by parameter name.
     #[serde(default)]
     pub priors: std::collections::BTreeMap<String, TriangularPrior>,
@@ -255,6 +264,18 @@ impl BuildingSpec {
                 message: format!("holidays_file: {e}"),
             })?;
             spec.holidays = Holidays::Dates(dates);
+        }
+        if let Some(file) = &spec.day_types_file {
+            let file = path
+                .parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join(file);
+            spec.observed_day_types =
+                bemcal_weather::read_day_type_calendar(&file).map_err(|e| Error::Input {
+                    path: path.to_path_buf(),
+                    line: 0,
+                    message: format!("day_types_file: {e}"),
+                })?;
         }
         spec.validate().map_err(|message| Error::Input {
             path: path.to_path_buf(),
@@ -430,7 +451,10 @@ impl BuildingSpec {
 
     /// The calendar the model simulates (year and holidays).
     pub fn calendar(&self) -> Calendar {
-        Calendar::new(self.year, self.holidays.clone())
+        Calendar {
+            observed: self.observed_day_types.clone(),
+            ..Calendar::new(self.year, self.holidays.clone())
+        }
     }
 
     /// Zone names, floor by floor.
@@ -527,14 +551,34 @@ impl BuildingSpec {
                 "Yes",
             ],
         );
-        for (i, d) in self.holidays.dates(year).iter().enumerate() {
+        // Days off run the weekend schedule as holidays; Saturdays and Sundays that the
+        // meters show as working days run the weekday schedule as CustomDay1 (the schedules'
+        // weekday `For:` lists it).
+        let calendar = self.calendar();
+        let mut special = 0;
+        for date in (0..366).filter_map(|d| {
+            chrono::NaiveDate::from_yo_opt(year, 1).map(|j| j + chrono::Duration::days(d))
+        }) {
+            if date.year() != year || (date.month() == 2 && date.day() == 29) {
+                continue;
+            }
+            let Some(t) = calendar.day_type(date.month(), date.day()) else {
+                continue;
+            };
+            let weekend = matches!(date.weekday(), chrono::Weekday::Sat | chrono::Weekday::Sun);
+            let kind = match (t.is_off_day(), weekend) {
+                (true, false) => "Holiday",
+                (false, true) => "CustomDay1",
+                _ => continue,
+            };
+            special += 1;
             m.add(
                 "RunPeriodControl:SpecialDays",
                 &[
-                    format!("Holiday {}", i + 1),
-                    format!("{}/{}", d.month(), d.day()),
+                    format!("Special Day {special}"),
+                    format!("{}/{}", date.month(), date.day()),
                     "1".into(),
-                    "Holiday".into(),
+                    kind.into(),
                 ],
             );
         }
@@ -575,9 +619,11 @@ impl BuildingSpec {
                         f.push("For: SummerDesignDay WinterDesignDay".into());
                         f.push("Until: 24:00".into());
                         f.push(num(d));
-                        f.push("For: Weekdays".into());
+                        f.push("For: Weekdays CustomDay1".into());
                     }
-                    None => f.push("For: Weekdays SummerDesignDay WinterDesignDay".into()),
+                    None => {
+                        f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into())
+                    }
                 }
                 if o0 > 0 {
                     f.push(format!("Until: {o0:02}:00"));
@@ -1245,7 +1291,7 @@ fn interval_schedule(
     weekend: (&[u32], &[f64]),
 ) {
     let mut f: Vec<String> = vec![name.into(), "Fraction".into(), "Through: 12/31".into()];
-    f.push("For: Weekdays SummerDesignDay WinterDesignDay".into());
+    f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into());
     for (h, v) in weekday.0.iter().zip(weekday.1) {
         f.push(format!("Until: {h:02}:00"));
         f.push(num(*v));

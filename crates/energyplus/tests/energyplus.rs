@@ -523,3 +523,58 @@ meters = ["InteriorLights:Electricity"]
         "{e}"
     );
 }
+
+/// The day-type calendar the meters show (`day_types_file`, pre-calibration's calendar.csv
+/// format): a Friday-Saturday weekend (Sundays worked, Fridays off) runs the weekend
+/// schedule on every Friday and the weekday schedule on every Sunday, in EnergyPlus and in the
+/// surrogate's day types.
+#[test]
+fn a_day_type_calendar_moves_the_weekend() {
+    use chrono::{Datelike, Weekday};
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let mut csv = String::from("date,calendar_day_type,cluster,label\n");
+    let mut d = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
+    while d.year() == 2021 {
+        let label = match d.weekday() {
+            Weekday::Fri | Weekday::Sat => "weekend",
+            _ => "weekday",
+        };
+        csv.push_str(&format!("{d},x,0,{label}\n"));
+        d = d.succ_opt().unwrap();
+    }
+    std::fs::write(tmp.path().join("calendar.csv"), csv).unwrap();
+    let text = "storeys = 1\nfootprint_m = [20.0, 15.0]\nzoning = \"one_per_floor\"\n\
+                timesteps_per_hour = 4\nday_types_file = \"calendar.csv\"\n";
+    let spec = BuildingSpec::from_toml(text, &tmp.path().join("m.toml")).unwrap();
+    let moved = Model::generated(spec.clone());
+    let usual = Model::generated(small_spec());
+    let a = simulate(&r, &moved, &[], &tmp.path().join("moved")).unwrap();
+    let b = simulate(&r, &usual, &[], &tmp.path().join("usual")).unwrap();
+    let daily = |o: &bemcal_energyplus::HourlyOutputs, day: usize| -> f64 {
+        o.get("lighting_kwh").unwrap()[day * 24..day * 24 + 24]
+            .iter()
+            .sum()
+    };
+    // 2021-01-08 is a Friday, 01-10 a Sunday, 01-13 a Wednesday.
+    let (fri, sun, wed) = (7, 9, 12);
+    assert!(
+        (daily(&a, fri) - daily(&b, sun)).abs() < 1e-6,
+        "Friday runs the weekend schedule"
+    );
+    assert!(
+        (daily(&a, sun) - daily(&b, wed)).abs() < 1e-6,
+        "Sunday runs the weekday schedule"
+    );
+    assert!(
+        daily(&a, wed) > daily(&a, fri),
+        "{} vs {}",
+        daily(&a, wed),
+        daily(&a, fri)
+    );
+    let cal = spec.calendar();
+    assert_eq!(cal.day_type(1, 8), Some(bemcal_weather::DayType::Weekend));
+    assert_eq!(cal.day_type(1, 10), Some(bemcal_weather::DayType::Weekday));
+    // New Year's Day (a Friday) is listed as a weekend day; a listed weekday overrides a holiday.
+    assert_eq!(cal.day_type(1, 1), Some(bemcal_weather::DayType::Weekend));
+}

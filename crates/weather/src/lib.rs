@@ -321,6 +321,61 @@ impl<'de> Deserialize<'de> for Holidays {
     }
 }
 
+/// Reads a day-type calendar: a CSV with a `date` column (`YYYY-MM-DD`) and a `label` column
+/// (`weekday` or `weekend`, as pre-calibration's `calendar.csv` writes them from the meters'
+/// day-type clusters); other labels (`skipped`) leave the date to the calendar's rule.
+pub fn read_day_type_calendar(
+    path: &Path,
+) -> Result<std::collections::BTreeMap<NaiveDate, DayType>, WeatherError> {
+    let text = std::fs::read_to_string(path).map_err(|source| WeatherError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let err = |line: usize, message: String| WeatherError::Malformed {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let mut reader = csv::Reader::from_reader(text.as_bytes());
+    let headers = reader
+        .headers()
+        .map_err(|e| err(1, format!("cannot read the header: {e}")))?
+        .clone();
+    let col = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h.trim() == name)
+            .ok_or_else(|| {
+                err(
+                    1,
+                    format!("no '{name}' column (expected date and label, as in calendar.csv)"),
+                )
+            })
+    };
+    let (di, li) = (col("date")?, col("label")?);
+    let mut out = std::collections::BTreeMap::new();
+    for (i, record) in reader.records().enumerate() {
+        let line = i + 2;
+        let record = record.map_err(|e| err(line, e.to_string()))?;
+        let raw = record.get(di).unwrap_or("").trim();
+        let date = NaiveDate::parse_from_str(raw, "%Y-%m-%d").map_err(|_| {
+            err(
+                line,
+                format!(
+                    "date '{}' is not YYYY-MM-DD",
+                    raw.chars().take(30).collect::<String>()
+                ),
+            )
+        })?;
+        match record.get(li).unwrap_or("").trim() {
+            "weekday" => out.insert(date, DayType::Weekday),
+            "weekend" => out.insert(date, DayType::Weekend),
+            _ => None,
+        };
+    }
+    Ok(out)
+}
+
 /// Reads a holiday list: one date `YYYY-MM-DD` per line, optionally followed by a comma and a
 /// name; blank lines and lines starting with `#` are skipped, as is a header line `date,...`.
 pub fn read_holiday_list(path: &Path) -> Result<Vec<NaiveDate>, WeatherError> {
@@ -359,16 +414,32 @@ pub struct Calendar {
     pub year: i32,
     #[serde(default)]
     pub holidays: Holidays,
+    /// Dates whose day type is known from the meters (pre-calibration's day-type clusters,
+    /// `calendar.csv`): they override the weekday/weekend/holiday rule.
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub observed: std::collections::BTreeMap<NaiveDate, DayType>,
 }
 
 impl Calendar {
     pub fn new(year: i32, holidays: Holidays) -> Calendar {
-        Calendar { year, holidays }
+        Calendar {
+            year,
+            holidays,
+            observed: Default::default(),
+        }
     }
 
     /// Day type of a date in this calendar's year; `None` for an impossible date (e.g. 2/30).
     pub fn day_type(&self, month: u32, day: u32) -> Option<DayType> {
         let date = NaiveDate::from_ymd_opt(self.year, month, day)?;
+        if let Some(t) = self.observed.get(&date) {
+            return Some(*t);
+        }
+        self.rule_day_type(date)
+    }
+
+    /// Day type of `date` by the weekday/weekend/holiday rule alone.
+    pub fn rule_day_type(&self, date: NaiveDate) -> Option<DayType> {
         if self.is_holiday(date) {
             return Some(DayType::Holiday);
         }
