@@ -308,3 +308,111 @@ fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
         "simulate --values calibrated.toml differs from the validation run"
     );
 }
+
+/// A building whose weekend is Friday-Saturday (meters from EnergyPlus with that calendar):
+/// pre-calibration finds the day types in the meters, and with `day_types_file` pointing at its
+/// calendar.csv the calibration recovers the weekend schedule and passes Guideline 14; with the
+/// usual Saturday-Sunday rule it does neither.
+#[test]
+fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let mut calendar = String::from("date,label\n");
+    let mut d = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
+    while chrono::Datelike::year(&d) == 2021 {
+        let off = matches!(
+            chrono::Datelike::weekday(&d),
+            chrono::Weekday::Fri | chrono::Weekday::Sat
+        );
+        calendar.push_str(&format!(
+            "{d},{}\n",
+            if off { "weekend" } else { "weekday" }
+        ));
+        d = d.succ_opt().unwrap();
+    }
+    std::fs::write(dir.join("true_calendar.csv"), calendar).unwrap();
+    let small = std::fs::read_to_string(repo().join("examples/office/small.toml")).unwrap();
+    std::fs::write(
+        dir.join("truth.toml"),
+        format!("{small}\nday_types_file = \"true_calendar.csv\"\n"),
+    )
+    .unwrap();
+    let (weekday_05, weekend_06) = (0.75, 0.35);
+    let s = bemcal()
+        .args(["synthesize", "--model"])
+        .arg(dir.join("truth.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .args([
+            "--set",
+            &format!("schedule_weekday_05={weekday_05}"),
+            "--set",
+            &format!("schedule_weekend_06={weekend_06}"),
+            "--out",
+        ])
+        .arg(dir.join("meters.csv"))
+        .output()
+        .unwrap();
+    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
+    let p = bemcal()
+        .args(["precalibrate", "--meters"])
+        .arg(dir.join("meters.csv"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .arg("--out")
+        .arg(dir.join("precal"))
+        .output()
+        .unwrap();
+    assert!(p.status.success(), "{}", String::from_utf8_lossy(&p.stderr));
+    std::fs::write(dir.join("model.toml"), &small).unwrap();
+    std::fs::write(
+        dir.join("model_cal.toml"),
+        format!("{small}\nday_types_file = \"precal/calendar.csv\"\n"),
+    )
+    .unwrap();
+    // The settings of the small synthetic calibration above, for the two schedule parameters.
+    write_project(dir);
+    let mut project = std::fs::read_to_string(dir.join("project.toml"))
+        .unwrap()
+        .replace(
+            "calibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
+            "calibrate = [\"schedule_weekday_05\", \"schedule_weekend_06\"]",
+        );
+    assert!(project.contains("schedule_weekend_06"));
+    std::fs::write(dir.join("project.toml"), &project).unwrap();
+    let (_, rule) = calibrate(dir, &dir.join("out-rule"));
+    project = project.replace("model = \"model.toml\"", "model = \"model_cal.toml\"");
+    std::fs::write(dir.join("project.toml"), &project).unwrap();
+    let (log, cal) = calibrate(dir, &dir.join("out-cal"));
+
+    let estimate = |s: &serde_json::Value, n: &str| range_and_estimate(s, n).1;
+    let passes = |s: &serde_json::Value| {
+        s["validation"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|v| v["pass"].as_bool().unwrap())
+    };
+    eprintln!(
+        "weekend_06 truth {weekend_06}: with the calendar {:.3}, with the rule {:.3}; weekday_05 truth {weekday_05}: {:.3}, {:.3}",
+        estimate(&cal, "schedule_weekend_06"),
+        estimate(&rule, "schedule_weekend_06"),
+        estimate(&cal, "schedule_weekday_05"),
+        estimate(&rule, "schedule_weekday_05"),
+    );
+    assert!(
+        (estimate(&cal, "schedule_weekend_06") - weekend_06).abs() < 0.02,
+        "{log}"
+    );
+    assert!(
+        (estimate(&cal, "schedule_weekday_05") - weekday_05).abs() < 0.03,
+        "{log}"
+    );
+    assert!(passes(&cal), "with the calendar: {}", cal["validation"]);
+    assert!((estimate(&rule, "schedule_weekend_06") - weekend_06).abs() > 0.05);
+    assert!(!passes(&rule), "with the rule: {}", rule["validation"]);
+}
