@@ -383,6 +383,12 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
             "calibrate = [\"schedule_weekday_05\", \"schedule_weekend_06\"]",
         );
     assert!(project.contains("schedule_weekend_06"));
+    // Shorter chains than above: two schedule fractions are well identified by a year of meters.
+    project = project.replace(
+        "iterations = 1500\nburn_in = 500\n",
+        "iterations = 800\nburn_in = 300\n",
+    );
+    assert!(project.contains("iterations = 800"));
     std::fs::write(dir.join("project.toml"), &project).unwrap();
     let (_, rule) = calibrate(dir, &dir.join("out-rule"));
     project = project.replace("model = \"model.toml\"", "model = \"model_cal.toml\"");
