@@ -78,6 +78,13 @@ impl Inputs {
             .collect()
     }
 
+    /// True when output `k` has a base (`[[bases]]`).
+    pub fn project_has_base(&self, k: usize) -> bool {
+        self.base_reports
+            .iter()
+            .any(|b| b.output == self.outputs[k])
+    }
+
     /// A model output `sim` of output `k` with its base added: what the meter is compared with.
     pub fn with_base(&self, k: usize, sim: &[f64]) -> Vec<f64> {
         sim.iter().zip(&self.bases[k]).map(|(s, b)| s + b).collect()
@@ -1303,9 +1310,40 @@ pub fn write_summary(
         timings,
     };
     write_calibrated_model(cal, &chains.estimate)?;
+    write_bases_csv(cal)?;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
     write_atomic(&cal.out.join("summary.json"), &json)?;
     Ok(summary)
+}
+
+/// `validation/bases.csv`: the hourly bases of the outputs that have one (`[[bases]]`), which
+/// the report adds to the EnergyPlus runs before drawing them against the meters.
+fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let with: Vec<usize> = (0..inp.outputs.len())
+        .filter(|&k| inp.project_has_base(k))
+        .collect();
+    if with.is_empty() {
+        return Ok(());
+    }
+    let mut s = String::from("timestamp");
+    for &k in &with {
+        s.push_str(&format!(",{}", inp.outputs[k]));
+    }
+    s.push('\n');
+    for (t, ts) in timestamps(inp.year, inp.bases[0].len()).iter().enumerate() {
+        s.push_str(ts);
+        for &k in &with {
+            let b = inp.bases[k][t];
+            s.push_str(&if b.is_finite() {
+                format!(",{b:.6}")
+            } else {
+                ",".into()
+            });
+        }
+        s.push('\n');
+    }
+    write_atomic(&cal.out.join("validation").join("bases.csv"), s.as_bytes())
 }
 
 /// The calibrated model a user takes away: `calibrated.idf` (the model at `estimate`, the

@@ -505,8 +505,21 @@ pub fn read_hourly(path: &Path, what: &str) -> Result<Hourly, ReportError> {
     })
 }
 
+/// Adds `validation/bases.csv` (the hourly loads in the meters that the model does not have,
+/// one column per output) to the same columns of an EnergyPlus run's outputs.
+fn add_bases(h: &mut Hourly, bases: &Hourly) {
+    for (name, base) in bases.columns.iter().zip(&bases.values) {
+        if let Some(k) = h.columns.iter().position(|c| c == name) {
+            for (v, b) in h.values[k].iter_mut().zip(base) {
+                *v += b;
+            }
+        }
+    }
+}
+
 /// Reads a calibration folder: `summary.json`, `draws.csv` and `posterior_predictive.csv` are
-/// required; `validation/calibrated.csv` and `validation/initial.csv` are optional.
+/// required; `validation/calibrated.csv` and `validation/initial.csv` are optional, and
+/// `validation/bases.csv`, when present, is added to both.
 pub fn read_calibration(dir: &Path) -> Result<CalibrationData, ReportError> {
     if !dir.is_dir() {
         return Err(ReportError::Missing {
@@ -540,10 +553,20 @@ pub fn read_calibration(dir: &Path) -> Result<CalibrationData, ReportError> {
             Ok(None)
         }
     };
+    // EnergyPlus runs hold the model alone; the meters are compared with model + bases.
+    let bases = opt("bases.csv")?;
+    let with_bases = |h: Option<Hourly>| {
+        h.map(|mut h| {
+            if let Some(b) = &bases {
+                add_bases(&mut h, b);
+            }
+            h
+        })
+    };
     Ok(CalibrationData {
         dir: dir.to_path_buf(),
-        calibrated: opt("calibrated.csv")?,
-        initial: opt("initial.csv")?,
+        calibrated: with_bases(opt("calibrated.csv")?),
+        initial: with_bases(opt("initial.csv")?),
         summary,
         draws,
         predictive,
@@ -666,4 +689,27 @@ pub fn write_html(path: &Path, html: &str) -> Result<(), ReportError> {
         path: path.to_path_buf(),
         source,
     })
+}
+
+#[cfg(test)]
+mod bases_tests {
+    use super::*;
+
+    #[test]
+    fn bases_are_added_to_the_runs_outputs_by_column() {
+        let hourly = |columns: &[&str], values: Vec<Vec<f64>>| Hourly {
+            timestamps: vec!["2021-01-01T00:00".into(), "2021-01-01T01:00".into()],
+            columns: columns.iter().map(|c| c.to_string()).collect(),
+            values,
+        };
+        let mut run = hourly(
+            &["heating_kwh", "electricity_kwh"],
+            vec![vec![1.0, 2.0], vec![3.0, 4.0]],
+        );
+        let bases = hourly(&["electricity_kwh"], vec![vec![10.0, f64::NAN]]);
+        add_bases(&mut run, &bases);
+        assert_eq!(run.values[0], vec![1.0, 2.0]);
+        assert_eq!(run.values[1][0], 13.0);
+        assert!(run.values[1][1].is_nan(), "a missing base hour is missing");
+    }
 }
