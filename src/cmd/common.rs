@@ -41,16 +41,15 @@ pub fn write_hourly_csv(path: &Path, year: i32, outputs: &HourlyOutputs) -> anyh
     Ok(())
 }
 
-/// A weather reference: a path, or `bundled:FILE` from EnergyPlus's `WeatherData`.
+/// A weather reference: a path, or `bundled:FILE` from EnergyPlus's `WeatherData` (EnergyPlus
+/// is looked for only then).
 pub fn resolve_weather_ref(reference: &str) -> anyhow::Result<std::path::PathBuf> {
-    let Some(name) = reference.strip_prefix("bundled:") else {
-        return Ok(std::path::PathBuf::from(reference));
-    };
-    let engine = Engine::locate()?;
-    engine.bundled_weather(name).with_context(|| {
-        format!(
-            "'{reference}': no such file in {}",
-            engine.root.join("WeatherData").display()
-        )
-    })
+    if !reference.starts_with("bundled:") {
+        return Ok(reference.into());
+    }
+    Ok(bemcal_calibrate::pipeline::weather_reference(
+        reference,
+        Path::new("."),
+        &Engine::locate()?,
+    )?)
 }

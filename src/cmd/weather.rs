@@ -4,9 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
-use bemcal_weather::measured::{build_epw, BuildOptions, BuildReport, Field, Stamp};
+use bemcal_weather::measured::{BuildReport, Field, Stamp};
 use bemcal_weather::station::{CsvColumn, CsvSpec, Source, TimeBasis, Unit};
-use bemcal_weather::Epw;
 
 /// Build the EPW of a metered year from measured weather.
 ///
@@ -76,9 +75,9 @@ fn parse_column(s: &str) -> anyhow::Result<CsvColumn> {
     })
 }
 
-fn source(a: &Args) -> anyhow::Result<(Source, Stamp)> {
+fn source(a: &Args) -> anyhow::Result<Source> {
     if !a.isd_lite.is_empty() {
-        return Ok((Source::IsdLite(a.isd_lite.clone()), Stamp::Instant));
+        return Ok(Source::IsdLite(a.isd_lite.clone()));
     }
     let Some(file) = &a.csv else {
         bail!("give the measured weather: --isd-lite FILE... or --csv FILE --column ...");
@@ -106,30 +105,15 @@ fn source(a: &Args) -> anyhow::Result<(Source, Stamp)> {
             .map(|c| parse_column(c))
             .collect::<anyhow::Result<_>>()?,
     };
-    Ok((
-        Source::Csv {
-            file: file.clone(),
-            spec,
-        },
-        stamp,
-    ))
+    Ok(Source::Csv {
+        file: file.clone(),
+        spec,
+    })
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let tmy = super::common::resolve_weather_ref(&a.tmy)?;
-    let tmy_text =
-        std::fs::read_to_string(&tmy).with_context(|| format!("reading {}", tmy.display()))?;
-    let location = Epw::parse(&tmy_text, &tmy)?.location;
-    let (source, stamp) = source(&a)?;
-    let observations = source.observations(&location)?;
-    let opts = BuildOptions {
-        year: a.year,
-        max_interpolated_gap_h: a.max_gap,
-        stamp,
-        interval_min: a.interval_min,
-        source: source.describe(),
-    };
-    let (text, report) = build_epw(&tmy_text, &tmy, &observations, &opts)?;
+    let (text, report) = source(&a)?.build_epw(&tmy, a.year, a.max_gap, a.interval_min)?;
     std::fs::write(&a.out, text).with_context(|| format!("writing {}", a.out.display()))?;
     let json = a.out.with_extension("json");
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)

@@ -162,17 +162,23 @@ pub struct PriorEntry {
     pub source: String,
 }
 
-/// Resolves a weather reference: a path, or `bundled:FILE` from the engine's `WeatherData`.
+/// Resolves the project's weather reference ([`weather_reference`]).
 pub fn resolve_weather(project: &Project, engine: &Engine) -> Result<PathBuf, Error> {
-    if let Some(name) = project.weather.strip_prefix("bundled:") {
-        return engine.bundled_weather(name).ok_or_else(|| {
+    weather_reference(&project.weather, &project.base, engine)
+}
+
+/// A weather reference: `bundled:FILE` from the engine's `WeatherData`, or a path (relative to
+/// `base`).
+pub fn weather_reference(reference: &str, base: &Path, engine: &Engine) -> Result<PathBuf, Error> {
+    match reference.strip_prefix("bundled:") {
+        Some(name) => engine.bundled_weather(name).ok_or_else(|| {
             Error::Config(format!(
                 "weather 'bundled:{name}': no such file in {}",
                 engine.root.join("WeatherData").display()
             ))
-        });
+        }),
+        None => Ok(base.join(reference)),
     }
-    Ok(project.resolve(Path::new(&project.weather)))
 }
 
 /// The weather a calibration simulates with: the project's EPW, or with `[measured_weather]`
@@ -183,31 +189,12 @@ pub fn weather_for(
     engine: &Engine,
     year: i32,
 ) -> Result<(PathBuf, Option<bemcal_weather::measured::BuildReport>), Error> {
-    use bemcal_weather::measured::{build_epw, BuildOptions, Stamp};
     let tmy = resolve_weather(project, engine)?;
     let Some(m) = &project.measured_weather else {
         return Ok((tmy, None));
     };
-    let tmy_text = std::fs::read_to_string(&tmy).map_err(|e| Error::Input {
-        path: tmy.clone(),
-        line: 0,
-        message: format!("cannot read: {e}"),
-    })?;
-    let location = Epw::parse(&tmy_text, &tmy)?.location;
-    let source = m.source(project);
-    let observations = source.observations(&location)?;
     let year = m.year.unwrap_or(year);
-    let opts = BuildOptions {
-        year,
-        max_interpolated_gap_h: m.max_gap_h,
-        stamp: match source {
-            bemcal_weather::station::Source::IsdLite(_) => Stamp::Instant,
-            _ => m.stamp,
-        },
-        interval_min: 60,
-        source: source.describe(),
-    };
-    let (text, report) = build_epw(&tmy_text, &tmy, &observations, &opts)?;
+    let (text, report) = m.source(project).build_epw(&tmy, year, m.max_gap_h, 60)?;
     let path = project.resolve(Path::new(&format!("measured-weather/{year}.epw")));
     let report_json =
         serde_json::to_vec_pretty(&report).map_err(|e| Error::Config(e.to_string()))?;

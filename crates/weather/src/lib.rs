@@ -52,6 +52,41 @@ pub struct Location {
     pub elevation_m: f64,
 }
 
+impl Location {
+    /// The `LOCATION` header, the first line of EPW text (`path` names it in errors).
+    pub fn parse(text: &str, path: &Path) -> Result<Location, WeatherError> {
+        let err = |message: String| WeatherError::Malformed {
+            path: path.to_path_buf(),
+            line: 1,
+            message,
+        };
+        let first = text
+            .lines()
+            .next()
+            .ok_or_else(|| err("empty file; expected an EPW LOCATION header".into()))?;
+        let loc: Vec<&str> = first.split(',').map(str::trim).collect();
+        if loc.first() != Some(&"LOCATION") || loc.len() < 10 {
+            return Err(err(
+                "expected 'LOCATION,city,state,country,source,WMO,lat,lon,tz,elevation'".into(),
+            ));
+        }
+        let num = |i: usize, what: &str| -> Result<f64, WeatherError> {
+            loc[i]
+                .parse::<f64>()
+                .map_err(|_| err(format!("LOCATION {what} '{}' is not a number", loc[i])))
+        };
+        Ok(Location {
+            city: loc[1].to_string(),
+            state: loc[2].to_string(),
+            country: loc[3].to_string(),
+            latitude_deg: num(6, "latitude")?,
+            longitude_deg: num(7, "longitude")?,
+            time_zone_h: num(8, "time zone")?,
+            elevation_m: num(9, "elevation")?,
+        })
+    }
+}
+
 /// One hourly EPW record (the fields bemcal uses).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct WeatherHour {
@@ -97,30 +132,8 @@ impl Epw {
             message,
         };
         let mut lines = text.lines().enumerate();
-        let (_, first) = lines
-            .next()
-            .ok_or_else(|| err(1, "empty file; expected an EPW LOCATION header".into()))?;
-        let loc: Vec<&str> = first.split(',').map(str::trim).collect();
-        if loc.first() != Some(&"LOCATION") || loc.len() < 10 {
-            return Err(err(
-                1,
-                "expected 'LOCATION,city,state,country,source,WMO,lat,lon,tz,elevation'".into(),
-            ));
-        }
-        let num = |i: usize, what: &str| -> Result<f64, WeatherError> {
-            loc[i]
-                .parse::<f64>()
-                .map_err(|_| err(1, format!("LOCATION {what} '{}' is not a number", loc[i])))
-        };
-        let location = Location {
-            city: loc[1].to_string(),
-            state: loc[2].to_string(),
-            country: loc[3].to_string(),
-            latitude_deg: num(6, "latitude")?,
-            longitude_deg: num(7, "longitude")?,
-            time_zone_h: num(8, "time zone")?,
-            elevation_m: num(9, "elevation")?,
-        };
+        let location = Location::parse(text, path)?;
+        lines.next();
         // Skip the remaining header lines up to and including DATA PERIODS.
         let mut header_end = None;
         for (i, line) in lines.by_ref() {

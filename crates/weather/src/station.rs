@@ -468,6 +468,35 @@ pub enum Source {
 }
 
 impl Source {
+    /// What the source's time stamps mean: ISD-lite observations are instants, a CSV says.
+    pub fn stamp(&self) -> Stamp {
+        match self {
+            Source::IsdLite(_) => Stamp::Instant,
+            Source::Csv { spec, .. } => spec.stamp,
+        }
+    }
+
+    /// The EPW of `year` from this source's observations merged onto the TMY file `tmy`
+    /// ([`crate::measured::build_epw`]): reads the TMY file and the observations.
+    pub fn build_epw(
+        &self,
+        tmy: &Path,
+        year: i32,
+        max_interpolated_gap_h: usize,
+        interval_min: u32,
+    ) -> Result<(String, crate::measured::BuildReport), WeatherError> {
+        let tmy_text = read_text(tmy)?;
+        let observations = self.observations(&crate::Location::parse(&tmy_text, tmy)?)?;
+        let opts = crate::measured::BuildOptions {
+            year,
+            max_interpolated_gap_h,
+            stamp: self.stamp(),
+            interval_min,
+            source: self.describe(),
+        };
+        crate::measured::build_epw(&tmy_text, tmy, &observations, &opts)
+    }
+
     /// Reads the observations of this source for a site at `location` (its elevation converts
     /// sea-level pressure, its standard time reads local-standard stamps).
     pub fn observations(
