@@ -34,7 +34,8 @@
 //!   is undone per stamp (the first occurrence of a stamp in the repeated hour is daylight
 //!   time); the readings of an hour are summed for energy units and averaged for power units,
 //!   and an hour with missing readings is the mean of those present scaled to the hour (counted
-//!   in the notes). An exact repeat of a stamp is the duplicate.
+//!   in the notes). An exact repeat of a stamp is the duplicate: an error, or with any other
+//!   policy the first reading is kept.
 
 use std::collections::HashMap;
 use std::fmt;
@@ -857,42 +858,39 @@ pub fn parse_meters(
             }
             continue;
         };
-        let dup = slot_line[t] != 0;
-        if per_hour > 1 {
-            // Several readings per slot are expected: an exact repeat of a stamp is the
-            // duplicate.
-            if let Some(first) = stamp_line.insert(r.clock, r.line) {
-                dups += 1;
-                if spec.duplicates == DuplicatePolicy::Error {
-                    return Err(row_err(
-                        r.line,
-                        &ts_name,
-                        format!(
-                            "duplicate reading {} (standard time): line {first} has the same stamp; \
-                             set meters.duplicates = \"first\" to keep the first",
-                            r.clock
-                        ),
-                    ));
-                }
-                continue;
-            }
-            slot_line[t] = r.line;
-        } else if dup {
+        // A duplicate is a second row of the same hour, or, for sub-hourly meters whose hours
+        // hold several readings, of the same stamp.
+        let earlier = if per_hour > 1 {
+            stamp_line.insert(r.clock, r.line)
+        } else {
+            Some(slot_line[t]).filter(|&l| l != 0)
+        };
+        if let Some(first) = earlier {
             dups += 1;
             if spec.duplicates == DuplicatePolicy::Error {
-                return Err(row_err(
-                    r.line,
-                    &ts_name,
+                let message = if per_hour > 1 {
                     format!(
-                        "duplicate hour {} (hour-beginning, standard time): line {} has the same hour; \
+                        "duplicate reading {} (standard time): line {first} has the same stamp; \
+                         set meters.duplicates = \"first\" to keep the first",
+                        r.clock
+                    )
+                } else {
+                    format!(
+                        "duplicate hour {} (hour-beginning, standard time): line {first} has the same hour; \
                          set meters.duplicates = \"first\" | \"last\" | \"mean\" | \"sum\" to accept",
-                        r.clock, slot_line[t]
-                    ),
-                ));
+                        r.clock
+                    )
+                };
+                return Err(row_err(r.line, &ts_name, message));
             }
-        } else {
+            if per_hour > 1 {
+                continue;
+            }
+        }
+        if slot_line[t] == 0 {
             slot_line[t] = r.line;
         }
+        let dup = per_hour == 1 && earlier.is_some();
         for (k, (col, &idx)) in columns.iter().zip(&col_idx).enumerate() {
             let raw = r.record.get(idx).unwrap_or("");
             let v = if is_missing_token(raw) {
@@ -1227,6 +1225,25 @@ mod tests {
         let t = "Time,Heat\n01/01/2011 24:00,7\n";
         let d = parse_meters(t, Path::new("m.csv"), &s, None, None).unwrap();
         assert_eq!(d.series[0].values[23], 7.0);
+    }
+
+    #[test]
+    fn a_repeated_stamp_of_a_sub_hourly_meter_is_the_duplicate() {
+        let text = "timestamp,Heat\n2011-01-01 00:00,1\n2011-01-01 00:15,1\n2011-01-01 00:30,1\n\
+                    2011-01-01 00:30,9\n2011-01-01 00:45,1\n2011-01-01 01:00,2\n";
+        let mut s = spec();
+        s.timestamp_format = "iso8601".into();
+        s.convention = HourConvention::HourBeginning;
+        let e = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap_err();
+        assert!(
+            e.to_string().contains("m.csv:5:")
+                && e.to_string().contains("line 4 has the same stamp"),
+            "{e}"
+        );
+        s.duplicates = DuplicatePolicy::First;
+        let d = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap();
+        // Energy readings summed over the hour, the first 00:30 reading kept (9 dropped).
+        assert_eq!(d.series[0].values[0], 4.0);
     }
 
     #[test]
