@@ -5,6 +5,7 @@
 //! output folder and reused by a rerun, so an interrupted calibration resumes. The stage
 //! functions ([`design`], [`posterior`]) are what a distributed runner dispatches piecewise.
 
+pub mod bases;
 pub mod design;
 pub mod pipeline;
 pub mod posterior;
