@@ -556,15 +556,16 @@ impl BuildingSpec {
         // weekday `For:` lists it).
         let calendar = self.calendar();
         let mut special = 0;
-        for date in (0..366).filter_map(|d| {
-            chrono::NaiveDate::from_yo_opt(year, 1).map(|j| j + chrono::Duration::days(d))
-        }) {
-            if date.year() != year || (date.month() == 2 && date.day() == 29) {
-                continue;
-            }
-            let Some(t) = calendar.day_type(date.month(), date.day()) else {
-                continue;
-            };
+        let jan1 = chrono::NaiveDate::from_ymd_opt(year, 1, 1).expect("a valid year");
+        // EnergyPlus simulates 365 days: February 29 is not one of them.
+        for date in jan1
+            .iter_days()
+            .take_while(|d| d.year() == year)
+            .filter(|d| !(d.month() == 2 && d.day() == 29))
+        {
+            let t = calendar
+                .day_type(date.month(), date.day())
+                .expect("a date of the year");
             let weekend = matches!(date.weekday(), chrono::Weekday::Sat | chrono::Weekday::Sun);
             let kind = match (t.is_off_day(), weekend) {
                 (true, false) => "Holiday",

@@ -306,14 +306,19 @@ fn warm_up_severe_within_the_margin_is_a_note_and_its_results_are_used() {
     }
 }
 
+/// A user's IDF, `dir/mine.idf`: here the small generated building, written out as plain text.
+fn users_idf(r: &Runner, dir: &std::path::Path) -> bemcal_energyplus::idf::Idf {
+    let generated = Model::generated(small_spec());
+    let idf = generated.instantiate(&Default::default(), r.idd()).unwrap();
+    std::fs::write(dir.join("mine.idf"), idf.to_text()).unwrap();
+    idf
+}
+
 #[test]
 fn users_own_idf_with_a_parameter_map() {
     let Some(r) = runner() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    // A user's IDF: here the small generated building, written out as plain text.
-    let generated = Model::generated(small_spec());
-    let idf = generated.instantiate(&Default::default(), r.idd()).unwrap();
-    std::fs::write(tmp.path().join("mine.idf"), idf.to_text()).unwrap();
+    users_idf(&r, tmp.path());
     let map = r#"
 [idf]
 path = "mine.idf"
@@ -426,9 +431,7 @@ fn energyplus_runs_on_an_epw_built_from_isd_lite() {
 fn relative_idf_edits_scale_and_offset_the_users_values() {
     let Some(r) = runner() else { return };
     let tmp = tempfile::tempdir().unwrap();
-    let generated = Model::generated(small_spec());
-    let idf = generated.instantiate(&Default::default(), r.idd()).unwrap();
-    std::fs::write(tmp.path().join("mine.idf"), idf.to_text()).unwrap();
+    let idf = users_idf(&r, tmp.path());
     let map = r#"
 [idf]
 path = "mine.idf"
@@ -473,15 +476,15 @@ meters = ["InteriorLights:Electricity"]
     for (a, b) in lpd(&at(0.5, 0.0)).iter().zip(&original) {
         assert!((a - 0.5 * b).abs() < 1e-9, "{a} vs {b}");
     }
-    let cooling_schedule = |idf: &bemcal_energyplus::idf::Idf| -> Vec<String> {
+    let schedule = |idf: &bemcal_energyplus::idf::Idf, name: &str| -> Vec<String> {
         idf.of_class("Schedule:Compact")
-            .find(|o| o.name() == Some("Cooling Setpoint"))
+            .find(|o| o.name() == Some(name))
             .unwrap()
             .fields
             .clone()
     };
-    let moved = cooling_schedule(&at(1.0, 1.5));
-    let before = cooling_schedule(&idf);
+    let moved = schedule(&at(1.0, 1.5), "Cooling Setpoint");
+    let before = schedule(&idf, "Cooling Setpoint");
     assert_eq!(moved.len(), before.len());
     for (a, b) in moved.iter().zip(&before) {
         match (a.parse::<f64>(), b.parse::<f64>()) {
@@ -490,14 +493,10 @@ meters = ["InteriorLights:Electricity"]
         }
     }
     // The heating schedule does not match "cool*".
-    let heating = |idf: &bemcal_energyplus::idf::Idf| {
-        idf.of_class("Schedule:Compact")
-            .find(|o| o.name() == Some("Heating Setpoint"))
-            .unwrap()
-            .fields
-            .clone()
-    };
-    assert_eq!(heating(&at(1.0, 1.5)), heating(&idf));
+    assert_eq!(
+        schedule(&at(1.0, 1.5), "Heating Setpoint"),
+        schedule(&idf, "Heating Setpoint")
+    );
     let cool = |o: f64, d: &str| {
         let out = simulate(
             &r,
