@@ -29,28 +29,12 @@ SETS=(); for t in "${TRUTH[@]}"; do SETS+=(--set "$t"); done
 [ -f "$OUT/meters.csv" ] || "$BIN" synthesize --model "$OUT/model.toml" --weather "$OUT/msp2017.epw" \
   "${SETS[@]}" --noise 0.05 --out "$OUT/meters.csv" --truth "$OUT/truth.json"
 CAL='calibrate = ["lighting_power_density", "cooling_setpoint_occupied", "heating_setpoint_occupied", "outdoor_air_ach_occupied", "wall_insulation_conductivity"]'
+# The example project's model and meters (its [meters] mapping), with this experiment's
+# parameters and settings.
 common() {
+  sed -e '/^\[design\]/,$d' -e '/^name = /d' -e '/^weather = /d' -e "s|^model = .*|&\n$CAL|" \
+    examples/office/project.toml
   cat <<TOML
-model = "model.toml"
-$CAL
-[meters]
-file = "meters.csv"
-timestamp_column = "timestamp"
-timestamp_format = "iso8601"
-convention = "hour_beginning"
-dst = "none"
-[[meters.columns]]
-column = "heating_kwh"
-role = "heating"
-unit = "kWh"
-[[meters.columns]]
-column = "cooling_kwh"
-role = "cooling"
-unit = "kWh"
-[[meters.columns]]
-column = "electricity_kwh"
-role = "electricity"
-unit = "kWh"
 [design]
 points = 16
 [surrogate]

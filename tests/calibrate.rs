@@ -6,7 +6,7 @@
 use std::path::Path;
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo};
+use common::{bemcal, golden_epw, have_engine, repo, run_ok};
 
 const TRUTH: [(&str, f64); 2] = [
     ("lighting_power_density", 12.5),
@@ -53,8 +53,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for (k, v) in TRUTH {
         synth.arg("--set").arg(format!("{k}={v}"));
     }
-    let s = synth.output().unwrap();
-    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
+    run_ok(&mut synth);
 
     let out = dir.join("out");
     let (log, summary) = calibrate(dir, &out);
@@ -277,21 +276,16 @@ fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
         err.lines().rev().take(10).collect::<Vec<_>>().join("\n")
     );
     let again = dir.join("again.csv");
-    let sim = bemcal()
-        .args(["simulate", "--model"])
-        .arg(dir.join("model.toml"))
-        .arg("--weather")
-        .arg(golden_epw())
-        .arg("--values")
-        .arg(out.join("calibrated.toml"))
-        .arg("--out")
-        .arg(&again)
-        .output()
-        .unwrap();
-    assert!(
-        sim.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sim.stderr)
+    run_ok(
+        bemcal()
+            .args(["simulate", "--model"])
+            .arg(dir.join("model.toml"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .arg("--values")
+            .arg(out.join("calibrated.toml"))
+            .arg("--out")
+            .arg(&again),
     );
     let read = |p: &Path| -> Vec<Vec<f64>> {
         std::fs::read_to_string(p)
@@ -342,32 +336,30 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     )
     .unwrap();
     let (weekday_05, weekend_06) = (0.75, 0.35);
-    let s = bemcal()
-        .args(["synthesize", "--model"])
-        .arg(dir.join("truth.toml"))
-        .arg("--weather")
-        .arg(golden_epw())
-        .args([
-            "--set",
-            &format!("schedule_weekday_05={weekday_05}"),
-            "--set",
-            &format!("schedule_weekend_06={weekend_06}"),
-            "--out",
-        ])
-        .arg(dir.join("meters.csv"))
-        .output()
-        .unwrap();
-    assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
-    let p = bemcal()
-        .args(["precalibrate", "--meters"])
-        .arg(dir.join("meters.csv"))
-        .arg("--weather")
-        .arg(golden_epw())
-        .arg("--out")
-        .arg(dir.join("precal"))
-        .output()
-        .unwrap();
-    assert!(p.status.success(), "{}", String::from_utf8_lossy(&p.stderr));
+    run_ok(
+        bemcal()
+            .args(["synthesize", "--model"])
+            .arg(dir.join("truth.toml"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .args([
+                "--set",
+                &format!("schedule_weekday_05={weekday_05}"),
+                "--set",
+                &format!("schedule_weekend_06={weekend_06}"),
+                "--out",
+            ])
+            .arg(dir.join("meters.csv")),
+    );
+    run_ok(
+        bemcal()
+            .args(["precalibrate", "--meters"])
+            .arg(dir.join("meters.csv"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .arg("--out")
+            .arg(dir.join("precal")),
+    );
     std::fs::write(dir.join("model.toml"), &small).unwrap();
     std::fs::write(
         dir.join("model_cal.toml"),

@@ -10,6 +10,17 @@ pub fn bemcal() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bemcal"))
 }
 
+/// Runs a `bemcal` command that must succeed (its standard error in the failure message).
+pub fn run_ok(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

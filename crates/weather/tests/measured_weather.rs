@@ -195,31 +195,23 @@ fn local_clock_time_with_daylight_saving_and_a_leap_day() {
     // 12:00 daylight time on July 1 2017 is 11:00 standard: EPW hour 11 of day 182. The
     // repeated 01:00 of November 5 is first daylight (00:00 standard: hour 24 of November 4),
     // then standard (hour 1 of November 5).
+    // A CSV read in `zone` and built into the EPW of `year`: its text, report and records.
+    let build = |csv: &str, zone: &str, year: i32| {
+        let obs = parse_weather_csv(csv, Path::new("w.csv"), &spec(zone), -7.0).unwrap();
+        let opts = options(year, Stamp::Instant, "w.csv");
+        let (text, report) = build_epw(&tmy_text, &tmy, &obs, &opts).unwrap();
+        let epw = Epw::parse(&text, Path::new("b.epw")).unwrap();
+        (text, report, epw)
+    };
     let csv = "time,temp\n07/01/2017 12:00,86\n11/05/2017 01:00,50\n11/05/2017 01:00,41\n";
-    let obs = parse_weather_csv(csv, Path::new("w.csv"), &spec("America/Denver"), -7.0).unwrap();
-    let (text, _) = build_epw(
-        &tmy_text,
-        &tmy,
-        &obs,
-        &options(2017, Stamp::Instant, "w.csv"),
-    )
-    .unwrap();
-    let epw = Epw::parse(&text, Path::new("b.epw")).unwrap();
+    let (_, _, epw) = build(csv, "America/Denver", 2017);
     assert!((epw.hours[181 * 24 + 10].dry_bulb_c - 30.0).abs() < 1e-9);
     assert!((epw.hours[307 * 24 + 23].dry_bulb_c - 10.0).abs() < 1e-9);
     assert!((epw.hours[308 * 24].dry_bulb_c - 5.0).abs() < 1e-9);
 
     // 2016 is a leap year: February 29 is left out, March 1 01:00 is hour 1 of day 60.
     let csv = "time,temp\n02/28/2016 23:00,32\n02/29/2016 12:00,50\n03/01/2016 01:00,59\n";
-    let obs = parse_weather_csv(csv, Path::new("w.csv"), &spec("local_standard"), -7.0).unwrap();
-    let (text, report) = build_epw(
-        &tmy_text,
-        &tmy,
-        &obs,
-        &options(2016, Stamp::Instant, "w.csv"),
-    )
-    .unwrap();
-    let epw = Epw::parse(&text, Path::new("b.epw")).unwrap();
+    let (text, report, epw) = build(csv, "local_standard", 2016);
     assert!(report.leap_day_dropped);
     assert_eq!(report.outside_year, 1);
     assert!((epw.hours[58 * 24 + 22].dry_bulb_c - 0.0).abs() < 1e-9);
