@@ -455,7 +455,9 @@ pub fn build_epw(
         reports.push(report_of(f, &origin, hourly.implausible[f.index()]));
         filled.push(values);
     }
-    let measured = |f: Field| reports[f.index()].measured_h > 0;
+    // What the observations gave, before a humidity field derived from the other is reported.
+    let was_measured: Vec<bool> = reports.iter().map(|r| r.measured_h > 0).collect();
+    let measured = |f: Field| was_measured[f.index()];
     let humidity_from_dew_point = measured(Field::DewPoint) || !measured(Field::RelHumidity);
     let (derived, from) = if humidity_from_dew_point {
         (Field::RelHumidity, Field::DewPoint)
@@ -471,8 +473,6 @@ pub fn build_epw(
             ..reports[from.index()].clone()
         };
     }
-    let measured =
-        |f: Field| reports[f.index()].measured_h > 0 && reports[f.index()].derived_from.is_none();
     let solar = if measured(Field::GlobalHorizontal) {
         SolarSource::MeasuredGlobalErbs
     } else {
