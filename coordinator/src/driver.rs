@@ -9,9 +9,6 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use bemcal_calibrate::pipeline::{
-    fallback_note, write_summary, Calibration, ChainSummary, MovedChain, OutputMetrics, Timings,
-};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{
     next_starts, pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound,
@@ -19,6 +16,9 @@ use bemcal_calibrate::refine::{
 };
 use bemcal_calibrate::replacement::{Attempt, Step};
 use bemcal_calibrate::Project;
+use bemcal_calibrate::{
+    fallback_note, write_summary, Calibration, ChainSummary, MovedChain, OutputMetrics, Timings,
+};
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::mcmc::Draws;

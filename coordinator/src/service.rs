@@ -349,7 +349,7 @@ impl Coordinator for Service {
             let pdir = dir.join("project");
             let pf = bundle::materialize(&files, &st.artifacts, &pdir)?;
             let project = bemcal_calibrate::Project::load(&pf).map_err(|e| e.to_string())?;
-            bemcal_calibrate::pipeline::load_inputs(&project).map_err(|e| e.to_string())?;
+            bemcal_calibrate::load_inputs(&project).map_err(|e| e.to_string())?;
             Ok(project)
         })
         .await

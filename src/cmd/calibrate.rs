@@ -88,7 +88,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "{:<18} {:>22} {:>22}      {:>22}",
         "output", "initial NMBE / CV-RMSE", "calibrated NMBE / CV", "surrogate at estimate"
     );
-    let pair = |m: Option<&bemcal_calibrate::pipeline::OutputMetrics>| {
+    let pair = |m: Option<&bemcal_calibrate::OutputMetrics>| {
         m.map_or("-".to_string(), |i| {
             format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
         })

@@ -47,7 +47,7 @@ pub fn resolve_weather_ref(reference: &str) -> anyhow::Result<std::path::PathBuf
     if !reference.starts_with("bundled:") {
         return Ok(reference.into());
     }
-    Ok(bemcal_calibrate::pipeline::weather_reference(
+    Ok(bemcal_calibrate::weather_reference(
         reference,
         Path::new("."),
         &Engine::locate()?,

@@ -86,7 +86,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.parallel,
             &|m: &str| eprintln!("{m}"),
         )?;
-        bemcal_calibrate::pipeline::log_design_outcome(&sims.outcome, &|m: &str| eprintln!("{m}"));
+        bemcal_calibrate::log_design_outcome(&sims.outcome, &|m: &str| eprintln!("{m}"));
         for &slot in &sims.outcome.slots {
             for note in bemcal_calibrate::design::point_notes(&runs, slot) {
                 eprintln!("design point {slot}: used despite: {note}");

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_calibrate::pipeline::Calibration;
+use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_coordinator::artifacts::safe_relative;
 use bemcal_coordinator::client::walk;

@@ -5,9 +5,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{timestamps, Calibration, Inputs};
 use crate::project::Project;
+use crate::summary::timestamps;
 use crate::{write_atomic, Error};
+use crate::{Calibration, Inputs};
 
 /// A base load in `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]

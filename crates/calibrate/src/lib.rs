@@ -1,23 +1,42 @@
-//! The calibration pipeline on one machine: project files, design points, training, chains,
-//! validation and the summary.
+//! The calibration: its inputs, stages and rules, and the local driver that runs them in order.
 //!
-//! [`pipeline::calibrate`] runs every stage in order; each stage's results are written under the
-//! output folder and reused by a rerun, so an interrupted calibration resumes. The stage
-//! functions ([`design`], [`posterior`]) are what a distributed runner dispatches piecewise.
+//! One file per stage, in the order the data flows: [`inputs`](load_inputs) (model, weather,
+//! meters, bases) -> [`design`] (Latin hypercube, EnergyPlus runs, [`replacement`] of failed
+//! points) -> training set and surrogate ([`Calibration`]) -> chains ([`Sampler`], [`posterior`])
+//! -> [`refine`]ment rounds -> validation -> summary ([`write_summary`]). [`calibrate`] runs
+//! every stage on this machine; the coordinator runs the same stage methods as jobs. Each stage's
+//! results are written under the output folder and reused by a rerun, so an interrupted
+//! calibration resumes.
 
 pub mod bases;
+mod calibration;
+mod chains;
 pub mod design;
-pub mod pipeline;
+mod inputs;
+mod local;
 pub mod posterior;
 pub mod project;
 pub mod refine;
 pub mod replacement;
+mod summary;
 pub mod synth;
 
 use std::path::{Path, PathBuf};
 
-pub use pipeline::{calibrate, Summary};
+pub use calibration::{Calibration, Log};
+pub use chains::{
+    chains_at, fallback_note, independence_dropped, moved_chains, ChainSummary, MovedChain,
+    Sampler, FALLBACKS,
+};
+pub use inputs::{
+    load_inputs, load_model, resolve_weather, weather_for, weather_reference, Inputs,
+};
+pub use local::{calibrate, log_design_outcome};
 pub use project::Project;
+pub use summary::{
+    write_calibrated_model, write_outputs_csv, write_summary, DesignReport, OutputMetrics,
+    ParameterReport, PointNote, Summary, Timings,
+};
 
 /// Errors of the pipeline, each naming the stage, file or setting concerned.
 #[derive(Debug, thiserror::Error)]

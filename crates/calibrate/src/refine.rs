@@ -18,8 +18,8 @@ use bemcal_stats::lhs::Design;
 use bemcal_stats::mcmc::Draws;
 use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{Calibration, OutputMetrics};
 use crate::{write_atomic, Error};
+use crate::{Calibration, OutputMetrics};
 
 /// File of the refinement log in the output folder.
 pub const REFINE_FILE: &str = "refine.json";

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use bemcal_calibrate::pipeline::load_inputs;
+use bemcal_calibrate::load_inputs;
 use bemcal_calibrate::project::Project;
 
 #[test]

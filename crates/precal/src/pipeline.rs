@@ -36,8 +36,10 @@ pub struct ParameterPrior {
     /// Upper bound.
     pub max: f64,
     /// Unit (`-` for fractions).
+    #[serde(default)]
     pub unit: String,
     /// Where the prior comes from.
+    #[serde(default)]
     pub source: String,
 }
 
@@ -50,12 +52,15 @@ pub struct ScheduleBoundaries {
     pub weekend_boundaries: Vec<usize>,
 }
 
-/// The content of `priors.toml`, the file the calibration reads.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// The content of `priors.toml`, the file the calibration reads (written by pre-calibration,
+/// or by hand: both parts are optional).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct PriorsFile {
-    /// Schedule interval boundaries.
-    pub schedule: ScheduleBoundaries,
+    /// Schedule interval boundaries (generated models only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule: Option<ScheduleBoundaries>,
     /// Triangular priors.
+    #[serde(default)]
     pub parameter: Vec<ParameterPrior>,
 }
 
@@ -234,10 +239,10 @@ pub fn run(
         ),
     }
     let priors = PriorsFile {
-        schedule: ScheduleBoundaries {
+        schedule: Some(ScheduleBoundaries {
             weekday_boundaries: schedules[0].boundaries(),
             weekend_boundaries: schedules[1].boundaries(),
-        },
+        }),
         parameter,
     };
     Ok(Precalibration {

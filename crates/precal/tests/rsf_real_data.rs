@@ -165,7 +165,16 @@ fn rsf_example_project_matches_auto_detection_and_writes_outputs() {
     let priors = bemcal_precal::io::read_priors(&dir.join("priors.toml")).unwrap();
     assert_eq!(priors, r.priors);
     assert_eq!(priors.parameter[0].name, "schedule_weekday_01");
-    assert_eq!(*priors.schedule.weekend_boundaries.last().unwrap(), 24);
+    assert_eq!(
+        *priors
+            .schedule
+            .as_ref()
+            .unwrap()
+            .weekend_boundaries
+            .last()
+            .unwrap(),
+        24
+    );
     let text = std::fs::read_to_string(dir.join("disaggregated.csv")).unwrap();
     assert_eq!(text.lines().count(), 8761);
     let cal = std::fs::read_to_string(dir.join("calendar.csv")).unwrap();

@@ -1,0 +1,261 @@
+//! A loaded calibration ([`Calibration`]): the project, its inputs and the output folder, with
+//! one method per stage that both drivers call.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_energyplus::HourlyOutputs;
+use bemcal_stats::lhs::Design;
+use bemcal_stats::metrics::g14;
+use bemcal_surrogate::{ParamSpec, Split, TrainOptions, TrainingSet};
+use ndarray::{Array2, Array3};
+
+use crate::design::{
+    make_design, read_outcome, simulate_point, write_design_csv, write_outcome, OUTCOME_FILE,
+};
+use crate::inputs::load_inputs;
+use crate::project::Project;
+use crate::replacement::{Attempt, Outcome, Policy};
+use crate::summary::{write_outputs_csv, OutputMetrics};
+use crate::{Error, Inputs};
+
+/// Progress messages.
+pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
+
+/// A loaded calibration: the project, its inputs and the output folder. Each stage is a method;
+/// [`calibrate`](crate::calibrate) runs them in order on this machine, and the coordinator dispatches the same
+/// methods to workers (simulations, training and chain segments as separate jobs).
+pub struct Calibration {
+    pub project: Project,
+    pub inputs: Inputs,
+    pub out: PathBuf,
+}
+
+impl Calibration {
+    /// Loads the project's inputs; `out` is where every stage writes.
+    pub fn load(project: Project, out: &Path) -> Result<Calibration, Error> {
+        std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+        let inputs = load_inputs(&project)?;
+        let mut cal = Calibration {
+            project,
+            inputs,
+            out: out.to_path_buf(),
+        };
+        if let Some(outcome) = read_outcome(&cal.simulations_dir()) {
+            cal.learn_invalid_region(&outcome);
+        }
+        Ok(cal)
+    }
+
+    /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
+    /// the chains refuse proposals there (see [`crate::replacement::InvalidRegion`]).
+    pub fn learn_invalid_region(&mut self, outcome: &Outcome) {
+        self.inputs.plan.invalid =
+            crate::replacement::InvalidRegion::from_outcome(outcome, &self.inputs.plan.priors);
+    }
+
+    /// Stage 1: the design (deterministic for the project's seed); writes `design.csv`.
+    pub fn design(&self) -> Result<Design, Error> {
+        let p = &self.project.design;
+        let d = make_design(
+            &self.inputs.plan,
+            &self.inputs.model,
+            p.points,
+            p.seed,
+            p.maximin_iterations,
+        )?;
+        write_design_csv(&self.out.join("design.csv"), &self.inputs.plan, &d)?;
+        Ok(d)
+    }
+
+    /// The spare hypercube that replaces design points EnergyPlus cannot simulate
+    /// ([`crate::replacement`]; deterministic for the project's seed).
+    pub fn spares(&self) -> Result<Design, Error> {
+        let p = &self.project.design;
+        make_design(
+            &self.inputs.plan,
+            &self.inputs.model,
+            p.points,
+            crate::replacement::spare_seed(p.seed),
+            p.maximin_iterations,
+        )
+    }
+
+    /// What to do about design points that fail (`[design]` replacements and floor).
+    pub fn design_policy(&self) -> Policy {
+        Policy {
+            replacements: self.project.design.replacements,
+            min_success: self.project.design.min_success,
+        }
+    }
+
+    /// The next step of the design after `attempts` (the one rule both drivers follow).
+    pub fn design_step(
+        &self,
+        hypercube: &Design,
+        spares: &Design,
+        attempts: &[Attempt],
+    ) -> crate::replacement::Step {
+        crate::replacement::next_step(
+            &self.inputs.plan,
+            hypercube,
+            spares,
+            self.design_policy(),
+            attempts,
+        )
+    }
+
+    /// Records the settled design in the simulations folder (`design.json`).
+    pub fn record_outcome(&self, outcome: &Outcome) -> Result<(), Error> {
+        write_outcome(&self.simulations_dir(), outcome)
+    }
+
+    /// The settled design (after replacements) and the points trained on: errors if the
+    /// design stage has not finished.
+    pub fn settled_design(&self) -> Result<(Outcome, Design), Error> {
+        let outcome = read_outcome(&self.simulations_dir()).ok_or_else(|| Error::Stage {
+            stage: "design",
+            message: format!(
+                "no settled design in {}",
+                self.simulations_dir().join(OUTCOME_FILE).display()
+            ),
+        })?;
+        let design = outcome.design(&self.design()?, &self.inputs.plan.priors);
+        Ok((outcome, design))
+    }
+
+    /// The simulation key of the first posterior draw of the next refinement round, after the
+    /// rounds in `log`: after every hypercube slot and every earlier round's draws (a dropped
+    /// design point keeps its slot, so keys never collide).
+    pub fn next_refine_key(&self, log: &crate::refine::RefineLog) -> usize {
+        self.project.design.points + log.points().count()
+    }
+
+    /// Folder of the design-point simulations.
+    pub fn simulations_dir(&self) -> PathBuf {
+        self.out.join("simulations")
+    }
+
+    /// Stage 2, one job: simulates design point `i` (or reloads it if already done).
+    pub fn simulate_point(
+        &self,
+        i: usize,
+        x: &[f64],
+    ) -> Result<(HourlyOutputs, Option<f64>), Error> {
+        let dir = self.simulations_dir();
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        simulate_point(
+            &self.inputs.runner,
+            &self.inputs.model,
+            &self.inputs.plan.values(x),
+            &self.inputs.weather_path,
+            &dir,
+            i,
+        )
+    }
+
+    /// Stage 3: the training set from the design and its simulated outputs; writes `dataset/`.
+    /// The first `base` points are the settled design's, the rest refinement draws.
+    pub fn training_set(
+        &self,
+        base: usize,
+        design: &Design,
+        sims: &[HourlyOutputs],
+    ) -> Result<PathBuf, Error> {
+        let inp = &self.inputs;
+        let n_pts = design.points.len();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let mut points = Array2::zeros((n_pts, inp.plan.calibrated.len()));
+        let mut y = Array3::zeros((n_pts, n_h, n_out));
+        for (i, (x, o)) in design.points.iter().zip(sims).enumerate() {
+            for (j, v) in x.iter().enumerate() {
+                points[[i, j]] = *v;
+            }
+            for (k, name) in inp.outputs.iter().enumerate() {
+                let s = o.get(name).ok_or_else(|| Error::Stage {
+                    stage: "training set",
+                    message: format!("design point {i} has no output {name}"),
+                })?;
+                for (h, v) in s.iter().enumerate() {
+                    y[[i, h, k]] = *v;
+                }
+            }
+        }
+        let params: Vec<ParamSpec> = inp
+            .plan
+            .calibrated
+            .iter()
+            .zip(&inp.plan.priors)
+            .map(|(n, p)| ParamSpec::new(n.clone(), p.min(), p.max(), p.mode()))
+            .collect();
+        let sp = &self.project.surrogate;
+        // Nested over refinement rounds (see `Split::nested`): the hypercube's points split as
+        // always, each appended draw keeps its side in every later round.
+        let split = Split::nested(base.min(n_pts), n_pts, sp.held_out_fraction, sp.seed)?;
+        let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
+            .with_split(split)?;
+        let dir = self.out.join("dataset");
+        set.write(&dir)?;
+        Ok(dir)
+    }
+
+    /// Folder of the trained surrogate.
+    pub fn surrogate_dir(&self) -> PathBuf {
+        self.out.join("surrogate")
+    }
+
+    /// True once a valid surrogate is in place.
+    pub fn has_surrogate(&self) -> bool {
+        bemcal_surrogate::SurrogateMeta::read(&self.surrogate_dir()).is_ok()
+    }
+
+    /// Stage 4, one job: trains the surrogate on `dataset/` into `surrogate/`, starting from
+    /// the weights in the surrogate folder `init` when given (a refinement round's warm start,
+    /// see [`Calibration::warm_start`]).
+    pub fn train(&self, init: Option<&Path>) -> Result<(), Error> {
+        let sp = &self.project.surrogate;
+        let opts = TrainOptions {
+            epochs: sp.epochs,
+            patience: sp.patience,
+            seed: sp.seed,
+            batch_size: sp.batch_size,
+            time_features: sp.time_features.parse().map_err(Error::Config)?,
+            threads: sp.threads,
+            quiet: true,
+            init: init.map(Path::to_path_buf),
+            ..TrainOptions::default()
+        };
+        bemcal_surrogate::train(&self.out.join("dataset"), &self.surrogate_dir(), &opts)?;
+        Ok(())
+    }
+
+    /// Stage 7, one job per run: EnergyPlus at `values` (key `i` in `validation/`) against the
+    /// meters, ASHRAE Guideline 14 per output.
+    pub fn validate(&self, i: usize, label: &str, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
+        let inp = &self.inputs;
+        let vdir = self.out.join("validation");
+        std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
+        let (o, _) = simulate_point(
+            &inp.runner,
+            &inp.model,
+            &inp.plan.values(x),
+            &inp.weather_path,
+            &vdir,
+            i,
+        )?;
+        write_outputs_csv(&vdir.join(format!("{label}.csv")), inp.year, &o)?;
+        let mut m = vec![];
+        for (k, name) in inp.outputs.iter().enumerate() {
+            let sim = o.get(name).expect("model output");
+            m.push(OutputMetrics {
+                output: name.clone(),
+                metrics: g14(&inp.measured[k], &inp.with_base(k, sim))?,
+            });
+        }
+        Ok(m)
+    }
+
+    /// The prior modes of the calibrated parameters (the initial model).
+    pub fn initial_point(&self) -> Vec<f64> {
+        self.inputs.plan.priors.iter().map(|p| p.mode()).collect()
+    }
+}

@@ -1,0 +1,571 @@
+//! Stages 5 and 6, the chains: the likelihood bound to the surrogate ([`Sampler`]), chain
+//! starts, segments, and the merged chains' summary.
+
+use bemcal_stats::chain::Chain;
+use bemcal_stats::hmc::{self, HmcConfig, HmcState};
+use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
+use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
+use bemcal_stats::metrics::g14;
+use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig};
+use bemcal_stats::prior::Prior;
+use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
+use bemcal_surrogate::{Evaluator, Surrogate};
+use serde::{Deserialize, Serialize};
+
+use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
+use crate::project::{ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::summary::{write_bands_csv, write_draws_csv};
+use crate::{Calibration, Error, OutputMetrics};
+
+/// Everything the chains need: the bound surrogate, the likelihood and the noise model.
+pub struct Sampler<'c> {
+    cal: &'c Calibration,
+    pub evaluator: Evaluator,
+    pub likelihood: GaussianLikelihood,
+    pub noise: Vec<OutputNoise>,
+    pub sigma_box: SigmaDeltaBox,
+    pub sigma_eta: Vec<f64>,
+    pub held_out: serde_json::Value,
+}
+
+impl Calibration {
+    /// Stage 5 set-up: loads the surrogate and builds the likelihood (reference Eq. 7).
+    pub fn sampler(&self) -> Result<Sampler<'_>, Error> {
+        let inp = &self.inputs;
+        let dir = self.surrogate_dir();
+        let surrogate = Surrogate::load(&dir, self.project.surrogate.threads)?;
+        let meta = surrogate.meta().clone();
+        if meta.output_names() != inp.outputs {
+            return Err(Error::Stage {
+                stage: "surrogate",
+                message: format!(
+                    "surrogate in {} predicts {:?}, the calibration needs {:?}; delete it to retrain",
+                    dir.display(),
+                    meta.output_names(),
+                    inp.outputs
+                ),
+            });
+        }
+        let sigma_eta = meta.sigma_eta_kwh();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let mut observed = vec![f64::NAN; n_h * n_out];
+        // The surrogate predicts the model's share of each meter (the meter less its base).
+        let shares: Vec<Vec<f64>> = (0..n_out).map(|k| inp.model_share(k)).collect();
+        for (k, s) in shares.iter().enumerate() {
+            for (h, v) in s.iter().enumerate() {
+                observed[h * n_out + k] = *v;
+            }
+        }
+        let stats: Vec<(f64, f64)> = shares.iter().map(|s| mean_sd(s)).collect();
+        let m = &self.project.mcmc;
+        let noise: Vec<OutputNoise> = stats
+            .iter()
+            .zip(&sigma_eta)
+            .map(|((mean, sd), eta)| OutputNoise {
+                sigma_y: m.sigma_y_fraction * mean.abs(),
+                sigma_delta: m.sigma_delta_fraction * sd,
+                sigma_eta: *eta,
+            })
+            .collect();
+        let likelihood = GaussianLikelihood::new(&observed, &noise)?;
+        let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
+        Ok(Sampler {
+            cal: self,
+            evaluator: surrogate.bind(&inp.features)?,
+            likelihood,
+            noise,
+            sigma_box: SigmaDeltaBox::new(&sd),
+            sigma_eta,
+            held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
+        })
+    }
+}
+
+impl Sampler<'_> {
+    /// The posterior over the unit space.
+    pub fn posterior(&self) -> Posterior<'_> {
+        Posterior {
+            plan: &self.cal.inputs.plan,
+            model: &self.cal.inputs.model,
+            likelihood: &self.likelihood,
+            sigma_box: (self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled)
+                .then_some(&self.sigma_box),
+            marginal: self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Marginal,
+            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+        }
+    }
+
+    /// MH settings of the chains on the surrogate of refinement round `round` (0 = the
+    /// hypercube's): the last round's are the project's `[mcmc]`; earlier (preliminary) rounds
+    /// use `[refine]`'s shorter burn-in.
+    pub fn config_for(&self, round: u32) -> MhConfig {
+        let m = &self.cal.project.mcmc;
+        let burn_in = if round < self.cal.project.refine.rounds {
+            self.cal.project.refine.burn_in
+        } else {
+            m.burn_in
+        };
+        MhConfig {
+            burn_in,
+            adapt_start: match m.start {
+                // Keep the Laplace covariance of the optimum: in 40 dimensions a burn-in's AM
+                // estimate is far worse (proposal sds 0.07-0.6 of the truth's vs 0.37 = the
+                // optimal 2.38 / sqrt(d) with the Laplace one; crates/stats tests/mcmc_peaked.rs).
+                ChainStart::Optimised => burn_in,
+                // Adapt the covariance from the second half of burn-in only: the first half is
+                // the transient from dispersed starts (measured on peaked 10-D/40-D targets).
+                ChainStart::Prior => (burn_in / 2).max(100).min(burn_in),
+            },
+            initial_sd: m.initial_sd,
+            independence: m.independence,
+            ..MhConfig::default()
+        }
+    }
+
+    /// HMC settings of round `round` (`mcmc.kernel = "hmc"`): burn-in as [`Self::config_for`].
+    pub fn hmc_config_for(&self, round: u32) -> HmcConfig {
+        HmcConfig {
+            burn_in: self.config_for(round).burn_in,
+            integration_time: self.cal.project.mcmc.hmc_integration_time,
+            ..HmcConfig::default()
+        }
+    }
+
+    /// MCMC settings of round `round`: a round's chains get their own random streams (the
+    /// last round of a project without refinement keeps the project's seed).
+    pub fn settings_for(&self, round: u32) -> McmcSettings {
+        let mut m = self.cal.project.mcmc.clone();
+        if round > 0 {
+            m.seed = m
+                .seed
+                .wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
+        }
+        m
+    }
+
+    /// Dispersed, feasible starting points (unit space), one per chain.
+    pub fn starts(&self) -> Vec<Vec<f64>> {
+        let cal = self.cal;
+        let plan = &cal.inputs.plan;
+        let post = self.posterior();
+        let mut starts =
+            dispersed_starts(&plan.priors, cal.project.mcmc.chains, cal.project.mcmc.seed);
+        let modes: Vec<f64> = plan.priors.iter().map(|p| p.to_unit(p.mode())).collect();
+        for s in &mut starts {
+            let mut tries = 0;
+            let ok = |s: &[f64]| {
+                let x = post.theta(s);
+                plan.feasible(&cal.inputs.model, &x) && plan.refused(&x).is_none()
+            };
+            while !ok(s) && tries < 50 {
+                for (u, m) in s.iter_mut().zip(&modes) {
+                    *u = 0.5 * (*u + m);
+                }
+                tries += 1;
+            }
+            if post.sigma_box.is_some() {
+                s.extend(std::iter::repeat_n(0.6, cal.inputs.outputs.len()));
+            }
+        }
+        starts
+    }
+
+    /// The posterior and the evaluator, borrowed together.
+    pub fn split(&mut self) -> (Posterior<'_>, &mut Evaluator) {
+        let mode = self.cal.project.mcmc.sigma_delta;
+        let post = Posterior {
+            plan: &self.cal.inputs.plan,
+            model: &self.cal.inputs.model,
+            likelihood: &self.likelihood,
+            sigma_box: (mode == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
+            marginal: mode == SigmaDeltaMode::Marginal,
+            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+        };
+        (post, &mut self.evaluator)
+    }
+
+    /// New chain states at `starts` for the chains of round `round` (see [`Self::config_for`]);
+    /// chain `c` gets random stream `first_chain + c`.
+    pub fn new_chains(
+        &mut self,
+        starts: &[Vec<f64>],
+        first_chain: u64,
+        round: u32,
+    ) -> Result<Vec<Chain>, Error> {
+        let config = self.config_for(round);
+        let hmc = self.hmc_config_for(round);
+        let m = self.settings_for(round);
+        let (post, eval) = self.split();
+        chains_at(&post, eval, starts, config, &hmc, &m, first_chain)
+    }
+
+    /// The surrogate's hourly outputs at `points` (physical calibrated values):
+    /// `[point][output][hour]`.
+    pub fn predict(&mut self, points: &[Vec<f64>]) -> Result<Vec<Vec<Vec<f64>>>, Error> {
+        let (n_h, n_out) = (
+            self.cal.inputs.features.len(),
+            self.cal.inputs.outputs.len(),
+        );
+        let mut out = vec![];
+        for chunk in points.chunks(8) {
+            let y = self.evaluator.evaluate_batch(chunk)?;
+            for b in 0..chunk.len() {
+                out.push(
+                    (0..n_out)
+                        .map(|k| (0..n_h).map(|h| f64::from(y[[b, h, k]])).collect())
+                        .collect(),
+                );
+            }
+        }
+        Ok(out)
+    }
+
+    /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
+    pub fn advance(&mut self, states: &mut [Chain], n: u64) -> Result<Vec<Draws>, Error> {
+        let (post, eval) = self.split();
+        advance_chains(&post, eval, states, n)
+    }
+
+    /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
+    /// and posterior predictive bands.
+    pub fn summarize(&mut self, states: &[Chain], draws: &[Draws]) -> Result<ChainSummary, Error> {
+        let cal = self.cal;
+        let inp = &cal.inputs;
+        let d = inp.plan.calibrated.len();
+        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+        let theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
+        let priors: Vec<Prior> = inp
+            .plan
+            .calibrated
+            .iter()
+            .zip(&inp.plan.priors)
+            .zip(&inp.plan.units)
+            .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
+            .collect();
+        let posterior = summarize(&priors, &theta_draws)?;
+        let sbox = self.sigma_box.clone();
+        let noise = self.noise.clone();
+        let (post, eval) = self.split();
+        write_draws_csv(
+            &cal.out.join("draws.csv"),
+            &post,
+            &inp.outputs,
+            draws,
+            &sbox,
+        )?;
+        let mut residual_ar1: Vec<(String, f64)> = vec![];
+        let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
+            Some(b) => (0..n_out)
+                .map(|k| {
+                    let mut v: Vec<f64> = draws
+                        .iter()
+                        .flat_map(|dr| dr.column(d + k))
+                        .map(|u| b.sigma(k, u))
+                        .collect();
+                    v.sort_by(f64::total_cmp);
+                    (inp.outputs[k].clone(), v[v.len() / 2])
+                })
+                .collect(),
+            None if post.marginal => {
+                // Posterior mean of sigma_k^2 given the MAP parameters, InvGamma(n/2, SSR/2):
+                // SSR / (n - 2); sigma_delta is what is left after sigma_y and sigma_eta.
+                let y = eval.evaluate(&posterior.map_point)?;
+                let flat = y.as_slice().expect("contiguous prediction");
+                let ssr = post.likelihood.residual_sum_of_squares(flat);
+                if post.ar1 {
+                    residual_ar1 = inp
+                        .outputs
+                        .iter()
+                        .cloned()
+                        .zip(post.likelihood.ar1_coefficients(flat))
+                        .collect();
+                }
+                let n_obs = post.likelihood.n_observed();
+                inp.outputs
+                    .iter()
+                    .enumerate()
+                    .map(|(k, name)| {
+                        let total = ssr[k] / (n_obs[k] as f64 - 2.0).max(1.0);
+                        let z = &noise[k];
+                        let rest = total - z.sigma_y * z.sigma_y - z.sigma_eta * z.sigma_eta;
+                        (name.clone(), rest.max(0.0).sqrt())
+                    })
+                    .collect()
+            }
+            None => inp
+                .outputs
+                .iter()
+                .zip(&noise)
+                .map(|(n, z)| (n.clone(), z.sigma_delta))
+                .collect(),
+        };
+        // Posterior predictive bands from draws spread over all chains.
+        let all: Vec<Vec<f64>> = theta_draws
+            .iter()
+            .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
+            .collect();
+        let want = cal.project.mcmc.predictive_draws.max(1);
+        let step = (all.len() / want).max(1);
+        let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
+        let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
+        for chunk in picks.chunks(8) {
+            let y = eval.evaluate_batch(chunk)?;
+            for b in 0..chunk.len() {
+                for (k, p) in pred.iter_mut().enumerate() {
+                    p.extend((0..n_h).map(|h| y[[b, h, k]]));
+                }
+            }
+        }
+        let mut bands = vec![];
+        for (k, p) in pred.iter().enumerate() {
+            let mut b = predictive_bands(p, picks.len(), n_h)?;
+            for q in [&mut b.q5, &mut b.q50, &mut b.q95] {
+                *q = inp.with_base(k, q);
+            }
+            bands.push(b);
+        }
+        write_bands_csv(
+            &cal.out.join("posterior_predictive.csv"),
+            inp.year,
+            &inp.outputs,
+            &inp.measured,
+            &bands,
+        )?;
+        let estimate: Vec<f64> = match cal.project.validation.estimate {
+            Estimate::Map => posterior.map_point.clone(),
+            Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
+            Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
+        };
+        let y = eval.evaluate(&estimate)?;
+        let mut surrogate_at_estimate = vec![];
+        for (k, name) in inp.outputs.iter().enumerate() {
+            let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
+            surrogate_at_estimate.push(OutputMetrics {
+                output: name.clone(),
+                metrics: g14(&inp.measured[k], &inp.with_base(k, &pred))?,
+            });
+        }
+        let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
+            .iter()
+            .map(|u| post.theta(u))
+            .filter(|x| x != &estimate)
+            .take(FALLBACKS)
+            .collect();
+        Ok(ChainSummary {
+            posterior,
+            sigma_delta_kwh,
+            residual_ar1,
+            estimate,
+            surrogate_at_estimate,
+            fallbacks,
+            estimate_note: None,
+            moved_chains: moved_chains(states),
+            independence_dropped: independence_dropped(states),
+        })
+    }
+}
+
+/// Chain states at `starts` (chain `c` gets random stream `first_chain + c`): optimised first
+/// with `start = "optimised"` (see [`ChainStart`]); Metropolis-Hastings or HMC by `m.kernel`.
+pub fn chains_at(
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    starts: &[Vec<f64>],
+    config: MhConfig,
+    hmc_config: &HmcConfig,
+    m: &McmcSettings,
+    first_chain: u64,
+) -> Result<Vec<Chain>, Error> {
+    if m.kernel == Kernel::Hmc && !eval.has_gradient() {
+        return Err(Error::Config(format!(
+            "mcmc.kernel = \"hmc\" needs the surrogate's gradient graph, and {} has none \
+             (trained before it existed): retrain, or add it with `python -m bemcal_train \
+             --add-vjp {}`",
+            eval.surrogate().dir().display(),
+            eval.surrogate().dir().display()
+        )));
+    }
+    if m.kernel == Kernel::Hmc && m.start == ChainStart::Prior {
+        // The gradient call gives the starts' log posteriors too.
+        let values = post.ln_posterior_grad_batch(eval, starts)?;
+        return starts
+            .iter()
+            .zip(values)
+            .enumerate()
+            .map(|(c, (s, (lp, g)))| {
+                Ok(Chain::from(HmcState::new(
+                    hmc_config.clone(),
+                    s,
+                    None,
+                    lp,
+                    &g,
+                    m.seed,
+                    first_chain + c as u64,
+                )?))
+            })
+            .collect();
+    }
+    let lps = post.ln_posterior_batch(eval, starts);
+    if m.start == ChainStart::Optimised {
+        let cfg = BfgsConfig {
+            max_iterations: m.optimiser_iterations,
+            ..BfgsConfig::default()
+        };
+        // With the surrogate's gradient graph (and no sampled sigma_delta), BFGS uses exact
+        // gradients: one VJP call (about 3.3 evaluations) instead of d + 1 evaluations.
+        let optima = if eval.has_gradient() && post.sigma_box.is_none() {
+            let cell = std::cell::RefCell::new(&mut *eval);
+            let mut failed = None;
+            let optima = maximise_batch_with_gradient(
+                starts,
+                &lps,
+                &cfg,
+                |us: &[Vec<f64>]| post.ln_posterior_batch(&mut cell.borrow_mut(), us),
+                &mut |us: &[Vec<f64>]| {
+                    post.ln_posterior_grad_or_reject(&mut cell.borrow_mut(), us, &mut failed)
+                },
+            );
+            if let Some(e) = failed {
+                return Err(e);
+            }
+            optima
+        } else {
+            maximise_batch(starts, &lps, &cfg, |us: &[Vec<f64>]| {
+                post.ln_posterior_batch(eval, us)
+            })
+        };
+        return Ok(match m.kernel {
+            Kernel::Mh => chains_at_optima(&config, optima, m.seed, first_chain, m.restart_below)?
+                .into_iter()
+                .map(Chain::from)
+                .collect(),
+            Kernel::Hmc => {
+                let mut failed = None;
+                let states = hmc::chains_at_optima(
+                    hmc_config,
+                    optima,
+                    m.seed,
+                    first_chain,
+                    m.restart_below,
+                    &mut |us: &[Vec<f64>]| post.ln_posterior_grad_or_reject(eval, us, &mut failed),
+                );
+                if let Some(e) = failed {
+                    return Err(e);
+                }
+                states?.into_iter().map(Chain::from).collect()
+            }
+        });
+    }
+    starts
+        .iter()
+        .zip(lps)
+        .enumerate()
+        .map(|(c, (s, lp))| {
+            Ok(Chain::from(ChainState::new(
+                config.clone(),
+                s.clone(),
+                lp,
+                m.seed,
+                first_chain + c as u64,
+            )?))
+        })
+        .collect()
+}
+
+/// What [`Sampler::summarize`] returns.
+pub struct ChainSummary {
+    pub posterior: PosteriorSummary,
+    pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
+    pub residual_ar1: Vec<(String, f64)>,
+    /// The calibrated estimate (calibrated parameters, physical units).
+    pub estimate: Vec<f64>,
+    /// Guideline 14 of the surrogate at the estimate against the meters.
+    pub surrogate_at_estimate: Vec<OutputMetrics>,
+    /// Where EnergyPlus cannot simulate the estimate, the draws validated instead, best first:
+    /// the next distinct draws by log posterior (physical units).
+    pub fallbacks: Vec<Vec<f64>>,
+    /// Set when a fallback draw replaced the estimate (why).
+    pub estimate_note: Option<String>,
+    /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
+    pub moved_chains: Vec<MovedChain>,
+    /// Chains whose independence kernel was switched off after burn-in
+    /// ([`independence_dropped`] of the states).
+    pub independence_dropped: Vec<usize>,
+}
+
+/// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
+/// (`mcmc.restart_below`, [`bemcal_stats::optim::keep_best_modes`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MovedChain {
+    pub chain: usize,
+    pub nats_below: f64,
+}
+
+/// The chains of `states` that were moved to the best optimum's mode.
+pub fn moved_chains(states: &[Chain]) -> Vec<MovedChain> {
+    states
+        .iter()
+        .enumerate()
+        .filter_map(|(chain, s)| {
+            s.moved_from_mode()
+                .map(|nats_below| MovedChain { chain, nats_below })
+        })
+        .collect()
+}
+
+/// The chains of `states` whose independence kernel was switched off at the end of burn-in.
+pub fn independence_dropped(states: &[Chain]) -> Vec<usize> {
+    (0..states.len())
+        .filter(|&c| states[c].independence_dropped())
+        .collect()
+}
+
+/// What summary.json says when the estimate was replaced by the next-best draw.
+pub fn fallback_note(failures: &[String]) -> String {
+    format!(
+        "EnergyPlus could not simulate the estimate; calibrated_values and validation are those \
+         of the next-best posterior draw that it could simulate (by log posterior; {} failed: {})",
+        failures.len(),
+        failures.join(" | ")
+    )
+}
+
+/// Draws tried, in order, when EnergyPlus fails at the estimate.
+pub const FALLBACKS: usize = 3;
+
+/// Up to `k` distinct draws (unit space) in decreasing log posterior.
+fn best_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let mut all: Vec<(f64, &[f64])> = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| (d.log_density[i], d.point(i))))
+        .collect();
+    all.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut out: Vec<Vec<f64>> = vec![];
+    for (_, p) in all {
+        if out.len() >= k {
+            break;
+        }
+        if !out.iter().any(|q| q.as_slice() == p) {
+            out.push(p.to_vec());
+        }
+    }
+    out
+}
+
+fn mean_sd(s: &[f64]) -> (f64, f64) {
+    let v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
+    let n = v.len().max(1) as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0).max(1.0);
+    (m, var.sqrt())
+}
+
+fn sub_draws(d: &Draws, dim: usize) -> Draws {
+    let mut out = Draws::new(dim);
+    for i in 0..d.len() {
+        out.points.extend_from_slice(&d.point(i)[..dim]);
+    }
+    out.log_density = d.log_density.clone();
+    out
+}

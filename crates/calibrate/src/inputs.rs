@@ -1,0 +1,194 @@
+//! Stage 0, the inputs: the project's model (with pre-calibration priors applied), the
+//! weather it simulates with, and the meters it is compared with.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
+use bemcal_precal::meters::{read_meters, MeterRole};
+use bemcal_precal::pipeline::PriorsFile;
+use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
+
+use crate::design::Plan;
+use crate::project::Project;
+use crate::{write_atomic, Error};
+
+/// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
+/// measurements.
+pub struct Inputs {
+    pub runner: Runner,
+    pub model: Model,
+    pub plan: Plan,
+    pub weather_path: PathBuf,
+    /// How the EPW was built from `[measured_weather]` (None: the project's EPW as it is).
+    pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
+    pub features: HourlyFeatures,
+    pub year: i32,
+    /// Calibration outputs (model output names) and their measured series (kWh, NaN = missing).
+    pub outputs: Vec<String>,
+    pub measured: Vec<Vec<f64>>,
+    /// Per output, the hourly load (kWh) in its meter that the model does not have
+    /// (`[[bases]]`; zeros without one): the model plus this is compared with the meter.
+    pub bases: Vec<Vec<f64>>,
+    /// What each base is, for the summary.
+    pub base_reports: Vec<crate::bases::BaseReport>,
+}
+
+/// Resolves the project's weather reference ([`weather_reference`]).
+pub fn resolve_weather(project: &Project, engine: &Engine) -> Result<PathBuf, Error> {
+    weather_reference(&project.weather, &project.base, engine)
+}
+
+/// A weather reference: `bundled:FILE` from the engine's `WeatherData`, or a path (relative to
+/// `base`).
+pub fn weather_reference(reference: &str, base: &Path, engine: &Engine) -> Result<PathBuf, Error> {
+    match reference.strip_prefix("bundled:") {
+        Some(name) => engine.bundled_weather(name).ok_or_else(|| {
+            Error::Config(format!(
+                "weather 'bundled:{name}': no such file in {}",
+                engine.root.join("WeatherData").display()
+            ))
+        }),
+        None => Ok(base.join(reference)),
+    }
+}
+
+/// The weather a calibration simulates with: the project's EPW, or with `[measured_weather]`
+/// the EPW of `year` built from the measured weather onto it (written beside the project as
+/// `measured-weather/YEAR.epw` with its report `YEAR.json`, rewritten only when it changes).
+pub fn weather_for(
+    project: &Project,
+    engine: &Engine,
+    year: i32,
+) -> Result<(PathBuf, Option<bemcal_weather::measured::BuildReport>), Error> {
+    let tmy = resolve_weather(project, engine)?;
+    let Some(m) = &project.measured_weather else {
+        return Ok((tmy, None));
+    };
+    let year = m.year.unwrap_or(year);
+    let (text, report) = m.source(project).build_epw(&tmy, year, m.max_gap_h, 60)?;
+    let path = project.resolve(Path::new(&format!("measured-weather/{year}.epw")));
+    let report_json =
+        serde_json::to_vec_pretty(&report).map_err(|e| Error::Config(e.to_string()))?;
+    if std::fs::read(&path).ok().as_deref() != Some(text.as_bytes()) {
+        write_atomic(&path, text.as_bytes())?;
+        write_atomic(&path.with_extension("json"), &report_json)?;
+    }
+    Ok((path, Some(report)))
+}
+
+/// Loads the model and applies a priors file to it.
+pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
+    let path = project.resolve(&project.model);
+    let mut model = Model::load(&path, runner.idd())?;
+    if let Some(p) = &project.priors {
+        let path = project.resolve(p);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let pf: PriorsFile = bemcal_energyplus::parse_toml(&text, &path).map_err(Error::from)?;
+        if let Some(b) = &pf.schedule {
+            let mut spec = model.spec().cloned().ok_or_else(|| Error::Input {
+                path: path.clone(),
+                line: 0,
+                message: "[schedule] boundaries apply to generated building models only".into(),
+            })?;
+            let hours = |b: &[usize]| b.iter().map(|&h| h as u32).collect::<Vec<u32>>();
+            spec.weekday_boundaries = hours(&b.weekday_boundaries);
+            spec.weekend_boundaries = hours(&b.weekend_boundaries);
+            spec.validate().map_err(|m| Error::Input {
+                path: path.clone(),
+                line: 0,
+                message: m,
+            })?;
+            let p0 = model.path.clone();
+            model = Model::generated(spec);
+            model.path = p0;
+        }
+        for e in &pf.parameter {
+            let prior =
+                bemcal_energyplus::TriangularPrior::new(e.min, e.mode, e.max).map_err(|m| {
+                    Error::Input {
+                        path: path.clone(),
+                        line: 0,
+                        message: format!("parameter {}: {m}", e.name),
+                    }
+                })?;
+            model
+                .set_prior(&e.name, prior)
+                .map_err(|err| Error::Input {
+                    path: path.clone(),
+                    line: 0,
+                    message: err.to_string(),
+                })?;
+        }
+    }
+    Ok(model)
+}
+
+/// Loads everything a calibration needs and checks it fits together.
+pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
+    let engine = Engine::locate()?;
+    let runner = Runner::new(engine, RunOptions::default())?;
+    let model = load_model(project, &runner)?;
+    let plan = Plan::new(&model, &project.calibrate, &project.fixed)?;
+    let calendar = model
+        .spec()
+        .map(|s| s.calendar())
+        .unwrap_or(Calendar::new(2021, Holidays::UsFederal));
+    let (weather_path, measured_weather) = weather_for(project, runner.engine(), calendar.year)?;
+    let epw = Epw::read(&weather_path)?;
+    let features = HourlyFeatures::from_epw(&epw, &calendar);
+    let meters_path = project.meters_file();
+    let data = read_meters(
+        &meters_path,
+        &project.meters,
+        Some(calendar.year),
+        Some(epw.location.time_zone_h),
+    )?;
+    let mut outputs = vec![];
+    let mut measured = vec![];
+    let roles = project.output_roles();
+    for o in model.outputs() {
+        if let Some(role) = roles.get(&o.name) {
+            if let Some(s) = data.get(&MeterRole::from(role.clone())) {
+                outputs.push(o.name.clone());
+                measured.push(s.values.clone());
+            }
+        }
+    }
+    for (name, role) in &roles {
+        if !model.outputs().iter().any(|o| &o.name == name) {
+            return Err(Error::Config(format!(
+                "[outputs] {name} = \"{role}\": the model has no output {name} (it has {})",
+                model
+                    .outputs()
+                    .iter()
+                    .map(|o| o.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    if outputs.is_empty() {
+        return Err(Error::Config(format!(
+            "no model output has a meter: outputs map {:?}, meters found: {:?}",
+            roles,
+            data.series
+                .iter()
+                .map(|s| s.role.name().to_string())
+                .collect::<Vec<_>>()
+        )));
+    }
+    let (bases, base_reports) = crate::bases::bases_of(project, &outputs, &data)?;
+    Ok(Inputs {
+        runner,
+        model,
+        plan,
+        weather_path,
+        measured_weather,
+        features,
+        year: calendar.year,
+        outputs,
+        measured,
+        bases,
+        base_reports,
+    })
+}

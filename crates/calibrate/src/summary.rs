@@ -1,0 +1,363 @@
+//! The last stage: `summary.json`, the calibrated model a user takes away, and the CSV files
+//! of draws, hourly outputs and predictive bands.
+
+use std::path::Path;
+
+use bemcal_stats::lhs::Design;
+use bemcal_stats::mcmc::Draws;
+use bemcal_stats::metrics::G14Metrics;
+use bemcal_stats::summary::PosteriorSummary;
+use serde::{Deserialize, Serialize};
+
+use crate::design::read_outcome;
+use crate::posterior::{Posterior, SigmaDeltaBox};
+use crate::project::Estimate;
+use crate::replacement::{Attempt, FailureGroup, Outcome};
+use crate::{write_atomic, Calibration, ChainSummary, Error, MovedChain};
+
+/// Wall time of each stage, s.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Timings {
+    pub design_s: f64,
+    pub simulations_s: f64,
+    pub training_s: f64,
+    pub chains_s: f64,
+    pub summary_s: f64,
+    pub validation_s: f64,
+    /// Refinement rounds: simulating posterior draws (their retraining is in `training_s`,
+    /// their preliminary chains in `chains_s`).
+    #[serde(default)]
+    pub refinement_s: f64,
+    pub total_s: f64,
+}
+
+/// Metrics of one model against the meters, per output.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct OutputMetrics {
+    pub output: String,
+    #[serde(flatten)]
+    pub metrics: G14Metrics,
+}
+
+/// `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Summary {
+    pub project: String,
+    /// The EPW built from `[measured_weather]`: where each field came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
+    /// Loads in the meters that the model does not have, added to its outputs (`[[bases]]`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bases: Vec<crate::bases::BaseReport>,
+    pub outputs: Vec<String>,
+    pub parameters: Vec<ParameterReport>,
+    pub posterior: PosteriorSummary,
+    pub sigma_delta_kwh: Vec<(String, f64)>,
+    /// AR(1) coefficient of the hourly residuals at the MAP, per output (empty with iid).
+    #[serde(default)]
+    pub residual_ar1: Vec<(String, f64)>,
+    pub sigma_eta_kwh: Vec<(String, f64)>,
+    pub acceptance_rate: Vec<f64>,
+    /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moved_chains: Vec<MovedChain>,
+    /// Chains whose independence kernel was switched off after burn-in (accepted under 1 %,
+    /// `stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE`): their recorded draws are random-walk steps.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub independence_dropped: Vec<usize>,
+    pub estimate: Estimate,
+    /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate_note: Option<String>,
+    pub calibrated_values: Vec<(String, f64)>,
+    pub validation: Vec<OutputMetrics>,
+    pub initial: Vec<OutputMetrics>,
+    /// Guideline 14 of the surrogate's prediction at the estimate against the meters: next to
+    /// `validation` (EnergyPlus at the same point) it separates surrogate error from
+    /// calibration error (the surrogate fitting the meters while EnergyPlus does not means the
+    /// surrogate, not the posterior, is the bottleneck: more design points or training).
+    #[serde(default)]
+    pub surrogate_at_estimate: Vec<OutputMetrics>,
+    pub converged: bool,
+    pub design_points: usize,
+    pub design_repair: bemcal_stats::lhs::RepairReport,
+    /// What EnergyPlus made of the design: failed runs, replacements, usable warnings.
+    #[serde(default)]
+    pub design: DesignReport,
+    pub surrogate_held_out: serde_json::Value,
+    /// Surrogate refinement rounds (empty without `[refine]`).
+    #[serde(default)]
+    pub refinement: Vec<crate::refine::RefineRound>,
+    pub timings: Timings,
+}
+
+/// The design stage's record in `summary.json`: which design points EnergyPlus could not
+/// simulate and why, what replaced them, and the Severe messages accepted as usable.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct DesignReport {
+    /// Hypercube points (slots).
+    pub slots: usize,
+    /// Slots with a simulated point (trained on).
+    pub simulated: usize,
+    /// Every failed EnergyPlus run: slot, values and error text.
+    pub failed: Vec<Attempt>,
+    /// Failures grouped by reason, largest first.
+    pub reasons: Vec<FailureGroup>,
+    /// Slots simulated at a spare point after failing.
+    pub replaced: Vec<usize>,
+    /// Slots left without a point.
+    pub dropped: Vec<usize>,
+    /// What a user could change (from the reasons and where the failures lie in the priors).
+    pub suggestions: Vec<String>,
+    /// Severe messages after which a design point's results were used, with why.
+    pub notes: Vec<PointNote>,
+    /// Where the chains refused proposals because EnergyPlus failed there.
+    #[serde(default)]
+    pub invalid_region: crate::replacement::InvalidRegion,
+}
+
+/// A Severe message accepted as usable at a design point.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PointNote {
+    pub point: usize,
+    pub message: String,
+}
+
+impl DesignReport {
+    /// The report of a settled design; usable messages are read from the saved runs.
+    pub fn new(cal: &Calibration, outcome: &Outcome) -> DesignReport {
+        let dir = cal.simulations_dir();
+        let plan = &cal.inputs.plan;
+        DesignReport {
+            slots: outcome.slot_count(),
+            simulated: outcome.slots.len(),
+            failed: outcome.failed.clone(),
+            reasons: outcome.reasons(),
+            replaced: outcome.replaced.iter().map(|r| r.0).collect(),
+            dropped: outcome.dropped.clone(),
+            suggestions: crate::replacement::suggestions(
+                &plan.priors,
+                &plan.calibrated,
+                &outcome.failed,
+            ),
+            notes: outcome
+                .slots
+                .iter()
+                .flat_map(|&point| {
+                    crate::design::point_notes(&dir, point)
+                        .into_iter()
+                        .map(move |message| PointNote { point, message })
+                })
+                .collect(),
+            invalid_region: plan.invalid.clone(),
+        }
+    }
+}
+
+/// A parameter's prior next to its posterior.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ParameterReport {
+    pub name: String,
+    pub unit: String,
+    pub prior_min: f64,
+    pub prior_mode: f64,
+    pub prior_max: f64,
+}
+
+/// Assembles `summary.json` from the stages' results and writes it.
+#[allow(clippy::too_many_arguments)]
+pub fn write_summary(
+    cal: &Calibration,
+    design: &Design,
+    chains: &ChainSummary,
+    sampler_info: (&[f64], &serde_json::Value),
+    acceptance: Vec<f64>,
+    validation: Vec<OutputMetrics>,
+    initial: Vec<OutputMetrics>,
+    timings: Timings,
+) -> Result<Summary, Error> {
+    let inp = &cal.inputs;
+    let summary = Summary {
+        project: cal.project.name.clone(),
+        measured_weather: inp.measured_weather.clone(),
+        bases: inp.base_reports.clone(),
+        outputs: inp.outputs.clone(),
+        parameters: inp
+            .plan
+            .calibrated
+            .iter()
+            .zip(&inp.plan.priors)
+            .zip(&inp.plan.units)
+            .map(|((n, p), u)| ParameterReport {
+                name: n.clone(),
+                unit: u.clone(),
+                prior_min: p.min(),
+                prior_mode: p.mode(),
+                prior_max: p.max(),
+            })
+            .collect(),
+        converged: chains.posterior.max_rhat <= 1.01,
+        posterior: chains.posterior.clone(),
+        sigma_delta_kwh: chains.sigma_delta_kwh.clone(),
+        residual_ar1: chains.residual_ar1.clone(),
+        sigma_eta_kwh: inp
+            .outputs
+            .iter()
+            .cloned()
+            .zip(sampler_info.0.iter().copied())
+            .collect(),
+        acceptance_rate: acceptance,
+        estimate: cal.project.validation.estimate,
+        estimate_note: chains.estimate_note.clone(),
+        moved_chains: chains.moved_chains.clone(),
+        independence_dropped: chains.independence_dropped.clone(),
+        calibrated_values: inp
+            .plan
+            .calibrated
+            .iter()
+            .cloned()
+            .zip(chains.estimate.clone())
+            .collect(),
+        validation,
+        initial,
+        surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
+        design_points: design.points.len(),
+        design_repair: design.repair,
+        design: read_outcome(&cal.simulations_dir())
+            .map(|o| DesignReport::new(cal, &o))
+            .unwrap_or_default(),
+        surrogate_held_out: sampler_info.1.clone(),
+        refinement: cal.refine_log()?.rounds,
+        timings,
+    };
+    write_calibrated_model(cal, &chains.estimate)?;
+    crate::bases::write_bases_csv(cal)?;
+    let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
+    write_atomic(&cal.out.join("summary.json"), &json)?;
+    Ok(summary)
+}
+
+/// The calibrated model a user takes away: `calibrated.idf` (the model at `estimate`, the
+/// validated calibrated values, with the fixed values) and `calibrated.toml` (every parameter
+/// value, readable by `bemcal simulate --values`).
+pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let values = inp.plan.values(estimate);
+    let idf = inp.model.instantiate(&values, inp.runner.idd())?;
+    let scratch = cal.out.join("calibrated.expand");
+    let _ = std::fs::remove_dir_all(&scratch);
+    let simulated = inp.runner.simulated_input(&idf, &scratch)?;
+    let _ = std::fs::remove_dir_all(&scratch);
+    write_atomic(
+        &cal.out.join("calibrated.idf"),
+        simulated.to_text().as_bytes(),
+    )?;
+    let mut toml = format!(
+        "# Parameter values of the calibrated model of '{}' (estimate: {}; calibrated and fixed).\n\
+         # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\
+         # or run EnergyPlus on calibrated.idf (HVAC templates expanded) with that weather file.\n",
+        cal.project.name,
+        format!("{:?}", cal.project.validation.estimate).to_lowercase(),
+        inp.model.path.display(),
+        inp.weather_path.display()
+    );
+    for (name, v) in &values {
+        toml.push_str(&format!("{name} = {v}\n"));
+    }
+    write_atomic(&cal.out.join("calibrated.toml"), toml.as_bytes())
+}
+
+pub(crate) fn write_draws_csv(
+    path: &Path,
+    post: &Posterior<'_>,
+    outputs: &[String],
+    draws: &[Draws],
+    sbox: &SigmaDeltaBox,
+) -> Result<(), Error> {
+    let d = post.plan.calibrated.len();
+    let mut s = format!("chain,draw,{}", post.plan.calibrated.join(","));
+    if post.sigma_box.is_some() {
+        for o in outputs {
+            s.push_str(&format!(",sigma_delta_{o}"));
+        }
+    }
+    s.push_str(",log_posterior\n");
+    for (c, dr) in draws.iter().enumerate() {
+        for i in 0..dr.len() {
+            let u = dr.point(i);
+            s.push_str(&format!("{c},{i}"));
+            for x in post.theta(u) {
+                s.push_str(&format!(",{x}"));
+            }
+            if post.sigma_box.is_some() {
+                for k in 0..outputs.len() {
+                    s.push_str(&format!(",{}", sbox.sigma(k, u[d + k])));
+                }
+            }
+            s.push_str(&format!(",{}\n", dr.log_density[i]));
+        }
+    }
+    write_atomic(path, s.as_bytes())
+}
+
+pub(crate) fn timestamps(year: i32, n: usize) -> Vec<String> {
+    let start = chrono::NaiveDate::from_ymd_opt(year, 1, 1)
+        .and_then(|d| d.and_hms_opt(0, 0, 0))
+        .expect("valid year");
+    (0..n)
+        .map(|t| {
+            (start + chrono::Duration::hours(t as i64))
+                .format("%Y-%m-%dT%H:%M")
+                .to_string()
+        })
+        .collect()
+}
+
+/// Writes hourly outputs as `timestamp,<output>...`.
+pub fn write_outputs_csv(
+    path: &Path,
+    year: i32,
+    o: &bemcal_energyplus::HourlyOutputs,
+) -> Result<(), Error> {
+    let mut s = format!("timestamp,{}\n", o.names.join(","));
+    for (t, ts) in timestamps(year, o.hours()).iter().enumerate() {
+        s.push_str(ts);
+        for series in &o.series {
+            s.push_str(&format!(",{:.6}", series[t]));
+        }
+        s.push('\n');
+    }
+    write_atomic(path, s.as_bytes())
+}
+
+pub(crate) fn write_bands_csv(
+    path: &Path,
+    year: i32,
+    outputs: &[String],
+    measured: &[Vec<f64>],
+    bands: &[bemcal_stats::summary::PredictiveBands],
+) -> Result<(), Error> {
+    let mut s = String::from("timestamp");
+    for o in outputs {
+        s.push_str(&format!(",{o}_measured,{o}_q5,{o}_q50,{o}_q95"));
+    }
+    s.push('\n');
+    let n = bands.first().map_or(0, |b| b.q50.len());
+    for (t, ts) in timestamps(year, n).iter().enumerate() {
+        s.push_str(ts);
+        for (k, b) in bands.iter().enumerate() {
+            let m = measured[k][t];
+            let m = if m.is_finite() {
+                format!("{m:.4}")
+            } else {
+                String::new()
+            };
+            s.push_str(&format!(
+                ",{m},{:.4},{:.4},{:.4}",
+                b.q5[t], b.q50[t], b.q95[t]
+            ));
+        }
+        s.push('\n');
+    }
+    write_atomic(path, s.as_bytes())
+}
