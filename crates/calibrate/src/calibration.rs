@@ -123,13 +123,6 @@ impl Calibration {
         Ok((outcome, design))
     }
 
-    /// The simulation key of the first posterior draw of the next refinement round, after the
-    /// rounds in `log`: after every hypercube slot and every earlier round's draws (a dropped
-    /// design point keeps its slot, so keys never collide).
-    pub fn next_refine_key(&self, log: &crate::refine::RefineLog) -> usize {
-        self.project.design.points + log.points().count()
-    }
-
     /// Folder of the design-point simulations.
     pub fn simulations_dir(&self) -> PathBuf {
         self.out.join("simulations")

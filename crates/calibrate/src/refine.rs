@@ -147,6 +147,13 @@ pub fn next_starts(
 }
 
 impl Calibration {
+    /// The simulation key of the first posterior draw of the next refinement round, after the
+    /// rounds in `log`: after every hypercube slot and every earlier round's draws (a dropped
+    /// design point keeps its slot, so keys never collide).
+    pub fn next_refine_key(&self, log: &RefineLog) -> usize {
+        self.project.design.points + log.points().count()
+    }
+
     /// The finished refinement rounds (`refine.json`; none when it does not exist).
     pub fn refine_log(&self) -> Result<RefineLog, Error> {
         let path = self.out.join(REFINE_FILE);
