@@ -7,7 +7,9 @@
 //!   distributed run (`calibrate --local-workers 2`) then gets the same surrogate (reused from
 //!   the output folder, as the local path reuses it) because two trainings are not bit-identical.
 //!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
-//!   posterior must then be identical to the single-process ones.
+//!   posterior must then be identical to the single-process ones. The project asks for an
+//!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): both drivers extend the
+//!   final chains once, by the same rule, to the same draws.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -132,8 +134,15 @@ fn distributed_matches_single_process() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
+    // Appended to the project's last table, [mcmc].
+    let text = format!("{}rhat_target = 0.5\nmax_extensions = 1\n", project_text());
+    std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
-    calibrate(&pf, &local, None);
+    let local_log = calibrate(&pf, &local, None);
+    assert!(
+        local_log.contains("extending to 500 iterations (extension 1 of at most 1)"),
+        "{local_log}"
+    );
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
     let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
@@ -167,9 +176,14 @@ fn distributed_matches_single_process() {
         "initial",
         "acceptance_rate",
         "sigma_delta_kwh",
+        "chain_extensions",
     ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
+    // One extension of 300 - 100 iterations: 2 chains x 400 draws after burn-in.
+    assert_eq!(sa["chain_extensions"], 1);
+    let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
+    assert_eq!(draws.lines().count(), 1 + 2 * 400);
 }
 
 #[test]

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::now_ms;
 use crate::proto;
+use crate::states::{JobKind, JobState, RunState, Stage};
 
 /// Migrations, in order; `user_version` = how many have been applied.
 const MIGRATIONS: &[&str] = &[
@@ -151,8 +152,8 @@ type Result<T> = std::result::Result<T, DbError>;
 pub struct RunRow {
     pub id: String,
     pub name: String,
-    pub state: String,
-    pub stage: String,
+    pub state: RunState,
+    pub stage: Stage,
     pub error: Option<String>,
     pub bundle: Vec<File>,
     pub surrogate: Vec<File>,
@@ -173,11 +174,11 @@ pub struct RunRow {
 pub struct JobRow {
     pub id: u64,
     pub run_id: String,
-    pub stage: String,
-    pub kind: String,
+    pub stage: Stage,
+    pub kind: JobKind,
     pub label: String,
     pub spec: proto::Job,
-    pub state: String,
+    pub state: JobState,
     pub failures: u32,
     pub outputs: Vec<File>,
     pub result: Option<String>,
@@ -251,8 +252,8 @@ fn job_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRow> {
 
 /// A new job to add.
 pub struct NewJob {
-    pub stage: &'static str,
-    pub kind: &'static str,
+    pub stage: Stage,
+    pub kind: JobKind,
     pub label: String,
     pub spec: proto::Job,
     pub cache_key: Option<String>,
@@ -378,7 +379,7 @@ impl Store {
     /// Moves a run to `stage`, closing the previous stage and opening the new one; jobs given
     /// are added in the same transaction. A stage visited again (chains of a later refinement
     /// round, an extension) keeps the seconds of its earlier visits.
-    pub fn set_stage(&self, run: &str, stage: &str, jobs: Vec<NewJob>) -> Result<()> {
+    pub fn set_stage(&self, run: &str, stage: Stage, jobs: Vec<NewJob>) -> Result<()> {
         self.set_stage_refined(run, stage, jobs, None)
     }
 
@@ -387,7 +388,7 @@ impl Store {
     pub fn set_stage_refined(
         &self,
         run: &str,
-        stage: &str,
+        stage: Stage,
         jobs: Vec<NewJob>,
         refine: Option<&str>,
     ) -> Result<()> {
@@ -437,7 +438,7 @@ impl Store {
     }
 
     /// Stage durations (s) of a run, by stage name.
-    pub fn stage_seconds(&self, run: &str) -> Result<Vec<(String, f64)>> {
+    pub fn stage_seconds(&self, run: &str) -> Result<Vec<(Stage, f64)>> {
         self.with(|c| {
             let mut st = c.prepare(
                 "SELECT stage, started_ms, COALESCE(finished_ms, ?2), seconds_before FROM stages WHERE run_id = ?1",
@@ -445,7 +446,7 @@ impl Store {
             let rows = st
                 .query_map(params![run, now_ms() as i64], |r| {
                     Ok((
-                        r.get::<_, String>(0)?,
+                        r.get::<_, Stage>(0)?,
                         r.get::<_, f64>(3)?
                             + (r.get::<_, i64>(2)? - r.get::<_, i64>(1)?) as f64 / 1000.0,
                     ))
@@ -456,7 +457,7 @@ impl Store {
     }
 
     /// Ends a run: `done`, `failed` (with the reason) or `cancelled`. Open jobs are cancelled.
-    pub fn end_run(&self, run: &str, state: &str, error: Option<&str>) -> Result<bool> {
+    pub fn end_run(&self, run: &str, state: RunState, error: Option<&str>) -> Result<bool> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -478,8 +479,11 @@ impl Store {
                     "UPDATE leases SET active = 0 WHERE active = 1 AND job_id IN (SELECT id FROM jobs WHERE run_id = ?1)",
                     [run],
                 )?;
-                if state == "done" {
-                    tx.execute("UPDATE runs SET stage = 'done' WHERE id = ?1", [run])?;
+                if state == RunState::Done {
+                    tx.execute(
+                        "UPDATE runs SET stage = ?2 WHERE id = ?1",
+                        params![run, Stage::Done],
+                    )?;
                 }
             }
             tx.commit()?;
@@ -526,7 +530,7 @@ impl Store {
             tx.commit()?;
             Ok(())
         })?;
-        self.end_run(run, "done", None)?;
+        self.end_run(run, RunState::Done, None)?;
         Ok(())
     }
 
@@ -549,7 +553,7 @@ impl Store {
     }
 
     /// Jobs of a run (optionally of one stage), in creation order.
-    pub fn jobs(&self, run: &str, stage: Option<&str>) -> Result<Vec<JobRow>> {
+    pub fn jobs(&self, run: &str, stage: Option<Stage>) -> Result<Vec<JobRow>> {
         self.with(|c| {
             let mut st = c.prepare(&format!(
                 "SELECT {JOB_COLS} FROM jobs WHERE run_id = ?1 AND (?2 IS NULL OR stage = ?2) ORDER BY id"
@@ -949,8 +953,8 @@ mod tests {
     fn jobs(n: usize, key: impl Fn(usize) -> Option<String>) -> Vec<NewJob> {
         (0..n)
             .map(|i| NewJob {
-                stage: "simulate",
-                kind: "simulate",
+                stage: Stage::Simulate,
+                kind: JobKind::Simulate,
                 label: format!("point {i}"),
                 spec: proto::Job::default(),
                 cache_key: key(i),
@@ -963,8 +967,10 @@ mod tests {
         let (s, dir) = store("fair");
         s.create_run("A", "big", &[], &[], 0).unwrap();
         s.create_run("B", "small", &[], &[], 0).unwrap();
-        s.set_stage("A", "simulate", jobs(50, |_| None)).unwrap();
-        s.set_stage("B", "simulate", jobs(2, |_| None)).unwrap();
+        s.set_stage("A", Stage::Simulate, jobs(50, |_| None))
+            .unwrap();
+        s.set_stage("B", Stage::Simulate, jobs(2, |_| None))
+            .unwrap();
         // Leases held (workers busy): A, B, A, B, then only A is left.
         let held: Vec<proto::Job> = (0..6)
             .map(|_| s.lease("w", 60_000).unwrap().unwrap())
@@ -973,7 +979,8 @@ mod tests {
         assert_eq!(order, ["A", "B", "A", "B", "A", "A"]);
         // A third run arriving while A and B hold leases goes first (it has none leased).
         s.create_run("C", "third", &[], &[], 0).unwrap();
-        s.set_stage("C", "simulate", jobs(2, |_| None)).unwrap();
+        s.set_stage("C", Stage::Simulate, jobs(2, |_| None))
+            .unwrap();
         assert_eq!(s.lease("w", 60_000).unwrap().unwrap().run_id, "C");
         std::fs::remove_dir_all(dir).ok();
 
@@ -981,8 +988,10 @@ mod tests {
         let (s, dir) = store("fair1");
         s.create_run("A", "big", &[], &[], 0).unwrap();
         s.create_run("B", "small", &[], &[], 0).unwrap();
-        s.set_stage("A", "simulate", jobs(50, |_| None)).unwrap();
-        s.set_stage("B", "simulate", jobs(2, |_| None)).unwrap();
+        s.set_stage("A", Stage::Simulate, jobs(50, |_| None))
+            .unwrap();
+        s.set_stage("B", Stage::Simulate, jobs(2, |_| None))
+            .unwrap();
         let mut order = vec![];
         for _ in 0..6 {
             let j = s.lease("w", 60_000).unwrap().unwrap();
@@ -998,9 +1007,9 @@ mod tests {
         let (s, dir) = store("share");
         s.create_run("A", "a", &[], &[], 0).unwrap();
         s.create_run("B", "b", &[], &[], 0).unwrap();
-        s.set_stage("A", "simulate", jobs(2, |i| Some(format!("k{i}"))))
+        s.set_stage("A", Stage::Simulate, jobs(2, |i| Some(format!("k{i}"))))
             .unwrap();
-        s.set_stage("B", "simulate", jobs(2, |i| Some(format!("k{i}"))))
+        s.set_stage("B", Stage::Simulate, jobs(2, |i| Some(format!("k{i}"))))
             .unwrap();
         let j1 = s.lease("w1", 60_000).unwrap().unwrap();
         let j2 = s.lease("w2", 60_000).unwrap().unwrap();
@@ -1021,7 +1030,7 @@ mod tests {
         assert_eq!(shared, vec!["A".to_string()]);
         for run in ["A", "B"] {
             let j = s.jobs(run, None).unwrap();
-            assert!(j.iter().all(|j| j.state == "done"), "{j:?}");
+            assert!(j.iter().all(|j| j.state == JobState::Done), "{j:?}");
             assert_eq!(j.iter().filter(|j| j.cached).count(), 1, "{j:?}");
             assert!(j.iter().all(|j| j.outputs[0].path == "point.json"));
         }

@@ -10,26 +10,23 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use bemcal_calibrate::posterior::Checkpoint;
-use bemcal_calibrate::refine::{
-    next_starts, pick_draws, pooled_error, FailedPoint, RefineLog, RefinePoint, RefineRound,
-    REFINE_FILE,
-};
+use bemcal_calibrate::refine::{close_round, pick_draws, RefineLog, SimulatedDraw, REFINE_FILE};
 use bemcal_calibrate::replacement::{Attempt, Step};
 use bemcal_calibrate::Project;
 use bemcal_calibrate::{
-    fallback_note, write_summary, Calibration, ChainSummary, MovedChain, OutputMetrics, Timings,
+    extended_target, next_candidate, write_summary, Calibration, ChainSummary, OutputMetrics,
+    Timings, ValidationStep, INITIAL_KEY,
 };
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::mcmc::Draws;
-use bemcal_stats::summary::PosteriorSummary;
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::artifacts::{safe_relative, ArtifactDir};
 use crate::bundle;
 use crate::db::{File, JobRow, NewJob, RunRow, Store};
 use crate::proto::{self, job::Kind};
+use crate::states::{JobKind, JobState, RunState, Stage};
 
 /// Settings of the coordinator that shape runs.
 #[derive(Debug, Clone)]
@@ -69,34 +66,17 @@ pub struct State {
     pub kick: tokio::sync::mpsc::UnboundedSender<String>,
 }
 
-/// Stages in order.
-pub const STAGES: &[&str] = &[
-    "design", "simulate", "train", "chains", "merge", "refine", "validate", "summary",
+/// The stages a run goes through, in order (every [`Stage`] but `Done`).
+pub const STAGES: &[Stage] = &[
+    Stage::Design,
+    Stage::Simulate,
+    Stage::Train,
+    Stage::Chains,
+    Stage::Merge,
+    Stage::Refine,
+    Stage::Validate,
+    Stage::Summary,
 ];
-
-/// The merged chains, kept in the database between the merge and the summary.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct Merged {
-    posterior: PosteriorSummary,
-    sigma_delta_kwh: Vec<(String, f64)>,
-    #[serde(default)]
-    residual_ar1: Vec<(String, f64)>,
-    estimate: Vec<f64>,
-    #[serde(default)]
-    surrogate_at_estimate: Vec<OutputMetrics>,
-    acceptance: Vec<f64>,
-    sigma_eta: Vec<f64>,
-    held_out: serde_json::Value,
-    /// Draws validated instead when EnergyPlus fails at the estimate.
-    #[serde(default)]
-    fallbacks: Vec<Vec<f64>>,
-    /// Chains started in the best optimum's mode.
-    #[serde(default)]
-    moved_chains: Vec<MovedChain>,
-    /// Chains whose independence kernel was switched off after burn-in.
-    #[serde(default)]
-    independence_dropped: Vec<usize>,
-}
 
 type Result<T> = std::result::Result<T, String>;
 
@@ -141,7 +121,7 @@ impl State {
     /// Advances `run` as far as it goes now; an error fails the run with its message.
     pub fn advance(&self, run: &str) {
         if let Err(e) = self.advance_inner(run) {
-            let _ = self.store.end_run(run, "failed", Some(&e));
+            let _ = self.store.end_run(run, RunState::Failed, Some(&e));
         }
     }
 
@@ -171,19 +151,19 @@ impl State {
             let Some(r) = self.store.run(run).map_err(err)? else {
                 return Ok(());
             };
-            if r.state != "running" {
+            if r.state != RunState::Running {
                 return Ok(());
             }
-            let progressed = match r.stage.as_str() {
-                "design" => self.stage_design(&r)?,
-                "simulate" => self.stage_simulate(&r)?,
-                "train" => self.stage_train(&r)?,
-                "chains" => self.stage_chains(&r)?,
-                "merge" => self.stage_merge(&r)?,
-                "refine" => self.stage_refine(&r)?,
-                "validate" => self.stage_validate(&r)?,
-                "summary" => self.stage_summary(&r)?,
-                _ => false,
+            let progressed = match r.stage {
+                Stage::Design => self.stage_design(&r)?,
+                Stage::Simulate => self.stage_simulate(&r)?,
+                Stage::Train => self.stage_train(&r)?,
+                Stage::Chains => self.stage_chains(&r)?,
+                Stage::Merge => self.stage_merge(&r)?,
+                Stage::Refine => self.stage_refine(&r)?,
+                Stage::Validate => self.stage_validate(&r)?,
+                Stage::Summary => self.stage_summary(&r)?,
+                Stage::Done => false,
             };
             if !progressed {
                 return Ok(());
@@ -203,7 +183,9 @@ impl State {
             .iter()
             .map(|(i, x)| self.simulation_job(r, &cal, &inputs_hash, *i, x, 0))
             .collect();
-        self.store.set_stage(&r.id, "simulate", jobs).map_err(err)?;
+        self.store
+            .set_stage(&r.id, Stage::Simulate, jobs)
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -225,11 +207,11 @@ impl State {
         let key = hex::encode(Sha256::digest(format!("tolerant\n{inputs_hash}\n{values}")));
         NewJob {
             stage: if refine_round > 0 {
-                "refine"
+                Stage::Refine
             } else {
-                "simulate"
+                Stage::Simulate
             },
-            kind: "simulate",
+            kind: JobKind::Simulate,
             label: if refine_round > 0 {
                 format!("simulation of posterior draw {i} (refinement round {refine_round})")
             } else {
@@ -331,8 +313,8 @@ impl State {
             });
         }
         Ok(NewJob {
-            stage: "train",
-            kind: "train",
+            stage: Stage::Train,
+            kind: JobKind::Train,
             label: "surrogate training".into(),
             spec: proto::Job {
                 bundle: crate::client::refs(&r.bundle),
@@ -366,8 +348,8 @@ impl State {
     }
 
     fn stage_simulate(&self, r: &RunRow) -> Result<bool> {
-        let jobs = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
-        if jobs.iter().any(|j| j.state != "done") {
+        let jobs = self.store.jobs(&r.id, Some(Stage::Simulate)).map_err(err)?;
+        if jobs.iter().any(|j| j.state != JobState::Done) {
             return Ok(false);
         }
         let cal = self.load(r)?;
@@ -424,12 +406,14 @@ impl State {
                 return Err("the surrogate given at submit is not a valid surrogate folder".into());
             }
             let jobs = self.chain_jobs(r, &cal.project)?;
-            self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
+            self.store
+                .set_stage(&r.id, Stage::Chains, jobs)
+                .map_err(err)?;
             return Ok(true);
         }
         let job = self.train_job(r, &cal, &dataset, None)?;
         self.store
-            .set_stage(&r.id, "train", vec![job])
+            .set_stage(&r.id, Stage::Train, vec![job])
             .map_err(err)?;
         Ok(true)
     }
@@ -437,8 +421,8 @@ impl State {
     /// The current surrogate: the latest trained one (refinement retrains), else the one
     /// given at submit.
     fn surrogate_files(&self, r: &RunRow) -> Result<Vec<File>> {
-        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
-        if let Some(j) = jobs.iter().rev().find(|j| j.state == "done") {
+        let jobs = self.store.jobs(&r.id, Some(Stage::Train)).map_err(err)?;
+        if let Some(j) = jobs.iter().rev().find(|j| j.state == JobState::Done) {
             return Ok(j.outputs.clone());
         }
         if !r.surrogate.is_empty() {
@@ -448,8 +432,8 @@ impl State {
     }
 
     fn stage_train(&self, r: &RunRow) -> Result<bool> {
-        let jobs = self.store.jobs(&r.id, Some("train")).map_err(err)?;
-        if jobs.is_empty() || jobs.iter().any(|j| j.state != "done") {
+        let jobs = self.store.jobs(&r.id, Some(Stage::Train)).map_err(err)?;
+        if jobs.is_empty() || jobs.iter().any(|j| j.state != JobState::Done) {
             return Ok(false);
         }
         let cal = self.load(r)?;
@@ -458,7 +442,9 @@ impl State {
             return Err("training produced no valid surrogate".into());
         }
         let jobs = self.chain_jobs(r, &cal.project)?;
-        self.store.set_stage(&r.id, "chains", jobs).map_err(err)?;
+        self.store
+            .set_stage(&r.id, Stage::Chains, jobs)
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -484,7 +470,7 @@ impl State {
     /// that segment's checkpoint; a round's first segment starts where the same chains ended
     /// in the previous round, `warm.json`).
     fn chain_jobs(&self, r: &RunRow, project: &Project) -> Result<Vec<NewJob>> {
-        let done = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let done = self.store.jobs(&r.id, Some(Stage::Chains)).map_err(err)?;
         let m = &project.mcmc;
         let n = m.chains;
         let per = if self.config.chains_per_job == 0 {
@@ -520,7 +506,7 @@ impl State {
         for first in (0..n).step_by(per) {
             let count = per.min(n - first);
             let mine = group(first, round);
-            if mine.iter().any(|j| j.state != "done") {
+            if mine.iter().any(|j| j.state != JobState::Done) {
                 continue;
             }
             let reached: u64 = mine
@@ -565,8 +551,8 @@ impl State {
                 format!("chains {}-{} segment {seg}", first, first + count - 1)
             };
             jobs.push(NewJob {
-                stage: "chains",
-                kind: "chains",
+                stage: Stage::Chains,
+                kind: JobKind::Chains,
                 label,
                 spec: proto::Job {
                     bundle: crate::client::refs(&r.bundle),
@@ -587,17 +573,19 @@ impl State {
     }
 
     fn stage_chains(&self, r: &RunRow) -> Result<bool> {
-        let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let jobs = self.store.jobs(&r.id, Some(Stage::Chains)).map_err(err)?;
         let project = self.project(r)?;
         let target_jobs = self.chain_jobs(r, &project)?;
         if !target_jobs.is_empty() {
             self.store.add_jobs(&r.id, target_jobs).map_err(err)?;
             return Ok(false);
         }
-        if jobs.iter().any(|j| j.state != "done") {
+        if jobs.iter().any(|j| j.state != JobState::Done) {
             return Ok(false);
         }
-        self.store.set_stage(&r.id, "merge", vec![]).map_err(err)?;
+        self.store
+            .set_stage(&r.id, Stage::Merge, vec![])
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -613,7 +601,7 @@ impl State {
     /// The chains of refinement round `round`, merged: each chain's last state and all its
     /// draws, segments in order.
     fn merged_chains(&self, r: &RunRow, round: u32) -> Result<(Vec<Chain>, Vec<Draws>)> {
-        let jobs = self.store.jobs(&r.id, Some("chains")).map_err(err)?;
+        let jobs = self.store.jobs(&r.id, Some(Stage::Chains)).map_err(err)?;
         let mut groups: Vec<(u32, Vec<&JobRow>)> = vec![];
         for j in &jobs {
             let Some(Kind::Chains(c)) = &j.spec.kind else {
@@ -677,19 +665,27 @@ impl State {
                     self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), round + 1)
                 })
                 .collect();
-            self.store.set_stage(&r.id, "refine", jobs).map_err(err)?;
+            self.store
+                .set_stage(&r.id, Stage::Refine, jobs)
+                .map_err(err)?;
             return Ok(true);
         }
-        let chains = sampler.summarize(&states, &draws).map_err(err)?;
-        if let Some(target) = self.config.rhat_target {
-            if chains.posterior.max_rhat > target && r.extensions < self.config.max_extensions {
-                let m = &cal.project.mcmc;
-                self.store
-                    .extend_chains(&r.id, r.chain_target + (m.iterations - m.burn_in))
-                    .map_err(err)?;
-                self.store.set_stage(&r.id, "chains", vec![]).map_err(err)?;
-                return Ok(true);
-            }
+        let mut chains = sampler.summarize(&states, &draws).map_err(err)?;
+        chains.extensions = r.extensions;
+        // The project's R-hat target, else the coordinator's (`--rhat-target`).
+        let mut m = cal.project.mcmc.clone();
+        if m.rhat_target.is_none() {
+            m.rhat_target = self.config.rhat_target;
+            m.max_extensions = self.config.max_extensions;
+        }
+        if let Some(target) =
+            extended_target(&m, chains.posterior.max_rhat, r.extensions, r.chain_target)
+        {
+            self.store.extend_chains(&r.id, target).map_err(err)?;
+            self.store
+                .set_stage(&r.id, Stage::Chains, vec![])
+                .map_err(err)?;
+            return Ok(true);
         }
         let ck = Checkpoint {
             states: states.clone(),
@@ -697,30 +693,24 @@ impl State {
         };
         let bytes = serde_json::to_vec(&ck).map_err(err)?;
         bemcal_calibrate::write_atomic(&cal.out.join("chains.json"), &bytes).map_err(err)?;
-        let merged = Merged {
-            acceptance: states
-                .iter()
-                .map(|s| s.acceptance_rate_post_burn_in())
-                .collect(),
-            posterior: chains.posterior,
-            sigma_delta_kwh: chains.sigma_delta_kwh,
-            residual_ar1: chains.residual_ar1,
-            estimate: chains.estimate.clone(),
-            surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
-            sigma_eta: sampler.sigma_eta.clone(),
-            held_out: sampler.held_out.clone(),
-            fallbacks: chains.fallbacks.clone(),
-            moved_chains: chains.moved_chains.clone(),
-            independence_dropped: chains.independence_dropped.clone(),
+        let ValidationStep::Validate(first) = next_candidate(&chains, &[]) else {
+            return Err("validation: no estimate".into());
         };
         self.store
-            .set_merge(&r.id, &serde_json::to_string(&merged).map_err(err)?)
+            .set_merge(&r.id, &serde_json::to_string(&chains).map_err(err)?)
             .map_err(err)?;
-        let mut jobs = vec![validation_job(r, 0, "calibrated", chains.estimate)];
+        let mut jobs = vec![validation_job(r, first.key, "calibrated", first.values)];
         if cal.project.validation.initial {
-            jobs.push(validation_job(r, 1, "initial", cal.initial_point()));
+            jobs.push(validation_job(
+                r,
+                INITIAL_KEY,
+                "initial",
+                cal.initial_point(),
+            ));
         }
-        self.store.set_stage(&r.id, "validate", jobs).map_err(err)?;
+        self.store
+            .set_stage(&r.id, Stage::Validate, jobs)
+            .map_err(err)?;
         Ok(true)
     }
 
@@ -734,53 +724,41 @@ impl State {
             |j: &JobRow| matches!(&j.spec.kind, Some(Kind::Simulate(s)) if s.refine_round == round);
         let jobs: Vec<JobRow> = self
             .store
-            .jobs(&r.id, Some("refine"))
+            .jobs(&r.id, Some(Stage::Refine))
             .map_err(err)?
             .into_iter()
             .filter(in_round)
             .collect();
-        if jobs.iter().any(|j| j.state != "done") {
+        if jobs.iter().any(|j| j.state != JobState::Done) {
             return Ok(false);
         }
         let cal = self.load(r)?;
         self.place(&cal.out, &self.surrogate_files(r)?)?;
         // Every simulation so far (design points, then every round's draws), read back once.
-        let mut sims = self.store.jobs(&r.id, Some("simulate")).map_err(err)?;
-        sims.extend(self.store.jobs(&r.id, Some("refine")).map_err(err)?);
+        let mut sims = self.store.jobs(&r.id, Some(Stage::Simulate)).map_err(err)?;
+        sims.extend(self.store.jobs(&r.id, Some(Stage::Refine)).map_err(err)?);
         let simulated = self.simulated(&cal, &sims)?;
-        let mut points = vec![];
-        let mut failed = vec![];
-        let mut outputs = vec![];
-        for s in simulated.iter().filter(|s| s.refine_round == round) {
-            match &s.outputs {
-                Ok(o) => {
-                    points.push(RefinePoint {
-                        index: s.index,
-                        values: s.values.clone(),
-                    });
-                    outputs.push(o.clone());
-                }
-                Err(error) => failed.push(FailedPoint {
-                    values: s.values.clone(),
-                    error: error.clone(),
-                }),
-            }
-        }
-        let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
-        let predicted = cal.sampler().map_err(err)?.predict(&xs).map_err(err)?;
-        let surrogate_error =
-            pooled_error(&cal.inputs.outputs, &outputs, &predicted).map_err(err)?;
         let (states, draws) = self.merged_chains(r, round - 1)?;
         let last: Vec<Vec<f64>> = states.iter().map(|s| s.position().to_vec()).collect();
-        let (starts, restarted) = next_starts(&draws, &last, cal.project.refine.restart_below);
-        log.rounds.push(RefineRound {
+        let this_round = simulated
+            .iter()
+            .filter(|s| s.refine_round == round)
+            .map(|s| SimulatedDraw {
+                index: s.index,
+                values: s.values.clone(),
+                outputs: s.outputs.clone(),
+            })
+            .collect();
+        let (closed, _) = close_round(
             round,
-            points,
-            failed,
-            surrogate_error,
-            starts,
-            restarted,
-        });
+            this_round,
+            &mut cal.sampler().map_err(err)?,
+            &draws,
+            &last,
+            cal.project.refine.restart_below,
+        )
+        .map_err(err)?;
+        log.rounds.push(closed);
         // The grown training set: design points, then every round's draws.
         let (outcome, design) = cal.settled_design().map_err(err)?;
         let by_index: std::collections::HashMap<usize, HourlyOutputs> = simulated
@@ -816,40 +794,37 @@ impl State {
         let job = self.train_job(r, &cal, &dataset, init.as_ref())?;
         let json = serde_json::to_string(&log).map_err(err)?;
         self.store
-            .set_stage_refined(&r.id, "train", vec![job], Some(&json))
+            .set_stage_refined(&r.id, Stage::Train, vec![job], Some(&json))
             .map_err(err)?;
         Ok(true)
     }
 
     fn stage_validate(&self, r: &RunRow) -> Result<bool> {
-        let jobs = self.store.jobs(&r.id, Some("validate")).map_err(err)?;
-        if jobs.iter().any(|j| j.state != "done") {
+        let jobs = self.store.jobs(&r.id, Some(Stage::Validate)).map_err(err)?;
+        if jobs.iter().any(|j| j.state != JobState::Done) {
             return Ok(false);
         }
         // EnergyPlus failed at the estimate (and at the fallbacks so far): the next-best draw.
         let tried: Vec<&JobRow> = jobs.iter().filter(|j| is_calibrated(j)).collect();
         let failures: Vec<String> = tried.iter().filter_map(|j| reported_failure(j)).collect();
         if failures.len() == tried.len() {
-            let merged = self.merged(r)?;
-            let Some(x) = merged.fallbacks.get(failures.len() - 1) else {
-                return Err(format!(
-                    "validation: EnergyPlus failed at the estimate and at the next {} draws: {}",
-                    failures.len() - 1,
-                    failures.join(" | ")
-                ));
-            };
-            let job = validation_job(r, failures.len() as u32 + 1, "calibrated", x.clone());
-            self.store.add_jobs(&r.id, vec![job]).map_err(err)?;
-            return Ok(false);
+            match next_candidate(&self.merged(r)?, &failures) {
+                ValidationStep::Validate(c) => {
+                    let job = validation_job(r, c.key, "calibrated", c.values);
+                    self.store.add_jobs(&r.id, vec![job]).map_err(err)?;
+                    return Ok(false);
+                }
+                ValidationStep::Exhausted(message) => return Err(format!("validation: {message}")),
+            }
         }
         self.store
-            .set_stage(&r.id, "summary", vec![])
+            .set_stage(&r.id, Stage::Summary, vec![])
             .map_err(err)?;
         Ok(true)
     }
 
     /// The merged chains recorded at the merge.
-    fn merged(&self, r: &RunRow) -> Result<Merged> {
+    fn merged(&self, r: &RunRow) -> Result<ChainSummary> {
         serde_json::from_str(
             r.merge
                 .as_deref()
@@ -860,11 +835,10 @@ impl State {
 
     fn stage_summary(&self, r: &RunRow) -> Result<bool> {
         let cal = self.load(r)?;
-        let jobs = self.store.jobs(&r.id, Some("validate")).map_err(err)?;
+        let jobs = self.store.jobs(&r.id, Some(Stage::Validate)).map_err(err)?;
         let mut validation = vec![];
         let mut initial = vec![];
-        let mut merged = self.merged(r)?;
-        let mut estimate_note = None;
+        let mut chains = self.merged(r)?;
         let failures: Vec<String> = jobs.iter().filter_map(reported_failure).collect();
         for j in &jobs {
             if reported_failure(j).is_some() {
@@ -875,11 +849,8 @@ impl State {
                 serde_json::from_str(j.result.as_deref().unwrap_or("[]")).map_err(err)?;
             match &j.spec.kind {
                 Some(Kind::Validate(v)) if v.label == "initial" => initial = m,
-                Some(Kind::Validate(v)) => {
-                    if !failures.is_empty() {
-                        merged.estimate = v.values.clone();
-                        estimate_note = Some(fallback_note(&failures));
-                    }
+                Some(Kind::Validate(_)) => {
+                    chains.settle_estimate(&failures);
                     validation = m
                 }
                 _ => {}
@@ -892,44 +863,24 @@ impl State {
             bemcal_calibrate::write_atomic(&cal.out.join(REFINE_FILE), &json).map_err(err)?;
         }
         let secs = self.store.stage_seconds(&r.id).map_err(err)?;
-        let s = |name: &str| {
+        let s = |stage: Stage| {
             secs.iter()
-                .filter(|x| x.0 == name)
+                .filter(|x| x.0 == stage)
                 .map(|x| x.1)
                 .sum::<f64>()
         };
         let timings = Timings {
-            design_s: s("design"),
-            simulations_s: s("simulate"),
-            training_s: s("train"),
-            chains_s: s("chains"),
-            summary_s: s("merge"),
-            validation_s: s("validate"),
-            refinement_s: s("refine"),
+            design_s: s(Stage::Design),
+            simulations_s: s(Stage::Simulate),
+            training_s: s(Stage::Train),
+            chains_s: s(Stage::Chains),
+            summary_s: s(Stage::Merge),
+            validation_s: s(Stage::Validate),
+            refinement_s: s(Stage::Refine),
             total_s: (crate::now_ms().saturating_sub(r.created_ms)) as f64 / 1000.0,
         };
-        let chains = ChainSummary {
-            posterior: merged.posterior,
-            sigma_delta_kwh: merged.sigma_delta_kwh,
-            residual_ar1: merged.residual_ar1,
-            estimate: merged.estimate,
-            surrogate_at_estimate: merged.surrogate_at_estimate,
-            fallbacks: merged.fallbacks,
-            estimate_note,
-            moved_chains: merged.moved_chains,
-            independence_dropped: merged.independence_dropped,
-        };
-        let summary = write_summary(
-            &cal,
-            &design,
-            &chains,
-            (&merged.sigma_eta, &merged.held_out),
-            merged.acceptance,
-            validation,
-            initial,
-            timings,
-        )
-        .map_err(err)?;
+        let summary =
+            write_summary(&cal, &design, &chains, validation, initial, timings).map_err(err)?;
         let mut files = vec![];
         for p in crate::client::walk(&cal.out).map_err(err)? {
             let rel = p
@@ -955,15 +906,15 @@ impl State {
 
 /// A validation job; the calibrated model's tolerates an EnergyPlus failure (the driver then
 /// validates the next-best draw).
-fn validation_job(r: &RunRow, index: u32, label: &str, values: Vec<f64>) -> NewJob {
+fn validation_job(r: &RunRow, key: usize, label: &str, values: Vec<f64>) -> NewJob {
     NewJob {
-        stage: "validate",
-        kind: "validate",
+        stage: Stage::Validate,
+        kind: JobKind::Validate,
         label: format!("validation ({label})"),
         spec: proto::Job {
             bundle: crate::client::refs(&r.bundle),
             kind: Some(Kind::Validate(proto::ValidateJob {
-                index,
+                index: key as u32,
                 label: label.into(),
                 values,
                 tolerate_failure: label == "calibrated",

@@ -15,6 +15,7 @@ pub mod driver;
 pub mod portfolio;
 pub mod server;
 pub mod service;
+pub mod states;
 
 /// Generated protocol types, client and server (package `bemcal.v1`).
 pub mod proto {

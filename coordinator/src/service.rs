@@ -11,6 +11,7 @@ use crate::db::{File, Outcome, RunRow};
 use crate::driver::{State, STAGES};
 use crate::proto::coordinator_server::Coordinator;
 use crate::proto::*;
+use crate::states::{JobKind, JobState, RunState};
 use crate::{bundle, CHUNK_BYTES};
 
 /// Largest artifact accepted (bytes).
@@ -71,8 +72,6 @@ impl Service {
                 let mine: Vec<_> = jobs.iter().filter(|j| j.stage == *s).collect();
                 let state = if i < cur {
                     "done"
-                } else if i == cur && r.state == "running" {
-                    "running"
                 } else if i == cur {
                     r.state.as_str()
                 } else {
@@ -83,7 +82,7 @@ impl Service {
                     (d, 1)
                 } else {
                     (
-                        mine.iter().filter(|j| j.state == "done").count() as u32,
+                        mine.iter().filter(|j| j.state == JobState::Done).count() as u32,
                         mine.len() as u32,
                     )
                 };
@@ -92,15 +91,15 @@ impl Service {
                     state: state.to_string(),
                     done,
                     total,
-                    running: mine.iter().filter(|j| j.state == "leased").count() as u32,
+                    running: mine.iter().filter(|j| j.state == JobState::Leased).count() as u32,
                 }
             })
             .collect();
         Ok(RunStatus {
             run_id: r.id.clone(),
             name: r.name.clone(),
-            state: r.state.clone(),
-            stage: r.stage.clone(),
+            state: r.state.to_string(),
+            stage: r.stage.to_string(),
             error: r.error.clone().unwrap_or_default(),
             stages,
             results: if with_results {
@@ -114,11 +113,11 @@ impl Service {
             building: r.building.clone().unwrap_or_default(),
             simulations_run: jobs
                 .iter()
-                .filter(|j| j.kind == "simulate" && j.state == "done" && !j.cached)
+                .filter(|j| j.kind == JobKind::Simulate && j.state == JobState::Done && !j.cached)
                 .count() as u32,
             simulations_shared: jobs
                 .iter()
-                .filter(|j| j.kind == "simulate" && j.state == "done" && j.cached)
+                .filter(|j| j.kind == JobKind::Simulate && j.state == JobState::Done && j.cached)
                 .count() as u32,
             jobs_total: jobs.len() as u32,
             attempts_total: self.st.store.attempts(&r.id).map_err(internal)? as u32,
@@ -134,9 +133,9 @@ impl Service {
                         let a = att.iter().find(|a| a.0 == j.id);
                         JobInfo {
                             job_id: j.id,
-                            stage: j.stage.clone(),
+                            stage: j.stage.to_string(),
                             label: j.label.clone(),
-                            state: j.state.clone(),
+                            state: j.state.to_string(),
                             attempts: a.map_or(0, |a| a.1),
                             worker: a.map_or(String::new(), |a| a.2.clone()),
                             cached: j.cached,
@@ -373,7 +372,9 @@ impl Coordinator for Service {
                 store
                     .set_portfolio(&id, &r.portfolio, &r.building)
                     .map_err(internal)?;
-                store.end_run(&id, "failed", Some(&msg)).map_err(internal)?;
+                store
+                    .end_run(&id, RunState::Failed, Some(&msg))
+                    .map_err(internal)?;
                 return Ok(Response::new(SubmitReply { run_id: id }));
             }
         };
@@ -433,7 +434,7 @@ impl Coordinator for Service {
         }
         self.st
             .store
-            .end_run(&id, "cancelled", Some("cancelled by request"))
+            .end_run(&id, RunState::Cancelled, Some("cancelled by request"))
             .map_err(internal)?;
         let r = self
             .st

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::lhs::Design;
-use bemcal_stats::metrics::g14;
 use bemcal_surrogate::{ParamSpec, Split, TrainOptions, TrainingSet};
 use ndarray::{Array2, Array3};
 
@@ -15,7 +14,6 @@ use crate::design::{
 use crate::inputs::load_inputs;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};
-use crate::summary::{write_outputs_csv, OutputMetrics};
 use crate::{Error, Inputs};
 
 /// Progress messages.
@@ -219,36 +217,5 @@ impl Calibration {
         };
         bemcal_surrogate::train(&self.out.join("dataset"), &self.surrogate_dir(), &opts)?;
         Ok(())
-    }
-
-    /// Stage 7, one job per run: EnergyPlus at `values` (key `i` in `validation/`) against the
-    /// meters, ASHRAE Guideline 14 per output.
-    pub fn validate(&self, i: usize, label: &str, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
-        let inp = &self.inputs;
-        let vdir = self.out.join("validation");
-        std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
-        let (o, _) = simulate_point(
-            &inp.runner,
-            &inp.model,
-            &inp.plan.values(x),
-            &inp.weather_path,
-            &vdir,
-            i,
-        )?;
-        write_outputs_csv(&vdir.join(format!("{label}.csv")), inp.year, &o)?;
-        let mut m = vec![];
-        for (k, name) in inp.outputs.iter().enumerate() {
-            let sim = o.get(name).expect("model output");
-            m.push(OutputMetrics {
-                output: name.clone(),
-                metrics: g14(&inp.measured[k], &inp.with_base(k, sim))?,
-            });
-        }
-        Ok(m)
-    }
-
-    /// The prior modes of the calibrated parameters (the initial model).
-    pub fn initial_point(&self) -> Vec<f64> {
-        self.inputs.plan.priors.iter().map(|p| p.mode()).collect()
     }
 }

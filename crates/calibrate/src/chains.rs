@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
 use crate::summary::{write_bands_csv, write_draws_csv};
+use crate::validation::{fallback_note, FALLBACKS};
 use crate::{Calibration, Error, OutputMetrics};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
@@ -82,6 +83,11 @@ impl Calibration {
 }
 
 impl Sampler<'_> {
+    /// The calibration's outputs, in the order the surrogate predicts them.
+    pub fn outputs(&self) -> &[String] {
+        &self.cal.inputs.outputs
+    }
+
     /// The posterior over the unit space.
     pub fn posterior(&self) -> Posterior<'_> {
         Posterior {
@@ -361,6 +367,13 @@ impl Sampler<'_> {
             estimate_note: None,
             moved_chains: moved_chains(states),
             independence_dropped: independence_dropped(states),
+            acceptance: states
+                .iter()
+                .map(|s| s.acceptance_rate_post_burn_in())
+                .collect(),
+            sigma_eta: self.sigma_eta.clone(),
+            held_out: self.held_out.clone(),
+            extensions: 0,
         })
     }
 }
@@ -472,26 +485,75 @@ pub fn chains_at(
         .collect()
 }
 
-/// What [`Sampler::summarize`] returns.
+/// The merged chains, summarised ([`Sampler::summarize`]): what validation and `summary.json`
+/// are built from. Both drivers keep it between those stages (the coordinator in its database),
+/// so every field is serialisable.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ChainSummary {
     pub posterior: PosteriorSummary,
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
+    #[serde(default)]
     pub residual_ar1: Vec<(String, f64)>,
     /// The calibrated estimate (calibrated parameters, physical units).
     pub estimate: Vec<f64>,
     /// Guideline 14 of the surrogate at the estimate against the meters.
+    #[serde(default)]
     pub surrogate_at_estimate: Vec<OutputMetrics>,
     /// Where EnergyPlus cannot simulate the estimate, the draws validated instead, best first:
     /// the next distinct draws by log posterior (physical units).
+    #[serde(default)]
     pub fallbacks: Vec<Vec<f64>>,
-    /// Set when a fallback draw replaced the estimate (why).
+    /// Set when a fallback draw replaced the estimate (why; [`ChainSummary::settle_estimate`]).
+    #[serde(default)]
     pub estimate_note: Option<String>,
     /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
+    #[serde(default)]
     pub moved_chains: Vec<MovedChain>,
     /// Chains whose independence kernel was switched off after burn-in
     /// ([`independence_dropped`] of the states).
+    #[serde(default)]
     pub independence_dropped: Vec<usize>,
+    /// Acceptance rate after burn-in, per chain.
+    pub acceptance: Vec<f64>,
+    /// The surrogate's held-out RMSE per output, kWh (its part of the likelihood's noise).
+    pub sigma_eta: Vec<f64>,
+    /// The surrogate's held-out metrics.
+    pub held_out: serde_json::Value,
+    /// Times the final chains were extended because R-hat was above `mcmc.rhat_target`.
+    #[serde(default)]
+    pub extensions: u32,
+}
+
+impl ChainSummary {
+    /// Makes the validated candidate the estimate: after `failures` (EnergyPlus failed at the
+    /// estimate and at the fallbacks before the one that ran, in [`crate::next_candidate`]'s
+    /// order), that fallback's values, with a note saying why.
+    pub fn settle_estimate(&mut self, failures: &[String]) {
+        if let Some(x) = failures
+            .len()
+            .checked_sub(1)
+            .and_then(|k| self.fallbacks.get(k))
+        {
+            self.estimate = x.clone();
+            self.estimate_note = Some(fallback_note(failures));
+        }
+    }
+}
+
+/// The iteration target after one more extension of the final chains, or `None` when they
+/// stop: R-hat at or below `m.rhat_target` (none: never extended), or `m.max_extensions` done.
+/// Each extension adds `iterations - burn_in` iterations per chain: as many draws again.
+pub fn extended_target(
+    m: &McmcSettings,
+    max_rhat: f64,
+    extensions: u32,
+    target: u64,
+) -> Option<u64> {
+    let above = m
+        .rhat_target
+        .is_some_and(|t| max_rhat.is_nan() || max_rhat > t);
+    (above && extensions < m.max_extensions).then(|| target + (m.iterations - m.burn_in))
 }
 
 /// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
@@ -520,19 +582,6 @@ pub fn independence_dropped(states: &[Chain]) -> Vec<usize> {
         .filter(|&c| states[c].independence_dropped())
         .collect()
 }
-
-/// What summary.json says when the estimate was replaced by the next-best draw.
-pub fn fallback_note(failures: &[String]) -> String {
-    format!(
-        "EnergyPlus could not simulate the estimate; calibrated_values and validation are those \
-         of the next-best posterior draw that it could simulate (by log posterior; {} failed: {})",
-        failures.len(),
-        failures.join(" | ")
-    )
-}
-
-/// Draws tried, in order, when EnergyPlus fails at the estimate.
-pub const FALLBACKS: usize = 3;
 
 /// Up to `k` distinct draws (unit space) in decreasing log posterior.
 fn best_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
@@ -568,4 +617,32 @@ fn sub_draws(d: &Draws, dim: usize) -> Draws {
     }
     out.log_density = d.log_density.clone();
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chains_are_extended_while_rhat_is_above_its_target_up_to_the_limit() {
+        let mut m = McmcSettings {
+            iterations: 1000,
+            burn_in: 400,
+            max_extensions: 2,
+            ..McmcSettings::default()
+        };
+        // No target: never.
+        assert_eq!(extended_target(&m, 3.0, 0, 1000), None);
+        m.rhat_target = Some(1.01);
+        assert_eq!(extended_target(&m, 1.2, 0, 1000), Some(1600));
+        assert_eq!(extended_target(&m, 1.2, 1, 1600), Some(2200));
+        assert_eq!(
+            extended_target(&m, 1.2, 2, 2200),
+            None,
+            "at most max_extensions"
+        );
+        assert_eq!(extended_target(&m, 1.01, 0, 1000), None, "at the target");
+        // An R-hat that could not be computed is not a converged one.
+        assert_eq!(extended_target(&m, f64::NAN, 0, 1000), Some(1600));
+    }
 }

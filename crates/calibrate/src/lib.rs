@@ -20,13 +20,14 @@ pub mod refine;
 pub mod replacement;
 mod summary;
 pub mod synth;
+mod validation;
 
 use std::path::{Path, PathBuf};
 
 pub use calibration::{Calibration, Log};
 pub use chains::{
-    chains_at, fallback_note, independence_dropped, moved_chains, ChainSummary, MovedChain,
-    Sampler, FALLBACKS,
+    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
+    Sampler,
 };
 pub use inputs::{
     load_inputs, load_model, resolve_weather, weather_for, weather_reference, Inputs,
@@ -36,6 +37,9 @@ pub use project::Project;
 pub use summary::{
     write_calibrated_model, write_outputs_csv, write_summary, DesignReport, OutputMetrics,
     ParameterReport, PointNote, Summary, Timings,
+};
+pub use validation::{
+    fallback_note, next_candidate, Candidate, ValidationStep, FALLBACKS, INITIAL_KEY,
 };
 
 /// Errors of the pipeline, each naming the stage, file or setting concerned.

@@ -10,9 +10,13 @@ use bemcal_stats::chain::Chain;
 use crate::design::simulate_design;
 use crate::posterior::run_chains;
 use crate::project::Project;
+use crate::refine::{close_round, SimulatedDraw};
 use crate::replacement::Outcome;
 use crate::Error;
-use crate::{chains_at, fallback_note, write_summary, Calibration, Log, Summary, Timings};
+use crate::{
+    chains_at, extended_target, next_candidate, write_summary, Calibration, Log, Summary, Timings,
+    ValidationStep, INITIAL_KEY,
+};
 
 /// Runs the whole calibration of `project` into `out` on this machine.
 pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
@@ -84,7 +88,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         outputs.push(cal.simulate_point(p.index, &p.values)?.0);
     }
     let rounds = project.refine.rounds;
-    let (mut sampler, ck) = loop {
+    let (mut sampler, mut ck) = loop {
         let round = refined.rounds.len() as u32;
         let full = cal.full_design(&design, &refined);
         let t = Instant::now();
@@ -184,38 +188,36 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 ))
             },
         )?;
-        let mut points = vec![];
-        let mut failed = vec![];
-        let mut new_outputs = vec![];
-        for ((i, x), r) in indexed.into_iter().zip(results) {
-            match r {
-                Ok((o, _)) => {
-                    points.push(crate::refine::RefinePoint {
-                        index: i,
-                        values: x,
-                    });
-                    new_outputs.push(o);
-                }
-                Err(e) => {
+        let simulated = indexed
+            .into_iter()
+            .zip(results)
+            .map(|((index, values), r)| SimulatedDraw {
+                index,
+                values,
+                outputs: r.map(|(o, _)| o).map_err(|e| {
                     log(&format!(
                         "refinement: posterior draw left out, EnergyPlus failed: {e}"
                     ));
-                    failed.push(crate::refine::FailedPoint {
-                        values: x,
-                        error: e.to_string(),
-                    });
-                }
-            }
-        }
-        let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
-        let predicted = sampler.predict(&xs)?;
-        let surrogate_error = crate::refine::pooled_error(&inp.outputs, &new_outputs, &predicted)?;
+                    e.to_string()
+                }),
+            })
+            .collect();
+        let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
+        let (closed, new_outputs) = close_round(
+            round + 1,
+            simulated,
+            &mut sampler,
+            &ck.draws,
+            &last,
+            project.refine.restart_below,
+        )?;
         log(&format!(
             "refinement round {}: {} posterior draws simulated ({} failed); surrogate vs EnergyPlus there: {}",
             round + 1,
-            points.len(),
-            failed.len(),
-            surrogate_error
+            closed.points.len(),
+            closed.failed.len(),
+            closed
+                .surrogate_error
                 .iter()
                 .map(|m| format!(
                     "{} NMBE {:.1} % CV-RMSE {:.1} %",
@@ -225,10 +227,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
                 .join(", ")
         ));
         drop(sampler);
-        let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
-        let (starts, restarted) =
-            crate::refine::next_starts(&ck.draws, &last, project.refine.restart_below);
-        for (c, gap) in &restarted {
+        for (c, gap) in &closed.restarted {
             log(&format!(
                 "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
                 round + 1
@@ -236,25 +235,47 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         }
         timings.refinement_s += t.elapsed().as_secs_f64();
         outputs.extend(new_outputs);
-        cal.record_round(
-            &mut refined,
-            crate::refine::RefineRound {
-                round: round + 1,
-                points,
-                failed,
-                surrogate_error,
-                starts,
-                restarted,
-            },
-        )?;
+        cal.record_round(&mut refined, closed)?;
     };
-    let acceptance: Vec<f64> = ck
-        .states
-        .iter()
-        .map(|s| s.acceptance_rate_post_burn_in())
-        .collect();
+    let t = Instant::now();
+    let mut chains = sampler.summarize(&ck.states, &ck.draws)?;
+    timings.summary_s = t.elapsed().as_secs_f64();
+    // Extend the final chains while R-hat is above its target (the rule: `extended_target`),
+    // from their checkpoint, as the coordinator does.
+    let m = &project.mcmc;
+    let mut target = m.iterations;
+    while let Some(next) = extended_target(m, chains.posterior.max_rhat, chains.extensions, target)
+    {
+        log(&format!(
+            "chains: max R-hat {:.3} above the target {}: extending to {next} iterations \
+             (extension {} of at most {})",
+            chains.posterior.max_rhat,
+            m.rhat_target.unwrap_or(f64::NAN),
+            chains.extensions + 1,
+            m.max_extensions
+        ));
+        let t = Instant::now();
+        let (post, eval) = sampler.split();
+        ck = run_chains(
+            &post,
+            eval,
+            |_, _| unreachable!("the final chains' checkpoint exists"),
+            next,
+            m.segment,
+            &cal.chains_path(rounds),
+            &|done, n| log(&format!("chains: {done}/{n} iterations")),
+        )?;
+        timings.chains_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let extensions = chains.extensions + 1;
+        chains = sampler.summarize(&ck.states, &ck.draws)?;
+        chains.extensions = extensions;
+        timings.summary_s += t.elapsed().as_secs_f64();
+        target = next;
+    }
     log(&format!(
-        "chains: acceptance after burn-in {acceptance:.3?}"
+        "chains: acceptance after burn-in {:.3?}",
+        chains.acceptance
     ));
     let divergent: Vec<u64> = ck
         .states
@@ -267,9 +288,6 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
              rejected) per chain: {divergent:?}"
         ));
     }
-
-    let t = Instant::now();
-    let mut chains = sampler.summarize(&ck.states, &ck.draws)?;
     for m in &chains.moved_chains {
         log(&format!(
             "chains: chain {} started in the best optimum's mode (its own was {:.0} nats lower)",
@@ -283,7 +301,6 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
             chains.independence_dropped
         ));
     }
-    timings.summary_s = t.elapsed().as_secs_f64();
     log(&format!(
         "posterior: max R-hat {:.3}, min bulk ESS {:.0}",
         chains.posterior.max_rhat, chains.posterior.min_ess_bulk
@@ -291,58 +308,39 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 
     let t = Instant::now();
     log("validation: EnergyPlus at the calibrated parameters");
+    // The estimate, then the next-best draws while EnergyPlus fails (`next_candidate`).
     let mut failures: Vec<String> = vec![];
-    let candidates: Vec<Vec<f64>> = std::iter::once(chains.estimate.clone())
-        .chain(chains.fallbacks.iter().cloned())
-        .collect();
-    let mut validation = None;
-    for (k, x) in candidates.iter().enumerate() {
-        // Keys: 0 the estimate, 1 the initial model, 2.. the fallback draws.
-        let i = if k == 0 { 0 } else { k + 1 };
-        match cal.validate(i, "calibrated", x) {
-            Ok(m) => {
-                if k > 0 {
-                    chains.estimate_note = Some(fallback_note(&failures));
-                    chains.estimate = x.clone();
-                }
-                validation = Some(m);
-                break;
+    let validation = loop {
+        let c = match next_candidate(&chains, &failures) {
+            ValidationStep::Validate(c) => c,
+            ValidationStep::Exhausted(message) => {
+                return Err(Error::Stage {
+                    stage: "validation",
+                    message,
+                })
             }
+        };
+        match cal.validate(c.key, "calibrated", &c.values) {
+            Ok(m) => break m,
             Err(e) => {
                 log(&format!(
-                    "validation: EnergyPlus failed at candidate {k}: {e}"
+                    "validation: EnergyPlus failed at candidate {}: {e}",
+                    c.rank
                 ));
                 failures.push(e.to_string());
             }
         }
-    }
-    let validation = validation.ok_or_else(|| Error::Stage {
-        stage: "validation",
-        message: format!(
-            "EnergyPlus failed at the estimate and at the next {} draws: {}",
-            candidates.len() - 1,
-            failures.join(" | ")
-        ),
-    })?;
+    };
+    chains.settle_estimate(&failures);
     let initial = if project.validation.initial {
         log("validation: EnergyPlus at the initial parameters (prior modes)");
-        cal.validate(1, "initial", &cal.initial_point())?
+        cal.validate(INITIAL_KEY, "initial", &cal.initial_point())?
     } else {
         vec![]
     };
     timings.validation_s = t.elapsed().as_secs_f64();
     timings.total_s = t_all.elapsed().as_secs_f64();
-    let info = (sampler.sigma_eta.clone(), sampler.held_out.clone());
-    write_summary(
-        &cal,
-        &design,
-        &chains,
-        (&info.0, &info.1),
-        acceptance,
-        validation,
-        initial,
-        timings,
-    )
+    write_summary(&cal, &design, &chains, validation, initial, timings)
 }
 
 /// Logs what became of the design points EnergyPlus could not simulate.

@@ -348,6 +348,12 @@ pub struct McmcSettings {
     pub kernel: Kernel,
     /// HMC trajectory length in the whitened space (`kernel = "hmc"`).
     pub hmc_integration_time: f64,
+    /// Extend the final chains while their largest R-hat is above this (unset: never; through
+    /// the coordinator, unset falls back to its `--rhat-target`). Each extension adds
+    /// `iterations - burn_in` draws per chain ([`crate::extended_target`]).
+    pub rhat_target: Option<f64>,
+    /// At most this many extensions (with `rhat_target`).
+    pub max_extensions: u32,
 }
 
 /// The chains' transition kernel.
@@ -400,6 +406,8 @@ impl Default for McmcSettings {
             restart_below: 20.0,
             kernel: Kernel::Mh,
             hmc_integration_time: 2.0,
+            rhat_target: None,
+            max_extensions: 2,
         }
     }
 }
@@ -563,6 +571,11 @@ impl Project {
                 "mcmc.hmc_integration_time = {} must be positive",
                 self.mcmc.hmc_integration_time
             ));
+        }
+        if let Some(t) = self.mcmc.rhat_target {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(format!("mcmc.rhat_target = {t} must be a positive number"));
+            }
         }
         if self.mcmc.restart_below.is_nan() || self.mcmc.restart_below < 0.0 {
             return Err(format!(

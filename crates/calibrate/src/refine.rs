@@ -19,7 +19,7 @@ use bemcal_stats::mcmc::Draws;
 use serde::{Deserialize, Serialize};
 
 use crate::{write_atomic, Error};
-use crate::{Calibration, OutputMetrics};
+use crate::{Calibration, OutputMetrics, Sampler};
 
 /// File of the refinement log in the output folder.
 pub const REFINE_FILE: &str = "refine.json";
@@ -224,6 +224,62 @@ impl Calibration {
         let json = serde_json::to_vec_pretty(log).map_err(|e| Error::Config(e.to_string()))?;
         write_atomic(&self.out.join(REFINE_FILE), &json)
     }
+}
+
+/// A posterior draw of a refinement round after EnergyPlus: its key in `simulations/`, its
+/// values (physical units) and its outputs or EnergyPlus's failure.
+pub struct SimulatedDraw {
+    pub index: usize,
+    pub values: Vec<f64>,
+    pub outputs: Result<HourlyOutputs, String>,
+}
+
+/// Closes refinement round `round` once its draws are simulated: the draws EnergyPlus could
+/// simulate become design points, the others are recorded as failed; the surrogate that ran
+/// the round's chains is measured against EnergyPlus at the new points ([`pooled_error`]); and
+/// the next round's chains start where these ended ([`next_starts`], from the round's merged
+/// chains: `draws` and each chain's `last` position). The one rule both drivers follow;
+/// returns the round and the new points' outputs (in the round's point order).
+pub fn close_round(
+    round: u32,
+    simulated: Vec<SimulatedDraw>,
+    sampler: &mut Sampler<'_>,
+    draws: &[Draws],
+    last: &[Vec<f64>],
+    restart_below: f64,
+) -> Result<(RefineRound, Vec<HourlyOutputs>), Error> {
+    let mut points = vec![];
+    let mut failed = vec![];
+    let mut outputs = vec![];
+    for s in simulated {
+        match s.outputs {
+            Ok(o) => {
+                points.push(RefinePoint {
+                    index: s.index,
+                    values: s.values,
+                });
+                outputs.push(o);
+            }
+            Err(error) => failed.push(FailedPoint {
+                values: s.values,
+                error,
+            }),
+        }
+    }
+    let xs: Vec<Vec<f64>> = points.iter().map(|p| p.values.clone()).collect();
+    let predicted = sampler.predict(&xs)?;
+    let names = sampler.outputs().to_vec();
+    let surrogate_error = pooled_error(&names, &outputs, &predicted)?;
+    let (starts, restarted) = next_starts(draws, last, restart_below);
+    let round = RefineRound {
+        round,
+        points,
+        failed,
+        surrogate_error,
+        starts,
+        restarted,
+    };
+    Ok((round, outputs))
 }
 
 /// Guideline 14 of `predicted` against EnergyPlus's `simulated` outputs, hours of all points

@@ -58,6 +58,9 @@ pub struct Summary {
     pub residual_ar1: Vec<(String, f64)>,
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
+    /// Times the final chains were extended because R-hat was above `mcmc.rhat_target`.
+    #[serde(default)]
+    pub chain_extensions: u32,
     /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub moved_chains: Vec<MovedChain>,
@@ -164,14 +167,12 @@ pub struct ParameterReport {
     pub prior_max: f64,
 }
 
-/// Assembles `summary.json` from the stages' results and writes it.
-#[allow(clippy::too_many_arguments)]
+/// Assembles `summary.json` from the stages' results and writes it, with the calibrated model
+/// and the bases' file.
 pub fn write_summary(
     cal: &Calibration,
     design: &Design,
     chains: &ChainSummary,
-    sampler_info: (&[f64], &serde_json::Value),
-    acceptance: Vec<f64>,
     validation: Vec<OutputMetrics>,
     initial: Vec<OutputMetrics>,
     timings: Timings,
@@ -204,9 +205,10 @@ pub fn write_summary(
             .outputs
             .iter()
             .cloned()
-            .zip(sampler_info.0.iter().copied())
+            .zip(chains.sigma_eta.iter().copied())
             .collect(),
-        acceptance_rate: acceptance,
+        acceptance_rate: chains.acceptance.clone(),
+        chain_extensions: chains.extensions,
         estimate: cal.project.validation.estimate,
         estimate_note: chains.estimate_note.clone(),
         moved_chains: chains.moved_chains.clone(),
@@ -226,7 +228,7 @@ pub fn write_summary(
         design: read_outcome(&cal.simulations_dir())
             .map(|o| DesignReport::new(cal, &o))
             .unwrap_or_default(),
-        surrogate_held_out: sampler_info.1.clone(),
+        surrogate_held_out: chains.held_out.clone(),
         refinement: cal.refine_log()?.rounds,
         timings,
     };

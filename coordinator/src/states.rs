@@ -1,0 +1,134 @@
+//! The typed states of runs and jobs. They are text only in the database (each type converts
+//! itself at the SQL boundary, [`rusqlite::ToSql`] / [`rusqlite::types::FromSql`]) and on the
+//! wire (the proto's strings, [`RunState::as_str`]).
+
+/// Declares an enum whose variants are stored as fixed words.
+macro_rules! words {
+    ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = $s:literal,)+ }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name { $($(#[$vm])* $v,)+ }
+
+        impl $name {
+            /// Every value, in order.
+            pub const ALL: &'static [$name] = &[$($name::$v,)+];
+
+            /// The word stored in the database and sent on the wire.
+            pub fn as_str(self) -> &'static str {
+                match self { $($name::$v => $s,)+ }
+            }
+        }
+
+        impl std::str::FromStr for $name {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, String> {
+                match s {
+                    $($s => Ok($name::$v),)+
+                    _ => Err(format!("unknown {} {s:?}", stringify!($name))),
+                }
+            }
+        }
+
+        impl std::fmt::Display for $name {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+
+        impl rusqlite::ToSql for $name {
+            fn to_sql(&self) -> rusqlite::Result<rusqlite::types::ToSqlOutput<'_>> {
+                Ok(self.as_str().into())
+            }
+        }
+
+        impl rusqlite::types::FromSql for $name {
+            fn column_result(v: rusqlite::types::ValueRef<'_>) -> rusqlite::types::FromSqlResult<Self> {
+                v.as_str()?
+                    .parse()
+                    .map_err(|e: String| rusqlite::types::FromSqlError::Other(e.into()))
+            }
+        }
+    };
+}
+
+words! {
+    /// Where a run is in its calibration: the stages in order, then `Done`.
+    Stage {
+        /// The Latin hypercube and the first wave of design-point simulations.
+        Design = "design",
+        /// EnergyPlus at the design points (with replacements of failed points).
+        Simulate = "simulate",
+        /// The surrogate's training (again after each refinement round).
+        Train = "train",
+        /// Chain segments.
+        Chains = "chains",
+        /// The merged chains: a refinement round, an extension, or the summary of the chains.
+        Merge = "merge",
+        /// EnergyPlus at posterior draws of a refinement round.
+        Refine = "refine",
+        /// EnergyPlus at the estimate (and the initial model).
+        Validate = "validate",
+        /// `summary.json` and the results.
+        Summary = "summary",
+        /// Finished.
+        Done = "done",
+    }
+}
+
+words! {
+    /// A run's state.
+    RunState {
+        Running = "running",
+        Done = "done",
+        Failed = "failed",
+        Cancelled = "cancelled",
+    }
+}
+
+words! {
+    /// A job's state.
+    JobState {
+        /// Waiting for a worker.
+        Queued = "queued",
+        /// Leased to a worker.
+        Leased = "leased",
+        Done = "done",
+        /// Failed too often (its run failed).
+        Failed = "failed",
+        /// Its run ended first.
+        Cancelled = "cancelled",
+    }
+}
+
+words! {
+    /// What a job does on a worker.
+    JobKind {
+        /// EnergyPlus at a point.
+        Simulate = "simulate",
+        /// The surrogate's training.
+        Train = "train",
+        /// A segment of chains.
+        Chains = "chains",
+        /// EnergyPlus at the estimate or the initial model, against the meters.
+        Validate = "validate",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_word_reads_back_as_its_value() {
+        for s in Stage::ALL {
+            assert_eq!(s.as_str().parse::<Stage>(), Ok(*s));
+        }
+        for s in JobState::ALL {
+            assert_eq!(s.as_str().parse::<JobState>(), Ok(*s));
+        }
+        assert!("runing"
+            .parse::<RunState>()
+            .unwrap_err()
+            .contains("unknown RunState"));
+    }
+}
