@@ -40,7 +40,8 @@ pub struct Args {
     /// Chains per chain-segment job (0: all in one job, bit-identical to the local path).
     #[arg(long, default_value_t = 0)]
     pub chains_per_job: usize,
-    /// Extend the chains while max R-hat is above this (off by default).
+    /// Extend the final chains while max R-hat is above this, for projects without their own
+    /// `[mcmc] rhat_target` (off by default).
     #[arg(long)]
     pub rhat_target: Option<f64>,
     /// Most extensions when --rhat-target is given.
