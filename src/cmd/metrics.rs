@@ -31,38 +31,43 @@ pub(crate) struct Table {
     pub rows: Vec<(usize, Vec<String>)>,
 }
 
-fn split_fields(line: &str) -> Vec<String> {
-    line.split(',')
-        .map(|f| f.trim().trim_matches('"').to_string())
-        .collect()
-}
-
 impl Table {
-    /// Read a comma-separated file with a header line; blank lines are skipped.
+    /// Read a comma-separated file with a header line (RFC 4180 quoting, fields trimmed);
+    /// blank lines are skipped.
     pub fn read(path: &Path) -> anyhow::Result<Table> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let mut lines = text
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| !l.trim().is_empty());
-        let Some((_, head)) = lines.next() else {
-            bail!("{}: empty file, expected a header line", path.display());
-        };
-        let header = split_fields(head.trim_start_matches('\u{feff}'));
-        let mut rows = Vec::new();
-        for (i, line) in lines {
-            let fields = split_fields(line);
-            if fields.len() != header.len() {
-                bail!(
-                    "{}:{}: {} fields, but the header has {}",
-                    path.display(),
-                    i + 1,
-                    fields.len(),
-                    header.len()
-                );
+        // The file's line of a record starting at `byte` (the csv crate's count and offset
+        // include the blank lines it skips before a record).
+        let line_at = |byte: u64| {
+            let bytes = text.as_bytes();
+            let mut i = (byte as usize).min(bytes.len());
+            while i < bytes.len() && matches!(bytes[i], b'\n' | b'\r') {
+                i += 1;
             }
-            rows.push((i + 1, fields));
+            1 + bytes[..i].iter().filter(|&&b| b == b'\n').count()
+        };
+        let mut reader = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .from_reader(text.as_bytes());
+        let bad = |e: csv::Error| match e.position() {
+            Some(p) => anyhow::anyhow!("{}:{}: {e}", path.display(), line_at(p.byte())),
+            None => anyhow::anyhow!("{}: {e}", path.display()),
+        };
+        let header: Vec<String> = reader
+            .headers()
+            .map_err(bad)?
+            .iter()
+            .map(|h| h.trim_start_matches('\u{feff}').to_string())
+            .collect();
+        if header.iter().all(String::is_empty) {
+            bail!("{}: empty file, expected a header line", path.display());
+        }
+        let mut rows = Vec::new();
+        for record in reader.records() {
+            let record = record.map_err(bad)?;
+            let line = record.position().map_or(0, |p| line_at(p.byte()));
+            rows.push((line, record.iter().map(str::to_string).collect()));
         }
         Ok(Table {
             path: path.to_path_buf(),
@@ -206,4 +211,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quoted_headers_and_cells_are_read_as_csv() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("m.csv");
+        std::fs::write(
+            &p,
+            "\u{feff}timestamp,\"heating, gas (kWh)\",cooling_kwh\n\n\"2021-01-01T00:00\", 1.5 ,\"2\"\n",
+        )
+        .unwrap();
+        let t = Table::read(&p).unwrap();
+        assert_eq!(t.header, ["timestamp", "heating, gas (kWh)", "cooling_kwh"]);
+        assert_eq!(t.column("heating, gas (kWh)").unwrap(), 1);
+        assert_eq!(
+            t.rows,
+            [(3, vec!["2021-01-01T00:00".into(), "1.5".into(), "2".into()])]
+        );
+
+        std::fs::write(&p, "timestamp,a\n2021-01-01T00:00,1,2\n").unwrap();
+        let e = Table::read(&p).err().unwrap().to_string();
+        assert!(e.starts_with(&format!("{}:2: ", p.display())), "{e}");
+    }
 }
