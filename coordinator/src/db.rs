@@ -8,7 +8,6 @@ use std::sync::Mutex;
 
 use prost::Message;
 use rusqlite::{params, Connection, OptionalExtension};
-use serde::{Deserialize, Serialize};
 
 use crate::now_ms;
 use crate::proto;
@@ -108,33 +107,7 @@ ALTER TABLE stages ADD COLUMN seconds_before REAL NOT NULL DEFAULT 0; -- earlier
 "#,
 ];
 
-/// A file by relative path and content hash (the serde twin of `proto::FileRef`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct File {
-    pub path: String,
-    pub sha256: String,
-    pub size: u64,
-}
-
-impl From<&proto::FileRef> for File {
-    fn from(f: &proto::FileRef) -> File {
-        File {
-            path: f.path.clone(),
-            sha256: f.sha256.clone(),
-            size: f.size,
-        }
-    }
-}
-
-impl From<&File> for proto::FileRef {
-    fn from(f: &File) -> proto::FileRef {
-        proto::FileRef {
-            path: f.path.clone(),
-            sha256: f.sha256.clone(),
-            size: f.size,
-        }
-    }
-}
+pub use bemcal_client::File;
 
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]

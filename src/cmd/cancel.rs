@@ -1,7 +1,7 @@
 //! `bemcal cancel`: cancels a run (its queued jobs are dropped, running ones ignored).
 
 use super::coordinator::ClientArgs;
-use bemcal_coordinator::proto::RunRequest;
+use bemcal_client::proto::RunRequest;
 
 /// Cancel a run.
 #[derive(Debug, clap::Args)]
@@ -13,7 +13,7 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let st = rt.block_on(async {
         let mut c = connect.client()?;
         c.cancel(RunRequest {

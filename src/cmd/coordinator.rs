@@ -9,8 +9,8 @@ use std::process::{Child, Command, Stdio};
 
 use anyhow::Context;
 use bemcal_calibrate::Summary;
-use bemcal_coordinator::auth::{load_token, random_token, TOKEN_ENV};
-use bemcal_coordinator::client::{self, Connect};
+use bemcal_client::auth::{load_token, random_token, TOKEN_ENV};
+use bemcal_client::client::{self, Connect};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
 
@@ -91,14 +91,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             max_extensions: a.max_extensions,
         },
     };
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     rt.block_on(serve(
         opts,
         |addr| {
             println!("listening on {addr}");
             let _ = std::io::stdout().flush();
         },
-        bemcal_coordinator::shutdown_signal(),
+        bemcal_client::shutdown_signal(),
     ))
 }
 
@@ -186,7 +186,7 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
     let (children, connect) = start_local(out, workers, &log)?;
     let surrogate = out.join("surrogate");
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let summary = rt.block_on(async {
         let mut c = connect.client()?;
         if reuse {

@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_coordinator::client::Client;
+use bemcal_client::client::Client;
+use bemcal_client::proto::RunStatus;
 use bemcal_coordinator::portfolio::{self, PortfolioSummary};
-use bemcal_coordinator::proto::RunStatus;
 
 use super::coordinator::ClientArgs;
 
@@ -56,7 +56,7 @@ pub enum Sub {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     match a.command {
         Sub::Submit { manifest, client } => {
             let m = portfolio::load_manifest(&manifest)?;

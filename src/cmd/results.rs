@@ -16,10 +16,10 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let n = rt.block_on(async {
         let mut c = connect.client()?;
-        bemcal_coordinator::client::fetch_results(&mut c, &a.run, &a.out).await
+        bemcal_client::client::fetch_results(&mut c, &a.run, &a.out).await
     })?;
     println!("{n} files written to {}", a.out.display());
     Ok(())

@@ -1,7 +1,7 @@
 //! `bemcal status`: runs and their progress per stage.
 
 use super::coordinator::ClientArgs;
-use bemcal_coordinator::proto::{ListRunsRequest, RunRequest, RunStatus};
+use bemcal_client::proto::{ListRunsRequest, RunRequest, RunStatus};
 
 /// Show one run (or all runs) with per-stage progress.
 #[derive(Debug, clap::Args)]
@@ -43,7 +43,7 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let runs = rt.block_on(async {
         let mut c = connect.client()?;
         let runs = match &a.run {
@@ -88,7 +88,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             }
         );
         if a.run.is_some() {
-            for l in bemcal_coordinator::client::progress_lines(s) {
+            for l in bemcal_client::client::progress_lines(s) {
                 println!("{l}");
             }
         }

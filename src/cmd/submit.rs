@@ -18,10 +18,10 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let id = rt.block_on(async {
         let mut c = connect.client()?;
-        bemcal_coordinator::client::submit_project(&mut c, &a.project, a.surrogate.as_deref()).await
+        bemcal_client::client::submit_project(&mut c, &a.project, a.surrogate.as_deref()).await
     })?;
     println!("{id}");
     Ok(())

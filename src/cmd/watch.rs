@@ -12,11 +12,11 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
-    let rt = bemcal_coordinator::runtime()?;
+    let rt = bemcal_client::runtime()?;
     let t0 = std::time::Instant::now();
     let st = rt.block_on(async {
         let mut c = connect.client()?;
-        bemcal_coordinator::client::watch(&mut c, &a.run, |s| {
+        bemcal_client::client::watch(&mut c, &a.run, |s| {
             println!(
                 "[{:>7.1} s] run {} {} (stage {})",
                 t0.elapsed().as_secs_f64(),
@@ -24,7 +24,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 s.state,
                 s.stage
             );
-            for l in bemcal_coordinator::client::progress_lines(s) {
+            for l in bemcal_client::client::progress_lines(s) {
                 println!("{l}");
             }
         })

@@ -38,9 +38,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
         drain: Duration::from_secs(a.drain),
     };
-    let rt = bemcal_coordinator::runtime()?;
-    rt.block_on(bemcal_worker::run(
-        opts,
-        bemcal_coordinator::shutdown_signal(),
-    ))
+    let rt = bemcal_client::runtime()?;
+    rt.block_on(bemcal_worker::run(opts, bemcal_client::shutdown_signal()))
 }

@@ -3,11 +3,11 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_coordinator::artifacts::{safe_relative, ArtifactDir};
-use bemcal_coordinator::bundle;
-use bemcal_coordinator::client::{download, Client};
-use bemcal_coordinator::db::File;
-use bemcal_coordinator::proto;
+use bemcal_client::artifacts::{safe_relative, ArtifactDir};
+use bemcal_client::bundle;
+use bemcal_client::client::{download, Client};
+use bemcal_client::proto;
+use bemcal_client::File;
 use sha2::{Digest, Sha256};
 
 /// The cache folder.

@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
-use bemcal_coordinator::artifacts::safe_relative;
-use bemcal_coordinator::client::walk;
-use bemcal_coordinator::proto::{self, job::Kind};
+use bemcal_client::artifacts::safe_relative;
+use bemcal_client::client::walk;
+use bemcal_client::proto::{self, job::Kind};
 use bemcal_stats::chain::Chain;
 
 /// Output files (`relative path`, file) and a small JSON result.

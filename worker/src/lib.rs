@@ -14,10 +14,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use bemcal_coordinator::client::{upload_file, Client, Connect};
-use bemcal_coordinator::proto::{
-    self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest,
-};
+use bemcal_client::client::{upload_file, Client, Connect};
+use bemcal_client::proto::{self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest};
 use tokio::sync::Semaphore;
 
 use crate::cache::Cache;

@@ -9,9 +9,9 @@ use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint};
 
 use crate::artifacts::sha256_hex;
 use crate::auth::AddToken;
-use crate::db::File;
 use crate::proto::coordinator_client::CoordinatorClient;
 use crate::proto::{self, ArtifactList, ArtifactRequest, Chunk};
+use crate::File;
 use crate::{CHUNK_BYTES, MAX_MESSAGE_BYTES};
 
 /// An authenticated client of the coordinator.

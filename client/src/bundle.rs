@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::artifacts::{safe_relative, ArtifactDir};
-use crate::db::File;
+use crate::File;
 
 /// Name of the project file in a bundle.
 pub const PROJECT_FILE: &str = "project.toml";

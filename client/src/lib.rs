@@ -1,0 +1,89 @@
+//! The client side of bemcal's coordinator protocol, shared by the CLI, the workers and the
+//! coordinator: the gRPC types (`proto/bemcal.proto`), an authenticated channel
+//! ([`client::Connect`]), content-addressed artifacts and their transfer in chunks, and project
+//! bundles. It links no server state (no SQLite): a worker or a CLI command depends on this
+//! crate, not on the coordinator.
+
+pub mod artifacts;
+pub mod auth;
+pub mod bundle;
+pub mod client;
+
+use serde::{Deserialize, Serialize};
+
+/// Generated protocol types, client and server (package `bemcal.v1`).
+pub mod proto {
+    tonic::include_proto!("bemcal.v1");
+}
+
+/// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
+pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;
+
+/// Size of one artifact chunk.
+pub const CHUNK_BYTES: usize = 1024 * 1024;
+
+/// A file by relative path and content hash (the serde twin of `proto::FileRef`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct File {
+    pub path: String,
+    pub sha256: String,
+    pub size: u64,
+}
+
+impl From<&proto::FileRef> for File {
+    fn from(f: &proto::FileRef) -> File {
+        File {
+            path: f.path.clone(),
+            sha256: f.sha256.clone(),
+            size: f.size,
+        }
+    }
+}
+
+impl From<&File> for proto::FileRef {
+    fn from(f: &File) -> proto::FileRef {
+        proto::FileRef {
+            path: f.path.clone(),
+            sha256: f.sha256.clone(),
+            size: f.size,
+        }
+    }
+}
+
+/// Milliseconds since the Unix epoch (lease expiry survives coordinator restarts).
+pub fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
+}
+
+/// A multi-threaded async runtime for the command-line front end.
+pub fn runtime() -> std::io::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+}
+
+/// Completes on SIGTERM or Ctrl-C.
+pub async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = term.recv() => {}
+                    _ = tokio::signal::ctrl_c() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
