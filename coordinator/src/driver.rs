@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{close_round, pick_draws, RefineLog, SimulatedDraw, REFINE_FILE};
 use bemcal_calibrate::replacement::{Attempt, Step};
@@ -252,7 +253,7 @@ impl State {
                 .outputs
                 .iter()
                 .map(|f| File {
-                    path: format!("simulations/point_{:03}.json", s.point),
+                    path: OutputDir::point_rel(s.point as usize),
                     ..f.clone()
                 })
                 .collect();
@@ -498,7 +499,7 @@ impl State {
         let states_of = |j: &JobRow| -> Result<File> {
             j.outputs
                 .iter()
-                .find(|f| f.path == "states.json")
+                .find(|f| f.path == STATES_FILE)
                 .cloned()
                 .ok_or_else(|| format!("{}: no states.json", j.label))
         };
@@ -534,7 +535,7 @@ impl State {
                     .ok_or_else(|| format!("chains {first}: no starting points"))?;
                 let bytes = serde_json::to_vec(mine).map_err(err)?;
                 inputs.push(proto::FileRef {
-                    path: "warm.json".into(),
+                    path: WARM_FILE.into(),
                     sha256: self.put_artifact(&bytes)?,
                     size: bytes.len() as u64,
                 });
@@ -630,8 +631,8 @@ impl State {
                         .ok_or_else(|| format!("{}: no {name}", j.label))?;
                     self.artifacts.read(&f.sha256).map_err(err)
                 };
-                let d: Vec<Draws> = serde_json::from_slice(&get("draws.json")?).map_err(err)?;
-                last_states = serde_json::from_slice(&get("states.json")?).map_err(err)?;
+                let d: Vec<Draws> = serde_json::from_slice(&get(DRAWS_FILE)?).map_err(err)?;
+                last_states = serde_json::from_slice(&get(STATES_FILE)?).map_err(err)?;
                 if acc.is_empty() {
                     acc = d;
                 } else {
@@ -692,7 +693,7 @@ impl State {
             draws,
         };
         let bytes = serde_json::to_vec(&ck).map_err(err)?;
-        bemcal_calibrate::write_atomic(&cal.out.join("chains.json"), &bytes).map_err(err)?;
+        bemcal_calibrate::write_atomic(&cal.out.chains_checkpoint(), &bytes).map_err(err)?;
         let ValidationStep::Validate(first) = next_candidate(&chains, &[]) else {
             return Err("validation: no estimate".into());
         };

@@ -184,7 +184,7 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
     let t0 = std::time::Instant::now();
     let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
     let (children, connect) = start_local(out, workers, &log)?;
-    let surrogate = out.join("surrogate");
+    let surrogate = bemcal_calibrate::OutputDir::new(out).surrogate();
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
     let rt = bemcal_client::runtime()?;
     let summary = rt.block_on(async {

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
@@ -35,7 +36,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                     ))
                 }
             };
-            let rel = format!("simulations/point_{i:03}.json");
+            let rel = OutputDir::point_rel(i);
             Ok((
                 vec![(rel.clone(), work.join(&rel))],
                 serde_json::json!({ "seconds": secs }).to_string(),
@@ -57,7 +58,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
         }
         Some(Kind::Chains(c)) => {
             let mut sampler = cal.sampler().map_err(err)?;
-            let states_path = work.join("states.json");
+            let states_path = work.join(STATES_FILE);
             let mut states: Vec<Chain> = if states_path.is_file() {
                 let bytes = std::fs::read(&states_path).map_err(err)?;
                 serde_json::from_slice(&bytes).map_err(|e| format!("states.json: {e}"))?
@@ -65,7 +66,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 let (a, n) = (c.first_chain as usize, c.chains as usize);
                 // A refinement round's chains start where the coordinator says (`warm.json`:
                 // where the previous round's ended, or restarted); round 0 at prior draws.
-                let warm_path = work.join("warm.json");
+                let warm_path = work.join(WARM_FILE);
                 let mine: Vec<Vec<f64>> = if warm_path.is_file() {
                     let bytes = std::fs::read(&warm_path).map_err(err)?;
                     serde_json::from_slice(&bytes).map_err(|e| format!("warm.json: {e}"))?
@@ -82,16 +83,16 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 sampler.new_chains(&mine, a as u64, c.round).map_err(err)?
             };
             let draws = sampler.advance(&mut states, c.iterations).map_err(err)?;
-            let out_states = work.join("out/states.json");
-            let out_draws = work.join("out/draws.json");
+            let out_states = work.join("out").join(STATES_FILE);
+            let out_draws = work.join("out").join(DRAWS_FILE);
             bemcal_calibrate::write_atomic(&out_states, &serde_json::to_vec(&states).map_err(err)?)
                 .map_err(err)?;
             bemcal_calibrate::write_atomic(&out_draws, &serde_json::to_vec(&draws).map_err(err)?)
                 .map_err(err)?;
             Ok((
                 vec![
-                    ("states.json".into(), out_states),
-                    ("draws.json".into(), out_draws),
+                    (STATES_FILE.into(), out_states),
+                    (DRAWS_FILE.into(), out_draws),
                 ],
                 serde_json::json!({ "iteration": states.first().map(|s| s.iteration()) })
                     .to_string(),
@@ -117,7 +118,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 }
                 Err(e) => return Err(e.to_string()),
             };
-            let a = format!("validation/point_{i:03}.json");
+            let a = OutputDir::validation_point_rel(i);
             let b = format!("validation/{}.csv", v.label);
             Ok((
                 vec![(a.clone(), work.join(&a)), (b.clone(), work.join(&b))],

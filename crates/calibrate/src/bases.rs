@@ -115,5 +115,5 @@ pub(crate) fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
         }
         s.push('\n');
     }
-    write_atomic(&cal.out.join("validation").join("bases.csv"), s.as_bytes())
+    write_atomic(&cal.out.bases_csv(), s.as_bytes())
 }

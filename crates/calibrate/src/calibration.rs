@@ -14,7 +14,7 @@ use crate::design::{
 use crate::inputs::load_inputs;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};
-use crate::{Error, Inputs};
+use crate::{Error, Inputs, OutputDir};
 
 /// Progress messages.
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
@@ -25,7 +25,7 @@ pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
 pub struct Calibration {
     pub project: Project,
     pub inputs: Inputs,
-    pub out: PathBuf,
+    pub out: OutputDir,
 }
 
 impl Calibration {
@@ -36,7 +36,7 @@ impl Calibration {
         let mut cal = Calibration {
             project,
             inputs,
-            out: out.to_path_buf(),
+            out: OutputDir::new(out),
         };
         if let Some(outcome) = read_outcome(&cal.simulations_dir()) {
             cal.learn_invalid_region(&outcome);
@@ -61,7 +61,7 @@ impl Calibration {
             p.seed,
             p.maximin_iterations,
         )?;
-        write_design_csv(&self.out.join("design.csv"), &self.inputs.plan, &d)?;
+        write_design_csv(&self.out.design_csv(), &self.inputs.plan, &d)?;
         Ok(d)
     }
 
@@ -123,7 +123,7 @@ impl Calibration {
 
     /// Folder of the design-point simulations.
     pub fn simulations_dir(&self) -> PathBuf {
-        self.out.join("simulations")
+        self.out.simulations()
     }
 
     /// Stage 2, one job: simulates design point `i` (or reloads it if already done).
@@ -184,14 +184,14 @@ impl Calibration {
         let split = Split::nested(base.min(n_pts), n_pts, sp.held_out_fraction, sp.seed)?;
         let set = TrainingSet::new(params, points, &inp.features, inp.outputs.clone(), y, 0)?
             .with_split(split)?;
-        let dir = self.out.join("dataset");
+        let dir = self.out.dataset();
         set.write(&dir)?;
         Ok(dir)
     }
 
     /// Folder of the trained surrogate.
     pub fn surrogate_dir(&self) -> PathBuf {
-        self.out.join("surrogate")
+        self.out.surrogate()
     }
 
     /// True once a valid surrogate is in place.
@@ -215,7 +215,7 @@ impl Calibration {
             init: init.map(Path::to_path_buf),
             ..TrainOptions::default()
         };
-        bemcal_surrogate::train(&self.out.join("dataset"), &self.surrogate_dir(), &opts)?;
+        bemcal_surrogate::train(&self.out.dataset(), &self.surrogate_dir(), &opts)?;
         Ok(())
     }
 }

@@ -252,13 +252,7 @@ impl Sampler<'_> {
         let sbox = self.sigma_box.clone();
         let noise = self.noise.clone();
         let (post, eval) = self.split();
-        write_draws_csv(
-            &cal.out.join("draws.csv"),
-            &post,
-            &inp.outputs,
-            draws,
-            &sbox,
-        )?;
+        write_draws_csv(&cal.out.draws_csv(), &post, &inp.outputs, draws, &sbox)?;
         let mut residual_ar1: Vec<(String, f64)> = vec![];
         let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
             Some(b) => (0..n_out)
@@ -331,7 +325,7 @@ impl Sampler<'_> {
             bands.push(b);
         }
         write_bands_csv(
-            &cal.out.join("posterior_predictive.csv"),
+            &cal.out.posterior_predictive_csv(),
             inp.year,
             &inp.outputs,
             &inp.measured,

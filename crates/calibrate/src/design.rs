@@ -363,7 +363,7 @@ pub fn write_outcome(dir: &Path, outcome: &Outcome) -> Result<(), Error> {
 /// Severe messages EnergyPlus wrote in the saved run of point `i` that left its results usable
 /// (see `bemcal_energyplus::errfile`), for the summary.
 pub fn point_notes(dir: &Path, i: usize) -> Vec<String> {
-    std::fs::read_to_string(dir.join(format!("point_{i:03}.json")))
+    std::fs::read_to_string(dir.join(crate::output::point_file(i)))
         .ok()
         .and_then(|t| serde_json::from_str::<SavedRun>(&t).ok())
         .map(|r| r.notes)
@@ -414,7 +414,7 @@ pub fn simulate_point(
     dir: &Path,
     i: usize,
 ) -> PointRun {
-    let saved = dir.join(format!("point_{i:03}.json"));
+    let saved = dir.join(crate::output::point_file(i));
     if let Ok(text) = std::fs::read_to_string(&saved) {
         if let Ok(o) = serde_json::from_str::<SavedRun>(&text) {
             if &o.values == values {
@@ -422,7 +422,7 @@ pub fn simulate_point(
             }
         }
     }
-    let run_dir: PathBuf = dir.join(format!("point_{i:03}"));
+    let run_dir: PathBuf = saved.with_extension("");
     if run_dir.exists() {
         // An interrupted run: start it again from scratch.
         std::fs::remove_dir_all(&run_dir).map_err(|e| Error::io(&run_dir, e))?;

@@ -14,6 +14,7 @@ mod chains;
 pub mod design;
 mod inputs;
 mod local;
+pub mod output;
 pub mod posterior;
 pub mod project;
 pub mod refine;
@@ -33,6 +34,7 @@ pub use inputs::{
     load_inputs, load_model, resolve_weather, weather_for, weather_reference, Inputs,
 };
 pub use local::{calibrate, log_design_outcome};
+pub use output::OutputDir;
 pub use project::Project;
 pub use summary::{
     write_calibrated_model, write_outputs_csv, write_summary, DesignReport, OutputMetrics,

@@ -169,7 +169,7 @@ impl Calibration {
 
     /// Folder of refinement round `round` (1-based).
     pub fn refine_dir(&self, round: u32) -> PathBuf {
-        self.out.join("refine").join(format!("round_{round}"))
+        self.out.refine_round(round)
     }
 
     /// Checkpoint of the chains that run on the surrogate of round `round` (0 = the
@@ -179,7 +179,7 @@ impl Calibration {
         if round < self.project.refine.rounds {
             self.refine_dir(round + 1).join("chains.json")
         } else {
-            self.out.join("chains.json")
+            self.out.chains_checkpoint()
         }
     }
 

@@ -235,7 +235,7 @@ pub fn write_summary(
     write_calibrated_model(cal, &chains.estimate)?;
     crate::bases::write_bases_csv(cal)?;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
-    write_atomic(&cal.out.join("summary.json"), &json)?;
+    write_atomic(&cal.out.summary_json(), &json)?;
     Ok(summary)
 }
 
@@ -250,10 +250,7 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
     let _ = std::fs::remove_dir_all(&scratch);
     let simulated = inp.runner.simulated_input(&idf, &scratch)?;
     let _ = std::fs::remove_dir_all(&scratch);
-    write_atomic(
-        &cal.out.join("calibrated.idf"),
-        simulated.to_text().as_bytes(),
-    )?;
+    write_atomic(&cal.out.calibrated_idf(), simulated.to_text().as_bytes())?;
     let mut toml = format!(
         "# Parameter values of the calibrated model of '{}' (estimate: {}; calibrated and fixed).\n\
          # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\
@@ -266,7 +263,7 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
     for (name, v) in &values {
         toml.push_str(&format!("{name} = {v}\n"));
     }
-    write_atomic(&cal.out.join("calibrated.toml"), toml.as_bytes())
+    write_atomic(&cal.out.calibrated_toml(), toml.as_bytes())
 }
 
 pub(crate) fn write_draws_csv(

@@ -70,7 +70,7 @@ impl Calibration {
     /// meters, ASHRAE Guideline 14 per output.
     pub fn validate(&self, i: usize, label: &str, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
         let inp = &self.inputs;
-        let vdir = self.out.join("validation");
+        let vdir = self.out.validation();
         std::fs::create_dir_all(&vdir).map_err(|e| Error::io(&vdir, e))?;
         let (o, _) = simulate_point(
             &inp.runner,

@@ -1,0 +1,120 @@
+//! The output folder of a calibration: where each stage writes, named once. The local driver,
+//! the coordinator's run folder (`DATA/runs/<id>/out`), a worker's job folder and the report all
+//! use this layout, as paths ([`OutputDir`]) or as the folder-relative names jobs carry
+//! ([`OutputDir::point_rel`], [`STATES_FILE`], ...).
+
+use std::path::{Path, PathBuf};
+
+/// A chain-segment job's chain states at its end (and the next segment's input).
+pub const STATES_FILE: &str = "states.json";
+/// A chain-segment job's draws.
+pub const DRAWS_FILE: &str = "draws.json";
+/// Where a refinement round's first chain segment starts (unit space, one row per chain).
+pub const WARM_FILE: &str = "warm.json";
+
+/// The file name of point `i` (a design point, a refinement draw or a validation run) in its
+/// folder; its EnergyPlus run directory is the same name without `.json`.
+pub fn point_file(i: usize) -> String {
+    format!("point_{i:03}.json")
+}
+
+/// The output folder of one calibration. It dereferences to its root path.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OutputDir {
+    root: PathBuf,
+}
+
+impl std::ops::Deref for OutputDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.root
+    }
+}
+
+impl AsRef<Path> for OutputDir {
+    fn as_ref(&self) -> &Path {
+        &self.root
+    }
+}
+
+impl OutputDir {
+    /// The folder at `root`.
+    pub fn new(root: impl Into<PathBuf>) -> OutputDir {
+        OutputDir { root: root.into() }
+    }
+
+    /// `design.csv`: the Latin hypercube.
+    pub fn design_csv(&self) -> PathBuf {
+        self.root.join("design.csv")
+    }
+
+    /// `simulations/`: EnergyPlus at design points and refinement draws.
+    pub fn simulations(&self) -> PathBuf {
+        self.root.join("simulations")
+    }
+
+    /// `simulations/point_NNN.json`, relative to the folder (as jobs name it).
+    pub fn point_rel(i: usize) -> String {
+        format!("simulations/{}", point_file(i))
+    }
+
+    /// `validation/point_NNN.json`, relative to the folder (as jobs name it).
+    pub fn validation_point_rel(i: usize) -> String {
+        format!("validation/{}", point_file(i))
+    }
+
+    /// `dataset/`: the training set.
+    pub fn dataset(&self) -> PathBuf {
+        self.root.join("dataset")
+    }
+
+    /// `surrogate/`: the current surrogate.
+    pub fn surrogate(&self) -> PathBuf {
+        self.root.join("surrogate")
+    }
+
+    /// `refine/round_R/` (1-based): a refinement round's chains and the surrogate they used.
+    pub fn refine_round(&self, round: u32) -> PathBuf {
+        self.root.join("refine").join(format!("round_{round}"))
+    }
+
+    /// `chains.json`: the final chains' checkpoint.
+    pub fn chains_checkpoint(&self) -> PathBuf {
+        self.root.join("chains.json")
+    }
+
+    /// `draws.csv`: the final chains' draws after burn-in.
+    pub fn draws_csv(&self) -> PathBuf {
+        self.root.join("draws.csv")
+    }
+
+    /// `posterior_predictive.csv`: hourly bands with the meters.
+    pub fn posterior_predictive_csv(&self) -> PathBuf {
+        self.root.join("posterior_predictive.csv")
+    }
+
+    /// `validation/`: EnergyPlus at the estimate and the initial model.
+    pub fn validation(&self) -> PathBuf {
+        self.root.join("validation")
+    }
+
+    /// `validation/bases.csv`: the loads in the meters the model does not have.
+    pub fn bases_csv(&self) -> PathBuf {
+        self.validation().join("bases.csv")
+    }
+
+    /// `summary.json`.
+    pub fn summary_json(&self) -> PathBuf {
+        self.root.join("summary.json")
+    }
+
+    /// `calibrated.idf`: the model at the estimate, as EnergyPlus ran it.
+    pub fn calibrated_idf(&self) -> PathBuf {
+        self.root.join("calibrated.idf")
+    }
+
+    /// `calibrated.toml`: every parameter's value at the estimate.
+    pub fn calibrated_toml(&self) -> PathBuf {
+        self.root.join("calibrated.toml")
+    }
+}
