@@ -9,21 +9,25 @@ use bemcal_stats::chain::Chain;
 
 use crate::design::simulate_design;
 use crate::posterior::run_chains;
+use crate::posterior::Checkpoint;
 use crate::project::Project;
 use crate::refine::{close_round, SimulatedDraw};
+use crate::refine::{RefineLog, RefineRound};
 use crate::replacement::Outcome;
-use crate::Error;
 use crate::{
-    chains_at, extended_target, next_candidate, write_summary, Calibration, Log, Summary, Timings,
-    ValidationStep, INITIAL_KEY,
+    chains_at, extended_target, next_candidate, write_summary, Calibration, ChainSummary, Error,
+    Log, OutputMetrics, Sampler, Summary, Timings, ValidationStep, INITIAL_KEY,
 };
+use bemcal_energyplus::HourlyOutputs;
+use bemcal_stats::lhs::Design;
 
-/// Runs the whole calibration of `project` into `out` on this machine.
+/// Runs the whole calibration of `project` into `out` on this machine: each stage in the
+/// order the data flows, every decision taken by the rules both drivers share.
 pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
     let t_all = Instant::now();
+    let mut timings = Timings::default();
     let mut cal = Calibration::load(project.clone(), out)?;
     let inp = &cal.inputs;
-    let mut timings = Timings::default();
     log(&format!(
         "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
         inp.model.path.display(),
@@ -32,10 +36,49 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         inp.outputs,
         inp.weather_path.display()
     ));
-
     for note in &inp.plan.restricted {
         log(note);
     }
+    let (design, mut outputs) = design_stage(&mut cal, log, &mut timings)?;
+    let cal = cal;
+
+    // Refinement points of rounds finished earlier (a rerun): their saved simulations.
+    let mut refined = cal.refine_log()?;
+    for p in refined.points() {
+        outputs.push(cal.simulate_point(p.index, &p.values)?.0);
+    }
+    let (mut sampler, ck) = loop {
+        let round = refined.rounds.len() as u32;
+        let mut sampler = surrogate_stage(&cal, &design, &refined, &outputs, log, &mut timings)?;
+        let ck = round_chains(&cal, &mut sampler, &refined, log, &mut timings)?;
+        if round >= project.refine.rounds {
+            break (sampler, ck);
+        }
+        let t = Instant::now();
+        let (closed, new_outputs) = refine_round(&cal, sampler, &ck, &refined, log)?;
+        timings.refinement_s += t.elapsed().as_secs_f64();
+        outputs.extend(new_outputs);
+        cal.record_round(&mut refined, closed)?;
+    };
+    let (mut chains, ck) = final_chains(&cal, &mut sampler, ck, log, &mut timings)?;
+    log_chains(&chains, &ck, log);
+
+    let t = Instant::now();
+    let (validation, initial) = validate_stage(&cal, &mut chains, log)?;
+    timings.validation_s = t.elapsed().as_secs_f64();
+    timings.total_s = t_all.elapsed().as_secs_f64();
+    write_summary(&cal, &design, &chains, validation, initial, timings)
+}
+
+/// The design: the hypercube and its spares, EnergyPlus at the points with failed ones
+/// replaced (`replacement::next_step` via `simulate_design`); the region EnergyPlus refused
+/// is learnt. Returns the settled design and its simulated outputs.
+fn design_stage(
+    cal: &mut Calibration,
+    log: Log<'_>,
+    timings: &mut Timings,
+) -> Result<(Design, Vec<HourlyOutputs>), Error> {
+    let inp = &cal.inputs;
     let t = Instant::now();
     let hypercube = cal.design()?;
     let spares = cal.spares()?;
@@ -57,7 +100,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         cal.design_policy(),
         &inp.weather_path,
         &cal.simulations_dir(),
-        project.design.parallel,
+        cal.project.design.parallel,
         log,
     )?;
     timings.simulations_s = t.elapsed().as_secs_f64();
@@ -69,179 +112,211 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     ));
     log_design_outcome(&sims.outcome, log);
     let design = sims.outcome.design(&hypercube, &inp.plan.priors);
-    let base = design.points.len();
     cal.learn_invalid_region(&sims.outcome);
-    let cal = cal;
-    let inp = &cal.inputs;
-    if !inp.plan.invalid.balls.is_empty() {
+    let invalid = cal.inputs.plan.invalid.balls.len();
+    if invalid > 0 {
         log(&format!(
-            "chains: proposals near the {} design point(s) EnergyPlus could not simulate are \
-             refused (summary.json design.invalid_region)",
-            inp.plan.invalid.balls.len()
+            "chains: proposals near the {invalid} design point(s) EnergyPlus could not simulate are \
+             refused (summary.json design.invalid_region)"
         ));
     }
+    Ok((design, sims.outputs))
+}
 
-    // Refinement points of rounds finished earlier (a rerun): their saved simulations.
-    let mut refined = cal.refine_log()?;
-    let mut outputs = sims.outputs;
-    for p in refined.points() {
-        outputs.push(cal.simulate_point(p.index, &p.values)?.0);
+/// The surrogate of the current round: the training set (the settled design, then every
+/// finished round's draws), trained unless one is in place (warm-started after a round), and
+/// bound to the likelihood.
+fn surrogate_stage<'c>(
+    cal: &'c Calibration,
+    design: &Design,
+    refined: &RefineLog,
+    outputs: &[HourlyOutputs],
+    log: Log<'_>,
+    timings: &mut Timings,
+) -> Result<Sampler<'c>, Error> {
+    let full = cal.full_design(design, refined);
+    let t = Instant::now();
+    cal.training_set(design.points.len(), &full, outputs)?;
+    if cal.has_surrogate() {
+        log("surrogate: reusing the one trained earlier");
+    } else {
+        log(&format!(
+            "training the surrogate (PyTorch) on {} points...",
+            full.points.len()
+        ));
+        let init = cal.warm_start(refined);
+        if let Some(dir) = &init {
+            log(&format!("  warm start from {}", dir.display()));
+        }
+        cal.train(init.as_deref())?;
     }
-    let rounds = project.refine.rounds;
-    let (mut sampler, mut ck) = loop {
-        let round = refined.rounds.len() as u32;
-        let full = cal.full_design(&design, &refined);
-        let t = Instant::now();
-        cal.training_set(base, &full, &outputs)?;
-        if cal.has_surrogate() {
-            log("surrogate: reusing the one trained earlier");
-        } else {
-            log(&format!(
-                "training the surrogate (PyTorch) on {} points...",
-                full.points.len()
-            ));
-            let init = cal.warm_start(&refined);
-            if let Some(dir) = &init {
-                log(&format!("  warm start from {}", dir.display()));
-            }
-            cal.train(init.as_deref())?;
-        }
-        let mut sampler = cal.sampler()?;
-        timings.training_s += t.elapsed().as_secs_f64();
-        log(&format!(
-            "surrogate: held-out RMSE (sigma_eta) {}",
-            inp.outputs
-                .iter()
-                .zip(&sampler.sigma_eta)
-                .map(|(n, s)| format!("{n} {s:.2} kWh"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-
-        let t = Instant::now();
-        // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
-        // (A log from before starts were recorded gives prior draws again.)
-        let starts = match refined.rounds.last() {
-            Some(r) if !r.starts.is_empty() => r.starts.clone(),
-            _ => sampler.starts(),
-        };
-        let config = sampler.config_for(round);
-        let hmc_config = sampler.hmc_config_for(round);
-        let settings = sampler.settings_for(round);
-        let last = round >= rounds;
-        let iterations = if last {
-            project.mcmc.iterations
-        } else {
-            project.refine.iterations
-        };
-        let path = cal.chains_path(round);
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        }
-        let label = if last {
-            "chains".to_string()
-        } else {
-            format!("refinement round {} chains", round + 1)
-        };
-        let ck = {
-            let (post, eval) = sampler.split();
-            run_chains(
-                &post,
-                eval,
-                |post, eval| chains_at(post, eval, &starts, config, &hmc_config, &settings, 0),
-                iterations,
-                project.mcmc.segment,
-                &path,
-                &|done, n| log(&format!("{label}: {done}/{n} iterations")),
-            )?
-        };
-        timings.chains_s += t.elapsed().as_secs_f64();
-        if last {
-            break (sampler, ck);
-        }
-
-        // Refinement round `round + 1`: simulate posterior draws, record, retrain.
-        let t = Instant::now();
-        let post = sampler.posterior();
-        let picks: Vec<Vec<f64>> = crate::refine::pick_draws(&ck.draws, project.refine.points)
+    let sampler = cal.sampler()?;
+    timings.training_s += t.elapsed().as_secs_f64();
+    log(&format!(
+        "surrogate: held-out RMSE (sigma_eta) {}",
+        cal.inputs
+            .outputs
             .iter()
-            .map(|u| post.theta(u))
-            .collect();
-        let first = cal.next_refine_key(&refined);
-        let indexed: Vec<(usize, Vec<f64>)> = picks
-            .iter()
-            .enumerate()
-            .map(|(j, x)| (first + j, x.clone()))
-            .collect();
-        let results = crate::design::simulate_points(
-            &inp.runner,
-            &inp.model,
-            &inp.plan,
-            &indexed,
-            &inp.weather_path,
-            &cal.simulations_dir(),
-            project.design.parallel,
-            &|done, n| {
-                log(&format!(
-                    "refinement round {}: {done}/{n} simulations",
-                    round + 1
-                ))
-            },
-        )?;
-        let simulated = indexed
-            .into_iter()
-            .zip(results)
-            .map(|((index, values), r)| SimulatedDraw {
-                index,
-                values,
-                outputs: r.map(|(o, _)| o).map_err(|e| {
-                    log(&format!(
-                        "refinement: posterior draw left out, EnergyPlus failed: {e}"
-                    ));
-                    e.to_string()
-                }),
-            })
-            .collect();
-        let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
-        let (closed, new_outputs) = close_round(
-            round + 1,
-            simulated,
-            &mut sampler,
-            &ck.draws,
-            &last,
-            project.refine.restart_below,
-        )?;
-        log(&format!(
-            "refinement round {}: {} posterior draws simulated ({} failed); surrogate vs EnergyPlus there: {}",
-            round + 1,
-            closed.points.len(),
-            closed.failed.len(),
-            closed
-                .surrogate_error
-                .iter()
-                .map(|m| format!(
-                    "{} NMBE {:.1} % CV-RMSE {:.1} %",
-                    m.output, m.metrics.nmbe, m.metrics.cv_rmse
-                ))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-        drop(sampler);
-        for (c, gap) in &closed.restarted {
-            log(&format!(
-                "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
-                round + 1
-            ));
-        }
-        timings.refinement_s += t.elapsed().as_secs_f64();
-        outputs.extend(new_outputs);
-        cal.record_round(&mut refined, closed)?;
+            .zip(&sampler.sigma_eta)
+            .map(|(n, s)| format!("{n} {s:.2} kWh"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    Ok(sampler)
+}
+
+/// The chains of the current round (a preliminary round's `refine.iterations`, or the final
+/// `mcmc.iterations`), checkpointed after every segment and resumed from their checkpoint.
+fn round_chains(
+    cal: &Calibration,
+    sampler: &mut Sampler<'_>,
+    refined: &RefineLog,
+    log: Log<'_>,
+    timings: &mut Timings,
+) -> Result<Checkpoint, Error> {
+    let project = &cal.project;
+    let round = refined.rounds.len() as u32;
+    let t = Instant::now();
+    // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
+    // (A log from before starts were recorded gives prior draws again.)
+    let starts = match refined.rounds.last() {
+        Some(r) if !r.starts.is_empty() => r.starts.clone(),
+        _ => sampler.starts(),
     };
+    let config = sampler.config_for(round);
+    let hmc_config = sampler.hmc_config_for(round);
+    let settings = sampler.settings_for(round);
+    let last = round >= project.refine.rounds;
+    let iterations = if last {
+        project.mcmc.iterations
+    } else {
+        project.refine.iterations
+    };
+    let path = cal.chains_path(round);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let label = if last {
+        "chains".to_string()
+    } else {
+        format!("refinement round {} chains", round + 1)
+    };
+    let ck = {
+        let (post, eval) = sampler.split();
+        run_chains(
+            &post,
+            eval,
+            |post, eval| chains_at(post, eval, &starts, config, &hmc_config, &settings, 0),
+            iterations,
+            project.mcmc.segment,
+            &path,
+            &|done, n| log(&format!("{label}: {done}/{n} iterations")),
+        )?
+    };
+    timings.chains_s += t.elapsed().as_secs_f64();
+    Ok(ck)
+}
+
+/// A refinement round after its chains: posterior draws picked (`refine::pick_draws`),
+/// simulated by EnergyPlus, and the round closed by the shared rule (`refine::close_round`).
+/// Returns the round and the new points' outputs; takes the round's sampler, so that it is
+/// gone (and its surrogate folder free to move) when the round is recorded.
+fn refine_round(
+    cal: &Calibration,
+    mut sampler: Sampler<'_>,
+    ck: &Checkpoint,
+    refined: &RefineLog,
+    log: Log<'_>,
+) -> Result<(RefineRound, Vec<HourlyOutputs>), Error> {
+    let (project, inp) = (&cal.project, &cal.inputs);
+    let round = refined.rounds.len() as u32;
+    let post = sampler.posterior();
+    let picks: Vec<Vec<f64>> = crate::refine::pick_draws(&ck.draws, project.refine.points)
+        .iter()
+        .map(|u| post.theta(u))
+        .collect();
+    let first = cal.next_refine_key(refined);
+    let indexed: Vec<(usize, Vec<f64>)> = picks
+        .iter()
+        .enumerate()
+        .map(|(j, x)| (first + j, x.clone()))
+        .collect();
+    let results = crate::design::simulate_points(
+        &inp.runner,
+        &inp.model,
+        &inp.plan,
+        &indexed,
+        &inp.weather_path,
+        &cal.simulations_dir(),
+        project.design.parallel,
+        &|done, n| {
+            log(&format!(
+                "refinement round {}: {done}/{n} simulations",
+                round + 1
+            ))
+        },
+    )?;
+    let simulated = indexed
+        .into_iter()
+        .zip(results)
+        .map(|((index, values), r)| SimulatedDraw {
+            index,
+            values,
+            outputs: r.map(|(o, _)| o).map_err(|e| {
+                log(&format!(
+                    "refinement: posterior draw left out, EnergyPlus failed: {e}"
+                ));
+                e.to_string()
+            }),
+        })
+        .collect();
+    let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
+    let (closed, new_outputs) = close_round(
+        round + 1,
+        simulated,
+        &mut sampler,
+        &ck.draws,
+        &last,
+        project.refine.restart_below,
+    )?;
+    log(&format!(
+        "refinement round {}: {} posterior draws simulated ({} failed); surrogate vs EnergyPlus there: {}",
+        round + 1,
+        closed.points.len(),
+        closed.failed.len(),
+        closed
+            .surrogate_error
+            .iter()
+            .map(|m| format!(
+                "{} NMBE {:.1} % CV-RMSE {:.1} %",
+                m.output, m.metrics.nmbe, m.metrics.cv_rmse
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    for (c, gap) in &closed.restarted {
+        log(&format!(
+            "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
+            round + 1
+        ));
+    }
+    Ok((closed, new_outputs))
+}
+
+/// The final chains summarised, and extended from their checkpoint while R-hat is above
+/// `mcmc.rhat_target` (the shared rule `extended_target`, as the coordinator does).
+fn final_chains(
+    cal: &Calibration,
+    sampler: &mut Sampler<'_>,
+    mut ck: Checkpoint,
+    log: Log<'_>,
+    timings: &mut Timings,
+) -> Result<(ChainSummary, Checkpoint), Error> {
+    let project = &cal.project;
+    let rounds = project.refine.rounds;
     let t = Instant::now();
     let mut chains = sampler.summarize(&ck.states, &ck.draws)?;
     timings.summary_s = t.elapsed().as_secs_f64();
-    // Extend the final chains while R-hat is above its target (the rule: `extended_target`),
-    // from their checkpoint, as the coordinator does.
     let m = &project.mcmc;
     let mut target = m.iterations;
     while let Some(next) = extended_target(m, chains.posterior.max_rhat, chains.extensions, target)
@@ -273,6 +348,12 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         timings.summary_s += t.elapsed().as_secs_f64();
         target = next;
     }
+    Ok((chains, ck))
+}
+
+/// What the final chains did: acceptance, HMC trajectories stopped, chains moved to the best
+/// mode, independence steps switched off, R-hat and ESS.
+fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
     log(&format!(
         "chains: acceptance after burn-in {:.3?}",
         chains.acceptance
@@ -305,13 +386,20 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         "posterior: max R-hat {:.3}, min bulk ESS {:.0}",
         chains.posterior.max_rhat, chains.posterior.min_ess_bulk
     ));
+}
 
-    let t = Instant::now();
+/// EnergyPlus at the estimate, or at the next-best draws while it fails (the shared rule
+/// `next_candidate`; the estimate settled with `settle_estimate`), and at the initial model.
+fn validate_stage(
+    cal: &Calibration,
+    chains: &mut ChainSummary,
+    log: Log<'_>,
+) -> Result<(Vec<OutputMetrics>, Vec<OutputMetrics>), Error> {
     log("validation: EnergyPlus at the calibrated parameters");
     // The estimate, then the next-best draws while EnergyPlus fails (`next_candidate`).
     let mut failures: Vec<String> = vec![];
     let validation = loop {
-        let c = match next_candidate(&chains, &failures) {
+        let c = match next_candidate(chains, &failures) {
             ValidationStep::Validate(c) => c,
             ValidationStep::Exhausted(message) => {
                 return Err(Error::Stage {
@@ -332,15 +420,13 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         }
     };
     chains.settle_estimate(&failures);
-    let initial = if project.validation.initial {
+    let initial = if cal.project.validation.initial {
         log("validation: EnergyPlus at the initial parameters (prior modes)");
         cal.validate(INITIAL_KEY, "initial", &cal.initial_point())?
     } else {
         vec![]
     };
-    timings.validation_s = t.elapsed().as_secs_f64();
-    timings.total_s = t_all.elapsed().as_secs_f64();
-    write_summary(&cal, &design, &chains, validation, initial, timings)
+    Ok((validation, initial))
 }
 
 /// Logs what became of the design points EnergyPlus could not simulate.
