@@ -680,8 +680,15 @@ pub fn read_precal(dir: &Path) -> Result<PrecalData, ReportError> {
 
 /// Writes the report atomically (temporary file + rename).
 pub fn write_html(path: &Path, html: &str) -> Result<(), ReportError> {
-    let tmp = path.with_extension("html.tmp");
-    std::fs::write(&tmp, html).map_err(|source| ReportError::Io {
+    write_atomic(path, html.as_bytes())
+}
+
+/// Writes a file atomically (temporary file + rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".tmp");
+    let tmp = path.with_file_name(name);
+    std::fs::write(&tmp, bytes).map_err(|source| ReportError::Io {
         path: tmp.clone(),
         source,
     })?;

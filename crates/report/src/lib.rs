@@ -18,6 +18,7 @@ pub mod analysis;
 pub mod html;
 pub mod io;
 pub mod plots;
+pub mod portfolio;
 
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,196 @@
+//! The portfolio page: a portfolio's summary (one row per building: state, Guideline 14 per
+//! output, max R-hat, run time, failure) as `portfolio.csv`, `portfolio.json` and a
+//! self-contained `portfolio.html` linking each building's report.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::html::esc;
+use crate::io::write_atomic;
+use crate::ReportError;
+
+/// G14 metrics of one output at the calibrated parameters.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputRow {
+    pub output: String,
+    pub nmbe: f64,
+    pub cv_rmse: f64,
+    pub pass: bool,
+}
+
+/// One building in the summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct BuildingRow {
+    pub building: String,
+    pub run: String,
+    /// done, failed, cancelled, running.
+    pub state: String,
+    /// The stage reached (where it failed, for a failed one).
+    pub stage: String,
+    /// Why it failed: the loader's message or the job's error (EnergyPlus error lines).
+    pub error: Option<String>,
+    /// Every output passes ASHRAE Guideline 14 (None: no validation).
+    pub g14_pass: Option<bool>,
+    pub outputs: Vec<OutputRow>,
+    pub max_rhat: Option<f64>,
+    pub run_time_s: f64,
+    pub simulations_run: u32,
+    pub simulations_shared: u32,
+    /// The building's report, relative to the summary folder.
+    pub report: Option<String>,
+}
+
+/// `portfolio.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PortfolioSummary {
+    pub portfolio: String,
+    pub name: String,
+    pub buildings: usize,
+    pub done: usize,
+    pub failed: usize,
+    pub simulations_run: u32,
+    pub simulations_shared: u32,
+    pub rows: Vec<BuildingRow>,
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn num(v: Option<f64>, digits: usize) -> String {
+    v.filter(|v| v.is_finite())
+        .map_or(String::new(), |v| format!("{v:.digits$}"))
+}
+
+/// Output names over all rows, in first-seen order.
+fn output_names(p: &PortfolioSummary) -> Vec<String> {
+    let mut names: Vec<String> = vec![];
+    for r in &p.rows {
+        for o in &r.outputs {
+            if !names.contains(&o.output) {
+                names.push(o.output.clone());
+            }
+        }
+    }
+    names
+}
+
+/// Writes `portfolio.csv` (one line per building; per output NMBE, CV-RMSE and G14 pass),
+/// `portfolio.json` and `portfolio.html` (a self-contained table linking each report) in `dir`.
+pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let names = output_names(p);
+    let mut csv = String::from(
+        "building,run,state,stage,g14_pass,max_rhat,run_time_s,simulations_run,simulations_shared",
+    );
+    for n in &names {
+        csv.push_str(&format!(",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass"));
+    }
+    csv.push_str(",error\n");
+    for r in &p.rows {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{:.1},{},{}",
+            csv_field(&r.building),
+            r.run,
+            r.state,
+            r.stage,
+            r.g14_pass.map_or(String::new(), |b| b.to_string()),
+            num(r.max_rhat, 4),
+            r.run_time_s,
+            r.simulations_run,
+            r.simulations_shared
+        ));
+        for n in &names {
+            match r.outputs.iter().find(|o| &o.output == n) {
+                Some(o) => csv.push_str(&format!(
+                    ",{},{},{}",
+                    num(Some(o.nmbe), 3),
+                    num(Some(o.cv_rmse), 3),
+                    o.pass
+                )),
+                None => csv.push_str(",,,"),
+            }
+        }
+        csv.push_str(&format!(
+            ",{}\n",
+            csv_field(r.error.as_deref().unwrap_or(""))
+        ));
+    }
+    write_atomic(&dir.join("portfolio.csv"), csv.as_bytes())?;
+    let json = serde_json::to_string_pretty(p).map_err(|e| ReportError::Parse {
+        path: dir.join("portfolio.json"),
+        msg: e.to_string(),
+    })?;
+    write_atomic(&dir.join("portfolio.json"), json.as_bytes())?;
+    let mut h = format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>Portfolio {name}</title><style>\
+         body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}td.l,th.l{{text-align:left}}\
+         .pass{{color:#1a7f37}}.fail{{color:#b42318;font-weight:bold}}pre{{white-space:pre-wrap;margin:0;text-align:left;max-width:60em}}\
+         </style></head><body>\n<h1>Portfolio {name}</h1>\n<p>{n} buildings: {d} done, {f} failed; \
+         {sr} EnergyPlus design runs, {ss} shared between buildings. ASHRAE Guideline 14 (hourly): \
+         |NMBE| &le; 10 %, CV-RMSE &le; 30 %.</p>\n<table>\n<tr><th class=\"l\">building</th><th class=\"l\">state</th>\
+         <th>G14</th><th>max R-hat</th><th>run time (s)</th>",
+        name = esc(&p.name),
+        n = p.buildings,
+        d = p.done,
+        f = p.failed,
+        sr = p.simulations_run,
+        ss = p.simulations_shared
+    );
+    for n in &names {
+        h.push_str(&format!(
+            "<th>{0} NMBE %</th><th>{0} CV-RMSE %</th>",
+            esc(n)
+        ));
+    }
+    h.push_str("<th class=\"l\">report / error</th></tr>\n");
+    for r in &p.rows {
+        let g14 = match r.g14_pass {
+            Some(true) => "<span class=\"pass\">pass</span>",
+            Some(false) => "<span class=\"fail\">FAIL</span>",
+            None => "",
+        };
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{g14}</td><td>{}</td><td>{:.0}</td>",
+            esc(&r.building),
+            if r.state == "failed" {
+                format!("<span class=\"fail\">failed</span> ({})", esc(&r.stage))
+            } else {
+                esc(&r.state)
+            },
+            num(r.max_rhat, 3),
+            r.run_time_s
+        ));
+        for n in &names {
+            match r.outputs.iter().find(|o| &o.output == n) {
+                Some(o) => {
+                    let c = if o.pass { "pass" } else { "fail" };
+                    h.push_str(&format!(
+                        "<td class=\"{c}\">{}</td><td class=\"{c}\">{}</td>",
+                        num(Some(o.nmbe), 1),
+                        num(Some(o.cv_rmse), 1)
+                    ))
+                }
+                None => h.push_str("<td></td><td></td>"),
+            }
+        }
+        let last = match (&r.report, &r.error) {
+            (_, Some(e)) => format!("<pre>{}</pre>", esc(e)),
+            (Some(rep), None) => format!("<a href=\"{0}\">{0}</a>", esc(rep)),
+            (None, None) => String::new(),
+        };
+        h.push_str(&format!("<td class=\"l\">{last}</td></tr>\n"));
+    }
+    h.push_str("</table>\n</body></html>\n");
+    write_atomic(&dir.join("portfolio.html"), h.as_bytes())?;
+    Ok(())
+}
