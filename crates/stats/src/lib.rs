@@ -19,6 +19,8 @@
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 
+#![deny(missing_docs)]
+
 pub mod chain;
 pub mod diagnostics;
 pub mod hmc;
@@ -40,9 +42,13 @@ pub enum StatsError {
     /// A triangular prior whose bounds are out of order.
     #[error("invalid triangular prior (min {min}, mode {mode}, max {max}): {reason}")]
     InvalidTriangular {
+        /// Lower bound.
         min: f64,
+        /// Mode.
         mode: f64,
+        /// Upper bound.
         max: f64,
+        /// What is out of order.
         reason: &'static str,
     },
     /// Inputs whose lengths or shapes do not fit together.
@@ -53,7 +59,10 @@ pub enum StatsError {
     Invalid(String),
     /// Design rows that still violate constraints after repair.
     #[error("constraint repair failed: design rows {rows:?} still violate the constraints")]
-    InfeasibleDesign { rows: Vec<usize> },
+    InfeasibleDesign {
+        /// The rows (design points) still infeasible.
+        rows: Vec<usize>,
+    },
     /// Too few valid values for a statistic.
     #[error("not enough data: {0}")]
     NotEnoughData(String),
