@@ -42,7 +42,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use chrono::{Datelike, Duration, NaiveDate, NaiveDateTime, Timelike, Weekday};
+use chrono::{Datelike, Duration, NaiveDate, NaiveDateTime, Offset, TimeZone, Timelike, Weekday};
 use serde::{Deserialize, Serialize};
 
 use crate::PrecalError;
@@ -332,6 +332,12 @@ pub struct MeterSpec {
     /// Daylight saving handling.
     #[serde(default)]
     pub dst: DstHandling,
+    /// The IANA time zone the file's clock follows (e.g. `Europe/Berlin`,
+    /// `Australia/Sydney`): its daylight saving rules (any country, either hemisphere) move
+    /// readings back to local standard time, the zone's standard offset. With it, `dst` stays
+    /// `auto`; stamps that carry a UTC offset are taken as they are.
+    #[serde(default)]
+    pub time_zone: Option<String>,
     /// Two rows in one hour slot.
     #[serde(default)]
     pub duplicates: DuplicatePolicy,
@@ -362,6 +368,7 @@ impl Default for MeterSpec {
             timestamp_format: default_format(),
             convention: HourConvention::Auto,
             dst: DstHandling::Auto,
+            time_zone: None,
             duplicates: DuplicatePolicy::Error,
             negative: NegativePolicy::Error,
             flat_run_hours: default_flat(),
@@ -545,6 +552,90 @@ pub fn slot_time(year: i32, t: usize) -> NaiveDateTime {
 pub fn slot_month(t: usize) -> u32 {
     let d = t / 24;
     CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11) as u32 + 1
+}
+
+/// US daylight saving (2007 rules) of a meters file: detected (`auto`: the spring hour absent
+/// or the autumn hour repeated) or named (`us`); rows inside it move back one hour.
+fn us_daylight_saving(
+    rows: &mut [Row],
+    dst: DstHandling,
+    year: i32,
+    per_hour: u32,
+    notes: &mut Vec<String>,
+) -> Result<(), String> {
+    let dst_days = us_dst_days(year);
+    let dst = match (dst, dst_days) {
+        (DstHandling::Auto, Some((spring, fall))) => {
+            let count = |d: NaiveDate, h: u32| {
+                rows.iter()
+                    .filter(|r| !r.offset && r.clock.date() == d && r.clock.hour() == h)
+                    .count()
+            };
+            let skipped = count(spring, 2) == 0 && count(spring, 1) > 0 && count(spring, 3) > 0;
+            let repeated = count(fall, 1) > per_hour as usize;
+            let us = skipped || repeated;
+            notes.push(format!(
+                "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
+                if us {
+                    "US DST clock"
+                } else {
+                    "none (standard time)"
+                },
+                if skipped { "absent" } else { "not absent" },
+                if repeated { "repeated" } else { "not repeated" }
+            ));
+            if us {
+                DstHandling::Us
+            } else {
+                DstHandling::None
+            }
+        }
+        (DstHandling::Auto, None) => DstHandling::None,
+        (d, _) => d,
+    };
+    if dst == DstHandling::Us {
+        let (spring, fall) = dst_days.ok_or_else(|| "no DST dates".to_string())?;
+        let start = spring.and_hms_opt(3, 0, 0).expect("time");
+        let end = fall.and_hms_opt(1, 0, 0).expect("time");
+        let mut seen_repeat = std::collections::HashSet::new();
+        let mut moved = 0usize;
+        for r in rows.iter_mut() {
+            if r.offset {
+                continue;
+            }
+            let in_dst = if r.clock >= start && r.clock < end {
+                true
+            } else if r.clock >= end && r.clock < end + Duration::hours(1) {
+                // First occurrence of a stamp in the repeated hour is still DST.
+                seen_repeat.insert(r.clock)
+            } else {
+                false
+            };
+            if in_dst {
+                r.clock -= Duration::hours(1);
+                moved += 1;
+            }
+        }
+        notes.push(format!(
+            "{moved} rows inside daylight saving time moved back one hour to local standard time"
+        ));
+    }
+
+    Ok(())
+}
+
+/// The standard UTC offset of `tz` in `year`: the smaller of its January and July offsets
+/// (daylight saving adds time, in either hemisphere).
+fn standard_offset(tz: chrono_tz::Tz, year: i32) -> Duration {
+    let at = |m: u32| {
+        let t = NaiveDate::from_ymd_opt(year, m, 1)
+            .and_then(|d| d.and_hms_opt(12, 0, 0))
+            .expect("valid date");
+        Duration::seconds(i64::from(
+            tz.offset_from_utc_datetime(&t).fix().local_minus_utc(),
+        ))
+    };
+    at(1).min(at(7))
 }
 
 /// US DST start/end (clock, hour-beginning): second Sunday of March 02:00 (absent hour), first
@@ -783,63 +874,67 @@ pub fn parse_meters(
         }
     };
 
-    // Daylight saving.
-    let dst_days = us_dst_days(year);
-    let dst = match (spec.dst, dst_days) {
-        (DstHandling::Auto, Some((spring, fall))) => {
-            let count = |d: NaiveDate, h: u32| {
-                rows.iter()
-                    .filter(|r| !r.offset && r.clock.date() == d && r.clock.hour() == h)
-                    .count()
-            };
-            let skipped = count(spring, 2) == 0 && count(spring, 1) > 0 && count(spring, 3) > 0;
-            let repeated = count(fall, 1) > per_hour as usize;
-            let us = skipped || repeated;
-            notes.push(format!(
-                "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
-                if us {
-                    "US DST clock"
-                } else {
-                    "none (standard time)"
-                },
-                if skipped { "absent" } else { "not absent" },
-                if repeated { "repeated" } else { "not repeated" }
-            ));
-            if us {
-                DstHandling::Us
-            } else {
-                DstHandling::None
-            }
+    // Daylight saving: the zone's rules, or US rules (detected or named), or none.
+    if let Some(name) = &spec.time_zone {
+        if spec.dst != DstHandling::Auto {
+            return Err(file_err(format!(
+                "meters.time_zone = \"{name}\" gives the daylight saving rules: leave meters.dst \
+                 out (it is {:?})",
+                spec.dst
+            )));
         }
-        (DstHandling::Auto, None) => DstHandling::None,
-        (d, _) => d,
-    };
-    if dst == DstHandling::Us {
-        let (spring, fall) = dst_days.ok_or_else(|| file_err("no DST dates".into()))?;
-        let start = spring.and_hms_opt(3, 0, 0).expect("time");
-        let end = fall.and_hms_opt(1, 0, 0).expect("time");
-        let mut seen_repeat = std::collections::HashSet::new();
+        let tz: chrono_tz::Tz = name.parse().map_err(|_| {
+            file_err(format!(
+                "meters.time_zone = \"{name}\": not an IANA time zone (e.g. \"Europe/Berlin\", \
+                 \"America/Chicago\")"
+            ))
+        })?;
+        let standard = standard_offset(tz, year);
+        let zone_h = standard.num_minutes() as f64 / 60.0;
+        if let Some(site_h) = std_offset_h.filter(|h| (h - zone_h).abs() > 1e-6) {
+            return Err(file_err(format!(
+                "meters.time_zone = \"{name}\" keeps standard time UTC{zone_h:+.1} h, but the \
+                 weather file's site is at UTC{site_h:+.1} h: meters and weather must be one place"
+            )));
+        }
+        let mut seen = std::collections::HashSet::new();
         let mut moved = 0usize;
         for r in &mut rows {
             if r.offset {
                 continue;
             }
-            let in_dst = if r.clock >= start && r.clock < end {
-                true
-            } else if r.clock >= end && r.clock < end + Duration::hours(1) {
-                // First occurrence of a stamp in the repeated hour is still DST.
-                seen_repeat.insert(r.clock)
-            } else {
-                false
+            let utc = match tz.from_local_datetime(&r.clock) {
+                chrono::LocalResult::Single(t) => t.naive_utc(),
+                // The hour repeated when clocks go back: daylight time first, then standard.
+                chrono::LocalResult::Ambiguous(a, b) => {
+                    if seen.insert(r.clock) {
+                        a.naive_utc()
+                    } else {
+                        b.naive_utc()
+                    }
+                }
+                chrono::LocalResult::None => {
+                    return Err(row_err(
+                        r.line,
+                        &ts_name,
+                        format!(
+                            "{}: no such clock time in {name} (the hour skipped when clocks go \
+                             forward)",
+                            r.clock
+                        ),
+                    ))
+                }
             };
-            if in_dst {
-                r.clock -= Duration::hours(1);
-                moved += 1;
-            }
+            let lst = utc + standard;
+            moved += usize::from(lst != r.clock);
+            r.clock = lst;
         }
         notes.push(format!(
-            "{moved} rows inside daylight saving time moved back one hour to local standard time"
+            "time zone {name}: standard time UTC{zone_h:+.1} h; {moved} rows in daylight saving \
+             time moved back to local standard time"
         ));
+    } else {
+        us_daylight_saving(&mut rows, spec.dst, year, per_hour, &mut notes).map_err(file_err)?;
     }
 
     // Pass 2: values on the grid.
@@ -1291,6 +1386,88 @@ mod tests {
         assert_eq!(v[nov6], 101.0);
         assert_eq!(v[nov6 + 1], 102.0);
         assert_eq!(v[nov6 + 2], 103.0);
+    }
+
+    #[test]
+    fn a_named_time_zone_gives_its_own_daylight_saving_in_either_hemisphere() {
+        // Berlin, 2021: clocks forward 28 March 02:00 -> 03:00, back 31 October 03:00 -> 02:00.
+        let mut text = String::from("Time,Heat\n");
+        for h in [0, 1, 3, 4] {
+            text += &format!("03/28/2021 {h:02}:00,{h}\n");
+        }
+        for (h, v) in [(1, 101), (2, 102), (2, 103), (3, 104)] {
+            text += &format!("10/31/2021 {h:02}:00,{v}\n");
+        }
+        text += "07/01/2021 12:00,7\n";
+        let mut s = spec();
+        s.convention = HourConvention::HourBeginning;
+        s.time_zone = Some("Europe/Berlin".into());
+        let d = parse_meters(&text, Path::new("m.csv"), &s, Some(2021), None).unwrap();
+        assert!(
+            d.notes
+                .iter()
+                .any(|n| n.contains("time zone Europe/Berlin: standard time UTC+1.0 h")),
+            "{:?}",
+            d.notes
+        );
+        let v = &d.series[0].values;
+        let mar28 = (CUM_DAYS[2] + 27) * 24;
+        // Standard time before the switch; clock 03:00 (summer time) is 02:00 standard.
+        assert_eq!(
+            (v[mar28], v[mar28 + 1], v[mar28 + 2], v[mar28 + 3]),
+            (0.0, 1.0, 3.0, 4.0)
+        );
+        let oct31 = (CUM_DAYS[9] + 30) * 24;
+        // Clock 01:00 summer = 00:00; the first 02:00 is summer (01:00), the second standard.
+        assert_eq!(
+            (v[oct31], v[oct31 + 1], v[oct31 + 2], v[oct31 + 3]),
+            (101.0, 102.0, 103.0, 104.0)
+        );
+        assert_eq!(
+            v[(CUM_DAYS[6]) * 24 + 11],
+            7.0,
+            "July noon is 11:00 standard"
+        );
+
+        // Sydney: daylight saving in January (the southern summer), standard UTC+10 in July.
+        let text = "Time,Heat\n01/15/2021 12:00,1\n07/15/2021 12:00,2\n";
+        s.time_zone = Some("Australia/Sydney".into());
+        let d = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None).unwrap();
+        let v = &d.series[0].values;
+        assert_eq!(v[14 * 24 + 11], 1.0);
+        assert_eq!(v[(CUM_DAYS[6] + 14) * 24 + 12], 2.0);
+
+        // A clock time that does not exist there, and a zone that does not exist.
+        s.time_zone = Some("Europe/Berlin".into());
+        let e = parse_meters(
+            "Time,Heat\n03/28/2021 02:00,1\n",
+            Path::new("m.csv"),
+            &s,
+            Some(2021),
+            None,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("m.csv:2") && e.contains("no such clock time in Europe/Berlin"),
+            "{e}"
+        );
+        s.time_zone = Some("Europe/Atlantis".into());
+        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not an IANA time zone"), "{e}");
+        s.time_zone = Some("Europe/Berlin".into());
+        s.dst = DstHandling::Us;
+        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("leave meters.dst out"), "{e}");
+        s.dst = DstHandling::Auto;
+        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), Some(-7.0))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("weather file's site is at UTC-7.0 h"), "{e}");
     }
 
     #[test]
