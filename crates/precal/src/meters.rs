@@ -647,6 +647,15 @@ fn us_dst_days(year: i32) -> Option<(NaiveDate, NaiveDate)> {
     ))
 }
 
+/// At most 40 characters of a cell, for messages (a cell can be megabytes long).
+fn excerpt(s: &str) -> String {
+    let mut e: String = s.chars().take(40).collect();
+    if s.chars().count() > 40 {
+        e.push_str("...");
+    }
+    e
+}
+
 fn is_missing_token(s: &str) -> bool {
     matches!(
         s.to_ascii_lowercase().as_str(),
@@ -728,6 +737,11 @@ pub fn parse_meters(
         .iter()
         .map(str::to_string)
         .collect();
+    if headers.iter().all(String::is_empty) {
+        return Err(file_err(
+            "empty file: expected a header line naming a timestamp column and the meters".into(),
+        ));
+    }
     let find = |name: &str| -> Option<usize> {
         headers.iter().position(|h| h == name.trim()).or_else(|| {
             headers
@@ -987,7 +1001,18 @@ pub fn parse_meters(
         }
         let dup = per_hour == 1 && earlier.is_some();
         for (k, (col, &idx)) in columns.iter().zip(&col_idx).enumerate() {
-            let raw = r.record.get(idx).unwrap_or("");
+            let raw = r.record.get(idx).ok_or_else(|| {
+                row_err(
+                    r.line,
+                    &col.column,
+                    format!(
+                        "the row has {} fields and ends before this column (field {}): a \
+                         truncated row? (an empty cell is a missing reading)",
+                        r.record.len(),
+                        idx + 1
+                    ),
+                )
+            })?;
             let v = if is_missing_token(raw) {
                 f64::NAN
             } else {
@@ -995,11 +1020,19 @@ pub fn parse_meters(
                     row_err(
                         r.line,
                         &col.column,
-                        format!("value '{raw}' is not a number"),
+                        format!("value '{}' is not a number", excerpt(raw)),
                     )
                 })?;
                 if !v.is_finite() {
-                    f64::NAN
+                    return Err(row_err(
+                        r.line,
+                        &col.column,
+                        format!(
+                            "value '{}' is not a finite number (an empty cell or NaN is a \
+                             missing reading)",
+                            excerpt(raw)
+                        ),
+                    ));
                 } else if v < 0.0 {
                     match spec.negative {
                         NegativePolicy::Error => {
@@ -1468,6 +1501,42 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("weather file's site is at UTC-7.0 h"), "{e}");
+    }
+
+    #[test]
+    fn empty_files_short_rows_and_infinite_values_are_errors_naming_the_line() {
+        let s = spec();
+        let read = |text: &str| match parse_meters(text, Path::new("m.csv"), &s, Some(2021), None) {
+            Ok(_) => "read without an error".to_string(),
+            Err(e) => e.to_string(),
+        };
+        assert!(read("").contains("m.csv: empty file"), "{}", read(""));
+        let head = "Time,Heat\n01/01/2021 00:00,1\n";
+        for (row, want) in [
+            ("01/01/2021 01:00", "m.csv:3"),
+            ("01/01/2021 01:00,inf", "'inf' is not a finite number"),
+            ("01/01/2021 01:00,1e999", "'1e999' is not a finite number"),
+        ] {
+            let e = read(&format!("{head}{row}\n"));
+            assert!(e.contains(want), "{row}: {e}");
+        }
+        let long = "9".repeat(5000) + "x";
+        let e = read(&format!("{head}01/01/2021 01:00,{long}\n"));
+        assert!(
+            e.len() < 300,
+            "the message quotes an excerpt, not the cell: {} bytes",
+            e.len()
+        );
+        // Missing readings stay missing.
+        let d = parse_meters(
+            &format!("{head}01/01/2021 01:00,\n01/01/2021 02:00,NaN\n"),
+            Path::new("m.csv"),
+            &s,
+            Some(2021),
+            None,
+        )
+        .unwrap();
+        assert!(d.series[0].values[1].is_nan() && d.series[0].values[2].is_nan());
     }
 
     #[test]
