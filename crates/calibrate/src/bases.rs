@@ -5,8 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::output::timestamps;
 use crate::project::Project;
-use crate::summary::timestamps;
 use crate::{write_atomic, Error};
 use crate::{Calibration, Inputs};
 

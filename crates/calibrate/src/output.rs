@@ -118,3 +118,18 @@ impl OutputDir {
         self.root.join("calibrated.toml")
     }
 }
+
+/// The hour-beginning stamps (`YYYY-MM-DDTHH:MM`) of the first `n` hours of `year`: the first
+/// column of every hourly CSV in the folder.
+pub(crate) fn timestamps(year: i32, n: usize) -> Vec<String> {
+    let start = chrono::NaiveDate::from_ymd_opt(year, 1, 1)
+        .and_then(|d| d.and_hms_opt(0, 0, 0))
+        .expect("valid year");
+    (0..n)
+        .map(|t| {
+            (start + chrono::Duration::hours(t as i64))
+                .format("%Y-%m-%dT%H:%M")
+                .to_string()
+        })
+        .collect()
+}

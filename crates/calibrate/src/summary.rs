@@ -10,6 +10,7 @@ use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
 use crate::design::read_outcome;
+use crate::output::timestamps;
 use crate::posterior::{Posterior, SigmaDeltaBox};
 use crate::project::Estimate;
 use crate::replacement::{Attempt, FailureGroup, Outcome};
@@ -297,19 +298,6 @@ pub(crate) fn write_draws_csv(
         }
     }
     write_atomic(path, s.as_bytes())
-}
-
-pub(crate) fn timestamps(year: i32, n: usize) -> Vec<String> {
-    let start = chrono::NaiveDate::from_ymd_opt(year, 1, 1)
-        .and_then(|d| d.and_hms_opt(0, 0, 0))
-        .expect("valid year");
-    (0..n)
-        .map(|t| {
-            (start + chrono::Duration::hours(t as i64))
-                .format("%Y-%m-%dT%H:%M")
-                .to_string()
-        })
-        .collect()
 }
 
 /// Writes hourly outputs as `timestamp,<output>...`.
