@@ -306,7 +306,9 @@ fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
 /// A building whose weekend is Friday-Saturday (meters from EnergyPlus with that calendar):
 /// pre-calibration finds the day types in the meters, and with `day_types_file` pointing at its
 /// calendar.csv the calibration recovers the weekend schedule and passes Guideline 14; with the
-/// usual Saturday-Sunday rule it does neither.
+/// usual Saturday-Sunday rule, EnergyPlus fails Guideline 14 for heating and cooling even at the
+/// true values (a calibration with the rule, when this test still ran one, missed the weekend
+/// fraction by 0.10 and failed the same two meters; two calibrations were too slow for CI).
 #[test]
 fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     if !have_engine() {
@@ -381,11 +383,42 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
         "iterations = 800\nburn_in = 300\n",
     );
     assert!(project.contains("iterations = 800"));
-    std::fs::write(dir.join("project.toml"), &project).unwrap();
-    let (_, rule) = calibrate(dir, &dir.join("out-rule"));
     project = project.replace("model = \"model.toml\"", "model = \"model_cal.toml\"");
     std::fs::write(dir.join("project.toml"), &project).unwrap();
     let (log, cal) = calibrate(dir, &dir.join("out-cal"));
+    // The Saturday-Sunday rule at the true values.
+    run_ok(
+        bemcal()
+            .args(["simulate", "--model"])
+            .arg(dir.join("model.toml"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .args([
+                "--set",
+                &format!("schedule_weekday_05={weekday_05}"),
+                "--set",
+                &format!("schedule_weekend_06={weekend_06}"),
+                "--out",
+            ])
+            .arg(dir.join("rule.csv")),
+    );
+    let out = run_ok(
+        bemcal()
+            .args(["metrics", "--json", "--measured"])
+            .arg(dir.join("meters.csv"))
+            .arg("--simulated")
+            .arg(dir.join("rule.csv")),
+    );
+    let rule: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rule_pass = |name: &str| {
+        rule.as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["output"] == name)
+            .unwrap_or_else(|| panic!("no {name} in {rule}"))["pass"]
+            .as_bool()
+            .unwrap()
+    };
 
     let estimate = |s: &serde_json::Value, n: &str| range_and_estimate(s, n).1;
     let passes = |s: &serde_json::Value| {
@@ -396,11 +429,9 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
             .all(|v| v["pass"].as_bool().unwrap())
     };
     eprintln!(
-        "weekend_06 truth {weekend_06}: with the calendar {:.3}, with the rule {:.3}; weekday_05 truth {weekday_05}: {:.3}, {:.3}",
+        "weekend_06 truth {weekend_06}: with the calendar {:.3}; weekday_05 truth {weekday_05}: {:.3}; the rule at the truth: {rule}",
         estimate(&cal, "schedule_weekend_06"),
-        estimate(&rule, "schedule_weekend_06"),
         estimate(&cal, "schedule_weekday_05"),
-        estimate(&rule, "schedule_weekday_05"),
     );
     assert!(
         (estimate(&cal, "schedule_weekend_06") - weekend_06).abs() < 0.02,
@@ -411,6 +442,8 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
         "{log}"
     );
     assert!(passes(&cal), "with the calendar: {}", cal["validation"]);
-    assert!((estimate(&rule, "schedule_weekend_06") - weekend_06).abs() > 0.05);
-    assert!(!passes(&rule), "with the rule: {}", rule["validation"]);
+    assert!(
+        !rule_pass("heating_kwh") && !rule_pass("cooling_kwh"),
+        "with the rule at the truth: {rule}"
+    );
 }
