@@ -911,34 +911,27 @@ pub fn parse_meters(
                  weather file's site is at UTC{site_h:+.1} h: meters and weather must be one place"
             )));
         }
-        let mut seen = std::collections::HashSet::new();
+        // The zone's rule (`TimeBasis::to_utc`, as for a weather station's CSV): in the hour
+        // repeated when clocks go back, daylight time until the rows have passed it.
+        let basis = bemcal_weather::station::TimeBasis::Zone(tz);
+        let mut previous = None;
         let mut moved = 0usize;
         for r in &mut rows {
             if r.offset {
                 continue;
             }
-            let utc = match tz.from_local_datetime(&r.clock) {
-                chrono::LocalResult::Single(t) => t.naive_utc(),
-                // The hour repeated when clocks go back: daylight time first, then standard.
-                chrono::LocalResult::Ambiguous(a, b) => {
-                    if seen.insert(r.clock) {
-                        a.naive_utc()
-                    } else {
-                        b.naive_utc()
-                    }
-                }
-                chrono::LocalResult::None => {
-                    return Err(row_err(
-                        r.line,
-                        &ts_name,
-                        format!(
-                            "{}: no such clock time in {name} (the hour skipped when clocks go \
-                             forward)",
-                            r.clock
-                        ),
-                    ))
-                }
-            };
+            let utc = basis.to_utc(r.clock, zone_h, previous).ok_or_else(|| {
+                row_err(
+                    r.line,
+                    &ts_name,
+                    format!(
+                        "{}: no such clock time in {name} (the hour skipped when clocks go \
+                         forward)",
+                        r.clock
+                    ),
+                )
+            })?;
+            previous = Some(utc);
             let lst = utc + standard;
             moved += usize::from(lst != r.clock);
             r.clock = lst;

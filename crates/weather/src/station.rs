@@ -370,16 +370,19 @@ pub fn parse_weather_csv(
             )
         })?;
         let previous = out.last().map(|o| o.utc);
-        let utc = to_utc(local, spec.time_zone, standard_offset_h, previous).ok_or_else(|| {
-            malformed(
-                path,
-                lineno,
-                format!(
-                    "'{stamp}' does not exist in {} (the hour skipped when clocks go forward)",
-                    spec_zone_name(spec.time_zone)
-                ),
-            )
-        })?;
+        let utc = spec
+            .time_zone
+            .to_utc(local, standard_offset_h, previous)
+            .ok_or_else(|| {
+                malformed(
+                    path,
+                    lineno,
+                    format!(
+                        "'{stamp}' does not exist in {} (the hour skipped when clocks go forward)",
+                        spec_zone_name(spec.time_zone)
+                    ),
+                )
+            })?;
         let mut values = [None; 8];
         for (k, c) in &columns {
             let raw = record.get(*k).unwrap_or("").trim();
@@ -411,31 +414,35 @@ fn spec_zone_name(b: TimeBasis) -> String {
     }
 }
 
-/// UTC of a local time stamp. In the hour that repeats when clocks go back, the earlier instant
-/// is taken unless the previous row already reached it (rows in time order).
-fn to_utc(
-    local: NaiveDateTime,
-    basis: TimeBasis,
-    standard_offset_h: f64,
-    previous: Option<NaiveDateTime>,
-) -> Option<NaiveDateTime> {
-    match basis {
-        TimeBasis::Utc => Some(local),
-        TimeBasis::LocalStandard => {
-            Some(local - Duration::minutes((standard_offset_h * 60.0).round() as i64))
-        }
-        TimeBasis::Zone(tz) => match tz.from_local_datetime(&local) {
-            chrono::LocalResult::Single(t) => Some(t.naive_utc()),
-            chrono::LocalResult::Ambiguous(a, b) => {
-                let (a, b) = (a.naive_utc(), b.naive_utc());
-                Some(if previous.is_some_and(|p| p >= a) {
-                    b
-                } else {
-                    a
-                })
+impl TimeBasis {
+    /// UTC of a local time stamp written in this basis (`standard_offset_h`: the site's
+    /// standard offset, for `LocalStandard`). In the hour that repeats when clocks go back, the
+    /// earlier instant is taken unless the previous row already reached it (`previous`: the
+    /// UTC of the row before, rows in time order). `None`: a clock time the zone skips.
+    pub fn to_utc(
+        self,
+        local: NaiveDateTime,
+        standard_offset_h: f64,
+        previous: Option<NaiveDateTime>,
+    ) -> Option<NaiveDateTime> {
+        match self {
+            TimeBasis::Utc => Some(local),
+            TimeBasis::LocalStandard => {
+                Some(local - Duration::minutes((standard_offset_h * 60.0).round() as i64))
             }
-            chrono::LocalResult::None => None,
-        },
+            TimeBasis::Zone(tz) => match tz.from_local_datetime(&local) {
+                chrono::LocalResult::Single(t) => Some(t.naive_utc()),
+                chrono::LocalResult::Ambiguous(a, b) => {
+                    let (a, b) = (a.naive_utc(), b.naive_utc());
+                    Some(if previous.is_some_and(|p| p >= a) {
+                        b
+                    } else {
+                        a
+                    })
+                }
+                chrono::LocalResult::None => None,
+            },
+        }
     }
 }
 
