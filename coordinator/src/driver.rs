@@ -85,14 +85,12 @@ fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
-/// A finished simulation job, read back: the point's key in `simulations/`, its values, and
-/// its outputs (or, for a refinement draw EnergyPlus failed on, the failure).
+/// A finished simulation job, read back: the point (its key in `simulations/`, its values, and
+/// its outputs or EnergyPlus's failure) and the refinement round it belongs to.
 struct Simulated {
     /// 0 for a design point, else the refinement round of the draw.
     refine_round: u32,
-    index: usize,
-    values: Vec<f64>,
-    outputs: std::result::Result<HourlyOutputs, String>,
+    point: SimulatedDraw,
 }
 
 /// The failure a tolerant (refinement) simulation job reported in its result, if any.
@@ -242,9 +240,11 @@ impl State {
             if let Some(e) = reported_failure(j) {
                 out.push(Simulated {
                     refine_round: s.refine_round,
-                    index: s.point as usize,
-                    values: s.values.clone(),
-                    outputs: Err(e),
+                    point: SimulatedDraw {
+                        index: s.point as usize,
+                        values: s.values.clone(),
+                        outputs: Err(e),
+                    },
                 });
                 continue;
             }
@@ -269,9 +269,11 @@ impl State {
             }
             out.push(Simulated {
                 refine_round: s.refine_round,
-                index: s.point as usize,
-                values: s.values.clone(),
-                outputs: Ok(o),
+                point: SimulatedDraw {
+                    index: s.point as usize,
+                    values: s.values.clone(),
+                    outputs: Ok(o),
+                },
             });
         }
         Ok(out)
@@ -361,9 +363,9 @@ impl State {
         let attempts: Vec<Attempt> = simulated
             .iter()
             .map(|s| Attempt {
-                slot: s.index,
-                values: s.values.clone(),
-                error: s.outputs.as_ref().err().cloned(),
+                slot: s.point.index,
+                values: s.point.values.clone(),
+                error: s.point.outputs.as_ref().err().cloned(),
             })
             .collect();
         let outcome = match cal.design_step(&hypercube, &cal.spares().map_err(err)?, &attempts) {
@@ -384,8 +386,8 @@ impl State {
         // file is the one left in `simulations/`.
         let mut by_slot: std::collections::HashMap<usize, HourlyOutputs> = Default::default();
         for s in simulated {
-            if let Ok(o) = s.outputs {
-                by_slot.insert(s.index, o);
+            if let Ok(o) = s.point.outputs {
+                by_slot.insert(s.point.index, o);
             }
         }
         let outputs = outcome
@@ -688,10 +690,7 @@ impl State {
                 .map_err(err)?;
             return Ok(true);
         }
-        let ck = Checkpoint {
-            states: states.clone(),
-            draws,
-        };
+        let ck = Checkpoint { states, draws };
         let bytes = serde_json::to_vec(&ck).map_err(err)?;
         bemcal_calibrate::write_atomic(&cal.out.chains_checkpoint(), &bytes).map_err(err)?;
         let ValidationStep::Validate(first) = next_candidate(&chains, &[]) else {
@@ -744,11 +743,7 @@ impl State {
         let this_round = simulated
             .iter()
             .filter(|s| s.refine_round == round)
-            .map(|s| SimulatedDraw {
-                index: s.index,
-                values: s.values.clone(),
-                outputs: s.outputs.clone(),
-            })
+            .map(|s| s.point.clone())
             .collect();
         let (closed, _) = close_round(
             round,
@@ -764,7 +759,7 @@ impl State {
         let (outcome, design) = cal.settled_design().map_err(err)?;
         let by_index: std::collections::HashMap<usize, HourlyOutputs> = simulated
             .into_iter()
-            .filter_map(|s| s.outputs.ok().map(|o| (s.index, o)))
+            .filter_map(|s| s.point.outputs.ok().map(|o| (s.point.index, o)))
             .collect();
         let full = cal.full_design(&design, &log);
         let indices = outcome

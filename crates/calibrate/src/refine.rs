@@ -228,6 +228,7 @@ impl Calibration {
 
 /// A posterior draw of a refinement round after EnergyPlus: its key in `simulations/`, its
 /// values (physical units) and its outputs or EnergyPlus's failure.
+#[derive(Debug, Clone)]
 pub struct SimulatedDraw {
     pub index: usize,
     pub values: Vec<f64>,
