@@ -338,27 +338,32 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     )
     .unwrap();
     let (weekday_05, weekend_06) = (0.75, 0.35);
-    run_ok(
-        bemcal()
-            .args(["synthesize", "--model"])
-            .arg(dir.join("truth.toml"))
-            .arg("--weather")
-            .arg(golden_epw())
-            .args([
-                "--set",
-                &format!("schedule_weekday_05={weekday_05}"),
-                "--set",
-                &format!("schedule_weekend_06={weekend_06}"),
-                "--out",
-            ])
-            .arg(dir.join("meters.csv")),
-    );
+    // EnergyPlus at the true values: `command` (synthesize or simulate) of `model` into `out`.
+    let epw = golden_epw();
+    let at_truth = |command: &str, model: &str, out: &str| {
+        run_ok(
+            bemcal()
+                .args([command, "--model"])
+                .arg(dir.join(model))
+                .arg("--weather")
+                .arg(&epw)
+                .args([
+                    "--set",
+                    &format!("schedule_weekday_05={weekday_05}"),
+                    "--set",
+                    &format!("schedule_weekend_06={weekend_06}"),
+                    "--out",
+                ])
+                .arg(dir.join(out)),
+        )
+    };
+    at_truth("synthesize", "truth.toml", "meters.csv");
     run_ok(
         bemcal()
             .args(["precalibrate", "--meters"])
             .arg(dir.join("meters.csv"))
             .arg("--weather")
-            .arg(golden_epw())
+            .arg(&epw)
             .arg("--out")
             .arg(dir.join("precal")),
     );
@@ -387,21 +392,7 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     std::fs::write(dir.join("project.toml"), &project).unwrap();
     let (log, cal) = calibrate(dir, &dir.join("out-cal"));
     // The Saturday-Sunday rule at the true values.
-    run_ok(
-        bemcal()
-            .args(["simulate", "--model"])
-            .arg(dir.join("model.toml"))
-            .arg("--weather")
-            .arg(golden_epw())
-            .args([
-                "--set",
-                &format!("schedule_weekday_05={weekday_05}"),
-                "--set",
-                &format!("schedule_weekend_06={weekend_06}"),
-                "--out",
-            ])
-            .arg(dir.join("rule.csv")),
-    );
+    at_truth("simulate", "model.toml", "rule.csv");
     let out = run_ok(
         bemcal()
             .args(["metrics", "--json", "--measured"])
