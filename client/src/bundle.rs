@@ -140,21 +140,47 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
 }
 
 /// Lays out `files` (from `store`) under `dir`, checking every path; returns the project file.
+/// The layout is written durably in a sibling folder and renamed into place: `dir` holds
+/// either a whole bundle or nothing (a crash mid-layout leaves only the sibling, redone on
+/// the next call).
 pub fn materialize(files: &[File], store: &ArtifactDir, dir: &Path) -> Result<PathBuf, String> {
     if !files.iter().any(|f| f.path == PROJECT_FILE) {
         return Err(format!("the bundle has no {PROJECT_FILE}"));
     }
+    let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
+    // A name of this call's own: two callers may lay out the same bundle at once.
+    let name = dir.file_name().map(|n| n.to_string_lossy().to_string());
+    let partial = dir.with_file_name(format!(
+        "{}.partial-{}-{}",
+        name.unwrap_or_default(),
+        std::process::id(),
+        crate::now_ms()
+    ));
     for f in files {
         let rel = safe_relative(&f.path)?;
         let bytes = store
             .read(&f.sha256)
             .map_err(|e| format!("artifact {} ({}) is missing: {e}", f.sha256, f.path))?;
-        let p = dir.join(rel);
-        if let Some(parent) = p.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
-        }
-        std::fs::write(&p, bytes).map_err(|e| format!("{}: {e}", p.display()))?;
+        let p = partial.join(rel);
+        bemcal_durable::write_atomic(&p, &bytes).map_err(|e| io(&p, e))?;
     }
+    if dir.join(PROJECT_FILE).is_file() {
+        // Laid out meanwhile by another caller.
+        let _ = std::fs::remove_dir_all(&partial);
+        return Ok(dir.join(PROJECT_FILE));
+    }
+    if dir.exists() {
+        // An earlier layout without its project file (written before layouts were atomic).
+        std::fs::remove_dir_all(dir).map_err(|e| io(dir, e))?;
+    }
+    if let Err(e) = std::fs::rename(&partial, dir) {
+        let _ = std::fs::remove_dir_all(&partial);
+        if !dir.join(PROJECT_FILE).is_file() {
+            return Err(io(dir, e));
+        }
+    }
+    // The rename itself is durable once the parent folder is synced.
+    bemcal_durable::sync_folder(dir.parent());
     Ok(dir.join(PROJECT_FILE))
 }
 

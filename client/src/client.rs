@@ -239,11 +239,7 @@ pub async fn fetch_results(client: &mut Client, run: &str, out: &Path) -> anyhow
     for f in &st.results {
         let rel = crate::artifacts::safe_relative(&f.path).map_err(|e| anyhow::anyhow!(e))?;
         let bytes = download(client, &f.sha256).await?;
-        let p = out.join(rel);
-        if let Some(parent) = p.parent() {
-            std::fs::create_dir_all(parent)?;
-        }
-        std::fs::write(&p, bytes)?;
+        bemcal_durable::write_atomic(&out.join(rel), &bytes)?;
     }
     Ok(st.results.len())
 }

@@ -50,6 +50,41 @@ impl From<&File> for proto::FileRef {
     }
 }
 
+/// The result of a job whose EnergyPlus run failed in a way the calibration handles (a design
+/// point or refinement draw EnergyPlus could not simulate, a validation candidate): the job is
+/// done, and the driver decides what follows (a replacement point, the next-best draw).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReportedFailure {
+    /// EnergyPlus's reason.
+    pub error: String,
+}
+
+/// The result of a simulation job that ran (its point file is the job's one output).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationRun {
+    /// EnergyPlus's wall time; none when the worker had the point already.
+    pub seconds: Option<f64>,
+}
+
+/// A job result as JSON text (`CompleteRequest::result_json`).
+pub fn result_json<T: Serialize>(result: &T) -> String {
+    serde_json::to_string(result).unwrap_or_else(|_| "{}".into())
+}
+
+/// A job result read back from its JSON text, if it is one of type `T`.
+pub fn parse_result<T: serde::de::DeserializeOwned>(json: &str) -> Option<T> {
+    serde_json::from_str(json).ok()
+}
+
+/// Longest error message a coordinator replies with or stores about a request (bytes). Errors
+/// quote at most an [`excerpt`] of the input they refuse, so a hostile or mistaken multi-MB
+/// input never travels back in a reply, a log line or the database.
+pub const MAX_ERROR_BYTES: usize = 1000;
+
+pub use bemcal_excerpt::{excerpt, EXCERPT_BYTES};
+
 /// Milliseconds since the Unix epoch (lease expiry survives coordinator restarts).
 pub fn now_ms() -> u64 {
     std::time::SystemTime::now()

@@ -207,19 +207,24 @@ fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
 }
 
 fn job_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<JobRow> {
-    let spec: Vec<u8> = r.get(5)?;
+    job_row_at(r, 0)
+}
+
+/// A job from the [`JOB_COLS`] starting at column `at`.
+fn job_row_at(r: &rusqlite::Row<'_>, at: usize) -> rusqlite::Result<JobRow> {
+    let spec: Vec<u8> = r.get(at + 5)?;
     Ok(JobRow {
-        id: r.get::<_, i64>(0)? as u64,
-        run_id: r.get(1)?,
-        stage: r.get(2)?,
-        kind: r.get(3)?,
-        label: r.get(4)?,
+        id: r.get::<_, i64>(at)? as u64,
+        run_id: r.get(at + 1)?,
+        stage: r.get(at + 2)?,
+        kind: r.get(at + 3)?,
+        label: r.get(at + 4)?,
         spec: proto::Job::decode(spec.as_slice()).unwrap_or_default(),
-        state: r.get(6)?,
-        failures: r.get::<_, i64>(7)? as u32,
-        outputs: parse_files(r.get(8)?),
-        result: r.get(9)?,
-        cached: r.get::<_, i64>(10)? != 0,
+        state: r.get(at + 6)?,
+        failures: r.get::<_, i64>(at + 7)? as u32,
+        outputs: parse_files(r.get(at + 8)?),
+        result: r.get(at + 9)?,
+        cached: r.get::<_, i64>(at + 10)? != 0,
     })
 }
 
@@ -431,6 +436,8 @@ impl Store {
 
     /// Ends a run: `done`, `failed` (with the reason) or `cancelled`. Open jobs are cancelled.
     pub fn end_run(&self, run: &str, state: RunState, error: Option<&str>) -> Result<bool> {
+        // A stored message is never longer than a reply may be.
+        let error = error.map(|e| crate::excerpt(e, crate::MAX_ERROR_BYTES));
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -653,6 +660,32 @@ impl Store {
                 params![lease as i64, (now_ms() + ttl_ms) as i64],
             )?;
             Ok(n > 0)
+        })
+    }
+
+    /// The worker that took lease `lease` and the job it was for (whatever their states now),
+    /// if the lease exists.
+    pub fn leased_job(&self, lease: u64) -> Result<Option<(String, JobRow)>> {
+        self.with(|c| {
+            let cols = JOB_COLS
+                .split(", ")
+                .map(|c| format!("j.{c}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            Ok(c.query_row(
+                &format!(
+                    "SELECT l.worker_id, {cols} FROM leases l JOIN jobs j ON j.id = l.job_id
+                     WHERE l.id = ?1"
+                ),
+                [lease as i64],
+                |r| {
+                    let worker: String = r.get(0)?;
+                    // The job's columns follow the worker's.
+                    let job = job_row_at(r, 1)?;
+                    Ok((worker, job))
+                },
+            )
+            .optional()?)
         })
     }
 

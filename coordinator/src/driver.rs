@@ -28,6 +28,7 @@ use crate::bundle;
 use crate::db::{File, JobRow, NewJob, RunRow, Store};
 use crate::proto::{self, job::Kind};
 use crate::states::{JobKind, JobState, RunState, Stage};
+use bemcal_client::{parse_result, ReportedFailure};
 
 /// Settings of the coordinator that shape runs.
 #[derive(Debug, Clone)]
@@ -98,8 +99,7 @@ fn reported_failure(j: &JobRow) -> Option<String> {
     if !j.outputs.is_empty() {
         return None;
     }
-    let v: serde_json::Value = serde_json::from_str(j.result.as_deref()?).ok()?;
-    v.get("error").and_then(|e| e.as_str()).map(str::to_string)
+    parse_result::<ReportedFailure>(j.result.as_deref()?).map(|f| f.error)
 }
 
 impl State {
@@ -125,14 +125,8 @@ impl State {
     }
 
     fn load(&self, r: &RunRow) -> Result<Calibration> {
-        let dir = self.run_dir(&r.id);
-        let pdir = dir.join("project");
-        let pf = pdir.join(bundle::PROJECT_FILE);
-        if !pf.is_file() {
-            bundle::materialize(&r.bundle, &self.artifacts, &pdir)?;
-        }
-        let project = Project::load(&pf).map_err(err)?;
-        Calibration::load(project, &dir.join("out")).map_err(err)
+        let project = self.project(r)?;
+        Calibration::load(project, &self.run_dir(&r.id).join("out")).map_err(err)
     }
 
     /// Copies job outputs into the run's output folder.
@@ -598,7 +592,7 @@ impl State {
         if !pf.is_file() {
             bundle::materialize(&r.bundle, &self.artifacts, &pdir)?;
         }
-        Project::load(&pf).map_err(err)
+        Project::load_submitted(&pf).map_err(err)
     }
 
     /// The chains of refinement round `round`, merged: each chain's last state and all its

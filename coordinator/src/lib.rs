@@ -14,6 +14,6 @@ pub mod service;
 pub mod states;
 
 pub use bemcal_client::{
-    artifacts, auth, bundle, client, now_ms, proto, runtime, shutdown_signal, CHUNK_BYTES,
-    MAX_MESSAGE_BYTES,
+    artifacts, auth, bundle, client, excerpt, now_ms, proto, runtime, shutdown_signal, CHUNK_BYTES,
+    MAX_ERROR_BYTES, MAX_MESSAGE_BYTES,
 };

@@ -1,5 +1,6 @@
 //! Starting the coordinator: the database, the driver, the lease reaper and the gRPC server
-//! (bearer token required; TLS when a certificate and key are given).
+//! (bearer token required, with a separate worker token when given; TLS when a certificate and
+//! key are given).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -23,7 +24,10 @@ pub struct Options {
     pub listen: SocketAddr,
     /// State: `coordinator.db`, `artifacts/`, `runs/`.
     pub data: PathBuf,
+    /// The bearer token of clients (and of workers when `worker_token` is `None`).
     pub token: String,
+    /// A separate token for workers: leases belong to workers, submissions to clients.
+    pub worker_token: Option<String>,
     /// PEM certificate and key: serve TLS.
     pub tls: Option<(PathBuf, PathBuf)>,
     pub config: Config,
@@ -94,7 +98,10 @@ pub async fn serve(
     let svc = CoordinatorServer::new(Service { st })
         .max_decoding_message_size(MAX_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_MESSAGE_BYTES);
-    let svc = InterceptedService::new(svc, CheckToken::new(&opts.token));
+    let svc = InterceptedService::new(
+        svc,
+        CheckToken::with_roles(&opts.token, opts.worker_token.as_deref()),
+    );
     let mut builder = Server::builder();
     if let Some((cert, key)) = &opts.tls {
         let cert = std::fs::read(cert)

@@ -4,15 +4,20 @@ use std::pin::Pin;
 use std::sync::Arc;
 
 use tokio_stream::Stream;
-use tonic::{Request, Response, Status, Streaming};
+use tonic::{Code, Request, Response, Status, Streaming};
 
 use crate::artifacts::{safe_relative, valid_sha};
-use crate::db::{File, Outcome, RunRow};
+use crate::auth::{require, Role};
+use crate::db::{File, JobRow, Outcome, RunRow};
 use crate::driver::{State, STAGES};
 use crate::proto::coordinator_server::Coordinator;
+use crate::proto::job::Kind;
 use crate::proto::*;
 use crate::states::{JobKind, JobState, RunState};
-use crate::{bundle, CHUNK_BYTES};
+use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
+use bemcal_calibrate::design::check_point_file;
+use bemcal_calibrate::OutputDir;
+use bemcal_client::{parse_result, ReportedFailure, SimulationRun};
 
 /// Largest artifact accepted (bytes).
 pub const MAX_ARTIFACT_BYTES: u64 = 1 << 30;
@@ -22,36 +27,113 @@ pub struct Service {
     pub st: Arc<State>,
 }
 
+/// An error reply, its message cut to [`MAX_ERROR_BYTES`]: whatever input it quotes, a
+/// reply stays short (a client that sent megabytes and hung up is not sent them back).
+fn refuse(code: Code, message: impl AsRef<str>) -> Status {
+    Status::new(code, excerpt(message.as_ref(), MAX_ERROR_BYTES))
+}
+
 fn internal<E: std::fmt::Display>(e: E) -> Status {
-    Status::internal(e.to_string())
+    refuse(Code::Internal, e.to_string())
+}
+
+fn invalid(message: impl AsRef<str>) -> Status {
+    refuse(Code::InvalidArgument, message)
+}
+
+/// A run id as the coordinator makes them (`r` and hex), or at least a short plain word.
+fn check_run_id(id: &str) -> Result<(), Status> {
+    let plain = |c: char| c.is_ascii_alphanumeric() || c == '-' || c == '_';
+    if id.is_empty() || id.len() > 64 || !id.chars().all(plain) {
+        return Err(invalid(format!(
+            "run id {:?} ({} bytes) is not a run id: 1-64 letters, digits, '-' or '_'",
+            excerpt(id, 20),
+            id.len()
+        )));
+    }
+    Ok(())
 }
 
 fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
     files
         .iter()
         .map(|f| {
-            safe_relative(&f.path).map_err(Status::invalid_argument)?;
+            safe_relative(&f.path).map_err(invalid)?;
             if !valid_sha(&f.sha256) || !st.artifacts.has(&f.sha256) {
-                return Err(Status::failed_precondition(format!(
-                    "{}: artifact {:?} was not uploaded",
-                    f.path, f.sha256
-                )));
+                return Err(refuse(
+                    Code::FailedPrecondition,
+                    format!("{}: artifact {:?} was not uploaded", f.path, f.sha256),
+                ));
             }
             Ok(File::from(f))
         })
         .collect()
 }
 
+/// Fills `buf` from `file` as far as it goes; the bytes read (0 at the end).
+fn read_full(file: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match std::io::Read::read(file, &mut buf[n..])? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
+}
+
+/// What a worker hands over for `job` is what that kind of job produces. A simulation either
+/// reports EnergyPlus's failure (no outputs) or brings exactly its point file, which must hold
+/// finite hourly series; other jobs bring a JSON result.
+fn check_result(st: &State, job: &JobRow, outputs: &[File], result: &str) -> Result<(), String> {
+    let Some(Kind::Simulate(s)) = &job.spec.kind else {
+        return serde_json::from_str::<serde_json::Value>(result)
+            .map(|_| ())
+            .map_err(|e| format!("the result is not JSON: {e}"));
+    };
+    if outputs.is_empty() {
+        return parse_result::<ReportedFailure>(result)
+            .map(|_| ())
+            .ok_or_else(|| "a simulation without outputs must report its failure".to_string());
+    }
+    let want = OutputDir::point_rel(s.point as usize);
+    match outputs {
+        [f] if f.path == want => {}
+        _ => return Err(format!("a simulation brings one file, {want}")),
+    }
+    let run: SimulationRun = parse_result(result)
+        .ok_or_else(|| "a simulation's result is {\"seconds\": ...}".to_string())?;
+    if run.seconds.is_some_and(|t| !t.is_finite() || t < 0.0) {
+        return Err("a simulation's seconds must be a finite, non-negative number".into());
+    }
+    let bytes = st
+        .artifacts
+        .read(&outputs[0].sha256)
+        .map_err(|e| e.to_string())?;
+    check_point_file(&bytes).map_err(|e| format!("{want}: {e}"))
+}
+
 fn check_worker(id: &str) -> Result<(), Status> {
     if id.is_empty() || id.len() > 200 {
-        return Err(Status::invalid_argument(
-            "worker_id must be 1-200 characters",
-        ));
+        return Err(invalid("worker_id must be 1-200 characters"));
     }
     Ok(())
 }
 
 impl Service {
+    /// The lease's job when `worker` holds it; `PermissionDenied` when another worker does.
+    /// An unknown lease is `None` (the store then ignores the call, as for a late duplicate).
+    fn own_lease(&self, lease: u64, worker: &str) -> Result<Option<JobRow>, Status> {
+        match self.st.store.leased_job(lease).map_err(internal)? {
+            Some((holder, _)) if holder != worker => Err(refuse(
+                Code::PermissionDenied,
+                format!("lease {lease} belongs to another worker"),
+            )),
+            Some((_, job)) => Ok(Some(job)),
+            None => Ok(None),
+        }
+    }
+
     fn kick(&self, o: Outcome) {
         if let Outcome::Recorded(run) = o {
             let _ = self.st.kick.send(run);
@@ -164,6 +246,7 @@ impl Coordinator for Service {
     }
 
     async fn lease(&self, req: Request<LeaseRequest>) -> Result<Response<LeaseReply>, Status> {
+        require(&req, Role::Worker)?;
         let r = req.into_inner();
         check_worker(&r.worker_id)?;
         if r.free_slots == 0 {
@@ -181,7 +264,12 @@ impl Coordinator for Service {
         &self,
         req: Request<HeartbeatRequest>,
     ) -> Result<Response<HeartbeatReply>, Status> {
+        require(&req, Role::Worker)?;
         let r = req.into_inner();
+        check_worker(&r.worker_id)?;
+        if self.own_lease(r.lease_id, &r.worker_id)?.is_none() {
+            return Ok(Response::new(HeartbeatReply { ok: false }));
+        }
         let ok = self
             .st
             .store
@@ -191,12 +279,23 @@ impl Coordinator for Service {
     }
 
     async fn complete(&self, req: Request<CompleteRequest>) -> Result<Response<Ack>, Status> {
+        require(&req, Role::Worker)?;
         let r = req.into_inner();
         check_worker(&r.worker_id)?;
         let outputs = check_files(&self.st, &r.outputs)?;
         if r.result_json.len() > 1 << 20 {
-            return Err(Status::invalid_argument("result_json over 1 MiB"));
+            return Err(invalid("result_json over 1 MiB"));
         }
+        let Some(job) = self.own_lease(r.lease_id, &r.worker_id)? else {
+            return Ok(Response::new(Ack {}));
+        };
+        // What a finished job hands over is checked before it is recorded (and, for a
+        // simulation, shared with every run with the same inputs).
+        let (st, files, result) = (self.st.clone(), outputs.clone(), r.result_json.clone());
+        tokio::task::spawn_blocking(move || check_result(&st, &job, &files, &result))
+            .await
+            .map_err(internal)?
+            .map_err(|e| invalid(format!("lease {}: {e}", r.lease_id)))?;
         // Committed before the reply: a worker that hears "ok" may forget the job.
         let (o, shared) = self
             .st
@@ -211,8 +310,12 @@ impl Coordinator for Service {
     }
 
     async fn fail(&self, req: Request<FailRequest>) -> Result<Response<Ack>, Status> {
+        require(&req, Role::Worker)?;
         let r = req.into_inner();
         check_worker(&r.worker_id)?;
+        if self.own_lease(r.lease_id, &r.worker_id)?.is_none() {
+            return Ok(Response::new(Ack {}));
+        }
         let error: String = r.error.chars().take(8000).collect();
         let o = self
             .st
@@ -231,40 +334,36 @@ impl Coordinator for Service {
         let first = stream
             .message()
             .await?
-            .ok_or_else(|| Status::invalid_argument("empty upload"))?;
+            .ok_or_else(|| invalid("empty upload"))?;
         if !valid_sha(&first.sha256) {
-            return Err(Status::invalid_argument(
-                "the first chunk must carry the sha256",
-            ));
+            return Err(invalid("the first chunk must carry the sha256"));
         }
         if first.size > MAX_ARTIFACT_BYTES {
-            return Err(Status::resource_exhausted(format!(
-                "artifact of {} bytes is over the limit of {MAX_ARTIFACT_BYTES}",
-                first.size
-            )));
+            return Err(refuse(
+                Code::ResourceExhausted,
+                format!(
+                    "artifact of {} bytes is over the limit of {MAX_ARTIFACT_BYTES}",
+                    first.size
+                ),
+            ));
         }
-        let mut bytes = Vec::with_capacity(first.size as usize);
-        bytes.extend_from_slice(&first.data);
+        // Streamed to disk as it arrives: an upload holds one chunk in memory, whatever its size.
+        let mut upload = self
+            .st
+            .artifacts
+            .upload(&first.sha256, first.size)
+            .map_err(internal)?;
+        upload
+            .write(&first.data)
+            .map_err(|e| invalid(e.to_string()))?;
         while let Some(c) = stream.message().await? {
-            bytes.extend_from_slice(&c.data);
-            if bytes.len() as u64 > first.size {
-                return Err(Status::invalid_argument("more bytes than announced"));
-            }
-        }
-        if bytes.len() as u64 != first.size {
-            return Err(Status::invalid_argument(format!(
-                "{} bytes received, {} announced",
-                bytes.len(),
-                first.size
-            )));
+            upload.write(&c.data).map_err(|e| invalid(e.to_string()))?;
         }
         let st = self.st.clone();
+        let size = first.size;
         let sha = first.sha256.clone();
-        let size = bytes.len() as u64;
         tokio::task::spawn_blocking(move || -> Result<(), Status> {
-            st.artifacts
-                .put(&bytes, Some(&sha))
-                .map_err(|e| Status::invalid_argument(e.to_string()))?;
+            upload.finish().map_err(|e| invalid(e.to_string()))?;
             st.store.add_artifact(&sha, size).map_err(internal)
         })
         .await
@@ -283,32 +382,45 @@ impl Coordinator for Service {
     ) -> Result<Response<Self::GetArtifactStream>, Status> {
         let sha = req.into_inner().sha256;
         if !valid_sha(&sha) {
-            return Err(Status::invalid_argument("not a sha256"));
+            return Err(invalid("not a sha256"));
         }
-        let bytes = self
-            .st
-            .artifacts
-            .read(&sha)
-            .map_err(|_| Status::not_found(format!("no artifact {sha}")))?;
-        let size = bytes.len() as u64;
-        let mut chunks: Vec<Result<Chunk, Status>> = bytes
-            .chunks(CHUNK_BYTES)
-            .map(|c| {
-                Ok(Chunk {
+        let path = self.st.artifacts.path(&sha);
+        let file = std::fs::File::open(&path)
+            .map_err(|_| refuse(Code::NotFound, format!("no artifact {sha}")))?;
+        let size = file.metadata().map_err(internal)?.len();
+        // Read from disk a chunk at a time as the client takes them: a download holds a few
+        // chunks in memory, whatever its size.
+        let (tx, rx) = tokio::sync::mpsc::channel(2);
+        tokio::task::spawn_blocking(move || {
+            let mut file = file;
+            let mut sent = false;
+            loop {
+                let mut buf = vec![0u8; CHUNK_BYTES];
+                let n = match read_full(&mut file, &mut buf) {
+                    Ok(n) => n,
+                    Err(e) => {
+                        let _ = tx.blocking_send(Err(internal(e)));
+                        return;
+                    }
+                };
+                if n == 0 && sent {
+                    return;
+                }
+                buf.truncate(n);
+                let chunk = Chunk {
                     sha256: sha.clone(),
                     size,
-                    data: c.to_vec(),
-                })
-            })
-            .collect();
-        if chunks.is_empty() {
-            chunks.push(Ok(Chunk {
-                sha256: sha,
-                size: 0,
-                data: vec![],
-            }));
-        }
-        Ok(Response::new(Box::pin(tokio_stream::iter(chunks))))
+                    data: buf,
+                };
+                if tx.blocking_send(Ok(chunk)).is_err() || n == 0 {
+                    return;
+                }
+                sent = true;
+            }
+        });
+        Ok(Response::new(Box::pin(
+            tokio_stream::wrappers::ReceiverStream::new(rx),
+        )))
     }
 
     async fn missing_artifacts(
@@ -317,7 +429,7 @@ impl Coordinator for Service {
     ) -> Result<Response<ArtifactList>, Status> {
         let list = req.into_inner();
         if list.sha256.len() > 100_000 {
-            return Err(Status::invalid_argument("too many hashes"));
+            return Err(invalid("too many hashes"));
         }
         Ok(Response::new(ArtifactList {
             sha256: list
@@ -329,11 +441,12 @@ impl Coordinator for Service {
     }
 
     async fn submit(&self, req: Request<SubmitRequest>) -> Result<Response<SubmitReply>, Status> {
+        require(&req, Role::Client)?;
         let r = req.into_inner();
         let bundle_files = check_files(&self.st, &r.bundle)?;
         let surrogate = check_files(&self.st, &r.surrogate)?;
         if let Some(f) = surrogate.iter().find(|f| !f.path.starts_with("surrogate/")) {
-            return Err(Status::invalid_argument(format!(
+            return Err(invalid(format!(
                 "surrogate file {} must be under surrogate/",
                 f.path
             )));
@@ -347,7 +460,8 @@ impl Coordinator for Service {
             let dir = st.run_dir(&idc);
             let pdir = dir.join("project");
             let pf = bundle::materialize(&files, &st.artifacts, &pdir)?;
-            let project = bemcal_calibrate::Project::load(&pf).map_err(|e| e.to_string())?;
+            let project =
+                bemcal_calibrate::Project::load_submitted(&pf).map_err(|e| e.to_string())?;
             bemcal_calibrate::load_inputs(&project).map_err(|e| e.to_string())?;
             Ok(project)
         })
@@ -361,7 +475,7 @@ impl Coordinator for Service {
                 let prefix = format!("{}/", dir.join("project").display());
                 let msg = format!("invalid project: {}", e.replace(&prefix, ""));
                 if r.portfolio.is_empty() {
-                    return Err(Status::invalid_argument(msg));
+                    return Err(invalid(msg));
                 }
                 // In a portfolio the building is reported as failed, with the loader's reason,
                 // and the other buildings go on.
@@ -402,6 +516,7 @@ impl Coordinator for Service {
         &self,
         req: Request<ListRunsRequest>,
     ) -> Result<Response<ListRunsReply>, Status> {
+        require(&req, Role::Client)?;
         let p = req.into_inner().portfolio;
         let runs = if p.is_empty() {
             self.st.store.runs()
@@ -417,20 +532,24 @@ impl Coordinator for Service {
     }
 
     async fn get_run(&self, req: Request<RunRequest>) -> Result<Response<RunStatus>, Status> {
+        require(&req, Role::Client)?;
         let id = req.into_inner().run_id;
+        check_run_id(&id)?;
         let r = self
             .st
             .store
             .run(&id)
             .map_err(internal)?
-            .ok_or_else(|| Status::not_found(format!("no run {id:?}")))?;
+            .ok_or_else(|| refuse(Code::NotFound, format!("no run {id:?}")))?;
         Ok(Response::new(self.status(&r, true)?))
     }
 
     async fn cancel(&self, req: Request<RunRequest>) -> Result<Response<RunStatus>, Status> {
+        require(&req, Role::Client)?;
         let id = req.into_inner().run_id;
+        check_run_id(&id)?;
         if self.st.store.run(&id).map_err(internal)?.is_none() {
-            return Err(Status::not_found(format!("no run {id:?}")));
+            return Err(refuse(Code::NotFound, format!("no run {id:?}")));
         }
         self.st
             .store
@@ -441,7 +560,7 @@ impl Coordinator for Service {
             .store
             .run(&id)
             .map_err(internal)?
-            .ok_or_else(|| Status::not_found(id))?;
+            .ok_or_else(|| refuse(Code::NotFound, id))?;
         Ok(Response::new(self.status(&r, false)?))
     }
 }

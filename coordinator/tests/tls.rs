@@ -52,6 +52,7 @@ fn tls_coordinator_serves_clients_that_trust_its_ca() {
             listen: "127.0.0.1:0".parse().unwrap(),
             data: dir.path().join("coordinator"),
             token: TOKEN.into(),
+            worker_token: None,
             tls: Some((dir.path().join("tls.crt"), dir.path().join("tls.key"))),
             config: Config::default(),
         };

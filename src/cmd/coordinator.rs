@@ -9,7 +9,7 @@ use std::process::{Child, Command, Stdio};
 
 use anyhow::Context;
 use bemcal_calibrate::Summary;
-use bemcal_client::auth::{load_token, random_token, TOKEN_ENV};
+use bemcal_client::auth::{load_token, load_worker_token, random_token, TOKEN_ENV};
 use bemcal_client::client::{self, Connect};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
@@ -26,6 +26,11 @@ pub struct Args {
     /// File with the bearer token (default: env BEMCAL_TOKEN).
     #[arg(long)]
     pub token_file: Option<PathBuf>,
+    /// File with a separate token for workers (default: env BEMCAL_WORKER_TOKEN). With it,
+    /// only workers lease, heartbeat, complete and fail jobs, and only clients submit, watch
+    /// and cancel runs; without it the one token serves both.
+    #[arg(long)]
+    pub worker_token_file: Option<PathBuf>,
     /// TLS certificate (PEM); with --tls-key, serve https.
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -75,6 +80,10 @@ impl ClientArgs {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let token = load_token(a.token_file.as_deref())?;
+    let worker_token = load_worker_token(a.worker_token_file.as_deref())?;
+    if worker_token.as_deref() == Some(token.as_str()) {
+        anyhow::bail!("the worker token must differ from the client token");
+    }
     if a.lease_ttl.is_nan() || a.lease_ttl < 1.0 {
         anyhow::bail!("--lease-ttl must be at least 1 s");
     }
@@ -82,6 +91,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         listen: a.listen,
         data: a.data,
         token,
+        worker_token,
         tls: a.tls_cert.zip(a.tls_key),
         config: Config {
             lease_ttl_ms: (a.lease_ttl * 1000.0) as u64,

@@ -76,6 +76,21 @@ pub enum Command {
     Portfolio(portfolio::Args),
 }
 
+impl Command {
+    /// Whether the command is (or hosts) a long-running server: the coordinator, a worker, or
+    /// a calibration or portfolio that starts them locally. Those must outlive a peer that
+    /// hangs up, so they never die of SIGPIPE.
+    pub fn serves(&self) -> bool {
+        matches!(
+            self,
+            Command::Coordinator(_)
+                | Command::Worker(_)
+                | Command::Calibrate(_)
+                | Command::Portfolio(_)
+        )
+    }
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(a) => simulate::run(a),

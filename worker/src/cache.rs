@@ -53,15 +53,7 @@ impl Cache {
         let key = hex::encode(h.finalize());
         let dir = self.root.join("bundles").join(&key[..16]);
         if !dir.join(bundle::PROJECT_FILE).is_file() {
-            let tmp =
-                self.root
-                    .join("bundles")
-                    .join(format!("{}.partial{}", &key[..16], job.lease_id));
-            let _ = std::fs::remove_dir_all(&tmp);
-            bundle::materialize(&files, &self.artifacts, &tmp)?;
-            if std::fs::rename(&tmp, &dir).is_err() {
-                let _ = std::fs::remove_dir_all(&tmp);
-            }
+            bundle::materialize(&files, &self.artifacts, &dir)?;
         }
         let work = self
             .root

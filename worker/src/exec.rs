@@ -9,6 +9,7 @@ use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
 use bemcal_client::client::walk;
 use bemcal_client::proto::{self, job::Kind};
+use bemcal_client::{result_json, ReportedFailure, SimulationRun};
 use bemcal_stats::chain::Chain;
 
 /// Output files (`relative path`, file) and a small JSON result.
@@ -20,7 +21,7 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 
 /// Runs `job` with the project at `project_file`, in `work`.
 pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Outputs, String> {
-    let project = Project::load(project_file).map_err(err)?;
+    let project = Project::load_submitted(project_file).map_err(err)?;
     let cal = Calibration::load(project, work).map_err(err)?;
     match &job.kind {
         Some(Kind::Simulate(s)) => {
@@ -32,14 +33,16 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 Err(e) => {
                     return Ok((
                         vec![],
-                        serde_json::json!({ "error": e.to_string() }).to_string(),
+                        result_json(&ReportedFailure {
+                            error: e.to_string(),
+                        }),
                     ))
                 }
             };
             let rel = OutputDir::point_rel(i);
             Ok((
                 vec![(rel.clone(), work.join(&rel))],
-                serde_json::json!({ "seconds": secs }).to_string(),
+                result_json(&SimulationRun { seconds: secs }),
             ))
         }
         Some(Kind::Train(t)) => {
@@ -113,7 +116,9 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
                 Err(e) if v.tolerate_failure => {
                     return Ok((
                         vec![],
-                        serde_json::json!({ "error": e.to_string() }).to_string(),
+                        result_json(&ReportedFailure {
+                            error: e.to_string(),
+                        }),
                     ))
                 }
                 Err(e) => return Err(e.to_string()),

@@ -440,6 +440,39 @@ pub fn simulate_point(
     Ok((r.outputs, Some(r.seconds)))
 }
 
+/// Checks a simulated point's file (`simulations/point_NNN.json`) as a worker uploads it,
+/// before a coordinator records or shares it: it parses, has one series per named output,
+/// every series as long as the first and at least a day, every value finite. Whether it
+/// answers the job's parameter values is checked when the driver reads it back.
+pub fn check_point_file(bytes: &[u8]) -> Result<(), String> {
+    let run: SavedRun =
+        serde_json::from_slice(bytes).map_err(|e| format!("not a simulated point's file: {e}"))?;
+    let o = &run.outputs;
+    if o.names.is_empty() || o.names.len() != o.series.len() {
+        return Err(format!(
+            "{} output names for {} series",
+            o.names.len(),
+            o.series.len()
+        ));
+    }
+    let hours = o.hours();
+    if hours < 24 {
+        return Err(format!("{hours} hours simulated"));
+    }
+    for (name, s) in o.names.iter().zip(&o.series) {
+        if s.len() != hours {
+            return Err(format!("output {name:?}: {} hours, not {hours}", s.len()));
+        }
+        if let Some(t) = s.iter().position(|v| !v.is_finite()) {
+            return Err(format!("output {name:?}: hour {t} is not a finite number"));
+        }
+    }
+    if let Some(v) = run.values.values().find(|v| !v.is_finite()) {
+        return Err(format!("a parameter value is not finite ({v})"));
+    }
+    Ok(())
+}
+
 #[derive(Serialize, Deserialize)]
 struct SavedRun {
     values: ParameterValues,

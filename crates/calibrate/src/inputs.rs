@@ -42,6 +42,10 @@ pub fn resolve_weather(project: &Project, engine: &Engine) -> Result<PathBuf, Er
 /// `base`).
 pub fn weather_reference(reference: &str, base: &Path, engine: &Engine) -> Result<PathBuf, Error> {
     match reference.strip_prefix("bundled:") {
+        Some(name) if !is_file_name(name) => Err(Error::Config(format!(
+            "weather 'bundled:{}': a bundled weather file is named by its file name alone",
+            name.chars().take(80).collect::<String>()
+        ))),
         Some(name) => engine.bundled_weather(name).ok_or_else(|| {
             Error::Config(format!(
                 "weather 'bundled:{name}': no such file in {}",
@@ -50,6 +54,12 @@ pub fn weather_reference(reference: &str, base: &Path, engine: &Engine) -> Resul
         }),
         None => Ok(base.join(reference)),
     }
+}
+
+/// A plain file name: one normal path component (no folder, no `..`).
+fn is_file_name(name: &str) -> bool {
+    let mut parts = Path::new(name).components();
+    matches!(parts.next(), Some(std::path::Component::Normal(_))) && parts.next().is_none()
 }
 
 /// The weather a calibration simulates with: the project's EPW, or with `[measured_weather]`

@@ -47,7 +47,7 @@ pub use validation::{
 /// Errors of the pipeline, each naming the stage, file or setting concerned.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{path}:{line}: {message}")]
+    #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Input {
         path: PathBuf,
         line: usize,
@@ -59,9 +59,9 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    #[error("{0}")]
+    #[error("{}", bemcal_excerpt::shorten(.0))]
     Config(String),
-    #[error("{stage}: {message}")]
+    #[error("{stage}: {}", bemcal_excerpt::shorten(.message))]
     Stage {
         stage: &'static str,
         message: String,
@@ -89,12 +89,7 @@ impl Error {
     }
 }
 
-/// Writes a file so that readers never see a partial one (temporary file + rename).
+/// Writes a file so that readers never see a partial one, durably ([`bemcal_durable`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Error> {
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-    }
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+    bemcal_durable::write_atomic(path, bytes).map_err(|e| Error::io(path, e))
 }

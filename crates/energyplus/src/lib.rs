@@ -47,14 +47,14 @@ pub enum Error {
         source: std::io::Error,
     },
     /// A model, spec or parameter-map file is malformed.
-    #[error("{path}:{line}: {message}")]
+    #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Input {
         path: PathBuf,
         line: usize,
         message: String,
     },
     /// A parameter is unknown, missing, out of range or violates a constraint.
-    #[error("parameter {name}: {message}")]
+    #[error("parameter {}: {}", bemcal_excerpt::excerpt(.name, 80), bemcal_excerpt::shorten(.message))]
     Parameter { name: String, message: String },
     /// EnergyPlus ran but failed (severe/fatal errors, missing output).
     #[error("EnergyPlus failed in {dir}: {message}\n{}", .details.join("\n"))]

@@ -180,6 +180,23 @@ impl Model {
         Model::from_toml(&text, path, idd)
     }
 
+    /// The files a model file names, as written (relative to the model file's folder): an
+    /// `[idf]` map's IDF, a building spec's `holidays_file` and `day_types_file` — what
+    /// [`Model::from_toml`] reads besides the model file itself.
+    pub fn named_files(text: &str, path: &Path) -> Result<Vec<PathBuf>, Error> {
+        let value: toml::Table = crate::parse_toml(text, path)?;
+        if value.contains_key("idf") {
+            let map: ParameterMap = crate::parse_toml(text, path)?;
+            return Ok(vec![map.idf.path]);
+        }
+        let spec: BuildingSpec = crate::parse_toml(text, path)?;
+        Ok(spec
+            .holidays_file
+            .into_iter()
+            .chain(spec.day_types_file)
+            .collect())
+    }
+
     /// Parses a model file's text (`path` locates relative files and names errors).
     pub fn from_toml(text: &str, path: &Path, idd: &Idd) -> Result<Model, Error> {
         let value: toml::Table = crate::parse_toml(text, path)?;

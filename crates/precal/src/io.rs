@@ -223,7 +223,7 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
     let mut written = Vec::new();
     let mut put = |name: &str, text: String| -> Result<(), PrecalError> {
         let p = dir.join(name);
-        std::fs::write(&p, text).map_err(io_err(&p))?;
+        bemcal_durable::write_atomic(&p, text.as_bytes()).map_err(io_err(&p))?;
         written.push(p);
         Ok(())
     };

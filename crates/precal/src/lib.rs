@@ -36,7 +36,7 @@ pub enum PrecalError {
         source: std::io::Error,
     },
     /// A meters CSV row or field is unusable.
-    #[error("{path}:{line}: column '{column}': {message}")]
+    #[error("{path}:{line}: column '{}': {}", bemcal_excerpt::excerpt(.column, 80), bemcal_excerpt::shorten(.message))]
     Meter {
         /// The meters file.
         path: PathBuf,
@@ -48,7 +48,7 @@ pub enum PrecalError {
         message: String,
     },
     /// A meters CSV or spec problem not tied to one row (missing column, no data, ...).
-    #[error("{path}: {message}")]
+    #[error("{path}: {}", bemcal_excerpt::shorten(.message))]
     MeterFile {
         /// The meters file.
         path: PathBuf,
@@ -56,6 +56,6 @@ pub enum PrecalError {
         message: String,
     },
     /// Invalid options or inconsistent inputs.
-    #[error("{0}")]
+    #[error("{}", bemcal_excerpt::shorten(.0))]
     Invalid(String),
 }

@@ -683,16 +683,9 @@ pub fn write_html(path: &Path, html: &str) -> Result<(), ReportError> {
     write_atomic(path, html.as_bytes())
 }
 
-/// Writes a file atomically (temporary file + rename).
+/// Writes a file atomically and durably ([`bemcal_durable`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(".tmp");
-    let tmp = path.with_file_name(name);
-    std::fs::write(&tmp, bytes).map_err(|source| ReportError::Io {
-        path: tmp.clone(),
-        source,
-    })?;
-    std::fs::rename(&tmp, path).map_err(|source| ReportError::Io {
+    bemcal_durable::write_atomic(path, bytes).map_err(|source| ReportError::Io {
         path: path.to_path_buf(),
         source,
     })

@@ -42,7 +42,7 @@ pub enum ReportError {
         source: std::io::Error,
     },
     /// A file is not in the expected format.
-    #[error("{}: {msg}", path.display())]
+    #[error("{}: {}", path.display(), bemcal_excerpt::shorten(.msg))]
     Parse {
         /// The file.
         path: PathBuf,

@@ -56,7 +56,7 @@ pub enum DatasetError {
     #[error("invalid training set: {0}")]
     Invalid(String),
     /// A file could not be read or written.
-    #[error("{path}: {message}")]
+    #[error("{path}: {}", bemcal_excerpt::shorten(.message))]
     Io { path: PathBuf, message: String },
 }
 
@@ -406,7 +406,8 @@ impl TrainingSet {
         write_npy(&p, &self.outputs).map_err(|e| io_err(&p, e))?;
         let p = dir.join("dataset.json");
         let json = serde_json::to_string_pretty(&self.meta()).map_err(|e| io_err(&p, e))?;
-        std::fs::write(&p, json).map_err(|e| io_err(&p, e))?;
+        // Written last and atomically: a dataset folder with its dataset.json is whole.
+        bemcal_durable::write_atomic(&p, json.as_bytes()).map_err(|e| io_err(&p, e))?;
         Ok(())
     }
 

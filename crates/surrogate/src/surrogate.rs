@@ -65,7 +65,7 @@ pub enum SurrogateError {
     #[error("ONNX Runtime: {0}")]
     Runtime(String),
     /// The surrogate directory or its metadata is missing or invalid.
-    #[error("{path}: {message}")]
+    #[error("{path}: {}", bemcal_excerpt::shorten(.message))]
     Metadata { path: PathBuf, message: String },
     /// Arguments do not fit the surrogate (wrong number of parameters, hours, ...).
     #[error("{0}")]

@@ -31,7 +31,7 @@ pub enum WeatherError {
         source: std::io::Error,
     },
     /// A line or field is not what the EPW format requires.
-    #[error("{path}:{line}: {message}")]
+    #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Malformed {
         path: PathBuf,
         line: usize,
