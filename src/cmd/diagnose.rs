@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use bemcal_stats::diagnostics::{self, ParameterDiagnostics};
 
-use super::metrics::Table;
+use super::metrics::{excerpt, Table};
 
 /// Arguments of `bemcal diagnose`.
 #[derive(Debug, clap::Args)]
@@ -50,11 +50,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             anyhow::anyhow!(
                 "{}:{line}: column `draw`: `{}` is not an integer",
                 t.path.display(),
-                f[di]
+                excerpt(&f[di])
             )
         })?;
         let mut vals = Vec::with_capacity(params.len());
         for &k in &params {
+            // `number` refuses an infinite draw (`inf`, `1e999`): its mean would print as `inf`
+            // beside an R-hat computed from ranks as if nothing were wrong.
             let v = t.number(*line, k, &f[k])?;
             if v.is_nan() {
                 bail!(
@@ -111,4 +113,59 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `run` on draws.csv text; the error with the temporary folder written as `DIR`.
+    fn diagnose(text: &str) -> Result<(), String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("draws.csv");
+        std::fs::write(&p, text).unwrap();
+        run(Args {
+            draws: p,
+            json: true,
+        })
+        .map_err(|e| {
+            e.to_string()
+                .replace(&dir.path().display().to_string(), "DIR")
+        })
+    }
+
+    #[test]
+    fn non_finite_draws_are_refused_naming_line_and_column() {
+        let mut lines = vec!["chain,draw,shgc,lighting_power_density".to_string()];
+        for c in 0..2 {
+            for d in 0..50 {
+                let shgc = 0.5 + 0.001 * ((d * 7 + c * 3) % 11) as f64;
+                let lpd = 10.0 + 0.01 * ((d * 5 + c) % 13) as f64;
+                lines.push(format!("{c},{d},{shgc},{lpd}"));
+            }
+        }
+        let with_shgc = |cell: &str| {
+            let mut l = lines.clone();
+            // Line 4: chain 0, draw 2.
+            l[3] = format!("0,2,{cell},10.0");
+            l.join("\n") + "\n"
+        };
+        diagnose(&with_shgc("0.5")).unwrap();
+        for cell in ["inf", "-inf", "1e999"] {
+            assert_eq!(
+                diagnose(&with_shgc(cell)).unwrap_err(),
+                format!("DIR/draws.csv:4: column `shgc`: `{cell}` is not a finite number")
+            );
+        }
+        assert_eq!(
+            diagnose(&with_shgc("NaN")).unwrap_err(),
+            "DIR/draws.csv:4: column `shgc`: missing value"
+        );
+        let e = diagnose(&with_shgc(&("9".repeat(400) + "x"))).unwrap_err();
+        assert!(
+            e.starts_with("DIR/draws.csv:4: column `shgc`: `9999"),
+            "{e}"
+        );
+        assert!(e.len() < 120, "the message quotes an excerpt: {e}");
+    }
 }

@@ -84,19 +84,37 @@ impl Table {
             .with_context(|| format!("{}:1: no column `{name}`", self.path.display()))
     }
 
-    /// A number cell; empty or `NaN` gives NaN (missing).
+    /// A number cell; empty or `NaN` gives NaN (missing). An infinite value (`inf`, `1e999`)
+    /// is an error: it would turn every mean and sum it enters into `inf`.
     pub fn number(&self, line: usize, col: usize, text: &str) -> anyhow::Result<f64> {
         if text.is_empty() || text.eq_ignore_ascii_case("nan") {
             return Ok(f64::NAN);
         }
-        text.parse::<f64>().map_err(|_| {
-            anyhow::anyhow!(
-                "{}:{line}: column `{}`: `{text}` is not a number",
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => bail!(
+                "{}:{line}: column `{}`: `{}` is not a finite number",
                 self.path.display(),
-                self.header[col]
-            )
-        })
+                self.header[col],
+                excerpt(text)
+            ),
+            Err(_) => bail!(
+                "{}:{line}: column `{}`: `{}` is not a number",
+                self.path.display(),
+                self.header[col],
+                excerpt(text)
+            ),
+        }
     }
+}
+
+/// At most 40 characters of a cell, for messages (a cell can be megabytes long).
+pub(crate) fn excerpt(s: &str) -> String {
+    let mut e: String = s.chars().take(40).collect();
+    if s.chars().count() > 40 {
+        e.push_str("...");
+    }
+    e
 }
 
 /// Metrics of one output.
@@ -123,9 +141,29 @@ fn parse_timestamp(path: &Path, line: usize, v: &str) -> anyhow::Result<chrono::
         }
     }
     bail!(
-        "{}:{line}: column 'timestamp': `{v}` is not an ISO 8601 time (expected YYYY-MM-DDTHH:MM or YYYY-MM-DDTHH:MM:SS)",
-        path.display()
+        "{}:{line}: column 'timestamp': `{}` is not an ISO 8601 time (expected YYYY-MM-DDTHH:MM or YYYY-MM-DDTHH:MM:SS)",
+        path.display(),
+        excerpt(v)
     )
+}
+
+/// The time of each row of `t` (timestamp column `col`), in row order; a time given twice is
+/// an error naming both lines.
+fn row_times(t: &Table, col: usize) -> anyhow::Result<Vec<chrono::NaiveDateTime>> {
+    let mut first_line: HashMap<chrono::NaiveDateTime, usize> = HashMap::new();
+    let mut times = Vec::with_capacity(t.rows.len());
+    for (line, f) in &t.rows {
+        let time = parse_timestamp(&t.path, *line, &f[col])?;
+        if let Some(first) = first_line.insert(time, *line) {
+            bail!(
+                "{}:{line}: duplicate timestamp `{}`: line {first} has the same time",
+                t.path.display(),
+                excerpt(&f[col])
+            );
+        }
+        times.push(time);
+    }
+    Ok(times)
 }
 
 /// Run `bemcal metrics`.
@@ -150,21 +188,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Rows are matched by time, not by text: `2021-01-01T00:00` (EnergyPlus validation CSVs)
     // and `2021-01-01T00:00:00` (`bemcal predict`) are the same hour.
-    let mut sim_rows: HashMap<chrono::NaiveDateTime, usize> = HashMap::new();
-    for (k, (line, f)) in sim.rows.iter().enumerate() {
-        let t = parse_timestamp(&sim.path, *line, &f[st])?;
-        if sim_rows.insert(t, k).is_some() {
-            bail!(
-                "{}:{line}: duplicate timestamp `{}`",
-                sim.path.display(),
-                f[st]
-            );
-        }
-    }
-    let mut meas_times = Vec::with_capacity(meas.rows.len());
-    for (line, f) in &meas.rows {
-        meas_times.push(parse_timestamp(&meas.path, *line, &f[mt])?);
-    }
+    let sim_rows: HashMap<chrono::NaiveDateTime, usize> = row_times(&sim, st)?
+        .into_iter()
+        .enumerate()
+        .map(|(k, t)| (t, k))
+        .collect();
+    // A measured hour written twice would be compared twice (counted twice in n, NMBE and
+    // CV-RMSE), so it is refused like a simulated one.
+    let meas_times = row_times(&meas, mt)?;
     let mut results = Vec::new();
     for &(i, j) in &outputs {
         let (mut y, mut yhat) = (Vec::new(), Vec::new());
@@ -237,5 +268,55 @@ mod tests {
         std::fs::write(&p, "timestamp,a\n2021-01-01T00:00,1,2\n").unwrap();
         let e = Table::read(&p).err().unwrap().to_string();
         assert!(e.starts_with(&format!("{}:2: ", p.display())), "{e}");
+    }
+
+    /// `run` on measured and simulated CSV text; the error with the folder written as `DIR`.
+    fn metrics(measured: &str, simulated: &str) -> Result<(), String> {
+        let dir = tempfile::tempdir().unwrap();
+        let (m, s) = (dir.path().join("m.csv"), dir.path().join("s.csv"));
+        std::fs::write(&m, measured).unwrap();
+        std::fs::write(&s, simulated).unwrap();
+        run(Args {
+            measured: m,
+            simulated: s,
+            json: true,
+        })
+        .map_err(|e| {
+            e.to_string()
+                .replace(&dir.path().display().to_string(), "DIR")
+        })
+    }
+
+    #[test]
+    fn a_duplicated_measured_hour_is_refused_naming_both_lines() {
+        let mut sim = String::from("timestamp,heating_kwh\n");
+        let mut meas = sim.clone();
+        for h in 0..24 {
+            sim.push_str(&format!("2021-01-01T{h:02}:00:00,{}\n", 10 + h % 5));
+            meas.push_str(&format!("2021-01-01T{h:02}:00,{}\n", 11 + h % 4));
+        }
+        metrics(&meas, &sim).unwrap();
+        // Line 8 (hour 6) repeated as line 9, written differently: the same hour.
+        let mut lines: Vec<&str> = meas.lines().collect();
+        lines.insert(8, "2021-01-01 06:00:00,99");
+        let dup = lines.join("\n") + "\n";
+        assert_eq!(
+            metrics(&dup, &sim).unwrap_err(),
+            "DIR/m.csv:9: duplicate timestamp `2021-01-01 06:00:00`: line 8 has the same time"
+        );
+        // Simulated duplicates name both lines too.
+        let mut lines: Vec<&str> = sim.lines().collect();
+        lines.insert(3, lines[2]);
+        let dup = lines.join("\n") + "\n";
+        assert_eq!(
+            metrics(&meas, &dup).unwrap_err(),
+            "DIR/s.csv:4: duplicate timestamp `2021-01-01T01:00:00`: line 3 has the same time"
+        );
+        // An infinite reading is refused like a non-number.
+        let bad = meas.replacen("2021-01-01T03:00,14\n", "2021-01-01T03:00,inf\n", 1);
+        assert_eq!(
+            metrics(&bad, &sim).unwrap_err(),
+            "DIR/m.csv:5: column `heating_kwh`: `inf` is not a finite number"
+        );
     }
 }

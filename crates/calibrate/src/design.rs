@@ -82,6 +82,15 @@ impl Plan {
         if plan.calibrated.is_empty() {
             return Err(Error::Config("no parameter left to calibrate".into()));
         }
+        // Values that are not calibrated never change: a constraint they break would fail
+        // every design point.
+        for c in model.constraints() {
+            c.check(&plan.fixed).map_err(|e| {
+                Error::Config(format!(
+                    "{e} (a parameter not calibrated is at its [fixed] value, else at its prior's mode)"
+                ))
+            })?;
+        }
         plan.restrict_to_fixed(model)?;
         Ok(plan)
     }
@@ -512,6 +521,19 @@ mod tests {
         let fixed: ParameterValues = [("heating_setpoint_occupied".to_string(), 27.0)].into();
         let e = Plan::new(&model, &["cooling_setpoint_occupied".into()], &fixed).unwrap_err();
         assert!(e.to_string().contains("lies entirely outside"), "{e}");
+
+        // Two values that are not calibrated (one fixed, one at its prior mode, 21 C) that break
+        // a constraint are refused before any design point.
+        let fixed: ParameterValues = [("cooling_setpoint_occupied".to_string(), 20.0)].into();
+        let e = Plan::new(&model, &["shgc".into()], &fixed).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "parameter heating_setpoint_occupied / cooling_setpoint_occupied: \
+             heating_setpoint_occupied = 21 and cooling_setpoint_occupied = 20 violate \
+             heating_setpoint_occupied + 0 <= cooling_setpoint_occupied: a heating set-point \
+             above the cooling set-point is fatal in EnergyPlus (DualSetPointWithDeadband) \
+             (a parameter not calibrated is at its [fixed] value, else at its prior's mode)"
+        );
     }
 
     #[test]

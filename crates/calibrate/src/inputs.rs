@@ -9,7 +9,7 @@ use bemcal_precal::pipeline::PriorsFile;
 use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
 
 use crate::design::Plan;
-use crate::project::Project;
+use crate::project::{excerpt, Project};
 use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
@@ -86,10 +86,12 @@ pub fn weather_for(
     Ok((path, Some(report)))
 }
 
-/// Loads the model and applies a priors file to it.
+/// Loads the model, checks the project against it ([`Project::check_model`]) and applies a
+/// priors file to it.
 pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
     let path = project.resolve(&project.model);
     let mut model = Model::load(&path, runner.idd())?;
+    project.check_model(&model)?;
     if let Some(p) = &project.priors {
         let path = project.resolve(p);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
@@ -164,17 +166,25 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
             }
         }
     }
-    for (name, role) in &roles {
-        if !model.outputs().iter().any(|o| &o.name == name) {
-            return Err(Error::Config(format!(
-                "[outputs] {name} = \"{role}\": the model has no output {name} (it has {})",
-                model
-                    .outputs()
-                    .iter()
-                    .map(|o| o.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
+    // Checked at load against listed columns; with columns detected from the headers, a role
+    // that `[outputs]` names explicitly must be among those found.
+    for (name, role) in &project.outputs {
+        if data.get(&MeterRole::from(role.clone())).is_none() {
+            return Err(project.error_at(
+                &["outputs", name],
+                format!(
+                    "[outputs] {} = \"{}\": {} has no meter of role '{}' (it has: {})",
+                    excerpt(name),
+                    excerpt(role),
+                    meters_path.display(),
+                    excerpt(role),
+                    data.series
+                        .iter()
+                        .map(|s| s.role.name().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
         }
     }
     if outputs.is_empty() {

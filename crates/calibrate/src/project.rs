@@ -129,6 +129,9 @@ pub struct Project {
     /// Folder of the project file (set on load).
     #[serde(skip)]
     pub base: PathBuf,
+    /// The project file itself (set on load; names it in messages).
+    #[serde(skip)]
+    pub path: PathBuf,
 }
 
 fn default_name() -> String {
@@ -530,6 +533,7 @@ impl Project {
         })?;
         let mut p: Project = bemcal_energyplus::parse_toml(&text, path).map_err(Error::from)?;
         p.base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        p.path = path.to_path_buf();
         p.validate().map_err(|message| Error::Input {
             path: path.into(),
             line: 0,
@@ -691,6 +695,176 @@ impl Project {
         Ok(())
     }
 
+    /// An error in the project file at the key `keys` (its line, when the file can be read
+    /// again and has the key; 0 otherwise, as for a default value).
+    pub(crate) fn error_at(&self, keys: &[&str], message: String) -> Error {
+        let line = std::fs::read_to_string(&self.path)
+            .map_or(0, |text| bemcal_energyplus::toml_line(&text, keys));
+        Error::Input {
+            path: self.path.clone(),
+            line,
+            message,
+        }
+    }
+
+    /// Checks the project against its model before anything runs: `[fixed]` values are known
+    /// parameters, finite and inside the support of the parameter's prior as the model declares
+    /// it (`model` before a priors file narrows it) and satisfy the model's constraints between
+    /// them; `[outputs]` names outputs the model has; and with `[[meters.columns]]` given,
+    /// every role that `[outputs]` or a `[[bases]]` sub-meter names is a column's role and
+    /// every column's role is compared with a model output or is a base.
+    pub fn check_model(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
+        let params = model.parameters();
+        let param_names = || {
+            params
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        for (name, &v) in &self.fixed {
+            let at = |m: String| self.error_at(&["fixed", name], format!("[fixed] {m}"));
+            let Some(p) = params.iter().find(|p| &p.name == name) else {
+                return Err(at(format!(
+                    "{}: unknown parameter; the model has: {}",
+                    excerpt(name),
+                    param_names()
+                )));
+            };
+            if !v.is_finite() {
+                return Err(at(format!("{name} = {v:?} is not a finite number")));
+            }
+            if !p.prior.contains(v) {
+                let unit = match p.unit.as_str() {
+                    "" | "-" => String::new(),
+                    u => format!(" {u}"),
+                };
+                return Err(at(format!(
+                    "{name} = {v:?} is outside {:?}..{:?}{unit}, the range of its prior in {} \
+                     (a value outside it needs a wider prior there)",
+                    p.prior.min,
+                    p.prior.max,
+                    model.path.display()
+                )));
+            }
+        }
+        for c in model.constraints() {
+            c.check(&self.fixed).map_err(|e| {
+                let message = match e {
+                    bemcal_energyplus::Error::Parameter { message, .. } => message,
+                    e => e.to_string(),
+                };
+                self.error_at(&["fixed", &c.upper], format!("[fixed] {message}"))
+            })?;
+        }
+        let outputs: Vec<&str> = model.outputs().iter().map(|o| o.name.as_str()).collect();
+        let roles = self.output_roles();
+        for (name, role) in &roles {
+            if !outputs.contains(&name.as_str()) {
+                return Err(self.error_at(
+                    &["outputs", name],
+                    format!(
+                        "[outputs] {} = \"{}\": the model has no output {} (it has {})",
+                        excerpt(name),
+                        excerpt(role),
+                        excerpt(name),
+                        outputs.join(", ")
+                    ),
+                ));
+            }
+        }
+        for (i, b) in self.bases.iter().enumerate() {
+            if !outputs.contains(&b.output.as_str()) {
+                return Err(self.error_at(
+                    &["bases", &i.to_string(), "output"],
+                    format!(
+                        "[[bases]] output = \"{}\": the model has no output {} (it has {})",
+                        excerpt(&b.output),
+                        excerpt(&b.output),
+                        outputs.join(", ")
+                    ),
+                ));
+            }
+        }
+        // Roles of the meters: known only when the columns are listed (otherwise they are
+        // detected from the CSV's headers, checked once it is read).
+        let columns = &self.meters.columns;
+        if columns.is_empty() {
+            return Ok(());
+        }
+        use bemcal_precal::meters::MeterRole;
+        let column_roles = || {
+            let mut r: Vec<&str> = vec![];
+            for c in columns {
+                if !r.contains(&c.role.name()) {
+                    r.push(c.role.name());
+                }
+            }
+            r.join(", ")
+        };
+        let has_column = |role: &MeterRole| columns.iter().any(|c| &c.role == role);
+        for (name, role) in &self.outputs {
+            if !has_column(&MeterRole::from(role.clone())) {
+                return Err(self.error_at(
+                    &["outputs", name],
+                    format!(
+                        "[outputs] {} = \"{}\": no [[meters.columns]] has role '{}' \
+                         (their roles: {})",
+                        excerpt(name),
+                        excerpt(role),
+                        excerpt(role),
+                        column_roles()
+                    ),
+                ));
+            }
+        }
+        for (i, b) in self.bases.iter().enumerate() {
+            if let Some(sub) = &b.submeter {
+                if !has_column(&MeterRole::from(sub.clone())) {
+                    return Err(self.error_at(
+                        &["bases", &i.to_string(), "submeter"],
+                        format!(
+                            "[[bases]] submeter = \"{}\": no [[meters.columns]] has role \
+                             '{}' (their roles: {})",
+                            excerpt(sub),
+                            excerpt(sub),
+                            column_roles()
+                        ),
+                    ));
+                }
+            }
+        }
+        // A column whose role no model output is compared with and no base uses would be read
+        // and then ignored: a misspelt `heatng` left heating out of the calibration unnoticed.
+        let used: Vec<MeterRole> = roles
+            .values()
+            .cloned()
+            .chain(self.bases.iter().filter_map(|b| b.submeter.clone()))
+            .map(MeterRole::from)
+            .collect();
+        for (i, c) in columns.iter().enumerate() {
+            if !used.contains(&c.role) {
+                let mapped: Vec<String> = roles
+                    .iter()
+                    .map(|(o, r)| format!("{o} = \"{r}\""))
+                    .collect();
+                return Err(self.error_at(
+                    &["meters", "columns", &i.to_string(), "role"],
+                    format!(
+                        "[[meters.columns]] column = \"{}\": role '{}' is compared with no model \
+                         output and is no [[bases]] submeter (outputs map {}; the model's outputs: \
+                         {}); map an output to it in [outputs] or remove the column",
+                        excerpt(&c.column),
+                        excerpt(c.role.name()),
+                        mapped.join(", "),
+                        outputs.join(", ")
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// A path from the project file, resolved against its folder.
     pub fn resolve(&self, p: &Path) -> PathBuf {
         if p.is_absolute() {
@@ -722,6 +896,15 @@ impl Project {
     }
 }
 
+/// At most 40 characters of a name from the file, for messages.
+pub(crate) fn excerpt(s: &str) -> String {
+    let mut e: String = s.chars().take(40).collect();
+    if s.chars().count() > 40 {
+        e.push_str("...");
+    }
+    e
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -735,13 +918,168 @@ mod tests {
         p.validate().map(|_| p)
     }
 
+    /// A generated model from a building spec file (no EnergyPlus needed).
+    fn spec_model(path: &Path) -> bemcal_energyplus::Model {
+        let text = std::fs::read_to_string(path).unwrap();
+        let spec = bemcal_energyplus::BuildingSpec::from_toml(&text, path)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut m = bemcal_energyplus::Model::generated(spec);
+        m.path = path.into();
+        m
+    }
+
     #[test]
     fn the_shipped_example_projects_load() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/office");
-        for name in ["project.toml", "quick.toml"] {
-            let p = Project::load(&dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert!(dir.join(&p.model).is_file(), "{name}: model {:?}", p.model);
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+        for name in [
+            "office/project.toml",
+            "office/quick.toml",
+            "rsf/project.toml",
+        ] {
+            let p = Project::load(&examples.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let model = p.resolve(&p.model);
+            assert!(model.is_file(), "{name}: model {:?}", p.model);
+            p.check_model(&spec_model(&model))
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
         }
+    }
+
+    /// `check_model` of a project made of `top` (top-level keys and tables before `[meters]`)
+    /// and `columns` (the meter columns' roles) against `examples/office/small.toml`; the
+    /// error with the temporary folder written as `DIR`.
+    fn check(top: &str, roles: &[&str], tail: &str) -> Result<(), String> {
+        let dir = tempfile::tempdir().unwrap();
+        let mut text = format!(
+            "model = \"model.toml\"\nweather = \"w.epw\"\n{top}[meters]\nfile = \"meters.csv\"\n"
+        );
+        for r in roles {
+            text.push_str(&format!(
+                "[[meters.columns]]\ncolumn = \"{r} (kWh)\"\nrole = \"{r}\"\nunit = \"kWh\"\n"
+            ));
+        }
+        text.push_str(tail);
+        let path = dir.path().join("project.toml");
+        std::fs::write(&path, text).unwrap();
+        let model = dir.path().join("model.toml");
+        std::fs::copy(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/office/small.toml"),
+            &model,
+        )
+        .unwrap();
+        Project::load(&path)
+            .and_then(|p| p.check_model(&spec_model(&model)))
+            .map_err(|e| {
+                e.to_string()
+                    .replace(&dir.path().display().to_string(), "DIR")
+            })
+    }
+
+    #[test]
+    fn fixed_values_outside_the_prior_or_not_finite_are_refused_with_the_range() {
+        let hc = ["heating", "cooling", "electricity"];
+        check(
+            "[fixed]\nshgc = 0.6\nwindow_glass_conductivity = 0.01\n",
+            &hc,
+            "",
+        )
+        .unwrap();
+        assert_eq!(
+            check(
+                "[fixed]\nshgc = 0.6\nwindow_glass_conductivity = -1000\n",
+                &hc,
+                ""
+            )
+            .unwrap_err(),
+            "DIR/project.toml:5: [fixed] window_glass_conductivity = -1000.0 is outside \
+             0.01..0.02 W/m-K, the range of its prior in DIR/model.toml (a value outside it \
+             needs a wider prior there)"
+        );
+        assert_eq!(
+            check("[fixed]\nshgc = 0.81\n", &hc, "").unwrap_err(),
+            "DIR/project.toml:4: [fixed] shgc = 0.81 is outside 0.3..0.8, the range of its \
+             prior in DIR/model.toml (a value outside it needs a wider prior there)"
+        );
+        for v in ["inf", "-inf", "nan"] {
+            let e = check(&format!("[fixed]\nshgc = {v}\n"), &hc, "").unwrap_err();
+            assert!(
+                e.starts_with("DIR/project.toml:4: [fixed] shgc = ")
+                    && e.ends_with(" is not a finite number"),
+                "{e}"
+            );
+        }
+        assert!(check("[fixed]\nshgcc = 0.5\n", &hc, "")
+            .unwrap_err()
+            .starts_with("DIR/project.toml:4: [fixed] shgcc: unknown parameter; the model has: "));
+        // Each in its prior, together impossible.
+        assert_eq!(
+            check(
+                "[fixed]\nheating_setpoint_occupied = 23.5\ncooling_setpoint_occupied = 22.0\n",
+                &hc,
+                ""
+            )
+            .unwrap_err(),
+            "DIR/project.toml:5: [fixed] heating_setpoint_occupied = 23.5 and \
+             cooling_setpoint_occupied = 22 violate heating_setpoint_occupied + 0 <= \
+             cooling_setpoint_occupied: a heating set-point above the cooling set-point is fatal \
+             in EnergyPlus (DualSetPointWithDeadband)"
+        );
+    }
+
+    #[test]
+    fn meter_roles_and_outputs_the_model_cannot_use_are_refused_naming_the_known_ones() {
+        let hc = ["heating", "cooling", "electricity"];
+        check(
+            "[outputs]\nheating_kwh = \"heating\"\nlighting_kwh = \"lighting\"\n",
+            &["heating", "lighting"],
+            "",
+        )
+        .unwrap();
+        // A misspelt column role: heating would be left out of the calibration.
+        assert_eq!(
+            check("", &["heatng", "cooling", "electricity"], "").unwrap_err(),
+            "DIR/project.toml:7: [[meters.columns]] column = \"heatng (kWh)\": role 'heatng' is \
+             compared with no model output and is no [[bases]] submeter (outputs map \
+             cooling_kwh = \"cooling\", electricity_kwh = \"electricity\", heating_kwh = \
+             \"heating\"; the model's outputs: heating_kwh, cooling_kwh, electricity_kwh, \
+             lighting_kwh, equipment_kwh); map an output to it in [outputs] or remove the column"
+        );
+        // A misspelt role in [outputs].
+        assert_eq!(
+            check("[outputs]\nheating_kwh = \"heatin\"\n", &hc, "").unwrap_err(),
+            "DIR/project.toml:4: [outputs] heating_kwh = \"heatin\": no [[meters.columns]] has \
+             role 'heatin' (their roles: heating, cooling, electricity)"
+        );
+        // An output the model does not have.
+        assert_eq!(
+            check("[outputs]\ngas_kwh = \"heating\"\n", &hc, "").unwrap_err(),
+            "DIR/project.toml:4: [outputs] gas_kwh = \"heating\": the model has no output gas_kwh \
+             (it has heating_kwh, cooling_kwh, electricity_kwh, lighting_kwh, equipment_kwh)"
+        );
+        // A base's sub-meter that no column has, and one that is there.
+        let base = "[[bases]]\noutput = \"electricity_kwh\"\nsubmeter = \"server_room\"\n";
+        assert_eq!(
+            check(base, &["electricity", "data_center"], "").unwrap_err(),
+            "DIR/project.toml:5: [[bases]] submeter = \"server_room\": no [[meters.columns]] has \
+             role 'server_room' (their roles: electricity, data_center)"
+        );
+        check(
+            &base.replace("server_room", "data_center"),
+            &["electricity", "data_center"],
+            "",
+        )
+        .unwrap();
+        assert_eq!(
+            check(
+                &base.replace("electricity_kwh", "gas_kwh"),
+                &["electricity", "server_room"],
+                ""
+            )
+            .unwrap_err(),
+            "DIR/project.toml:4: [[bases]] output = \"gas_kwh\": the model has no output gas_kwh \
+             (it has heating_kwh, cooling_kwh, electricity_kwh, lighting_kwh, equipment_kwh)"
+        );
+        // Columns detected from the headers are checked once the meters are read.
+        check("[outputs]\nheating_kwh = \"heatin\"\n", &[], "").unwrap();
     }
 
     #[test]

@@ -260,7 +260,7 @@ impl BuildingSpec {
                 .join(file);
             let dates = bemcal_weather::read_holiday_list(&file).map_err(|e| Error::Input {
                 path: path.to_path_buf(),
-                line: 0,
+                line: crate::toml_line(text, &["holidays_file"]),
                 message: format!("holidays_file: {e}"),
             })?;
             spec.holidays = Holidays::Dates(dates);
@@ -273,13 +273,13 @@ impl BuildingSpec {
             spec.observed_day_types =
                 bemcal_weather::read_day_type_calendar(&file).map_err(|e| Error::Input {
                     path: path.to_path_buf(),
-                    line: 0,
+                    line: crate::toml_line(text, &["day_types_file"]),
                     message: format!("day_types_file: {e}"),
                 })?;
         }
-        spec.validate().map_err(|message| Error::Input {
+        spec.check_fields().map_err(|(key, message)| Error::Input {
             path: path.to_path_buf(),
-            line: 0,
+            line: crate::toml_line(text, &key.iter().map(String::as_str).collect::<Vec<_>>()),
             message,
         })?;
         Ok(spec)
@@ -287,56 +287,100 @@ impl BuildingSpec {
 
     /// Checks geometry, schedule boundaries and prior overrides.
     pub fn validate(&self) -> Result<(), String> {
+        self.check_fields().map_err(|(_, message)| message)
+    }
+
+    /// [`BuildingSpec::validate`], with the TOML key of the field at fault (`["footprint_m"]`,
+    /// `["priors", "shgc"]`) so that a spec file's message can name its line.
+    fn check_fields(&self) -> Result<(), (Vec<String>, String)> {
+        let at = |key: &str, message: String| (vec![key.to_string()], message);
         if self.storeys == 0 || self.storeys > 60 {
-            return Err(format!("storeys = {}, expected 1..=60", self.storeys));
+            return Err(at(
+                "storeys",
+                format!("storeys = {}, expected 1..=60", self.storeys),
+            ));
         }
         let [l, w] = self.footprint_m;
-        if !(l >= 3.0 && w >= 3.0) {
-            return Err(format!("footprint_m = [{l}, {w}], expected both >= 3 m"));
+        // Finite and bounded: an infinite footprint passed ">= 3 m" and made an infinite floor
+        // area, which the hot water prior (scaled by floor area) then reported as its own fault.
+        if !((3.0..=1000.0).contains(&l) && (3.0..=1000.0).contains(&w)) {
+            return Err(at(
+                "footprint_m",
+                format!("footprint_m = [{l:?}, {w:?}], expected two finite lengths of 3..1000 m"),
+            ));
         }
         if !(2.4..=10.0).contains(&self.floor_to_floor_m) {
-            return Err(format!(
-                "floor_to_floor_m = {}, expected 2.4..10 m",
-                self.floor_to_floor_m
+            return Err(at(
+                "floor_to_floor_m",
+                format!(
+                    "floor_to_floor_m = {:?}, expected 2.4..10 m",
+                    self.floor_to_floor_m
+                ),
+            ));
+        }
+        if !(self.perimeter_depth_m.is_finite() && self.perimeter_depth_m > 0.0) {
+            return Err(at(
+                "perimeter_depth_m",
+                format!(
+                    "perimeter_depth_m = {:?}, expected a finite depth > 0 m",
+                    self.perimeter_depth_m
+                ),
             ));
         }
         if self.zoning == Zoning::PerimeterCore && 2.0 * self.perimeter_depth_m + 1.0 > l.min(w) {
-            return Err(format!(
-                "perimeter_depth_m = {} leaves no core in a {l} x {w} m footprint",
-                self.perimeter_depth_m
+            return Err(at(
+                "perimeter_depth_m",
+                format!(
+                    "perimeter_depth_m = {} leaves no core in a {l} x {w} m footprint",
+                    self.perimeter_depth_m
+                ),
             ));
         }
         if !(0.01..=0.9).contains(&self.window_to_wall) {
-            return Err(format!(
-                "window_to_wall = {}, expected 0.01..0.9",
-                self.window_to_wall
+            return Err(at(
+                "window_to_wall",
+                format!(
+                    "window_to_wall = {:?}, expected 0.01..0.9",
+                    self.window_to_wall
+                ),
             ));
         }
         if ![1, 2, 3, 4, 5, 6, 10, 12, 15, 20, 30, 60].contains(&self.timesteps_per_hour) {
-            return Err(format!(
-                "timesteps_per_hour = {}, expected a divisor of 60",
-                self.timesteps_per_hour
+            return Err(at(
+                "timesteps_per_hour",
+                format!(
+                    "timesteps_per_hour = {}, expected a divisor of 60",
+                    self.timesteps_per_hour
+                ),
             ));
         }
         let [a, b] = self.occupied_hours;
         if !(a < b && b <= 24) {
-            return Err(format!(
-                "occupied_hours = [{a}, {b}], expected start < end <= 24"
+            return Err(at(
+                "occupied_hours",
+                format!("occupied_hours = [{a}, {b}], expected start < end <= 24"),
+            ));
+        }
+        if !(1900..=2100).contains(&self.year) {
+            return Err(at(
+                "year",
+                format!("year = {}, expected 1900..=2100", self.year),
             ));
         }
         for (what, bounds) in [
             ("weekday_boundaries", &self.weekday_boundaries),
             ("weekend_boundaries", &self.weekend_boundaries),
         ] {
-            check_boundaries(bounds).map_err(|m| format!("{what}: {m}"))?;
+            check_boundaries(bounds).map_err(|m| at(what, format!("{what}: {m}")))?;
         }
         let names: Vec<String> = self.parameters().into_iter().map(|d| d.name).collect();
         for (name, p) in &self.priors {
+            let at = |m: String| (vec!["priors".to_string(), name.clone()], m);
             if !names.contains(name) {
-                return Err(format!("priors.{name}: unknown parameter"));
+                return Err(at(format!("priors.{name}: unknown parameter")));
             }
             TriangularPrior::new(p.min, p.mode, p.max)
-                .map_err(|m| format!("priors.{name}: {m}"))?;
+                .map_err(|m| at(format!("priors.{name}: {m}")))?;
         }
         Ok(())
     }
@@ -1421,5 +1465,76 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("expected 24"), "{e}");
+    }
+
+    #[test]
+    fn non_finite_or_unphysical_geometry_is_refused_naming_the_field_and_line() {
+        let load = |text: &str| {
+            BuildingSpec::from_toml(text, std::path::Path::new("model.toml"))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        let head = "name = \"box\"\nstoreys = 1\n";
+        for (field, value, message) in [
+            (
+                "footprint_m",
+                "[inf, 15]",
+                "footprint_m = [inf, 15.0], expected two finite lengths of 3..1000 m",
+            ),
+            (
+                "footprint_m",
+                "[20, nan]",
+                "footprint_m = [20.0, NaN], expected two finite lengths of 3..1000 m",
+            ),
+            (
+                "footprint_m",
+                "[1e300, 15]",
+                "footprint_m = [1e300, 15.0], expected two finite lengths of 3..1000 m",
+            ),
+            (
+                "floor_to_floor_m",
+                "inf",
+                "floor_to_floor_m = inf, expected 2.4..10 m",
+            ),
+            (
+                "perimeter_depth_m",
+                "-inf",
+                "perimeter_depth_m = -inf, expected a finite depth > 0 m",
+            ),
+            (
+                "perimeter_depth_m",
+                "-2.0",
+                "perimeter_depth_m = -2.0, expected a finite depth > 0 m",
+            ),
+            (
+                "window_to_wall",
+                "nan",
+                "window_to_wall = NaN, expected 0.01..0.9",
+            ),
+            (
+                "window_to_wall",
+                "1.5",
+                "window_to_wall = 1.5, expected 0.01..0.9",
+            ),
+            ("year", "20210", "year = 20210, expected 1900..=2100"),
+        ] {
+            let e = load(&format!("{head}{field} = {value}\n")).unwrap_err();
+            assert_eq!(e, format!("model.toml:3: {message}"), "{field} = {value}");
+        }
+        let e = load(&format!(
+            "{head}\n[priors]\nshgc = {{ min = 0.3, mode = inf, max = 0.8 }}\n"
+        ))
+        .unwrap_err();
+        assert_eq!(
+            e,
+            "model.toml:5: priors.shgc: prior (0.3, inf, 0.8) is not finite"
+        );
+        // A spec whose fields are all defaults has nothing to point at.
+        load(head).unwrap();
+        // The one-zone box with a sensible perimeter depth it does not use still loads.
+        load(&format!(
+            "{head}zoning = \"one_per_floor\"\nfootprint_m = [20, 15]\n"
+        ))
+        .unwrap();
     }
 }

@@ -87,3 +87,73 @@ pub(crate) fn io_err(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) ->
     let path = path.into();
     move |source| Error::Io { path, source }
 }
+
+/// The 1-based line of a key in TOML text, for messages about a value that parsed but is not
+/// acceptable: `keys` is the path to it (`["fixed", "shgc"]`; an array index as a number,
+/// `["meters", "columns", "2", "role"]`). 0 when the text does not parse or has no such key
+/// (a default value), as the file-level messages write it.
+pub fn toml_line(text: &str, keys: &[&str]) -> usize {
+    use toml::de::{DeTable, DeValue};
+    let Ok(root) = DeTable::parse(text) else {
+        return 0;
+    };
+    let line = |byte: usize| text[..byte.min(text.len())].matches('\n').count() + 1;
+    let mut table = root.get_ref();
+    let mut value: Option<&toml::Spanned<DeValue>> = None;
+    let mut key_start = 0;
+    for (n, k) in keys.iter().enumerate() {
+        if n > 0 {
+            match value.map(|v| v.get_ref()) {
+                Some(DeValue::Table(t)) => table = t,
+                Some(DeValue::Array(a)) => {
+                    let Some(item) = k.parse::<usize>().ok().and_then(|i| a.get(i)) else {
+                        return 0;
+                    };
+                    key_start = item.span().start;
+                    value = Some(item);
+                    continue;
+                }
+                _ => return 0,
+            }
+        }
+        let Some((key, v)) = table.iter().find(|(key, _)| key.get_ref().as_ref() == *k) else {
+            return 0;
+        };
+        key_start = key.span().start;
+        value = Some(v);
+    }
+    if keys.is_empty() {
+        0
+    } else {
+        line(key_start)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn toml_line_finds_keys_tables_and_array_items() {
+        let text = "name = \"x\"\n\n[fixed]\nshgc = 0.5\n[[meters.columns]]\nrole = \"a\"\n\
+                    [[meters.columns]]\ncolumn = \"c\"\nrole = \"b\"\n[priors.shgc]\nmin = 1\n";
+        assert_eq!(super::toml_line(text, &["name"]), 1);
+        assert_eq!(super::toml_line(text, &["fixed", "shgc"]), 4);
+        assert_eq!(
+            super::toml_line(text, &["meters", "columns", "0", "role"]),
+            6
+        );
+        assert_eq!(
+            super::toml_line(text, &["meters", "columns", "1", "role"]),
+            9
+        );
+        assert_eq!(super::toml_line(text, &["priors", "shgc", "min"]), 11);
+        for missing in [
+            &["year"][..],
+            &["fixed", "lpd"],
+            &["meters", "columns", "2"],
+            &[],
+        ] {
+            assert_eq!(super::toml_line(text, missing), 0, "{missing:?}");
+        }
+        assert_eq!(super::toml_line("a = [", &["a"]), 0);
+    }
+}

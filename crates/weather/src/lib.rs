@@ -17,6 +17,8 @@ use std::path::{Path, PathBuf};
 use chrono::{Datelike, NaiveDate, Weekday};
 use serde::{Deserialize, Serialize};
 
+use station::excerpt;
+
 /// Hours in a non-leap year: the length of every EPW file bemcal accepts.
 pub const HOURS_PER_YEAR: usize = 8760;
 
@@ -71,18 +73,34 @@ impl Location {
             ));
         }
         let num = |i: usize, what: &str| -> Result<f64, WeatherError> {
-            loc[i]
-                .parse::<f64>()
-                .map_err(|_| err(format!("LOCATION {what} '{}' is not a number", loc[i])))
+            loc[i].parse::<f64>().map_err(|_| {
+                err(format!(
+                    "LOCATION {what} '{}' is not a number",
+                    excerpt(loc[i])
+                ))
+            })
+        };
+        // Range checks: a time zone of 99 (a missing-value code) or a latitude of 400 would
+        // otherwise shift every solar position and every meter's alignment without a word.
+        let ranged = |i: usize, what: &str, lo: f64, hi: f64, unit: &str| {
+            let v = num(i, what)?;
+            if !(lo..=hi).contains(&v) {
+                return Err(err(if v.is_finite() {
+                    format!("LOCATION {what} {v} is outside {lo}..{hi:+} {unit}")
+                } else {
+                    format!("LOCATION {what} {v} is not a finite number")
+                }));
+            }
+            Ok(v)
         };
         Ok(Location {
             city: loc[1].to_string(),
             state: loc[2].to_string(),
             country: loc[3].to_string(),
-            latitude_deg: num(6, "latitude")?,
-            longitude_deg: num(7, "longitude")?,
-            time_zone_h: num(8, "time zone")?,
-            elevation_m: num(9, "elevation")?,
+            latitude_deg: ranged(6, "latitude", -90.0, 90.0, "degrees")?,
+            longitude_deg: ranged(7, "longitude", -180.0, 180.0, "degrees")?,
+            time_zone_h: ranged(8, "time zone", -12.0, 14.0, "hours from UTC")?,
+            elevation_m: ranged(9, "elevation", f64::MIN, f64::MAX, "m")?,
         })
     }
 }
@@ -149,6 +167,8 @@ impl Epw {
             ));
         }
         let mut hours = Vec::with_capacity(HOURS_PER_YEAR);
+        let mut seen: std::collections::HashMap<(u32, u32, u32), usize> =
+            std::collections::HashMap::with_capacity(HOURS_PER_YEAR);
         for (i, line) in lines {
             let lineno = i + 1;
             if line.trim().is_empty() {
@@ -165,18 +185,35 @@ impl Epw {
                 ));
             }
             let field = |idx: usize, name: &str| -> Result<f64, WeatherError> {
-                f[idx].trim().parse::<f64>().map_err(|_| {
-                    err(
+                match f[idx].trim().parse::<f64>() {
+                    Ok(v) if v.is_finite() => Ok(v),
+                    Ok(_) => Err(err(
                         lineno,
-                        format!("field {} ({name}) '{}' is not a number", idx + 1, f[idx]),
-                    )
-                })
+                        format!(
+                            "field {} ({name}) '{}' is not a finite number",
+                            idx + 1,
+                            excerpt(f[idx])
+                        ),
+                    )),
+                    Err(_) => Err(err(
+                        lineno,
+                        format!(
+                            "field {} ({name}) '{}' is not a number",
+                            idx + 1,
+                            excerpt(f[idx])
+                        ),
+                    )),
+                }
             };
             let int = |idx: usize, name: &str, lo: u32, hi: u32| -> Result<u32, WeatherError> {
                 let v = f[idx].trim().parse::<u32>().map_err(|_| {
                     err(
                         lineno,
-                        format!("field {} ({name}) '{}' is not an integer", idx + 1, f[idx]),
+                        format!(
+                            "field {} ({name}) '{}' is not an integer",
+                            idx + 1,
+                            excerpt(f[idx])
+                        ),
                     )
                 })?;
                 if v < lo || v > hi {
@@ -213,6 +250,18 @@ impl Epw {
                     format!(
                         "relative humidity {} % is outside 0..110 %",
                         h.rel_humidity_pct
+                    ),
+                ));
+            }
+            // A repeated month/day/hour means another hour is missing: every later row would
+            // be simulated an hour off.
+            if let Some(first) = seen.insert((h.month, h.day, h.hour), lineno) {
+                return Err(err(
+                    lineno,
+                    format!(
+                        "month {} day {} hour {} again: line {first} has the same hour \
+                         (a duplicated hour; an EPW has each hour of the year once)",
+                        h.month, h.day, h.hour
                     ),
                 ));
             }
@@ -700,6 +749,94 @@ mod tests {
             .sum::<f64>()
             / 744.0;
         assert!(jul > 18.0, "July mean {jul}");
+    }
+
+    /// A minimal valid EPW (constant weather, 2021's calendar, no leap day) as lines.
+    fn tiny_epw_lines(time_zone: &str) -> Vec<String> {
+        let mut lines = vec![
+            format!("LOCATION,Golden,CO,USA,TMY3,724666,39.74,-105.18,{time_zone},1829.0"),
+            "DESIGN CONDITIONS,0".into(),
+            "TYPICAL/EXTREME PERIODS,0".into(),
+            "GROUND TEMPERATURES,0".into(),
+            "HOLIDAYS/DAYLIGHT SAVINGS,No,0,0,0".into(),
+            "COMMENTS 1,synthetic".into(),
+            "COMMENTS 2,synthetic".into(),
+            "DATA PERIODS,1,1,Data,Friday, 1/ 1,12/31".into(),
+        ];
+        let mut day = NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
+        while day.year() == 2021 {
+            for hour in 1..=24 {
+                lines.push(format!(
+                    "2021,{},{},{hour},0,?,10.0,2.0,50,83000,0,0,300,0,0,0,0,0,0,0,180,3.0",
+                    day.month(),
+                    day.day()
+                ));
+            }
+            day = day.succ_opt().unwrap();
+        }
+        lines
+    }
+
+    #[test]
+    fn a_duplicated_hour_or_an_impossible_time_zone_is_refused_naming_the_line() {
+        let lines = tiny_epw_lines("-7.0");
+        let epw = Epw::parse(&lines.join("\n"), Path::new("x.epw")).unwrap();
+        assert_eq!(epw.hours.len(), HOURS_PER_YEAR);
+
+        // Hour 3 of January 2 (line 8 + 24 + 3 = 35) written as hour 2 again.
+        let mut dup = lines.clone();
+        assert!(dup[34].starts_with("2021,1,2,3,"), "{}", dup[34]);
+        dup[34] = dup[34].replacen("2021,1,2,3,", "2021,1,2,2,", 1);
+        let e = Epw::parse(&dup.join("\n"), Path::new("x.epw"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "x.epw:35: month 1 day 2 hour 2 again: line 34 has the same hour \
+             (a duplicated hour; an EPW has each hour of the year once)"
+        );
+
+        for (tz, what) in [
+            ("99", "time zone 99 is outside -12..+14 hours from UTC"),
+            (
+                "-12.5",
+                "time zone -12.5 is outside -12..+14 hours from UTC",
+            ),
+            ("inf", "time zone inf is not a finite number"),
+        ] {
+            let e = Epw::parse(&tiny_epw_lines(tz).join("\n"), Path::new("x.epw"))
+                .unwrap_err()
+                .to_string();
+            assert_eq!(e, format!("x.epw:1: LOCATION {what}"));
+        }
+        for tz in ["-12", "14", "5.5", "-3.5"] {
+            Epw::parse(&tiny_epw_lines(tz).join("\n"), Path::new("x.epw")).unwrap();
+        }
+
+        // A non-finite reading, and a long bad cell quoted as an excerpt.
+        let mut bad = lines.clone();
+        bad[20] = bad[20].replacen(",83000,", ",inf,", 1);
+        let e = Epw::parse(&bad.join("\n"), Path::new("x.epw"))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "x.epw:21: field 10 (atmospheric pressure) 'inf' is not a finite number"
+        );
+        let mut bad = lines.clone();
+        bad[20] = bad[20].replacen(",83000,", &format!(",{},", "9".repeat(5000) + "x"), 1);
+        let e = Epw::parse(&bad.join("\n"), Path::new("x.epw"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("x.epw:21: field 10 (atmospheric pressure) '999"),
+            "{e}"
+        );
+        assert!(
+            e.len() < 200,
+            "the message quotes an excerpt: {} bytes",
+            e.len()
+        );
     }
 
     #[test]

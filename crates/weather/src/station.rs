@@ -456,7 +456,7 @@ pub fn read_weather_csv(
 }
 
 /// The first 60 characters of a line, for messages.
-fn excerpt(s: &str) -> String {
+pub(crate) fn excerpt(s: &str) -> String {
     let mut e: String = s.chars().take(60).collect();
     if s.chars().count() > 60 {
         e.push_str("...");
