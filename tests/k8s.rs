@@ -266,7 +266,7 @@ fn worker_points_at_the_coordinator_service() {
     let probe = &container(&objs, "bemcal-worker")["readinessProbe"]["exec"]["command"];
     let cmd: Vec<&str> = probe.as_sequence().unwrap().iter().map(s).collect();
     assert_eq!(cmd[..2], ["sh", "-c"]);
-    assert!(cmd[2].contains("bemcal status --coordinator \"$BEMCAL_COORDINATOR\""));
+    assert!(cmd[2].contains("bemcal status --health --coordinator \"$BEMCAL_COORDINATOR\""));
     assert_eq!(config(&objs)["BEMCAL_COORDINATOR"], url);
     // Slots and drain parse; the grace period covers the drain and the 10 s give-back.
     assert!(flag(&a, "--slots").parse::<usize>().unwrap() >= 1);
@@ -292,9 +292,10 @@ fn token_secret_key_matches_every_reference() {
         .keys()
         .map(s)
         .collect();
-    // The placeholder must not be a usable token (spaces: bemcal refuses it).
-    let placeholder = s(&secret["stringData"][keys[0]]);
-    assert!(placeholder.contains(' '));
+    // The placeholders must not be usable tokens (spaces: bemcal refuses them).
+    for k in &keys {
+        assert!(s(&secret["stringData"][*k]).contains(' '), "{k}");
+    }
     let objs = deployed();
     assert!(
         !objs.iter().any(|o| o["kind"] == "Secret"),
@@ -310,6 +311,23 @@ fn token_secret_key_matches_every_reference() {
         assert_eq!(s(&r["name"]), name, "{d}");
         assert!(keys.contains(&s(&r["key"])), "{d}: key {:?}", r["key"]);
     }
+    // Workers carry the worker token, which the coordinator knows as its worker token, and
+    // which is not the clients' token.
+    let key_of = |d: &str, var: &str| -> String {
+        let env = container(&objs, d)["env"].as_sequence().unwrap();
+        let e = env
+            .iter()
+            .find(|e| e["name"] == var)
+            .unwrap_or_else(|| panic!("{d}: no {var}"));
+        s(&e["valueFrom"]["secretKeyRef"]["key"]).to_string()
+    };
+    let worker_key = key_of("bemcal-worker", "BEMCAL_TOKEN");
+    assert_eq!(
+        worker_key,
+        key_of("bemcal-coordinator", "BEMCAL_WORKER_TOKEN")
+    );
+    assert_ne!(worker_key, key_of("bemcal-coordinator", "BEMCAL_TOKEN"));
+    assert!(keys.contains(&worker_key.as_str()));
 }
 
 #[test]
@@ -390,7 +408,7 @@ fn every_flag_in_the_manifests_is_one_the_cli_takes() {
             used += 1;
         }
     }
-    // The worker's readiness probe runs `bemcal status --coordinator`.
+    // The worker's readiness probe runs `bemcal status --health --coordinator`.
     assert!(help("status").contains("--coordinator "));
     assert!(used >= 8);
 }

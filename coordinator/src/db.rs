@@ -105,6 +105,9 @@ CREATE INDEX jobs_cache ON jobs(cache_key, state);
 ALTER TABLE runs ADD COLUMN refine TEXT;              -- JSON RefineLog: finished refinement rounds
 ALTER TABLE stages ADD COLUMN seconds_before REAL NOT NULL DEFAULT 0; -- earlier visits of a stage
 "#,
+    r#"
+CREATE INDEX jobs_run_state ON jobs(run_id, state, id); -- a run's queued / leased jobs (leasing)
+"#,
 ];
 
 pub use bemcal_client::File;
@@ -604,12 +607,18 @@ impl Store {
             let job = tx
                 .query_row(
                     &format!(
-                        "SELECT {} FROM jobs j JOIN runs r ON r.id = j.run_id
-                         WHERE j.state = 'queued' AND r.state = 'running'
-                           AND (j.cache_key IS NULL OR NOT EXISTS (
-                                SELECT 1 FROM jobs k WHERE k.cache_key = j.cache_key AND k.state = 'leased'))
-                         ORDER BY (SELECT COUNT(*) FROM jobs k WHERE k.run_id = j.run_id AND k.state = 'leased'),
-                                  r.last_lease, j.id
+                        // Each run's oldest eligible job first, then the runs ordered: the
+                        // leased count is counted once per run, not once per queued job.
+                        "WITH eligible AS (
+                           SELECT j.run_id AS run_id, MIN(j.id) AS first
+                           FROM jobs j JOIN runs r ON r.id = j.run_id
+                           WHERE j.state = 'queued' AND r.state = 'running'
+                             AND (j.cache_key IS NULL OR NOT EXISTS (
+                                  SELECT 1 FROM jobs k WHERE k.cache_key = j.cache_key AND k.state = 'leased'))
+                           GROUP BY j.run_id)
+                         SELECT {} FROM eligible e JOIN runs r ON r.id = e.run_id JOIN jobs j ON j.id = e.first
+                         ORDER BY (SELECT COUNT(*) FROM jobs k WHERE k.run_id = e.run_id AND k.state = 'leased'),
+                                  r.last_lease, e.first
                          LIMIT 1",
                         JOB_COLS
                             .split(", ")

@@ -1,7 +1,7 @@
 //! `bemcal status`: runs and their progress per stage.
 
 use super::coordinator::ClientArgs;
-use bemcal_client::proto::{ListRunsRequest, RunRequest, RunStatus};
+use bemcal_client::proto::{HealthRequest, ListRunsRequest, RunRequest, RunStatus};
 
 /// Show one run (or all runs) with per-stage progress.
 #[derive(Debug, clap::Args)]
@@ -13,6 +13,10 @@ pub struct Args {
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
+    /// Only check that the coordinator answers (any valid token, a worker's too): prints its
+    /// version and queue depth. What a worker's readiness probe runs.
+    #[arg(long, conflicts_with = "run")]
+    pub health: bool,
 }
 
 /// A run's status as JSON.
@@ -23,8 +27,8 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
         "state": s.state,
         "stage": s.stage,
         "error": s.error,
-        "jobs": s.jobs_total,
-        "attempts": s.attempts_total,
+        "jobs_total": s.jobs_total,
+        "attempts_total": s.attempts_total,
         "created_ms": s.created_ms,
         "finished_ms": s.finished_ms,
         "stages": s.stages.iter().map(|g| serde_json::json!({
@@ -44,6 +48,23 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
     let rt = bemcal_client::runtime()?;
+    if a.health {
+        let h = rt
+            .block_on(async {
+                connect
+                    .client()?
+                    .health(HealthRequest {})
+                    .await
+                    .map_err(anyhow::Error::from)
+            })
+            .map_err(|e| anyhow::anyhow!("{}: {e:#}", a.client.coordinator))?
+            .into_inner();
+        println!(
+            "coordinator {} (bemcal {}): {} jobs queued, {} leased",
+            a.client.coordinator, h.version, h.queued_jobs, h.leased_jobs
+        );
+        return Ok(());
+    }
     let runs = rt.block_on(async {
         let mut c = connect.client()?;
         let runs = match &a.run {
