@@ -563,7 +563,17 @@ fn chaos_kills_do_not_change_the_results() {
     calibrate(&pf, &reference, None);
 
     let data = tmp.path().join("coord");
-    let (mut coord, url) = coordinator(&data, "127.0.0.1:0");
+    // A job whose worker is killed counts a failed attempt, and three fail its run (a job that
+    // kills its worker each time should); the schedule may hit one job more often than that.
+    let chaos_coordinator = |listen: &str| {
+        common::coordinator(
+            &data,
+            listen,
+            TOKEN,
+            &["--lease-ttl", "3", "--max-failures", "20"],
+        )
+    };
+    let (mut coord, url) = chaos_coordinator("127.0.0.1:0");
     let port = url.rsplit(':').next().unwrap().to_string();
     let cache = |i: usize| tmp.path().join(format!("w{i}"));
     let mut workers: Vec<Proc> = (0..2)
@@ -604,7 +614,7 @@ fn chaos_kills_do_not_change_the_results() {
             finished_before.extend(done_jobs(&s));
             drop(coord);
             std::thread::sleep(Duration::from_millis(rng.random_range(200..2_000)));
-            let (c, u) = coordinator(&data, &format!("127.0.0.1:{port}"));
+            let (c, u) = chaos_coordinator(&format!("127.0.0.1:{port}"));
             assert_eq!(u, url);
             coord = c;
             kills.push(format!("coordinator (stage {})", s["stage"]));
@@ -617,7 +627,11 @@ fn chaos_kills_do_not_change_the_results() {
     }
     eprintln!("chaos: {} kills: {kills:?}", kills.len());
     let s = wait_for(&url, &run, 1_200, |_| false);
-    assert_eq!(s["state"], "done", "the run did not complete: {s}");
+    assert_eq!(
+        s["state"], "done",
+        "the run did not complete ({}; kills: {kills:?}): {s}",
+        s["error"]
+    );
     let jobs = s["jobs"].as_array().unwrap();
     for (id, attempts) in &finished_before {
         let j = jobs.iter().find(|j| j["id"] == *id).unwrap();

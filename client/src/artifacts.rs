@@ -91,6 +91,17 @@ impl ArtifactDir {
         self.root.join(&sha[..2]).join(sha)
     }
 
+    /// Removes the artifact `sha` (nothing when it is not there).
+    pub fn remove(&self, sha: &str) -> std::io::Result<()> {
+        if !valid_sha(sha) {
+            return Ok(());
+        }
+        match std::fs::remove_file(self.path(sha)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+            _ => Ok(()),
+        }
+    }
+
     pub fn has(&self, sha: &str) -> bool {
         valid_sha(sha) && self.path(sha).is_file()
     }

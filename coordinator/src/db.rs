@@ -844,6 +844,55 @@ impl Store {
     }
 
     /// Notes an artifact the coordinator holds.
+    /// Artifacts recorded before `before_ms` that nothing in the database refers to: no run's
+    /// bundle, surrogate or results, no job's spec or outputs, no simulation-cache entry (an
+    /// upload whose submit or completion never came, a stale completion's outputs).
+    pub fn unreferenced_artifacts(&self, before_ms: u64) -> Result<Vec<String>> {
+        self.with(|c| {
+            let mut referenced = std::collections::HashSet::new();
+            for sql in [
+                "SELECT bundle FROM runs",
+                "SELECT surrogate FROM runs",
+                "SELECT spec FROM jobs",
+                "SELECT outputs FROM jobs WHERE outputs IS NOT NULL",
+                "SELECT outputs FROM sim_cache",
+                "SELECT sha256 FROM results",
+            ] {
+                let mut st = c.prepare(sql)?;
+                let mut rows = st.query([])?;
+                while let Some(r) = rows.next()? {
+                    let bytes: Vec<u8> = match r.get_ref(0)? {
+                        rusqlite::types::ValueRef::Text(t) | rusqlite::types::ValueRef::Blob(t) => {
+                            t.to_vec()
+                        }
+                        _ => continue,
+                    };
+                    sha256s_in(&bytes, &mut referenced);
+                }
+            }
+            let mut st = c.prepare("SELECT sha256 FROM artifacts WHERE created_ms < ?1")?;
+            let old = st
+                .query_map([before_ms as i64], |r| r.get::<_, String>(0))?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(old
+                .into_iter()
+                .filter(|s| !referenced.contains(s))
+                .collect())
+        })
+    }
+
+    /// Forgets artifacts (after their files are removed).
+    pub fn remove_artifacts(&self, shas: &[String]) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            for s in shas {
+                tx.execute("DELETE FROM artifacts WHERE sha256 = ?1", [s])?;
+            }
+            tx.commit()?;
+            Ok(())
+        })
+    }
+
     pub fn add_artifact(&self, sha: &str, size: u64) -> Result<()> {
         self.with(|c| {
             c.execute(
@@ -852,6 +901,20 @@ impl Store {
             )?;
             Ok(())
         })
+    }
+}
+
+/// Every sha256 (64 lowercase hex characters in a row) in `bytes`: the artifacts a JSON list of
+/// files or a proto job refers to.
+fn sha256s_in(bytes: &[u8], out: &mut std::collections::HashSet<String>) {
+    let hex = |b: &u8| b.is_ascii_digit() || (b'a'..=b'f').contains(b);
+    let mut i = 0;
+    while i < bytes.len() {
+        let run = bytes[i..].iter().take_while(|b| hex(b)).count();
+        if run == 64 {
+            out.insert(String::from_utf8_lossy(&bytes[i..i + 64]).into_owned());
+        }
+        i += run.max(1);
     }
 }
 
@@ -975,6 +1038,42 @@ mod tests {
                 cache_key: key(i),
             })
             .collect()
+    }
+
+    #[test]
+    fn artifacts_nothing_refers_to_are_found_once_past_their_grace() {
+        let (s, dir) = store("gc");
+        let sha = |c: char| c.to_string().repeat(64);
+        let file = |c: char| File {
+            path: format!("{c}.txt"),
+            sha256: sha(c),
+            size: 1,
+        };
+        for c in ['a', 'b', 'c', 'd', 'e'] {
+            s.add_artifact(&sha(c), 1).unwrap();
+        }
+        // a: a run's bundle; b: a job's spec (proto bytes); c: a job's outputs; d, e: nothing.
+        s.create_run("R", "r", &[file('a')], &[], 0).unwrap();
+        let spec = proto::Job {
+            inputs: vec![proto::FileRef::from(&file('b'))],
+            ..Default::default()
+        };
+        let job = NewJob {
+            spec,
+            ..jobs(1, |_| None).remove(0)
+        };
+        s.set_stage("R", Stage::Simulate, vec![job]).unwrap();
+        let lease = s.lease("w", 60_000).unwrap().unwrap().lease_id;
+        s.complete(lease, &[file('c')], "{}").unwrap();
+        let later = now_ms() + 1;
+        let mut orphans = s.unreferenced_artifacts(later).unwrap();
+        orphans.sort();
+        assert_eq!(orphans, vec![sha('d'), sha('e')]);
+        // Within their grace period, nothing is collected.
+        assert!(s.unreferenced_artifacts(0).unwrap().is_empty());
+        s.remove_artifacts(&orphans).unwrap();
+        assert!(s.unreferenced_artifacts(later).unwrap().is_empty());
+        let _ = std::fs::remove_dir_all(dir);
     }
 
     #[test]

@@ -44,6 +44,9 @@ pub struct Config {
     pub rhat_target: Option<f64>,
     /// At most this many extensions (each adds iterations - burn_in per chain).
     pub max_extensions: u32,
+    /// Artifacts that nothing refers to are removed once they are this old (ms): an upload
+    /// whose submit or completion never came gets this long to be used.
+    pub artifact_grace_ms: u64,
 }
 
 impl Default for Config {
@@ -54,6 +57,7 @@ impl Default for Config {
             chains_per_job: 0,
             rhat_target: None,
             max_extensions: 2,
+            artifact_grace_ms: 24 * 3600 * 1000,
         }
     }
 }
@@ -115,6 +119,20 @@ impl State {
             .add_artifact(&sha, bytes.len() as u64)
             .map_err(err)?;
         Ok(sha)
+    }
+
+    /// Removes the artifacts nothing refers to that are older than the grace period
+    /// ([`Config::artifact_grace_ms`]); returns how many and their bytes.
+    pub fn collect_artifacts(&self) -> Result<(usize, u64)> {
+        let before = crate::now_ms().saturating_sub(self.config.artifact_grace_ms);
+        let orphans = self.store.unreferenced_artifacts(before).map_err(err)?;
+        let mut bytes = 0;
+        for sha in &orphans {
+            bytes += std::fs::metadata(self.artifacts.path(sha)).map_or(0, |m| m.len());
+            self.artifacts.remove(sha).map_err(err)?;
+        }
+        self.store.remove_artifacts(&orphans).map_err(err)?;
+        Ok((orphans.len(), bytes))
     }
 
     /// Advances `run` as far as it goes now; an error fails the run with its message.

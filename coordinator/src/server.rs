@@ -71,6 +71,16 @@ pub async fn serve(
         }
     });
 
+    // Artifacts nothing refers to, past their grace period: at start, then hourly.
+    let collector = st.clone();
+    tokio::spawn(async move {
+        loop {
+            let st = collector.clone();
+            let _ = tokio::task::spawn_blocking(move || st.collect_artifacts()).await;
+            tokio::time::sleep(Duration::from_secs(3600)).await;
+        }
+    });
+
     // Standard gRPC health (grpc.health.v1, no token: Kubernetes probes cannot send one):
     // SERVING while the database answers the query behind the Health RPC.
     let (health, health_svc) = tonic_health::server::health_reporter();

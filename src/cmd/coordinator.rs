@@ -52,6 +52,10 @@ pub struct Args {
     /// Most extensions when --rhat-target is given.
     #[arg(long, default_value_t = 2)]
     pub max_extensions: u32,
+    /// Hours an artifact that no run, job or cached simulation refers to is kept before it is
+    /// removed (checked at start and hourly).
+    #[arg(long, default_value_t = 24.0)]
+    pub artifact_grace_hours: f64,
 }
 
 /// Where the coordinator is and how to authenticate.
@@ -84,6 +88,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if worker_token.as_deref() == Some(token.as_str()) {
         anyhow::bail!("the worker token must differ from the client token");
     }
+    if a.artifact_grace_hours.is_nan() || a.artifact_grace_hours < 0.1 {
+        anyhow::bail!("--artifact-grace-hours must be at least 0.1 (uploads need time to be used)");
+    }
     if a.lease_ttl.is_nan() || a.lease_ttl < 1.0 {
         anyhow::bail!("--lease-ttl must be at least 1 s");
     }
@@ -99,6 +106,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             chains_per_job: a.chains_per_job,
             rhat_target: a.rhat_target,
             max_extensions: a.max_extensions,
+            artifact_grace_ms: (a.artifact_grace_hours * 3.6e6) as u64,
         },
     };
     let rt = bemcal_client::runtime()?;
