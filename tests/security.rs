@@ -300,3 +300,26 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
     });
     assert!(alive(&mut proc));
 }
+
+#[test]
+fn the_artifact_store_keeps_to_its_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    // 2,000 bytes.
+    let (mut proc, url) = coordinator(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        TOKEN,
+        &["--max-store-gb", "0.000002"],
+    );
+    let rt = bemcal_client::runtime().unwrap();
+    rt.block_on(async {
+        let mut c = client(&url, TOKEN);
+        let a = upload(&mut c, vec![b'a'; 1_500]).await.unwrap();
+        let e = upload(&mut c, vec![b'b'; 1_500]).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::ResourceExhausted);
+        assert!(e.message().contains("2000-byte limit"), "{}", e.message());
+        // What is stored stays there and can be sent again.
+        assert_eq!(upload(&mut c, vec![b'a'; 1_500]).await.unwrap(), a);
+    });
+    assert!(alive(&mut proc));
+}

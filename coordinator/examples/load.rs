@@ -92,6 +92,7 @@ fn main() -> anyhow::Result<()> {
         data: dir.path().into(),
         config: Config::default(),
         kick,
+        uploads: tokio::sync::Semaphore::new(16),
     });
     let rt = bemcal_client::runtime()?;
     rt.block_on(async move {

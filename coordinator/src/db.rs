@@ -881,6 +881,17 @@ impl Store {
         })
     }
 
+    /// Bytes of every artifact recorded.
+    pub fn artifact_bytes(&self) -> Result<u64> {
+        self.with(|c| {
+            Ok(
+                c.query_row("SELECT COALESCE(SUM(size), 0) FROM artifacts", [], |r| {
+                    r.get::<_, i64>(0)
+                })? as u64,
+            )
+        })
+    }
+
     /// Forgets artifacts (after their files are removed).
     pub fn remove_artifacts(&self, shas: &[String]) -> Result<()> {
         self.with(|c| {

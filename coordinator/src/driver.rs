@@ -47,6 +47,10 @@ pub struct Config {
     /// Artifacts that nothing refers to are removed once they are this old (ms): an upload
     /// whose submit or completion never came gets this long to be used.
     pub artifact_grace_ms: u64,
+    /// Largest the artifact store may grow (bytes); an upload past it is refused. 0: no limit.
+    pub max_store_bytes: u64,
+    /// Uploads received at once; more wait their turn.
+    pub max_uploads: usize,
 }
 
 impl Default for Config {
@@ -58,6 +62,8 @@ impl Default for Config {
             rhat_target: None,
             max_extensions: 2,
             artifact_grace_ms: 24 * 3600 * 1000,
+            max_store_bytes: 0,
+            max_uploads: 16,
         }
     }
 }
@@ -70,6 +76,8 @@ pub struct State {
     pub config: Config,
     /// Asks the driver task to advance a run.
     pub kick: tokio::sync::mpsc::UnboundedSender<String>,
+    /// Permits for uploads in progress ([`Config::max_uploads`]).
+    pub uploads: tokio::sync::Semaphore,
 }
 
 /// The stages a run goes through, in order (every [`Stage`] but `Done`).

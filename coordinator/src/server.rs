@@ -50,6 +50,7 @@ pub async fn serve(
         data: opts.data.clone(),
         config: opts.config.clone(),
         kick: tx,
+        uploads: tokio::sync::Semaphore::new(opts.config.max_uploads.max(1)),
     });
     for r in st.store.running_runs()? {
         let _ = st.kick.send(r);

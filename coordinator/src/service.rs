@@ -347,6 +347,22 @@ impl Coordinator for Service {
                 ),
             ));
         }
+        // At most max_uploads at once (more wait), and the store within its limit.
+        let _permit = self.st.uploads.acquire().await.map_err(internal)?;
+        let limit = self.st.config.max_store_bytes;
+        if limit > 0 && !self.st.artifacts.has(&first.sha256) {
+            let held = self.st.store.artifact_bytes().map_err(internal)?;
+            if held.saturating_add(first.size) > limit {
+                return Err(refuse(
+                    Code::ResourceExhausted,
+                    format!(
+                        "the artifact store holds {held} bytes of its {limit}-byte limit: an \
+                         artifact of {} bytes does not fit (the coordinator's --max-store-gb)",
+                        first.size
+                    ),
+                ));
+            }
+        }
         // Streamed to disk as it arrives: an upload holds one chunk in memory, whatever its size.
         let mut upload = self
             .st

@@ -56,6 +56,12 @@ pub struct Args {
     /// removed (checked at start and hourly).
     #[arg(long, default_value_t = 24.0)]
     pub artifact_grace_hours: f64,
+    /// Largest the artifact store may grow, GB (0: no limit); uploads past it are refused.
+    #[arg(long, default_value_t = 0.0)]
+    pub max_store_gb: f64,
+    /// Uploads received at once; more wait their turn.
+    #[arg(long, default_value_t = 16)]
+    pub max_uploads: usize,
 }
 
 /// Where the coordinator is and how to authenticate.
@@ -91,6 +97,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if a.artifact_grace_hours.is_nan() || a.artifact_grace_hours < 0.1 {
         anyhow::bail!("--artifact-grace-hours must be at least 0.1 (uploads need time to be used)");
     }
+    if !a.max_store_gb.is_finite() || a.max_store_gb < 0.0 {
+        anyhow::bail!("--max-store-gb must be a number of GB, 0 for no limit");
+    }
     if a.lease_ttl.is_nan() || a.lease_ttl < 1.0 {
         anyhow::bail!("--lease-ttl must be at least 1 s");
     }
@@ -107,6 +116,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             rhat_target: a.rhat_target,
             max_extensions: a.max_extensions,
             artifact_grace_ms: (a.artifact_grace_hours * 3.6e6) as u64,
+            max_store_bytes: (a.max_store_gb * 1e9) as u64,
+            max_uploads: a.max_uploads.max(1),
         },
     };
     let rt = bemcal_client::runtime()?;
