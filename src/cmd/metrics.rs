@@ -108,13 +108,9 @@ impl Table {
     }
 }
 
-/// At most 40 characters of a cell, for messages (a cell can be megabytes long).
-pub(crate) fn excerpt(s: &str) -> String {
-    let mut e: String = s.chars().take(40).collect();
-    if s.chars().count() > 40 {
-        e.push_str("...");
-    }
-    e
+/// At most 40 bytes of a cell, for messages (a cell can be megabytes long).
+pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    bemcal_excerpt::excerpt(s, 40)
 }
 
 /// Metrics of one output.

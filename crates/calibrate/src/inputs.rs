@@ -44,7 +44,7 @@ pub fn weather_reference(reference: &str, base: &Path, engine: &Engine) -> Resul
     match reference.strip_prefix("bundled:") {
         Some(name) if !is_file_name(name) => Err(Error::Config(format!(
             "weather 'bundled:{}': a bundled weather file is named by its file name alone",
-            name.chars().take(80).collect::<String>()
+            bemcal_excerpt::excerpt(name, 80)
         ))),
         Some(name) => engine.bundled_weather(name).ok_or_else(|| {
             Error::Config(format!(

@@ -51,11 +51,7 @@ pub const MAX_SUBMITTED_FILE_BYTES: u64 = 1 << 30;
 /// real path. The one path rule of submitted projects (coordinator and workers).
 pub fn file_inside(root: &Path, dir: &Path, written: &Path) -> Result<PathBuf, String> {
     let shown = written.display().to_string();
-    let shown = if shown.len() > 120 {
-        format!("{}...", shown.chars().take(120).collect::<String>())
-    } else {
-        shown
-    };
+    let shown = bemcal_excerpt::excerpt(&shown, 120);
     let plain = written
         .components()
         .all(|c| matches!(c, std::path::Component::Normal(_)));
@@ -896,13 +892,9 @@ impl Project {
     }
 }
 
-/// At most 40 characters of a name from the file, for messages.
-pub(crate) fn excerpt(s: &str) -> String {
-    let mut e: String = s.chars().take(40).collect();
-    if s.chars().count() > 40 {
-        e.push_str("...");
-    }
-    e
+/// At most 40 bytes of a name from the file, for messages.
+pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    bemcal_excerpt::excerpt(s, 40)
 }
 
 #[cfg(test)]

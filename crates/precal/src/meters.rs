@@ -647,13 +647,9 @@ fn us_dst_days(year: i32) -> Option<(NaiveDate, NaiveDate)> {
     ))
 }
 
-/// At most 40 characters of a cell, for messages (a cell can be megabytes long).
-fn excerpt(s: &str) -> String {
-    let mut e: String = s.chars().take(40).collect();
-    if s.chars().count() > 40 {
-        e.push_str("...");
-    }
-    e
+/// At most 40 bytes of a cell, for messages (a cell can be megabytes long).
+fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    bemcal_excerpt::excerpt(s, 40)
 }
 
 fn is_missing_token(s: &str) -> bool {

@@ -425,7 +425,7 @@ pub fn read_day_type_calendar(
                 line,
                 format!(
                     "date '{}' is not YYYY-MM-DD",
-                    raw.chars().take(30).collect::<String>()
+                    bemcal_excerpt::excerpt(raw, 30)
                 ),
             )
         })?;
@@ -460,7 +460,7 @@ pub fn read_holiday_list(path: &Path) -> Result<Vec<NaiveDate>, WeatherError> {
                 line: i + 1,
                 message: format!(
                     "'{}' is not a date: expected YYYY-MM-DD (optionally ',name')",
-                    field.chars().take(40).collect::<String>()
+                    bemcal_excerpt::excerpt(field, 40)
                 ),
             })?;
         dates.push(d);

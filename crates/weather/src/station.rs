@@ -455,13 +455,9 @@ pub fn read_weather_csv(
     parse_weather_csv(&read_text(path)?, path, spec, standard_offset_h)
 }
 
-/// The first 60 characters of a line, for messages.
-pub(crate) fn excerpt(s: &str) -> String {
-    let mut e: String = s.chars().take(60).collect();
-    if s.chars().count() > 60 {
-        e.push_str("...");
-    }
-    e
+/// At most 60 bytes of a line, for messages.
+pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    bemcal_excerpt::excerpt(s, 60)
 }
 
 /// The measured sources of an EPW build, as named in a project or on the command line.
