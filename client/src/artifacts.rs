@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
+use bemcal_durable::AtomicFile;
 use sha2::{Digest, Sha256};
+use std::io::Write;
 
 /// sha256 of bytes, lowercase hex.
 pub fn sha256_hex(bytes: &[u8]) -> String {
@@ -17,13 +19,11 @@ pub fn valid_sha(s: &str) -> bool {
             .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
-/// An artifact being received ([`ArtifactDir::upload`]): the bytes go to a temporary file as
-/// they arrive, hashed on the way; [`Upload::finish`] checks the size and hash and moves the
-/// file into place. Dropped unfinished, it leaves nothing behind.
+/// An artifact being received ([`ArtifactDir::upload`]): the bytes go to a durable
+/// [`AtomicFile`] as they arrive, hashed on the way; [`Upload::finish`] checks the size and
+/// hash and puts the file in place. Dropped unfinished, it leaves nothing behind.
 pub struct Upload {
-    file: std::fs::File,
-    tmp: PathBuf,
-    dest: PathBuf,
+    file: AtomicFile,
     hasher: Sha256,
     received: u64,
     sha: String,
@@ -41,11 +41,11 @@ impl Upload {
             ));
         }
         self.hasher.update(data);
-        std::io::Write::write_all(&mut self.file, data)
+        self.file.write_all(data)
     }
 
     /// Checks the size and the hash, and stores the artifact durably.
-    pub fn finish(mut self) -> std::io::Result<()> {
+    pub fn finish(self) -> std::io::Result<()> {
         let bad = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
         if self.received != self.size {
             return Err(bad(format!(
@@ -53,24 +53,14 @@ impl Upload {
                 self.received, self.size
             )));
         }
-        let got = hex::encode(std::mem::take(&mut self.hasher).finalize());
+        let got = hex::encode(self.hasher.finalize());
         if got != self.sha {
             return Err(bad(format!(
                 "artifact content has sha256 {got}, announced {}",
                 self.sha
             )));
         }
-        self.file.sync_all()?;
-        std::fs::rename(&self.tmp, &self.dest)?;
-        bemcal_durable::sync_folder(self.dest.parent());
-        Ok(())
-    }
-}
-
-impl Drop for Upload {
-    fn drop(&mut self) {
-        // After `finish` the temporary name is gone and this does nothing.
-        let _ = std::fs::remove_file(&self.tmp);
+        self.file.commit()
     }
 }
 
@@ -115,15 +105,8 @@ impl ArtifactDir {
                 "not a sha256",
             ));
         }
-        let dest = self.path(sha);
-        std::fs::create_dir_all(dest.parent().expect("artifact folder"))?;
-        static UPLOADS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let n = UPLOADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let tmp = dest.with_extension(format!("upload{}-{n}", std::process::id()));
         Ok(Upload {
-            file: std::fs::File::create(&tmp)?,
-            tmp,
-            dest,
+            file: AtomicFile::create(&self.path(sha))?,
             hasher: Sha256::new(),
             received: 0,
             sha: sha.into(),

@@ -148,14 +148,8 @@ pub fn materialize(files: &[File], store: &ArtifactDir, dir: &Path) -> Result<Pa
         return Err(format!("the bundle has no {PROJECT_FILE}"));
     }
     let io = |p: &Path, e: std::io::Error| format!("{}: {e}", p.display());
-    // A name of this call's own: two callers may lay out the same bundle at once.
-    let name = dir.file_name().map(|n| n.to_string_lossy().to_string());
-    let partial = dir.with_file_name(format!(
-        "{}.partial-{}-{}",
-        name.unwrap_or_default(),
-        std::process::id(),
-        crate::now_ms()
-    ));
+    // A name of this call's own: two callers (worker slots) may lay out one bundle at once.
+    let partial = bemcal_durable::temporary_beside(dir);
     for f in files {
         let rel = safe_relative(&f.path)?;
         let bytes = store

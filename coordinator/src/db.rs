@@ -188,6 +188,15 @@ const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_
 const JOB_COLS: &str =
     "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
 
+/// [`JOB_COLS`] of the table aliased `j` (`j.id, j.run_id, ...`), for queries that join jobs.
+fn job_cols_of_j() -> String {
+    JOB_COLS
+        .split(", ")
+        .map(|c| format!("j.{c}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
     Ok(RunRow {
         id: r.get(0)?,
@@ -620,11 +629,7 @@ impl Store {
                          ORDER BY (SELECT COUNT(*) FROM jobs k WHERE k.run_id = e.run_id AND k.state = 'leased'),
                                   r.last_lease, e.first
                          LIMIT 1",
-                        JOB_COLS
-                            .split(", ")
-                            .map(|c| format!("j.{c}"))
-                            .collect::<Vec<_>>()
-                            .join(", ")
+                        job_cols_of_j()
                     ),
                     [],
                     job_row,
@@ -676,11 +681,7 @@ impl Store {
     /// if the lease exists.
     pub fn leased_job(&self, lease: u64) -> Result<Option<(String, JobRow)>> {
         self.with(|c| {
-            let cols = JOB_COLS
-                .split(", ")
-                .map(|c| format!("j.{c}"))
-                .collect::<Vec<_>>()
-                .join(", ");
+            let cols = job_cols_of_j();
             Ok(c.query_row(
                 &format!(
                     "SELECT l.worker_id, {cols} FROM leases l JOIN jobs j ON j.id = l.job_id
@@ -861,13 +862,11 @@ impl Store {
                 let mut st = c.prepare(sql)?;
                 let mut rows = st.query([])?;
                 while let Some(r) = rows.next()? {
-                    let bytes: Vec<u8> = match r.get_ref(0)? {
-                        rusqlite::types::ValueRef::Text(t) | rusqlite::types::ValueRef::Blob(t) => {
-                            t.to_vec()
-                        }
-                        _ => continue,
-                    };
-                    sha256s_in(&bytes, &mut referenced);
+                    if let rusqlite::types::ValueRef::Text(t) | rusqlite::types::ValueRef::Blob(t) =
+                        r.get_ref(0)?
+                    {
+                        sha256s_in(t, &mut referenced);
+                    }
                 }
             }
             let mut st = c.prepare("SELECT sha256 FROM artifacts WHERE created_ms < ?1")?;

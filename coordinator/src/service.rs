@@ -70,18 +70,6 @@ fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
         .collect()
 }
 
-/// Fills `buf` from `file` as far as it goes; the bytes read (0 at the end).
-fn read_full(file: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match std::io::Read::read(file, &mut buf[n..])? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
-}
-
 /// What a worker hands over for `job` is what that kind of job produces. A simulation either
 /// reports EnergyPlus's failure (no outputs) or brings exactly its point file, which must hold
 /// finite hourly series; other jobs bring a JSON result.
@@ -409,26 +397,25 @@ impl Coordinator for Service {
         let (tx, rx) = tokio::sync::mpsc::channel(2);
         tokio::task::spawn_blocking(move || {
             let mut file = file;
+            // An empty artifact is one empty chunk; otherwise chunks until the end of the file.
             let mut sent = false;
             loop {
-                let mut buf = vec![0u8; CHUNK_BYTES];
-                let n = match read_full(&mut file, &mut buf) {
-                    Ok(n) => n,
-                    Err(e) => {
-                        let _ = tx.blocking_send(Err(internal(e)));
-                        return;
-                    }
+                let mut data = Vec::with_capacity(CHUNK_BYTES);
+                let read = std::io::Read::read_to_end(
+                    &mut std::io::Read::take(&mut file, CHUNK_BYTES as u64),
+                    &mut data,
+                );
+                let chunk = match read {
+                    Ok(0) if sent => return,
+                    Ok(_) => Ok(Chunk {
+                        sha256: sha.clone(),
+                        size,
+                        data,
+                    }),
+                    Err(e) => Err(internal(e)),
                 };
-                if n == 0 && sent {
-                    return;
-                }
-                buf.truncate(n);
-                let chunk = Chunk {
-                    sha256: sha.clone(),
-                    size,
-                    data: buf,
-                };
-                if tx.blocking_send(Ok(chunk)).is_err() || n == 0 {
+                let last = !matches!(&chunk, Ok(c) if c.data.len() == CHUNK_BYTES);
+                if tx.blocking_send(chunk).is_err() || last {
                     return;
                 }
                 sent = true;
