@@ -19,6 +19,7 @@ pub mod posterior;
 pub mod project;
 pub mod refine;
 pub mod replacement;
+pub mod submitted;
 mod summary;
 pub mod synth;
 mod validation;
