@@ -46,12 +46,19 @@ chains = 4
 iterations = 4000
 burn_in = 2000
 segment = 1000
+kernel = "mh"        # the settings docs/benchmarks.md's figures were measured with
+start = "prior"
+max_extensions = 0
+[refine]
+rounds = 0
 TOML
 }
 { echo "name = \"actual-2017\""; echo "weather = \"$PWD/$TMY\""; common; echo '[measured_weather]'; echo 'isd_lite = ["726580-14922-2017.gz"]'; } > "$OUT/actual.toml"
 { echo "name = \"tmy3\""; echo "weather = \"$PWD/$TMY\""; common; } > "$OUT/tmy.toml"
 for p in actual tmy; do
-  "$BIN" calibrate "$OUT/$p.toml" --out "$OUT/$p" 2> "$OUT/$p.log" || { tail -20 "$OUT/$p.log"; exit 1; }
+  # 3: finished, not converged (reported in summary.json); anything else is a failure.
+  st=0; "$BIN" calibrate "$OUT/$p.toml" --out "$OUT/$p" 2> "$OUT/$p.log" || st=$?
+  [ $st -eq 0 ] || [ $st -eq 3 ] || { tail -20 "$OUT/$p.log"; exit 1; }
 done
 "$BEMCAL_VENV/bin/python" - "$OUT" <<'PY'
 import json, sys, os

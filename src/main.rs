@@ -19,6 +19,10 @@ fn main() {
         }
     }
     if let Err(e) = cmd::run(cli) {
+        if let Some(n) = e.downcast_ref::<cmd::calibrate::NotConverged>() {
+            eprintln!("\n{n}");
+            std::process::exit(bemcal_calibrate::NOT_CONVERGED_EXIT);
+        }
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo, run_ok};
+use common::{bemcal, finished, golden_epw, have_engine, repo, run_ok};
 
 const TRUTH: [(&str, f64); 2] = [
     ("lighting_power_density", 12.5),
@@ -28,7 +28,7 @@ fn write_project(dir: &Path) {
         "weather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"\ncalibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
     );
     project.push_str(
-        "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\n",
+        "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n",
     );
     std::fs::write(dir.join("project.toml"), project).unwrap();
 }
@@ -124,7 +124,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         .output()
         .unwrap();
     let log2 = String::from_utf8_lossy(&again.stderr);
-    assert!(again.status.success(), "{log2}");
+    assert!(finished(again.status), "{log2}");
     assert!(
         log2.contains("0 run") && log2.contains("8 reused"),
         "{log2}"
@@ -136,9 +136,9 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let project = std::fs::read_to_string(dir.join("project.toml"))
         .unwrap()
         .replace(
-            "iterations = 1500\nburn_in = 500\n",
-            "iterations = 80\nburn_in = 30\nkernel = \"hmc\"\nstart = \"optimised\"\n",
-        );
+        "iterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\n",
+        "iterations = 80\nburn_in = 30\nsegment = 500\nkernel = \"hmc\"\nstart = \"optimised\"\n",
+    );
     std::fs::write(dir.join("project.toml"), project).unwrap();
     std::fs::remove_file(out.join("chains.json")).unwrap();
     let (log3, summary) = calibrate(dir, &out);
@@ -158,7 +158,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     }
 }
 
-/// `bemcal calibrate DIR/project.toml --out OUT`, which must succeed: its log and summary.json.
+/// `bemcal calibrate DIR/project.toml --out OUT`, which must run to its end (converged or
+/// not, [`finished`]): its log and summary.json.
 fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
     let run = bemcal()
         .arg("calibrate")
@@ -168,7 +169,7 @@ fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
         .output()
         .unwrap();
     let log = String::from_utf8_lossy(&run.stderr).into_owned();
-    assert!(run.status.success(), "calibrate failed:\n{log}");
+    assert!(finished(run.status), "calibrate failed:\n{log}");
     let summary =
         serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     (log, summary)
@@ -225,6 +226,65 @@ fn bad_project_is_a_clear_error() {
         !o.status.success() && e.contains("project.toml:7") && e.contains("chainz"),
         "{e}"
     );
+}
+
+/// `bemcal check` loads the project and everything it names and says what a calibration would
+/// use, running nothing; a broken meters file is refused naming it, with a non-zero exit.
+#[test]
+fn check_loads_everything_and_runs_nothing() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    write_project(dir);
+    run_ok(
+        bemcal()
+            .args(["synthesize", "--model"])
+            .arg(dir.join("model.toml"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .arg("--out")
+            .arg(dir.join("meters.csv")),
+    );
+    let before: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    let o = run_ok(bemcal().arg("check").arg(dir.join("project.toml")));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains(": OK"), "{text}");
+    assert!(
+        text.contains("2 calibrated (lighting_power_density, cooling_setpoint_occupied)"),
+        "{text}"
+    );
+    // The synthetic meters miss 15 July - 15 August (744 h).
+    assert!(
+        text.contains("meter for heating_kwh: 8016 of 8760 hours measured"),
+        "{text}"
+    );
+    assert!(text.contains("Mh from Prior starts"), "{text}");
+    let after: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(before, after, "check wrote nothing");
+
+    let meters = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
+    std::fs::write(
+        dir.join("meters.csv"),
+        meters.replace("cooling_kwh", "cooling"),
+    )
+    .unwrap();
+    let o = bemcal()
+        .arg("check")
+        .arg(dir.join("project.toml"))
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("meters.csv") && e.contains("cooling_kwh"), "{e}");
 }
 
 /// The surrogate trained on real EnergyPlus output: held-out error reported per output, and

@@ -9,7 +9,8 @@
 //!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
 //!   posterior must then be identical to the single-process ones. The project asks for an
 //!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): both drivers extend the
-//!   final chains once, by the same rule, to the same draws.
+//!   final chains once, by the same rule, to the same draws, and both report the run as not
+//!   converged (exit status 3, `summary.json` `convergence`, the report's banner).
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -23,7 +24,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo, small_project, Proc};
+use common::{bemcal, finished, golden_epw, have_engine, repo, small_project, Proc, NOT_CONVERGED};
 
 const TOKEN: &str = "test-token-0123456789abcdef";
 
@@ -107,9 +108,21 @@ fn wait_for(
     }
 }
 
-/// `bemcal calibrate` of `pf` into `out`: on this process without `surrogate`; with it, through
-/// 2 local workers, given that surrogate (copied into `out/surrogate`). Returns its log.
+/// `bemcal calibrate` of `pf` into `out`, which must run to its end (converged or not,
+/// [`finished`]): on this process without `surrogate`; with it, through 2 local workers, given
+/// that surrogate (copied into `out/surrogate`). Returns its log.
 fn calibrate(pf: &Path, out: &Path, surrogate: Option<&Path>) -> String {
+    let (status, log) = calibrate_status(pf, out, surrogate);
+    assert!(finished(status), "{}: {log}", out.display());
+    log
+}
+
+/// [`calibrate`] without the check: the exit status and the log (standard error).
+fn calibrate_status(
+    pf: &Path,
+    out: &Path,
+    surrogate: Option<&Path>,
+) -> (std::process::ExitStatus, String) {
     let mut c = bemcal();
     c.arg("calibrate").arg(pf);
     if let Some(from) = surrogate {
@@ -121,9 +134,7 @@ fn calibrate(pf: &Path, out: &Path, surrogate: Option<&Path>) -> String {
         c.args(["--local-workers", "2"]);
     }
     let o = c.arg("--out").arg(out).output().unwrap();
-    let log = String::from_utf8_lossy(&o.stderr).into_owned();
-    assert!(o.status.success(), "{}: {log}", out.display());
-    log
+    (o.status, String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
 #[test]
@@ -134,18 +145,41 @@ fn distributed_matches_single_process() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
-    // Appended to the project's last table, [mcmc].
-    let text = format!("{}rhat_target = 0.5\nmax_extensions = 1\n", project_text());
+    // An R-hat target no chains reach, one extension; ESS not judged (so the extension is one
+    // step of iterations - burn_in).
+    let text = project_text().replace(
+        "max_extensions = 0\n",
+        "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\n",
+    );
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
-    let local_log = calibrate(&pf, &local, None);
+    let (status, local_log) = calibrate_status(&pf, &local, None);
     assert!(
         local_log.contains("extending to 500 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
-    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
+    let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")));
+
+    // Both ran to their end short of the target: reported as not converged, by the exit
+    // status, the last lines, summary.json and the report's first screen.
+    for (status, log) in [(status, &local_log), (dist_status, &log)] {
+        assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
+        assert!(log.contains("NOT CONVERGED: max R-hat"), "{log}");
+        assert!(log.contains("(target <= 0.5)"), "{log}");
+    }
+    let r = bemcal().arg("report").arg(&local).output().unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let html = std::fs::read_to_string(local.join("report.html")).unwrap();
+    let banner = html
+        .find("id=\"not-converged\"")
+        .expect("the not-converged banner");
+    assert!(
+        banner < html.find("<nav>").unwrap(),
+        "the banner is on the first screen"
+    );
+    assert!(html.contains("(target &le; 0.5)"));
 
     for f in [
         "design.csv",
@@ -182,6 +216,16 @@ fn distributed_matches_single_process() {
     }
     // One extension of 300 - 100 iterations: 2 chains x 400 draws after burn-in.
     assert_eq!(sa["chain_extensions"], 1);
+    assert_eq!(sa["converged"], false);
+    let c = &sa["convergence"];
+    assert_eq!(c["targets"]["rhat"], 0.5);
+    assert_eq!(c["converged"], false);
+    // Every parameter misses an R-hat of 0.5, worst first.
+    let short = c["shortfalls"].as_array().unwrap();
+    assert_eq!(short.len(), 2, "{c}");
+    assert!(short[0]["rhat"].as_f64().unwrap() >= short[1]["rhat"].as_f64().unwrap());
+    assert_eq!(c["max_rhat"], short[0]["rhat"]);
+    assert_eq!(sa["convergence"], sb["convergence"]);
     let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
     assert_eq!(draws.lines().count(), 1 + 2 * 400);
 }
@@ -195,8 +239,8 @@ fn refinement_round_local_and_distributed() {
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
     let text = format!(
-        "{}[refine]\nrounds = 1\npoints = 3\niterations = 200\nburn_in = 100\n",
-        project_text()
+        "{}rounds = 1\npoints = 3\niterations = 200\nburn_in = 100\n",
+        project_text().replace("rounds = 0\n", "")
     );
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");

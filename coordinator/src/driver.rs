@@ -40,10 +40,6 @@ pub struct Config {
     /// Chains per chain-segment job; 0 = all chains in one job (the same batches as the
     /// single-process path, so the draws are bit-identical to it).
     pub chains_per_job: usize,
-    /// Extend the chains while the max R-hat is above this (None: never).
-    pub rhat_target: Option<f64>,
-    /// At most this many extensions (each adds iterations - burn_in per chain).
-    pub max_extensions: u32,
     /// Artifacts that nothing refers to are removed once they are this old (ms): an upload
     /// whose submit or completion never came gets this long to be used.
     pub artifact_grace_ms: u64,
@@ -59,8 +55,6 @@ impl Default for Config {
             lease_ttl_ms: 30_000,
             max_failures: 3,
             chains_per_job: 0,
-            rhat_target: None,
-            max_extensions: 2,
             artifact_grace_ms: 24 * 3600 * 1000,
             max_store_bytes: 0,
             max_uploads: 16,
@@ -695,15 +689,12 @@ impl State {
         }
         let mut chains = sampler.summarize(&states, &draws).map_err(err)?;
         chains.extensions = r.extensions;
-        // The project's R-hat target, else the coordinator's (`--rhat-target`).
-        let mut m = cal.project.mcmc.clone();
-        if m.rhat_target.is_none() {
-            m.rhat_target = self.config.rhat_target;
-            m.max_extensions = self.config.max_extensions;
-        }
-        if let Some(target) =
-            extended_target(&m, chains.posterior.max_rhat, r.extensions, r.chain_target)
-        {
+        if let Some(target) = extended_target(
+            &cal.project.mcmc,
+            &chains.convergence,
+            r.extensions,
+            r.chain_target,
+        ) {
             self.store.extend_chains(&r.id, target).map_err(err)?;
             self.store
                 .set_stage(&r.id, Stage::Chains, vec![])

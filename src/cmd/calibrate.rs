@@ -21,6 +21,33 @@ pub struct Args {
     pub local_workers: Option<usize>,
 }
 
+/// The calibration finished and wrote everything, but its chains missed a convergence target:
+/// `main` prints this and exits with [`bemcal_calibrate::NOT_CONVERGED_EXIT`].
+#[derive(Debug)]
+pub struct NotConverged(pub String);
+
+impl std::fmt::Display for NotConverged {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NotConverged {}
+
+/// The lines that say a finished calibration did not converge, and what to do.
+fn not_converged(s: &bemcal_calibrate::Summary, out: &std::path::Path) -> NotConverged {
+    NotConverged(format!(
+        "NOT CONVERGED: {}.\nThe estimate, the intervals and the validation above come from \
+         chains that have not mixed: do not use them as a calibration. Every output was written \
+         to {} (draws.csv, chains.json); run `bemcal calibrate` again with more \
+         `[mcmc] iterations` or `max_extensions` (the chains continue from their checkpoint only \
+         when the output folder is kept), or see `bemcal diagnose`. Exit status {}.",
+        s.convergence,
+        out.display(),
+        bemcal_calibrate::NOT_CONVERGED_EXIT
+    ))
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     let project = Project::load(&a.project)?;
     let t0 = std::time::Instant::now();
@@ -31,13 +58,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
-        return Ok(());
+        return converged_or_not(&s, &a.out);
     }
     println!(
-        "\nposterior ({} chains; max R-hat {:.3}, min bulk ESS {:.0}):",
+        "\nposterior ({} chains; {}):",
         s.acceptance_rate.len(),
-        s.posterior.max_rhat,
-        s.posterior.min_ess_bulk
+        s.convergence
     );
     println!(
         "{:<30} {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} {:>9} {:>6} {:>6} {:>5}",
@@ -128,8 +154,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         t.design_s, t.simulations_s, t.training_s, t.chains_s, t.refinement_s, t.summary_s, t.validation_s, t.total_s
     );
     println!(
-        "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/",
+        "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/, calibrated.idf",
         a.out.display()
     );
-    Ok(())
+    converged_or_not(&s, &a.out)
+}
+
+fn converged_or_not(s: &bemcal_calibrate::Summary, out: &std::path::Path) -> anyhow::Result<()> {
+    if s.converged {
+        Ok(())
+    } else {
+        Err(not_converged(s, out).into())
+    }
 }

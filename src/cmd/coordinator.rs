@@ -45,13 +45,6 @@ pub struct Args {
     /// Chains per chain-segment job (0: all in one job, bit-identical to the local path).
     #[arg(long, default_value_t = 0)]
     pub chains_per_job: usize,
-    /// Extend the final chains while max R-hat is above this, for projects without their own
-    /// `[mcmc] rhat_target` (off by default).
-    #[arg(long)]
-    pub rhat_target: Option<f64>,
-    /// Most extensions when --rhat-target is given.
-    #[arg(long, default_value_t = 2)]
-    pub max_extensions: u32,
     /// Hours an artifact that no run, job or cached simulation refers to is kept before it is
     /// removed (checked at start and hourly).
     #[arg(long, default_value_t = 24.0)]
@@ -67,8 +60,12 @@ pub struct Args {
 /// Where the coordinator is and how to authenticate.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ClientArgs {
-    /// Coordinator URL.
-    #[arg(long, default_value = "http://127.0.0.1:50051")]
+    /// Coordinator URL (default: env BEMCAL_COORDINATOR, else the local default).
+    #[arg(
+        long,
+        env = "BEMCAL_COORDINATOR",
+        default_value = "http://127.0.0.1:50051"
+    )]
     pub coordinator: String,
     /// File with the bearer token (default: env BEMCAL_TOKEN).
     #[arg(long)]
@@ -113,8 +110,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             lease_ttl_ms: (a.lease_ttl * 1000.0) as u64,
             max_failures: a.max_failures.max(1),
             chains_per_job: a.chains_per_job,
-            rhat_target: a.rhat_target,
-            max_extensions: a.max_extensions,
             artifact_grace_ms: (a.artifact_grace_hours * 3.6e6) as u64,
             max_store_bytes: (a.max_store_gb * 1e9) as u64,
             max_uploads: a.max_uploads.max(1),

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 pub mod calibrate;
 pub mod cancel;
+pub mod check;
 mod common;
 pub mod coordinator;
 pub mod design;
@@ -50,6 +51,8 @@ pub enum Command {
     Predict(predict::Args),
     /// Convergence diagnostics (R-hat, bulk/tail ESS) of MCMC draws from a CSV.
     Diagnose(diagnose::Args),
+    /// Load and validate a project and everything it names, without running anything.
+    Check(check::Args),
     /// The whole calibration on this machine: design, training, chains, validation.
     Calibrate(calibrate::Args),
     /// Synthetic meters: EnergyPlus at hidden true parameters, with noise and a gap.
@@ -103,6 +106,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Metrics(a) => metrics::run(a),
         Command::Report(a) => report::run(a),
         Command::Design(a) => design::run(a),
+        Command::Check(a) => check::run(a),
         Command::Calibrate(a) => calibrate::run(a),
         Command::Synthesize(a) => synthesize::run(a),
         Command::Coordinator(a) => coordinator::run(a),

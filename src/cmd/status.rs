@@ -65,24 +65,27 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let runs = rt.block_on(async {
-        let mut c = connect.client()?;
-        let runs = match &a.run {
-            Some(id) => vec![c
-                .get_run(RunRequest { run_id: id.clone() })
-                .await
-                .map_err(|e| anyhow::anyhow!("{}", e.message()))?
-                .into_inner()],
-            None => {
-                c.list_runs(ListRunsRequest::default())
+    let runs = rt
+        .block_on(async {
+            let mut c = connect.client()?;
+            let runs = match &a.run {
+                Some(id) => vec![c
+                    .get_run(RunRequest { run_id: id.clone() })
                     .await
                     .map_err(|e| anyhow::anyhow!("{}", e.message()))?
-                    .into_inner()
-                    .runs
-            }
-        };
-        Ok::<_, anyhow::Error>(runs)
-    })?;
+                    .into_inner()],
+                None => {
+                    c.list_runs(ListRunsRequest::default())
+                        .await
+                        .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+                        .into_inner()
+                        .runs
+                }
+            };
+            Ok::<_, anyhow::Error>(runs)
+        })
+        // Which coordinator did not answer, as --health says it.
+        .map_err(|e| anyhow::anyhow!("coordinator {}: {e:#}", a.client.coordinator))?;
     if a.json {
         let v: Vec<_> = runs.iter().map(to_json).collect();
         let v = if a.run.is_some() {

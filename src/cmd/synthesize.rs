@@ -22,6 +22,10 @@ pub struct Args {
     /// Draw the true values of all parameters from their priors with this seed instead.
     #[arg(long)]
     pub truth_seed: Option<u64>,
+    /// With --truth-seed: draw only these parameters (repeatable); the others stay at their
+    /// prior modes, as a calibration of only these assumes.
+    #[arg(long, value_name = "NAME", requires = "truth_seed")]
+    pub draw: Vec<String>,
     /// Multiplicative noise sd.
     #[arg(long, default_value_t = 0.05)]
     pub noise: f64,
@@ -42,7 +46,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (model, runner) = common::load_model(&a.model)?;
     let mut given = parse_assignments(&a.set)?;
     if let Some(seed) = a.truth_seed {
-        let plan = bemcal_calibrate::design::Plan::new(&model, &[], &Default::default())?;
+        let plan = bemcal_calibrate::design::Plan::new(&model, &a.draw, &Default::default())?;
         let d = bemcal_calibrate::design::make_design(&plan, &model, 1, seed, 0)?;
         for (n, v) in plan.calibrated.iter().zip(&d.points[0]) {
             given.entry(n.clone()).or_insert(*v);

@@ -2,6 +2,7 @@
 //! starts, segments, and the merged chains' summary.
 
 use bemcal_stats::chain::Chain;
+use bemcal_stats::convergence::{assess, draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
@@ -138,15 +139,10 @@ impl Sampler<'_> {
     }
 
     /// MCMC settings of round `round`: a round's chains get their own random streams (the
-    /// last round of a project without refinement keeps the project's seed).
+    /// last round of a project without refinement keeps the project's seed); a preliminary
+    /// round's kernel is `refine.kernel` when set.
     pub fn settings_for(&self, round: u32) -> McmcSettings {
-        let mut m = self.cal.project.mcmc.clone();
-        if round > 0 {
-            m.seed = m
-                .seed
-                .wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
-        }
-        m
+        settings_for(&self.cal.project, round)
     }
 
     /// Dispersed, feasible starting points (unit space), one per chain.
@@ -351,6 +347,7 @@ impl Sampler<'_> {
             .filter(|x| x != &estimate)
             .take(FALLBACKS)
             .collect();
+        let convergence = assess(&posterior, &cal.project.mcmc.targets());
         Ok(ChainSummary {
             posterior,
             sigma_delta_kwh,
@@ -368,6 +365,7 @@ impl Sampler<'_> {
             sigma_eta: self.sigma_eta.clone(),
             held_out: self.held_out.clone(),
             extensions: 0,
+            convergence,
         })
     }
 }
@@ -514,9 +512,12 @@ pub struct ChainSummary {
     pub sigma_eta: Vec<f64>,
     /// The surrogate's held-out metrics.
     pub held_out: serde_json::Value,
-    /// Times the final chains were extended because R-hat was above `mcmc.rhat_target`.
+    /// Times the final chains were extended because a convergence target was missed.
     #[serde(default)]
     pub extensions: u32,
+    /// The verdict on these chains against `mcmc.rhat_target` and `mcmc.ess_target`.
+    #[serde(default)]
+    pub convergence: Convergence,
 }
 
 impl ChainSummary {
@@ -535,19 +536,43 @@ impl ChainSummary {
     }
 }
 
+/// [`Sampler::settings_for`]: the project's `[mcmc]` for round `round`, with the round's own
+/// random stream and, in a preliminary round, `refine.kernel` when set.
+fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
+    let mut m = project.mcmc.clone();
+    if round > 0 {
+        m.seed = m
+            .seed
+            .wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul(u64::from(round)));
+    }
+    if round < project.refine.rounds {
+        if let Some(k) = project.refine.kernel {
+            m.kernel = k;
+        }
+    }
+    m
+}
+
 /// The iteration target after one more extension of the final chains, or `None` when they
-/// stop: R-hat at or below `m.rhat_target` (none: never extended), or `m.max_extensions` done.
-/// Each extension adds `iterations - burn_in` iterations per chain: as many draws again.
+/// stop: `convergence` meets its targets, or `m.max_extensions` are done. An extension adds
+/// `iterations - burn_in` iterations per chain (as many draws again), or what the smallest
+/// ESS says the ESS target needs ([`bemcal_stats::convergence::draws_for_ess`]), at most
+/// four times that. One rule for both drivers.
 pub fn extended_target(
     m: &McmcSettings,
-    max_rhat: f64,
+    convergence: &Convergence,
     extensions: u32,
     target: u64,
 ) -> Option<u64> {
-    let above = m
-        .rhat_target
-        .is_some_and(|t| max_rhat.is_nan() || max_rhat > t);
-    (above && extensions < m.max_extensions).then(|| target + (m.iterations - m.burn_in))
+    if convergence.converged || extensions >= m.max_extensions {
+        return None;
+    }
+    let step = m.iterations - m.burn_in;
+    let draws = target - m.burn_in;
+    let min_ess = convergence.min_ess_bulk.min(convergence.min_ess_tail);
+    let for_ess = draws_for_ess(draws, min_ess, convergence.targets.ess)
+        .map_or(0, |n| n.saturating_sub(draws));
+    Some(target + for_ess.clamp(step, 4 * step))
 }
 
 /// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
@@ -618,25 +643,73 @@ mod tests {
     use super::*;
 
     #[test]
-    fn chains_are_extended_while_rhat_is_above_its_target_up_to_the_limit() {
-        let mut m = McmcSettings {
+    fn preliminary_rounds_take_the_refine_kernel_and_the_final_round_the_mcmc_one() {
+        let mut p: crate::Project = toml::from_str(
+            "name = \"x\"\nmodel = \"m.toml\"\nweather = \"w.epw\"\n[meters]\nfile = \"m.csv\"\n",
+        )
+        .unwrap();
+        p.refine.rounds = 2;
+        assert_eq!(
+            settings_for(&p, 0).kernel,
+            Kernel::Hmc,
+            "unset: mcmc.kernel"
+        );
+        p.refine.kernel = Some(Kernel::Mh);
+        let kernels: Vec<Kernel> = (0..=2).map(|r| settings_for(&p, r).kernel).collect();
+        assert_eq!(kernels, [Kernel::Mh, Kernel::Mh, Kernel::Hmc]);
+        assert_eq!(settings_for(&p, 0).seed, p.mcmc.seed);
+        assert_ne!(settings_for(&p, 1).seed, p.mcmc.seed);
+    }
+
+    fn verdict(converged: bool, ess_bulk: f64, ess_tail: f64) -> Convergence {
+        Convergence {
+            converged,
+            min_ess_bulk: ess_bulk,
+            min_ess_tail: ess_tail,
+            ..Convergence::default()
+        }
+    }
+
+    #[test]
+    fn chains_are_extended_while_a_target_is_missed_up_to_the_limit() {
+        let m = McmcSettings {
             iterations: 1000,
             burn_in: 400,
             max_extensions: 2,
             ..McmcSettings::default()
         };
-        // No target: never.
-        assert_eq!(extended_target(&m, 3.0, 0, 1000), None);
-        m.rhat_target = Some(1.01);
-        assert_eq!(extended_target(&m, 1.2, 0, 1000), Some(1600));
-        assert_eq!(extended_target(&m, 1.2, 1, 1600), Some(2200));
+        // ESS already large (R-hat missed): one step of iterations - burn_in.
+        let rhat_only = verdict(false, 2000.0, 2000.0);
+        assert_eq!(extended_target(&m, &rhat_only, 0, 1000), Some(1600));
+        assert_eq!(extended_target(&m, &rhat_only, 1, 1600), Some(2200));
         assert_eq!(
-            extended_target(&m, 1.2, 2, 2200),
+            extended_target(&m, &rhat_only, 2, 2200),
             None,
             "at most max_extensions"
         );
-        assert_eq!(extended_target(&m, 1.01, 0, 1000), None, "at the target");
-        // An R-hat that could not be computed is not a converged one.
-        assert_eq!(extended_target(&m, f64::NAN, 0, 1000), Some(1600));
+        assert_eq!(
+            extended_target(&m, &verdict(true, 2000.0, 2000.0), 0, 1000),
+            None,
+            "converged"
+        );
+        // 600 draws gave tail ESS 200: 600 x 1.1 x 2 = 1,320 draws, 720 more.
+        assert_eq!(
+            extended_target(&m, &verdict(false, 900.0, 200.0), 0, 1000),
+            Some(1720)
+        );
+        // A tiny ESS asks for at most 4 steps; an ESS that could not be computed for one.
+        assert_eq!(
+            extended_target(&m, &verdict(false, 3.0, 3.0), 0, 1000),
+            Some(3400)
+        );
+        assert_eq!(
+            extended_target(&m, &verdict(false, f64::NAN, f64::NAN), 0, 1000),
+            Some(1600)
+        );
+        let report_only = McmcSettings {
+            max_extensions: 0,
+            ..m
+        };
+        assert_eq!(extended_target(&report_only, &rhat_only, 0, 1000), None);
     }
 }

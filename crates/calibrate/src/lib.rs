@@ -39,7 +39,7 @@ pub use output::OutputDir;
 pub use project::Project;
 pub use summary::{
     write_calibrated_model, write_outputs_csv, write_summary, DesignReport, OutputMetrics,
-    ParameterReport, PointNote, Summary, Timings,
+    ParameterReport, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
 };
 pub use validation::{
     fallback_note, next_candidate, Candidate, ValidationStep, FALLBACKS, INITIAL_KEY,

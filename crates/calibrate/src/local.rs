@@ -303,8 +303,9 @@ fn refine_round(
     Ok((closed, new_outputs))
 }
 
-/// The final chains summarised, and extended from their checkpoint while R-hat is above
-/// `mcmc.rhat_target` (the shared rule `extended_target`, as the coordinator does).
+/// The final chains summarised, and extended from their checkpoint while they miss a
+/// convergence target (`mcmc.rhat_target`, `mcmc.ess_target`; the shared rule
+/// `extended_target`, as the coordinator does).
 fn final_chains(
     cal: &Calibration,
     sampler: &mut Sampler<'_>,
@@ -319,13 +320,10 @@ fn final_chains(
     timings.summary_s = t.elapsed().as_secs_f64();
     let m = &project.mcmc;
     let mut target = m.iterations;
-    while let Some(next) = extended_target(m, chains.posterior.max_rhat, chains.extensions, target)
-    {
+    while let Some(next) = extended_target(m, &chains.convergence, chains.extensions, target) {
         log(&format!(
-            "chains: max R-hat {:.3} above the target {}: extending to {next} iterations \
-             (extension {} of at most {})",
-            chains.posterior.max_rhat,
-            m.rhat_target.unwrap_or(f64::NAN),
+            "chains: {}: extending to {next} iterations (extension {} of at most {})",
+            chains.convergence,
             chains.extensions + 1,
             m.max_extensions
         ));
@@ -382,10 +380,7 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
             chains.independence_dropped
         ));
     }
-    log(&format!(
-        "posterior: max R-hat {:.3}, min bulk ESS {:.0}",
-        chains.posterior.max_rhat, chains.posterior.min_ess_bulk
-    ));
+    log(&format!("posterior: {}", chains.convergence));
 }
 
 /// EnergyPlus at the estimate, or at the next-best draws while it fails (the shared rule

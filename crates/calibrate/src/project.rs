@@ -27,10 +27,12 @@
 //! points = 20
 //! [surrogate]
 //! epochs = 200
-//! [mcmc]
-//! chains = 4
-//! iterations = 10000
-//! burn_in = 2000
+//! [mcmc]                               # defaults: HMC from optimised starts, converged
+//! chains = 4                           # or extended (rhat_target 1.01, ess_target 400)
+//! iterations = 500
+//! burn_in = 150
+//! [refine]                             # default: 2 rounds of 8 posterior draws
+//! rounds = 2
 //! ```
 //! Relative paths are relative to the project file.
 
@@ -38,6 +40,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use bemcal_precal::meters::MeterSpec;
+use bemcal_stats::convergence::Targets;
 use serde::{Deserialize, Serialize};
 
 use crate::Error;
@@ -300,12 +303,18 @@ pub enum Residuals {
     Iid,
 }
 
-/// Metropolis-Hastings chains.
+/// The chains. The defaults are the sampler that converges on the paper-size problem: HMC
+/// through the surrogate's gradient from BFGS optima (`kernel = "hmc"`, `start =
+/// "optimised"`, 4 x 500 iterations with 150 burn-in), judged against R-hat <= 1.01 and bulk
+/// and tail ESS >= 400 and extended while short of them. The reference's random-walk
+/// Metropolis stays available (`kernel = "mh"`, `start = "prior"`, with `iterations` in
+/// thousands: the reference used 10,000 and 2,000 burn-in).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct McmcSettings {
     pub chains: usize,
-    /// Iterations per chain including burn-in (reference: 10,000).
+    /// Iterations per chain including burn-in (default 500, for HMC; the reference's
+    /// random walk: 10,000).
     pub iterations: u64,
     /// Burn-in (reference: 2,000); the proposal adapts only during burn-in.
     pub burn_in: u64,
@@ -323,7 +332,7 @@ pub struct McmcSettings {
     pub segment: u64,
     /// Posterior draws evaluated for the predictive bands.
     pub predictive_draws: usize,
-    /// Where chains start: `prior` (default) or `optimised`.
+    /// Where chains start: `optimised` (default) or `prior`.
     pub start: ChainStart,
     /// BFGS iterations per chain before sampling (`start = "optimised"`).
     pub optimiser_iterations: usize,
@@ -340,7 +349,7 @@ pub struct McmcSettings {
     /// optimum. Through the coordinator the chains compared are those of one chain job: all of
     /// them unless `--chains-per-job` splits them.
     pub restart_below: f64,
-    /// The transition kernel: `mh` (default: random-walk Metropolis-Hastings, the reference's
+    /// The transition kernel: `hmc` (default) or `mh` (random-walk Metropolis-Hastings, the reference's
     /// Algorithm 1, with the adaptive and independence variants above) or `hmc` (Hamiltonian
     /// Monte Carlo with gradients through the surrogate's VJP graph, `stats::hmc`; needs
     /// `sigma_delta = "marginal"` or `"fixed"`). An HMC iteration is a whole trajectory
@@ -351,22 +360,38 @@ pub struct McmcSettings {
     pub kernel: Kernel,
     /// HMC trajectory length in the whitened space (`kernel = "hmc"`).
     pub hmc_integration_time: f64,
-    /// Extend the final chains while their largest R-hat is above this (unset: never; through
-    /// the coordinator, unset falls back to its `--rhat-target`). Each extension adds
-    /// `iterations - burn_in` draws per chain ([`crate::extended_target`]).
-    pub rhat_target: Option<f64>,
-    /// At most this many extensions (with `rhat_target`).
+    /// Convergence target: every parameter's rank-normalised split R-hat at or below this
+    /// (Vehtari et al. 2021: 1.01). The final chains are extended while a target is missed
+    /// ([`crate::extended_target`]), and a calibration that ends short of one says so
+    /// (`summary.json` `converged` and `convergence`, the report's banner, exit status 3).
+    pub rhat_target: f64,
+    /// Convergence target: every parameter's bulk and tail ESS, all chains together, at or
+    /// above this (Vehtari et al. 2021: 100 per chain, 400 for four).
+    pub ess_target: f64,
+    /// At most this many extensions of the final chains while a target is missed (0: judge
+    /// and report only). Each adds at least `iterations - burn_in` draws per chain, more when
+    /// the ESS shortfall asks for it (at most 4x that).
     pub max_extensions: u32,
+}
+
+impl McmcSettings {
+    /// The convergence targets ([`bemcal_stats::convergence`]).
+    pub fn targets(&self) -> Targets {
+        Targets {
+            rhat: self.rhat_target,
+            ess: self.ess_target,
+        }
+    }
 }
 
 /// The chains' transition kernel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Kernel {
-    /// Random-walk (and independence) Metropolis-Hastings.
-    #[default]
+    /// Random-walk (and independence) Metropolis-Hastings (the reference's Algorithm 1).
     Mh,
-    /// Hamiltonian Monte Carlo.
+    /// Hamiltonian Monte Carlo (the default).
+    #[default]
     Hmc,
 }
 
@@ -378,14 +403,13 @@ pub enum ChainStart {
     /// surrogate) and the chain starts at that optimum with the Laplace covariance as its
     /// proposal shape (Pathfinder-style initialisation). On a smooth, peaked 40-D posterior
     /// this turns R-hat 4 / bulk ESS 4 into R-hat <= 1.005 / bulk ESS >= 2,300 with 4 x 8,000
-    /// draws (crates/stats tests/mcmc_peaked.rs). Not the default because on the demo's
-    /// posterior (a 20-point surrogate with 38 % held-out CV-RMSE) BFGS stopped in poorer local
-    /// optima (log posterior -113,950 and -115,390 for two chains, vs -111,850 to -111,990 for
-    /// chains from prior draws) and the Laplace Gaussian's independence steps were never
-    /// accepted: that posterior is rugged, not Gaussian.
+    /// draws (crates/stats tests/mcmc_peaked.rs); with exact-gradient BFGS and HMC it reached
+    /// R-hat 1.009 / bulk ESS 581 at the paper size (docs/benchmarks.md). The default. (With
+    /// finite-difference BFGS on a rugged 20-point surrogate it once stopped in poorer local
+    /// optima; `mcmc.restart_below` moves such chains to the best one's mode.)
     Optimised,
     /// Chains start at prior draws and learn their proposal by adaptive Metropolis during
-    /// burn-in (the reference's procedure; the default).
+    /// burn-in (the reference's procedure).
     Prior,
 }
 
@@ -393,8 +417,8 @@ impl Default for McmcSettings {
     fn default() -> Self {
         McmcSettings {
             chains: 4,
-            iterations: 10_000,
-            burn_in: 2_000,
+            iterations: 500,
+            burn_in: 150,
             seed: 7,
             sigma_delta: SigmaDeltaMode::Marginal,
             residuals: Residuals::Ar1,
@@ -403,14 +427,15 @@ impl Default for McmcSettings {
             initial_sd: 0.02,
             segment: 500,
             predictive_draws: 100,
-            start: ChainStart::Prior,
+            start: ChainStart::Optimised,
             optimiser_iterations: 60,
             independence: 0.0,
             restart_below: 20.0,
-            kernel: Kernel::Mh,
+            kernel: Kernel::Hmc,
             hmc_integration_time: 2.0,
-            rhat_target: None,
-            max_extensions: 2,
+            rhat_target: 1.01,
+            ess_target: 400.0,
+            max_extensions: 3,
         }
     }
 }
@@ -425,7 +450,7 @@ impl Default for McmcSettings {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RefineSettings {
-    /// Refinement rounds (0, the default: the reference's one-shot design).
+    /// Refinement rounds (default 2; 0: the reference's one-shot design).
     pub rounds: u32,
     /// Posterior draws simulated per round.
     pub points: usize,
@@ -438,16 +463,24 @@ pub struct RefineSettings {
     /// e^-restart_below of the posterior mass; on the demo, chains stuck 100-250 nats apart
     /// kept R-hat near 4). A large value keeps every chain where it ended.
     pub restart_below: f64,
+    /// The transition kernel of the preliminary rounds' chains (unset: `mcmc.kernel`). Those
+    /// chains only have to find where the posterior is, for the draws EnergyPlus simulates
+    /// next; on the early, rugged surrogates HMC's trajectories run to their step cap (the
+    /// demo's first preliminary round: 100 HMC iterations in 860 s), where `"mh"` from the same
+    /// BFGS optima with the Laplace proposal costs one evaluation per iteration (give it
+    /// `iterations` in thousands).
+    pub kernel: Option<Kernel>,
 }
 
 impl Default for RefineSettings {
     fn default() -> Self {
         RefineSettings {
-            rounds: 0,
+            rounds: 2,
             points: 8,
-            iterations: 4_000,
-            burn_in: 2_000,
+            iterations: 120,
+            burn_in: 60,
             restart_below: 20.0,
+            kernel: None,
         }
     }
 }
@@ -576,10 +609,13 @@ impl Project {
                 self.mcmc.hmc_integration_time
             ));
         }
-        if let Some(t) = self.mcmc.rhat_target {
-            if !(t.is_finite() && t > 0.0) {
-                return Err(format!("mcmc.rhat_target = {t} must be a positive number"));
-            }
+        let t = self.mcmc.rhat_target;
+        if !(t.is_finite() && t > 0.0) {
+            return Err(format!("mcmc.rhat_target = {t} must be a positive number"));
+        }
+        let e = self.mcmc.ess_target;
+        if !(e.is_finite() && e >= 0.0) {
+            return Err(format!("mcmc.ess_target = {e} must be a number >= 0"));
         }
         if self.mcmc.restart_below.is_nan() || self.mcmc.restart_below < 0.0 {
             return Err(format!(
@@ -997,13 +1033,15 @@ mod tests {
     }
 
     #[test]
-    fn refinement_settings_default_off_and_are_checked() {
+    fn refinement_settings_default_on_and_are_checked() {
         let p = project("").unwrap();
+        assert_eq!((p.refine.rounds, p.refine.iterations), (2, 120));
+        let p = project("[refine]\nrounds = 0\n").unwrap();
         assert_eq!(p.refine.rounds, 0);
-        let p = project("[refine]\nrounds = 2\npoints = 5\n").unwrap();
+        let p = project("[refine]\nrounds = 3\npoints = 5\n").unwrap();
         assert_eq!(
             (p.refine.rounds, p.refine.points, p.refine.iterations),
-            (2, 5, 4000)
+            (3, 5, 120)
         );
         let e = project("[refine]\nrounds = 1\niterations = 500\nburn_in = 500\n").unwrap_err();
         assert!(
@@ -1014,5 +1052,33 @@ mod tests {
         assert!(e.contains("refine.points must be at least 1"), "{e}");
         let e = project("[refine]\nround = 1\n").unwrap_err();
         assert!(e.contains("round"), "{e}");
+    }
+
+    #[test]
+    fn the_default_sampler_is_hmc_from_optima_held_to_convergence_targets() {
+        let m = project("").unwrap().mcmc;
+        assert_eq!((m.kernel, m.start), (Kernel::Hmc, ChainStart::Optimised));
+        assert_eq!((m.iterations, m.burn_in), (500, 150));
+        assert_eq!(
+            (m.rhat_target, m.ess_target, m.max_extensions),
+            (1.01, 400.0, 3)
+        );
+        let m = project("[mcmc]\nkernel = \"mh\"\nstart = \"prior\"\niterations = 10000\n")
+            .unwrap()
+            .mcmc;
+        assert_eq!(
+            (m.kernel, m.start, m.iterations),
+            (Kernel::Mh, ChainStart::Prior, 10000)
+        );
+        let e = project("[mcmc]\ness_target = -1\n").unwrap_err();
+        assert!(
+            e.contains("mcmc.ess_target = -1 must be a number >= 0"),
+            "{e}"
+        );
+        let e = project("[mcmc]\nrhat_target = 0\n").unwrap_err();
+        assert!(
+            e.contains("mcmc.rhat_target = 0 must be a positive number"),
+            "{e}"
+        );
     }
 }

@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use bemcal_stats::convergence::Convergence;
 use bemcal_stats::lhs::Design;
 use bemcal_stats::mcmc::Draws;
 use bemcal_stats::metrics::G14Metrics;
@@ -40,6 +41,11 @@ pub struct OutputMetrics {
     pub metrics: G14Metrics,
 }
 
+/// Exit status of `bemcal calibrate` (and `bemcal portfolio` when a building's run is
+/// affected) when the calibration finished but its chains missed a convergence target: every
+/// output was written, and `summary.json` `converged` is false. 1 stays "failed".
+pub const NOT_CONVERGED_EXIT: i32 = 3;
+
 /// `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
@@ -59,7 +65,7 @@ pub struct Summary {
     pub residual_ar1: Vec<(String, f64)>,
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
-    /// Times the final chains were extended because R-hat was above `mcmc.rhat_target`.
+    /// Times the final chains were extended because a convergence target was missed.
     #[serde(default)]
     pub chain_extensions: u32,
     /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
@@ -82,7 +88,13 @@ pub struct Summary {
     /// surrogate, not the posterior, is the bottleneck: more design points or training).
     #[serde(default)]
     pub surrogate_at_estimate: Vec<OutputMetrics>,
+    /// Every parameter meets `mcmc.rhat_target` and `mcmc.ess_target` (`convergence`); when
+    /// false the estimate and intervals are not to be trusted, and `bemcal calibrate` exits
+    /// with status 3 ([`NOT_CONVERGED_EXIT`]).
     pub converged: bool,
+    /// The verdict behind `converged`: targets, worst figures, the parameters short of them.
+    #[serde(default)]
+    pub convergence: Convergence,
     pub design_points: usize,
     pub design_repair: bemcal_stats::lhs::RepairReport,
     /// What EnergyPlus made of the design: failed runs, replacements, usable warnings.
@@ -198,7 +210,8 @@ pub fn write_summary(
                 prior_max: p.max(),
             })
             .collect(),
-        converged: chains.posterior.max_rhat <= 1.01,
+        converged: chains.convergence.converged,
+        convergence: chains.convergence.clone(),
         posterior: chains.posterior.clone(),
         sigma_delta_kwh: chains.sigma_delta_kwh.clone(),
         residual_ar1: chains.residual_ar1.clone(),

@@ -121,6 +121,7 @@ mod tests {
             sigma_eta: vec![],
             held_out: serde_json::Value::Null,
             extensions: 0,
+            convergence: Default::default(),
         }
     }
 

@@ -32,6 +32,7 @@ td.l,th.l{text-align:left}
 .badge{display:inline-block;padding:2px 8px;border-radius:10px;font-size:13px;font-weight:600}
 .ok{background:#e6f4ea;color:#1a7f37}.bad{background:#fdecea;color:#c62828}
 ul.warn li{margin:2px 0}
+.banner{margin:10px 0;padding:10px 14px;border-left:6px solid #c62828;background:#fdecea;color:#5f1010}
 .grid{display:flex;flex-wrap:wrap;gap:10px}
 figure{margin:4px 0;padding:0}figcaption{font-size:12.5px;color:#333;margin:2px 0 0}
 .legend{font-size:12.5px;margin:4px 0}.legend span{margin-right:14px;white-space:nowrap}
@@ -158,6 +159,53 @@ fn pass_cell(m: Option<&OutputMetrics>) -> String {
     }
 }
 
+/// The first screen's banner of a calibration whose chains missed a convergence target.
+fn not_converged_banner(s: &crate::io::Summary) -> String {
+    let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
+    let detail = match &s.convergence {
+        Some(c) => {
+            let short: Vec<String> = c
+                .shortfalls
+                .iter()
+                .take(8)
+                .map(|p| {
+                    format!(
+                        "{} (R-hat {}, ESS {} / {})",
+                        esc(&p.parameter),
+                        num(p.rhat, 3),
+                        num(p.ess_bulk, 0),
+                        num(p.ess_tail, 0)
+                    )
+                })
+                .collect();
+            format!(
+                "max R-hat {} (target &le; {}), min bulk / tail ESS {} / {} (target &ge; {}); \
+                 {} parameter(s) short: {}{}.",
+                num(c.max_rhat, 3),
+                c.targets.rhat,
+                num(c.min_ess_bulk, 0),
+                num(c.min_ess_tail, 0),
+                c.targets.ess,
+                c.shortfalls.len(),
+                short.join(", "),
+                if c.shortfalls.len() > 8 {
+                    ", &hellip;"
+                } else {
+                    ""
+                }
+            )
+        }
+        None => format!("max R-hat {:.3}.", s.posterior.max_rhat),
+    };
+    format!(
+        "<div class=\"banner\" id=\"not-converged\"><b>Not converged.</b> {detail} The chains \
+         have not mixed: the estimate, the intervals and the validation below are not a \
+         calibration yet. Run longer chains (<code>[mcmc] iterations</code> or \
+         <code>max_extensions</code>; they continue from their checkpoint in the same output \
+         folder).</div>\n"
+    )
+}
+
 /// The whole report as one self-contained HTML document.
 pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<String, ReportError> {
     let s = &cal.summary;
@@ -204,6 +252,9 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
             v => v.to_string(),
         })
     );
+    if !s.converged {
+        h.push_str(&not_converged_banner(s));
+    }
     h.push_str(
         "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
 <a href=\"#parameters\">Parameters</a><a href=\"#prior-posterior\">Prior vs posterior</a>\

@@ -131,6 +131,48 @@ pub struct Timings {
     pub total_s: f64,
 }
 
+/// `summary.json` `convergence`: the targets, the worst figures, the parameters short.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct ConvergenceBlock {
+    /// The targets (`rhat`, `ess`).
+    #[serde(default)]
+    pub targets: ConvergenceTargets,
+    /// Largest R-hat (null when it could not be computed).
+    #[serde(default)]
+    pub max_rhat: Option<f64>,
+    /// Smallest bulk ESS.
+    #[serde(default)]
+    pub min_ess_bulk: Option<f64>,
+    /// Smallest tail ESS.
+    #[serde(default)]
+    pub min_ess_tail: Option<f64>,
+    /// The parameters short of a target, worst R-hat first.
+    #[serde(default)]
+    pub shortfalls: Vec<Shortfall>,
+}
+
+/// Convergence targets.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct ConvergenceTargets {
+    /// Largest acceptable R-hat.
+    pub rhat: f64,
+    /// Smallest acceptable bulk and tail ESS.
+    pub ess: f64,
+}
+
+/// A parameter short of a convergence target.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct Shortfall {
+    /// Parameter name.
+    pub parameter: String,
+    /// Its R-hat (null when it could not be computed).
+    pub rhat: Option<f64>,
+    /// Its bulk ESS.
+    pub ess_bulk: Option<f64>,
+    /// Its tail ESS.
+    pub ess_tail: Option<f64>,
+}
+
 /// `summary.json` `design`: the design points EnergyPlus could not simulate.
 #[derive(Debug, Clone, Default, Deserialize)]
 pub struct DesignBlock {
@@ -220,6 +262,9 @@ pub struct Summary {
     /// Whether every R-hat and ESS criterion was met.
     #[serde(default)]
     pub converged: bool,
+    /// The verdict behind `converged` (absent in summaries written before it existed).
+    #[serde(default)]
+    pub convergence: Option<ConvergenceBlock>,
     /// Number of design points.
     #[serde(default)]
     pub design_points: usize,

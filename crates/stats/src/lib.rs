@@ -15,6 +15,7 @@
 //!   surrogate's VJP graph), dual-averaging step size, checkpointable, batched over chains.
 //! - [`optim`]: posterior mode search (BFGS, finite differences) for the chains' starts.
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS (Vehtari et al. 2021).
+//! - [`convergence`]: the verdict on merged chains against R-hat and ESS targets.
 //! - [`summary`]: posterior summaries, width ratios, correlated pairs, predictive bands.
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
@@ -22,6 +23,7 @@
 #![deny(missing_docs)]
 
 pub mod chain;
+pub mod convergence;
 pub mod diagnostics;
 pub mod hmc;
 pub mod lhs;

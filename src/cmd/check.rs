@@ -1,0 +1,66 @@
+//! `bemcal check`: load and validate a project and everything it names, run nothing.
+
+use std::path::PathBuf;
+
+use bemcal_calibrate::{load_inputs, Project};
+
+/// Load a project and everything it names (model, priors, weather or measured weather, meters,
+/// bases) and check that they fit together, without simulating or training anything; prints
+/// what a calibration would use. Exit status 1 with the first problem (file, line, field).
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Project file (TOML).
+    pub project: PathBuf,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let project = Project::load(&a.project)?;
+    let inp = load_inputs(&project)?;
+    println!("project {}: OK", a.project.display());
+    println!(
+        "  model {}: {} parameters, {} calibrated ({})",
+        inp.model.path.display(),
+        inp.model.parameters().len(),
+        inp.plan.calibrated.len(),
+        inp.plan.calibrated.join(", ")
+    );
+    for note in &inp.plan.restricted {
+        println!("  note: {note}");
+    }
+    println!(
+        "  weather {} (year {})",
+        inp.weather_path.display(),
+        inp.year
+    );
+    for (name, series) in inp.outputs.iter().zip(&inp.measured) {
+        let known = series.iter().filter(|v| v.is_finite()).count();
+        println!(
+            "  meter for {name}: {known} of {} hours measured, {:.0} kWh over them",
+            series.len(),
+            series.iter().filter(|v| v.is_finite()).sum::<f64>()
+        );
+    }
+    for b in &inp.base_reports {
+        println!(
+            "  base of {}: {}, {:.0} kWh",
+            b.output, b.source, b.annual_kwh
+        );
+    }
+    let m = &project.mcmc;
+    println!(
+        "  chains: {} x {} iterations ({} burn-in), {:?} from {:?} starts; converged when R-hat <= {} and bulk / tail ESS >= {} (at most {} extensions)",
+        m.chains,
+        m.iterations,
+        m.burn_in,
+        m.kernel,
+        m.start,
+        m.rhat_target,
+        m.ess_target,
+        m.max_extensions
+    );
+    println!(
+        "  design {} points; refinement {} round(s) of {} draws",
+        project.design.points, project.refine.rounds, project.refine.points
+    );
+    Ok(())
+}
