@@ -42,18 +42,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     write_project(dir);
-    let mut synth = bemcal();
-    synth
-        .args(["synthesize", "--model"])
-        .arg(dir.join("model.toml"))
-        .arg("--weather")
-        .arg(golden_epw())
-        .arg("--out")
-        .arg(dir.join("meters.csv"));
-    for (k, v) in TRUTH {
-        synth.arg("--set").arg(format!("{k}={v}"));
-    }
-    run_ok(&mut synth);
+    synthesize(dir, &TRUTH);
 
     let out = dir.join("out");
     let (log, summary) = calibrate(dir, &out);
@@ -158,6 +147,23 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     }
 }
 
+/// `DIR/meters.csv`: EnergyPlus on `DIR/model.toml` (Golden TMY3) at `truth` (the other
+/// parameters at their prior modes), with `synthesize`'s noise and gap.
+fn synthesize(dir: &Path, truth: &[(&str, f64)]) {
+    let mut synth = bemcal();
+    synth
+        .args(["synthesize", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        .arg(golden_epw())
+        .arg("--out")
+        .arg(dir.join("meters.csv"));
+    for (k, v) in truth {
+        synth.arg("--set").arg(format!("{k}={v}"));
+    }
+    run_ok(&mut synth);
+}
+
 /// `bemcal calibrate DIR/project.toml --out OUT`, which must run to its end (converged or
 /// not, [`finished`]): its log and summary.json.
 fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
@@ -239,15 +245,7 @@ fn check_loads_everything_and_runs_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     write_project(dir);
-    run_ok(
-        bemcal()
-            .args(["synthesize", "--model"])
-            .arg(dir.join("model.toml"))
-            .arg("--weather")
-            .arg(golden_epw())
-            .arg("--out")
-            .arg(dir.join("meters.csv")),
-    );
+    synthesize(dir, &[]);
     let before: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().file_name())
