@@ -687,7 +687,7 @@ impl State {
                 .map_err(err)?;
             return Ok(true);
         }
-        let mut chains = sampler.summarize(&states, &draws).map_err(err)?;
+        let mut chains = sampler.summarize(&states, &draws, &log).map_err(err)?;
         chains.extensions = r.extensions;
         if let Some(target) = extended_target(
             &cal.project.mcmc,

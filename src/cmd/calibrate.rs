@@ -90,6 +90,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             p.name, r.prior_min, r.prior_mode, r.prior_max, p.mean, p.q5, p.q95, est, p.rhat, p.ess_bulk, p.width_ratio
         );
     }
+    if let Some(e) = &s.surrogate_error {
+        println!(
+            "\nwith the surrogate's error (what a calibration through the round-{} surrogate recovered \
+             at {} EnergyPlus points, added to the draws; the intervals to read):",
+            e.round, e.points
+        );
+        println!(
+            "{:<30} {:>9} {:>9} {:>9} {:>9}",
+            "parameter", "q5", "median", "q95", "rms shift"
+        );
+        for p in &e.parameters {
+            println!(
+                "{:<30} {:>9.4} {:>9.4} {:>9.4} {:>9.4}",
+                p.name, p.q5, p.median, p.q95, p.rms_shift
+            );
+        }
+    }
     for c in &s.posterior.correlated_pairs {
         println!(
             "warning: {} and {} are strongly correlated (rho = {:.2}): not separately identifiable",

@@ -1,13 +1,14 @@
 //! Stages 5 and 6, the chains: the likelihood bound to the surrogate ([`Sampler`]), chain
 //! starts, segments, and the merged chains' summary.
 
+use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::convergence::{assess, draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
 use bemcal_stats::metrics::g14;
-use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig};
+use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig, Optimum};
 use bemcal_stats::prior::Prior;
 use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
 use bemcal_surrogate::{Evaluator, Surrogate};
@@ -15,7 +16,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::refine::RefineLog;
 use crate::summary::{write_bands_csv, write_draws_csv};
+use crate::surrogate_error::{carry, SurrogateError};
 use crate::validation::{fallback_note, FALLBACKS};
 use crate::{Calibration, Error, OutputMetrics};
 
@@ -222,6 +225,62 @@ impl Sampler<'_> {
         Ok(out)
     }
 
+    /// What a calibration through this surrogate recovers from EnergyPlus's `outputs` at known
+    /// `points` (physical calibrated values): the posterior's mode with those outputs in place
+    /// of the meters (the same missing hours and error model), by BFGS from the point itself.
+    /// The difference to the point is the surrogate's error in parameter space there, from
+    /// surrogate error alone ([`bemcal_stats::surrogate_error`]).
+    pub fn recover(
+        &mut self,
+        points: &[Vec<f64>],
+        outputs: &[HourlyOutputs],
+    ) -> Result<Vec<Vec<f64>>, Error> {
+        let names = self.outputs().to_vec();
+        let n_h = self.cal.inputs.features.len();
+        let cfg = BfgsConfig {
+            max_iterations: self.cal.project.mcmc.optimiser_iterations,
+            hessian: false,
+            ..BfgsConfig::default()
+        };
+        let mut recovered = vec![];
+        for (i, (x, o)) in points.iter().zip(outputs).enumerate() {
+            let mut observed = vec![f64::NAN; n_h * names.len()];
+            for (k, name) in names.iter().enumerate() {
+                let series =
+                    o.get(name)
+                        .filter(|s| s.len() == n_h)
+                        .ok_or_else(|| Error::Stage {
+                            stage: "refinement",
+                            message: format!("point {i}: no {n_h}-hour output {name}"),
+                        })?;
+                for (h, v) in series.iter().enumerate() {
+                    observed[h * names.len() + k] = *v;
+                }
+            }
+            let likelihood = self.likelihood.with_observed(&observed)?;
+            let (post, eval) = self.split();
+            let post = Posterior {
+                likelihood: &likelihood,
+                ..post
+            };
+            let mut start: Vec<f64> = post
+                .plan
+                .priors
+                .iter()
+                .zip(x)
+                .map(|(p, v)| p.to_unit(*v))
+                .collect();
+            if post.sigma_box.is_some() {
+                start.extend(std::iter::repeat_n(0.6, names.len()));
+            }
+            let starts = [start];
+            let lps = post.ln_posterior_batch(eval, &starts);
+            let best = optimise(&post, eval, &starts, &lps, &cfg)?;
+            recovered.push(post.theta(&best[0].point));
+        }
+        Ok(recovered)
+    }
+
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
     pub fn advance(&mut self, states: &mut [Chain], n: u64) -> Result<Vec<Draws>, Error> {
         let (post, eval) = self.split();
@@ -229,8 +288,14 @@ impl Sampler<'_> {
     }
 
     /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
-    /// and posterior predictive bands.
-    pub fn summarize(&mut self, states: &[Chain], draws: &[Draws]) -> Result<ChainSummary, Error> {
+    /// and posterior predictive bands; with the surrogate error `refined`'s last round measured,
+    /// the intervals that carry it ([`crate::surrogate_error`]).
+    pub fn summarize(
+        &mut self,
+        states: &[Chain],
+        draws: &[Draws],
+        refined: &RefineLog,
+    ) -> Result<ChainSummary, Error> {
         let cal = self.cal;
         let inp = &cal.inputs;
         let d = inp.plan.calibrated.len();
@@ -248,7 +313,24 @@ impl Sampler<'_> {
         let sbox = self.sigma_box.clone();
         let noise = self.noise.clone();
         let (post, eval) = self.split();
-        write_draws_csv(&cal.out.draws_csv(), &post, &inp.outputs, draws, &sbox)?;
+        write_draws_csv(
+            &cal.out.draws_csv(),
+            &post,
+            &inp.outputs,
+            draws,
+            &sbox,
+            true,
+        )?;
+        // Seeded apart from the chains' streams.
+        let seed = cal.project.mcmc.seed ^ 0x5EED_5EED_0E44_0420;
+        let surrogate_error = match carry(post.plan, draws, refined, seed)? {
+            Some((report, shifted)) => {
+                let path = cal.out.draws_with_surrogate_error_csv();
+                write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
+                Some(report)
+            }
+            None => None,
+        };
         let mut residual_ar1: Vec<(String, f64)> = vec![];
         let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
             Some(b) => (0..n_out)
@@ -366,6 +448,7 @@ impl Sampler<'_> {
             held_out: self.held_out.clone(),
             extensions: 0,
             convergence,
+            surrogate_error,
         })
     }
 }
@@ -416,29 +499,7 @@ pub fn chains_at(
             max_iterations: m.optimiser_iterations,
             ..BfgsConfig::default()
         };
-        // With the surrogate's gradient graph (and no sampled sigma_delta), BFGS uses exact
-        // gradients: one VJP call (about 3.3 evaluations) instead of d + 1 evaluations.
-        let optima = if eval.has_gradient() && post.sigma_box.is_none() {
-            let cell = std::cell::RefCell::new(&mut *eval);
-            let mut failed = None;
-            let optima = maximise_batch_with_gradient(
-                starts,
-                &lps,
-                &cfg,
-                |us: &[Vec<f64>]| post.ln_posterior_batch(&mut cell.borrow_mut(), us),
-                &mut |us: &[Vec<f64>]| {
-                    post.ln_posterior_grad_or_reject(&mut cell.borrow_mut(), us, &mut failed)
-                },
-            );
-            if let Some(e) = failed {
-                return Err(e);
-            }
-            optima
-        } else {
-            maximise_batch(starts, &lps, &cfg, |us: &[Vec<f64>]| {
-                post.ln_posterior_batch(eval, us)
-            })
-        };
+        let optima = optimise(post, eval, starts, &lps, &cfg)?;
         return Ok(match m.kernel {
             Kernel::Mh => chains_at_optima(&config, optima, m.seed, first_chain, m.restart_below)?
                 .into_iter()
@@ -475,6 +536,38 @@ pub fn chains_at(
             )?))
         })
         .collect()
+}
+
+/// BFGS from each of `starts` (their log posteriors `lps`) to the posterior's mode. With the
+/// surrogate's gradient graph (and no sampled sigma_delta), exact gradients: one VJP call
+/// (about 3.3 evaluations) instead of d + 1 evaluations.
+fn optimise(
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    starts: &[Vec<f64>],
+    lps: &[f64],
+    cfg: &BfgsConfig,
+) -> Result<Vec<Optimum>, Error> {
+    if !(eval.has_gradient() && post.sigma_box.is_none()) {
+        return Ok(maximise_batch(starts, lps, cfg, |us: &[Vec<f64>]| {
+            post.ln_posterior_batch(eval, us)
+        }));
+    }
+    let cell = std::cell::RefCell::new(&mut *eval);
+    let mut failed = None;
+    let optima = maximise_batch_with_gradient(
+        starts,
+        lps,
+        cfg,
+        |us: &[Vec<f64>]| post.ln_posterior_batch(&mut cell.borrow_mut(), us),
+        &mut |us: &[Vec<f64>]| {
+            post.ln_posterior_grad_or_reject(&mut cell.borrow_mut(), us, &mut failed)
+        },
+    );
+    match failed {
+        Some(e) => Err(e),
+        None => Ok(optima),
+    }
 }
 
 /// The merged chains, summarised ([`Sampler::summarize`]): what validation and `summary.json`
@@ -518,6 +611,10 @@ pub struct ChainSummary {
     /// The verdict on these chains against `mcmc.rhat_target` and `mcmc.ess_target`.
     #[serde(default)]
     pub convergence: Convergence,
+    /// The intervals with the surrogate's error ([`crate::surrogate_error`]); `None` without a
+    /// refinement round that measured it.
+    #[serde(default)]
+    pub surrogate_error: Option<SurrogateError>,
 }
 
 impl ChainSummary {

@@ -3,7 +3,8 @@
 //! One file per stage, in the order the data flows: [`inputs`](load_inputs) (model, weather,
 //! meters, bases) -> [`design`] (Latin hypercube, EnergyPlus runs, [`replacement`] of failed
 //! points) -> training set and surrogate ([`Calibration`]) -> chains ([`Sampler`], [`posterior`])
-//! -> [`refine`]ment rounds -> validation -> summary ([`write_summary`]). [`calibrate`] runs
+//! -> [`refine`]ment rounds -> the [`surrogate_error`] carried into the intervals -> validation
+//! -> summary ([`write_summary`]). [`calibrate`] runs
 //! every stage on this machine; the coordinator runs the same stage methods as jobs. Each stage's
 //! results are written under the output folder and reused by a rerun, so an interrupted
 //! calibration resumes.
@@ -21,6 +22,7 @@ pub mod refine;
 pub mod replacement;
 pub mod submitted;
 mod summary;
+pub mod surrogate_error;
 pub mod synth;
 mod validation;
 

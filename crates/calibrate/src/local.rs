@@ -60,7 +60,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         outputs.extend(new_outputs);
         cal.record_round(&mut refined, closed)?;
     };
-    let (mut chains, ck) = final_chains(&cal, &mut sampler, ck, log, &mut timings)?;
+    let (mut chains, ck) = final_chains(&cal, &mut sampler, ck, &refined, log, &mut timings)?;
     log_chains(&chains, &ck, log);
 
     let t = Instant::now();
@@ -310,13 +310,14 @@ fn final_chains(
     cal: &Calibration,
     sampler: &mut Sampler<'_>,
     mut ck: Checkpoint,
+    refined: &RefineLog,
     log: Log<'_>,
     timings: &mut Timings,
 ) -> Result<(ChainSummary, Checkpoint), Error> {
     let project = &cal.project;
     let rounds = project.refine.rounds;
     let t = Instant::now();
-    let mut chains = sampler.summarize(&ck.states, &ck.draws)?;
+    let mut chains = sampler.summarize(&ck.states, &ck.draws, refined)?;
     timings.summary_s = t.elapsed().as_secs_f64();
     let m = &project.mcmc;
     let mut target = m.iterations;
@@ -341,7 +342,7 @@ fn final_chains(
         timings.chains_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let extensions = chains.extensions + 1;
-        chains = sampler.summarize(&ck.states, &ck.draws)?;
+        chains = sampler.summarize(&ck.states, &ck.draws, refined)?;
         chains.extensions = extensions;
         timings.summary_s += t.elapsed().as_secs_f64();
         target = next;

@@ -88,6 +88,12 @@ impl OutputDir {
         self.root.join("draws.csv")
     }
 
+    /// `draws_with_surrogate_error.csv`: the draws with the surrogate's error added
+    /// ([`crate::surrogate_error`]).
+    pub fn draws_with_surrogate_error_csv(&self) -> PathBuf {
+        self.root.join("draws_with_surrogate_error.csv")
+    }
+
     /// `posterior_predictive.csv`: hourly bands with the meters.
     pub fn posterior_predictive_csv(&self) -> PathBuf {
         self.root.join("posterior_predictive.csv")

@@ -43,6 +43,12 @@ pub struct RefineRound {
     /// added points, all points' hours pooled: the surrogate's error where the posterior is,
     /// out of sample (the held-out RMSE measures it over the prior).
     pub surrogate_error: Vec<OutputMetrics>,
+    /// What a calibration through the round's surrogate recovers from EnergyPlus's outputs at
+    /// each added point (physical units, as `points`; [`Sampler::recover`]): the surrogate's
+    /// error in parameter space where the posterior is, which the final intervals carry
+    /// ([`bemcal_stats::surrogate_error`]). Empty in rounds recorded before it existed.
+    #[serde(default)]
+    pub recovered: Vec<Vec<f64>>,
     /// Where the next round's chains start (unit space), one per chain: see [`next_starts`].
     #[serde(default)]
     pub starts: Vec<Vec<f64>>,
@@ -237,7 +243,8 @@ pub struct SimulatedDraw {
 
 /// Closes refinement round `round` once its draws are simulated: the draws EnergyPlus could
 /// simulate become design points, the others are recorded as failed; the surrogate that ran
-/// the round's chains is measured against EnergyPlus at the new points ([`pooled_error`]); and
+/// the round's chains is measured against EnergyPlus at the new points ([`pooled_error`], and
+/// in parameter space: what it recovers from their outputs, [`Sampler::recover`]); and
 /// the next round's chains start where these ended ([`next_starts`], from the round's merged
 /// chains: `draws` and each chain's `last` position). The one rule both drivers follow;
 /// returns the round and the new points' outputs (in the round's point order).
@@ -271,12 +278,14 @@ pub fn close_round(
     let predicted = sampler.predict(&xs)?;
     let names = sampler.outputs().to_vec();
     let surrogate_error = pooled_error(&names, &outputs, &predicted)?;
+    let recovered = sampler.recover(&xs, &outputs)?;
     let (starts, restarted) = next_starts(draws, last, restart_below);
     let round = RefineRound {
         round,
         points,
         failed,
         surrogate_error,
+        recovered,
         starts,
         restarted,
     };

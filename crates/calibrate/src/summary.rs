@@ -88,6 +88,11 @@ pub struct Summary {
     /// surrogate, not the posterior, is the bottleneck: more design points or training).
     #[serde(default)]
     pub surrogate_at_estimate: Vec<OutputMetrics>,
+    /// The posterior's intervals with the surrogate's error carried in: the intervals to read
+    /// (`posterior`'s are the chains' own, on the surrogate, narrower by the surrogate's error
+    /// in parameter space). Absent without a refinement round, which measures that error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surrogate_error: Option<crate::surrogate_error::SurrogateError>,
     /// Every parameter meets `mcmc.rhat_target` and `mcmc.ess_target` (`convergence`); when
     /// false the estimate and intervals are not to be trusted, and `bemcal calibrate` exits
     /// with status 3 ([`NOT_CONVERGED_EXIT`]).
@@ -237,6 +242,7 @@ pub fn write_summary(
         validation,
         initial,
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
+        surrogate_error: chains.surrogate_error.clone(),
         design_points: design.points.len(),
         design_repair: design.repair,
         design: read_outcome(&cal.simulations_dir())
@@ -286,6 +292,7 @@ pub(crate) fn write_draws_csv(
     outputs: &[String],
     draws: &[Draws],
     sbox: &SigmaDeltaBox,
+    log_posterior: bool,
 ) -> Result<(), Error> {
     let d = post.plan.calibrated.len();
     let mut s = format!("chain,draw,{}", post.plan.calibrated.join(","));
@@ -294,7 +301,11 @@ pub(crate) fn write_draws_csv(
             s.push_str(&format!(",sigma_delta_{o}"));
         }
     }
-    s.push_str(",log_posterior\n");
+    s.push_str(if log_posterior {
+        ",log_posterior\n"
+    } else {
+        "\n"
+    });
     for (c, dr) in draws.iter().enumerate() {
         for i in 0..dr.len() {
             let u = dr.point(i);
@@ -307,7 +318,10 @@ pub(crate) fn write_draws_csv(
                     s.push_str(&format!(",{}", sbox.sigma(k, u[d + k])));
                 }
             }
-            s.push_str(&format!(",{}\n", dr.log_density[i]));
+            if log_posterior {
+                s.push_str(&format!(",{}", dr.log_density[i]));
+            }
+            s.push('\n');
         }
     }
     write_atomic(path, s.as_bytes())

@@ -122,6 +122,7 @@ mod tests {
             held_out: serde_json::Value::Null,
             extensions: 0,
             convergence: Default::default(),
+            surrogate_error: None,
         }
     }
 

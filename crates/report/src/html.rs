@@ -428,11 +428,29 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
     h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
 
     // ---- parameters (Table 4)
-    h.push_str(
-        "<h2 id=\"parameters\">Estimated parameters</h2>\
-<table><tr><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>prior min</th><th>mode</th><th>max</th>\
-<th>prior 90 %</th><th>posterior mean &plusmn; sd</th><th>posterior 90 %</th><th>estimate</th>\
+    h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");
+    let carried = s.surrogate_error.as_ref();
+    if let Some(c) = carried {
+        let _ = write!(
+            h,
+            "<p class=\"sub\">With surrogate error: the 90 % interval once the surrogate's error \
+             in parameter space is added, as measured at the {} EnergyPlus points of refinement \
+             round {} (what a calibration through that surrogate recovered from their outputs, \
+             against their known values). The chains' own interval is narrower by that error; \
+             read this one.</p>",
+            c.points, c.round
+        );
+    }
+    let _ = write!(
+        h,
+        "<table><tr><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>prior min</th><th>mode</th><th>max</th>\
+<th>prior 90 %</th><th>posterior mean &plusmn; sd</th><th>posterior 90 %</th>{}<th>estimate</th>\
 <th>width ratio</th><th>R-hat</th><th>ESS bulk</th><th>ESS tail</th></tr>",
+        if carried.is_some() {
+            "<th>90 % with surrogate error</th>"
+        } else {
+            ""
+        }
     );
     for (k, p) in s.parameters.iter().enumerate() {
         let q = post
@@ -475,9 +493,17 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
                 } else {
                     ""
                 };
+                let with_error = carried.map_or(String::new(), |c| {
+                    c.parameters
+                        .iter()
+                        .find(|x| x.name == p.name)
+                        .map_or("<td>&ndash;</td>".into(), |x| {
+                            format!("<td>{}&ndash;{}</td>", g(x.q5), g(x.q95))
+                        })
+                });
                 let _ = write!(
                     h,
-                    "<td>{} &plusmn; {}</td><td>{}&ndash;{}</td><td><b>{}</b></td><td{wr}>{}</td><td{rh}>{}</td><td{es}>{}</td><td>{}</td></tr>",
+                    "<td>{} &plusmn; {}</td><td>{}&ndash;{}</td>{with_error}<td><b>{}</b></td><td{wr}>{}</td><td{rh}>{}</td><td{es}>{}</td><td>{}</td></tr>",
                     g(q.mean),
                     g(q.sd),
                     g(q.q5),
@@ -490,7 +516,8 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
                 );
             }
             None => {
-                let _ = write!(h, "<td colspan=\"7\">no posterior summary</td></tr>");
+                let cols = if carried.is_some() { 8 } else { 7 };
+                let _ = write!(h, "<td colspan=\"{cols}\">no posterior summary</td></tr>");
             }
         }
     }

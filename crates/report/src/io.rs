@@ -277,9 +277,34 @@ pub struct Summary {
     /// Surrogate refinement rounds.
     #[serde(default)]
     pub refinement: Vec<RefineRound>,
+    /// The intervals with the surrogate's error (absent without a refinement round).
+    #[serde(default)]
+    pub surrogate_error: Option<SurrogateErrorBlock>,
     /// Stage timings.
     #[serde(default)]
     pub timings: Timings,
+}
+
+/// `summary.json` `surrogate_error`: the intervals with the surrogate's error carried in.
+#[derive(Debug, Clone, Deserialize)]
+pub struct SurrogateErrorBlock {
+    /// The refinement round whose points measured it.
+    pub round: u32,
+    /// EnergyPlus points recovered.
+    pub points: usize,
+    /// Per parameter.
+    pub parameters: Vec<CarriedInterval>,
+}
+
+/// One parameter's interval with the surrogate's error.
+#[derive(Debug, Clone, Deserialize)]
+pub struct CarriedInterval {
+    /// Parameter name.
+    pub name: String,
+    /// 5 % quantile.
+    pub q5: f64,
+    /// 95 % quantile.
+    pub q95: f64,
 }
 
 /// A surrogate refinement round (`summary.json` `refinement`).

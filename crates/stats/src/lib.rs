@@ -17,6 +17,8 @@
 //! - [`diagnostics`]: rank-normalised split R-hat, bulk and tail ESS (Vehtari et al. 2021).
 //! - [`convergence`]: the verdict on merged chains against R-hat and ESS targets.
 //! - [`summary`]: posterior summaries, width ratios, correlated pairs, predictive bands.
+//! - [`surrogate_error`]: the surrogate's error near the posterior, measured at EnergyPlus
+//!   points by recovering their known values, added to the draws.
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 
@@ -33,6 +35,7 @@ pub mod metrics;
 pub mod optim;
 pub mod prior;
 pub mod summary;
+pub mod surrogate_error;
 
 mod normal;
 

@@ -114,6 +114,22 @@ impl GaussianLikelihood {
         })
     }
 
+    /// The same likelihood (missing hours, noise) for other observations of the same hours,
+    /// `hours x outputs`: what the calibration would see if `observed` were the meters (used to
+    /// calibrate against EnergyPlus's outputs at known parameters). A value at an observed hour
+    /// that is not finite is an error.
+    pub fn with_observed(&self, observed: &[f64]) -> Result<Self> {
+        if observed.len() != self.observed.len() {
+            return Err(StatsError::Shape(format!(
+                "{} observations for {} hours x {} outputs",
+                observed.len(),
+                self.n_hours,
+                self.n_outputs
+            )));
+        }
+        Self::with_mask(observed, &self.present, &self.noise)
+    }
+
     /// Number of hours.
     pub fn n_hours(&self) -> usize {
         self.n_hours
@@ -508,6 +524,26 @@ pub fn ln_prior_log_sigma_delta(log_sigma: f64, scale: f64, family: SigmaPrior) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn other_observations_keep_the_missing_hours_and_the_noise() {
+        let noise = [OutputNoise {
+            sigma_y: 0.1,
+            sigma_delta: 0.2,
+            sigma_eta: 0.3,
+        }];
+        let lik = GaussianLikelihood::new(&[1.0, f64::NAN, 3.0, 4.0], &noise).unwrap();
+        // The second hour stays missing, whatever the new value there.
+        let other = lik.with_observed(&[2.0, 99.0, 3.0, 5.0]).unwrap();
+        assert_eq!(other.n_observed(), &[3]);
+        assert_eq!(other.noise(), lik.noise());
+        let pred = [2.0f32, 0.0, 3.0, 5.0];
+        let perfect = other.log_likelihood(&pred);
+        let moved = GaussianLikelihood::new(&[2.0, f64::NAN, 3.0, 5.0], &noise).unwrap();
+        assert_eq!(perfect, moved.log_likelihood(&pred));
+        assert!(lik.with_observed(&[1.0; 3]).is_err());
+        assert!(lik.with_observed(&[f64::NAN, 0.0, 0.0, 0.0]).is_err());
+    }
 
     #[test]
     fn gradients_match_central_differences() {

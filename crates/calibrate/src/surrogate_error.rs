@@ -1,0 +1,187 @@
+//! The surrogate's error carried into the final intervals (issue 20).
+//!
+//! Each refinement round records what a calibration through the round's surrogate recovers
+//! from EnergyPlus's outputs at the round's points ([`crate::refine::RefineRound::recovered`]):
+//! the surrogate's error in parameter space where the posterior is. The last such round's
+//! shifts are added to the final draws ([`bemcal_stats::surrogate_error`]), and those draws
+//! give the intervals `summary.json` reports beside the chains' own
+//! (`draws_with_surrogate_error.csv`). The round's surrogate is the one before the final
+//! retraining, which then learns those very points: the carried error is an upper estimate of
+//! the final surrogate's.
+
+use bemcal_stats::diagnostics::quantile_sorted;
+use bemcal_stats::mcmc::Draws;
+use bemcal_stats::surrogate_error::{add_to_draws, rms, shifts};
+use serde::{Deserialize, Serialize};
+
+use crate::design::Plan;
+use crate::refine::RefineLog;
+use crate::Error;
+
+/// `summary.json` `surrogate_error`: the intervals with the surrogate's error.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurrogateError {
+    /// The refinement round whose surrogate was tested at its own points.
+    pub round: u32,
+    /// EnergyPlus points recovered (the shifts' number).
+    pub points: usize,
+    /// One per calibrated parameter, in plan order.
+    pub parameters: Vec<CarriedParameter>,
+}
+
+/// One parameter's shift and its intervals with it (physical units).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CarriedParameter {
+    pub name: String,
+    /// Root mean square of recovered - true over the points: the standard deviation the
+    /// surrogate's error adds.
+    pub rms_shift: f64,
+    pub q5: f64,
+    pub q25: f64,
+    pub median: f64,
+    pub q75: f64,
+    pub q95: f64,
+}
+
+/// The last refinement round of `log` that recorded recovered values, its shifts carried into
+/// the chains' `draws` (unit space; `seed` for the added error): the report and the shifted
+/// draws. `None` without such a round (no refinement, or rounds recorded before it existed).
+pub fn carry(
+    plan: &Plan,
+    draws: &[Draws],
+    log: &RefineLog,
+    seed: u64,
+) -> Result<Option<(SurrogateError, Vec<Draws>)>, Error> {
+    let Some(round) = log
+        .rounds
+        .iter()
+        .rev()
+        .find(|r| !r.points.is_empty() && r.recovered.len() == r.points.len())
+    else {
+        return Ok(None);
+    };
+    let unit = |x: &[f64]| -> Vec<f64> {
+        plan.priors
+            .iter()
+            .zip(x)
+            .map(|(p, v)| p.to_unit(*v))
+            .collect()
+    };
+    let truths: Vec<Vec<f64>> = round.points.iter().map(|p| unit(&p.values)).collect();
+    let recovered: Vec<Vec<f64>> = round.recovered.iter().map(|x| unit(x)).collect();
+    let unit_shifts = shifts(&truths, &recovered)?;
+    let shifted = add_to_draws(draws, &unit_shifts, seed)?;
+    let widths: Vec<f64> = plan.priors.iter().map(|p| p.max() - p.min()).collect();
+    let rms_unit = rms(&unit_shifts);
+    let parameters = plan
+        .calibrated
+        .iter()
+        .enumerate()
+        .map(|(j, name)| {
+            let mut v: Vec<f64> = shifted
+                .iter()
+                .flat_map(|d| d.column(j))
+                .map(|u| plan.priors[j].from_unit(u))
+                .collect();
+            v.sort_by(f64::total_cmp);
+            let q = |p: f64| quantile_sorted(&v, p);
+            CarriedParameter {
+                name: name.clone(),
+                rms_shift: rms_unit[j] * widths[j],
+                q5: q(0.05),
+                q25: q(0.25),
+                median: q(0.5),
+                q75: q(0.75),
+                q95: q(0.95),
+            }
+        })
+        .collect();
+    let report = SurrogateError {
+        round: round.round,
+        points: round.points.len(),
+        parameters,
+    };
+    Ok(Some((report, shifted)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::refine::{RefinePoint, RefineRound};
+    use bemcal_stats::Triangular;
+
+    fn plan() -> Plan {
+        Plan {
+            calibrated: vec!["a".into(), "b".into()],
+            priors: vec![
+                Triangular::new(0.0, 5.0, 10.0).unwrap(),
+                Triangular::new(1.0, 2.0, 3.0).unwrap(),
+            ],
+            units: vec!["".into(), "".into()],
+            fixed: Default::default(),
+            restricted: vec![],
+            invalid: Default::default(),
+        }
+    }
+
+    fn round(n: u32, recovered: Vec<Vec<f64>>) -> RefineRound {
+        RefineRound {
+            round: n,
+            points: vec![
+                RefinePoint {
+                    index: 10,
+                    values: vec![5.0, 2.0],
+                },
+                RefinePoint {
+                    index: 11,
+                    values: vec![4.0, 2.5],
+                },
+            ],
+            failed: vec![],
+            surrogate_error: vec![],
+            recovered,
+            starts: vec![],
+            restarted: vec![],
+        }
+    }
+
+    #[test]
+    fn the_last_recorded_round_widens_the_intervals_by_its_shifts() {
+        let p = plan();
+        // A posterior concentrated at (5, 2): every draw there.
+        let mut d = Draws::new(2);
+        for _ in 0..4000 {
+            d.points.extend_from_slice(&[0.5, 0.5]);
+            d.log_density.push(0.0);
+        }
+        let none = RefineLog::default();
+        assert!(carry(&p, std::slice::from_ref(&d), &none, 1)
+            .unwrap()
+            .is_none());
+        // Round 1 recorded nothing (an old log); round 2 recovered a off by +1 and -1, b exactly.
+        let log = RefineLog {
+            rounds: vec![
+                round(1, vec![]),
+                round(2, vec![vec![6.0, 2.0], vec![3.0, 2.5]]),
+            ],
+        };
+        let (report, shifted) = carry(&p, std::slice::from_ref(&d), &log, 1)
+            .unwrap()
+            .unwrap();
+        assert_eq!((report.round, report.points), (2, 2));
+        let a = &report.parameters[0];
+        assert!((a.rms_shift - 1.0).abs() < 1e-9, "{a:?}");
+        // N(5, 1): the 90 % interval 5 -+ 1.645, the 50 % one 5 -+ 0.674.
+        assert!(
+            (a.q95 - 6.645).abs() < 0.1 && (a.q5 - 3.355).abs() < 0.1,
+            "{a:?}"
+        );
+        assert!(
+            (a.q75 - 5.674).abs() < 0.06 && (a.median - 5.0).abs() < 0.06,
+            "{a:?}"
+        );
+        let b = &report.parameters[1];
+        assert_eq!((b.rms_shift, b.q5, b.q95), (0.0, 2.0, 2.0));
+        assert_eq!(shifted[0].len(), d.len());
+    }
+}
