@@ -201,11 +201,14 @@ impl Calibration {
 
     /// Stage 4, one job: trains the surrogate on `dataset/` into `surrogate/`, starting from
     /// the weights in the surrogate folder `init` when given (a refinement round's warm start,
-    /// see [`Calibration::warm_start`]).
+    /// see [`Calibration::warm_start`]; then at most `surrogate.warm_epochs` epochs).
     pub fn train(&self, init: Option<&Path>) -> Result<(), Error> {
         let sp = &self.project.surrogate;
         let opts = TrainOptions {
-            epochs: sp.epochs,
+            epochs: match init {
+                Some(_) => sp.epochs.min(sp.warm_epochs),
+                None => sp.epochs,
+            },
             patience: sp.patience,
             seed: sp.seed,
             batch_size: sp.batch_size,
