@@ -488,6 +488,15 @@ fn failed_design_point_is_replaced_local_and_distributed() {
     let log = calibrate(&pf, &local, None);
     assert!(log.contains("failed in an earlier run"), "{log}");
     assert!(log.contains("simulations: 0 run"), "{log}");
+    // The same through the coordinator: every wave, the replacement's too, comes whole from its
+    // simulation cache, so no completion arrives to advance the run; it must go on anyway (it
+    // stalled in `simulate` before).
+    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
+    assert!(
+        log.contains("train (running)") || log.contains("chains (running)"),
+        "{log}"
+    );
+    assert_eq!(summary(&dist)["design"]["simulated"], 6);
 }
 
 #[test]

@@ -390,7 +390,9 @@ impl State {
                     .map(|(i, x)| self.simulation_job(r, &cal, &hash, *i, x, 0))
                     .collect();
                 self.store.add_jobs(&r.id, jobs).map_err(err)?;
-                return Ok(false);
+                // Advance again at once: a wave served whole from the simulation cache is
+                // done already, and no completion will come to kick this run.
+                return Ok(true);
             }
             Step::Failed(message) => return Err(format!("design: {message}")),
             Step::Done(outcome) => outcome,
@@ -819,7 +821,8 @@ impl State {
                 ValidationStep::Validate(c) => {
                     let job = validation_job(r, c.key, "calibrated", c.values);
                     self.store.add_jobs(&r.id, vec![job]).map_err(err)?;
-                    return Ok(false);
+                    // As in the design: a cached validation is done already.
+                    return Ok(true);
                 }
                 ValidationStep::Exhausted(message) => return Err(format!("validation: {message}")),
             }

@@ -11,6 +11,7 @@ use anyhow::Context;
 use bemcal_calibrate::Summary;
 use bemcal_client::auth::{load_token, load_worker_token, random_token, TOKEN_ENV};
 use bemcal_client::client::{self, Connect};
+use bemcal_client::proto::{ListRunsRequest, RunRequest};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
 
@@ -213,6 +214,25 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
     let rt = bemcal_client::runtime()?;
     let summary = rt.block_on(async {
         let mut c = connect.client()?;
+        // A run that an interrupted calibration left in this folder is resumed by the
+        // coordinator, and would compete with the new one for the workers: cancel it (its
+        // simulations stay in the coordinator's cache and the new run reuses them).
+        let runs = c
+            .list_runs(ListRunsRequest::default())
+            .await?
+            .into_inner()
+            .runs;
+        for left in runs.iter().filter(|s| s.state == "running") {
+            c.cancel(RunRequest {
+                run_id: left.run_id.clone(),
+            })
+            .await?;
+            log(&format!(
+                "run {} was left running by an interrupted calibration in this folder: \
+                 cancelled (the new run reuses its simulations)",
+                left.run_id
+            ));
+        }
         if reuse {
             log("surrogate: reusing the one trained earlier");
         }
