@@ -28,7 +28,8 @@ fn write_project(dir: &Path) {
         "weather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"\ncalibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
     );
     project.push_str(
-        "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n",
+        "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n\
+         [validation]\nholdout = \"last 2 months\"\n",
     );
     std::fs::write(dir.join("project.toml"), project).unwrap();
 }
@@ -89,6 +90,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     }
     surrogate_matches_torch_on_real_output(&out.join("surrogate"));
     calibrated_model_reproduces_the_validation(dir, &out);
+    held_out_period_is_judged_and_never_fitted(dir, &out, &summary);
 
     // The initial model (prior modes) is reported beside the calibrated one.
     assert_eq!(summary["initial"].as_array().unwrap().len(), 3);
@@ -145,6 +147,96 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
+}
+
+/// The last two months are held out (`[validation] holdout`): summary.json judges the model
+/// on them (Guideline 14, predictive coverage), and they never enter the likelihood: with the
+/// held-out meters tripled the same seeds give bit-identical chains, while tripling a month of
+/// the calibration period changes them.
+fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &serde_json::Value) {
+    let h = &summary["holdout"];
+    assert_eq!(h["period"], "last 2 months", "{h}");
+    assert_eq!(h["hours"].as_u64(), Some((30 + 31) * 24), "{h}");
+    for v in summary["validation"].as_array().unwrap() {
+        let held = &v["held_out"];
+        assert!(held["hourly"]["n"].as_u64().unwrap() > 1000, "{v}");
+        assert!(held["hourly"]["pass"].as_bool().unwrap(), "held out: {v}");
+        assert_eq!(held["monthly"]["n"].as_u64(), Some(2), "{v}");
+        assert!(v["monthly"]["n"].as_u64().unwrap() >= 9, "{v}");
+    }
+    // Predictive intervals from EnergyPlus at 8 posterior draws: every coverage is a share,
+    // and the 90 % interval holds most of the calibration hours of this synthetic building
+    // (its meters are EnergyPlus plus noise: the error model is right by construction).
+    let p = &summary["predictive"];
+    assert_eq!(p["draws"].as_u64(), Some(8), "{p}");
+    for o in p["outputs"].as_array().unwrap() {
+        for m in o["by_error_model"].as_array().unwrap() {
+            for c in m["in_sample"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .chain(m["held_out"].as_array().unwrap())
+            {
+                let f = c["fraction"].as_f64().unwrap();
+                assert!(
+                    (0.0..=1.0).contains(&f) && c["mean_width"].as_f64().unwrap() > 0.0,
+                    "{c}"
+                );
+            }
+            let in90 = m["in_sample"][1]["fraction"].as_f64().unwrap();
+            assert!((0.75..=0.99).contains(&in90), "{o}");
+            assert_eq!(m["held_out"].as_array().unwrap().len(), 2, "{o}");
+        }
+    }
+    let csv = std::fs::read_to_string(out.join("validation/predictive_intervals.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 8761);
+    assert!(
+        csv.lines().last().unwrap().split(',').nth(1) == Some("1"),
+        "Dec 31 is held out"
+    );
+
+    // The same chains from the same seeds, on meters altered in the held-out months or not.
+    // (The project's own output folder gives the surrogate.)
+    let chains_on = |months: &[&str]| -> String {
+        let altered = tempfile::tempdir().unwrap();
+        for f in ["model.toml", "project.toml"] {
+            std::fs::copy(dir.join(f), altered.path().join(f)).unwrap();
+        }
+        let meters = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
+        let mut text = String::new();
+        for (i, line) in meters.lines().enumerate() {
+            let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+            if i > 0 && months.iter().any(|m| cells[0][5..7] == **m) {
+                for c in cells.iter_mut().skip(1).filter(|c| !c.is_empty()) {
+                    *c = format!("{}", c.parse::<f64>().unwrap() * 3.0);
+                }
+            }
+            text.push_str(&cells.join(","));
+            text.push('\n');
+        }
+        std::fs::write(altered.path().join("meters.csv"), text).unwrap();
+        let project =
+            bemcal_calibrate::Project::load(&altered.path().join("project.toml")).unwrap();
+        let cal = bemcal_calibrate::Calibration::load(project, out).unwrap();
+        let mut sampler = cal.sampler().unwrap();
+        let starts = sampler.starts();
+        let mut states = sampler.new_chains(&starts, 0, 0).unwrap();
+        // 60 iterations of burn-in: the chains' whole states (positions, log posteriors,
+        // adaptation, random streams) decide every later draw.
+        sampler.advance(&mut states, 60).unwrap();
+        serde_json::to_string(&states).unwrap()
+    };
+    let original = chains_on(&[]);
+    assert_eq!(
+        original,
+        chains_on(&["11", "12"]),
+        "held-out meters changed the chains"
+    );
+    assert_ne!(
+        original,
+        chains_on(&["06"]),
+        "a calibration month must change the chains"
+    );
 }
 
 /// `DIR/meters.csv`: EnergyPlus on `DIR/model.toml` (Golden TMY3) at `truth` (the other

@@ -147,10 +147,18 @@ fn distributed_matches_single_process() {
     let pf = project(tmp.path());
     // An R-hat target no chains reach, one extension; ESS not judged (so the extension is one
     // step of iterations - burn_in).
-    let text = project_text().replace(
-        "max_extensions = 0\n",
-        "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\n",
-    );
+    // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
+    // (validation jobs of their own on the distributed path).
+    let text = project_text()
+        .replace(
+            "max_extensions = 0\n",
+            "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\n",
+        )
+        .replace(
+            "predictive_draws = 0\n",
+            "predictive_draws = 3\nholdout = \"dec\"\n",
+        );
+    assert!(text.contains("holdout"));
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
     let (status, local_log) = calibrate_status(&pf, &local, None);
@@ -190,6 +198,8 @@ fn distributed_matches_single_process() {
         "posterior_predictive.csv",
         "validation/calibrated.csv",
         "validation/initial.csv",
+        "validation/predictive_02.csv",
+        "validation/predictive_intervals.csv",
     ] {
         let a = std::fs::read(local.join(f)).unwrap_or_else(|e| panic!("local {f}: {e}"));
         let b =
@@ -211,9 +221,19 @@ fn distributed_matches_single_process() {
         "acceptance_rate",
         "sigma_delta_kwh",
         "chain_extensions",
+        "holdout",
+        "predictive",
     ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
+    assert_eq!(sa["holdout"]["hours"], 31 * 24);
+    assert_eq!(sa["predictive"]["draws"], 3, "{}", sa["predictive"]);
+    assert!(
+        sa["validation"][0]["held_out"]["hourly"]["n"]
+            .as_u64()
+            .unwrap()
+            > 700
+    );
     // One extension of 300 - 100 iterations: 2 chains x 400 draws after burn-in.
     assert_eq!(sa["chain_extensions"], 1);
     assert_eq!(sa["converged"], false);

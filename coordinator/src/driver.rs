@@ -721,6 +721,9 @@ impl State {
                 cal.initial_point(),
             ));
         }
+        for (c, label) in chains.predictive_candidates() {
+            jobs.push(validation_job(r, c.key, &label, c.values));
+        }
         self.store
             .set_stage(&r.id, Stage::Validate, jobs)
             .map_err(err)?;
@@ -849,7 +852,11 @@ impl State {
         let mut validation = vec![];
         let mut initial = vec![];
         let mut chains = self.merged(r)?;
-        let failures: Vec<String> = jobs.iter().filter_map(reported_failure).collect();
+        let failures: Vec<String> = jobs
+            .iter()
+            .filter(|j| is_calibrated(j))
+            .filter_map(reported_failure)
+            .collect();
         for j in &jobs {
             if reported_failure(j).is_some() {
                 continue;
@@ -859,10 +866,11 @@ impl State {
                 serde_json::from_str(j.result.as_deref().unwrap_or("[]")).map_err(err)?;
             match &j.spec.kind {
                 Some(Kind::Validate(v)) if v.label == "initial" => initial = m,
-                Some(Kind::Validate(_)) => {
+                _ if is_calibrated(j) => {
                     chains.settle_estimate(&failures);
                     validation = m
                 }
+                // A predictive draw: its run is placed for the intervals.
                 _ => {}
             }
         }
@@ -927,7 +935,8 @@ fn validation_job(r: &RunRow, key: usize, label: &str, values: Vec<f64>) -> NewJ
                 index: key as u32,
                 label: label.into(),
                 values,
-                tolerate_failure: label == "calibrated",
+                // The estimate's failure picks the next draw; a predictive draw's is left out.
+                tolerate_failure: label != "initial",
             })),
             ..Default::default()
         },

@@ -19,6 +19,10 @@ pub struct Args {
     /// Run through a coordinator and this many worker processes on loopback instead.
     #[arg(long)]
     pub local_workers: Option<usize>,
+    /// Hours that check the calibration and never fit it, as `[validation] holdout`
+    /// (overrides the project): `last 3 months`, `oct,nov,dec`, `2017-06-01..2017-08-31`.
+    #[arg(long)]
+    pub holdout: Option<bemcal_weather::period::Holdout>,
 }
 
 /// The calibration finished and wrote everything, but its chains missed a convergence target:
@@ -49,7 +53,16 @@ fn not_converged(s: &bemcal_calibrate::Summary, out: &std::path::Path) -> NotCon
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let project = Project::load(&a.project)?;
+    let mut project = Project::load(&a.project)?;
+    if let Some(h) = &a.holdout {
+        anyhow::ensure!(
+            a.local_workers.is_none(),
+            "--holdout with --local-workers: write `holdout = \"{h}\"` under [validation] in {} \
+             instead (the workers read the project file)",
+            a.project.display()
+        );
+        project.validation.holdout = Some(h.clone());
+    }
     let t0 = std::time::Instant::now();
     let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
     let s = match a.local_workers {
@@ -152,6 +165,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             pair(sur)
         );
     }
+    print_held_out(&s);
     for r in &s.refinement {
         println!(
             "\nrefinement round {}: {} posterior draws added, {} failed in EnergyPlus; surrogate vs EnergyPlus at them (NMBE / CV-RMSE): {}",
@@ -175,6 +189,85 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.out.display()
     );
     converged_or_not(&s, &a.out)
+}
+
+/// Monthly Guideline 14, the held-out period's, and the predictive intervals' coverage.
+fn print_held_out(s: &bemcal_calibrate::Summary) {
+    let pm = |m: Option<&bemcal_stats::metrics::G14Metrics>| {
+        m.map_or("-".to_string(), |m| {
+            format!(
+                "{:6.1} % / {:5.1} % {}",
+                m.nmbe,
+                m.cv_rmse,
+                if m.pass { "pass" } else { "FAIL" }
+            )
+        })
+    };
+    println!(
+        "\nGuideline 14 of the calibrated model, monthly (|NMBE| <= 5 %, CV-RMSE <= 15 %){}:",
+        if s.holdout.is_some() {
+            ", and on the held-out period"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "{:<18} {:>28} {:>28} {:>28}",
+        "output", "monthly, calibration period", "held out, hourly", "held out, monthly"
+    );
+    for v in &s.validation {
+        let h = v.held_out.as_ref();
+        println!(
+            "{:<18} {:>28} {:>28} {:>28}",
+            v.output,
+            pm(v.monthly.as_ref()),
+            pm(h.map(|h| &h.hourly)),
+            pm(h.and_then(|h| h.monthly.as_ref()))
+        );
+    }
+    if let Some(h) = &s.holdout {
+        println!(
+            "held out: {} ({} hours; measured hours held out / calibrated on: {})",
+            h.period,
+            h.hours,
+            h.measured_hours
+                .iter()
+                .map(|(o, a, b)| format!("{o} {a} / {b}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if let Some(p) = &s.predictive {
+        println!(
+            "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + {:?} noise): \
+             share of measured hours inside, mean width",
+            p.draws,
+            if p.with_surrogate_error { " with the surrogate's error" } else { "" },
+            p.failed,
+            p.error_model
+        );
+        let cov = |c: &[bemcal_stats::predictive::Coverage]| {
+            c.iter()
+                .map(|c| {
+                    format!(
+                        "{:.0} %: {:5.1} % ({:.1} kWh)",
+                        c.nominal * 100.0,
+                        c.fraction * 100.0,
+                        c.mean_width
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        for o in &p.outputs {
+            if let Some(m) = o.by_error_model.first() {
+                println!("{:<18} in-sample  {}", o.output, cov(&m.in_sample));
+                if !m.held_out.is_empty() {
+                    println!("{:<18} held out   {}", "", cov(&m.held_out));
+                }
+            }
+        }
+    }
 }
 
 fn converged_or_not(s: &bemcal_calibrate::Summary, out: &std::path::Path) -> anyhow::Result<()> {

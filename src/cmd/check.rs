@@ -35,9 +35,21 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for (name, series) in inp.outputs.iter().zip(&inp.measured) {
         let known = series.iter().filter(|v| v.is_finite()).count();
         println!(
-            "  meter for {name}: {known} of {} hours measured, {:.0} kWh over them",
+            "  meter for {name}: {known} of {} hours measured (calibration period), {:.0} kWh over them",
             series.len(),
             series.iter().filter(|v| v.is_finite()).sum::<f64>()
+        );
+    }
+    if let Some(h) = &inp.held_out {
+        let kept = inp
+            .measured
+            .first()
+            .map_or(0, |m| m.iter().filter(|v| v.is_finite()).count());
+        println!(
+            "  held out: {} ({} hours; they fit nothing and judge the model; {kept} measured hours of {} left to calibrate with)",
+            h.period,
+            h.hours.iter().filter(|o| **o).count(),
+            inp.outputs.first().map_or("-", String::as_str)
         );
     }
     for b in &inp.base_reports {

@@ -43,6 +43,10 @@ pub struct Args {
     /// file of dates (YYYY-MM-DD per line).
     #[arg(long)]
     pub holidays: Option<String>,
+    /// Hours to leave out, as `[validation] holdout` (overrides the project): `last 3 months`,
+    /// `oct,nov,dec`, or `2017-06-01..2017-08-31`.
+    #[arg(long)]
+    pub holdout: Option<bemcal_weather::period::Holdout>,
 }
 
 /// `--holidays`: a table's name or a file of dates.
@@ -71,7 +75,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .context("no meters file: pass --meters or set [meters] file in the project")?;
     let epw = Epw::read(&args.weather)?;
     let year = args.year.or(project.year);
-    let meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
+    let mut meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
+    if let Some(h) = args
+        .holdout
+        .as_ref()
+        .or(project.validation.holdout.as_ref())
+    {
+        meters
+            .hold_out(h)
+            .map_err(|m| anyhow::anyhow!("{}: {m}", meters_path.display()))?;
+    }
     let mut opts = project.precalibration.clone();
     if let Some(b) = args.band {
         opts.schedule.band = b;

@@ -98,6 +98,8 @@ start = "prior"
 max_extensions = 0
 [refine]
 rounds = 0
+[validation]
+predictive_draws = 0
 "#
     )
 }

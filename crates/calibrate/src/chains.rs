@@ -7,7 +7,6 @@ use bemcal_stats::convergence::{assess, draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
-use bemcal_stats::metrics::g14;
 use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig, Optimum};
 use bemcal_stats::prior::Prior;
 use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
@@ -323,14 +322,16 @@ impl Sampler<'_> {
         )?;
         // Seeded apart from the chains' streams.
         let seed = cal.project.mcmc.seed ^ 0x5EED_5EED_0E44_0420;
-        let surrogate_error = match carry(post.plan, draws, refined, seed)? {
+        let k = cal.project.validation.predictive_draws;
+        let (surrogate_error, predictive) = match carry(post.plan, draws, refined, seed)? {
             Some((report, shifted)) => {
                 let path = cal.out.draws_with_surrogate_error_csv();
                 write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
-                Some(report)
+                (Some(report), crate::predictive::pick(&shifted, k))
             }
-            None => None,
+            None => (None, crate::predictive::pick(draws, k)),
         };
+        let predictive = predictive.iter().map(|u| post.theta(u)).collect();
         let mut residual_ar1: Vec<(String, f64)> = vec![];
         let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
             Some(b) => (0..n_out)
@@ -406,7 +407,7 @@ impl Sampler<'_> {
             &cal.out.posterior_predictive_csv(),
             inp.year,
             &inp.outputs,
-            &inp.measured,
+            &(0..n_out).map(|k| inp.meter(k)).collect::<Vec<_>>(),
             &bands,
         )?;
         let estimate: Vec<f64> = match cal.project.validation.estimate {
@@ -418,10 +419,7 @@ impl Sampler<'_> {
         let mut surrogate_at_estimate = vec![];
         for (k, name) in inp.outputs.iter().enumerate() {
             let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
-            surrogate_at_estimate.push(OutputMetrics {
-                output: name.clone(),
-                metrics: g14(&inp.measured[k], &inp.with_base(k, &pred))?,
-            });
+            surrogate_at_estimate.push(inp.metrics(k, name, &pred)?);
         }
         let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
             .iter()
@@ -449,6 +447,7 @@ impl Sampler<'_> {
             extensions: 0,
             convergence,
             surrogate_error,
+            predictive,
         })
     }
 }
@@ -575,6 +574,10 @@ fn optimise(
 /// so every field is serialisable.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ChainSummary {
+    /// Posterior draws (physical units) EnergyPlus simulates for the predictive intervals
+    /// ([`crate::predictive`]).
+    #[serde(default)]
+    pub predictive: Vec<Vec<f64>>,
     pub posterior: PosteriorSummary,
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).

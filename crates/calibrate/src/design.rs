@@ -482,6 +482,13 @@ pub fn check_point_file(bytes: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
+/// The outputs saved under key `i` in `dir` if they were simulated at `values`.
+pub fn saved_outputs(dir: &Path, i: usize, values: &ParameterValues) -> Option<HourlyOutputs> {
+    let text = std::fs::read_to_string(dir.join(crate::output::point_file(i))).ok()?;
+    let run: SavedRun = serde_json::from_str(&text).ok()?;
+    (&run.values == values).then_some(run.outputs)
+}
+
 #[derive(Serialize, Deserialize)]
 struct SavedRun {
     values: ParameterValues,

@@ -23,14 +23,80 @@ pub struct Inputs {
     pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
     pub features: HourlyFeatures,
     pub year: i32,
-    /// Calibration outputs (model output names) and their measured series (kWh, NaN = missing).
+    /// Calibration outputs (model output names) and their measured series over the calibration
+    /// period (kWh, NaN = missing or held out): what the likelihood, the surrogate's checks and
+    /// the in-sample Guideline 14 see.
     pub outputs: Vec<String>,
     pub measured: Vec<Vec<f64>>,
+    /// The held-out period (`[validation] holdout`): its hours and the meters there.
+    pub held_out: Option<HeldOut>,
     /// Per output, the hourly load (kWh) in its meter that the model does not have
     /// (`[[bases]]`; zeros without one): the model plus this is compared with the meter.
     pub bases: Vec<Vec<f64>>,
     /// What each base is, for the summary.
     pub base_reports: Vec<crate::bases::BaseReport>,
+}
+
+/// The hours of a held-out period and the meters' values in them: they check the calibration
+/// and never fit it ([`Inputs::measured`] is NaN there).
+#[derive(Debug, Clone)]
+pub struct HeldOut {
+    /// The period as the project wrote it.
+    pub period: String,
+    /// Per hour slot, whether it is held out.
+    pub hours: Vec<bool>,
+    /// Per output, the meter in the held-out hours (NaN elsewhere and where missing).
+    pub measured: Vec<Vec<f64>>,
+}
+
+impl HeldOut {
+    /// Splits `measured` (whole meters) by `hours`: the calibration period's values stay in
+    /// `measured` (NaN in held-out hours), the held-out values move to the returned period.
+    pub fn split(period: String, hours: Vec<bool>, measured: &mut [Vec<f64>]) -> HeldOut {
+        let held = measured
+            .iter_mut()
+            .map(|m| {
+                m.iter_mut()
+                    .zip(&hours)
+                    .map(|(v, &out)| {
+                        if out {
+                            std::mem::replace(v, f64::NAN)
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        HeldOut {
+            period,
+            hours,
+            measured: held,
+        }
+    }
+}
+
+impl Inputs {
+    /// Meter `k` whole: the calibration period's values and the held-out ones.
+    pub fn meter(&self, k: usize) -> Vec<f64> {
+        match &self.held_out {
+            None => self.measured[k].clone(),
+            Some(h) => self.measured[k]
+                .iter()
+                .zip(&h.measured[k])
+                .zip(&h.hours)
+                .map(|((m, o), &out)| if out { *o } else { *m })
+                .collect(),
+        }
+    }
+
+    /// Per hour slot, whether it belongs to the calibration period (not held out).
+    pub fn calibration_hours(&self) -> Vec<bool> {
+        match &self.held_out {
+            None => vec![true; self.features.len()],
+            Some(h) => h.hours.iter().map(|o| !o).collect(),
+        }
+    }
 }
 
 /// Resolves the project's weather reference ([`weather_reference`]).
@@ -197,6 +263,17 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
                 .collect::<Vec<_>>()
         )));
     }
+    let held_out = match &project.validation.holdout {
+        None => None,
+        Some(h) => {
+            let n = measured.first().map_or(0, Vec::len);
+            let present = |i: usize| measured.iter().any(|m| m[i].is_finite());
+            let hours = h
+                .hours(calendar.year, n, &present)
+                .map_err(|m| project.error_at(&["validation", "holdout"], m))?;
+            Some(HeldOut::split(h.to_string(), hours, &mut measured))
+        }
+    };
     let (bases, base_reports) = crate::bases::bases_of(project, &outputs, &data)?;
     Ok(Inputs {
         runner,
@@ -208,6 +285,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         year: calendar.year,
         outputs,
         measured,
+        held_out,
         bases,
         base_reports,
     })

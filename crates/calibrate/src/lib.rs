@@ -17,6 +17,7 @@ mod inputs;
 mod local;
 pub mod output;
 pub mod posterior;
+pub mod predictive;
 pub mod project;
 pub mod refine;
 pub mod replacement;
@@ -34,14 +35,14 @@ pub use chains::{
     Sampler,
 };
 pub use inputs::{
-    load_inputs, load_model, resolve_weather, weather_for, weather_reference, Inputs,
+    load_inputs, load_model, resolve_weather, weather_for, weather_reference, HeldOut, Inputs,
 };
 pub use local::{calibrate, log_design_outcome};
 pub use output::OutputDir;
 pub use project::Project;
 pub use summary::{
-    write_calibrated_model, write_outputs_csv, write_summary, DesignReport, OutputMetrics,
-    ParameterReport, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
+    write_calibrated_model, write_outputs_csv, write_summary, DesignReport, HoldoutReport,
+    OutputMetrics, ParameterReport, PeriodMetrics, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
 };
 pub use validation::{
     fallback_note, next_candidate, Candidate, ValidationStep, FALLBACKS, INITIAL_KEY,

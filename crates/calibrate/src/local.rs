@@ -422,7 +422,39 @@ fn validate_stage(
     } else {
         vec![]
     };
+    predictive_stage(cal, chains, log)?;
     Ok((validation, initial))
+}
+
+/// EnergyPlus at the posterior draws of the predictive intervals, in parallel; a draw it
+/// cannot simulate is left out (`crate::predictive::assess` counts it).
+fn predictive_stage(cal: &Calibration, chains: &ChainSummary, log: Log<'_>) -> Result<(), Error> {
+    use rayon::prelude::*;
+    let candidates = chains.predictive_candidates();
+    if candidates.is_empty() {
+        return Ok(());
+    }
+    log(&format!(
+        "validation: EnergyPlus at {} posterior draws for the predictive intervals",
+        candidates.len()
+    ));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(cal.project.design.parallel.max(1))
+        .build()
+        .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
+    let failed: Vec<String> = pool.install(|| {
+        candidates
+            .par_iter()
+            .filter_map(|(c, label)| cal.validate(c.key, label, &c.values).err())
+            .map(|e| e.to_string())
+            .collect()
+    });
+    for e in failed {
+        log(&format!(
+            "validation: a predictive draw failed in EnergyPlus: {e}"
+        ));
+    }
+    Ok(())
 }
 
 /// Logs what became of the design points EnergyPlus could not simulate.

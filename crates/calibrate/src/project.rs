@@ -511,6 +511,16 @@ pub struct ValidationSettings {
     pub estimate: Estimate,
     /// Also simulate the initial model (prior modes), as the reference's Table 5.
     pub initial: bool,
+    /// Hours that check the calibration and never fit it (`"last 3 months"`, `["oct", "nov"]`,
+    /// `"2017-06-01..2017-08-31"`; [`bemcal_weather::period`]): they are left out of the
+    /// likelihood like missing hours, and Guideline 14 and the predictive intervals are
+    /// reported on them beside the calibration period.
+    pub holdout: Option<bemcal_weather::period::Holdout>,
+    /// EnergyPlus runs at posterior draws for the hourly predictive intervals (0: none).
+    pub predictive_draws: usize,
+    /// The noise the predictive intervals add to those runs
+    /// ([`bemcal_stats::predictive::ErrorModel`]).
+    pub error_model: bemcal_stats::predictive::ErrorModel,
 }
 
 impl Default for ValidationSettings {
@@ -518,6 +528,9 @@ impl Default for ValidationSettings {
         ValidationSettings {
             estimate: Estimate::Map,
             initial: true,
+            holdout: None,
+            predictive_draws: 8,
+            error_model: bemcal_stats::predictive::ErrorModel::Constant,
         }
     }
 }

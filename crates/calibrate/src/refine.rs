@@ -311,10 +311,10 @@ pub fn pooled_error(
             truth.extend_from_slice(series);
             pred.extend_from_slice(&p[k]);
         }
-        m.push(OutputMetrics {
-            output: name.clone(),
-            metrics: bemcal_stats::metrics::g14(&truth, &pred)?,
-        });
+        m.push(OutputMetrics::hourly(
+            name,
+            bemcal_stats::metrics::g14(&truth, &pred)?,
+        ));
     }
     Ok(m)
 }

@@ -33,12 +33,39 @@ pub struct Timings {
     pub total_s: f64,
 }
 
-/// Metrics of one model against the meters, per output.
+/// Metrics of one model against the meters, per output: ASHRAE Guideline 14 hourly (the
+/// flattened `metrics`) and monthly over the calibration period, and on the held-out period.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct OutputMetrics {
     pub output: String,
     #[serde(flatten)]
     pub metrics: G14Metrics,
+    /// On monthly totals of the same hours (absent under two months of data).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub monthly: Option<G14Metrics>,
+    /// On the held-out period (`[validation] holdout`): hours that did not fit the model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<PeriodMetrics>,
+}
+
+/// Guideline 14 of one period, hourly and monthly.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PeriodMetrics {
+    pub hourly: G14Metrics,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub monthly: Option<G14Metrics>,
+}
+
+impl OutputMetrics {
+    /// Hourly metrics alone (pooled comparisons that are not a period of the meters).
+    pub fn hourly(output: &str, metrics: G14Metrics) -> OutputMetrics {
+        OutputMetrics {
+            output: output.to_string(),
+            metrics,
+            monthly: None,
+            held_out: None,
+        }
+    }
 }
 
 /// Exit status of `bemcal calibrate` (and `bemcal portfolio` when a building's run is
@@ -82,6 +109,14 @@ pub struct Summary {
     pub calibrated_values: Vec<(String, f64)>,
     pub validation: Vec<OutputMetrics>,
     pub initial: Vec<OutputMetrics>,
+    /// The held-out period (`[validation] holdout`): its hours fit nothing; `validation`'s
+    /// `held_out` judges the model on them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<HoldoutReport>,
+    /// Hourly predictive intervals from EnergyPlus at posterior draws and their coverage of
+    /// the measured hours, in-sample and held out (`validation/predictive_intervals.csv`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predictive: Option<crate::predictive::PredictiveReport>,
     /// Guideline 14 of the surrogate's prediction at the estimate against the meters: next to
     /// `validation` (EnergyPlus at the same point) it separates surrogate error from
     /// calibration error (the surrogate fitting the meters while EnergyPlus does not means the
@@ -110,6 +145,34 @@ pub struct Summary {
     #[serde(default)]
     pub refinement: Vec<crate::refine::RefineRound>,
     pub timings: Timings,
+}
+
+/// The held-out period in `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct HoldoutReport {
+    /// As the project wrote it.
+    pub period: String,
+    /// Hour slots held out.
+    pub hours: usize,
+    /// Per output, the measured hours held out and those left to calibrate with.
+    pub measured_hours: Vec<(String, usize, usize)>,
+}
+
+impl HoldoutReport {
+    fn of(inp: &crate::Inputs) -> Option<HoldoutReport> {
+        let h = inp.held_out.as_ref()?;
+        let count = |v: &[f64]| v.iter().filter(|x| x.is_finite()).count();
+        Some(HoldoutReport {
+            period: h.period.clone(),
+            hours: h.hours.iter().filter(|o| **o).count(),
+            measured_hours: inp
+                .outputs
+                .iter()
+                .enumerate()
+                .map(|(k, o)| (o.clone(), count(&h.measured[k]), count(&inp.measured[k])))
+                .collect(),
+        })
+    }
 }
 
 /// The design stage's record in `summary.json`: which design points EnergyPlus could not
@@ -241,6 +304,8 @@ pub fn write_summary(
             .collect(),
         validation,
         initial,
+        holdout: HoldoutReport::of(inp),
+        predictive: crate::predictive::assess(cal, chains)?,
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         surrogate_error: chains.surrogate_error.clone(),
         design_points: design.points.len(),

@@ -2,11 +2,13 @@
 //! and the rule for when it cannot simulate the estimate: the next-best posterior draws, in
 //! order, each under its own key in `validation/`.
 
-use bemcal_stats::metrics::g14;
+use bemcal_stats::metrics::{g14, g14_monthly};
+use bemcal_weather::period::months_of_hours;
 
 use crate::design::simulate_point;
 use crate::summary::write_outputs_csv;
-use crate::{Calibration, ChainSummary, Error, OutputMetrics};
+use crate::summary::PeriodMetrics;
+use crate::{Calibration, ChainSummary, Error, Inputs, OutputMetrics};
 
 /// Draws tried, in order, when EnergyPlus fails at the estimate.
 pub const FALLBACKS: usize = 3;
@@ -83,11 +85,7 @@ impl Calibration {
         write_outputs_csv(&vdir.join(format!("{label}.csv")), inp.year, &o)?;
         let mut m = vec![];
         for (k, name) in inp.outputs.iter().enumerate() {
-            let sim = o.get(name).expect("model output");
-            m.push(OutputMetrics {
-                output: name.clone(),
-                metrics: g14(&inp.measured[k], &inp.with_base(k, sim))?,
-            });
+            m.push(inp.metrics(k, name, o.get(name).expect("model output"))?);
         }
         Ok(m)
     }
@@ -95,6 +93,27 @@ impl Calibration {
     /// The prior modes of the calibrated parameters (the initial model).
     pub fn initial_point(&self) -> Vec<f64> {
         self.inputs.plan.priors.iter().map(|p| p.mode()).collect()
+    }
+}
+
+impl Inputs {
+    /// Guideline 14 of model output `sim` (without its base) of output `k` against its meter:
+    /// hourly and monthly over the calibration period, and over the held-out period if any.
+    pub fn metrics(&self, k: usize, name: &str, sim: &[f64]) -> Result<OutputMetrics, Error> {
+        let sim = self.with_base(k, sim);
+        let months = months_of_hours(self.year, sim.len());
+        let monthly = |meter: &[f64]| g14_monthly(meter, &sim, &months).ok();
+        Ok(OutputMetrics {
+            output: name.to_string(),
+            metrics: g14(&self.measured[k], &sim)?,
+            monthly: monthly(&self.measured[k]),
+            held_out: self.held_out.as_ref().and_then(|h| {
+                Some(PeriodMetrics {
+                    hourly: g14(&h.measured[k], &sim).ok()?,
+                    monthly: monthly(&h.measured[k]),
+                })
+            }),
+        })
     }
 }
 
@@ -123,6 +142,7 @@ mod tests {
             extensions: 0,
             convergence: Default::default(),
             surrogate_error: None,
+            predictive: vec![],
         }
     }
 

@@ -37,6 +37,17 @@ pub struct PrecalProject {
     /// Options.
     #[serde(default)]
     pub precalibration: PrecalOptions,
+    /// `[validation]`: only its `holdout` matters here.
+    #[serde(default)]
+    pub validation: PrecalValidation,
+}
+
+/// The part of a project's `[validation]` that pre-calibration reads.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PrecalValidation {
+    /// Hours never used to fit anything, pre-calibration's priors included.
+    #[serde(default)]
+    pub holdout: Option<bemcal_weather::period::Holdout>,
 }
 
 impl PrecalProject {

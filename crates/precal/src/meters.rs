@@ -409,6 +409,29 @@ impl MeterData {
         self.series.iter().find(|s| &s.role == role)
     }
 
+    /// Leaves the held-out period out (`[validation] holdout`): its hours become missing in
+    /// every series, so that pre-calibration sees only the calibration period, and a note says
+    /// so. Returns the hour slots held out.
+    pub fn hold_out(&mut self, holdout: &bemcal_weather::period::Holdout) -> Result<usize, String> {
+        let n = self.series.first().map_or(0, |s| s.values.len());
+        let hours = {
+            let present = |h: usize| self.series.iter().any(|s| s.values[h].is_finite());
+            holdout.hours(self.year, n, &present)?
+        };
+        for s in &mut self.series {
+            for (v, &out) in s.values.iter_mut().zip(&hours) {
+                if out {
+                    *v = f64::NAN;
+                }
+            }
+        }
+        let count = hours.iter().filter(|o| **o).count();
+        self.notes.push(format!(
+            "held out {holdout} ({count} hours): pre-calibration sees only the calibration period"
+        ));
+        Ok(count)
+    }
+
     /// The sub-meter named `name`.
     pub fn submeter(&self, name: &str) -> Option<&MeterSeries> {
         self.get(&MeterRole::Submeter(name.to_string()))

@@ -159,6 +159,108 @@ fn pass_cell(m: Option<&OutputMetrics>) -> String {
     }
 }
 
+/// Guideline 14 cells of one block: NMBE, CV-RMSE and pass/fail by its own period's criteria.
+fn block_cells(b: Option<&crate::io::G14Block>) -> String {
+    match b {
+        None => "<td>&ndash;</td><td>&ndash;</td><td>&ndash;</td>".into(),
+        Some(b) => format!(
+            "<td>{}</td><td>{}</td>{}",
+            f(b.nmbe, 1),
+            f(b.cv_rmse, 1),
+            if b.pass {
+                "<td class=\"pass\">pass</td>"
+            } else {
+                "<td class=\"fail\">fail</td>"
+            }
+        ),
+    }
+}
+
+/// The calibrated model monthly, and on the held-out period (hours that fitted nothing).
+fn monthly_and_held_out(s: &crate::io::Summary) -> String {
+    let mut h = String::new();
+    let held = s.holdout.as_ref();
+    let _ = write!(
+        h,
+        "<h3 id=\"held-out\">Monthly{}</h3><p class=\"sub\">Monthly limits: |NMBE| &le; 5 %, \
+         CV-RMSE &le; 15 %. {}</p><table><tr><th class=\"l\" rowspan=\"2\">output</th>\
+         <th colspan=\"3\">calibration period, monthly</th><th colspan=\"3\">held out, hourly</th>\
+         <th colspan=\"3\">held out, monthly</th></tr><tr>{}</tr>",
+        if held.is_some() { " and held out" } else { "" },
+        match held {
+            Some(p) => format!(
+                "Held out: <b>{}</b> ({} hours): these hours entered neither the likelihood nor \
+                 pre-calibration; EnergyPlus at the estimate is judged on them.",
+                esc(&p.period),
+                p.hours
+            ),
+            None => "No held-out period (<code>[validation] holdout</code>): every figure here is in-sample.".into(),
+        },
+        "<th>NMBE %</th><th>CV-RMSE %</th><th>G14</th>".repeat(3)
+    );
+    for m in &s.validation {
+        let p = m.held_out.as_ref();
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td>{}{}{}</tr>",
+            esc(&m.output),
+            block_cells(m.monthly.as_ref()),
+            block_cells(p.map(|p| &p.hourly)),
+            block_cells(p.and_then(|p| p.monthly.as_ref()))
+        );
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// Coverage of the hourly predictive intervals, per meter and error model.
+fn predictive_coverage(s: &crate::io::Summary) -> String {
+    let Some(p) = &s.predictive else {
+        return String::new();
+    };
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<h3 id=\"predictive\">Hourly predictive intervals</h3><p class=\"sub\">EnergyPlus at {} \
+         posterior draws{} ({} failed), plus noise of the error model: share of the measured \
+         hours inside the 50 % and 90 % intervals, and their mean width. Intervals that hold \
+         read about 50 % and 90 %; the first error model is the one in \
+         <code>validation/predictive_intervals.csv</code> (<code>[validation] error_model</code>).</p>\
+         <table><tr><th class=\"l\">output</th><th class=\"l\">error model</th>\
+         <th>in-sample 50 %</th><th>in-sample 90 %</th><th>held out 50 %</th><th>held out 90 %</th>\
+         <th>90 % width, kWh</th></tr>",
+        p.draws,
+        if p.with_surrogate_error {
+            " (with the surrogate's error)"
+        } else {
+            ""
+        },
+        p.failed
+    );
+    let pct = |c: Option<&crate::io::CoverageBlock>| {
+        c.map_or("&ndash;".to_string(), |c| {
+            format!("{:.1} %", c.fraction * 100.0)
+        })
+    };
+    for o in &p.outputs {
+        for m in &o.by_error_model {
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(&o.output),
+                esc(&m.error_model),
+                pct(m.in_sample.first()),
+                pct(m.in_sample.get(1)),
+                pct(m.held_out.first()),
+                pct(m.held_out.get(1)),
+                m.in_sample.get(1).map_or("&ndash;".into(), |c| g(c.mean_width)),
+            );
+        }
+    }
+    h.push_str("</table>\n");
+    h
+}
+
 /// The first screen's banner of a calibration whose chains missed a convergence target.
 fn not_converged_banner(s: &crate::io::Summary) -> String {
     let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
@@ -426,6 +528,8 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         );
     }
     h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
+    h.push_str(&monthly_and_held_out(s));
+    h.push_str(&predictive_coverage(s));
 
     // ---- parameters (Table 4)
     h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");

@@ -107,6 +107,95 @@ pub struct OutputMetrics {
     pub nmbe: f64,
     /// CV-RMSE, %.
     pub cv_rmse: f64,
+    /// Monthly Guideline 14 over the calibration period.
+    #[serde(default)]
+    pub monthly: Option<G14Block>,
+    /// Guideline 14 on the held-out period.
+    #[serde(default)]
+    pub held_out: Option<PeriodBlock>,
+}
+
+/// Guideline 14 figures as `summary.json` writes them (`pass` by the criteria of their period).
+#[derive(Debug, Clone, Deserialize)]
+pub struct G14Block {
+    /// Hours or months used.
+    pub n: usize,
+    /// NMBE, %.
+    pub nmbe: f64,
+    /// CV-RMSE, %.
+    pub cv_rmse: f64,
+    /// Whether the criteria are met.
+    pub pass: bool,
+}
+
+/// Guideline 14 of one period, hourly and monthly.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PeriodBlock {
+    /// Hourly.
+    pub hourly: G14Block,
+    /// Monthly.
+    #[serde(default)]
+    pub monthly: Option<G14Block>,
+}
+
+/// `summary.json` `holdout`.
+#[derive(Debug, Clone, Deserialize)]
+pub struct HoldoutBlock {
+    /// As the project wrote it.
+    pub period: String,
+    /// Hour slots held out.
+    pub hours: usize,
+}
+
+/// `summary.json` `predictive`: hourly predictive intervals and their coverage.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PredictiveBlock {
+    /// EnergyPlus runs at posterior draws.
+    pub draws: usize,
+    /// Draws EnergyPlus failed at.
+    #[serde(default)]
+    pub failed: usize,
+    /// Whether the draws carry the surrogate's error.
+    #[serde(default)]
+    pub with_surrogate_error: bool,
+    /// The error model of the intervals file.
+    pub error_model: String,
+    /// Per meter.
+    pub outputs: Vec<OutputPredictiveBlock>,
+}
+
+/// One meter's predictive coverage.
+#[derive(Debug, Clone, Deserialize)]
+pub struct OutputPredictiveBlock {
+    /// Meter.
+    pub output: String,
+    /// Under each error model, the configured one first.
+    pub by_error_model: Vec<ModelCoverageBlock>,
+}
+
+/// Coverage under one error model.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ModelCoverageBlock {
+    /// Its name.
+    pub error_model: String,
+    /// 50 % and 90 % over the calibration hours.
+    pub in_sample: Vec<CoverageBlock>,
+    /// 50 % and 90 % over the held-out hours (empty without).
+    #[serde(default)]
+    pub held_out: Vec<CoverageBlock>,
+}
+
+/// How often one interval held.
+#[derive(Debug, Clone, Deserialize)]
+pub struct CoverageBlock {
+    /// Nominal level.
+    pub nominal: f64,
+    /// Hours judged.
+    pub hours: usize,
+    /// Share inside.
+    pub fraction: f64,
+    /// Mean width, kWh.
+    pub mean_width: f64,
 }
 
 /// Wall time per stage, s (`summary.json` `timings`).
@@ -259,6 +348,12 @@ pub struct Summary {
     /// G14 metrics of the surrogate's prediction at the estimate.
     #[serde(default)]
     pub surrogate_at_estimate: Vec<OutputMetrics>,
+    /// The held-out period, if any.
+    #[serde(default)]
+    pub holdout: Option<HoldoutBlock>,
+    /// Hourly predictive intervals from EnergyPlus at posterior draws.
+    #[serde(default)]
+    pub predictive: Option<PredictiveBlock>,
     /// Whether every R-hat and ESS criterion was met.
     #[serde(default)]
     pub converged: bool,

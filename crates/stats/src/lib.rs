@@ -33,6 +33,7 @@ pub mod likelihood;
 pub mod mcmc;
 pub mod metrics;
 pub mod optim;
+pub mod predictive;
 pub mod prior;
 pub mod summary;
 pub mod surrogate_error;

@@ -19,6 +19,10 @@ pub const P: usize = 1;
 pub const HOURLY_NMBE_LIMIT: f64 = 10.0;
 /// Hourly CV-RMSE criterion, per cent.
 pub const HOURLY_CV_RMSE_LIMIT: f64 = 30.0;
+/// Monthly NMBE criterion, per cent (absolute value).
+pub const MONTHLY_NMBE_LIMIT: f64 = 5.0;
+/// Monthly CV-RMSE criterion, per cent.
+pub const MONTHLY_CV_RMSE_LIMIT: f64 = 15.0;
 
 /// Guideline 14 metrics of one output.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -79,6 +83,35 @@ pub fn g14(measured: &[f64], simulated: &[f64]) -> Result<G14Metrics> {
     })
 }
 
+/// Monthly Guideline 14: the same NMBE and CV-RMSE on monthly totals (`n` = months, `p` = 1),
+/// criteria `|NMBE| <= 5 %` and `CV-RMSE <= 15 %`. `months[h]` is the calendar month of hour
+/// `h`; a month's totals sum the hours where both values are present, so a missing hour drops
+/// out of the measured and the simulated total alike.
+pub fn g14_monthly(measured: &[f64], simulated: &[f64], months: &[u32]) -> Result<G14Metrics> {
+    if measured.len() != simulated.len() || months.len() != measured.len() {
+        return Err(StatsError::Shape(format!(
+            "{} measured, {} simulated values and {} months",
+            measured.len(),
+            simulated.len(),
+            months.len()
+        )));
+    }
+    let mut totals: std::collections::BTreeMap<u32, (f64, f64)> = Default::default();
+    for ((&y, &s), &m) in measured.iter().zip(simulated).zip(months) {
+        if y.is_finite() && s.is_finite() {
+            let t = totals.entry(m).or_default();
+            t.0 += y;
+            t.1 += s;
+        }
+    }
+    let (y, s): (Vec<f64>, Vec<f64>) = totals.into_values().unzip();
+    let m = g14(&y, &s)?;
+    Ok(G14Metrics {
+        pass: m.nmbe.abs() <= MONTHLY_NMBE_LIMIT && m.cv_rmse <= MONTHLY_CV_RMSE_LIMIT,
+        ..m
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -106,6 +139,24 @@ mod tests {
         assert!((m.nmbe - 25.0).abs() < 1e-12);
         assert!((m.cv_rmse - 5f64.sqrt() * 25.0).abs() < 1e-12);
         assert!(!m.pass);
+    }
+
+    #[test]
+    fn monthly_totals_hand_computed() {
+        // Two hours in each of three months: totals y = [10, 20, 30], yhat = [11, 18, 30]:
+        // r = [-1, 2, 0], n = 3, ybar = 20: NMBE = 1 / (2 * 20) * 100 = 2.5 %,
+        // CV-RMSE = sqrt(5 / 2) / 20 * 100 = 7.9057 %. A missing hour drops from both totals.
+        let y = [4.0, 6.0, 10.0, 10.0, 15.0, 15.0, f64::NAN];
+        let s = [5.0, 6.0, 9.0, 9.0, 15.0, 15.0, 100.0];
+        let m = g14_monthly(&y, &s, &[1, 1, 2, 2, 3, 3, 3]).unwrap();
+        assert_eq!(m.n, 3);
+        assert!((m.nmbe - 2.5).abs() < 1e-12);
+        assert!((m.cv_rmse - 2.5f64.sqrt() * 5.0).abs() < 1e-12);
+        assert!(m.pass);
+        // 6 % bias passes hourly but not monthly.
+        let m = g14_monthly(&[10.0; 3], &[9.4; 3], &[1, 2, 3]).unwrap();
+        assert!(!m.pass && g14(&[10.0; 3], &[9.4; 3]).unwrap().pass);
+        assert!(g14_monthly(&[1.0], &[1.0], &[]).is_err());
     }
 
     #[test]

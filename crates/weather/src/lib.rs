@@ -8,6 +8,7 @@
 //! (TMY) files mix source years and so carry no usable weekday.
 
 pub mod measured;
+pub mod period;
 pub mod solar;
 pub mod station;
 

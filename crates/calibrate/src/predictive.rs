@@ -1,0 +1,246 @@
+//! Stage 7b, hourly posterior predictive intervals from EnergyPlus: which posterior draws are
+//! simulated (keys [`FIRST_KEY`].. in `validation/`, labels `predictive_NN`), and the
+//! intervals, their coverage of the measured hours (calibration period and held-out period)
+//! and their width, for `summary.json` and `validation/predictive_intervals.csv`.
+//!
+//! The draws are EnergyPlus at evenly spaced posterior draws (with the surrogate's error
+//! carried, where a refinement round measured it, so that the surrogate's bias in parameter
+//! space is in the spread); the noise is the error model's scale of EnergyPlus's residuals at
+//! the estimate over the calibration hours (`[validation] error_model`). Numerics in
+//! [`bemcal_stats::predictive`]; both drivers simulate [`ChainSummary::predictive_candidates`]
+//! and [`crate::write_summary`] calls [`assess`].
+
+use bemcal_stats::mcmc::Draws;
+use bemcal_stats::predictive::{coverage, intervals, Coverage, ErrorModel};
+use serde::{Deserialize, Serialize};
+
+use crate::design::saved_outputs;
+use crate::output::timestamps;
+use crate::validation::{Candidate, FALLBACKS};
+use crate::{write_atomic, Calibration, ChainSummary, Error};
+
+/// Key of the first predictive draw in `validation/` (0 is the estimate, 1 the initial model,
+/// 2.. the fallbacks).
+pub const FIRST_KEY: usize = 10;
+
+/// The nominal levels of the intervals.
+pub const LEVELS: [f64; 2] = [0.5, 0.9];
+
+/// The label (and `validation/LABEL.csv`) of predictive draw `j`.
+pub fn label(j: usize) -> String {
+    format!("predictive_{j:02}")
+}
+
+/// Whether a validation label is a predictive draw's.
+pub fn is_predictive(label: &str) -> bool {
+    label.starts_with("predictive_")
+}
+
+/// `k` draws evenly spaced through the merged chains (unit space), the middle of each of `k`
+/// equal stretches.
+pub fn pick(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let all: Vec<&[f64]> = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| d.point(i)))
+        .collect();
+    if k == 0 || all.is_empty() {
+        return vec![];
+    }
+    let k = k.min(all.len());
+    (0..k)
+        .map(|j| all[(2 * j + 1) * all.len() / (2 * k)].to_vec())
+        .collect()
+}
+
+impl ChainSummary {
+    /// The posterior draws EnergyPlus simulates for the predictive intervals, with their keys
+    /// and labels.
+    pub fn predictive_candidates(&self) -> Vec<(Candidate, String)> {
+        self.predictive
+            .iter()
+            .enumerate()
+            .map(|(j, x)| {
+                (
+                    Candidate {
+                        rank: 0,
+                        key: FIRST_KEY + j,
+                        values: x.clone(),
+                    },
+                    label(j),
+                )
+            })
+            .collect()
+    }
+}
+
+/// The predictive intervals' record in `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PredictiveReport {
+    /// Posterior draws EnergyPlus simulated for the intervals.
+    pub draws: usize,
+    /// Draws it could not simulate (left out).
+    pub failed: usize,
+    /// Whether the draws carry the surrogate's error (`draws_with_surrogate_error.csv`).
+    pub with_surrogate_error: bool,
+    /// The error model of `validation/predictive_intervals.csv` (`[validation] error_model`).
+    pub error_model: ErrorModel,
+    /// The held-out period, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<String>,
+    pub outputs: Vec<OutputPredictive>,
+}
+
+/// One meter's intervals.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct OutputPredictive {
+    pub output: String,
+    /// Root mean square residual of EnergyPlus at the estimate over the calibration hours (kWh).
+    pub noise_kwh: f64,
+    /// Coverage under each error model (the configured one first).
+    pub by_error_model: Vec<ModelCoverage>,
+}
+
+/// Coverage of the 50 % and 90 % intervals under one error model.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModelCoverage {
+    pub error_model: ErrorModel,
+    pub in_sample: Vec<Coverage>,
+    /// Empty without a held-out period.
+    pub held_out: Vec<Coverage>,
+}
+
+/// The predictive intervals of a finished validation: reads EnergyPlus at the predictive
+/// draws and at the estimate from `validation/`, writes `validation/predictive_intervals.csv`
+/// and returns the report (None when no draw or the estimate's run is missing).
+pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<PredictiveReport>, Error> {
+    let inp = &cal.inputs;
+    let vdir = cal.out.validation();
+    let candidates = chains.predictive_candidates();
+    let runs: Vec<_> = candidates
+        .iter()
+        .filter_map(|(c, _)| saved_outputs(&vdir, c.key, &inp.plan.values(&c.values)))
+        .collect();
+    let at_estimate = std::iter::once(0)
+        .chain(2..2 + FALLBACKS)
+        .find_map(|key| saved_outputs(&vdir, key, &inp.plan.values(&chains.estimate)));
+    let Some(at_estimate) = at_estimate.filter(|_| !runs.is_empty()) else {
+        return Ok(None);
+    };
+    let fit = inp.calibration_hours();
+    let mut outputs = vec![];
+    let mut columns: Vec<(String, Vec<f64>)> = vec![];
+    let configured = cal.project.validation.error_model;
+    let mut models = vec![configured];
+    models.extend(ErrorModel::ALL.iter().filter(|m| **m != configured));
+    for (k, name) in inp.outputs.iter().enumerate() {
+        let series = |o: &bemcal_energyplus::HourlyOutputs| {
+            inp.with_base(k, o.get(name).expect("model output"))
+        };
+        let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
+        let estimate = series(&at_estimate);
+        // An energy meter does not read below zero: its intervals are those of max(0, Y).
+        let meter = inp.meter(k);
+        let non_negative = !meter.iter().any(|v| *v < 0.0);
+        let mut by_error_model = vec![];
+        let mut noise_kwh = f64::NAN;
+        for &model in &models {
+            let scales = model.scales(&inp.measured[k], &estimate, &fit)?;
+            if model == ErrorModel::Constant {
+                noise_kwh = scales.first().copied().unwrap_or(f64::NAN);
+            }
+            let mut iv = intervals(&sims, &scales, &LEVELS)?;
+            if non_negative {
+                iv.clamp_below(0.0);
+            }
+            let judge = |meter: &[f64], hours: &[bool]| -> Vec<Coverage> {
+                LEVELS
+                    .iter()
+                    .enumerate()
+                    .map(|(i, l)| coverage(*l, meter, &iv.lower[i], &iv.upper[i], hours))
+                    .collect()
+            };
+            by_error_model.push(ModelCoverage {
+                error_model: model,
+                in_sample: judge(&inp.measured[k], &fit),
+                held_out: inp
+                    .held_out
+                    .as_ref()
+                    .map_or(vec![], |h| judge(&h.measured[k], &h.hours)),
+            });
+            if model == configured {
+                columns.push((format!("{name}_measured"), meter.clone()));
+                columns.push((format!("{name}_q5"), iv.lower[1].clone()));
+                columns.push((format!("{name}_q25"), iv.lower[0].clone()));
+                columns.push((format!("{name}_q50"), iv.median.clone()));
+                columns.push((format!("{name}_q75"), iv.upper[0].clone()));
+                columns.push((format!("{name}_q95"), iv.upper[1].clone()));
+            }
+        }
+        outputs.push(OutputPredictive {
+            output: name.clone(),
+            noise_kwh,
+            by_error_model,
+        });
+    }
+    write_intervals_csv(cal, &columns)?;
+    Ok(Some(PredictiveReport {
+        draws: runs.len(),
+        failed: candidates.len() - runs.len(),
+        with_surrogate_error: chains.surrogate_error.is_some(),
+        error_model: configured,
+        held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
+        outputs,
+    }))
+}
+
+/// `validation/predictive_intervals.csv`: per hour, whether it is held out, then per meter the
+/// measured value and the 5/25/50/75/95 % predictive quantiles.
+fn write_intervals_csv(cal: &Calibration, columns: &[(String, Vec<f64>)]) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let fit = inp.calibration_hours();
+    let mut s = String::from("timestamp,held_out");
+    for (name, _) in columns {
+        s.push(',');
+        s.push_str(name);
+    }
+    s.push('\n');
+    for (h, ts) in timestamps(inp.year, fit.len()).iter().enumerate() {
+        s.push_str(ts);
+        s.push_str(if fit[h] { ",0" } else { ",1" });
+        for (_, v) in columns {
+            let x = v[h];
+            if x.is_finite() {
+                s.push_str(&format!(",{x:.4}"));
+            } else {
+                s.push(',');
+            }
+        }
+        s.push('\n');
+    }
+    write_atomic(
+        &cal.out.validation().join("predictive_intervals.csv"),
+        s.as_bytes(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn picks_spread_evenly_over_all_chains() {
+        let mut a = Draws::new(1);
+        let mut b = Draws::new(1);
+        for i in 0..10 {
+            a.points.push(i as f64);
+            a.log_density.push(0.0);
+            b.points.push(10.0 + i as f64);
+            b.log_density.push(0.0);
+        }
+        let p = pick(&[a.clone(), b], 4);
+        assert_eq!(p, vec![vec![2.0], vec![7.0], vec![12.0], vec![17.0]]);
+        assert_eq!(pick(&[a.clone()], 0), Vec::<Vec<f64>>::new());
+        assert_eq!(pick(&[a], 50).len(), 10);
+        assert!(is_predictive(&label(3)) && !is_predictive("calibrated"));
+    }
+}

@@ -1,0 +1,392 @@
+//! Hourly posterior predictive intervals of a meter and how often they hold.
+//!
+//! The predictive distribution of hour `h` is the simulations at `J` posterior draws, each with
+//! the error model's noise added: the equal-weight mixture `(1/J) Σ_j N(c_j(h), s(h)²)`
+//! (Gelman et al., *Bayesian Data Analysis*, 3rd ed., §6.3: draws of the parameters, then of
+//! the data given them). Its quantiles are found by bisection on the mixture's CDF. The noise
+//! `s(h)` is the residual scale of the model at the estimate over the calibration hours, either
+//! one value per meter ([`ErrorModel::Constant`]) or one per hour of the day
+//! ([`ErrorModel::HourOfDay`]). Coverage is the share of measured hours inside an interval
+//! (the check of calibrated prediction: Gneiting, Balabdaoui & Raftery 2007, JRSS B 69).
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Result, StatsError};
+
+/// How the noise scale of the predictive distribution is estimated from in-sample residuals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorModel {
+    /// One scale per meter: the root mean square residual.
+    Constant,
+    /// One scale per hour of the day (hour slot `h` has hour `h % 24`).
+    HourOfDay,
+    /// One scale per level of the simulated value: the calibration hours are cut into
+    /// [`LEVEL_BINS`] bins of equal count by the simulation at the estimate, and an hour gets
+    /// the scale of the bin its own simulated value falls into (heteroscedastic residuals: a
+    /// cooling meter idle in winter and busy in summer).
+    Level,
+}
+
+/// Bins of [`ErrorModel::Level`].
+pub const LEVEL_BINS: usize = 10;
+
+impl ErrorModel {
+    /// Every error model, in the order they are reported.
+    pub const ALL: [ErrorModel; 3] = [
+        ErrorModel::Constant,
+        ErrorModel::HourOfDay,
+        ErrorModel::Level,
+    ];
+
+    /// The noise scale of each hour: the root mean square of `measured - simulated` over the
+    /// hours where `fit[h]` is true and both are present (per hour of the day for
+    /// [`ErrorModel::HourOfDay`], falling back to the constant scale for an hour of the day
+    /// with fewer than 10 such hours).
+    pub fn scales(self, measured: &[f64], simulated: &[f64], fit: &[bool]) -> Result<Vec<f64>> {
+        let n = measured.len();
+        if simulated.len() != n || fit.len() != n {
+            return Err(StatsError::Shape(format!(
+                "{n} measured, {} simulated values, {} hour flags",
+                simulated.len(),
+                fit.len()
+            )));
+        }
+        let mut sum = [0.0f64; 24];
+        let mut count = [0usize; 24];
+        for h in 0..n {
+            let r = measured[h] - simulated[h];
+            if fit[h] && r.is_finite() {
+                sum[h % 24] += r * r;
+                count[h % 24] += 1;
+            }
+        }
+        let total: usize = count.iter().sum();
+        if total < 2 {
+            return Err(StatsError::NotEnoughData(format!(
+                "{total} calibration hours with a measured and a simulated value"
+            )));
+        }
+        let constant = (sum.iter().sum::<f64>() / total as f64).sqrt();
+        Ok(match self {
+            ErrorModel::Constant => vec![constant; n],
+            ErrorModel::HourOfDay => (0..n)
+                .map(|h| match count[h % 24] {
+                    c if c >= 10 => (sum[h % 24] / c as f64).sqrt(),
+                    _ => constant,
+                })
+                .collect(),
+            ErrorModel::Level => level_scales(measured, simulated, fit, constant),
+        })
+    }
+}
+
+/// [`ErrorModel::Level`]: bin edges at the quantiles of the fitted hours' simulated values,
+/// the root mean square residual of each bin (the constant scale for a bin of fewer than 10
+/// hours), and each hour's scale from its own simulated value's bin.
+fn level_scales(measured: &[f64], simulated: &[f64], fit: &[bool], constant: f64) -> Vec<f64> {
+    let mut pairs: Vec<(f64, f64)> = (0..measured.len())
+        .filter(|&h| fit[h] && (measured[h] - simulated[h]).is_finite())
+        .map(|h| (simulated[h], measured[h] - simulated[h]))
+        .collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let per = pairs.len().div_ceil(LEVEL_BINS).max(1);
+    // Upper edge and scale of each bin; ties across an edge stay in the lower bin.
+    let bins: Vec<(f64, f64)> = pairs
+        .chunks(per)
+        .map(|c| {
+            let rms = (c.iter().map(|p| p.1 * p.1).sum::<f64>() / c.len() as f64).sqrt();
+            (c[c.len() - 1].0, if c.len() >= 10 { rms } else { constant })
+        })
+        .collect();
+    simulated
+        .iter()
+        .map(|&x| {
+            let i = bins
+                .partition_point(|b| b.0 < x)
+                .min(bins.len().saturating_sub(1));
+            bins.get(i).map_or(constant, |b| b.1)
+        })
+        .collect()
+}
+
+/// Standard normal CDF.
+fn phi(z: f64) -> f64 {
+    0.5 * libm::erfc(-z / std::f64::consts::SQRT_2)
+}
+
+/// The `p` quantile of the equal-weight mixture of `N(c, sd²)` over `centers` (bisection on
+/// the mixture CDF to 1e-9 of the bracket). `sd <= 0` gives the centers' own quantile.
+pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
+    let (lo, hi) = centers
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| {
+            (a.min(c), b.max(c))
+        });
+    if centers.is_empty() || !lo.is_finite() {
+        return f64::NAN;
+    }
+    let sd = if sd > 0.0 {
+        sd
+    } else {
+        1e-12 * (1.0 + hi.abs())
+    };
+    let cdf =
+        |x: f64| centers.iter().map(|&c| phi((x - c) / sd)).sum::<f64>() / centers.len() as f64;
+    let (mut a, mut b) = (lo - 9.0 * sd, hi + 9.0 * sd);
+    let tol = 1e-9 * (b - a);
+    while b - a > tol {
+        let m = 0.5 * (a + b);
+        if cdf(m) < p {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// Central predictive intervals of every hour at the nominal levels (e.g. 0.5 and 0.9).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Intervals {
+    /// The nominal levels, as given.
+    pub levels: Vec<f64>,
+    /// Per level, the lower bound of each hour.
+    pub lower: Vec<Vec<f64>>,
+    /// Per level, the upper bound of each hour.
+    pub upper: Vec<Vec<f64>>,
+    /// The mixture's median of each hour.
+    pub median: Vec<f64>,
+}
+
+/// Predictive intervals of each hour from `sims` (one hourly series per posterior draw, meter
+/// units) and the noise scale `scales[h]`. An hour where no draw has a value is NaN.
+pub fn intervals(sims: &[Vec<f64>], scales: &[f64], levels: &[f64]) -> Result<Intervals> {
+    let n = scales.len();
+    if sims.is_empty() || sims.iter().any(|s| s.len() != n) {
+        return Err(StatsError::Shape(format!(
+            "{} simulations for {n} hours (each must have {n} values)",
+            sims.len()
+        )));
+    }
+    if levels.iter().any(|l| !(0.0..1.0).contains(l) || *l == 0.0) {
+        return Err(StatsError::Invalid(format!(
+            "levels {levels:?} must lie strictly between 0 and 1"
+        )));
+    }
+    let mut out = Intervals {
+        levels: levels.to_vec(),
+        lower: vec![Vec::with_capacity(n); levels.len()],
+        upper: vec![Vec::with_capacity(n); levels.len()],
+        median: Vec::with_capacity(n),
+    };
+    let mut c = Vec::with_capacity(sims.len());
+    for h in 0..n {
+        c.clear();
+        c.extend(sims.iter().map(|s| s[h]).filter(|v| v.is_finite()));
+        out.median.push(mixture_quantile(&c, scales[h], 0.5));
+        for (i, l) in levels.iter().enumerate() {
+            out.lower[i].push(mixture_quantile(&c, scales[h], 0.5 - l / 2.0));
+            out.upper[i].push(mixture_quantile(&c, scales[h], 0.5 + l / 2.0));
+        }
+    }
+    Ok(out)
+}
+
+impl Intervals {
+    /// Raises every bound and median below `floor` to it: the intervals of `max(floor, Y)`
+    /// (quantiles commute with a monotone map), for a meter that cannot read below `floor`.
+    pub fn clamp_below(&mut self, floor: f64) {
+        for v in self
+            .lower
+            .iter_mut()
+            .chain(self.upper.iter_mut())
+            .chain(std::iter::once(&mut self.median))
+        {
+            for x in v.iter_mut().filter(|x| **x < floor) {
+                *x = floor;
+            }
+        }
+    }
+}
+
+/// How often one interval level held on a set of hours.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Coverage {
+    /// Nominal level (0.9 for a 90 % interval).
+    pub nominal: f64,
+    /// Measured hours judged.
+    pub hours: usize,
+    /// Share of them inside the interval (bounds included).
+    pub fraction: f64,
+    /// Mean width of the interval over those hours (meter units).
+    pub mean_width: f64,
+    /// Mean width over the mean measured value of those hours (relative width).
+    pub relative_width: f64,
+}
+
+/// Coverage of `lower..=upper` on the hours where `select[h]` is true and `measured[h]` and
+/// both bounds are finite.
+pub fn coverage(
+    nominal: f64,
+    measured: &[f64],
+    lower: &[f64],
+    upper: &[f64],
+    select: &[bool],
+) -> Coverage {
+    let (mut n, mut inside, mut width, mut level) = (0usize, 0usize, 0.0, 0.0);
+    for h in 0..measured
+        .len()
+        .min(lower.len())
+        .min(upper.len())
+        .min(select.len())
+    {
+        let (y, a, b) = (measured[h], lower[h], upper[h]);
+        if select[h] && y.is_finite() && a.is_finite() && b.is_finite() {
+            n += 1;
+            inside += usize::from(a <= y && y <= b);
+            width += b - a;
+            level += y;
+        }
+    }
+    let nf = n.max(1) as f64;
+    Coverage {
+        nominal,
+        hours: n,
+        fraction: if n == 0 { f64::NAN } else { inside as f64 / nf },
+        mean_width: width / nf,
+        relative_width: if level == 0.0 {
+            f64::NAN
+        } else {
+            width / level
+        },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::StandardNormal;
+
+    #[test]
+    fn one_center_gives_the_normal_quantiles() {
+        // N(10, 2²): the 5 % and 95 % quantiles are 10 -+ 1.644854 * 2.
+        let q = mixture_quantile(&[10.0], 2.0, 0.95);
+        assert!((q - (10.0 + 2.0 * 1.6448536269514722)).abs() < 1e-6, "{q}");
+        assert!((mixture_quantile(&[10.0], 2.0, 0.5) - 10.0).abs() < 1e-6);
+        // Two far-apart centers: the median lies between them, each tail follows its center.
+        let q = mixture_quantile(&[0.0, 100.0], 1.0, 0.25);
+        assert!((q - (-0.0)).abs() < 1e-6, "{q}");
+        // No noise: the centers' own quantile.
+        let q = mixture_quantile(&[1.0, 2.0, 3.0, 4.0], 0.0, 0.6);
+        assert!((q - 3.0).abs() < 1e-6, "{q}");
+    }
+
+    #[test]
+    fn coverage_counts_known_hours() {
+        let y = [1.0, 2.0, 3.0, f64::NAN, 5.0];
+        let lo = [0.0, 2.5, 3.0, 0.0, 4.0];
+        let hi = [2.0, 3.0, 4.0, 9.0, 4.5];
+        let c = coverage(0.9, &y, &lo, &hi, &[true, true, true, true, false]);
+        // Hours 0 and 2 inside (a bound counts), 1 outside, 3 missing, 4 not selected.
+        assert_eq!(c.hours, 3);
+        assert!((c.fraction - 2.0 / 3.0).abs() < 1e-12);
+        assert!((c.mean_width - (2.0 + 0.5 + 1.0) / 3.0).abs() < 1e-12);
+        assert!((c.relative_width - 3.5 / 6.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn intervals_of_a_known_model_cover_their_nominal_share() {
+        // Data = truth + N(0, 0.3²) (what the parameters leave uncertain) + N(0, 0.5²) (noise);
+        // the draws scatter the truth by N(0, 0.3²) and the noise scale is 0.5: the predictive
+        // is the data's own distribution, so the 50 % and 90 % intervals hold 50 % and 90 % of
+        // the hours within sampling error (4,000 hours: +-2.5 points is over 3 sd).
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let n = 4000;
+        let mut z = move || rng.sample::<f64, _>(StandardNormal);
+        let truth: Vec<f64> = (0..n).map(|h| 10.0 + (h as f64 / 24.0).sin()).collect();
+        let y: Vec<f64> = truth.iter().map(|t| t + 0.3 * z() + 0.5 * z()).collect();
+        let sims: Vec<Vec<f64>> = (0..100)
+            .map(|_| truth.iter().map(|t| t + 0.3 * z()).collect())
+            .collect();
+        let s = vec![0.5; n];
+        let iv = intervals(&sims, &s, &[0.5, 0.9]).unwrap();
+        for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
+            let c = coverage(nominal, &y, &iv.lower[i], &iv.upper[i], &vec![true; n]);
+            assert!((c.fraction - nominal).abs() < 0.025, "{nominal}: {c:?}");
+        }
+        // Without the draws' spread (the truth alone), the 90 % interval is too narrow:
+        // P(|N(0, 0.34)| < 1.645 * 0.5) = 84.1 %.
+        let one = intervals(std::slice::from_ref(&truth), &s, &[0.9]).unwrap();
+        let c = coverage(0.9, &y, &one.lower[0], &one.upper[0], &vec![true; n]);
+        assert!((c.fraction - 0.841).abs() < 0.02, "{c:?}");
+        // The constant scale of the residuals at the truth is their root mean square.
+        let r = ErrorModel::Constant
+            .scales(&y, &truth, &vec![true; n])
+            .unwrap();
+        assert!((r[0] - 0.34f64.sqrt()).abs() < 0.02, "{}", r[0]);
+    }
+
+    #[test]
+    fn level_scales_follow_the_size_of_the_simulated_value() {
+        // Idle hours (simulated 0, residual 0.1) and busy hours (simulated 10, residual 2):
+        // each gets its own bin's scale, also for hours that were not fitted.
+        let n = 1000;
+        let sim: Vec<f64> = (0..n)
+            .map(|h| if h % 2 == 0 { 0.0 } else { 10.0 })
+            .collect();
+        let y: Vec<f64> = (0..n)
+            .map(|h| {
+                sim[h] + if h % 2 == 0 { 0.1 } else { 2.0 } * if h % 4 < 2 { 1.0 } else { -1.0 }
+            })
+            .collect();
+        let fit: Vec<bool> = (0..n).map(|h| h < 800).collect();
+        let s = ErrorModel::Level.scales(&y, &sim, &fit).unwrap();
+        assert!(
+            (s[0] - 0.1).abs() < 1e-12 && (s[1] - 2.0).abs() < 1e-12,
+            "{:?}",
+            &s[..2]
+        );
+        assert!((s[998] - 0.1).abs() < 1e-12 && (s[999] - 2.0).abs() < 1e-12);
+        // A value above every fitted one (an unfitted hour) takes the top bin's scale.
+        let mut high = sim.clone();
+        high[999] = 50.0;
+        let s = ErrorModel::Level.scales(&y, &high, &fit).unwrap();
+        assert!((s[999] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn clamping_raises_bounds_below_the_floor() {
+        let mut iv = intervals(&[vec![0.0, 5.0]], &[1.0, 1.0], &[0.9]).unwrap();
+        iv.clamp_below(0.0);
+        assert_eq!(iv.lower[0][0], 0.0);
+        assert!((iv.upper[0][0] - 1.6448536).abs() < 1e-6);
+        assert!((iv.lower[0][1] - (5.0 - 1.6448536)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn hour_of_day_scales_follow_the_residuals_of_each_hour() {
+        // Residuals of size 2 at 14:00 and 0 elsewhere, except one hour: the constant scale
+        // is sqrt(mean r²), the hour-of-day scale 2 at 14:00.
+        let n = 24 * 20;
+        let y: Vec<f64> = (0..n)
+            .map(|h| if h % 24 == 14 { 2.0 } else { 0.0 })
+            .collect();
+        let s = ErrorModel::HourOfDay
+            .scales(&y, &vec![0.0; n], &vec![true; n])
+            .unwrap();
+        assert!((s[14] - 2.0).abs() < 1e-12 && s[13] == 0.0);
+        let c = ErrorModel::Constant
+            .scales(&y, &vec![0.0; n], &vec![true; n])
+            .unwrap();
+        assert!((c[0] - (4.0f64 / 24.0).sqrt()).abs() < 1e-12);
+        // Hours not fitted do not count.
+        let fit: Vec<bool> = (0..n).map(|h| h % 24 != 14).collect();
+        let c = ErrorModel::Constant
+            .scales(&y, &vec![0.0; n], &fit)
+            .unwrap();
+        assert_eq!(c[0], 0.0);
+    }
+}
