@@ -29,7 +29,7 @@ fn write_project(dir: &Path) {
     );
     project.push_str(
         "[design]\npoints = 8\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n\
-         [validation]\nholdout = \"last 2 months\"\n",
+         [validation]\nholdout = \"last 2 months\"\npredictive_draws = 4\n",
     );
     std::fs::write(dir.join("project.toml"), project).unwrap();
 }
@@ -164,11 +164,11 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
         assert_eq!(held["monthly"]["n"].as_u64(), Some(2), "{v}");
         assert!(v["monthly"]["n"].as_u64().unwrap() >= 9, "{v}");
     }
-    // Predictive intervals from EnergyPlus at 8 posterior draws: every coverage is a share,
+    // Predictive intervals from EnergyPlus at 4 posterior draws: every coverage is a share,
     // and the 90 % interval holds most of the calibration hours of this synthetic building
     // (its meters are EnergyPlus plus noise: the error model is right by construction).
     let p = &summary["predictive"];
-    assert_eq!(p["draws"].as_u64(), Some(8), "{p}");
+    assert_eq!(p["draws"].as_u64(), Some(4), "{p}");
     for o in p["outputs"].as_array().unwrap() {
         for m in o["by_error_model"].as_array().unwrap() {
             for c in m["in_sample"]
