@@ -121,6 +121,21 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{log2}"
     );
     assert!(log2.contains("reusing the one trained earlier"), "{log2}");
+    // ... but not chains fitted with another held-out period: they saw other hours.
+    let other = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .args(["--holdout", "last 1 month", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&other.stderr);
+    assert!(
+        other.status.code() == Some(1)
+            && e.contains("chains fitted with holdout last 2 months (1464 hours)")
+            && e.contains("last 1 month (744 hours)"),
+        "{e}"
+    );
 
     // The same posterior with HMC (gradients through the surrogate's VJP graph), from optimised
     // starts: short chains, the same recovery and Guideline 14.
@@ -349,9 +364,14 @@ fn check_loads_everything_and_runs_nothing() {
         text.contains("2 calibrated (lighting_power_density, cooling_setpoint_occupied)"),
         "{text}"
     );
-    // The synthetic meters miss 15 July - 15 August (744 h).
+    // The synthetic meters miss 15 July - 15 August (744 h); November and December (1,464 h)
+    // are held out.
     assert!(
-        text.contains("meter for heating_kwh: 8016 of 8760 hours measured"),
+        text.contains("meter for heating_kwh: 6552 of 8760 hours measured (calibration period)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("held out: last 2 months (1464 hours"),
         "{text}"
     );
     assert!(text.contains("Mh from Prior starts"), "{text}");

@@ -258,9 +258,9 @@ fn refinement_round_local_and_distributed() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
-    let text = format!(
-        "{}rounds = 1\npoints = 3\niterations = 200\nburn_in = 100\n",
-        project_text().replace("rounds = 0\n", "")
+    let text = project_text().replace(
+        "rounds = 0\n",
+        "rounds = 1\npoints = 3\niterations = 200\nburn_in = 100\n",
     );
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");

@@ -76,14 +76,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let epw = Epw::read(&args.weather)?;
     let year = args.year.or(project.year);
     let mut meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
-    if let Some(h) = args
-        .holdout
-        .as_ref()
-        .or(project.validation.holdout.as_ref())
-    {
+    let holdout = match (&args.holdout, &project.validation.holdout, &args.project) {
+        (Some(h), _, _) => Some((h, "--holdout".to_string())),
+        (None, Some(h), Some(p)) => Some((h, format!("{}: [validation] holdout", p.display()))),
+        _ => None,
+    };
+    if let Some((h, from)) = holdout {
         meters
             .hold_out(h)
-            .map_err(|m| anyhow::anyhow!("{}: {m}", meters_path.display()))?;
+            .map_err(|m| anyhow::anyhow!("{from}: {m} (meters {})", meters_path.display()))?;
     }
     let mut opts = project.precalibration.clone();
     if let Some(b) = args.band {

@@ -327,11 +327,16 @@ impl Sampler<'_> {
             Some((report, shifted)) => {
                 let path = cal.out.draws_with_surrogate_error_csv();
                 write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
-                (Some(report), crate::predictive::pick(&shifted, k))
+                (
+                    Some(report),
+                    crate::predictive::pick(post.plan, &inp.model, &shifted, k),
+                )
             }
-            None => (None, crate::predictive::pick(draws, k)),
+            None => (
+                None,
+                crate::predictive::pick(post.plan, &inp.model, draws, k),
+            ),
         };
-        let predictive = predictive.iter().map(|u| post.theta(u)).collect();
         let mut residual_ar1: Vec<(String, f64)> = vec![];
         let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
             Some(b) => (0..n_out)

@@ -266,12 +266,19 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let held_out = match &project.validation.holdout {
         None => None,
         Some(h) => {
-            let n = measured.first().map_or(0, Vec::len);
-            let present = |i: usize| measured.iter().any(|m| m[i].is_finite());
-            let hours = h
-                .hours(calendar.year, n, &present)
-                .map_err(|m| project.error_at(&["validation", "holdout"], m))?;
-            Some(HeldOut::split(h.to_string(), hours, &mut measured))
+            let at = |m: String| project.error_at(&["validation", "holdout"], m);
+            let hours = data.held_out_hours(h).map_err(at)?;
+            let held = HeldOut::split(h.to_string(), hours, &mut measured);
+            if let Some(k) = measured
+                .iter()
+                .position(|m| !m.iter().any(|v| v.is_finite()))
+            {
+                return Err(at(format!(
+                    "holdout '{h}' holds out every measured hour of {}: nothing is left to calibrate it with",
+                    outputs[k]
+                )));
+            }
+            Some(held)
         }
     };
     let (bases, base_reports) = crate::bases::bases_of(project, &outputs, &data)?;

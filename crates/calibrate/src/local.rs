@@ -27,6 +27,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     let t_all = Instant::now();
     let mut timings = Timings::default();
     let mut cal = Calibration::load(project.clone(), out)?;
+    same_hours_as_before(&cal)?;
     let inp = &cal.inputs;
     log(&format!(
         "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
@@ -68,6 +69,38 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
     timings.validation_s = t.elapsed().as_secs_f64();
     timings.total_s = t_all.elapsed().as_secs_f64();
     write_summary(&cal, &design, &chains, validation, initial, timings)
+}
+
+/// A rerun reuses the folder's chains and refinement rounds: refuses when they were fitted
+/// with another held-out period (they saw other hours), then records this run's in
+/// `holdout.txt`.
+fn same_hours_as_before(cal: &Calibration) -> Result<(), Error> {
+    let now = match &cal.inputs.held_out {
+        Some(h) => format!(
+            "{} ({} hours)",
+            h.period,
+            h.hours.iter().filter(|o| **o).count()
+        ),
+        None => "none".into(),
+    };
+    let path = cal.out.holdout_txt();
+    let before = std::fs::read_to_string(&path).unwrap_or_else(|_| "none".into());
+    let fitted = [
+        cal.out.chains_checkpoint(),
+        cal.out.join(crate::refine::REFINE_FILE),
+    ]
+    .iter()
+    .any(|p| p.exists());
+    if fitted && before.trim() != now {
+        return Err(Error::Config(format!(
+            "{} holds chains fitted with holdout {}, and this run holds out {now}: they saw \
+             other hours. Use a new --out, or delete chains.json, refine.json and refine/ there \
+             (simulations and the first surrogate are kept)",
+            cal.out.display(),
+            before.trim()
+        )));
+    }
+    crate::write_atomic(&path, now.as_bytes())
 }
 
 /// The design: the hypercube and its spares, EnergyPlus at the points with failed ones

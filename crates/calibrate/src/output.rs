@@ -110,6 +110,11 @@ impl OutputDir {
     }
 
     /// `summary.json`.
+    /// `holdout.txt`: the held-out period the folder's chains were fitted without (`none`).
+    pub fn holdout_txt(&self) -> PathBuf {
+        self.root.join("holdout.txt")
+    }
+
     pub fn summary_json(&self) -> PathBuf {
         self.root.join("summary.json")
     }
@@ -125,15 +130,13 @@ impl OutputDir {
     }
 }
 
-/// The hour-beginning stamps (`YYYY-MM-DDTHH:MM`) of the first `n` hours of `year`: the first
-/// column of every hourly CSV in the folder.
+/// The hour-beginning stamps (`YYYY-MM-DDTHH:MM`) of the first `n` hour slots of `year` (the
+/// grid: no 29 February, [`bemcal_weather::grid`]): the first column of every hourly CSV in the
+/// folder.
 pub(crate) fn timestamps(year: i32, n: usize) -> Vec<String> {
-    let start = chrono::NaiveDate::from_ymd_opt(year, 1, 1)
-        .and_then(|d| d.and_hms_opt(0, 0, 0))
-        .expect("valid year");
     (0..n)
         .map(|t| {
-            (start + chrono::Duration::hours(t as i64))
+            bemcal_weather::grid::slot_time(year, t)
                 .format("%Y-%m-%dT%H:%M")
                 .to_string()
         })

@@ -14,7 +14,9 @@ use bemcal_stats::mcmc::Draws;
 use bemcal_stats::predictive::{coverage, intervals, Coverage, ErrorModel};
 use serde::{Deserialize, Serialize};
 
-use crate::design::saved_outputs;
+use bemcal_energyplus::Model;
+
+use crate::design::{saved_outputs, Plan};
 use crate::output::timestamps;
 use crate::validation::{Candidate, FALLBACKS};
 use crate::{write_atomic, Calibration, ChainSummary, Error};
@@ -36,19 +38,30 @@ pub fn is_predictive(label: &str) -> bool {
     label.starts_with("predictive_")
 }
 
-/// `k` draws evenly spaced through the merged chains (unit space), the middle of each of `k`
-/// equal stretches.
-pub fn pick(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
-    let all: Vec<&[f64]> = draws
+/// `k` draws evenly spaced through the merged chains (unit space; the middle of each of `k`
+/// equal stretches) among those EnergyPlus can be asked to simulate (every model constraint
+/// met, outside the region it refused), in physical units.
+pub fn pick(plan: &Plan, model: &Model, draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let feasible: Vec<Vec<f64>> = draws
         .iter()
         .flat_map(|d| (0..d.len()).map(move |i| d.point(i)))
+        .map(|u| {
+            plan.priors
+                .iter()
+                .zip(u)
+                .map(|(p, u)| p.from_unit(*u))
+                .collect::<Vec<f64>>()
+        })
+        .filter(|x| plan.feasible(model, x) && plan.refused(x).is_none())
         .collect();
-    if k == 0 || all.is_empty() {
-        return vec![];
-    }
+    evenly(&feasible, k)
+}
+
+/// `k` items evenly spaced through `all`, the middle of each of `k` equal stretches.
+fn evenly<T: Clone>(all: &[T], k: usize) -> Vec<T> {
     let k = k.min(all.len());
     (0..k)
-        .map(|j| all[(2 * j + 1) * all.len() / (2 * k)].to_vec())
+        .map(|j| all[(2 * j + 1) * all.len() / (2 * k)].clone())
         .collect()
 }
 
@@ -156,7 +169,7 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
                 LEVELS
                     .iter()
                     .enumerate()
-                    .map(|(i, l)| coverage(*l, meter, &iv.lower[i], &iv.upper[i], hours))
+                    .filter_map(|(i, l)| coverage(*l, meter, &iv.lower[i], &iv.upper[i], hours))
                     .collect()
             };
             by_error_model.push(ModelCoverage {
@@ -228,19 +241,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn picks_spread_evenly_over_all_chains() {
-        let mut a = Draws::new(1);
-        let mut b = Draws::new(1);
-        for i in 0..10 {
-            a.points.push(i as f64);
-            a.log_density.push(0.0);
-            b.points.push(10.0 + i as f64);
-            b.log_density.push(0.0);
-        }
-        let p = pick(&[a.clone(), b], 4);
-        assert_eq!(p, vec![vec![2.0], vec![7.0], vec![12.0], vec![17.0]]);
-        assert_eq!(pick(&[a.clone()], 0), Vec::<Vec<f64>>::new());
-        assert_eq!(pick(&[a], 50).len(), 10);
+    fn picks_spread_evenly() {
+        let all: Vec<usize> = (0..20).collect();
+        assert_eq!(evenly(&all, 4), vec![2, 7, 12, 17]);
+        assert_eq!(evenly(&all, 0), Vec::<usize>::new());
+        assert_eq!(evenly(&all[..10], 50).len(), 10);
         assert!(is_predictive(&label(3)) && !is_predictive("calibrated"));
     }
 }

@@ -531,7 +531,7 @@ impl Default for ValidationSettings {
             holdout: None,
             predictive_draws: 8,
             // Chosen by held-out coverage (docs/benchmarks.md, issue 24): on the quick example
-            // with three months held out, `level` held 52-66 % / 90-92 % of the held-out hours
+            // with three months held out, `level` held 52-67 % / 90-93 % of the held-out hours
             // in its 50 % / 90 % intervals, `constant` up to 93 % / 99 % (too wide when idle).
             error_model: bemcal_stats::predictive::ErrorModel::Level,
         }

@@ -101,7 +101,7 @@ impl Inputs {
     /// hourly and monthly over the calibration period, and over the held-out period if any.
     pub fn metrics(&self, k: usize, name: &str, sim: &[f64]) -> Result<OutputMetrics, Error> {
         let sim = self.with_base(k, sim);
-        let months = months_of_hours(self.year, sim.len());
+        let months = months_of_hours(sim.len());
         let monthly = |meter: &[f64]| g14_monthly(meter, &sim, &months).ok();
         Ok(OutputMetrics {
             output: name.to_string(),

@@ -50,7 +50,7 @@ use crate::PrecalError;
 /// Hours in the (non-leap) meter year.
 pub const HOURS: usize = 8760;
 
-const CUM_DAYS: [usize; 13] = [0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334, 365];
+pub use bemcal_weather::grid::{day_date, slot_month, slot_of, slot_time, CUM_DAYS};
 
 /// Default timestamp format: `auto` = ISO 8601, else US `%m/%d/%Y %H:%M` (`01/13/2011 05:00`).
 pub const DEFAULT_TIMESTAMP_FORMAT: &str = "auto";
@@ -409,15 +409,23 @@ impl MeterData {
         self.series.iter().find(|s| &s.role == role)
     }
 
-    /// Leaves the held-out period out (`[validation] holdout`): its hours become missing in
-    /// every series, so that pre-calibration sees only the calibration period, and a note says
-    /// so. Returns the hour slots held out.
-    pub fn hold_out(&mut self, holdout: &bemcal_weather::period::Holdout) -> Result<usize, String> {
+    /// The hour slots of a held-out period (`[validation] holdout`) on this grid: an hour is
+    /// measured when any series has a value there. Pre-calibration and the calibration both
+    /// ask this, so that `last N months` names the same months for both.
+    pub fn held_out_hours(
+        &self,
+        holdout: &bemcal_weather::period::Holdout,
+    ) -> Result<Vec<bool>, String> {
         let n = self.series.first().map_or(0, |s| s.values.len());
-        let hours = {
-            let present = |h: usize| self.series.iter().any(|s| s.values[h].is_finite());
-            holdout.hours(self.year, n, &present)?
-        };
+        let present = |h: usize| self.series.iter().any(|s| s.values[h].is_finite());
+        holdout.hours(self.year, n, &present)
+    }
+
+    /// Leaves the held-out period out: its hours become missing in every series, so that
+    /// pre-calibration sees only the calibration period, and a note says so. Returns the hour
+    /// slots held out.
+    pub fn hold_out(&mut self, holdout: &bemcal_weather::period::Holdout) -> Result<usize, String> {
+        let hours = self.held_out_hours(holdout)?;
         for s in &mut self.series {
             for (v, &out) in s.values.iter_mut().zip(&hours) {
                 if out {
@@ -546,35 +554,6 @@ fn parse_timestamp(
             .map_err(|e| format!("timestamp '{s}' does not match format '{format}': {e}"))?
     };
     Ok((if plus_day { dt + Duration::days(1) } else { dt }, offset))
-}
-
-/// Index of a (non-29-February) hour-beginning time of `year` on the 8,760-slot grid.
-pub fn slot_of(year: i32, t: NaiveDateTime) -> Option<usize> {
-    if t.year() != year || (t.month() == 2 && t.day() == 29) {
-        return None;
-    }
-    let day = CUM_DAYS[t.month0() as usize] + t.day0() as usize;
-    Some(day * 24 + t.hour() as usize)
-}
-
-/// Date of day `d` (0..365, counted without 29 February) of `year`.
-pub fn day_date(year: i32, d: usize) -> NaiveDate {
-    let m = CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11);
-    NaiveDate::from_ymd_opt(year, m as u32 + 1, (d - CUM_DAYS[m]) as u32 + 1)
-        .expect("valid day of year")
-}
-
-/// Hour-beginning local standard time of slot `t` of `year`.
-pub fn slot_time(year: i32, t: usize) -> NaiveDateTime {
-    day_date(year, t / 24)
-        .and_hms_opt((t % 24) as u32, 0, 0)
-        .expect("valid hour")
-}
-
-/// Month (1..=12) of slot `t`.
-pub fn slot_month(t: usize) -> u32 {
-    let d = t / 24;
-    CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11) as u32 + 1
 }
 
 /// US daylight saving (2007 rules) of a meters file: detected (`auto`: the spring hour absent

@@ -261,6 +261,63 @@ fn predictive_coverage(s: &crate::io::Summary) -> String {
     h
 }
 
+/// The first and the last week of the held-out period, hour by hour: the meter against the
+/// EnergyPlus-based predictive median and 5-95 % interval (`validation/predictive_intervals.csv`)
+/// and the calibrated model.
+fn held_out_weeks(cal: &CalibrationData) -> Result<String, ReportError> {
+    let Some(iv) = &cal.intervals else {
+        return Ok(String::new());
+    };
+    let held: Vec<usize> = iv
+        .get("held_out")
+        .unwrap_or(&[])
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| **v == 1.0)
+        .map(|(h, _)| h)
+        .collect();
+    let (Some(&first), Some(&last)) = (held.first(), held.last()) else {
+        return Ok(String::new());
+    };
+    let week = 7 * 24;
+    let mut windows = vec![analysis::Window {
+        title: "first held-out week".into(),
+        start: first,
+        end: (first + week).min(last + 1),
+    }];
+    if last + 1 >= first + 2 * week {
+        windows.push(analysis::Window {
+            title: "last held-out week".into(),
+            start: last + 1 - week,
+            end: last + 1,
+        });
+    }
+    let mut h = String::from(
+        "<p class=\"sub\">Held-out weeks: the meter (hours that fitted nothing) against the \
+         predictive median and 5&ndash;95 % interval of EnergyPlus at posterior draws plus the \
+         error model's noise, and EnergyPlus at the estimate.</p><div class=\"grid\">",
+    );
+    for o in &cal.summary.outputs {
+        let col = |suf: &str| iv.get(&format!("{o}_{suf}")).unwrap_or(&[]);
+        let calibrated = cal.calibrated.as_ref().and_then(|c| c.get(o));
+        let view = HourlyView {
+            timestamps: &iv.timestamps,
+            measured: col("measured"),
+            q5: col("q5"),
+            q50: col("q50"),
+            q95: col("q95"),
+            calibrated,
+            unit: "kWh per hour",
+        };
+        for w in &windows {
+            let svg = plots::hourly_window(&view, w)?;
+            h.push_str(&figure(&svg, &format!("{}: {}", esc(o), esc(&w.title))));
+        }
+    }
+    h.push_str("</div>\n");
+    Ok(h)
+}
+
 /// The first screen's banner of a calibration whose chains missed a convergence target.
 fn not_converged_banner(s: &crate::io::Summary) -> String {
     let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
@@ -530,6 +587,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
     h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
     h.push_str(&monthly_and_held_out(s));
     h.push_str(&predictive_coverage(s));
+    h.push_str(&held_out_weeks(cal)?);
 
     // ---- parameters (Table 4)
     h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");

@@ -469,6 +469,9 @@ pub struct CalibrationData {
     pub calibrated: Option<Hourly>,
     /// `validation/initial.csv`, if the initial model was simulated.
     pub initial: Option<Hourly>,
+    /// `validation/predictive_intervals.csv` (EnergyPlus at posterior draws plus noise), if
+    /// written.
+    pub intervals: Option<Hourly>,
 }
 
 /// One row of `calendar.csv`.
@@ -732,6 +735,7 @@ pub fn read_calibration(dir: &Path) -> Result<CalibrationData, ReportError> {
         dir: dir.to_path_buf(),
         calibrated: with_bases(opt("calibrated.csv")?),
         initial: with_bases(opt("initial.csv")?),
+        intervals: opt("predictive_intervals.csv")?,
         summary,
         draws,
         predictive,

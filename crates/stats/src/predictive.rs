@@ -90,15 +90,21 @@ fn level_scales(measured: &[f64], simulated: &[f64], fit: &[bool], constant: f64
         .map(|h| (simulated[h], measured[h] - simulated[h]))
         .collect();
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Bins of about equal count; a bin grows past its count while the next value ties with its
+    // largest, so that equal simulated values (a meter idle at 0) share one bin.
     let per = pairs.len().div_ceil(LEVEL_BINS).max(1);
-    // Upper edge and scale of each bin; ties across an edge stay in the lower bin.
-    let bins: Vec<(f64, f64)> = pairs
-        .chunks(per)
-        .map(|c| {
-            let rms = (c.iter().map(|p| p.1 * p.1).sum::<f64>() / c.len() as f64).sqrt();
-            (c[c.len() - 1].0, if c.len() >= 10 { rms } else { constant })
-        })
-        .collect();
+    let mut bins: Vec<(f64, f64)> = vec![];
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (i, &(x, r)) in pairs.iter().enumerate() {
+        sum += r * r;
+        count += 1;
+        let tie = pairs.get(i + 1).is_some_and(|next| next.0 == x);
+        if (count >= per && !tie) || i + 1 == pairs.len() {
+            let rms = (sum / count as f64).sqrt();
+            bins.push((x, if count >= 10 { rms } else { constant }));
+            (sum, count) = (0.0, 0);
+        }
+    }
     simulated
         .iter()
         .map(|&x| {
@@ -135,8 +141,13 @@ pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
         |x: f64| centers.iter().map(|&c| phi((x - c) / sd)).sum::<f64>() / centers.len() as f64;
     let (mut a, mut b) = (lo - 9.0 * sd, hi + 9.0 * sd);
     let tol = 1e-9 * (b - a);
-    while b - a > tol {
+    // At most 100 halvings (a bracket of any width reaches 1e-9 of itself in 30); stop early
+    // where floating point cannot split the bracket any more.
+    for _ in 0..100 {
         let m = 0.5 * (a + b);
+        if b - a <= tol || m <= a || m >= b {
+            break;
+        }
         if cdf(m) < p {
             a = m;
         } else {
@@ -221,19 +232,20 @@ pub struct Coverage {
     pub fraction: f64,
     /// Mean width of the interval over those hours (meter units).
     pub mean_width: f64,
-    /// Mean width over the mean measured value of those hours (relative width).
-    pub relative_width: f64,
+    /// Mean width over the mean measured value of those hours (absent where that mean is 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_width: Option<f64>,
 }
 
 /// Coverage of `lower..=upper` on the hours where `select[h]` is true and `measured[h]` and
-/// both bounds are finite.
+/// both bounds are finite; None where there is no such hour.
 pub fn coverage(
     nominal: f64,
     measured: &[f64],
     lower: &[f64],
     upper: &[f64],
     select: &[bool],
-) -> Coverage {
+) -> Option<Coverage> {
     let (mut n, mut inside, mut width, mut level) = (0usize, 0usize, 0.0, 0.0);
     for h in 0..measured
         .len()
@@ -249,18 +261,17 @@ pub fn coverage(
             level += y;
         }
     }
-    let nf = n.max(1) as f64;
-    Coverage {
+    if n == 0 {
+        return None;
+    }
+    let nf = n as f64;
+    Some(Coverage {
         nominal,
         hours: n,
-        fraction: if n == 0 { f64::NAN } else { inside as f64 / nf },
+        fraction: inside as f64 / nf,
         mean_width: width / nf,
-        relative_width: if level == 0.0 {
-            f64::NAN
-        } else {
-            width / level
-        },
-    }
+        relative_width: (level != 0.0).then(|| width / level),
+    })
 }
 
 #[cfg(test)]
@@ -289,12 +300,16 @@ mod tests {
         let y = [1.0, 2.0, 3.0, f64::NAN, 5.0];
         let lo = [0.0, 2.5, 3.0, 0.0, 4.0];
         let hi = [2.0, 3.0, 4.0, 9.0, 4.5];
-        let c = coverage(0.9, &y, &lo, &hi, &[true, true, true, true, false]);
+        let c = coverage(0.9, &y, &lo, &hi, &[true, true, true, true, false]).unwrap();
         // Hours 0 and 2 inside (a bound counts), 1 outside, 3 missing, 4 not selected.
         assert_eq!(c.hours, 3);
         assert!((c.fraction - 2.0 / 3.0).abs() < 1e-12);
         assert!((c.mean_width - (2.0 + 0.5 + 1.0) / 3.0).abs() < 1e-12);
-        assert!((c.relative_width - 3.5 / 6.0).abs() < 1e-12);
+        assert!((c.relative_width.unwrap() - 3.5 / 6.0).abs() < 1e-12);
+        assert!(coverage(0.9, &y, &lo, &hi, &[false; 5]).is_none());
+        // All measured values 0: no relative width.
+        let zero = coverage(0.5, &[0.0], &[0.0], &[1.0], &[true]).unwrap();
+        assert!(zero.relative_width.is_none());
     }
 
     #[test]
@@ -314,13 +329,13 @@ mod tests {
         let s = vec![0.5; n];
         let iv = intervals(&sims, &s, &[0.5, 0.9]).unwrap();
         for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
-            let c = coverage(nominal, &y, &iv.lower[i], &iv.upper[i], &vec![true; n]);
+            let c = coverage(nominal, &y, &iv.lower[i], &iv.upper[i], &vec![true; n]).unwrap();
             assert!((c.fraction - nominal).abs() < 0.025, "{nominal}: {c:?}");
         }
         // Without the draws' spread (the truth alone), the 90 % interval is too narrow:
         // P(|N(0, 0.34)| < 1.645 * 0.5) = 84.1 %.
         let one = intervals(std::slice::from_ref(&truth), &s, &[0.9]).unwrap();
-        let c = coverage(0.9, &y, &one.lower[0], &one.upper[0], &vec![true; n]);
+        let c = coverage(0.9, &y, &one.lower[0], &one.upper[0], &vec![true; n]).unwrap();
         assert!((c.fraction - 0.841).abs() < 0.02, "{c:?}");
         // The constant scale of the residuals at the truth is their root mean square.
         let r = ErrorModel::Constant
@@ -355,6 +370,33 @@ mod tests {
         high[999] = 50.0;
         let s = ErrorModel::Level.scales(&y, &high, &fit).unwrap();
         assert!((s[999] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn tied_simulated_values_share_one_level_bin() {
+        // 60 % of the hours idle at exactly 0 (residual 0.1 or 0.3 alternating through the
+        // year), 40 % busy: every idle hour gets the scale of all idle hours together.
+        let n = 1000;
+        let sim: Vec<f64> = (0..n)
+            .map(|h| if h < 600 { 0.0 } else { h as f64 })
+            .collect();
+        let y: Vec<f64> = (0..n)
+            .map(|h| sim[h] + if h < 600 { [0.1, 0.3][h % 2] } else { 1.0 })
+            .collect();
+        let s = ErrorModel::Level.scales(&y, &sim, &vec![true; n]).unwrap();
+        let idle = (0.5f64 * (0.01 + 0.09)).sqrt();
+        assert!(
+            (s[0] - idle).abs() < 1e-12 && (s[599] - idle).abs() < 1e-12,
+            "{}",
+            s[0]
+        );
+        assert!((s[700] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_zero_scale_far_from_zero_terminates() {
+        let q = mixture_quantile(&[12345.678; 3], 0.0, 0.05);
+        assert!((q - 12345.678).abs() < 1e-6, "{q}");
     }
 
     #[test]

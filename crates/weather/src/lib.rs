@@ -7,6 +7,7 @@
 //! into day types (weekday, weekend, holiday) for a chosen calendar year, because typical-year
 //! (TMY) files mix source years and so carry no usable weekday.
 
+pub mod grid;
 pub mod measured;
 pub mod period;
 pub mod solar;

@@ -5,22 +5,25 @@
 //! Written as one string or a list of strings, each of which may hold several comma-separated
 //! parts, their union:
 //!
-//! - `last 3 months`: the last three calendar months that hold a measured hour;
+//! - `last 3 months`: the three calendar months that end with the last month holding a
+//!   measured hour;
 //! - `2017-10` or `oct` / `october`: a calendar month;
 //! - `2017-06-01..2017-08-31`: a range of dates, both ends included.
 //!
-//! Hours are the 8,760 hour-beginning slots of the grid year, counted from 1 January 00:00 (the
-//! layout of every hourly file bemcal writes).
+//! Hours are the 8,760 hour-beginning slots of the grid year ([`crate::grid`]: from 1 January
+//! 00:00, without 29 February).
 
 use std::fmt;
 
-use chrono::{Datelike, NaiveDate, NaiveDateTime};
+use chrono::{Datelike, NaiveDate};
+
+use crate::grid;
 use serde::{Deserialize, Serialize};
 
 /// One part of a held-out period.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum HoldoutPart {
-    /// The last `n` calendar months that hold a measured hour.
+    /// The `n` calendar months that end with the last month holding a measured hour.
     LastMonths(u32),
     /// A calendar month (1-12), of the grid year or of the year given.
     Month { year: Option<i32>, month: u32 },
@@ -154,17 +157,10 @@ fn parse_part(p: &str) -> Result<HoldoutPart, String> {
     Err("not understood".into())
 }
 
-/// The date and time of hour slot `h` of `year` (hour-beginning, from 1 January 00:00).
-pub fn hour_start(year: i32, h: usize) -> NaiveDateTime {
-    NaiveDate::from_ymd_opt(year, 1, 1)
-        .and_then(|d| d.and_hms_opt(0, 0, 0))
-        .expect("valid year")
-        + chrono::Duration::hours(h as i64)
-}
-
-/// The calendar month (1-12) of each of the first `n` hour slots of `year`.
-pub fn months_of_hours(year: i32, n: usize) -> Vec<u32> {
-    (0..n).map(|h| hour_start(year, h).month()).collect()
+/// The calendar month (1-12) of each of the first `n` hour slots of the grid
+/// ([`crate::grid`]).
+pub fn months_of_hours(n: usize) -> Vec<u32> {
+    (0..n).map(grid::slot_month).collect()
 }
 
 impl Holdout {
@@ -177,7 +173,7 @@ impl Holdout {
         n: usize,
         measured: &dyn Fn(usize) -> bool,
     ) -> Result<Vec<bool>, String> {
-        let months = months_of_hours(year, n);
+        let months = months_of_hours(n);
         let mut out = vec![false; n];
         for part in &self.parts {
             match *part {
@@ -204,7 +200,7 @@ impl Holdout {
                         return Err(format!("holdout {a}..{b}: the meters are of {year}"));
                     }
                     for (h, o) in out.iter_mut().enumerate() {
-                        let d = hour_start(year, h).date();
+                        let d = grid::slot_time(year, h).date();
                         *o |= a <= d && d <= b;
                     }
                 }
@@ -300,6 +296,18 @@ mod tests {
     }
 
     #[test]
+    fn a_leap_year_keeps_months_on_their_dates() {
+        // 2020: 1 December is slot 334 * 24 on the grid, as in every year.
+        let m = "dec"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(2020, 8760, &all)
+            .unwrap();
+        assert_eq!(m.iter().position(|&x| x), Some(334 * 24));
+        assert_eq!(m.iter().filter(|&&x| x).count(), 31 * 24);
+    }
+
+    #[test]
     fn last_months_follow_the_last_measured_hour() {
         // Meters that end on 30 September: the last two months are August and September.
         let n = 8760;
@@ -308,7 +316,7 @@ mod tests {
         let m = h.hours(2017, n, &|i| i < end).unwrap();
         let first = m.iter().position(|&x| x).unwrap();
         assert_eq!(
-            hour_start(2017, first).date(),
+            grid::slot_time(2017, first).date(),
             NaiveDate::from_ymd_opt(2017, 8, 1).unwrap()
         );
         assert!(m[end - 1] && !m[first - 1]);
