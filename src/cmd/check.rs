@@ -48,7 +48,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!(
             "  held out: {} ({} hours; they fit nothing and judge the model; {kept} measured hours of {} left to calibrate with)",
             h.period,
-            h.hours.iter().filter(|o| **o).count(),
+            h.hour_count(),
             inp.outputs.first().map_or("-", String::as_str)
         );
     }

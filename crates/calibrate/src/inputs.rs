@@ -50,6 +50,11 @@ pub struct HeldOut {
 }
 
 impl HeldOut {
+    /// Hour slots held out.
+    pub fn hour_count(&self) -> usize {
+        self.hours.iter().filter(|o| **o).count()
+    }
+
     /// Splits `measured` (whole meters) by `hours`: the calibration period's values stay in
     /// `measured` (NaN in held-out hours), the held-out values move to the returned period.
     pub fn split(period: String, hours: Vec<bool>, measured: &mut [Vec<f64>]) -> HeldOut {

@@ -76,11 +76,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 /// `holdout.txt`.
 fn same_hours_as_before(cal: &Calibration) -> Result<(), Error> {
     let now = match &cal.inputs.held_out {
-        Some(h) => format!(
-            "{} ({} hours)",
-            h.period,
-            h.hours.iter().filter(|o| **o).count()
-        ),
+        Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
         None => "none".into(),
     };
     let path = cal.out.holdout_txt();

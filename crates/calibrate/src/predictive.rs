@@ -18,7 +18,7 @@ use bemcal_energyplus::Model;
 
 use crate::design::{saved_outputs, Plan};
 use crate::output::timestamps;
-use crate::validation::{Candidate, FALLBACKS};
+use crate::validation::{candidate_key, Candidate, FALLBACKS};
 use crate::{write_atomic, Calibration, ChainSummary, Error};
 
 /// Key of the first predictive draw in `validation/` (0 is the estimate, 1 the initial model,
@@ -133,8 +133,10 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
         .iter()
         .filter_map(|(c, _)| saved_outputs(&vdir, c.key, &inp.plan.values(&c.values)))
         .collect();
-    let at_estimate = std::iter::once(0)
-        .chain(2..2 + FALLBACKS)
+    // The estimate was settled on one of the validation candidates (a fallback where
+    // EnergyPlus failed at the MAP): the run whose values are the estimate's.
+    let at_estimate = (0..=FALLBACKS)
+        .map(candidate_key)
         .find_map(|key| saved_outputs(&vdir, key, &inp.plan.values(&chains.estimate)));
     let Some(at_estimate) = at_estimate.filter(|_| !runs.is_empty()) else {
         return Ok(None);
@@ -195,7 +197,7 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
             by_error_model,
         });
     }
-    write_intervals_csv(cal, &columns)?;
+    write_intervals_csv(cal, &fit, &columns)?;
     Ok(Some(PredictiveReport {
         draws: runs.len(),
         failed: candidates.len() - runs.len(),
@@ -208,9 +210,12 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
 
 /// `validation/predictive_intervals.csv`: per hour, whether it is held out, then per meter the
 /// measured value and the 5/25/50/75/95 % predictive quantiles.
-fn write_intervals_csv(cal: &Calibration, columns: &[(String, Vec<f64>)]) -> Result<(), Error> {
+fn write_intervals_csv(
+    cal: &Calibration,
+    fit: &[bool],
+    columns: &[(String, Vec<f64>)],
+) -> Result<(), Error> {
     let inp = &cal.inputs;
-    let fit = inp.calibration_hours();
     let mut s = String::from("timestamp,held_out");
     for (name, _) in columns {
         s.push(',');

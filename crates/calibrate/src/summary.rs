@@ -164,7 +164,7 @@ impl HoldoutReport {
         let count = |v: &[f64]| v.iter().filter(|x| x.is_finite()).count();
         Some(HoldoutReport {
             period: h.period.clone(),
-            hours: h.hours.iter().filter(|o| **o).count(),
+            hours: h.hour_count(),
             measured_hours: inp
                 .outputs
                 .iter()

@@ -16,6 +16,16 @@ pub const FALLBACKS: usize = 3;
 /// Key of the initial model (the prior modes) in `validation/`.
 pub const INITIAL_KEY: usize = 1;
 
+/// The key in `validation/` of the `rank`-th candidate: 0 the estimate, then `rank + 1` (1 is
+/// the initial model).
+pub fn candidate_key(rank: usize) -> usize {
+    if rank == 0 {
+        0
+    } else {
+        rank + 1
+    }
+}
+
 /// A point to validate the calibration at: the estimate (`rank` 0) or the `rank`-th fallback.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
@@ -46,7 +56,7 @@ pub fn next_candidate(chains: &ChainSummary, failures: &[String]) -> ValidationS
     match values {
         Some(x) => ValidationStep::Validate(Candidate {
             rank,
-            key: if rank == 0 { 0 } else { rank + 1 },
+            key: candidate_key(rank),
             values: x.clone(),
         }),
         None => ValidationStep::Exhausted(format!(

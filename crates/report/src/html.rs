@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 
 use crate::analysis;
-use crate::io::{CalibrationData, OutputMetrics, PrecalData};
+use crate::io::{CalibrationData, Hourly, OutputMetrics, PrecalData};
 use crate::plots::{self, HourlyView, PriorPosterior};
 use crate::ReportError;
 
@@ -261,6 +261,24 @@ fn predictive_coverage(s: &crate::io::Summary) -> String {
     h
 }
 
+/// Output `o` of an hourly bands file (columns `{o}_measured`, `{o}_q5`, `{o}_q50`, `{o}_q95`:
+/// `posterior_predictive.csv`, `validation/predictive_intervals.csv`) beside the calibrated
+/// model's run, cut to the file's hours.
+fn hourly_view<'a>(bands: &'a Hourly, o: &str, calibrated: Option<&'a Hourly>) -> HourlyView<'a> {
+    let col = |suf: &str| bands.get(&format!("{o}_{suf}")).unwrap_or(&[]);
+    HourlyView {
+        timestamps: &bands.timestamps,
+        measured: col("measured"),
+        q5: col("q5"),
+        q50: col("q50"),
+        q95: col("q95"),
+        calibrated: calibrated
+            .and_then(|c| c.get(o))
+            .map(|v| &v[..v.len().min(bands.timestamps.len())]),
+        unit: "kWh per hour",
+    }
+}
+
 /// The first and the last week of the held-out period, hour by hour: the meter against the
 /// EnergyPlus-based predictive median and 5-95 % interval (`validation/predictive_intervals.csv`)
 /// and the calibrated model.
@@ -298,17 +316,7 @@ fn held_out_weeks(cal: &CalibrationData) -> Result<String, ReportError> {
          error model's noise, and EnergyPlus at the estimate.</p><div class=\"grid\">",
     );
     for o in &cal.summary.outputs {
-        let col = |suf: &str| iv.get(&format!("{o}_{suf}")).unwrap_or(&[]);
-        let calibrated = cal.calibrated.as_ref().and_then(|c| c.get(o));
-        let view = HourlyView {
-            timestamps: &iv.timestamps,
-            measured: col("measured"),
-            q5: col("q5"),
-            q50: col("q50"),
-            q95: col("q95"),
-            calibrated,
-            unit: "kWh per hour",
-        };
+        let view = hourly_view(iv, o, cal.calibrated.as_ref());
         for w in &windows {
             let svg = plots::hourly_window(&view, w)?;
             h.push_str(&figure(&svg, &format!("{}: {}", esc(o), esc(&w.title))));
@@ -837,21 +845,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
     h.push_str("<p class=\"sub\">Year view: daily means (grey envelope: measured daily min&ndash;max; band: daily mean of the hourly 5 % and 95 % bounds). Weeks: every hour.</p>");
     let pp = &cal.predictive;
     for o in &s.outputs {
-        let col = |suf: &str| pp.get(&format!("{o}_{suf}")).unwrap_or(&[]);
-        let calibrated = cal
-            .calibrated
-            .as_ref()
-            .and_then(|c| c.get(o))
-            .map(|v| &v[..v.len().min(pp.timestamps.len())]);
-        let view = HourlyView {
-            timestamps: &pp.timestamps,
-            measured: col("measured"),
-            q5: col("q5"),
-            q50: col("q50"),
-            q95: col("q95"),
-            calibrated,
-            unit: "kWh per hour",
-        };
+        let view = hourly_view(pp, o, cal.calibrated.as_ref());
         let missing = view.measured.iter().filter(|x| !x.is_finite()).count();
         let m = s.validation.iter().find(|m| &m.output == o);
         let _ = write!(
