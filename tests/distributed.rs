@@ -24,7 +24,10 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{bemcal, finished, golden_epw, have_engine, repo, small_project, Proc, NOT_CONVERGED};
+use common::{
+    bemcal, finished, golden_epw, have_engine, http_get, metric, repo, small_project, Proc,
+    NOT_CONVERGED,
+};
 
 const TOKEN: &str = "test-token-0123456789abcdef";
 
@@ -528,12 +531,44 @@ fn worker_killed_and_coordinator_restarted() {
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
     let data = tmp.path().join("coord");
-    let (coord, url) = coordinator(&data, "127.0.0.1:0");
+    let with_metrics = ["--lease-ttl", "3", "--metrics-listen", "127.0.0.1:0"];
+    let (coord, url, metrics) =
+        common::coordinator_with_metrics(&data, "127.0.0.1:0", TOKEN, &with_metrics);
+    let metrics = metrics.unwrap();
+    // Before any run: every series exists, at 0.
+    let (code, page) = http_get(&metrics);
+    assert_eq!(code, 200, "{page}");
+    assert_eq!(
+        metric(&page, "bemcal_runs{state=\"running\"}"),
+        Some(0.0),
+        "{page}"
+    );
+    assert_eq!(
+        metric(&page, "bemcal_lease_expiries_total"),
+        Some(0.0),
+        "{page}"
+    );
     let mut w0 = Some(worker(&url, "w0", &tmp.path().join("w0")));
     let _w1 = worker(&url, "w1", &tmp.path().join("w1"));
     let o = client(&["submit", pf.to_str().unwrap()], &url);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let run = String::from_utf8(o.stdout).unwrap().trim().to_string();
+    // The run and its design-point simulations show as they are queued and leased.
+    let page = http_get(&metrics).1;
+    assert_eq!(
+        metric(&page, "bemcal_runs{state=\"running\"}"),
+        Some(1.0),
+        "{page}"
+    );
+    let simulations = |page: &str| {
+        ["queued", "leased", "done"].map(|s| {
+            metric(
+                page,
+                &format!("bemcal_jobs{{kind=\"simulate\",state=\"{s}\"}}"),
+            )
+            .unwrap()
+        })
+    };
 
     // Kill -9 w0 while it runs a simulation.
     let leased_by_w0 = |s: &serde_json::Value| {
@@ -565,6 +600,27 @@ fn worker_killed_and_coordinator_restarted() {
             .count()
             >= 3
     });
+    // Scraped while the run goes on: simulations queued or leased, some done, each with a
+    // duration, and w0's lease expired (it was killed).
+    let page = http_get(&metrics).1;
+    let [queued, leased, done] = simulations(&page);
+    assert!(done >= 3.0 && queued + leased + done >= 6.0, "{page}");
+    let done_attempts = "bemcal_job_attempts_total{kind=\"simulate\",outcome=\"done\"}";
+    let mid_run = metric(&page, done_attempts).unwrap();
+    assert!(mid_run >= 3.0, "{page}");
+    assert!(
+        metric(
+            &page,
+            "bemcal_job_duration_seconds_count{kind=\"simulate\"}"
+        )
+        .unwrap()
+            >= 3.0,
+        "{page}"
+    );
+    assert!(
+        metric(&page, "bemcal_artifact_store_bytes").unwrap() > 0.0,
+        "{page}"
+    );
     let port = url.rsplit(':').next().unwrap().to_string();
     drop(coord);
     let before: Vec<(u64, u64)> = s["jobs"]
@@ -575,11 +631,31 @@ fn worker_killed_and_coordinator_restarted() {
         .map(|j| (j["id"].as_u64().unwrap(), j["attempts"].as_u64().unwrap()))
         .collect();
     std::thread::sleep(Duration::from_secs(1));
-    let (_coord, url2) = coordinator(&data, &format!("127.0.0.1:{port}"));
+    let (_coord, url2, metrics) =
+        common::coordinator_with_metrics(&data, &format!("127.0.0.1:{port}"), TOKEN, &with_metrics);
     assert_eq!(url, url2);
+    let metrics = metrics.unwrap();
 
     let s = wait_for(&url, &run, 600, |_| false);
     assert_eq!(s["state"], "done", "run did not complete: {s}");
+    // The counters come from the database: after the restart they went on from where they
+    // were, and the lost lease of the killed worker is counted.
+    let page = http_get(&metrics).1;
+    assert!(metric(&page, done_attempts).unwrap() > mid_run, "{page}");
+    assert!(
+        metric(&page, "bemcal_lease_expiries_total").unwrap() >= 1.0,
+        "{page}"
+    );
+    assert_eq!(
+        metric(&page, "bemcal_runs{state=\"done\"}"),
+        Some(1.0),
+        "{page}"
+    );
+    assert_eq!(simulations(&page)[0], 0.0, "{page}");
+    assert!(
+        metric(&page, "bemcal_job_duration_seconds_count{kind=\"train\"}").unwrap() >= 1.0,
+        "{page}"
+    );
     let jobs = s["jobs"].as_array().unwrap();
     for id in &killed {
         let j = jobs.iter().find(|j| j["id"] == *id).unwrap();

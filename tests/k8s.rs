@@ -9,6 +9,8 @@ use std::process::{Command, Stdio};
 
 use serde_yaml_ng::Value;
 
+mod common;
+
 const BIN: &str = env!("CARGO_BIN_EXE_bemcal");
 
 fn root() -> PathBuf {
@@ -122,10 +124,17 @@ fn flag<'a>(args: &'a [String], name: &str) -> &'a str {
     &args[i + 1]
 }
 
+/// The container's gRPC port (its only port, or the one named `grpc`).
 fn container_port(objs: &[Value], deployment: &str) -> u64 {
     let ports = container(objs, deployment)["ports"].as_sequence().unwrap();
-    assert_eq!(ports.len(), 1);
-    ports[0]["containerPort"].as_u64().unwrap()
+    let grpc = match ports.len() {
+        1 => &ports[0],
+        _ => ports
+            .iter()
+            .find(|p| p["name"] == "grpc")
+            .expect("a port named grpc"),
+    };
+    grpc["containerPort"].as_u64().unwrap()
 }
 
 fn help(sub: &str) -> String {
@@ -157,8 +166,9 @@ fn every_manifest_parses_and_the_kustomization_lists_them() {
                 assert!(d["metadata"]["name"].is_string(), "{name}: metadata.name");
             }
         }
-        // Everything but the kustomization itself and the example Secret is deployed.
-        if name != "kustomization.yaml" && name != "secret.example.yaml" {
+        // Everything but the kustomization itself and the examples (the Secret, KEDA's
+        // ScaledObject) is deployed.
+        if name != "kustomization.yaml" && !name.ends_with(".example.yaml") {
             assert!(
                 listed.contains(&name),
                 "{name} not in kustomization resources"
@@ -232,6 +242,32 @@ fn service_container_listen_and_probe_ports_agree() {
     for (k, v) in svc["spec"]["selector"].as_mapping().unwrap() {
         assert_eq!(&labels[s(k)], v, "selector {k:?}");
     }
+    // The metrics port: --metrics-listen, the container's "metrics" port, the Service's, and
+    // the scrape annotation agree.
+    let metrics: std::net::SocketAddr = flag(&a, "--metrics-listen").parse().unwrap();
+    assert!(metrics.ip().is_unspecified(), "--metrics-listen {metrics}");
+    let c = container(&objs, "bemcal-coordinator");
+    let named = |ports: &Value, key: &str| -> Option<u64> {
+        ports
+            .as_sequence()?
+            .iter()
+            .find(|p| p["name"] == "metrics")?[key]
+            .as_u64()
+    };
+    assert_eq!(
+        named(&c["ports"], "containerPort"),
+        Some(metrics.port() as u64)
+    );
+    assert_eq!(
+        named(&svc["spec"]["ports"], "targetPort"),
+        Some(metrics.port() as u64)
+    );
+    let annotations = &find(&objs, "Deployment", "bemcal-coordinator")["spec"]["template"]
+        ["metadata"]["annotations"];
+    assert_eq!(
+        annotations["prometheus.io/port"],
+        metrics.port().to_string().as_str()
+    );
     // Probes: native gRPC probes (grpc.health.v1.Health/Check) on that port.
     let c = container(&objs, "bemcal-coordinator");
     for p in ["startupProbe", "readinessProbe", "livenessProbe"] {
@@ -497,6 +533,10 @@ fn probes_pass_against_a_real_coordinator() {
         .unwrap() = "127.0.0.1:0".into();
     *a.iter_mut().skip_while(|x| *x != "--data").nth(1).unwrap() =
         dir.path().join("data").to_str().unwrap().into();
+    *a.iter_mut()
+        .skip_while(|x| *x != "--metrics-listen")
+        .nth(1)
+        .unwrap() = "127.0.0.1:0".into();
     let token = "k8s-test-token-0123456789abcdef";
     let mut child = Command::new(BIN)
         .args(&a)
@@ -512,9 +552,8 @@ fn probes_pass_against_a_real_coordinator() {
         }
     }
     let mut line = String::new();
-    std::io::BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+    reader.read_line(&mut line).unwrap();
     let _guard = Kill(child);
     let addr = line
         .trim()
@@ -522,6 +561,16 @@ fn probes_pass_against_a_real_coordinator() {
         .unwrap()
         .to_string();
     let url = format!("http://{addr}");
+    // The metrics port the manifests open answers a scrape, without a token.
+    let mut line = String::new();
+    reader.read_line(&mut line).unwrap();
+    let metrics = line.trim().strip_prefix("metrics on ").unwrap().to_string();
+    let (code, page) = common::http_get(&metrics);
+    assert_eq!(code, 200, "{page}");
+    assert!(
+        page.contains("bemcal_jobs{kind=\"simulate\",state=\"queued\"} 0"),
+        "{page}"
+    );
 
     let coord = container(&objs, "bemcal-coordinator");
     let services: Vec<String> = ["startupProbe", "readinessProbe", "livenessProbe"]

@@ -112,6 +112,21 @@ CREATE INDEX jobs_run_state ON jobs(run_id, state, id); -- a run's queued / leas
 
 pub use bemcal_client::File;
 
+/// The coordinator's figures at one moment (see [`Store::metrics_snapshot`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MetricsSnapshot {
+    /// (kind, state, jobs).
+    pub jobs: Vec<(String, String, u64)>,
+    /// (state, runs).
+    pub runs: Vec<(String, u64)>,
+    /// (kind, outcome, attempts); outcomes: done, failed, lost, returned, stale.
+    pub attempts: Vec<(String, String, u64)>,
+    /// (kind, seconds) of every attempt that finished its job.
+    pub durations: Vec<(String, f64)>,
+    /// Bytes in the artifact store.
+    pub artifact_bytes: u64,
+}
+
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]
 pub enum DbError {
@@ -589,6 +604,54 @@ impl Store {
                 [run],
                 |r| r.get::<_, i64>(0),
             )? as u64)
+        })
+    }
+
+    /// What `/metrics` reports, read in one transaction: jobs by kind and state, runs by
+    /// state, attempts by kind and outcome (`lost` = a lease that expired), the durations of
+    /// finished attempts by kind, and the artifact store's size. Every figure is derived from
+    /// the durable record, so the counters survive a restart.
+    pub fn metrics_snapshot(&self) -> Result<MetricsSnapshot> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let pairs = |sql: &str| -> rusqlite::Result<Vec<(String, String, u64)>> {
+                let mut st = tx.prepare(sql)?;
+                let rows = st
+                    .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get::<_, i64>(2)? as u64)))?
+                    .collect();
+                rows
+            };
+            let jobs = pairs("SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state")?;
+            let attempts = pairs(
+                "SELECT j.kind, a.outcome, COUNT(*) FROM attempts a JOIN jobs j ON j.id = a.job_id
+                 WHERE a.outcome IS NOT NULL GROUP BY j.kind, a.outcome",
+            )?;
+            let runs = {
+                let mut st = tx.prepare("SELECT state, COUNT(*) FROM runs GROUP BY state")?;
+                let rows = st
+                    .query_map([], |r| Ok((r.get(0)?, r.get::<_, i64>(1)? as u64)))?
+                    .collect::<rusqlite::Result<Vec<(String, u64)>>>()?;
+                rows
+            };
+            let durations = {
+                let mut st = tx.prepare(
+                    "SELECT j.kind, a.ended_ms - a.started_ms FROM attempts a JOIN jobs j ON j.id = a.job_id
+                     WHERE a.outcome = 'done' AND a.ended_ms IS NOT NULL",
+                )?;
+                let rows = st
+                    .query_map([], |r| Ok((r.get(0)?, r.get::<_, i64>(1)?.max(0) as f64 / 1e3)))?
+                    .collect::<rusqlite::Result<Vec<(String, f64)>>>()?;
+                rows
+            };
+            let artifact_bytes: i64 =
+                tx.query_row("SELECT COALESCE(SUM(size), 0) FROM artifacts", [], |r| r.get(0))?;
+            Ok(MetricsSnapshot {
+                jobs,
+                runs,
+                attempts,
+                durations,
+                artifact_bytes: artifact_bytes.max(0) as u64,
+            })
         })
     }
 

@@ -8,6 +8,7 @@
 
 pub mod db;
 pub mod driver;
+pub mod metrics;
 pub mod portfolio;
 pub mod server;
 pub mod service;

@@ -30,13 +30,16 @@ pub struct Options {
     pub worker_token: Option<String>,
     /// PEM certificate and key: serve TLS.
     pub tls: Option<(PathBuf, PathBuf)>,
+    /// Where to serve Prometheus metrics (`GET /metrics`, plain HTTP, no token); `None`: not.
+    pub metrics: Option<SocketAddr>,
     pub config: Config,
 }
 
-/// Serves until `shutdown` completes; `ready` gets the bound address (port 0 = ephemeral).
+/// Serves until `shutdown` completes; `ready` gets the bound addresses (port 0 = ephemeral) of
+/// the gRPC service and of the metrics.
 pub async fn serve(
     opts: Options,
-    ready: impl FnOnce(SocketAddr),
+    ready: impl FnOnce(SocketAddr, Option<SocketAddr>),
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     std::fs::create_dir_all(&opts.data)?;
@@ -105,7 +108,21 @@ pub async fn serve(
     });
 
     let listener = tokio::net::TcpListener::bind(opts.listen).await?;
-    ready(listener.local_addr()?);
+    let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
+    let metrics_addr = match opts.metrics {
+        None => None,
+        Some(addr) => {
+            let metrics = tokio::net::TcpListener::bind(addr)
+                .await
+                .map_err(|e| anyhow::anyhow!("metrics address {addr}: {e}"))?;
+            let bound = metrics.local_addr()?;
+            tokio::spawn(crate::metrics::serve(st.clone(), metrics, async move {
+                let _ = metrics_stopped.await;
+            }));
+            Some(bound)
+        }
+    };
+    ready(listener.local_addr()?, metrics_addr);
     let svc = CoordinatorServer::new(Service { st })
         .max_decoding_message_size(MAX_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_MESSAGE_BYTES);
@@ -130,5 +147,6 @@ pub async fn serve(
             shutdown,
         )
         .await?;
+    let _ = stop_metrics.send(());
     Ok(())
 }

@@ -54,11 +54,12 @@ fn tls_coordinator_serves_clients_that_trust_its_ca() {
             token: TOKEN.into(),
             worker_token: None,
             tls: Some((dir.path().join("tls.crt"), dir.path().join("tls.key"))),
+            metrics: None,
             config: Config::default(),
         };
         let server = tokio::spawn(serve(
             opts,
-            move |a| {
+            move |a, _| {
                 let _ = addr_tx.send(a);
             },
             async move {

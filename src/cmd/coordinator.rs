@@ -56,6 +56,10 @@ pub struct Args {
     /// Uploads received at once; more wait their turn.
     #[arg(long, default_value_t = 16)]
     pub max_uploads: usize,
+    /// Serve Prometheus metrics (`GET /metrics`, plain HTTP, no token) on this address, e.g.
+    /// 0.0.0.0:9464 (port 0: any free port; the bound address is printed).
+    #[arg(long, env = "BEMCAL_METRICS_LISTEN")]
+    pub metrics_listen: Option<SocketAddr>,
 }
 
 /// Where the coordinator is and how to authenticate.
@@ -107,6 +111,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         token,
         worker_token,
         tls: a.tls_cert.zip(a.tls_key),
+        metrics: a.metrics_listen,
         config: Config {
             lease_ttl_ms: (a.lease_ttl * 1000.0) as u64,
             max_failures: a.max_failures.max(1),
@@ -119,8 +124,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let rt = bemcal_client::runtime()?;
     rt.block_on(serve(
         opts,
-        |addr| {
+        |addr, metrics| {
             println!("listening on {addr}");
+            if let Some(m) = metrics {
+                println!("metrics on {}", bemcal_coordinator::metrics::url(m));
+            }
             let _ = std::io::stdout().flush();
         },
         bemcal_client::shutdown_signal(),

@@ -9,6 +9,9 @@ mod common;
 pub mod coordinator;
 pub mod design;
 pub mod diagnose;
+pub mod doctor;
+pub mod example;
+pub mod export;
 pub mod metrics;
 pub mod params;
 pub mod portfolio;
@@ -39,6 +42,10 @@ pub enum Command {
     Simulate(simulate::Args),
     /// List a model's calibration parameters and priors.
     Params(params::Args),
+    /// Where bemcal finds Python, EnergyPlus, ONNX Runtime and PyTorch, each tried for real.
+    Doctor(doctor::Args),
+    /// Write a bundled example building (model and project files) into a folder.
+    Example(example::Args),
     /// An EPW of the metered year from measured weather (ISD-lite or a station CSV) and a TMY.
     Weather(weather::Args),
     /// Pre-calibration: meters -> bases, day types, schedule priors (priors.toml).
@@ -75,6 +82,8 @@ pub enum Command {
     Results(results::Args),
     /// Cancel a run.
     Cancel(cancel::Args),
+    /// A calibration's posterior as an ArviZ InferenceData file (netCDF).
+    Export(export::Args),
     /// Many buildings calibrated together: submit, run locally, status, results.
     Portfolio(portfolio::Args),
 }
@@ -98,6 +107,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::Params(a) => params::run(a),
+        Command::Example(a) => example::run(a),
+        Command::Doctor(a) => doctor::run(a),
         Command::Weather(a) => weather::run(a),
         Command::Precalibrate(a) => precalibrate::run(a),
         Command::Train(a) => train::run(a),
@@ -116,6 +127,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Watch(a) => watch::run(a),
         Command::Results(a) => results::run(a),
         Command::Cancel(a) => cancel::run(a),
+        Command::Export(a) => export::run(a),
         Command::Portfolio(a) => portfolio::run(a),
     }
 }

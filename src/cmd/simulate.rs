@@ -13,9 +13,10 @@ pub struct Args {
     /// Model file: a building spec (TOML) or an `[idf]` parameter map.
     #[arg(long)]
     pub model: PathBuf,
-    /// EnergyPlus weather file (EPW).
+    /// EnergyPlus weather file (EPW), or `bundled:FILE` from EnergyPlus's WeatherData folder
+    /// (e.g. `bundled:USA_CO_Golden-NREL.724666_TMY3.epw`).
     #[arg(long)]
-    pub weather: PathBuf,
+    pub weather: String,
     /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines) or
     /// its `summary.json` (its calibrated values); --set overrides them.
     #[arg(long)]
@@ -44,7 +45,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let idf = model.instantiate(&given, runner.idd())?;
     let tmp = tempfile::tempdir().context("creating a temporary run directory")?;
     let dir = a.keep.clone().unwrap_or_else(|| tmp.path().join("run"));
-    let result = runner.run(&idf, &a.weather, model.outputs(), &dir)?;
+    let weather = common::resolve_weather_ref(&a.weather)?;
+    let result = runner.run(&idf, &weather, model.outputs(), &dir)?;
     common::write_hourly_csv(&a.out, common::model_year(&model), &result.outputs)?;
     let totals = result.outputs.totals();
     if a.json {

@@ -117,6 +117,18 @@ impl Drop for Proc {
 /// A `bemcal coordinator` on `listen` with its state in `data`, `token` as its bearer token and
 /// `extra` arguments; returns it with its URL (read from its "listening on" line).
 pub fn coordinator(data: &Path, listen: &str, token: &str, extra: &[&str]) -> (Proc, String) {
+    let (c, url, _) = coordinator_with_metrics(data, listen, token, extra);
+    (c, url)
+}
+
+/// [`coordinator`], and the URL of its `/metrics` when `extra` holds `--metrics-listen` (read
+/// from its "metrics on" line).
+pub fn coordinator_with_metrics(
+    data: &Path,
+    listen: &str,
+    token: &str,
+    extra: &[&str],
+) -> (Proc, String, Option<String>) {
     let mut c = bemcal()
         .args(["coordinator", "--listen", listen])
         .args(extra)
@@ -126,14 +138,57 @@ pub fn coordinator(data: &Path, listen: &str, token: &str, extra: &[&str]) -> (P
         .stdout(Stdio::piped())
         .spawn()
         .unwrap();
-    let mut line = String::new();
-    BufReader::new(c.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut lines = BufReader::new(c.stdout.take().unwrap()).lines();
+    let line = lines.next().unwrap().unwrap();
     let addr = line
         .trim()
         .strip_prefix("listening on ")
         .expect("address")
         .to_string();
-    (Proc(c), format!("http://{addr}"))
+    let metrics = extra.contains(&"--metrics-listen").then(|| {
+        let line = lines.next().unwrap().unwrap();
+        line.trim()
+            .strip_prefix("metrics on ")
+            .expect("metrics address")
+            .to_string()
+    });
+    (Proc(c), format!("http://{addr}"), metrics)
+}
+
+/// `GET url` over plain HTTP/1.1 (a `/metrics` page): the status code and the body.
+pub fn http_get(url: &str) -> (u16, String) {
+    use std::io::{Read, Write};
+    let rest = url.strip_prefix("http://").expect("an http:// URL");
+    let (host, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    let mut s = std::net::TcpStream::connect(host).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    let code = text
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    let body = text
+        .split_once("\r\n\r\n")
+        .map(|(_, b)| b.to_string())
+        .unwrap_or_default();
+    (code, body)
+}
+
+/// The value of one series (`name{labels}` exactly as exposed) in a metrics page.
+pub fn metric(page: &str, series: &str) -> Option<f64> {
+    page.lines().find_map(|l| {
+        l.strip_prefix(series)?
+            .strip_prefix(' ')?
+            .trim()
+            .parse()
+            .ok()
+    })
 }

@@ -13,8 +13,10 @@ pub mod bases;
 mod calibration;
 mod chains;
 pub mod design;
+pub mod examples;
 mod inputs;
 mod local;
+
 pub mod output;
 pub mod posterior;
 pub mod predictive;

