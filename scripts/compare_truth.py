@@ -8,7 +8,7 @@ import sys
 
 truth = json.load(open(sys.argv[1]))
 summary = json.load(open(sys.argv[2]))
-estimate = dict(summary["calibrated_values"])
+estimate = dict(summary["calibrated_values"])  # an object (or [name, value] pairs before issue 22)
 rows = summary["posterior"]["parameters"]
 # The intervals with the surrogate's error (summary.json surrogate_error), when measured.
 carried = {p["name"]: p for p in (summary.get("surrogate_error") or {}).get("parameters", [])}

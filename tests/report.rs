@@ -154,7 +154,7 @@ fn write_calibration(dir: &Path) {
             "correlated_pairs": [{"a": "lighting_power_density", "b": "cooling_setpoint_occupied", "rho": -0.86}],
             "max_rhat": 1.04, "min_ess_bulk": 850.0
         },
-        "sigma_delta_kwh": [["heating_kwh", 0.41], ["electricity_kwh", 0.39]],
+        "sigma_delta_kwh": {"heating_kwh": 0.41, "electricity_kwh": 0.39},
         "sigma_eta_kwh": [["heating_kwh", 1.2], ["electricity_kwh", 0.3]],
         "acceptance_rate": [0.24, 0.22, 0.26],
         "estimate": "map",

@@ -232,7 +232,7 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
             h.hours,
             h.measured_hours
                 .iter()
-                .map(|(o, a, b)| format!("{o} {a} / {b}"))
+                .map(|(o, h)| format!("{o} {} / {}", h.held_out, h.calibration))
                 .collect::<Vec<_>>()
                 .join(", ")
         );

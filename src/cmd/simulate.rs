@@ -80,6 +80,7 @@ fn read_values(
     if path.extension().is_some_and(|e| e == "json") {
         #[derive(serde::Deserialize)]
         struct Calibrated {
+            #[serde(with = "bemcal_calibrate::named")]
             calibrated_values: Vec<(String, f64)>,
         }
         let s: Calibrated = serde_json::from_str(&text).with_context(|| {

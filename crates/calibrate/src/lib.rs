@@ -16,7 +16,7 @@ pub mod design;
 pub mod examples;
 mod inputs;
 mod local;
-
+pub mod named;
 pub mod output;
 pub mod posterior;
 pub mod predictive;

@@ -86,10 +86,14 @@ pub struct Summary {
     pub outputs: Vec<String>,
     pub parameters: Vec<ParameterReport>,
     pub posterior: PosteriorSummary,
+    /// Model-discrepancy standard deviation per output, kWh (`{output: value}`).
+    #[serde(with = "crate::named")]
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// AR(1) coefficient of the hourly residuals at the MAP, per output (empty with iid).
-    #[serde(default)]
+    #[serde(default, with = "crate::named")]
     pub residual_ar1: Vec<(String, f64)>,
+    /// The surrogate's held-out error per output, kWh (`{output: value}`).
+    #[serde(with = "crate::named")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
     pub acceptance_rate: Vec<f64>,
     /// Times the final chains were extended because a convergence target was missed.
@@ -106,6 +110,8 @@ pub struct Summary {
     /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate_note: Option<String>,
+    /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
+    #[serde(with = "crate::named")]
     pub calibrated_values: Vec<(String, f64)>,
     pub validation: Vec<OutputMetrics>,
     pub initial: Vec<OutputMetrics>,
@@ -155,7 +161,17 @@ pub struct HoldoutReport {
     /// Hour slots held out.
     pub hours: usize,
     /// Per output, the measured hours held out and those left to calibrate with.
-    pub measured_hours: Vec<(String, usize, usize)>,
+    #[serde(with = "crate::named")]
+    pub measured_hours: Vec<(String, MeasuredHours)>,
+}
+
+/// Measured hours of one meter on either side of the held-out period.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MeasuredHours {
+    /// Measured hours in the held-out period (they judge the model).
+    pub held_out: usize,
+    /// Measured hours left to calibrate with.
+    pub calibration: usize,
 }
 
 impl HoldoutReport {
@@ -169,7 +185,13 @@ impl HoldoutReport {
                 .outputs
                 .iter()
                 .enumerate()
-                .map(|(k, o)| (o.clone(), count(&h.measured[k]), count(&inp.measured[k])))
+                .map(|(k, o)| {
+                    let hours = MeasuredHours {
+                        held_out: count(&h.measured[k]),
+                        calibration: count(&inp.measured[k]),
+                    };
+                    (o.clone(), hours)
+                })
                 .collect(),
         })
     }
