@@ -6,6 +6,7 @@ use bemcal_client::proto::RunRequest;
 /// Cancel a run.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Run id (printed by `submit`).
     pub run: String,
     #[command(flatten)]
     pub client: ClientArgs,

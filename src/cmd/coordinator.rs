@@ -35,6 +35,7 @@ pub struct Args {
     /// TLS certificate (PEM); with --tls-key, serve https.
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
+    /// TLS private key (PEM) of --tls-cert.
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
     /// Seconds a lease lasts without a heartbeat.

@@ -10,11 +10,13 @@ use super::common;
 /// simulate them with EnergyPlus.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Model file: a building spec (TOML) or an `[idf]` parameter map.
     #[arg(long)]
     pub model: PathBuf,
     /// Number of design points.
     #[arg(long, default_value_t = 20)]
     pub points: usize,
+    /// Seed of the Latin hypercube.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Maximin column-swap iterations.

@@ -6,6 +6,7 @@ pub mod calibrate;
 pub mod cancel;
 pub mod check;
 mod common;
+pub mod completions;
 pub mod coordinator;
 pub mod design;
 pub mod diagnose;
@@ -84,6 +85,8 @@ pub enum Command {
     Cancel(cancel::Args),
     /// A calibration's posterior as an ArviZ InferenceData file (netCDF).
     Export(export::Args),
+    /// A shell completion script (bash, zsh, fish, elvish, powershell) on stdout.
+    Completions(completions::Args),
     /// Many buildings calibrated together: submit, run locally, status, results.
     Portfolio(portfolio::Args),
 }
@@ -128,6 +131,55 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Results(a) => results::run(a),
         Command::Cancel(a) => cancel::run(a),
         Command::Export(a) => export::run(a),
+        Command::Completions(a) => completions::run(a),
         Command::Portfolio(a) => portfolio::run(a),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::Cli;
+
+    /// Every subcommand, flag and positional argument says what it is in `--help`.
+    #[test]
+    fn every_flag_has_help() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            let path = format!("{path} {}", cmd.get_name());
+            if cmd.get_about().is_none() {
+                missing.push(format!("{path}: no about"));
+            }
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                if arg.get_help().is_none() && arg.get_long_help().is_none() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &path, missing);
+            }
+        }
+        let mut missing = vec![];
+        walk(&Cli::command(), "", &mut missing);
+        assert!(missing.is_empty(), "without help text: {missing:#?}");
+    }
+
+    #[test]
+    fn completions_name_every_subcommand() {
+        let mut out = Vec::new();
+        clap_complete::generate(
+            clap_complete::Shell::Bash,
+            &mut Cli::command(),
+            "bemcal",
+            &mut out,
+        );
+        let script = String::from_utf8(out).unwrap();
+        for sub in Cli::command().get_subcommands() {
+            assert!(script.contains(sub.get_name()), "{}", sub.get_name());
+        }
     }
 }

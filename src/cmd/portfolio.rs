@@ -29,15 +29,18 @@ pub enum Sub {
     /// OUT/<building>/ (with report.html), portfolio.csv, portfolio.json and portfolio.html.
     /// Exits non-zero if any building failed (after writing everything that finished).
     Run {
+        /// The portfolio manifest (as for `submit`).
         manifest: PathBuf,
         /// Worker processes.
         #[arg(long, default_value_t = 2)]
         local_workers: usize,
+        /// Folder for every building's results and the portfolio's files.
         #[arg(long)]
         out: PathBuf,
     },
     /// Per building: state, stage, G14 per output, NMBE, CV-RMSE, max R-hat, run time, errors.
     Status {
+        /// Portfolio id (printed by `submit`).
         portfolio: String,
         #[command(flatten)]
         client: ClientArgs,
@@ -47,7 +50,9 @@ pub enum Sub {
     },
     /// Download the finished buildings (OUT/<building>/, report.html) and the summary files.
     Results {
+        /// Portfolio id (printed by `submit`).
         portfolio: String,
+        /// Folder to write the finished buildings and the summary files into.
         #[arg(long)]
         out: PathBuf,
         #[command(flatten)]

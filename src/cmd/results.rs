@@ -7,7 +7,9 @@ use super::coordinator::ClientArgs;
 /// Download summary.json, draws.csv, posterior_predictive.csv, surrogate/, validation/, ...
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Run id (printed by `submit`).
     pub run: String,
+    /// Folder to write the run's files into.
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]

@@ -12,8 +12,10 @@ use super::common;
 /// Simulate a model at given (true) parameters and write noisy hourly meters with a gap.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Model file: a building spec (TOML) or an `[idf]` parameter map.
     #[arg(long)]
     pub model: PathBuf,
+    /// EnergyPlus weather file (EPW) of the synthetic year.
     #[arg(long)]
     pub weather: PathBuf,
     /// True parameter value, NAME=VALUE (repeatable); others at their prior mode.
@@ -32,6 +34,7 @@ pub struct Args {
     /// Missing hours, START:END (hours of the year); default 15 July - 15 August.
     #[arg(long)]
     pub gap: Option<String>,
+    /// Seed of the noise.
     #[arg(long, default_value_t = 42)]
     pub seed: u64,
     /// Meters CSV to write.

@@ -5,6 +5,7 @@ use super::coordinator::ClientArgs;
 /// Follow a run until it ends (exit status 1 if it fails or is cancelled).
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Run id (printed by `submit`).
     pub run: String,
     #[command(flatten)]
     pub client: ClientArgs,
