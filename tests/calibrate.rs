@@ -331,14 +331,9 @@ fn range_and_estimate(summary: &serde_json::Value, name: &str) -> (f64, f64) {
         .find(|p| p["name"] == name)
         .unwrap();
     let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
-    let estimate = summary["calibrated_values"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|v| v[0] == name)
-        .unwrap()[1]
+    let estimate = summary["calibrated_values"][name]
         .as_f64()
-        .unwrap();
+        .unwrap_or_else(|| panic!("no calibrated value of {name}"));
     (range, estimate)
 }
 
