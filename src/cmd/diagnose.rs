@@ -2,7 +2,8 @@
 //! and tail ESS as ArviZ computes them) and summary statistics per parameter.
 //!
 //! DRAWS.csv has columns `chain,draw,<parameter>...`; each chain's rows are ordered by `draw`
-//! and all chains must have the same number of draws.
+//! and all chains must have the same number of draws. Columns ending in `__` (the sampler's
+//! statistics, as CmdStan names them) are skipped.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -34,8 +35,10 @@ struct Row<'a> {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let t = Table::read(&args.draws)?;
     let (ci, di) = (t.column("chain")?, t.column("draw")?);
+    // Columns ending in `__` are the sampler's statistics per draw (CmdStan's convention:
+    // accept_stat__, stepsize__, ...), not quantities to diagnose.
     let params: Vec<usize> = (0..t.header.len())
-        .filter(|&k| k != ci && k != di)
+        .filter(|&k| k != ci && k != di && !t.header[k].ends_with("__"))
         .collect();
     if params.is_empty() {
         bail!(

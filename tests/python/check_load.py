@@ -45,6 +45,19 @@ for k, chain in enumerate(chains):
         assert np.array_equal(got, rows[name].to_numpy()), name
     assert np.array_equal(data.sample_stats["lp"].sel(chain=k).to_numpy(), rows["log_posterior"].to_numpy())
 
+# The sampler's statistics per draw (CmdStan's columns), as ArviZ names them.
+for column, name in [("accept_stat__", "acceptance_rate"), ("stepsize__", "step_size"),
+                     ("n_leapfrog__", "n_steps"), ("divergent__", "diverging")]:
+    assert column in draws.columns, f"draws.csv has no {column}: {list(draws.columns)}"
+    for k, chain in enumerate(chains):
+        rows = draws[draws["chain"] == chain].sort_values("draw")
+        got = data.sample_stats[name].sel(chain=k).to_numpy()
+        assert np.array_equal(got, rows[column].to_numpy().astype(got.dtype)), name
+accept = data.sample_stats["acceptance_rate"].to_numpy()
+assert ((0 <= accept) & (accept <= 1)).all()
+assert (data.sample_stats["step_size"].to_numpy() > 0).all(), "HMC draws have a step size"
+assert (data.sample_stats["n_steps"].to_numpy() >= 1).all()
+
 # Summary statistics: the InferenceData's against summary.json's.
 for p in summary["posterior"]["parameters"]:
     x = data.posterior[p["name"]].to_numpy().ravel()

@@ -740,6 +740,7 @@ fn sub_draws(d: &Draws, dim: usize) -> Draws {
         out.points.extend_from_slice(&d.point(i)[..dim]);
     }
     out.log_density = d.log_density.clone();
+    out.stats = d.stats.clone();
     out
 }
 

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use bemcal_stats::convergence::Convergence;
 use bemcal_stats::lhs::Design;
-use bemcal_stats::mcmc::Draws;
+use bemcal_stats::mcmc::{DrawStats, Draws};
 use bemcal_stats::metrics::G14Metrics;
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
@@ -388,11 +388,18 @@ pub(crate) fn write_draws_csv(
             s.push_str(&format!(",sigma_delta_{o}"));
         }
     }
-    s.push_str(if log_posterior {
-        ",log_posterior\n"
-    } else {
-        "\n"
-    });
+    if log_posterior {
+        s.push_str(",log_posterior");
+    }
+    // The sampler's statistics per draw, named as CmdStan names them, when every chain has them.
+    let stats: Option<Vec<&[DrawStats]>> = match log_posterior {
+        true => draws.iter().map(Draws::stats).collect(),
+        false => None,
+    };
+    if stats.is_some() {
+        s.push_str(",accept_stat__,stepsize__,n_leapfrog__,divergent__");
+    }
+    s.push('\n');
     for (c, dr) in draws.iter().enumerate() {
         for i in 0..dr.len() {
             let u = dr.point(i);
@@ -407,6 +414,13 @@ pub(crate) fn write_draws_csv(
             }
             if log_posterior {
                 s.push_str(&format!(",{}", dr.log_density[i]));
+            }
+            if let Some(st) = stats.as_ref().map(|all| all[c][i]) {
+                let divergent = u8::from(st.divergent);
+                s.push_str(&format!(
+                    ",{},{},{},{divergent}",
+                    st.accept_stat, st.step_size, st.n_leapfrog
+                ));
             }
             s.push('\n');
         }

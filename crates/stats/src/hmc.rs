@@ -33,7 +33,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use crate::mcmc::{cholesky, f64_bits, Draws};
+use crate::mcmc::{cholesky, f64_bits, DrawStats, Draws};
 use crate::{Result, StatsError};
 
 /// Energy error (nats) past which a trajectory counts as divergent and is rejected.
@@ -438,6 +438,7 @@ impl HmcState {
     fn finish(&mut self, tr: Trajectory, draws: &mut Draws) {
         let post_burn_in = self.iteration >= self.config.burn_in;
         self.leapfrog_steps += u64::from(tr.done);
+        let (eps, steps, divergent) = (tr.eps, tr.done, tr.stopped || tr.last.is_none());
         let mut alpha = 0.0;
         if let (false, Some((ln_pi, grad, lp))) = (tr.stopped, tr.last) {
             let h1 = -ln_pi + 0.5 * tr.rho.iter().map(|v| v * v).sum::<f64>();
@@ -464,7 +465,13 @@ impl HmcState {
         let burn = self.config.burn_in;
         if post_burn_in {
             self.accept_stat_post_burn_in += alpha;
-            draws.push(&self.position(), self.log_density);
+            let stats = DrawStats {
+                accept_stat: alpha,
+                step_size: eps,
+                n_leapfrog: steps,
+                divergent,
+            };
+            draws.push(&self.position(), self.log_density, stats);
             return;
         }
         self.ln_eps = self
@@ -749,6 +756,15 @@ mod tests {
                 states[c].mean_accept_stat()
             );
             assert_eq!(states[c].divergent().1, 0);
+            // One record of the sampler's statistics per draw, which sum to the chain's own
+            // counters (the draws are the post-burn-in iterations).
+            let stats = draws[c].stats().expect("statistics of every draw");
+            assert_eq!(stats.len(), draws[c].len());
+            let mean_accept = stats.iter().map(|s| s.accept_stat).sum::<f64>() / stats.len() as f64;
+            assert!((mean_accept - states[c].mean_accept_stat()).abs() < 1e-12);
+            assert!(stats
+                .iter()
+                .all(|s| s.step_size > 0.0 && s.n_leapfrog >= 1 && !s.divergent));
         }
         let all: Vec<&[f64]> = draws
             .iter()

@@ -276,6 +276,22 @@ pub(crate) mod f64_bits {
     }
 }
 
+/// What the sampler did in the transition to one recorded draw: the sampler diagnostics
+/// CmdStan writes beside its draws (`accept_stat__`, `stepsize__`, `n_leapfrog__`,
+/// `divergent__`; Stan Reference Manual, "MCMC sampling").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DrawStats {
+    /// Acceptance probability of the transition: `min(1, exp(-dH))` for HMC, the
+    /// Metropolis-Hastings ratio `min(1, p(u') q(u) / (p(u) q(u')))` for MH.
+    pub accept_stat: f64,
+    /// The leapfrog step size used (jittered); 0 for Metropolis-Hastings.
+    pub step_size: f64,
+    /// Leapfrog steps taken (the trajectory's length); 0 for Metropolis-Hastings.
+    pub n_leapfrog: u32,
+    /// The trajectory diverged (energy error over the limit, or a non-finite density).
+    pub divergent: bool,
+}
+
 /// Recorded post-burn-in draws of one chain (unit space) and their log densities.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Draws {
@@ -285,6 +301,10 @@ pub struct Draws {
     pub points: Vec<f64>,
     /// Log posterior of each draw.
     pub log_density: Vec<f64>,
+    /// The sampler's statistics of each draw (absent from checkpoints written before they
+    /// were kept: see [`Draws::stats`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stats: Vec<DrawStats>,
 }
 
 impl Draws {
@@ -294,7 +314,13 @@ impl Draws {
             dim,
             points: Vec::new(),
             log_density: Vec::new(),
+            stats: Vec::new(),
         }
+    }
+    /// The sampler's statistics of every draw, or `None` when some draws have none (draws
+    /// made up rather than sampled, or a chain begun before they were kept).
+    pub fn stats(&self) -> Option<&[DrawStats]> {
+        (self.stats.len() == self.len() && !self.is_empty()).then_some(&self.stats)
     }
     /// Number of draws.
     pub fn len(&self) -> usize {
@@ -322,10 +348,12 @@ impl Draws {
         assert_eq!(self.dim, later.dim, "draws of different dimension");
         self.points.extend_from_slice(&later.points);
         self.log_density.extend_from_slice(&later.log_density);
+        self.stats.extend_from_slice(&later.stats);
     }
-    pub(crate) fn push(&mut self, x: &[f64], lp: f64) {
+    pub(crate) fn push(&mut self, x: &[f64], lp: f64, stats: DrawStats) {
         self.points.extend_from_slice(x);
         self.log_density.push(lp);
+        self.stats.push(stats);
     }
 }
 
@@ -671,7 +699,13 @@ impl ChainState {
             self.ind_dropped = true;
         }
         if t > self.config.burn_in {
-            draws.push(&self.position, self.log_density);
+            let stats = DrawStats {
+                accept_stat: alpha,
+                step_size: 0.0,
+                n_leapfrog: 0,
+                divergent: false,
+            };
+            draws.push(&self.position, self.log_density, stats);
             return;
         }
         match self.config.target_acceptance {
