@@ -148,6 +148,12 @@ fn portfolio_of_small_buildings_with_one_broken() {
             out.join(name).join("report.html").is_file(),
             "{name}: no report"
         );
+        // Each building's estimate, as its summary.json has it (issue 22).
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join(name).join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(r["estimate"], summary["calibrated_values"], "{r:#}");
+        assert!(r["converged"].is_boolean(), "{r:#}");
         assert_eq!(r["report"], format!("{name}/report.html"));
     }
 
@@ -169,6 +175,14 @@ fn portfolio_of_small_buildings_with_one_broken() {
     let csv = std::fs::read_to_string(out.join("portfolio.csv")).unwrap();
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(csv.lines().next().unwrap().contains("_nmbe_pct"), "{csv}");
+    // One column per calibrated parameter, its estimate on every finished building's line.
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    for (parameter, value) in row("north")["estimate"].as_object().unwrap() {
+        let k = header.iter().position(|h| h == parameter).expect(parameter);
+        let line = csv.lines().find(|l| l.starts_with("north,")).unwrap();
+        let cell: f64 = line.split(',').nth(k).unwrap().parse().unwrap();
+        assert_eq!(cell, value.as_f64().unwrap(), "{parameter}");
+    }
     let html = std::fs::read_to_string(out.join("portfolio.html")).unwrap();
     for name in ["north", "south", "annex"] {
         assert!(

@@ -162,6 +162,19 @@ pub async fn follow(
     }
 }
 
+/// The calibrated values of a `summary.json`, in the model's order (an object keyed by name,
+/// or the `[name, value]` pairs of older summaries); empty when it has none.
+fn estimate(summary_json: &str) -> Vec<(String, f64)> {
+    #[derive(serde::Deserialize)]
+    struct Calibrated {
+        #[serde(default, with = "bemcal_calibrate::named")]
+        calibrated_values: Vec<(String, f64)>,
+    }
+    serde_json::from_str::<Calibrated>(summary_json)
+        .map(|c| c.calibrated_values)
+        .unwrap_or_default()
+}
+
 /// The summary row of a run.
 pub fn row(s: &RunStatus) -> BuildingRow {
     let summary: serde_json::Value = serde_json::from_str(&s.summary_json).unwrap_or_default();
@@ -196,6 +209,8 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         error: (!s.error.is_empty()).then(|| s.error.clone()),
         g14_pass: (!outputs.is_empty()).then(|| outputs.iter().all(|o| o.pass)),
         max_rhat: summary["posterior"]["max_rhat"].as_f64(),
+        converged: summary["converged"].as_bool(),
+        estimate: estimate(&s.summary_json),
         run_time_s: summary["timings"]["total_s"].as_f64().unwrap_or(elapsed),
         simulations_run: s.simulations_run,
         simulations_shared: s.simulations_shared,
@@ -223,6 +238,8 @@ pub fn summarize(
             g14_pass: None,
             outputs: vec![],
             max_rhat: None,
+            converged: None,
+            estimate: vec![],
             run_time_s: 0.0,
             simulations_run: 0,
             simulations_shared: 0,

@@ -34,6 +34,12 @@ pub struct BuildingRow {
     pub g14_pass: Option<bool>,
     pub outputs: Vec<OutputRow>,
     pub max_rhat: Option<f64>,
+    /// The chains met their R-hat and ESS targets (None: no chains yet).
+    pub converged: Option<bool>,
+    /// The calibrated parameters at the estimate, in the model's order (`{name: value}` in
+    /// portfolio.json, one column per parameter in portfolio.csv).
+    #[serde(serialize_with = "as_object")]
+    pub estimate: Vec<(String, f64)>,
     pub run_time_s: f64,
     pub simulations_run: u32,
     pub simulations_shared: u32,
@@ -52,6 +58,22 @@ pub struct PortfolioSummary {
     pub simulations_run: u32,
     pub simulations_shared: u32,
     pub rows: Vec<BuildingRow>,
+}
+
+/// `[(name, value)]` as a JSON object keyed by name, in order.
+fn as_object<S: serde::Serializer>(v: &[(String, f64)], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_map(v.iter().map(|(k, x)| (k, x)))
+}
+
+/// Parameter names over all rows' estimates, in first-seen order.
+fn parameter_names(p: &PortfolioSummary) -> Vec<String> {
+    let mut names: Vec<String> = vec![];
+    for (n, _) in p.rows.iter().flat_map(|r| &r.estimate) {
+        if !names.contains(n) {
+            names.push(n.clone());
+        }
+    }
+    names
 }
 
 fn csv_field(s: &str) -> String {
@@ -80,7 +102,8 @@ fn output_names(p: &PortfolioSummary) -> Vec<String> {
     names
 }
 
-/// Writes `portfolio.csv` (one line per building; per output NMBE, CV-RMSE and G14 pass),
+/// Writes `portfolio.csv` (one line per building; per output NMBE, CV-RMSE and G14 pass; the
+/// estimate of every calibrated parameter),
 /// `portfolio.json` and `portfolio.html` (a self-contained table linking each report) in `dir`.
 pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
     std::fs::create_dir_all(dir).map_err(|source| ReportError::Io {
@@ -88,22 +111,27 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
         source,
     })?;
     let names = output_names(p);
+    let parameters = parameter_names(p);
     let mut csv = String::from(
-        "building,run,state,stage,g14_pass,max_rhat,run_time_s,simulations_run,simulations_shared",
+        "building,run,state,stage,g14_pass,max_rhat,converged,run_time_s,simulations_run,simulations_shared",
     );
     for n in &names {
         csv.push_str(&format!(",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass"));
     }
+    for n in &parameters {
+        csv.push_str(&format!(",{}", csv_field(n)));
+    }
     csv.push_str(",error\n");
     for r in &p.rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{:.1},{},{}",
+            "{},{},{},{},{},{},{},{:.1},{},{}",
             csv_field(&r.building),
             r.run,
             r.state,
             r.stage,
             r.g14_pass.map_or(String::new(), |b| b.to_string()),
             num(r.max_rhat, 4),
+            r.converged.map_or(String::new(), |b| b.to_string()),
             r.run_time_s,
             r.simulations_run,
             r.simulations_shared
@@ -118,6 +146,10 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
                 )),
                 None => csv.push_str(",,,"),
             }
+        }
+        for n in &parameters {
+            let v = r.estimate.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+            csv.push_str(&format!(",{}", v.map_or(String::new(), |v| v.to_string())));
         }
         csv.push_str(&format!(
             ",{}\n",
