@@ -287,11 +287,12 @@ fn report_is_self_contained_with_every_section_and_figure() {
         assert!(html.contains(&format!("id=\"{id}\"")), "no section {id}");
     }
     // Figures: prior/posterior per parameter, trace+rank per parameter, per sigma_delta and
-    // for the log posterior, per output a year view and four seasonal weeks plus the gap week,
-    // and for the pre-calibration 2 clusters + 2 box plots + 2 interval plots.
+    // for the log posterior, per output a year view, the measured-vs-calibrated scatter, the
+    // monthly totals and four seasonal weeks plus the gap week, and for the pre-calibration 2
+    // clusters + 2 box plots + 2 interval plots.
     let svgs = html.matches("<svg").count();
     let expected =
-        PARAMS.len() + (PARAMS.len() + OUTPUTS.len() + 1) + OUTPUTS.len() * (1 + 4 + 1) + 6;
+        PARAMS.len() + (PARAMS.len() + OUTPUTS.len() + 1) + OUTPUTS.len() * (1 + 2 + 4 + 1) + 6;
     assert_eq!(svgs, expected, "SVG figures");
     assert_eq!(svgs, html.matches("</svg>").count());
     // Tables and flags.
@@ -305,6 +306,7 @@ fn report_is_self_contained_with_every_section_and_figure() {
     assert!(html.contains("class=\"fail\">fail") && html.contains("class=\"pass\">pass"));
     assert!(html.contains("MCMC chains"), "timings");
     assert!(html.contains("Merged schedule intervals"));
+    assert!(html.contains("measured against calibrated") && html.contains("monthly totals"));
 }
 
 #[test]

@@ -301,9 +301,90 @@ pub fn zoom_windows(timestamps: &[String], measured: &[f64]) -> Vec<Window> {
     out
 }
 
+/// Monthly totals of a measured and a simulated hourly series over the hours both have (the
+/// hours Guideline 14's monthly figures compare): `(month 1-12, measured, simulated)` for each
+/// month with at least one such hour. The month of hour `i` is read from `timestamps[i]`
+/// (`YYYY-MM-...`).
+pub fn monthly_totals(
+    timestamps: &[String],
+    measured: &[f64],
+    simulated: &[f64],
+) -> Vec<(u32, f64, f64)> {
+    let mut sums = [(0.0, 0.0, 0usize); 12];
+    for ((t, &m), &s) in timestamps.iter().zip(measured).zip(simulated) {
+        let month = t.get(5..7).and_then(|x| x.parse::<usize>().ok());
+        if let (Some(k @ 1..=12), true) = (month, m.is_finite() && s.is_finite()) {
+            sums[k - 1].0 += m;
+            sums[k - 1].1 += s;
+            sums[k - 1].2 += 1;
+        }
+    }
+    (1..=12)
+        .zip(sums)
+        .filter(|(_, (_, _, n))| *n > 0)
+        .map(|(k, (m, s, _))| (k, m, s))
+        .collect()
+}
+
+/// A 2-D histogram of `(x, y)` pairs on a `bins` x `bins` grid over `[lo, hi]` on both axes
+/// (a scatter of 8,760 hours drawn as at most `bins^2` cells): `(x bin, y bin, count)` for the
+/// non-empty cells. Pairs with a non-finite value or outside the range are left out.
+pub fn binned_pairs(
+    x: &[f64],
+    y: &[f64],
+    lo: f64,
+    hi: f64,
+    bins: usize,
+) -> Vec<(usize, usize, usize)> {
+    let mut counts = std::collections::BTreeMap::new();
+    let width = (hi - lo) / bins as f64;
+    if width.is_nan() || width <= 0.0 {
+        return vec![];
+    }
+    for (&a, &b) in x.iter().zip(y) {
+        if !(a.is_finite() && b.is_finite() && (lo..=hi).contains(&a) && (lo..=hi).contains(&b)) {
+            continue;
+        }
+        let cell = |v: f64| (((v - lo) / width) as usize).min(bins - 1);
+        *counts.entry((cell(a), cell(b))).or_insert(0) += 1;
+    }
+    counts.into_iter().map(|((i, j), n)| (i, j, n)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn monthly_totals_use_the_hours_both_series_have() {
+        let ts: Vec<String> = [
+            "2021-01-01T00:00",
+            "2021-01-31T23:00",
+            "2021-02-01T00:00",
+            "2021-03-01T00:00",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let measured = [1.0, 2.0, f64::NAN, 4.0];
+        let simulated = [1.5, 2.5, 9.0, f64::NAN];
+        assert_eq!(
+            monthly_totals(&ts, &measured, &simulated),
+            vec![(1, 3.0, 4.0)]
+        );
+    }
+
+    #[test]
+    fn binned_pairs_count_each_cell_and_skip_missing() {
+        let x = [0.0, 0.1, 9.9, 10.0, f64::NAN, 11.0];
+        let y = [0.0, 0.2, 9.9, 10.0, 1.0, 1.0];
+        // 10 bins of width 1: (0, 0) twice, the top cell (9, 9) twice (10.0 is kept in it).
+        assert_eq!(
+            binned_pairs(&x, &y, 0.0, 10.0, 10),
+            vec![(0, 0, 2), (9, 9, 2)]
+        );
+        assert!(binned_pairs(&x, &y, 1.0, 1.0, 10).is_empty());
+    }
 
     #[test]
     fn triangular_integrates_to_one() {

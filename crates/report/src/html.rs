@@ -868,6 +868,22 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
             &plots::hourly_year(&view)?,
             &format!("{}: the year, daily", esc(o)),
         ));
+        if let Some(calibrated) = view.calibrated {
+            let months = analysis::monthly_totals(&pp.timestamps, view.measured, calibrated);
+            h.push_str("<div class=\"grid\">");
+            h.push_str(&figure(
+                &plots::measured_vs_calibrated(view.measured, calibrated, "kWh")?,
+                &format!("{}: every hour, measured against calibrated (shade: hours per cell; line: 1:1)", esc(o)),
+            ));
+            h.push_str(&figure(
+                &plots::monthly_totals(&months, "kWh per month")?,
+                &format!(
+                    "{}: monthly totals over the hours the meter has (dark: measured; orange: calibrated)",
+                    esc(o)
+                ),
+            ));
+            h.push_str("</div>\n");
+        }
         h.push_str("<div class=\"grid\">");
         for w in analysis::zoom_windows(&pp.timestamps, view.measured) {
             let svg = plots::hourly_window(&view, &w)?;

@@ -501,6 +501,102 @@ pub fn hourly_window(v: &HourlyView<'_>, w: &Window) -> Result<String, PlotError
     })
 }
 
+/// Measured against calibrated, hour by hour: a 2-D histogram (cells shaded by how many hours
+/// fall in them) with the 1:1 line; the way an engineer checks a calibration at a glance
+/// (points on the line: the model follows the meter; a fan or a bend: it does not).
+pub fn measured_vs_calibrated(
+    measured: &[f64],
+    calibrated: &[f64],
+    unit: &str,
+) -> Result<String, PlotError> {
+    const BINS: usize = 60;
+    let (min, max) = finite_range(measured.iter().chain(calibrated));
+    let lo = min.min(0.0);
+    let (lo, hi) = pad(lo, max.max(lo + 1e-9), 0.03);
+    let cells = analysis::binned_pairs(measured, calibrated, lo, hi, BINS);
+    let most = cells.iter().map(|c| c.2).max().unwrap_or(1) as f64;
+    let w = (hi - lo) / BINS as f64;
+    render(340, 320, |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(8)
+            .margin_right(16)
+            .x_label_area_size(36)
+            .y_label_area_size(50)
+            .build_cartesian_2d(lo..hi, lo..hi)?;
+        c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
+            .x_labels(5)
+            .y_labels(5)
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
+            .x_desc(format!("measured, {unit}"))
+            .y_desc(format!("calibrated, {unit}"))
+            .label_style((FONT, 11))
+            .axis_desc_style((FONT, 11))
+            .draw()?;
+        c.draw_series(cells.iter().map(|&(i, j, n)| {
+            // Shade on a log scale: a handful of hours stays visible beside thousands.
+            let a = 0.15 + 0.85 * ((n as f64).ln_1p() / most.ln_1p());
+            let (x0, y0) = (lo + i as f64 * w, lo + j as f64 * w);
+            Rectangle::new([(x0, y0), (x0 + w, y0 + w)], POSTERIOR.mix(a).filled())
+        }))?;
+        c.draw_series(LineSeries::new(
+            [(lo, lo), (hi, hi)],
+            CALIBRATED.stroke_width(1),
+        ))?;
+        Ok(())
+    })
+}
+
+/// Monthly totals, measured beside calibrated (bars per month; `months`: `(month 1-12,
+/// measured, calibrated)` from [`analysis::monthly_totals`]).
+pub fn monthly_totals(months: &[(u32, f64, f64)], unit: &str) -> Result<String, PlotError> {
+    const NAMES: [&str; 12] = [
+        "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+    ];
+    let top = months
+        .iter()
+        .flat_map(|m| [m.1, m.2])
+        .filter(|v| v.is_finite())
+        .fold(1e-9, f64::max);
+    let (_, hi) = pad(0.0, top, 0.06);
+    render(540, 260, |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(8)
+            .margin_right(16)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.5..12.5, 0.0..hi)?;
+        c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
+            .disable_x_mesh()
+            .x_labels(12)
+            .y_labels(5)
+            .x_label_formatter(&|v: &f64| {
+                let k = v.round() as usize;
+                NAMES
+                    .get(k.wrapping_sub(1))
+                    .map_or(String::new(), |s| s.to_string())
+            })
+            .y_label_formatter(&|v| tick(*v))
+            .y_desc(unit)
+            .label_style((FONT, 11))
+            .axis_desc_style((FONT, 11))
+            .draw()?;
+        c.draw_series(months.iter().map(|&(k, m, _)| {
+            let x = k as f64;
+            Rectangle::new([(x - 0.38, 0.0), (x, m)], MEASURED.mix(0.75).filled())
+        }))?;
+        c.draw_series(months.iter().map(|&(k, _, s)| {
+            let x = k as f64;
+            Rectangle::new([(x, 0.0), (x + 0.38, s)], CALIBRATED.filled())
+        }))?;
+        Ok(())
+    })
+}
+
 /// A chart with `f64` axes on an SVG area.
 type XyChart<'a, 'b> =
     ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
