@@ -79,6 +79,29 @@ fn worker(url: &str, id: &str, cache: &Path) -> Proc {
     )
 }
 
+/// [`worker`] serving its own `/metrics` on a free loopback port; returns it with that URL.
+fn worker_with_metrics(url: &str, id: &str, cache: &Path) -> (Proc, String) {
+    use std::io::BufRead;
+    let mut c = bemcal()
+        .args(["worker", "--coordinator", url, "--id", id, "--cache"])
+        .arg(cache)
+        .args(["--metrics-listen", "127.0.0.1:0"])
+        .env("BEMCAL_TOKEN", TOKEN)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(c.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let metrics = line
+        .trim()
+        .strip_prefix("metrics on ")
+        .expect("metrics address")
+        .to_string();
+    (Proc(c), metrics)
+}
+
 fn client(args: &[&str], url: &str) -> std::process::Output {
     bemcal()
         .args(args)
@@ -549,7 +572,7 @@ fn worker_killed_and_coordinator_restarted() {
         "{page}"
     );
     let mut w0 = Some(worker(&url, "w0", &tmp.path().join("w0")));
-    let _w1 = worker(&url, "w1", &tmp.path().join("w1"));
+    let (_w1, w1_metrics) = worker_with_metrics(&url, "w1", &tmp.path().join("w1"));
     let o = client(&["submit", pf.to_str().unwrap()], &url);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let run = String::from_utf8(o.stdout).unwrap().trim().to_string();
@@ -654,6 +677,25 @@ fn worker_killed_and_coordinator_restarted() {
     assert_eq!(simulations(&page)[0], 0.0, "{page}");
     assert!(
         metric(&page, "bemcal_job_duration_seconds_count{kind=\"train\"}").unwrap() >= 1.0,
+        "{page}"
+    );
+    // The surviving worker's own metrics: the jobs it finished, none running now.
+    let page = http_get(&w1_metrics).1;
+    let w1_done = |kind: &str| {
+        metric(
+            &page,
+            &format!("bemcal_worker_jobs_total{{kind=\"{kind}\",outcome=\"done\"}}"),
+        )
+        .unwrap()
+    };
+    assert!(w1_done("simulate") >= 1.0, "{page}");
+    assert!(
+        w1_done("simulate") + w1_done("train") + w1_done("chains") >= 3.0,
+        "{page}"
+    );
+    assert_eq!(
+        metric(&page, "bemcal_worker_busy_slots"),
+        Some(0.0),
         "{page}"
     );
     let jobs = s["jobs"].as_array().unwrap();

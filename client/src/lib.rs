@@ -8,6 +8,7 @@ pub mod artifacts;
 pub mod auth;
 pub mod bundle;
 pub mod client;
+pub mod metrics;
 
 use serde::{Deserialize, Serialize};
 

@@ -7,7 +7,6 @@
 //! `bemcal_jobs{state="queued"}` is the queue depth that worker autoscaling reads (KEDA's
 //! Prometheus scaler; see docs/operations.md).
 
-use std::net::SocketAddr;
 use std::sync::Arc;
 
 use prometheus_client::encoding::text::encode;
@@ -163,48 +162,24 @@ fn labels(kind: &str, state: &str) -> KindState {
     }
 }
 
-/// Serves `GET /metrics` on `listener` until `shutdown` completes.
+/// Serves `GET /metrics` on `listener` until `shutdown` completes: each scrape reads a
+/// snapshot of the database (off the async threads) and renders it.
 pub async fn serve(
     st: Arc<State>,
     listener: tokio::net::TcpListener,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
-    use axum::http::{header, StatusCode};
-    use axum::response::IntoResponse;
-
-    let app = axum::Router::new().route(
-        "/metrics",
-        axum::routing::get(move || {
-            let st = st.clone();
-            async move {
-                let snapshot =
-                    tokio::task::spawn_blocking(move || st.store.metrics_snapshot()).await;
-                match snapshot {
-                    Ok(Ok(s)) => (
-                        StatusCode::OK,
-                        [(
-                            header::CONTENT_TYPE,
-                            "application/openmetrics-text; version=1.0.0; charset=utf-8",
-                        )],
-                        render(&s),
-                    )
-                        .into_response(),
-                    Ok(Err(e)) => (StatusCode::SERVICE_UNAVAILABLE, format!("database: {e}\n"))
-                        .into_response(),
-                    Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
-                }
+    let scrape = move || {
+        let st = st.clone();
+        async move {
+            match tokio::task::spawn_blocking(move || st.store.metrics_snapshot()).await {
+                Ok(Ok(s)) => Ok(render(&s)),
+                Ok(Err(e)) => Err(format!("database: {e}")),
+                Err(e) => Err(e.to_string()),
             }
-        }),
-    );
-    axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
-        .await?;
-    Ok(())
-}
-
-/// Where `/metrics` is served, as the CLI prints it.
-pub fn url(addr: SocketAddr) -> String {
-    format!("http://{addr}/metrics")
+        }
+    };
+    bemcal_client::metrics::serve(listener, scrape, shutdown).await
 }
 
 #[cfg(test)]

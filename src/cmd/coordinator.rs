@@ -128,7 +128,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         |addr, metrics| {
             println!("listening on {addr}");
             if let Some(m) = metrics {
-                println!("metrics on {}", bemcal_coordinator::metrics::url(m));
+                println!("metrics on {}", bemcal_client::metrics::url(m));
             }
             let _ = std::io::stdout().flush();
         },

@@ -23,6 +23,10 @@ pub struct Args {
     /// Seconds running jobs may take to finish after SIGTERM before their leases are returned.
     #[arg(long, default_value_t = 60)]
     pub drain: u64,
+    /// Serve this worker's Prometheus metrics (`GET /metrics`: jobs by kind and outcome, job
+    /// durations, busy slots) on this address (port 0: any free port; the address is printed).
+    #[arg(long, env = "BEMCAL_WORKER_METRICS_LISTEN")]
+    pub metrics_listen: Option<std::net::SocketAddr>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
@@ -37,7 +41,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .id
             .unwrap_or_else(|| format!("{host}-{}", std::process::id())),
         drain: Duration::from_secs(a.drain),
+        metrics: a.metrics_listen,
     };
     let rt = bemcal_client::runtime()?;
-    rt.block_on(bemcal_worker::run(opts, bemcal_client::shutdown_signal()))
+    rt.block_on(bemcal_worker::run(
+        opts,
+        |metrics| {
+            if let Some(m) = metrics {
+                println!("metrics on {}", bemcal_client::metrics::url(m));
+                let _ = std::io::Write::flush(&mut std::io::stdout());
+            }
+        },
+        bemcal_client::shutdown_signal(),
+    ))
 }

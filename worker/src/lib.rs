@@ -8,7 +8,9 @@
 
 pub mod cache;
 pub mod exec;
+pub mod metrics;
 
+use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -19,6 +21,7 @@ use bemcal_client::proto::{self, CompleteRequest, FailRequest, HeartbeatRequest,
 use tokio::sync::Semaphore;
 
 use crate::cache::Cache;
+use crate::metrics::{Metrics, Outcome};
 
 /// How to run a worker.
 #[derive(Debug, Clone)]
@@ -31,6 +34,8 @@ pub struct Options {
     pub worker_id: String,
     /// How long running jobs may take to finish after a shutdown request.
     pub drain: Duration,
+    /// Where to serve this worker's Prometheus metrics (`GET /metrics`); `None`: not.
+    pub metrics: Option<SocketAddr>,
 }
 
 /// Retries an RPC while the coordinator is unreachable (it may be restarting), for up to
@@ -57,12 +62,37 @@ where
     }
 }
 
-/// Runs the worker until `shutdown` completes (then drains).
+/// Runs the worker until `shutdown` completes (then drains); `ready` gets the bound address of
+/// the metrics, if served (port 0 = ephemeral).
 pub async fn run(
     opts: Options,
+    ready: impl FnOnce(Option<SocketAddr>),
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     let client = opts.connect.client()?;
+    let metrics = Metrics::new(opts.slots.max(1));
+    let bound = match opts.metrics {
+        None => None,
+        Some(addr) => {
+            let listener = tokio::net::TcpListener::bind(addr)
+                .await
+                .map_err(|e| anyhow::anyhow!("metrics address {addr}: {e}"))?;
+            let bound = listener.local_addr()?;
+            let m = metrics.clone();
+            let scrape = move || {
+                let m = m.clone();
+                async move { Ok(m.render()) }
+            };
+            // Served until the process ends: a draining worker still answers scrapes.
+            tokio::spawn(bemcal_client::metrics::serve(
+                listener,
+                scrape,
+                std::future::pending(),
+            ));
+            Some(bound)
+        }
+    };
+    ready(bound);
     let cache = Arc::new(Cache::new(&opts.cache)?);
     let stopping = Arc::new(AtomicBool::new(false));
     let slots = Arc::new(Semaphore::new(opts.slots.max(1)));
@@ -103,14 +133,19 @@ pub async fn run(
             tokio::time::sleep(Duration::from_millis(300)).await;
             continue;
         };
-        let (client, cache, id, give_back) = (
+        let (client, cache, id, give_back, metrics) = (
             client.clone(),
             cache.clone(),
             opts.worker_id.clone(),
             give_back.clone(),
+            metrics.clone(),
         );
         tasks.spawn(async move {
-            handle(client, cache, id, job, give_back).await;
+            let kind = crate::metrics::kind_name(&job);
+            let t0 = std::time::Instant::now();
+            metrics.started();
+            let outcome = handle(client, cache, id, job, give_back).await;
+            metrics.ended(kind, outcome, t0.elapsed());
             drop(permit);
         });
         while tasks.try_join_next().is_some() {}
@@ -130,14 +165,15 @@ pub async fn run(
     Ok(())
 }
 
-/// Runs one job: heartbeats while it runs, then uploads its outputs and reports.
+/// Runs one job: heartbeats while it runs, then uploads its outputs and reports; returns how
+/// it ended.
 async fn handle(
     mut client: Client,
     cache: Arc<Cache>,
     worker: String,
     job: proto::Job,
     give_back: Arc<AtomicBool>,
-) {
+) -> Outcome {
     let lease = job.lease_id;
     let ttl = Duration::from_millis(job.lease_ttl_ms.max(1000) as u64);
     let beat = {
@@ -185,7 +221,7 @@ async fn handle(
         _ = give_back_wait => None,
     };
     let patience = Duration::from_secs(600);
-    match outcome {
+    let ended = match outcome {
         None => {
             let _ = client
                 .fail(FailRequest {
@@ -195,6 +231,7 @@ async fn handle(
                     requeue: true,
                 })
                 .await;
+            Outcome::Returned
         }
         Some(Ok((dir, (files, result)))) => {
             let mut outputs = vec![];
@@ -214,6 +251,7 @@ async fn handle(
                     Err(e) => upload_err = Some(e.message().to_string()),
                 }
             }
+            let uploaded = upload_err.is_none();
             let r = match upload_err {
                 Some(e) => retry(patience, || {
                     let mut c = client.clone();
@@ -240,6 +278,7 @@ async fn handle(
                 .await
                 .map(|_| ()),
             };
+            let reported = r.is_ok();
             if let Err(e) = r {
                 eprintln!(
                     "worker {worker}: reporting job {}: {}",
@@ -248,6 +287,10 @@ async fn handle(
                 );
             }
             let _ = std::fs::remove_dir_all(&dir);
+            match uploaded && reported {
+                true => Outcome::Done,
+                false => Outcome::Failed,
+            }
         }
         Some(Err(e)) => {
             let _ = retry(patience, || {
@@ -261,7 +304,9 @@ async fn handle(
                 async move { c.fail(req).await }
             })
             .await;
+            Outcome::Failed
         }
-    }
+    };
     beat.abort();
+    ended
 }
