@@ -163,14 +163,15 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
-    results_load_in_python_as_arviz(&out);
+    results_load_in_python_as_arviz(&out, &dir.join("project.toml"));
 }
 
 /// Issue 22: `bemcal.load` (python/bemcal) reads the output folder as an ArviZ InferenceData
 /// whose groups, dimensions and values match draws.csv and summary.json, `arviz.summary` on it
 /// agrees with `bemcal diagnose` to 1e-6, and `bemcal export` writes the same InferenceData as
-/// netCDF (tests/python/check_load.py makes the comparisons).
-fn results_load_in_python_as_arviz(out: &Path) {
+/// netCDF, and `bemcal.calibrate` streams a (reused) calibration's lines and loads its folder
+/// (tests/python/check_load.py makes the comparisons).
+fn results_load_in_python_as_arviz(out: &Path, project: &Path) {
     let diagnose = run_ok(
         bemcal()
             .arg("diagnose")
@@ -193,7 +194,9 @@ fn results_load_in_python_as_arviz(out: &Path) {
             .arg(out)
             .arg(&diagnose_file)
             .arg(&nc)
-            .env("PYTHONPATH", repo().join("python")),
+            .arg(project)
+            .env("PYTHONPATH", repo().join("python"))
+            .env("BEMCAL_BIN", env!("CARGO_BIN_EXE_bemcal")),
     );
     eprintln!("{}", String::from_utf8_lossy(&check.stdout).trim());
 }

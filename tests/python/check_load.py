@@ -1,8 +1,10 @@
 """Checks `bemcal.load` on a finished calibration against the files it was read from.
 
-Run by tests/calibrate.rs: python check_load.py OUT_DIR DIAGNOSE.json EXPORT.nc, with the
-repository's python/ on PYTHONPATH. DIAGNOSE.json is `bemcal diagnose --draws OUT_DIR/draws.csv
---json`, EXPORT.nc is `bemcal export OUT_DIR --to EXPORT.nc`.
+Run by tests/calibrate.rs: python check_load.py OUT_DIR DIAGNOSE.json EXPORT.nc PROJECT.toml,
+with the repository's python/ on PYTHONPATH and BEMCAL_BIN set. DIAGNOSE.json is `bemcal
+diagnose --draws OUT_DIR/draws.csv --json`, EXPORT.nc is `bemcal export OUT_DIR --to
+EXPORT.nc`; PROJECT.toml calibrated OUT_DIR (`bemcal.calibrate` reruns it there: every stage is
+reused, so it only streams the binary's lines and loads the folder again).
 Exits non-zero (an AssertionError and its message) at the first mismatch.
 """
 
@@ -19,7 +21,7 @@ import arviz as az  # noqa: E402
 
 import bemcal  # noqa: E402
 
-out, diagnose_file, export_file = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+out, diagnose_file, export_file, project = (Path(a) for a in sys.argv[1:5])
 result = bemcal.load(out)
 data = result.posterior
 summary = json.loads((out / "summary.json").read_text())
@@ -112,5 +114,13 @@ for group in data.groups():
     for name, var in getattr(data, group).data_vars.items():
         theirs = getattr(back, group)[name].to_numpy()
         assert np.array_equal(var.to_numpy(), theirs, equal_nan=var.dtype.kind == "f"), (group, name)
+# bemcal.calibrate: the binary's lines stream through `echo` as they come, and the result is
+# the folder loaded again (the same draws: every stage was reused).
+lines = []
+again = bemcal.calibrate(project, out=out, workers=0, echo=lines.append)
+assert any("reusing" in l for l in lines), lines[-20:]
+assert again.draws.equals(result.draws)
+assert again.estimate == result.estimate
+
 print(f"bemcal.load: {len(data.groups())} groups, {len(chains)} chains x {per_chain.iloc[0]} draws, "
       f"{len(calibrated)} parameters; ArviZ summary within {worst:.1e} of bemcal diagnose")
