@@ -13,13 +13,14 @@ pub fn url(addr: SocketAddr) -> String {
     format!("http://{addr}/metrics")
 }
 
-/// Serves `GET /metrics` on `listener` until `shutdown` completes; each request calls `render`,
+/// Binds `addr` and serves `GET /metrics` there in the background until `shutdown`
+/// completes; returns the bound address (port 0 = ephemeral). Each request calls `render`,
 /// whose error becomes a 503 with its text (the state behind the figures could not be read).
-pub async fn serve<F, Fut>(
-    listener: tokio::net::TcpListener,
+pub async fn spawn<F, Fut>(
+    addr: SocketAddr,
     render: F,
     shutdown: impl Future<Output = ()> + Send + 'static,
-) -> anyhow::Result<()>
+) -> anyhow::Result<SocketAddr>
 where
     F: Fn() -> Fut + Clone + Send + Sync + 'static,
     Fut: Future<Output = Result<String, String>> + Send + 'static,
@@ -27,6 +28,10 @@ where
     use axum::http::{header, StatusCode};
     use axum::response::IntoResponse;
 
+    let listener = tokio::net::TcpListener::bind(addr)
+        .await
+        .map_err(|e| anyhow::anyhow!("metrics address {addr}: {e}"))?;
+    let bound = listener.local_addr()?;
     let app = axum::Router::new().route(
         "/metrics",
         axum::routing::get(move || {
@@ -40,8 +45,10 @@ where
             }
         }),
     );
-    axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
-        .await?;
-    Ok(())
+    tokio::spawn(async move {
+        let _ = axum::serve(listener, app)
+            .with_graceful_shutdown(shutdown)
+            .await;
+    });
+    Ok(bound)
 }

@@ -162,13 +162,14 @@ fn labels(kind: &str, state: &str) -> KindState {
     }
 }
 
-/// Serves `GET /metrics` on `listener` until `shutdown` completes: each scrape reads a
-/// snapshot of the database (off the async threads) and renders it.
-pub async fn serve(
+/// Serves `GET /metrics` on `addr` in the background until `shutdown` completes (each scrape
+/// reads a snapshot of the database off the async threads and renders it); returns the bound
+/// address.
+pub async fn spawn(
     st: Arc<State>,
-    listener: tokio::net::TcpListener,
+    addr: std::net::SocketAddr,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<std::net::SocketAddr> {
     let scrape = move || {
         let st = st.clone();
         async move {
@@ -179,7 +180,7 @@ pub async fn serve(
             }
         }
     };
-    bemcal_client::metrics::serve(listener, scrape, shutdown).await
+    bemcal_client::metrics::spawn(addr, scrape, shutdown).await
 }
 
 #[cfg(test)]

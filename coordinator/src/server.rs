@@ -111,16 +111,12 @@ pub async fn serve(
     let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
     let metrics_addr = match opts.metrics {
         None => None,
-        Some(addr) => {
-            let metrics = tokio::net::TcpListener::bind(addr)
-                .await
-                .map_err(|e| anyhow::anyhow!("metrics address {addr}: {e}"))?;
-            let bound = metrics.local_addr()?;
-            tokio::spawn(crate::metrics::serve(st.clone(), metrics, async move {
+        Some(addr) => Some(
+            crate::metrics::spawn(st.clone(), addr, async move {
                 let _ = metrics_stopped.await;
-            }));
-            Some(bound)
-        }
+            })
+            .await?,
+        ),
     };
     ready(listener.local_addr()?, metrics_addr);
     let svc = CoordinatorServer::new(Service { st })

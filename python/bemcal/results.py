@@ -11,6 +11,7 @@ layout is in the repository's ARCHITECTURE.md): ``draws.csv``, ``summary.json``,
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional, Union
@@ -285,7 +286,7 @@ def predictions_frame(out: Path) -> pd.DataFrame:
     if intervals.is_file():
         t = pd.read_csv(intervals, index_col="timestamp")
         t = t.drop(columns=[c for c in t.columns if c.endswith("_measured")])
-        t.columns = [c.replace("_q", "_pi") if c != "held_out" else c for c in t.columns]
+        t.columns = [re.sub(r"_q(\d+)$", r"_pi\1", c) for c in t.columns]
         if "held_out" in t.columns:
             t["held_out"] = t["held_out"].astype(bool)
         frames.append(t)

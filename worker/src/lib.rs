@@ -74,22 +74,13 @@ pub async fn run(
     let bound = match opts.metrics {
         None => None,
         Some(addr) => {
-            let listener = tokio::net::TcpListener::bind(addr)
-                .await
-                .map_err(|e| anyhow::anyhow!("metrics address {addr}: {e}"))?;
-            let bound = listener.local_addr()?;
             let m = metrics.clone();
             let scrape = move || {
                 let m = m.clone();
                 async move { Ok(m.render()) }
             };
             // Served until the process ends: a draining worker still answers scrapes.
-            tokio::spawn(bemcal_client::metrics::serve(
-                listener,
-                scrape,
-                std::future::pending(),
-            ));
-            Some(bound)
+            Some(bemcal_client::metrics::spawn(addr, scrape, std::future::pending()).await?)
         }
     };
     ready(bound);
