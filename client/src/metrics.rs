@@ -8,6 +8,12 @@ use std::net::SocketAddr;
 /// The exposition format's content type (OpenMetrics text, as `prometheus-client` encodes).
 pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
 
+/// Upper bounds of the job-duration histograms, s (the coordinator's and each worker's):
+/// EnergyPlus runs take seconds to minutes, training and chain segments minutes to an hour.
+pub const DURATION_BUCKETS: [f64; 12] = [
+    0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0,
+];
+
 /// Where `/metrics` is served, as the CLI prints it.
 pub fn url(addr: SocketAddr) -> String {
     format!("http://{addr}/metrics")

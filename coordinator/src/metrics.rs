@@ -21,12 +21,6 @@ use crate::db::MetricsSnapshot;
 use crate::driver::State;
 use crate::states::{JobKind, JobState, RunState};
 
-/// Upper bounds of the job-duration histogram, s: EnergyPlus runs take seconds to minutes,
-/// training and chain segments minutes to an hour.
-pub const DURATION_BUCKETS: [f64; 12] = [
-    0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0,
-];
-
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct KindState {
     kind: String,
@@ -122,7 +116,7 @@ pub fn render(s: &MetricsSnapshot) -> String {
     );
 
     let durations = Family::<Kind, Histogram>::new_with_constructor(|| {
-        Histogram::new(DURATION_BUCKETS.iter().copied())
+        Histogram::new(bemcal_client::metrics::DURATION_BUCKETS.iter().copied())
     });
     for kind in JobKind::ALL {
         let _ = durations.get_or_create(&Kind {

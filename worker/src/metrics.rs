@@ -14,11 +14,6 @@ use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::Histogram;
 use prometheus_client::registry::{Registry, Unit};
 
-/// Upper bounds of the job-duration histogram, s (as the coordinator's).
-const DURATION_BUCKETS: [f64; 12] = [
-    0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0,
-];
-
 /// How a job ended on this worker.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {
@@ -76,7 +71,7 @@ impl Metrics {
         let mut registry = Registry::with_prefix("bemcal_worker");
         let jobs = Family::<KindOutcome, Counter>::default();
         let durations = Family::<OfKind, Histogram>::new_with_constructor(|| {
-            Histogram::new(DURATION_BUCKETS.iter().copied())
+            Histogram::new(bemcal_client::metrics::DURATION_BUCKETS.iter().copied())
         });
         let busy = Gauge::default();
         let total = Gauge::<i64>::default();

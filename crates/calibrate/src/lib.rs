@@ -16,7 +16,7 @@ pub mod design;
 pub mod examples;
 mod inputs;
 mod local;
-pub mod named;
+pub use bemcal_named as named;
 pub mod output;
 pub mod posterior;
 pub mod predictive;

@@ -109,12 +109,12 @@ impl OutputDir {
         self.validation().join("bases.csv")
     }
 
-    /// `summary.json`.
     /// `holdout.txt`: the held-out period the folder's chains were fitted without (`none`).
     pub fn holdout_txt(&self) -> PathBuf {
         self.root.join("holdout.txt")
     }
 
+    /// `summary.json`.
     pub fn summary_json(&self) -> PathBuf {
         self.root.join("summary.json")
     }

@@ -107,17 +107,24 @@ pub const MODULE_FILES: [(&str, &str); 5] = [
     ),
 ];
 
+/// Writes an embedded Python package, `(relative path, contents)` pairs such as
+/// [`MODULE_FILES`], under `dir` (its folders created), to put `dir` on `PYTHONPATH`.
+pub fn write_package(dir: &Path, files: &[(&str, &str)]) -> std::io::Result<()> {
+    for (rel, text) in files {
+        let path = dir.join(rel);
+        std::fs::create_dir_all(path.parent().expect("a package file is in a folder"))?;
+        std::fs::write(&path, text)?;
+    }
+    Ok(())
+}
+
 /// Runs `python -m bemcal ARGS` in the environment's interpreter with the module of
 /// [`MODULE_FILES`] (written to a temporary folder first on `PYTHONPATH`); `BEMCAL_BIN` is set
 /// to the running executable so that the module calls back into this binary. Returns the exit
 /// status; the module's output goes to this process's stdout and stderr.
 pub fn run_module(venv: &Path, args: &[&std::ffi::OsStr]) -> std::io::Result<i32> {
     let dir = tempfile::Builder::new().prefix("bemcal-py-").tempdir()?;
-    for (rel, text) in MODULE_FILES {
-        let path = dir.path().join(rel);
-        std::fs::create_dir_all(path.parent().expect("a module file is in a folder"))?;
-        std::fs::write(&path, text)?;
-    }
+    write_package(dir.path(), &MODULE_FILES)?;
     let mut path = std::ffi::OsString::from(dir.path().as_os_str());
     if let Some(old) = env::var_os("PYTHONPATH") {
         path.push(":");

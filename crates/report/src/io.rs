@@ -13,40 +13,6 @@ use serde::Deserialize;
 
 use crate::ReportError;
 
-/// Named values of `summary.json` in document order: the object keyed by name that
-/// `bemcal_calibrate`'s `named` module writes, or the `[[name, value], ...]` pairs of summaries
-/// before it.
-fn named<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<(String, f64)>, D::Error> {
-    struct Named;
-    impl<'de> serde::de::Visitor<'de> for Named {
-        type Value = Vec<(String, f64)>;
-        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-            f.write_str("an object keyed by name, or a list of [name, value] pairs")
-        }
-        fn visit_map<A: serde::de::MapAccess<'de>>(
-            self,
-            mut m: A,
-        ) -> Result<Self::Value, A::Error> {
-            let mut out = vec![];
-            while let Some(e) = m.next_entry()? {
-                out.push(e);
-            }
-            Ok(out)
-        }
-        fn visit_seq<A: serde::de::SeqAccess<'de>>(
-            self,
-            mut s: A,
-        ) -> Result<Self::Value, A::Error> {
-            let mut out = vec![];
-            while let Some(e) = s.next_element()? {
-                out.push(e);
-            }
-            Ok(out)
-        }
-    }
-    d.deserialize_any(Named)
-}
-
 /// A parameter's triangular prior (`summary.json` `parameters[]`).
 #[derive(Debug, Clone, Deserialize)]
 pub struct PriorInfo {
@@ -359,10 +325,10 @@ pub struct Summary {
     /// Posterior summary.
     pub posterior: PosteriorBlock,
     /// Estimated model-discrepancy sd per output, kWh.
-    #[serde(default, deserialize_with = "named")]
+    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// Surrogate error sd per output, kWh.
-    #[serde(default, deserialize_with = "named")]
+    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
     /// Acceptance rate per chain.
     #[serde(default)]
@@ -371,7 +337,7 @@ pub struct Summary {
     #[serde(default)]
     pub estimate: serde_json::Value,
     /// The calibrated parameter values.
-    #[serde(default, deserialize_with = "named")]
+    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
     pub calibrated_values: Vec<(String, f64)>,
     /// G14 metrics of the calibrated model.
     #[serde(default)]

@@ -38,7 +38,7 @@ pub struct BuildingRow {
     pub converged: Option<bool>,
     /// The calibrated parameters at the estimate, in the model's order (`{name: value}` in
     /// portfolio.json, one column per parameter in portfolio.csv).
-    #[serde(serialize_with = "as_object")]
+    #[serde(serialize_with = "bemcal_named::serialize")]
     pub estimate: Vec<(String, f64)>,
     pub run_time_s: f64,
     pub simulations_run: u32,
@@ -58,11 +58,6 @@ pub struct PortfolioSummary {
     pub simulations_run: u32,
     pub simulations_shared: u32,
     pub rows: Vec<BuildingRow>,
-}
-
-/// `[(name, value)]` as a JSON object keyed by name, in order.
-fn as_object<S: serde::Serializer>(v: &[(String, f64)], s: S) -> Result<S::Ok, S::Error> {
-    s.collect_map(v.iter().map(|(k, x)| (k, x)))
 }
 
 /// Parameter names over all rows' estimates, in first-seen order.

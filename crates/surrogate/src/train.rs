@@ -153,12 +153,7 @@ fn runtime(msg: String) -> SurrogateError {
 
 /// Writes the embedded trainer package under `dir` (e.g. to run it by hand).
 pub fn write_trainer(dir: &Path) -> std::io::Result<()> {
-    for (rel, text) in TRAINER_FILES {
-        let p = dir.join(rel);
-        std::fs::create_dir_all(p.parent().expect("relative path has a parent"))?;
-        std::fs::write(p, text)?;
-    }
-    Ok(())
+    bemcal_pyenv::write_package(dir, &TRAINER_FILES)
 }
 
 /// Trains a surrogate on `dataset_dir` (written by [`crate::TrainingSet::write`]) into

@@ -2,7 +2,8 @@
 //! written as a JSON object keyed by name (`{"heating_kwh": 0.31, ...}`, in that order), the
 //! form pandas, `jq` and a dict read as they are; it reads back from that object or from the
 //! `[[name, value], ...]` pairs that summaries before issue 22 wrote. Used with
-//! `#[serde(with = "crate::named")]`.
+//! `#[serde(with = "bemcal_named")]` (the writer, `bemcal-calibrate`) and by every reader
+//! (the report, the portfolio, `simulate --values`).
 
 use std::fmt;
 use std::marker::PhantomData;
@@ -55,7 +56,7 @@ impl<'de, T: Deserialize<'de>> Visitor<'de> for Named<T> {
 mod tests {
     #[derive(serde::Serialize, serde::Deserialize, PartialEq, Debug)]
     struct S {
-        #[serde(with = "super")]
+        #[serde(with = "crate")]
         v: Vec<(String, f64)>,
     }
 
