@@ -520,14 +520,29 @@ impl BuildingSpec {
     /// Writes the model's IDF for a complete set of parameter values (see
     /// [`crate::params::complete_values`]); constraints must already hold.
     pub fn to_idf(&self, v: &ParameterValues) -> Result<Idf, Error> {
-        let get = |n: &str| -> Result<f64, Error> {
-            v.get(n).copied().ok_or_else(|| Error::Parameter {
-                name: n.into(),
-                message: "missing value".into(),
-            })
-        };
         let mut m = Idf::new();
-        let year = self.year;
+        self.add_simulation_control(&mut m);
+        self.add_sizing_periods(&mut m);
+        self.add_run_period(&mut m);
+        m.add(
+            "Site:GroundTemperature:BuildingSurface",
+            &["18"; 12].map(String::from),
+        );
+        self.add_schedules(&mut m, v)?;
+        self.add_setpoint_schedules(&mut m, v)?;
+        self.add_constructions(&mut m, v)?;
+        self.add_geometry(&mut m);
+        self.add_internal_gains(&mut m, v)?;
+        self.add_air_systems(&mut m, v)?;
+        self.add_plant(&mut m);
+        self.add_domestic_hot_water(&mut m, v)?;
+        self.add_outputs(&mut m);
+        Ok(m)
+    }
+
+    /// The simulation's settings: IDF version, what is simulated, the `Building` object, time
+    /// steps and geometry rules.
+    fn add_simulation_control(&self, m: &mut Idf) {
         m.add("Version", &["25.2"]);
         m.add(
             "SimulationControl",
@@ -551,6 +566,10 @@ impl BuildingSpec {
             "GlobalGeometryRules",
             &["UpperLeftCorner", "Counterclockwise", "Relative"],
         );
+    }
+
+    /// The sizing periods (`SizingPeriod:WeatherFileConditionType`) and sizing factors.
+    fn add_sizing_periods(&self, m: &mut Idf) {
         // Sizing from the weather file itself (no .ddy needed), on days of the design-day
         // types: there the thermostat holds its fixed design set-points (see
         // `DESIGN_COOLING_SETPOINT_C`), so equipment is sized once for the building and its
@@ -576,6 +595,12 @@ impl BuildingSpec {
             ],
         );
         m.add("Sizing:Parameters", &["1.2", "1.2"]);
+    }
+
+    /// The run period (the spec's year) and its special days (`RunPeriodControl:SpecialDays`)
+    /// from the spec's calendar.
+    fn add_run_period(&self, m: &mut Idf) {
+        let year = self.year;
         let jan1 = chrono_weekday_name(year);
         m.add(
             "RunPeriod",
@@ -627,123 +652,133 @@ impl BuildingSpec {
                 ],
             );
         }
-        m.add(
-            "Site:GroundTemperature:BuildingSurface",
-            &["18"; 12].map(String::from),
-        );
+    }
 
-        // Schedules.
+    /// Schedule type limits, the constant `Always On` and `Activity` schedules, and the
+    /// `Occupancy` schedule from the weekday and weekend interval fractions.
+    fn add_schedules(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
         m.add("ScheduleTypeLimits", &["Fraction", "0", "1", "Continuous"]);
         m.add(
             "ScheduleTypeLimits",
             &["Temperature", "-60", "200", "Continuous"],
         );
         m.add("ScheduleTypeLimits", &["Any Number"]);
-        constant(&mut m, "Always On", "Fraction", 1.0);
-        constant(&mut m, "Activity", "Any Number", 120.0);
+        constant(m, "Always On", "Fraction", 1.0);
+        constant(m, "Activity", "Any Number", 120.0);
         let wd: Vec<f64> = (1..=self.weekday_boundaries.len())
-            .map(|i| get(&weekday_param(i)))
+            .map(|i| value(v, &weekday_param(i)))
             .collect::<Result<_, _>>()?;
         let we: Vec<f64> = (1..=self.weekend_boundaries.len())
-            .map(|i| get(&weekend_param(i)))
+            .map(|i| value(v, &weekend_param(i)))
             .collect::<Result<_, _>>()?;
         interval_schedule(
-            &mut m,
+            m,
             "Occupancy",
             (&self.weekday_boundaries, &wd),
             (&self.weekend_boundaries, &we),
         );
-        let [o0, o1] = self.occupied_hours;
-        // Weekdays switch between the occupied and unoccupied values; with a `design` value the
-        // sizing days hold it all day instead of following the weekday pattern.
-        let occ_sched =
-            |m: &mut Idf, name: &str, limits: &str, occ: f64, unocc: f64, design: Option<f64>| {
-                let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
-                match design {
-                    Some(d) => {
-                        f.push("For: SummerDesignDay WinterDesignDay".into());
-                        f.push("Until: 24:00".into());
-                        f.push(num(d));
-                        f.push("For: Weekdays CustomDay1".into());
-                    }
-                    None => {
-                        f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into())
-                    }
-                }
-                if o0 > 0 {
-                    f.push(format!("Until: {o0:02}:00"));
-                    f.push(num(unocc));
-                }
-                f.push(format!("Until: {o1:02}:00"));
-                f.push(num(occ));
-                if o1 < 24 {
-                    f.push("Until: 24:00".into());
-                    f.push(num(unocc));
-                }
-                f.push("For: AllOtherDays".into());
-                f.push("Until: 24:00".into());
-                f.push(num(unocc));
-                m.add("Schedule:Compact", &f);
-            };
-        occ_sched(
-            &mut m,
+        Ok(())
+    }
+
+    /// The control schedules: heating and cooling set-points, outdoor-air fraction, the plant's
+    /// chilled- and hot-water set-points, each AHU's supply air and preheat temperatures, and the
+    /// domestic hot water's set-point, mains and ambient temperatures.
+    fn add_setpoint_schedules(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
+        self.occupied_schedule(
+            m,
             "Heating Setpoint",
             "Temperature",
-            get("heating_setpoint_occupied")?,
-            get("heating_setpoint_unoccupied")?,
+            value(v, "heating_setpoint_occupied")?,
+            value(v, "heating_setpoint_unoccupied")?,
             Some(DESIGN_HEATING_SETPOINT_C),
         );
-        occ_sched(
-            &mut m,
+        self.occupied_schedule(
+            m,
             "Cooling Setpoint",
             "Temperature",
-            get("cooling_setpoint_occupied")?,
-            get("cooling_setpoint_unoccupied")?,
+            value(v, "cooling_setpoint_occupied")?,
+            value(v, "cooling_setpoint_unoccupied")?,
             Some(DESIGN_COOLING_SETPOINT_C),
         );
-        let oa_occ = get("outdoor_air_ach_occupied")?;
-        let oa_unocc = get("outdoor_air_ach_unoccupied")?;
+        let oa_occ = value(v, "outdoor_air_ach_occupied")?;
+        let oa_unocc = value(v, "outdoor_air_ach_unoccupied")?;
         let oa_frac = if oa_occ > 0.0 {
             (oa_unocc / oa_occ).min(1.0)
         } else {
             0.0
         };
-        occ_sched(
-            &mut m,
-            "Outdoor Air Fraction",
-            "Fraction",
-            1.0,
-            oa_frac,
-            None,
-        );
-        let chw = get("chilled_water_supply_temp")?;
-        constant(&mut m, "CHW Setpoint", "Temperature", chw);
-        constant(&mut m, "HW Setpoint", "Temperature", 80.0);
+        self.occupied_schedule(m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, None);
+        let chw = value(v, "chilled_water_supply_temp")?;
+        constant(m, "CHW Setpoint", "Temperature", chw);
+        constant(m, "HW Setpoint", "Temperature", 80.0);
         let sat = |ahu: usize| -> Result<f64, Error> {
             if self.separate_ahu_supply_air {
-                get(&format!("supply_air_temp_ahu{ahu}"))
+                value(v, &format!("supply_air_temp_ahu{ahu}"))
             } else {
-                get("supply_air_temp")
+                value(v, "supply_air_temp")
             }
         };
         for ahu in 1..=2 {
             let s = sat(ahu)?;
-            constant(&mut m, &format!("AHU{ahu} Supply Air"), "Temperature", s);
+            constant(m, &format!("AHU{ahu} Supply Air"), "Temperature", s);
             constant(
-                &mut m,
+                m,
                 &format!("AHU{ahu} Preheat"),
                 "Temperature",
                 (s - 2.0).min(10.0),
             );
         }
-        constant(&mut m, "DHW Setpoint", "Temperature", 60.0);
-        constant(&mut m, "DHW Mains", "Temperature", 12.0);
-        constant(&mut m, "DHW Ambient", "Temperature", 21.0);
+        constant(m, "DHW Setpoint", "Temperature", 60.0);
+        constant(m, "DHW Mains", "Temperature", 12.0);
+        constant(m, "DHW Ambient", "Temperature", 21.0);
+        Ok(())
+    }
 
-        // Materials and constructions.
-        let k_wall = get("wall_insulation_conductivity")?;
-        let k_roof = get("roof_insulation_conductivity")?;
-        let k_glass = get("window_glass_conductivity")?;
+    /// `Schedule:Compact` switching between an occupied and an unoccupied value at the spec's
+    /// `occupied_hours` on weekdays; with a `design` value the sizing days hold it all day
+    /// instead of following the weekday pattern.
+    fn occupied_schedule(
+        &self,
+        m: &mut Idf,
+        name: &str,
+        limits: &str,
+        occ: f64,
+        unocc: f64,
+        design: Option<f64>,
+    ) {
+        let [o0, o1] = self.occupied_hours;
+        let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
+        match design {
+            Some(d) => {
+                f.push("For: SummerDesignDay WinterDesignDay".into());
+                f.push("Until: 24:00".into());
+                f.push(num(d));
+                f.push("For: Weekdays CustomDay1".into());
+            }
+            None => f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into()),
+        }
+        if o0 > 0 {
+            f.push(format!("Until: {o0:02}:00"));
+            f.push(num(unocc));
+        }
+        f.push(format!("Until: {o1:02}:00"));
+        f.push(num(occ));
+        if o1 < 24 {
+            f.push("Until: 24:00".into());
+            f.push(num(unocc));
+        }
+        f.push("For: AllOtherDays".into());
+        f.push("Until: 24:00".into());
+        f.push(num(unocc));
+        m.add("Schedule:Compact", &f);
+    }
+
+    /// Materials and constructions: walls, roof, floors and ceilings, interior walls and the
+    /// window's simple glazing system, from the sampled conductivities and SHGC.
+    fn add_constructions(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
+        let k_wall = value(v, "wall_insulation_conductivity")?;
+        let k_roof = value(v, "roof_insulation_conductivity")?;
+        let k_glass = value(v, "window_glass_conductivity")?;
         if k_wall <= 0.0 || k_roof <= 0.0 || k_glass <= 0.0 {
             return Err(Error::Parameter {
                 name: "insulation / glass conductivity".into(),
@@ -763,14 +798,14 @@ impl BuildingSpec {
                 ],
             );
         };
-        mat(&mut m, "Brick", 0.1016, 0.89, 1920.0, 790.0);
-        mat(&mut m, "Wall Insulation", 0.0794, k_wall, 43.0, 1210.0);
-        mat(&mut m, "Gypsum", 0.0127, 0.16, 784.9, 830.0);
-        mat(&mut m, "Roof Membrane", 0.0095, 0.16, 1121.3, 1460.0);
-        mat(&mut m, "Roof Insulation", 0.2, k_roof, 265.0, 836.8);
-        mat(&mut m, "Metal Deck", 0.0015, 45.0, 7680.0, 418.0);
-        mat(&mut m, "Concrete Slab", 0.1016, 1.95, 2240.0, 900.0);
-        mat(&mut m, "Carpet", 0.0127, 0.06, 288.0, 1380.0);
+        mat(m, "Brick", 0.1016, 0.89, 1920.0, 790.0);
+        mat(m, "Wall Insulation", 0.0794, k_wall, 43.0, 1210.0);
+        mat(m, "Gypsum", 0.0127, 0.16, 784.9, 830.0);
+        mat(m, "Roof Membrane", 0.0095, 0.16, 1121.3, 1460.0);
+        mat(m, "Roof Insulation", 0.2, k_roof, 265.0, 836.8);
+        mat(m, "Metal Deck", 0.0015, 45.0, 7680.0, 418.0);
+        mat(m, "Concrete Slab", 0.1016, 1.95, 2240.0, 900.0);
+        mat(m, "Carpet", 0.0127, 0.06, 288.0, 1380.0);
         m.add(
             "Construction",
             &["Exterior Wall", "Brick", "Wall Insulation", "Gypsum"],
@@ -789,7 +824,7 @@ impl BuildingSpec {
             &["Interior Ceiling", "Carpet", "Concrete Slab"],
         );
         m.add("Construction", &["Interior Wall", "Gypsum", "Gypsum"]);
-        let shgc = get("shgc")?;
+        let shgc = value(v, "shgc")?;
         if !(0.0 < shgc && shgc < 1.0) {
             return Err(Error::Parameter {
                 name: "shgc".into(),
@@ -806,18 +841,18 @@ impl BuildingSpec {
             ],
         );
         m.add("Construction", &["Window", "Glazing"]);
+        Ok(())
+    }
 
-        // Geometry.
-        self.add_geometry(&mut m);
-
-        // Internal gains, infiltration.
+    /// Internal gains (people, lights, equipment over the `All Zones` list) and infiltration.
+    fn add_internal_gains(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
         m.add(
             "ZoneList",
             &std::iter::once("All Zones".to_string())
                 .chain(self.zone_names())
                 .collect::<Vec<_>>(),
         );
-        let people = get("people_area_per_person")?;
+        let people = value(v, "people_area_per_person")?;
         if people <= 0.0 {
             return Err(Error::Parameter {
                 name: "people_area_per_person".into(),
@@ -847,7 +882,7 @@ impl BuildingSpec {
                 "Occupancy".into(),
                 "Watts/Area".into(),
                 "".into(),
-                num(get("lighting_power_density")?),
+                num(value(v, "lighting_power_density")?),
                 "".into(),
                 "0".into(),
                 "0.7".into(),
@@ -863,7 +898,7 @@ impl BuildingSpec {
                 "Occupancy".into(),
                 "Watts/Area".into(),
                 "".into(),
-                num(get("equipment_power_density")?),
+                num(value(v, "equipment_power_density")?),
                 "".into(),
                 "0".into(),
                 "0.5".into(),
@@ -887,9 +922,15 @@ impl BuildingSpec {
                 "0",
             ],
         );
+        Ok(())
+    }
 
+    /// The air side of the HVAC (HVACTemplate objects): the thermostat, the zones' outdoor air,
+    /// one VAV terminal with hot-water reheat per zone and the VAV air-handling units.
+    fn add_air_systems(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
         // HVAC: VAV with hot-water reheat, two AHUs, district chilled water, boiler or district
         // hot water.
+        let oa_occ = value(v, "outdoor_air_ach_occupied")?;
         m.add(
             "HVACTemplate:Thermostat",
             &["Thermostat", "Heating Setpoint", "", "Cooling Setpoint", ""],
@@ -974,6 +1015,12 @@ impl BuildingSpec {
             f.push("StayOff".into()); // night cycle: the AHUs run around the clock anyway
             m.add("HVACTemplate:System:VAV", &f);
         }
+        Ok(())
+    }
+
+    /// The plant (HVACTemplate objects): the chilled-water loop on district cooling and the
+    /// hot-water loop on a boiler or district heating.
+    fn add_plant(&self, m: &mut Idf) {
         m.add(
             "HVACTemplate:Plant:ChilledWaterLoop",
             &[
@@ -1033,12 +1080,17 @@ impl BuildingSpec {
                 ],
             ),
         }
+    }
+
+    /// Domestic hot water: a stand-alone mixed tank (`WaterHeater:Mixed`) heated by the spec's
+    /// heating source.
+    fn add_domestic_hot_water(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
         // Domestic hot water: a stand-alone mixed tank, sized so it never saturates.
         let dhw_fuel = match self.heating_source {
             HeatingSource::Boiler => "NaturalGas",
             HeatingSource::District => "DistrictHeatingWater",
         };
-        let dhw_flow = get("hot_water_peak_flow")?;
+        let dhw_flow = value(v, "hot_water_peak_flow")?;
         if dhw_flow < 0.0 {
             return Err(Error::Parameter {
                 name: "hot_water_peak_flow".into(),
@@ -1072,7 +1124,11 @@ impl BuildingSpec {
             f[i - 1] = v;
         }
         m.add("WaterHeater:Mixed", &f);
+        Ok(())
+    }
 
+    /// Outputs: the reported meters, hourly, and which output files EnergyPlus writes.
+    fn add_outputs(&self, m: &mut Idf) {
         // Outputs: EnergyPlus writes its own hourly meter CSV (no ReadVarsESO).
         for meter in REPORTED_METERS {
             m.add("Output:Meter", &[meter, "Hourly"]);
@@ -1081,9 +1137,10 @@ impl BuildingSpec {
         files.resize(33, "No");
         files[3] = "Yes"; // EIO, small and useful for sizing checks
         m.add("OutputControl:Files", &files);
-        Ok(m)
     }
 
+    /// Geometry: the zones of each storey and their surfaces (floors, ceilings and roof, exterior
+    /// and matched interzone walls) with the windows.
     fn add_geometry(&self, m: &mut Idf) {
         let [l, w] = self.footprint_m;
         let h = self.floor_to_floor_m;
@@ -1318,6 +1375,14 @@ fn check_boundaries(b: &[u32]) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The value of parameter `name`, or an error naming it as missing.
+fn value(v: &ParameterValues, name: &str) -> Result<f64, Error> {
+    v.get(name).copied().ok_or_else(|| Error::Parameter {
+        name: name.into(),
+        message: "missing value".into(),
+    })
 }
 
 fn constant(m: &mut Idf, name: &str, limits: &str, value: f64) {
