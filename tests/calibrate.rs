@@ -164,6 +164,93 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
     results_load_in_python_as_arviz(&out, &dir.join("project.toml"));
+    model_form_tells_reached_from_out_of_reach(dir, &out, &summary);
+}
+
+/// Issue 19: the model form of this synthetic building (EnergyPlus plus noise) reaches every
+/// meter, and the same EnergyPlus runs against a meter holding a load the model lacks (a
+/// constant 3x the electricity's mean added) say that meter is out of reach, mostly a constant
+/// offset, while the other meters stay reached.
+fn model_form_tells_reached_from_out_of_reach(dir: &Path, out: &Path, summary: &serde_json::Value) {
+    let f = &summary["model_form"];
+    let meters = f["meters"].as_array().unwrap();
+    assert_eq!(meters.len(), 3, "{f}");
+    for m in meters {
+        assert_eq!(m["reach"]["verdict"], "reached", "{m}");
+        assert_eq!(m["patterns"].as_array().unwrap().len(), 4, "{m}");
+        assert!(
+            m["findings"][0].as_str().unwrap().starts_with("reached"),
+            "{m}"
+        );
+    }
+    let csv = std::fs::read_to_string(out.join("validation/discrepancy.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 8761);
+    assert_eq!(csv.lines().next().unwrap().split(',').count(), 1 + 3 * 3);
+
+    let altered = tempfile::tempdir().unwrap();
+    for f in ["model.toml", "project.toml"] {
+        std::fs::copy(dir.join(f), altered.path().join(f)).unwrap();
+    }
+    let meters = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
+    let header: Vec<&str> = meters.lines().next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "electricity_kwh").unwrap();
+    // The gap is written as NaN: it stays missing.
+    let values: Vec<f64> = meters
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split(',').nth(col)?.parse::<f64>().ok())
+        .filter(|v| v.is_finite())
+        .collect();
+    let offset = 3.0 * values.iter().sum::<f64>() / values.len() as f64;
+    let mut text = String::new();
+    for (i, line) in meters.lines().enumerate() {
+        let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+        match cells[col].parse::<f64>() {
+            Ok(v) if i > 0 && v.is_finite() => cells[col] = format!("{}", v + offset),
+            _ => {}
+        }
+        text.push_str(&cells.join(","));
+        text.push('\n');
+    }
+    std::fs::write(altered.path().join("meters.csv"), text).unwrap();
+    let project = bemcal_calibrate::Project::load(&altered.path().join("project.toml")).unwrap();
+    let cal = bemcal_calibrate::Calibration::load(project, out).unwrap();
+    let run = |label: &str| -> bemcal_energyplus::HourlyOutputs {
+        let text = std::fs::read_to_string(out.join("validation").join(label)).unwrap();
+        let saved: serde_json::Value = serde_json::from_str(&text).unwrap();
+        serde_json::from_value(saved["outputs"].clone()).unwrap()
+    };
+    let posterior = serde_json::from_value(summary["posterior"].clone()).unwrap();
+    let draws: Vec<_> = (10..14)
+        .map(|k| run(&format!("point_{k:03}.json")))
+        .collect();
+    let report =
+        bemcal_calibrate::model_form::report(&cal, &run("point_000.json"), &draws, &posterior)
+            .unwrap();
+    for m in &report.meters {
+        let verdict = m.reach.verdict;
+        if m.output == "electricity_kwh" {
+            assert_eq!(verdict, bemcal_stats::model_form::Verdict::Level, "{m:?}");
+            assert!(!m.reach.within_draws, "{m:?}");
+            assert!(
+                m.findings[0].starts_with("out of reach"),
+                "{:?}",
+                m.findings
+            );
+            assert!(
+                m.findings[1].contains("constant offset"),
+                "{:?}",
+                m.findings
+            );
+            assert!(
+                m.findings[1].contains("below the meter"),
+                "{:?}",
+                m.findings
+            );
+        } else {
+            assert_eq!(verdict, bemcal_stats::model_form::Verdict::Reached, "{m:?}");
+        }
+    }
 }
 
 /// Issue 22: `bemcal.load` (python/bemcal) reads the output folder as an ArviZ InferenceData
@@ -238,6 +325,33 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
             let in90 = m["in_sample"][1]["fraction"].as_f64().unwrap();
             assert!((0.75..=0.99).contains(&in90), "{o}");
             assert_eq!(m["held_out"].as_array().unwrap().len(), 2, "{o}");
+        }
+    }
+    // Intervals of daily and monthly totals (issue 24), with the AR(1) noise of a sum and as if
+    // hours were independent: shares of whole measured days and months, in-sample and held out
+    // (November and December), the AR(1) intervals no narrower where phi > 0.
+    for o in p["outputs"].as_array().unwrap() {
+        let phi = o["residual_phi"].as_f64().unwrap();
+        assert!((-1.0..1.0).contains(&phi), "{o}");
+        let totals = o["totals"].as_array().unwrap();
+        assert_eq!(totals.len(), 2, "{o}");
+        for t in totals {
+            let held = t["ar1"]["held_out"].as_array().unwrap();
+            assert_eq!(held.len(), 2, "{t}");
+            let periods = if t["period"] == "day" { 61 } else { 2 };
+            assert_eq!(held[0]["hours"].as_u64(), Some(periods), "{t}");
+            for kind in ["ar1", "independent"] {
+                for c in t[kind]["in_sample"].as_array().unwrap() {
+                    assert!(
+                        (0.0..=1.0).contains(&c["fraction"].as_f64().unwrap()),
+                        "{t}"
+                    );
+                }
+            }
+            let width = |kind: &str| t[kind]["in_sample"][1]["mean_width"].as_f64().unwrap();
+            if phi > 0.0 {
+                assert!(width("ar1") >= width("independent"), "{t}");
+            }
         }
     }
     let csv = std::fs::read_to_string(out.join("validation/predictive_intervals.csv")).unwrap();

@@ -166,6 +166,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     print_held_out(&s);
+    print_model_form(&s);
     for r in &s.refinement {
         println!(
             "\nrefinement round {}: {} posterior draws added, {} failed in EnergyPlus; surrogate vs EnergyPlus at them (NMBE / CV-RMSE): {}",
@@ -185,10 +186,25 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         t.design_s, t.simulations_s, t.training_s, t.chains_s, t.refinement_s, t.summary_s, t.validation_s, t.total_s
     );
     println!(
-        "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/, calibrated.idf",
+        "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/ (discrepancy.csv: the model-form discrepancy), calibrated.idf",
         a.out.display()
     );
     converged_or_not(&s, &a.out)
+}
+
+/// Whether the model reaches each meter, and what to look at where it does not.
+fn print_model_form(s: &bemcal_calibrate::Summary) {
+    let Some(f) = &s.model_form else { return };
+    println!("\nmodel form (can the calibrated model reach each meter?):");
+    for m in &f.meters {
+        for (i, line) in m.findings.iter().enumerate() {
+            let name = if i == 0 { m.output.as_str() } else { "" };
+            println!("{name:<18} {line}");
+        }
+    }
+    for line in &f.parameter_findings {
+        println!("{:<18} {line}", "parameters");
+    }
 }
 
 /// Monthly Guideline 14, the held-out period's, and the predictive intervals' coverage.
@@ -265,6 +281,41 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
                 if !m.held_out.is_empty() {
                     println!("{:<18} held out   {}", "", cov(&m.held_out));
                 }
+            }
+        }
+        print_totals(p, &cov);
+    }
+}
+
+/// Coverage of the intervals of daily and monthly totals, with the AR(1) noise of a sum and
+/// as if hours were independent.
+fn print_totals(
+    p: &bemcal_calibrate::predictive::PredictiveReport,
+    cov: &dyn Fn(&[bemcal_stats::predictive::Coverage]) -> String,
+) {
+    if p.outputs.iter().all(|o| o.totals.is_empty()) {
+        return;
+    }
+    println!(
+        "\nintervals of daily and monthly totals: share of whole measured days / months inside \
+         (AR(1) noise of a sum; as if hours were independent)"
+    );
+    for o in &p.outputs {
+        for t in &o.totals {
+            let name = format!("{} {:?}", o.output, t.period).to_lowercase();
+            println!(
+                "{name:<24} phi {:.2}  in-sample  {} | independent {}",
+                o.residual_phi,
+                cov(&t.ar1.in_sample),
+                cov(&t.independent.in_sample)
+            );
+            if !t.ar1.held_out.is_empty() {
+                println!(
+                    "{:<34}held out   {} | independent {}",
+                    "",
+                    cov(&t.ar1.held_out),
+                    cov(&t.independent.held_out)
+                );
             }
         }
     }

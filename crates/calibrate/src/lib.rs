@@ -4,7 +4,8 @@
 //! meters, bases) -> [`design`] (Latin hypercube, EnergyPlus runs, [`replacement`] of failed
 //! points) -> training set and surrogate ([`Calibration`]) -> chains ([`Sampler`], [`posterior`])
 //! -> [`refine`]ment rounds -> the [`surrogate_error`] carried into the intervals -> validation
-//! -> summary ([`write_summary`]). [`calibrate`] runs
+//! -> [`predictive`] intervals and [`model_form`] (can the model reach each meter) -> summary
+//! ([`write_summary`]). [`calibrate`] runs
 //! every stage on this machine; the coordinator runs the same stage methods as jobs. Each stage's
 //! results are written under the output folder and reused by a rerun, so an interrupted
 //! calibration resumes.
@@ -16,6 +17,7 @@ pub mod design;
 pub mod examples;
 mod inputs;
 mod local;
+pub mod model_form;
 pub use bemcal_named as named;
 pub mod output;
 pub mod posterior;

@@ -9,12 +9,22 @@
 //! the estimate over the calibration hours (`[validation] error_model`). Numerics in
 //! [`bemcal_stats::predictive`]; both drivers simulate [`ChainSummary::predictive_candidates`]
 //! and [`crate::write_summary`] calls [`assess`].
+//!
+//! Totals over days and months ([`TotalPeriod`]) get intervals too: the draws' sums with the
+//! noise of a sum of AR(1) residuals (`phi` from EnergyPlus's standardised residuals at the
+//! estimate), beside the same intervals as if hours were independent, which are too narrow
+//! where the residuals are autocorrelated; both are judged on whole measured days and months.
 
 use bemcal_stats::mcmc::Draws;
-use bemcal_stats::predictive::{coverage, intervals, Coverage, ErrorModel};
+use std::ops::Range;
+
+use bemcal_stats::predictive::{
+    coverage, intervals, lag1_autocorrelation, period_totals, total_intervals, Coverage,
+    ErrorModel, Intervals,
+};
 use serde::{Deserialize, Serialize};
 
-use bemcal_energyplus::Model;
+use bemcal_energyplus::{HourlyOutputs, Model};
 
 use crate::design::{saved_outputs, Plan};
 use crate::output::timestamps;
@@ -111,6 +121,55 @@ pub struct OutputPredictive {
     pub noise_kwh: f64,
     /// Coverage under each error model (the configured one first).
     pub by_error_model: Vec<ModelCoverage>,
+    /// Lag-one autocorrelation of EnergyPlus's residuals at the estimate over the calibration
+    /// hours, each standardised by the configured error model's scale.
+    #[serde(default)]
+    pub residual_phi: f64,
+    /// Intervals of daily and monthly totals (the configured error model), with the AR(1)
+    /// noise of a sum and as if hours were independent.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub totals: Vec<TotalsCoverage>,
+}
+
+/// What a total is taken over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TotalPeriod {
+    Day,
+    Month,
+}
+
+impl TotalPeriod {
+    /// The hour slots of every day or month of the grid.
+    pub fn periods(self, hours: usize) -> Vec<Range<usize>> {
+        match self {
+            TotalPeriod::Day => (0..hours / 24).map(|d| 24 * d..24 * d + 24).collect(),
+            TotalPeriod::Month => bemcal_weather::grid::CUM_DAYS
+                .windows(2)
+                .map(|w| 24 * w[0]..24 * w[1])
+                .filter(|r| r.end <= hours)
+                .collect(),
+        }
+    }
+}
+
+/// Coverage of the intervals of one kind of total (`hours` of each [`Coverage`] counts the
+/// periods judged: those whose every hour is measured and in the period judged).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TotalsCoverage {
+    pub period: TotalPeriod,
+    /// With the AR(1) noise of a sum (`residual_phi`): the intervals to read.
+    pub ar1: PeriodCoverage,
+    /// As if the hours' noise were independent (`phi = 0`): for comparison.
+    pub independent: PeriodCoverage,
+}
+
+/// 50 % and 90 % coverage, in-sample and held out.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PeriodCoverage {
+    pub in_sample: Vec<Coverage>,
+    /// Empty without a held-out period.
+    pub held_out: Vec<Coverage>,
 }
 
 /// Coverage of the 50 % and 90 % intervals under one error model.
@@ -122,23 +181,36 @@ pub struct ModelCoverage {
     pub held_out: Vec<Coverage>,
 }
 
+/// EnergyPlus at the predictive draws, as validation saved them (draws it could not simulate
+/// are left out).
+pub(crate) fn draw_runs(cal: &Calibration, chains: &ChainSummary) -> Vec<HourlyOutputs> {
+    let vdir = cal.out.validation();
+    chains
+        .predictive_candidates()
+        .iter()
+        .filter_map(|(c, _)| saved_outputs(&vdir, c.key, &cal.inputs.plan.values(&c.values)))
+        .collect()
+}
+
+/// EnergyPlus at the estimate, as validation saved it. The estimate was settled on one of the
+/// validation candidates (a fallback where EnergyPlus failed at the MAP): the run whose values
+/// are the estimate's.
+pub(crate) fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Option<HourlyOutputs> {
+    let vdir = cal.out.validation();
+    let values = cal.inputs.plan.values(&chains.estimate);
+    (0..=FALLBACKS)
+        .map(candidate_key)
+        .find_map(|key| saved_outputs(&vdir, key, &values))
+}
+
 /// The predictive intervals of a finished validation: reads EnergyPlus at the predictive
 /// draws and at the estimate from `validation/`, writes `validation/predictive_intervals.csv`
 /// and returns the report (None when no draw or the estimate's run is missing).
 pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<PredictiveReport>, Error> {
     let inp = &cal.inputs;
-    let vdir = cal.out.validation();
     let candidates = chains.predictive_candidates();
-    let runs: Vec<_> = candidates
-        .iter()
-        .filter_map(|(c, _)| saved_outputs(&vdir, c.key, &inp.plan.values(&c.values)))
-        .collect();
-    // The estimate was settled on one of the validation candidates (a fallback where
-    // EnergyPlus failed at the MAP): the run whose values are the estimate's.
-    let at_estimate = (0..=FALLBACKS)
-        .map(candidate_key)
-        .find_map(|key| saved_outputs(&vdir, key, &inp.plan.values(&chains.estimate)));
-    let Some(at_estimate) = at_estimate.filter(|_| !runs.is_empty()) else {
+    let runs = draw_runs(cal, chains);
+    let Some(at_estimate) = run_at_estimate(cal, chains).filter(|_| !runs.is_empty()) else {
         return Ok(None);
     };
     let fit = inp.calibration_hours();
@@ -148,9 +220,7 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
     let mut models = vec![configured];
     models.extend(ErrorModel::ALL.iter().filter(|m| **m != configured));
     for (k, name) in inp.outputs.iter().enumerate() {
-        let series = |o: &bemcal_energyplus::HourlyOutputs| {
-            inp.with_base(k, o.get(name).expect("model output"))
-        };
+        let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
         let estimate = series(&at_estimate);
         // An energy meter does not read below zero: its intervals are those of max(0, Y).
@@ -191,10 +261,45 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
                 columns.push((format!("{name}_q95"), iv.upper[1].clone()));
             }
         }
+        let scales = configured.scales(&inp.measured[k], &estimate, &fit)?;
+        let standardised: Vec<f64> = (0..fit.len())
+            .map(|t| match fit[t] {
+                true => (inp.measured[k][t] - estimate[t]) / scales[t],
+                false => f64::NAN,
+            })
+            .collect();
+        let residual_phi = lag1_autocorrelation(&standardised);
+        let totals = [TotalPeriod::Day, TotalPeriod::Month]
+            .into_iter()
+            .map(|period| {
+                let periods = period.periods(fit.len());
+                let judge = |phi: f64| -> Result<PeriodCoverage, Error> {
+                    let mut iv = total_intervals(&sims, &scales, phi, &periods, &LEVELS)?;
+                    if non_negative {
+                        iv.clamp_below(0.0);
+                    }
+                    let held_out = match &inp.held_out {
+                        Some(h) => totals_coverage(&h.measured[k], &h.hours, &periods, &iv),
+                        None => vec![],
+                    };
+                    Ok(PeriodCoverage {
+                        in_sample: totals_coverage(&inp.measured[k], &fit, &periods, &iv),
+                        held_out,
+                    })
+                };
+                Ok(TotalsCoverage {
+                    period,
+                    ar1: judge(residual_phi)?,
+                    independent: judge(0.0)?,
+                })
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
         outputs.push(OutputPredictive {
             output: name.clone(),
             noise_kwh,
             by_error_model,
+            residual_phi,
+            totals,
         });
     }
     write_intervals_csv(cal, &fit, &columns)?;
@@ -206,6 +311,22 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
         held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
         outputs,
     }))
+}
+
+/// Coverage of the totals' intervals `iv` over the periods whose every hour is measured and
+/// selected.
+fn totals_coverage(
+    measured: &[f64],
+    select: &[bool],
+    periods: &[Range<usize>],
+    iv: &Intervals,
+) -> Vec<Coverage> {
+    let (totals, counted) = period_totals(measured, select, periods);
+    LEVELS
+        .iter()
+        .enumerate()
+        .filter_map(|(i, l)| coverage(*l, &totals, &iv.lower[i], &iv.upper[i], &counted))
+        .collect()
 }
 
 /// `validation/predictive_intervals.csv`: per hour, whether it is held out, then per meter the

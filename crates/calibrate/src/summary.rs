@@ -123,6 +123,11 @@ pub struct Summary {
     /// the measured hours, in-sample and held out (`validation/predictive_intervals.csv`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub predictive: Option<crate::predictive::PredictiveReport>,
+    /// Whether the calibrated model can reach each meter, where its residuals sit, what to
+    /// change, and an additive discrepancy reported apart from the parameters
+    /// (`validation/discrepancy.csv`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_form: Option<crate::model_form::ModelFormReport>,
     /// Guideline 14 of the surrogate's prediction at the estimate against the meters: next to
     /// `validation` (EnergyPlus at the same point) it separates surrogate error from
     /// calibration error (the surrogate fitting the meters while EnergyPlus does not means the
@@ -328,6 +333,7 @@ pub fn write_summary(
         initial,
         holdout: HoldoutReport::of(inp),
         predictive: crate::predictive::assess(cal, chains)?,
+        model_form: crate::model_form::assess(cal, chains)?,
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         surrogate_error: chains.surrogate_error.clone(),
         design_points: design.points.len(),

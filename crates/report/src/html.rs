@@ -258,6 +258,105 @@ fn predictive_coverage(s: &crate::io::Summary) -> String {
         }
     }
     h.push_str("</table>\n");
+    h.push_str(&totals_coverage(p, &pct));
+    h
+}
+
+/// Coverage of the intervals of daily and monthly totals: with the AR(1) noise of a sum, and
+/// as if hours were independent (too narrow where residuals are autocorrelated).
+fn totals_coverage(
+    p: &crate::io::PredictiveBlock,
+    pct: &dyn Fn(Option<&crate::io::CoverageBlock>) -> String,
+) -> String {
+    if p.outputs.iter().all(|o| o.totals.is_empty()) {
+        return String::new();
+    }
+    let mut h = String::from(
+        "<p class=\"sub\">Intervals of daily and monthly totals (the first error model): share \
+         of the whole measured days or months inside, with the noise of a sum of AR(1) \
+         residuals (&phi;: their lag-one autocorrelation at the estimate) and, for comparison, \
+         as if the hours were independent.</p><table><tr><th class=\"l\">output</th>\
+         <th class=\"l\">total</th><th>&phi;</th><th>in-sample 50 %</th><th>in-sample 90 %</th>\
+         <th>held out 50 %</th><th>held out 90 %</th><th>independent: in-sample 90 %</th>\
+         <th>held out 90 %</th><th>90 % width, kWh</th></tr>",
+    );
+    for o in &p.outputs {
+        for t in &o.totals {
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td>\
+                 <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(&o.output),
+                esc(&t.period),
+                f(o.residual_phi, 2),
+                pct(t.ar1.in_sample.first()),
+                pct(t.ar1.in_sample.get(1)),
+                pct(t.ar1.held_out.first()),
+                pct(t.ar1.held_out.get(1)),
+                pct(t.independent.in_sample.get(1)),
+                pct(t.independent.held_out.get(1)),
+                t.ar1.in_sample.get(1).map_or("&ndash;".into(), |c| g(c.mean_width)),
+            );
+        }
+    }
+    h.push_str("</table>\n");
+    h
+}
+
+/// Whether the calibrated model reaches each meter: the verdict, the share of the residuals'
+/// variance each grouping explains, and the findings in words (`summary.json` `model_form`).
+fn model_form(s: &crate::io::Summary) -> String {
+    let Some(m) = &s.model_form else {
+        return String::new();
+    };
+    let mut h = String::from(
+        "<h3 id=\"model-form\">Can the model reach each meter?</h3><p class=\"sub\">EnergyPlus at \
+         the estimate against the meter over the calibration hours: the verdict by Guideline 14 \
+         (level: |NMBE| over 10 %; shape: CV-RMSE over 30 %), the meter's total against the \
+         model's at the estimate and posterior draws, the share of the residuals' variance \
+         (&eta;&sup2;) explained by the hour of day, working or off day, month and outdoor \
+         temperature, and the share of the misfit an additive discrepancy removes \
+         (<code>validation/discrepancy.csv</code>).</p><table><tr><th class=\"l\">output</th>\
+         <th class=\"l\">verdict</th><th>meter, MWh</th><th>model, MWh</th><th>hour</th>\
+         <th>day kind</th><th>month</th><th>outdoor T</th><th>discrepancy removes</th></tr>",
+    );
+    for o in &m.meters {
+        let eta = |factor: &str| {
+            o.patterns
+                .iter()
+                .find(|p| p.factor == factor)
+                .map_or("&ndash;".to_string(), |p| f(p.eta_squared, 2))
+        };
+        let verdict = match (o.reach.verdict.as_str(), o.reach.within_draws) {
+            ("reached", _) => "<span class=\"pass\">reached</span>".to_string(),
+            ("level", false) => "<span class=\"fail\">out of reach</span>".to_string(),
+            (v, _) => format!("<span class=\"fail\">{} missed</span>", esc(v)),
+        };
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{verdict}</td><td>{}</td><td>{}..{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.0} %</td></tr>",
+            esc(&o.output),
+            g(o.reach.measured_kwh / 1000.0),
+            g(o.reach.draws_kwh[0] / 1000.0),
+            g(o.reach.draws_kwh[1] / 1000.0),
+            eta("hour_of_day"),
+            eta("day_kind"),
+            eta("month"),
+            eta("outdoor_temperature"),
+            100.0 * o.discrepancy.share,
+        );
+    }
+    h.push_str("</table><ul class=\"findings\">");
+    for o in &m.meters {
+        for line in &o.findings {
+            let _ = write!(h, "<li><b>{}</b>: {}</li>", esc(&o.output), esc(line));
+        }
+    }
+    for line in &m.parameter_findings {
+        let _ = write!(h, "<li>{}</li>", esc(line));
+    }
+    h.push_str("</ul>\n");
     h
 }
 
@@ -327,6 +426,32 @@ fn held_out_weeks(cal: &CalibrationData) -> Result<String, ReportError> {
 }
 
 /// The first screen's banner of a calibration whose chains missed a convergence target.
+/// A banner on the first screen naming the meters no posterior draw of the model reaches.
+fn out_of_reach_banner(s: &crate::io::Summary) -> String {
+    let out: Vec<&str> = s
+        .model_form
+        .iter()
+        .flat_map(|m| &m.meters)
+        .filter(|o| o.reach.verdict == "level" && !o.reach.within_draws)
+        .map(|o| o.output.as_str())
+        .collect();
+    if out.is_empty() {
+        return String::new();
+    }
+    format!(
+        "<div class=\"banner\" id=\"out-of-reach\"><b>Out of the model's reach: {}.</b> No \
+         posterior draw of the model reaches the level of {}: the parameters below are the \
+         model's best compromise, not the building's values. <a href=\"#model-form\">What the \
+         residuals point to</a>.</div>\n",
+        esc(&out.join(", ")),
+        if out.len() == 1 {
+            "this meter"
+        } else {
+            "these meters"
+        }
+    )
+}
+
 fn not_converged_banner(s: &crate::io::Summary) -> String {
     let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
     let detail = match &s.convergence {
@@ -422,6 +547,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     if !s.converged {
         h.push_str(&not_converged_banner(s));
     }
+    h.push_str(&out_of_reach_banner(s));
     h.push_str(
         "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
 <a href=\"#parameters\">Parameters</a><a href=\"#prior-posterior\">Prior vs posterior</a>\
@@ -595,6 +721,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
     h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
     h.push_str(&monthly_and_held_out(s));
     h.push_str(&predictive_coverage(s));
+    h.push_str(&model_form(s));
     h.push_str(&held_out_weeks(cal)?);
 
     // ---- parameters (Table 4)

@@ -171,6 +171,33 @@ pub struct OutputPredictiveBlock {
     pub output: String,
     /// Under each error model, the configured one first.
     pub by_error_model: Vec<ModelCoverageBlock>,
+    /// Lag-one autocorrelation of the standardised residuals at the estimate.
+    #[serde(default)]
+    pub residual_phi: f64,
+    /// Intervals of daily and monthly totals.
+    #[serde(default)]
+    pub totals: Vec<TotalsBlock>,
+}
+
+/// Coverage of the intervals of one kind of total.
+#[derive(Debug, Clone, Deserialize)]
+pub struct TotalsBlock {
+    /// `day` or `month`.
+    pub period: String,
+    /// With the AR(1) noise of a sum.
+    pub ar1: PeriodCoverageBlock,
+    /// As if the hours' noise were independent.
+    pub independent: PeriodCoverageBlock,
+}
+
+/// 50 % and 90 % coverage of totals, in-sample and held out (`hours` counts periods).
+#[derive(Debug, Clone, Deserialize)]
+pub struct PeriodCoverageBlock {
+    /// Over the calibration period.
+    pub in_sample: Vec<CoverageBlock>,
+    /// Over the held-out period (empty without).
+    #[serde(default)]
+    pub held_out: Vec<CoverageBlock>,
 }
 
 /// Coverage under one error model.
@@ -196,6 +223,62 @@ pub struct CoverageBlock {
     pub fraction: f64,
     /// Mean width, kWh.
     pub mean_width: f64,
+}
+
+/// `summary.json` `model_form`: whether the model reaches each meter, and what to change.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ModelFormBlock {
+    /// Per meter.
+    pub meters: Vec<MeterFormBlock>,
+    /// Parameters piled against a prior bound, in words.
+    #[serde(default)]
+    pub parameter_findings: Vec<String>,
+}
+
+/// One meter's model form.
+#[derive(Debug, Clone, Deserialize)]
+pub struct MeterFormBlock {
+    /// Meter.
+    pub output: String,
+    /// Its reach: the verdict and the totals.
+    pub reach: ReachBlock,
+    /// The residuals grouped by each factor.
+    #[serde(default)]
+    pub patterns: Vec<PatternBlock>,
+    /// The additive discrepancy.
+    pub discrepancy: DiscrepancyBlock,
+    /// In words.
+    #[serde(default)]
+    pub findings: Vec<String>,
+}
+
+/// A meter's reach.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ReachBlock {
+    /// `reached`, `level` or `shape`.
+    pub verdict: String,
+    /// Whether a posterior draw reaches the meter's total.
+    pub within_draws: bool,
+    /// The meter's total, kWh.
+    pub measured_kwh: f64,
+    /// The smallest and largest total of the model at the estimate and the draws, kWh.
+    pub draws_kwh: [f64; 2],
+}
+
+/// Residuals grouped by one factor.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PatternBlock {
+    /// `hour_of_day`, `day_kind`, `month` or `outdoor_temperature`.
+    pub factor: String,
+    /// Share of the residuals' variance the grouping explains.
+    pub eta_squared: f64,
+}
+
+/// The additive discrepancy's effect.
+#[derive(Debug, Clone, Deserialize)]
+pub struct DiscrepancyBlock {
+    /// Share of the misfit it removes.
+    pub share: f64,
 }
 
 /// Wall time per stage, s (`summary.json` `timings`).
@@ -354,6 +437,9 @@ pub struct Summary {
     /// Hourly predictive intervals from EnergyPlus at posterior draws.
     #[serde(default)]
     pub predictive: Option<PredictiveBlock>,
+    /// Whether the model reaches each meter.
+    #[serde(default)]
+    pub model_form: Option<ModelFormBlock>,
     /// Whether every R-hat and ESS criterion was met.
     #[serde(default)]
     pub converged: bool,

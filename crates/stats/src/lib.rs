@@ -21,6 +21,8 @@
 //!   points by recovering their known values, added to the draws.
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
+//! - [`model_form`]: whether a model can reach a meter, residual patterns, an additive
+//!   discrepancy, parameters piled against a prior bound.
 
 #![deny(missing_docs)]
 
@@ -32,6 +34,7 @@ pub mod lhs;
 pub mod likelihood;
 pub mod mcmc;
 pub mod metrics;
+pub mod model_form;
 pub mod optim;
 pub mod predictive;
 pub mod prior;

@@ -1,0 +1,561 @@
+//! Stage 7c, model form: for each meter, whether the calibrated model can reach it, where its
+//! hourly residuals sit (hour of day, working or off day, month, outdoor temperature), what a
+//! user could change, and an additive discrepancy fitted to the residuals and reported apart
+//! from the parameters (`summary.json` `model_form`, `validation/discrepancy.csv`).
+//!
+//! A calibration that passes its chains' checks can still leave a meter out of the model's
+//! reach (a system the model lacks, a meter that holds more than the model's output, a prior
+//! that excludes the building): this stage says so in words instead of leaving a failed
+//! Guideline 14 line to be read. Numerics in [`bemcal_stats::model_form`]; the words (which
+//! factor points to which part of the model) are this module's rule, [`findings`].
+
+use bemcal_energyplus::HourlyOutputs;
+use bemcal_stats::metrics::{g14, G14Metrics};
+use bemcal_stats::model_form::{
+    additive_discrepancy, pattern, piled_at_bound, quantile_bands, reach, slope, Bound,
+    FactorGroups, Pattern, Reach, Verdict,
+};
+use bemcal_stats::summary::PosteriorSummary;
+use serde::{Deserialize, Serialize};
+
+use crate::output::timestamps;
+use crate::predictive::{draw_runs, run_at_estimate};
+use crate::{write_atomic, Calibration, ChainSummary, Error};
+
+/// Outdoor temperature bands (equal counts of hours) the residuals are grouped by.
+pub const TEMPERATURE_BANDS: usize = 10;
+
+/// A pattern is named in the findings when its grouping explains at least this share of the
+/// residuals' variance (`eta^2`).
+pub const PATTERN_ETA2: f64 = 0.10;
+
+/// A level miss is called a constant offset when the residuals' mean carries at least this
+/// share of their mean square.
+pub const OFFSET_SHARE: f64 = 0.5;
+
+const MONTHS: [&str; 12] = [
+    "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+];
+
+/// What the residuals are grouped by.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Factor {
+    /// Hour of the day, local standard time (24 groups).
+    HourOfDay,
+    /// Working day or off day (weekend, holiday, or the meters' off days).
+    DayKind,
+    /// Calendar month.
+    Month,
+    /// Outdoor dry-bulb temperature, [`TEMPERATURE_BANDS`] bands of equal hours.
+    OutdoorTemperature,
+}
+
+/// The model-form record in `summary.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModelFormReport {
+    /// Posterior draws of EnergyPlus the reach is judged with (besides the estimate).
+    pub draws: usize,
+    pub meters: Vec<MeterForm>,
+    /// Parameters whose posterior median lies against a prior bound.
+    pub piled: Vec<PiledParameter>,
+    /// The piled parameters in words, with what to change ([`PiledParameter::finding`]).
+    pub parameter_findings: Vec<String>,
+}
+
+/// One meter's model form, over the calibration period's measured hours.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MeterForm {
+    pub output: String,
+    pub reach: Reach,
+    /// The residuals (measured - model, kWh per hour) grouped by each factor.
+    pub patterns: Vec<FactorPattern>,
+    /// Slope of the residuals on the outdoor dry-bulb temperature, kWh per hour per K.
+    pub temperature_slope_kwh_per_k: f64,
+    pub discrepancy: Discrepancy,
+    /// In words: whether the model reaches the meter, and what to look at if not.
+    pub findings: Vec<String>,
+}
+
+/// The residuals grouped by one factor.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FactorPattern {
+    pub factor: Factor,
+    #[serde(flatten)]
+    pub pattern: Pattern,
+}
+
+/// The additive discrepancy `delta(hour of day x day kind) + delta(month) + delta(outdoor
+/// temperature band)` fitted to the calibration period's residuals at the estimate
+/// (`validation/discrepancy.csv` has it hourly).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Discrepancy {
+    /// Share of the residuals' mean square it removes.
+    pub share: f64,
+    /// Guideline 14 of model + discrepancy over the calibration period.
+    pub corrected: G14Metrics,
+    /// The same on the held-out period, where the discrepancy was not fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<G14Metrics>,
+}
+
+/// A parameter piled against a prior bound.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PiledParameter {
+    pub name: String,
+    pub bound: Bound,
+    pub median: f64,
+    pub prior_min: f64,
+    pub prior_max: f64,
+}
+
+impl PiledParameter {
+    /// In words, with what to change.
+    pub fn finding(&self) -> String {
+        let (which, at) = match self.bound {
+            Bound::Lower => ("lower", self.prior_min),
+            Bound::Upper => ("upper", self.prior_max),
+        };
+        format!(
+            "{} is piled against its prior's {which} bound (median {:.4} against {at}): widen \
+             that prior if a value beyond is physical; if not, it compensates for something the \
+             model lacks",
+            self.name, self.median
+        )
+    }
+}
+
+/// The hour groups of every factor, for one year's hour slots.
+struct Groups {
+    factors: Vec<(Factor, Vec<usize>, Vec<String>)>,
+    /// Hour of day x day kind (48 groups), the discrepancy's time term.
+    hour_by_kind: Vec<usize>,
+}
+
+impl Groups {
+    fn new(cal: &Calibration) -> Groups {
+        let f = &cal.inputs.features;
+        let n = f.len();
+        let hour: Vec<usize> = (0..n).map(|t| t % 24).collect();
+        let kind: Vec<usize> = f
+            .day_type
+            .iter()
+            .map(|d| usize::from(d.is_off_day()))
+            .collect();
+        let month: Vec<usize> = (0..n)
+            .map(|t| bemcal_weather::grid::slot_month(t) as usize - 1)
+            .collect();
+        let (band, band_labels) = quantile_bands(&f.dry_bulb_c, TEMPERATURE_BANDS);
+        let hour_by_kind = hour.iter().zip(&kind).map(|(h, k)| h + 24 * k).collect();
+        Groups {
+            factors: vec![
+                (
+                    Factor::HourOfDay,
+                    hour,
+                    (0..24).map(|h| format!("{h:02}")).collect(),
+                ),
+                (
+                    Factor::DayKind,
+                    kind,
+                    vec!["working day".into(), "off day".into()],
+                ),
+                (Factor::Month, month, MONTHS.map(String::from).to_vec()),
+                (Factor::OutdoorTemperature, band, band_labels),
+            ],
+            hour_by_kind,
+        }
+    }
+
+    fn of(&self, factor: Factor) -> &[usize] {
+        &self
+            .factors
+            .iter()
+            .find(|f| f.0 == factor)
+            .expect("every factor")
+            .1
+    }
+
+    fn levels(&self, factor: Factor) -> usize {
+        self.factors
+            .iter()
+            .find(|f| f.0 == factor)
+            .expect("every factor")
+            .2
+            .len()
+    }
+}
+
+/// The model form of a finished validation: reads EnergyPlus at the estimate and at the
+/// predictive draws from `validation/` and calls [`report`] (None when the estimate's run is
+/// missing).
+pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<ModelFormReport>, Error> {
+    let Some(at_estimate) = run_at_estimate(cal, chains) else {
+        return Ok(None);
+    };
+    let draws = draw_runs(cal, chains);
+    report(cal, &at_estimate, &draws, &chains.posterior).map(Some)
+}
+
+/// The model form of EnergyPlus's hourly outputs at the estimate and at posterior draws
+/// against the calibration's meters (with their bases), and the posterior's medians against
+/// the priors; writes `validation/discrepancy.csv`. A meter with too few hours to judge is
+/// left out (its Guideline 14 line says so already).
+pub fn report(
+    cal: &Calibration,
+    at_estimate: &HourlyOutputs,
+    draws: &[HourlyOutputs],
+    posterior: &PosteriorSummary,
+) -> Result<ModelFormReport, Error> {
+    let inp = &cal.inputs;
+    let groups = Groups::new(cal);
+    let mut meters = vec![];
+    let mut columns: Vec<(String, Vec<f64>)> = vec![];
+    for (k, name) in inp.outputs.iter().enumerate() {
+        let Some(sim) = at_estimate.get(name) else {
+            continue;
+        };
+        let model = inp.with_base(k, sim);
+        let sims: Vec<Vec<f64>> = draws
+            .iter()
+            .filter_map(|o| o.get(name).map(|s| inp.with_base(k, s)))
+            .collect();
+        let Ok((form, delta)) = meter_form(cal, &groups, k, &model, &sims) else {
+            continue;
+        };
+        let corrected: Vec<f64> = model.iter().zip(&delta).map(|(m, d)| m + d).collect();
+        columns.push((format!("{name}_model"), model));
+        columns.push((format!("{name}_discrepancy"), delta));
+        columns.push((format!("{name}_corrected"), corrected));
+        meters.push(form);
+    }
+    write_discrepancy_csv(cal, &columns)?;
+    let piled = piled_parameters(cal, posterior);
+    Ok(ModelFormReport {
+        draws: draws.len(),
+        meters,
+        parameter_findings: piled.iter().map(PiledParameter::finding).collect(),
+        piled,
+    })
+}
+
+/// One meter's form and its hourly discrepancy.
+fn meter_form(
+    cal: &Calibration,
+    groups: &Groups,
+    k: usize,
+    model: &[f64],
+    draws: &[Vec<f64>],
+) -> Result<(MeterForm, Vec<f64>), bemcal_stats::StatsError> {
+    let inp = &cal.inputs;
+    let measured = &inp.measured[k];
+    let reach = reach(measured, model, draws)?;
+    let patterns = groups
+        .factors
+        .iter()
+        .map(|(factor, g, labels)| {
+            Ok(FactorPattern {
+                factor: *factor,
+                pattern: pattern(measured, model, g, labels)?,
+            })
+        })
+        .collect::<Result<Vec<_>, bemcal_stats::StatsError>>()?;
+    let residual: Vec<f64> = measured.iter().zip(model).map(|(y, s)| y - s).collect();
+    let temperature_slope_kwh_per_k = slope(&inp.features.dry_bulb_c, &residual);
+    let factors = [
+        FactorGroups {
+            group: &groups.hour_by_kind,
+            levels: 48,
+        },
+        FactorGroups {
+            group: groups.of(Factor::Month),
+            levels: 12,
+        },
+        FactorGroups {
+            group: groups.of(Factor::OutdoorTemperature),
+            levels: groups.levels(Factor::OutdoorTemperature),
+        },
+    ];
+    let additive = additive_discrepancy(measured, model, &factors)?;
+    let corrected: Vec<f64> = model
+        .iter()
+        .zip(&additive.delta)
+        .map(|(m, d)| m + d)
+        .collect();
+    let discrepancy = Discrepancy {
+        share: additive.share,
+        corrected: g14(measured, &corrected)?,
+        held_out: inp
+            .held_out
+            .as_ref()
+            .and_then(|h| g14(&h.measured[k], &corrected).ok()),
+    };
+    let mut form = MeterForm {
+        output: inp.outputs[k].clone(),
+        reach,
+        patterns,
+        temperature_slope_kwh_per_k,
+        discrepancy,
+        findings: vec![],
+    };
+    form.findings = findings(&form, draws.len());
+    Ok((form, additive.delta))
+}
+
+/// Parameters whose posterior median lies against a bound of their prior.
+fn piled_parameters(cal: &Calibration, posterior: &PosteriorSummary) -> Vec<PiledParameter> {
+    let plan = &cal.inputs.plan;
+    plan.calibrated
+        .iter()
+        .zip(&plan.priors)
+        .filter_map(|(name, prior)| {
+            let p = posterior.parameters.iter().find(|p| &p.name == name)?;
+            let bound = piled_at_bound(prior.min(), prior.max(), p.median)?;
+            Some(PiledParameter {
+                name: name.clone(),
+                bound,
+                median: p.median,
+                prior_min: prior.min(),
+                prior_max: prior.max(),
+            })
+        })
+        .collect()
+}
+
+/// The rule that turns a meter's figures into words: the verdict, then (for a meter not
+/// reached) a constant offset, the strongest residual pattern with the part of the model it
+/// points to, and what the discrepancy removes.
+pub fn findings(form: &MeterForm, draws: usize) -> Vec<String> {
+    let r = &form.reach;
+    let mwh = |x: f64| x / 1000.0;
+    let mut out = vec![match r.verdict {
+        Verdict::Reached => format!(
+            "reached: NMBE {:+.1} %, CV-RMSE {:.1} % at the estimate",
+            r.nmbe, r.cv_rmse
+        ),
+        Verdict::Level if !r.within_draws => format!(
+            "out of reach: EnergyPlus at the estimate and {draws} posterior draws gives \
+             {:.1}..{:.1} MWh over the calibration hours, the meter {:.1} MWh (NMBE {:+.1} %): \
+             no posterior draw reaches its level",
+            mwh(r.draws_kwh[0]),
+            mwh(r.draws_kwh[1]),
+            mwh(r.measured_kwh),
+            r.nmbe
+        ),
+        Verdict::Level => format!(
+            "level missed at the estimate (NMBE {:+.1} %) although posterior draws span \
+             {:.1}..{:.1} MWh around the meter's {:.1} MWh: the surrogate's error near the \
+             posterior (more refinement rounds or design points) or a compromise with the \
+             other meters",
+            r.nmbe,
+            mwh(r.draws_kwh[0]),
+            mwh(r.draws_kwh[1]),
+            mwh(r.measured_kwh)
+        ),
+        Verdict::Shape => format!(
+            "level reached (NMBE {:+.1} %), hourly shape missed (CV-RMSE {:.1} %)",
+            r.nmbe, r.cv_rmse
+        ),
+    }];
+    if r.verdict == Verdict::Reached {
+        return out;
+    }
+    let side = |x: f64| if x > 0.0 { "below" } else { "above" };
+    // The residuals' mean square is mean^2 + variance, and (NMBE / CV-RMSE)^2 is the share of
+    // it the mean carries (Guideline 14's denominators cancel).
+    let offset_share = (r.nmbe / r.cv_rmse).powi(2);
+    if r.verdict == Verdict::Level && offset_share >= OFFSET_SHARE {
+        let mean = r.nmbe / 100.0 * r.measured_kwh / r.hours.max(1) as f64;
+        out.push(format!(
+            "mostly a constant offset ({:.0} % of the misfit): the model is {} the meter by \
+             {:.1} kWh every hour on average: a load the model lacks (a base: [[bases]]), a \
+             meter that holds more or other than the model's output, or a system unlike the \
+             model's",
+            100.0 * offset_share.min(1.0),
+            side(mean),
+            mean.abs()
+        ));
+    }
+    let strongest = form
+        .patterns
+        .iter()
+        .filter(|p| p.pattern.eta_squared >= PATTERN_ETA2)
+        .max_by(|a, b| a.pattern.eta_squared.total_cmp(&b.pattern.eta_squared));
+    if let Some(p) = strongest {
+        out.push(pattern_finding(form, p));
+    }
+    let d = &form.discrepancy;
+    out.push(format!(
+        "an additive discrepancy (hour of day by day kind, month, outdoor temperature) removes \
+         {:.0} % of the misfit: NMBE {:+.1} %, CV-RMSE {:.1} % with it{}",
+        100.0 * d.share,
+        d.corrected.nmbe,
+        d.corrected.cv_rmse,
+        d.held_out.map_or(String::new(), |h| format!(
+            "; on the held-out period, where it was not fitted, {:+.1} % / {:.1} %",
+            h.nmbe, h.cv_rmse
+        ))
+    ));
+    out
+}
+
+/// The strongest pattern in words, with the part of the model it points to.
+fn pattern_finding(form: &MeterForm, p: &FactorPattern) -> String {
+    let g = &p.pattern.groups;
+    let eta = p.pattern.eta_squared;
+    let by = |f: fn(&f64, &f64) -> std::cmp::Ordering| {
+        g.iter()
+            .max_by(|a, b| f(&a.mean_residual.abs(), &b.mean_residual.abs()))
+            .map(|x| (x.label.clone(), x.mean_residual))
+            .unwrap_or_default()
+    };
+    let (worst, worst_r) = by(f64::total_cmp);
+    match p.factor {
+        Factor::OutdoorTemperature => {
+            let (cold, warm) = (g.first(), g.last());
+            format!(
+                "the residuals follow the outdoor temperature (eta^2 {eta:.2}; {:+.2} kWh per \
+                 hour per K; {:+.1} kWh/h at {} C, {:+.1} at {} C): the envelope (insulation, \
+                 glazing, infiltration), outdoor air, the plant's efficiency, or the weather \
+                 (calibrate with the metered year's: [measured_weather])",
+                form.temperature_slope_kwh_per_k,
+                cold.map_or(0.0, |c| c.mean_residual),
+                cold.map_or("", |c| c.label.as_str()),
+                warm.map_or(0.0, |c| c.mean_residual),
+                warm.map_or("", |c| c.label.as_str()),
+            )
+        }
+        Factor::HourOfDay => format!(
+            "the residuals follow the hour of the day (eta^2 {eta:.2}; largest at {worst}:00, \
+             {worst_r:+.1} kWh/h): the schedules (occupied hours, start and stop times; \
+             pre-calibration's schedule priors in priors.toml)"
+        ),
+        Factor::DayKind => format!(
+            "working and off days differ (eta^2 {eta:.2}; {}): the day-type calendar \
+             (day_types_file = \"precal/calendar.csv\" in the building spec) or the holidays",
+            g.iter()
+                .map(|x| format!("{} {:+.1} kWh/h", x.label, x.mean_residual))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Factor::Month => format!(
+            "a seasonal pattern (eta^2 {eta:.2}; largest in {worst}, {worst_r:+.1} kWh/h): a \
+             system that runs part of the year (economiser, heating season, a process load) \
+             or the weather (calibrate with the metered year's: [measured_weather])"
+        ),
+    }
+}
+
+/// `validation/discrepancy.csv`: per hour and meter, the model at the estimate (with its
+/// base), the fitted discrepancy, and their sum.
+fn write_discrepancy_csv(cal: &Calibration, columns: &[(String, Vec<f64>)]) -> Result<(), Error> {
+    let mut s = String::from("timestamp");
+    for (name, _) in columns {
+        s.push(',');
+        s.push_str(name);
+    }
+    s.push('\n');
+    let n = columns.first().map_or(0, |c| c.1.len());
+    for (h, ts) in timestamps(cal.inputs.year, n).iter().enumerate() {
+        s.push_str(ts);
+        for (_, v) in columns {
+            s.push_str(&format!(",{:.4}", v[h]));
+        }
+        s.push('\n');
+    }
+    write_atomic(&cal.out.validation().join("discrepancy.csv"), s.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bemcal_stats::model_form::Group;
+
+    fn form(verdict: Verdict, nmbe: f64, within: bool, patterns: Vec<FactorPattern>) -> MeterForm {
+        MeterForm {
+            output: "heating_kwh".into(),
+            reach: Reach {
+                hours: 8760,
+                measured_kwh: 760_000.0,
+                estimate_kwh: 2_580_000.0,
+                draws_kwh: [2_500_000.0, 2_700_000.0],
+                within_draws: within,
+                nmbe,
+                cv_rmse: 300.0,
+                verdict,
+            },
+            patterns,
+            temperature_slope_kwh_per_k: 3.5,
+            discrepancy: Discrepancy {
+                share: 0.9,
+                corrected: g14(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]).unwrap(),
+                held_out: None,
+            },
+            findings: vec![],
+        }
+    }
+
+    fn groups(means: &[f64]) -> Vec<Group> {
+        means
+            .iter()
+            .enumerate()
+            .map(|(i, m)| Group {
+                label: format!("{i:02}"),
+                hours: 100,
+                mean_residual: *m,
+                mean_measured: 80.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn an_unreachable_offset_meter_is_named_with_what_to_change() {
+        // A level 200 kWh/h too high at every hour: out of reach, a constant offset, the
+        // temperature pattern named, the piled parameter named.
+        let patterns = vec![
+            FactorPattern {
+                factor: Factor::HourOfDay,
+                pattern: Pattern {
+                    eta_squared: 0.02,
+                    groups: groups(&[-205.0, -195.0]),
+                },
+            },
+            FactorPattern {
+                factor: Factor::OutdoorTemperature,
+                pattern: Pattern {
+                    eta_squared: 0.4,
+                    groups: groups(&[-260.0, -140.0]),
+                },
+            },
+        ];
+        let f = findings(&form(Verdict::Level, -240.0, false, patterns), 8);
+        assert!(f[0].starts_with("out of reach"), "{f:?}");
+        assert!(f[0].contains("760.0 MWh"), "{f:?}");
+        assert!(
+            f[1].contains("constant offset") && f[1].contains("above"),
+            "{f:?}"
+        );
+        assert!(f[2].contains("outdoor temperature"), "{f:?}");
+        assert!(f[3].contains("removes 90 %"), "{f:?}");
+        let piled = PiledParameter {
+            name: "wall_insulation_k".into(),
+            bound: Bound::Lower,
+            median: 0.0201,
+            prior_min: 0.02,
+            prior_max: 0.06,
+        };
+        let line = piled.finding();
+        assert!(
+            line.contains("wall_insulation_k") && line.contains("lower bound"),
+            "{line}"
+        );
+    }
+
+    #[test]
+    fn a_reached_meter_is_one_line_and_a_level_within_the_draws_blames_the_surrogate() {
+        let f = findings(&form(Verdict::Reached, 1.0, true, vec![]), 8);
+        assert_eq!(f.len(), 1);
+        assert!(f[0].starts_with("reached"));
+        let f = findings(&form(Verdict::Level, -14.0, true, vec![]), 8);
+        assert!(f[0].contains("surrogate"), "{f:?}");
+    }
+}
