@@ -425,7 +425,6 @@ fn held_out_weeks(cal: &CalibrationData) -> Result<String, ReportError> {
     Ok(h)
 }
 
-/// The first screen's banner of a calibration whose chains missed a convergence target.
 /// A banner on the first screen naming the meters no posterior draw of the model reaches.
 fn out_of_reach_banner(s: &crate::io::Summary) -> String {
     let out: Vec<&str> = s
@@ -452,6 +451,7 @@ fn out_of_reach_banner(s: &crate::io::Summary) -> String {
     )
 }
 
+/// The first screen's banner of a calibration whose chains missed a convergence target.
 fn not_converged_banner(s: &crate::io::Summary) -> String {
     let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
     let detail = match &s.convergence {
@@ -501,8 +501,40 @@ fn not_converged_banner(s: &crate::io::Summary) -> String {
 /// The whole report as one self-contained HTML document.
 pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<String, ReportError> {
     let s = &cal.summary;
-    let post = &s.posterior;
     let mut h = String::with_capacity(1 << 20);
+    h.push_str(&header(cal));
+    if !s.converged {
+        h.push_str(&not_converged_banner(s));
+    }
+    h.push_str(&out_of_reach_banner(s));
+    h.push_str(&nav(precal.is_some()));
+    h.push_str(&warnings(s));
+    h.push_str(&design_failures(s));
+    h.push_str(&goodness_of_fit(s));
+    h.push_str(&monthly_and_held_out(s));
+    h.push_str(&predictive_coverage(s));
+    h.push_str(&model_form(s));
+    h.push_str(&held_out_weeks(cal)?);
+    h.push_str(&parameters_table(s));
+    h.push_str(&prior_vs_posterior(cal)?);
+    h.push_str(&chain_plots(cal)?);
+    h.push_str(&hourly_fit(cal)?);
+    h.push_str(&run_timings(s));
+    h.push_str(&refinement(s));
+    h.push_str(&acceptance_rates(s));
+    h.push_str(&surrogate_on_held_out(s));
+    if let Some(p) = precal {
+        precal_section(&mut h, p)?;
+    }
+    h.push_str("<p class=\"sub\" style=\"margin-top:32px\">Written by bemcal report.</p></main></body></html>\n");
+    Ok(h)
+}
+
+/// The page's head (title, style) and first line: the project, the convergence badge, the folder,
+/// outputs, parameters, chains, draws, design points and estimate.
+fn header(cal: &CalibrationData) -> String {
+    let s = &cal.summary;
+    let mut h = String::new();
     let title = if s.project.is_empty() {
         "calibration".to_string()
     } else {
@@ -544,21 +576,29 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
             v => v.to_string(),
         })
     );
-    if !s.converged {
-        h.push_str(&not_converged_banner(s));
-    }
-    h.push_str(&out_of_reach_banner(s));
+    h
+}
+
+/// The navigation bar: a link to each section (the pre-calibration's where there is one).
+fn nav(with_precal: bool) -> String {
+    let mut h = String::new();
     h.push_str(
         "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
 <a href=\"#parameters\">Parameters</a><a href=\"#prior-posterior\">Prior vs posterior</a>\
 <a href=\"#chains\">Chains</a><a href=\"#fit\">Measured vs calibrated</a><a href=\"#run\">Run</a>",
     );
-    if precal.is_some() {
+    if with_precal {
         h.push_str("<a href=\"#precal\">Pre-calibration</a>");
     }
     h.push_str("</nav>\n");
+    h
+}
 
-    // ---- warnings
+/// Warnings: R-hat, bulk ESS, uninformed parameters, correlated pairs, acceptance rates,
+/// Guideline 14 failures and design runs EnergyPlus could not simulate.
+fn warnings(s: &crate::io::Summary) -> String {
+    let post = &s.posterior;
+    let mut h = String::new();
     let mut warn: Vec<String> = vec![];
     for p in &post.parameters {
         if p.rhat > RHAT_LIMIT {
@@ -636,60 +676,70 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
         }
         h.push_str("</ul>");
     }
+    h
+}
 
-    // ---- design points EnergyPlus could not simulate: where the model is not valid
-    if !d.failed.is_empty() || !d.notes.is_empty() {
-        h.push_str(
-            "<h2 id=\"design\">Design points EnergyPlus could not simulate</h2>\
+/// The design points EnergyPlus could not simulate (where the model is not valid), the
+/// suggestions and the Severe messages accepted; nothing when there are none.
+fn design_failures(s: &crate::io::Summary) -> String {
+    let d = &s.design;
+    if d.failed.is_empty() && d.notes.is_empty() {
+        return String::new();
+    }
+    let mut h = String::new();
+    h.push_str(
+        "<h2 id=\"design\">Design points EnergyPlus could not simulate</h2>\
 <p class=\"sub\">Each failed run was replaced by the spare hypercube point farthest from every \
 point tried; the chains refuse proposals near the points where EnergyPlus failed. Values in \
 calibration order.</p>",
-        );
-        if !d.failed.is_empty() {
-            h.push_str("<table><tr><th>point</th><th class=\"l\">values</th><th class=\"l\">EnergyPlus</th></tr>");
-            for f in &d.failed {
-                let values: Vec<String> = s
-                    .parameters
-                    .iter()
-                    .zip(&f.values)
-                    .map(|(p, v)| format!("{} {}", esc(&p.name), g(*v)))
-                    .collect();
-                let first = f
-                    .error
-                    .as_deref()
-                    .unwrap_or_default()
-                    .lines()
-                    .find(|l| l.contains("Severe") || l.contains("Fatal"))
-                    .unwrap_or_default();
-                let _ = write!(
-                    h,
-                    "<tr><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td></tr>",
-                    f.slot,
-                    values.join(", "),
-                    esc(first)
-                );
-            }
-            h.push_str("</table>");
-        }
-        if !d.suggestions.is_empty() {
-            h.push_str("<ul>");
-            for sg in &d.suggestions {
-                let _ = write!(h, "<li>{}</li>", esc(sg));
-            }
-            h.push_str("</ul>");
-        }
-        if !d.notes.is_empty() {
-            h.push_str(
-                "<p class=\"sub\">Severe messages after which the results were used:</p><ul>",
+    );
+    if !d.failed.is_empty() {
+        h.push_str("<table><tr><th>point</th><th class=\"l\">values</th><th class=\"l\">EnergyPlus</th></tr>");
+        for f in &d.failed {
+            let values: Vec<String> = s
+                .parameters
+                .iter()
+                .zip(&f.values)
+                .map(|(p, v)| format!("{} {}", esc(&p.name), g(*v)))
+                .collect();
+            let first = f
+                .error
+                .as_deref()
+                .unwrap_or_default()
+                .lines()
+                .find(|l| l.contains("Severe") || l.contains("Fatal"))
+                .unwrap_or_default();
+            let _ = write!(
+                h,
+                "<tr><td>{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td></tr>",
+                f.slot,
+                values.join(", "),
+                esc(first)
             );
-            for n in &d.notes {
-                let _ = write!(h, "<li>point {}: {}</li>", n.point, esc(&n.message));
-            }
-            h.push_str("</ul>");
         }
+        h.push_str("</table>");
     }
+    if !d.suggestions.is_empty() {
+        h.push_str("<ul>");
+        for sg in &d.suggestions {
+            let _ = write!(h, "<li>{}</li>", esc(sg));
+        }
+        h.push_str("</ul>");
+    }
+    if !d.notes.is_empty() {
+        h.push_str("<p class=\"sub\">Severe messages after which the results were used:</p><ul>");
+        for n in &d.notes {
+            let _ = write!(h, "<li>point {}: {}</li>", n.point, esc(&n.message));
+        }
+        h.push_str("</ul>");
+    }
+    h
+}
 
-    // ---- metrics (Table 5)
+/// Goodness of fit (the reference's Table 5): Guideline 14 hourly metrics per output, initial,
+/// calibrated and surrogate at the estimate, with the discrepancy and surrogate error.
+fn goodness_of_fit(s: &crate::io::Summary) -> String {
+    let mut h = String::new();
     let _ = write!(
         h,
         "<h2 id=\"metrics\">Goodness of fit (ASHRAE Guideline 14, hourly)</h2>\
@@ -719,12 +769,14 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         );
     }
     h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
-    h.push_str(&monthly_and_held_out(s));
-    h.push_str(&predictive_coverage(s));
-    h.push_str(&model_form(s));
-    h.push_str(&held_out_weeks(cal)?);
+    h
+}
 
-    // ---- parameters (Table 4)
+/// The estimated parameters (the reference's Table 4): prior, posterior and estimate per
+/// parameter (with the surrogate error carried in, where measured), and the correlated pairs.
+fn parameters_table(s: &crate::io::Summary) -> String {
+    let post = &s.posterior;
+    let mut h = String::new();
     h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");
     let carried = s.surrogate_error.as_ref();
     if let Some(c) = carried {
@@ -832,8 +884,14 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         }
         h.push_str("</table>");
     }
+    h
+}
 
-    // ---- prior vs posterior (Fig. 10)
+/// Prior vs posterior (the reference's Fig. 10): one figure per parameter.
+fn prior_vs_posterior(cal: &CalibrationData) -> Result<String, ReportError> {
+    let s = &cal.summary;
+    let post = &s.posterior;
+    let mut h = String::new();
     h.push_str("<h2 id=\"prior-posterior\">Prior vs posterior</h2>");
     h.push_str(&legend(&[
         (plots::PRIOR, "triangular prior", true),
@@ -885,8 +943,16 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         h.push_str(&figure(&svg, &cap));
     }
     h.push_str("</div>\n");
+    Ok(h)
+}
 
-    // ---- chains
+/// Chains: trace and rank plots per parameter, discrepancy and log posterior, with the
+/// acceptance rates and R-hat flags.
+fn chain_plots(cal: &CalibrationData) -> Result<String, ReportError> {
+    let s = &cal.summary;
+    let post = &s.posterior;
+    let n_chains = cal.draws.chains.len();
+    let mut h = String::new();
     h.push_str("<h2 id=\"chains\">Chains: trace and rank plots</h2>");
     let chain_items: Vec<(plotters::style::RGBColor, String)> = (0..n_chains)
         .map(|k| {
@@ -952,8 +1018,14 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         };
         h.push_str(&figure(&svg, &format!("<b>{}</b>{flag}", esc(name))));
     }
+    Ok(h)
+}
 
-    // ---- measured vs calibrated (Fig. 11)
+/// Hourly measured vs calibrated (the reference's Fig. 11) per output: the year, daily; every
+/// hour against the calibrated model; monthly totals; and the zoomed weeks.
+fn hourly_fit(cal: &CalibrationData) -> Result<String, ReportError> {
+    let s = &cal.summary;
+    let mut h = String::new();
     h.push_str("<h2 id=\"fit\">Hourly measured vs calibrated</h2>");
     if cal.calibrated.is_none() {
         h.push_str("<p class=\"fail\">No validation/calibrated.csv: the calibrated EnergyPlus run is not shown.</p>");
@@ -1018,8 +1090,12 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         }
         h.push_str("</div>\n");
     }
+    Ok(h)
+}
 
-    // ---- run: timings, acceptance, surrogate
+/// The run: wall time per stage.
+fn run_timings(s: &crate::io::Summary) -> String {
+    let mut h = String::new();
     let t = &s.timings;
     h.push_str("<h2 id=\"run\">Run</h2><h3>Timings per stage</h3><table><tr><th class=\"l\">stage</th><th>wall time</th><th>share</th></tr>");
     for (name, v) in [
@@ -1048,41 +1124,55 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         "<tr><th class=\"l\">total</th><th>{}</th><th></th></tr></table>",
         duration(t.total_s)
     );
-    if !s.refinement.is_empty() {
-        h.push_str(
-            "<h3>Surrogate refinement</h3><p class=\"sub\">Each round simulates posterior \
+    h
+}
+
+/// Surrogate refinement: each round's surrogate against EnergyPlus at the draws it added;
+/// nothing without refinement rounds.
+fn refinement(s: &crate::io::Summary) -> String {
+    if s.refinement.is_empty() {
+        return String::new();
+    }
+    let mut h = String::new();
+    h.push_str(
+        "<h3>Surrogate refinement</h3><p class=\"sub\">Each round simulates posterior \
 draws in EnergyPlus, adds them to the training set and retrains; shown is the round's surrogate \
 (before retraining) against EnergyPlus at those draws, their hours pooled.</p>\
 <table><tr><th>round</th><th>draws added</th><th>failed</th>",
+    );
+    for o in &s.outputs {
+        let _ = write!(h, "<th>{} NMBE / CV-RMSE %</th>", esc(o));
+    }
+    h.push_str("</tr>");
+    for r in &s.refinement {
+        let _ = write!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td>",
+            r.round,
+            r.points.len(),
+            r.failed.len()
         );
         for o in &s.outputs {
-            let _ = write!(h, "<th>{} NMBE / CV-RMSE %</th>", esc(o));
-        }
-        h.push_str("</tr>");
-        for r in &s.refinement {
+            let m = r.surrogate_error.iter().find(|m| &m.output == o);
             let _ = write!(
                 h,
-                "<tr><td>{}</td><td>{}</td><td>{}</td>",
-                r.round,
-                r.points.len(),
-                r.failed.len()
+                "<td>{}</td>",
+                m.map_or("-".to_string(), |m| format!(
+                    "{} / {}",
+                    f(m.nmbe, 1),
+                    f(m.cv_rmse, 1)
+                ))
             );
-            for o in &s.outputs {
-                let m = r.surrogate_error.iter().find(|m| &m.output == o);
-                let _ = write!(
-                    h,
-                    "<td>{}</td>",
-                    m.map_or("-".to_string(), |m| format!(
-                        "{} / {}",
-                        f(m.nmbe, 1),
-                        f(m.cv_rmse, 1)
-                    ))
-                );
-            }
-            h.push_str("</tr>");
         }
-        h.push_str("</table>");
+        h.push_str("</tr>");
     }
+    h.push_str("</table>");
+    h
+}
+
+/// The acceptance rate per chain.
+fn acceptance_rates(s: &crate::io::Summary) -> String {
+    let mut h = String::new();
     h.push_str("<h3>Acceptance rate per chain</h3><table><tr>");
     for k in 0..s.acceptance_rate.len() {
         let _ = write!(h, "<th>chain {k}</th>");
@@ -1092,31 +1182,33 @@ draws in EnergyPlus, adds them to the training set and retrains; shown is the ro
         let _ = write!(h, "<td>{:.1} %</td>", 100.0 * a);
     }
     h.push_str("</tr></table>");
-    if let Some(ms) = s
+    h
+}
+
+/// The surrogate on held-out design points; nothing when summary.json has no metrics.
+fn surrogate_on_held_out(s: &crate::io::Summary) -> String {
+    let Some(ms) = s
         .surrogate_held_out
         .get("metrics")
         .and_then(|m| m.as_object())
-    {
-        h.push_str("<h3>Surrogate on held-out design points</h3><table><tr><th class=\"l\">output</th><th>NMBE %</th><th>CV-RMSE %</th><th>RMSE kWh</th></tr>");
-        for (o, m) in ms {
-            let v = |k: &str| m.get(k).and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
-            let _ = write!(
-                h,
-                "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
-                esc(o),
-                f(v("nmbe_pct"), 1),
-                f(v("cv_rmse_pct"), 1),
-                g(v("rmse_kwh"))
-            );
-        }
-        h.push_str("</table>");
+    else {
+        return String::new();
+    };
+    let mut h = String::new();
+    h.push_str("<h3>Surrogate on held-out design points</h3><table><tr><th class=\"l\">output</th><th>NMBE %</th><th>CV-RMSE %</th><th>RMSE kWh</th></tr>");
+    for (o, m) in ms {
+        let v = |k: &str| m.get(k).and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(o),
+            f(v("nmbe_pct"), 1),
+            f(v("cv_rmse_pct"), 1),
+            g(v("rmse_kwh"))
+        );
     }
-
-    if let Some(p) = precal {
-        precal_section(&mut h, p)?;
-    }
-    h.push_str("<p class=\"sub\" style=\"margin-top:32px\">Written by bemcal report.</p></main></body></html>\n");
-    Ok(h)
+    h.push_str("</table>");
+    h
 }
 
 fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
