@@ -249,9 +249,11 @@ fn distributed_matches_single_process() {
         "chain_extensions",
         "holdout",
         "predictive",
+        "model_form",
     ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
+    assert_eq!(sa["model_form"]["meters"].as_array().map(Vec::len), Some(3));
     assert_eq!(sa["holdout"]["hours"], 31 * 24);
     assert_eq!(sa["predictive"]["draws"], 3, "{}", sa["predictive"]);
     assert!(
