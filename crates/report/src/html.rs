@@ -305,9 +305,9 @@ fn totals_coverage(
 
 /// Whether the calibrated model reaches each meter: the verdict, the share of the residuals'
 /// variance each grouping explains, and the findings in words (`summary.json` `model_form`).
-fn model_form(s: &crate::io::Summary) -> String {
+fn model_form(s: &crate::io::Summary) -> Result<String, ReportError> {
     let Some(m) = &s.model_form else {
-        return String::new();
+        return Ok(String::new());
     };
     let mut h = String::from(
         "<h3 id=\"model-form\">Can the model reach each meter?</h3><p class=\"sub\">EnergyPlus at \
@@ -357,7 +357,58 @@ fn model_form(s: &crate::io::Summary) -> String {
         let _ = write!(h, "<li>{}</li>", esc(line));
     }
     h.push_str("</ul>\n");
-    h
+    h.push_str(&residual_figures(m)?);
+    Ok(h)
+}
+
+/// The residual patterns by hour of day and by outdoor temperature band, every meter in % of
+/// its mean (a group's x: its hour, or its band's middle).
+fn residual_figures(m: &crate::io::ModelFormBlock) -> Result<String, ReportError> {
+    let x_of = |label: &str| -> Option<f64> {
+        match label.split_once("..") {
+            Some((lo, hi)) => Some(0.5 * (lo.parse::<f64>().ok()? + hi.parse::<f64>().ok()?)),
+            None => label.parse().ok(),
+        }
+    };
+    let lines = |factor: &str| -> Vec<(&str, Vec<(f64, f64)>)> {
+        m.meters
+            .iter()
+            .filter_map(|o| {
+                let mean = o.reach.measured_kwh / o.reach.hours.max(1) as f64;
+                let p = o.patterns.iter().find(|p| p.factor == factor)?;
+                let pts = p
+                    .groups
+                    .iter()
+                    .filter_map(|g| Some((x_of(&g.label)?, 100.0 * g.mean_residual / mean)))
+                    .filter(|(_, y)| y.is_finite())
+                    .collect::<Vec<_>>();
+                (mean > 0.0 && !pts.is_empty()).then_some((o.output.as_str(), pts))
+            })
+            .collect()
+    };
+    let (by_hour, by_temperature) = (lines("hour_of_day"), lines("outdoor_temperature"));
+    if by_hour.is_empty() {
+        return Ok(String::new());
+    }
+    let items: Vec<_> = by_hour
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (plots::PALETTE[i % plots::PALETTE.len()], l.0, true))
+        .collect();
+    let mut h = legend(&items);
+    h.push_str("<div class=\"grid\">");
+    h.push_str(&figure(
+        &plots::residual_profile(&by_hour, "hour of day", 0)?,
+        "Mean residual (measured &minus; model) by hour of the day, in % of each meter's mean: \
+         a shape the schedules do not make.",
+    ));
+    h.push_str(&figure(
+        &plots::residual_profile(&by_temperature, "outdoor dry bulb, C (band middle)", 0)?,
+        "Mean residual by outdoor temperature band (tenths of the hours): a slope points to the \
+         envelope, outdoor air or the plant.",
+    ));
+    h.push_str("</div>\n");
+    Ok(h)
 }
 
 /// Output `o` of an hourly bands file (columns `{o}_measured`, `{o}_q5`, `{o}_q50`, `{o}_q95`:
@@ -513,7 +564,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     h.push_str(&goodness_of_fit(s));
     h.push_str(&monthly_and_held_out(s));
     h.push_str(&predictive_coverage(s));
-    h.push_str(&model_form(s));
+    h.push_str(&model_form(s)?);
     h.push_str(&held_out_weeks(cal)?);
     h.push_str(&parameters_table(s));
     h.push_str(&prior_vs_posterior(cal)?);

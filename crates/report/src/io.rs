@@ -255,6 +255,9 @@ pub struct MeterFormBlock {
 /// A meter's reach.
 #[derive(Debug, Clone, Deserialize)]
 pub struct ReachBlock {
+    /// Hours compared.
+    #[serde(default)]
+    pub hours: usize,
     /// `reached`, `level` or `shape`.
     pub verdict: String,
     /// Whether a posterior draw reaches the meter's total.
@@ -272,6 +275,18 @@ pub struct PatternBlock {
     pub factor: String,
     /// Share of the residuals' variance the grouping explains.
     pub eta_squared: f64,
+    /// The groups, in order.
+    #[serde(default)]
+    pub groups: Vec<GroupBlock>,
+}
+
+/// One group of hours of a residual pattern.
+#[derive(Debug, Clone, Deserialize)]
+pub struct GroupBlock {
+    /// What the group is (`"07"`, `"-12.2..-3.9"`).
+    pub label: String,
+    /// Mean residual (measured - model), kWh per hour.
+    pub mean_residual: f64,
 }
 
 /// The additive discrepancy's effect.

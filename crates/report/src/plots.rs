@@ -634,6 +634,51 @@ fn hour_of_day_axes<'a, 'b>(
     Ok(c)
 }
 
+/// Mean residuals (measured - model) by group, one line per meter (`lines`: name and
+/// `(x, residual in % of the meter's mean)` points), with the zero line: the model form's
+/// residual patterns by hour of day or outdoor temperature (x labels with `x_decimals`).
+pub fn residual_profile(
+    lines: &[(&str, Vec<(f64, f64)>)],
+    x_desc: &str,
+    x_decimals: usize,
+) -> Result<String, PlotError> {
+    let points = || lines.iter().flat_map(|l| l.1.iter());
+    let (x0, x1) = finite_range(points().map(|p| &p.0));
+    let (ylo, yhi) = finite_range(points().map(|p| &p.1));
+    let (y0, y1) = pad(ylo.min(0.0), yhi.max(0.0), 0.08);
+    render(420, 260, |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(8)
+            .margin_right(22)
+            .x_label_area_size(30)
+            .y_label_area_size(44)
+            .build_cartesian_2d(x0..x1.max(x0 + 1.0), y0..y1)?;
+        c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
+            .x_labels(7)
+            .y_labels(6)
+            .x_label_formatter(&|x| format!("{x:.x_decimals$}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
+            .x_desc(x_desc)
+            .y_desc("residual, % of the meter's mean")
+            .label_style((FONT, 11))
+            .axis_desc_style((FONT, 11))
+            .draw()?;
+        c.draw_series(LineSeries::new(
+            [(x0, 0.0), (x1.max(x0 + 1.0), 0.0)],
+            PRIOR.stroke_width(1),
+        ))?;
+        for (i, (_, pts)) in lines.iter().enumerate() {
+            let col = PALETTE[i % PALETTE.len()];
+            for seg in segments(pts.iter().copied()) {
+                c.draw_series(LineSeries::new(seg, col.stroke_width(2)))?;
+            }
+        }
+        Ok(())
+    })
+}
+
 /// One day type's normalised daily profiles (the reference's Fig. 4): every day thin, outlier
 /// days red, the medoid thick.
 pub fn daily_profiles(
