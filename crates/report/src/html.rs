@@ -397,16 +397,26 @@ fn residual_figures(m: &crate::io::ModelFormBlock) -> Result<String, ReportError
         .collect();
     let mut h = legend(&items);
     h.push_str("<div class=\"grid\">");
-    h.push_str(&figure(
-        &plots::residual_profile(&by_hour, "hour of day", 0)?,
-        "Mean residual (measured &minus; model) by hour of the day, in % of each meter's mean: \
-         a shape the schedules do not make.",
-    ));
-    h.push_str(&figure(
-        &plots::residual_profile(&by_temperature, "outdoor dry bulb, C (band middle)", 0)?,
-        "Mean residual by outdoor temperature band (tenths of the hours): a slope points to the \
-         envelope, outdoor air or the plant.",
-    ));
+    let figures = [
+        (
+            by_hour,
+            "hour of day",
+            "Mean residual (measured &minus; model) by hour of the day, in % of each meter's \
+             mean: a shape the schedules do not make.",
+        ),
+        (
+            by_temperature,
+            "outdoor dry bulb, C (band middle)",
+            "Mean residual by outdoor temperature band (tenths of the hours): a slope points to \
+             the envelope, outdoor air or the plant.",
+        ),
+    ];
+    for (lines, x_desc, caption) in figures.iter().filter(|f| !f.0.is_empty()) {
+        h.push_str(&figure(
+            &plots::residual_profile(lines, x_desc, 0)?,
+            caption,
+        ));
+    }
     h.push_str("</div>\n");
     Ok(h)
 }

@@ -643,7 +643,8 @@ pub fn residual_profile(
     x_decimals: usize,
 ) -> Result<String, PlotError> {
     let points = || lines.iter().flat_map(|l| l.1.iter());
-    let (x0, x1) = finite_range(points().map(|p| &p.0));
+    let (xlo, xhi) = finite_range(points().map(|p| &p.0));
+    let (x0, x1) = pad(xlo, xhi, 0.0);
     let (ylo, yhi) = finite_range(points().map(|p| &p.1));
     let (y0, y1) = pad(ylo.min(0.0), yhi.max(0.0), 0.08);
     render(420, 260, |root| {
@@ -652,7 +653,7 @@ pub fn residual_profile(
             .margin_right(22)
             .x_label_area_size(30)
             .y_label_area_size(44)
-            .build_cartesian_2d(x0..x1.max(x0 + 1.0), y0..y1)?;
+            .build_cartesian_2d(x0..x1, y0..y1)?;
         c.configure_mesh()
             .light_line_style(LIGHT_MESH)
             .bold_line_style(BOLD_MESH)
@@ -666,7 +667,7 @@ pub fn residual_profile(
             .axis_desc_style((FONT, 11))
             .draw()?;
         c.draw_series(LineSeries::new(
-            [(x0, 0.0), (x1.max(x0 + 1.0), 0.0)],
+            [(x0, 0.0), (x1, 0.0)],
             PRIOR.stroke_width(1),
         ))?;
         for (i, (_, pts)) in lines.iter().enumerate() {
