@@ -863,11 +863,7 @@ fn parameters_table(s: &crate::io::Summary) -> String {
         }
     );
     for (k, p) in s.parameters.iter().enumerate() {
-        let q = post
-            .parameters
-            .iter()
-            .find(|x| x.name == p.name)
-            .or(post.parameters.get(k));
+        let q = post.of(k, &p.name);
         let est = s
             .calibrated_values
             .iter()
@@ -967,11 +963,7 @@ fn prior_vs_posterior(cal: &CalibrationData) -> Result<String, ReportError> {
         "<p class=\"sub\">Light blue band: posterior 90 % interval.</p><div class=\"grid\">",
     );
     for (k, p) in s.parameters.iter().enumerate() {
-        let q = post
-            .parameters
-            .iter()
-            .find(|x| x.name == p.name)
-            .or(post.parameters.get(k));
+        let q = post.of(k, &p.name);
         let chains = cal
             .draws
             .column(&p.name)
@@ -1047,12 +1039,7 @@ fn chain_plots(cal: &CalibrationData) -> Result<String, ReportError> {
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            let r = post
-                .parameters
-                .iter()
-                .find(|x| x.name == p.name)
-                .or(post.parameters.get(k))
-                .map_or(f64::NAN, |q| q.rhat);
+            let r = post.of(k, &p.name).map_or(f64::NAN, |q| q.rhat);
             (p.name.clone(), p.unit.clone(), r)
         })
         .collect();

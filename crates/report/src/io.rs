@@ -410,6 +410,17 @@ pub struct PointNote {
     pub message: String,
 }
 
+impl PosteriorBlock {
+    /// The posterior of the `k`-th prior, `name`: found by name, else by position (summaries
+    /// whose rows carry no names).
+    pub fn of(&self, k: usize, name: &str) -> Option<&PosteriorInfo> {
+        self.parameters
+            .iter()
+            .find(|x| x.name == name)
+            .or(self.parameters.get(k))
+    }
+}
+
 /// `summary.json` as written by `bemcal calibrate`.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Summary {
