@@ -1265,15 +1265,35 @@ fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
         "<h2 id=\"precal\">Pre-calibration</h2><p class=\"sub\">{}</p>",
         esc(&p.dir.display().to_string())
     );
-    // Day types in order of first appearance.
+    let types = day_types(p);
+    let whiskers = profile_clusters(h, p, &types)?;
+    schedule_fractions(h, p, &types, &whiskers)?;
+    merged_intervals(h, p, &types)?;
+    Ok(())
+}
+
+/// The pre-calibration's day types, in order of first appearance in its schedule.
+fn day_types(p: &PrecalData) -> Vec<String> {
     let mut types: Vec<String> = vec![];
     for s in &p.schedule {
         if !types.contains(&s.day_type) {
             types.push(s.day_type.clone());
         }
     }
+    types
+}
 
-    // Fig. 4: profiles per cluster.
+/// The days of each whisker's day type, kept for the box plots.
+type Whiskers = std::collections::HashMap<String, Vec<Vec<f64>>>;
+
+/// Daily profile clusters (the reference's Fig. 4): one figure per cluster, every day
+/// normalised, outliers and the medoid marked; returns the non-outlier days per day type for
+/// the box plots' whiskers.
+fn profile_clusters(
+    h: &mut String,
+    p: &PrecalData,
+    types: &[String],
+) -> Result<Whiskers, ReportError> {
     h.push_str("<h3>Daily profile clusters</h3>");
     let first = p
         .calendar
@@ -1291,7 +1311,7 @@ fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
             })
             .collect()
     });
-    let mut whiskers: std::collections::HashMap<String, Vec<Vec<f64>>> = Default::default();
+    let mut whiskers = Whiskers::default();
     match &profiles {
         None => h.push_str(
             "<p class=\"sub\">No disaggregated.csv (schedule_series_kwh): profiles not shown.</p>",
@@ -1350,8 +1370,17 @@ fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
             h.push_str("</div>");
         }
     }
+    Ok(whiskers)
+}
 
-    // Fig. 5: boxes per hour.
+/// Hourly schedule fractions per day type (the reference's Fig. 5): quartile boxes, medians and
+/// whiskers within 1.5 IQR.
+fn schedule_fractions(
+    h: &mut String,
+    p: &PrecalData,
+    types: &[String],
+    whiskers: &Whiskers,
+) -> Result<(), ReportError> {
     h.push_str("<h3>Hourly schedule fractions per day type</h3><p class=\"sub\">Box: quartiles over the day type's days; line: median; whiskers: range within 1.5 IQR. The quartiles become the triangular priors.</p><div class=\"grid\">");
     for (k, t) in types.iter().enumerate() {
         let hours: Vec<_> = p
@@ -1392,8 +1421,12 @@ fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
         ));
     }
     h.push_str("</div>");
+    Ok(())
+}
 
-    // Fig. 6: intervals.
+/// Merged schedule intervals (the reference's Fig. 6) with their priors' table, and
+/// pre-calibration's summary.txt.
+fn merged_intervals(h: &mut String, p: &PrecalData, types: &[String]) -> Result<(), ReportError> {
     h.push_str("<h3>Merged schedule intervals</h3><p class=\"sub\">Adjacent hours with similar quartiles merge into one calibrated schedule value; shaded: its triangular prior min&ndash;max, thick line: mode; dots: hourly medians.</p><div class=\"grid\">");
     for (k, t) in types.iter().enumerate() {
         let hours: Vec<_> = p
