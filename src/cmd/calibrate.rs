@@ -277,9 +277,10 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
         };
         for o in &p.outputs {
             if let Some(m) = o.by_error_model.first() {
-                println!("{:<18} in-sample  {}", o.output, cov(&m.in_sample));
-                if !m.held_out.is_empty() {
-                    println!("{:<18} held out   {}", "", cov(&m.held_out));
+                let c = &m.coverage;
+                println!("{:<18} in-sample  {}", o.output, cov(&c.in_sample));
+                if !c.held_out.is_empty() {
+                    println!("{:<18} held out   {}", "", cov(&c.held_out));
                 }
             }
         }

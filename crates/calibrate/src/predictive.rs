@@ -172,13 +172,12 @@ pub struct PeriodCoverage {
     pub held_out: Vec<Coverage>,
 }
 
-/// Coverage of the 50 % and 90 % intervals under one error model.
+/// Coverage of the 50 % and 90 % hourly intervals under one error model.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ModelCoverage {
     pub error_model: ErrorModel,
-    pub in_sample: Vec<Coverage>,
-    /// Empty without a held-out period.
-    pub held_out: Vec<Coverage>,
+    #[serde(flatten)]
+    pub coverage: PeriodCoverage,
 }
 
 /// EnergyPlus at the predictive draws, as validation saved them (draws it could not simulate
@@ -228,6 +227,7 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
         let non_negative = !meter.iter().any(|v| *v < 0.0);
         let mut by_error_model = vec![];
         let mut noise_kwh = f64::NAN;
+        let mut configured_scales = vec![];
         for &model in &models {
             let scales = model.scales(&inp.measured[k], &estimate, &fit)?;
             if model == ErrorModel::Constant {
@@ -237,20 +237,9 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
             if non_negative {
                 iv.clamp_below(0.0);
             }
-            let judge = |meter: &[f64], hours: &[bool]| -> Vec<Coverage> {
-                LEVELS
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, l)| coverage(*l, meter, &iv.lower[i], &iv.upper[i], hours))
-                    .collect()
-            };
             by_error_model.push(ModelCoverage {
                 error_model: model,
-                in_sample: judge(&inp.measured[k], &fit),
-                held_out: inp
-                    .held_out
-                    .as_ref()
-                    .map_or(vec![], |h| judge(&h.measured[k], &h.hours)),
+                coverage: in_and_out(inp, k, &fit, |m, hours| level_coverage(&iv, m, hours)),
             });
             if model == configured {
                 columns.push((format!("{name}_measured"), meter.clone()));
@@ -259,9 +248,10 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
                 columns.push((format!("{name}_q50"), iv.median.clone()));
                 columns.push((format!("{name}_q75"), iv.upper[0].clone()));
                 columns.push((format!("{name}_q95"), iv.upper[1].clone()));
+                configured_scales = scales;
             }
         }
-        let scales = configured.scales(&inp.measured[k], &estimate, &fit)?;
+        let scales = configured_scales;
         let standardised: Vec<f64> = (0..fit.len())
             .map(|t| match fit[t] {
                 true => (inp.measured[k][t] - estimate[t]) / scales[t],
@@ -278,14 +268,10 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
                     if non_negative {
                         iv.clamp_below(0.0);
                     }
-                    let held_out = match &inp.held_out {
-                        Some(h) => totals_coverage(&h.measured[k], &h.hours, &periods, &iv),
-                        None => vec![],
-                    };
-                    Ok(PeriodCoverage {
-                        in_sample: totals_coverage(&inp.measured[k], &fit, &periods, &iv),
-                        held_out,
-                    })
+                    Ok(in_and_out(inp, k, &fit, |m, hours| {
+                        let (totals, whole) = period_totals(m, hours, &periods);
+                        level_coverage(&iv, &totals, &whole)
+                    }))
                 };
                 Ok(TotalsCoverage {
                     period,
@@ -313,20 +299,31 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
     }))
 }
 
-/// Coverage of the totals' intervals `iv` over the periods whose every hour is measured and
-/// selected.
-fn totals_coverage(
-    measured: &[f64],
-    select: &[bool],
-    periods: &[Range<usize>],
-    iv: &Intervals,
-) -> Vec<Coverage> {
-    let (totals, counted) = period_totals(measured, select, periods);
+/// Coverage of the intervals `iv` at every level of [`LEVELS`] on the values of `measured`
+/// that `select` keeps (hours, or the totals of whole measured periods).
+fn level_coverage(iv: &Intervals, measured: &[f64], select: &[bool]) -> Vec<Coverage> {
     LEVELS
         .iter()
         .enumerate()
-        .filter_map(|(i, l)| coverage(*l, &totals, &iv.lower[i], &iv.upper[i], &counted))
+        .filter_map(|(i, l)| coverage(*l, measured, &iv.lower[i], &iv.upper[i], select))
         .collect()
+}
+
+/// `cover` of meter `k` over the calibration period (`fit`) and, where one is held out, over
+/// the held-out period.
+fn in_and_out(
+    inp: &crate::Inputs,
+    k: usize,
+    fit: &[bool],
+    cover: impl Fn(&[f64], &[bool]) -> Vec<Coverage>,
+) -> PeriodCoverage {
+    PeriodCoverage {
+        in_sample: cover(&inp.measured[k], fit),
+        held_out: inp
+            .held_out
+            .as_ref()
+            .map_or(vec![], |h| cover(&h.measured[k], &h.hours)),
+    }
 }
 
 /// `validation/predictive_intervals.csv`: per hour, whether it is held out, then per meter the

@@ -249,11 +249,14 @@ fn predictive_coverage(s: &crate::io::Summary) -> String {
                 "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&o.output),
                 esc(&m.error_model),
-                pct(m.in_sample.first()),
-                pct(m.in_sample.get(1)),
-                pct(m.held_out.first()),
-                pct(m.held_out.get(1)),
-                m.in_sample.get(1).map_or("&ndash;".into(), |c| g(c.mean_width)),
+                pct(m.coverage.in_sample.first()),
+                pct(m.coverage.in_sample.get(1)),
+                pct(m.coverage.held_out.first()),
+                pct(m.coverage.held_out.get(1)),
+                m.coverage
+                    .in_sample
+                    .get(1)
+                    .map_or("&ndash;".into(), |c| g(c.mean_width)),
             );
         }
     }

@@ -190,7 +190,7 @@ pub struct TotalsBlock {
     pub independent: PeriodCoverageBlock,
 }
 
-/// 50 % and 90 % coverage of totals, in-sample and held out (`hours` counts periods).
+/// 50 % and 90 % coverage, in-sample and held out (of totals: `hours` counts periods).
 #[derive(Debug, Clone, Deserialize)]
 pub struct PeriodCoverageBlock {
     /// Over the calibration period.
@@ -200,16 +200,14 @@ pub struct PeriodCoverageBlock {
     pub held_out: Vec<CoverageBlock>,
 }
 
-/// Coverage under one error model.
+/// Coverage of the hourly intervals under one error model.
 #[derive(Debug, Clone, Deserialize)]
 pub struct ModelCoverageBlock {
     /// Its name.
     pub error_model: String,
-    /// 50 % and 90 % over the calibration hours.
-    pub in_sample: Vec<CoverageBlock>,
-    /// 50 % and 90 % over the held-out hours (empty without).
-    #[serde(default)]
-    pub held_out: Vec<CoverageBlock>,
+    /// 50 % and 90 % over the calibration hours and the held-out hours.
+    #[serde(flatten)]
+    pub coverage: PeriodCoverageBlock,
 }
 
 /// How often one interval held.
