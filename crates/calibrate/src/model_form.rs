@@ -19,8 +19,7 @@ use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
 use crate::output::timestamps;
-use crate::predictive::{draw_runs, run_at_estimate};
-use crate::{write_atomic, Calibration, ChainSummary, Error};
+use crate::{write_atomic, Calibration, Error};
 
 /// Outdoor temperature bands (equal counts of hours) the residuals are grouped by.
 pub const TEMPERATURE_BANDS: usize = 10;
@@ -125,9 +124,26 @@ impl PiledParameter {
     }
 }
 
+/// One factor's group of every hour slot, and the groups' labels.
+struct FactorHours {
+    factor: Factor,
+    group: Vec<usize>,
+    labels: Vec<String>,
+}
+
+impl FactorHours {
+    fn groups(&self) -> FactorGroups<'_> {
+        FactorGroups {
+            group: &self.group,
+            levels: self.labels.len(),
+        }
+    }
+}
+
 /// The hour groups of every factor, for one year's hour slots.
 struct Groups {
-    factors: Vec<(Factor, Vec<usize>, Vec<String>)>,
+    /// Hour of day, day kind, month, outdoor temperature band: the patterns, in this order.
+    factors: [FactorHours; 4],
     /// Hour of day x day kind (48 groups), the discrepancy's time term.
     hour_by_kind: Vec<usize>,
 }
@@ -147,53 +163,42 @@ impl Groups {
             .collect();
         let (band, band_labels) = quantile_bands(&f.dry_bulb_c, TEMPERATURE_BANDS);
         let hour_by_kind = hour.iter().zip(&kind).map(|(h, k)| h + 24 * k).collect();
+        let hours = |factor, group, labels| FactorHours {
+            factor,
+            group,
+            labels,
+        };
         Groups {
-            factors: vec![
-                (
+            factors: [
+                hours(
                     Factor::HourOfDay,
                     hour,
                     (0..24).map(|h| format!("{h:02}")).collect(),
                 ),
-                (
+                hours(
                     Factor::DayKind,
                     kind,
                     vec!["working day".into(), "off day".into()],
                 ),
-                (Factor::Month, month, MONTHS.map(String::from).to_vec()),
-                (Factor::OutdoorTemperature, band, band_labels),
+                hours(Factor::Month, month, MONTHS.map(String::from).to_vec()),
+                hours(Factor::OutdoorTemperature, band, band_labels),
             ],
             hour_by_kind,
         }
     }
 
-    fn of(&self, factor: Factor) -> &[usize] {
-        &self
-            .factors
-            .iter()
-            .find(|f| f.0 == factor)
-            .expect("every factor")
-            .1
+    /// The discrepancy's terms: hour of day x day kind, month, outdoor temperature band.
+    fn discrepancy_terms(&self) -> [FactorGroups<'_>; 3] {
+        let [_, _, month, temperature] = &self.factors;
+        [
+            FactorGroups {
+                group: &self.hour_by_kind,
+                levels: 48,
+            },
+            month.groups(),
+            temperature.groups(),
+        ]
     }
-
-    fn levels(&self, factor: Factor) -> usize {
-        self.factors
-            .iter()
-            .find(|f| f.0 == factor)
-            .expect("every factor")
-            .2
-            .len()
-    }
-}
-
-/// The model form of a finished validation: reads EnergyPlus at the estimate and at the
-/// predictive draws from `validation/` and calls [`report`] (None when the estimate's run is
-/// missing).
-pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<ModelFormReport>, Error> {
-    let Some(at_estimate) = run_at_estimate(cal, chains) else {
-        return Ok(None);
-    };
-    let draws = draw_runs(cal, chains);
-    report(cal, &at_estimate, &draws, &chains.posterior).map(Some)
 }
 
 /// The model form of EnergyPlus's hourly outputs at the estimate and at posterior draws
@@ -219,10 +224,9 @@ pub fn report(
             .iter()
             .filter_map(|o| o.get(name).map(|s| inp.with_base(k, s)))
             .collect();
-        let Ok((form, delta)) = meter_form(cal, &groups, k, &model, &sims) else {
+        let Ok((form, delta, corrected)) = meter_form(cal, &groups, k, &model, &sims) else {
             continue;
         };
-        let corrected: Vec<f64> = model.iter().zip(&delta).map(|(m, d)| m + d).collect();
         columns.push((format!("{name}_model"), model));
         columns.push((format!("{name}_discrepancy"), delta));
         columns.push((format!("{name}_corrected"), corrected));
@@ -238,44 +242,33 @@ pub fn report(
     })
 }
 
-/// One meter's form and its hourly discrepancy.
+/// A meter's form, its hourly discrepancy and the model corrected by it.
+type MeterHours = (MeterForm, Vec<f64>, Vec<f64>);
+
+/// One meter's form, its hourly discrepancy and the model corrected by it.
 fn meter_form(
     cal: &Calibration,
     groups: &Groups,
     k: usize,
     model: &[f64],
     draws: &[Vec<f64>],
-) -> Result<(MeterForm, Vec<f64>), bemcal_stats::StatsError> {
+) -> Result<MeterHours, bemcal_stats::StatsError> {
     let inp = &cal.inputs;
     let measured = &inp.measured[k];
     let reach = reach(measured, model, draws)?;
     let patterns = groups
         .factors
         .iter()
-        .map(|(factor, g, labels)| {
+        .map(|f| {
             Ok(FactorPattern {
-                factor: *factor,
-                pattern: pattern(measured, model, g, labels)?,
+                factor: f.factor,
+                pattern: pattern(measured, model, &f.group, &f.labels)?,
             })
         })
         .collect::<Result<Vec<_>, bemcal_stats::StatsError>>()?;
     let residual: Vec<f64> = measured.iter().zip(model).map(|(y, s)| y - s).collect();
     let temperature_slope_kwh_per_k = slope(&inp.features.dry_bulb_c, &residual);
-    let factors = [
-        FactorGroups {
-            group: &groups.hour_by_kind,
-            levels: 48,
-        },
-        FactorGroups {
-            group: groups.of(Factor::Month),
-            levels: 12,
-        },
-        FactorGroups {
-            group: groups.of(Factor::OutdoorTemperature),
-            levels: groups.levels(Factor::OutdoorTemperature),
-        },
-    ];
-    let additive = additive_discrepancy(measured, model, &factors)?;
+    let additive = additive_discrepancy(measured, model, &groups.discrepancy_terms())?;
     let corrected: Vec<f64> = model
         .iter()
         .zip(&additive.delta)
@@ -298,7 +291,7 @@ fn meter_form(
         findings: vec![],
     };
     form.findings = findings(&form, draws.len());
-    Ok((form, additive.delta))
+    Ok((form, additive.delta, corrected))
 }
 
 /// Parameters whose posterior median lies against a bound of their prior.

@@ -8,7 +8,7 @@
 //! space is in the spread); the noise is the error model's scale of EnergyPlus's residuals at
 //! the estimate over the calibration hours (`[validation] error_model`). Numerics in
 //! [`bemcal_stats::predictive`]; both drivers simulate [`ChainSummary::predictive_candidates`]
-//! and [`crate::write_summary`] calls [`assess`].
+//! and [`crate::write_summary`] reads their runs once and calls [`assess`].
 //!
 //! Totals over days and months ([`TotalPeriod`]) get intervals too: the draws' sums with the
 //! noise of a sum of AR(1) residuals (`phi` from EnergyPlus's standardised residuals at the
@@ -182,7 +182,7 @@ pub struct ModelCoverage {
 
 /// EnergyPlus at the predictive draws, as validation saved them (draws it could not simulate
 /// are left out).
-pub(crate) fn draw_runs(cal: &Calibration, chains: &ChainSummary) -> Vec<HourlyOutputs> {
+pub fn draw_runs(cal: &Calibration, chains: &ChainSummary) -> Vec<HourlyOutputs> {
     let vdir = cal.out.validation();
     chains
         .predictive_candidates()
@@ -194,7 +194,7 @@ pub(crate) fn draw_runs(cal: &Calibration, chains: &ChainSummary) -> Vec<HourlyO
 /// EnergyPlus at the estimate, as validation saved it. The estimate was settled on one of the
 /// validation candidates (a fallback where EnergyPlus failed at the MAP): the run whose values
 /// are the estimate's.
-pub(crate) fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Option<HourlyOutputs> {
+pub fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Option<HourlyOutputs> {
     let vdir = cal.out.validation();
     let values = cal.inputs.plan.values(&chains.estimate);
     (0..=FALLBACKS)
@@ -202,14 +202,19 @@ pub(crate) fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Optio
         .find_map(|key| saved_outputs(&vdir, key, &values))
 }
 
-/// The predictive intervals of a finished validation: reads EnergyPlus at the predictive
-/// draws and at the estimate from `validation/`, writes `validation/predictive_intervals.csv`
-/// and returns the report (None when no draw or the estimate's run is missing).
-pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<PredictiveReport>, Error> {
+/// The predictive intervals of a finished validation from EnergyPlus at the estimate and at
+/// the predictive draws (`run_at_estimate`, `draw_runs`): writes
+/// `validation/predictive_intervals.csv` and returns the report (None when no draw or the
+/// estimate's run is missing).
+pub fn assess(
+    cal: &Calibration,
+    chains: &ChainSummary,
+    at_estimate: Option<&HourlyOutputs>,
+    runs: &[HourlyOutputs],
+) -> Result<Option<PredictiveReport>, Error> {
     let inp = &cal.inputs;
     let candidates = chains.predictive_candidates();
-    let runs = draw_runs(cal, chains);
-    let Some(at_estimate) = run_at_estimate(cal, chains).filter(|_| !runs.is_empty()) else {
+    let Some(at_estimate) = at_estimate.filter(|_| !runs.is_empty()) else {
         return Ok(None);
     };
     let fit = inp.calibration_hours();
@@ -221,7 +226,7 @@ pub fn assess(cal: &Calibration, chains: &ChainSummary) -> Result<Option<Predict
     for (k, name) in inp.outputs.iter().enumerate() {
         let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
-        let estimate = series(&at_estimate);
+        let estimate = series(at_estimate);
         // An energy meter does not read below zero: its intervals are those of max(0, Y).
         let meter = inp.meter(k);
         let non_negative = !meter.iter().any(|v| *v < 0.0);

@@ -286,6 +286,9 @@ pub fn write_summary(
     timings: Timings,
 ) -> Result<Summary, Error> {
     let inp = &cal.inputs;
+    // EnergyPlus at the estimate and at the predictive draws, read once for both judges.
+    let at_estimate = crate::predictive::run_at_estimate(cal, chains);
+    let draws = crate::predictive::draw_runs(cal, chains);
     let summary = Summary {
         project: cal.project.name.clone(),
         measured_weather: inp.measured_weather.clone(),
@@ -332,8 +335,11 @@ pub fn write_summary(
         validation,
         initial,
         holdout: HoldoutReport::of(inp),
-        predictive: crate::predictive::assess(cal, chains)?,
-        model_form: crate::model_form::assess(cal, chains)?,
+        predictive: crate::predictive::assess(cal, chains, at_estimate.as_ref(), &draws)?,
+        model_form: at_estimate
+            .as_ref()
+            .map(|e| crate::model_form::report(cal, e, &draws, &chains.posterior))
+            .transpose()?,
         surrogate_at_estimate: chains.surrogate_at_estimate.clone(),
         surrogate_error: chains.surrogate_error.clone(),
         design_points: design.points.len(),
