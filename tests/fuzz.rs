@@ -172,7 +172,7 @@ fn meters_csv() {
             &text(b),
             Path::new("meters.csv"),
             &spec,
-            Some(2011),
+            Some(2011.into()),
             Some(-7.0),
         )
         .map(|_| ())

@@ -74,6 +74,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         return converged_or_not(&s, &a.out);
     }
     println!(
+        "\nmeters of {} ({} to {}):",
+        s.year,
+        s.year.first_date(),
+        s.year.last_date()
+    );
+    for note in &s.meter_notes {
+        println!("  {note}");
+    }
+    println!(
         "\nposterior ({} chains; {}):",
         s.acceptance_rate.len(),
         s.convergence

@@ -32,6 +32,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         inp.weather_path.display(),
         inp.year
     );
+    for note in &inp.meter_notes {
+        println!("  meters: {note}");
+    }
     for (name, series) in inp.outputs.iter().zip(&inp.measured) {
         let known = series.iter().filter(|v| v.is_finite()).count();
         println!(

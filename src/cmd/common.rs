@@ -1,5 +1,6 @@
 //! Helpers shared by subcommands (loading models, writing hourly CSV).
 
+use bemcal_weather::grid::GridYear;
 use std::io::Write;
 use std::path::Path;
 
@@ -14,24 +15,24 @@ pub fn load_model(path: &Path) -> anyhow::Result<(Model, Runner)> {
     Ok((model, runner))
 }
 
-/// The calendar year a model simulates (2021 for IDF models without a spec).
-pub fn model_year(model: &Model) -> i32 {
-    model.spec().map_or(2021, |s| s.year)
+/// The year a model simulates (2021 for IDF models without a spec).
+pub fn model_year(model: &Model) -> GridYear {
+    model.spec().map_or(GridYear::calendar(2021), |s| s.year)
 }
 
-/// Writes `timestamp,<output>...` with ISO 8601 local, hour-beginning timestamps.
-pub fn write_hourly_csv(path: &Path, year: i32, outputs: &HourlyOutputs) -> anyhow::Result<()> {
+/// Writes `timestamp,<output>...` with ISO 8601 local, hour-beginning timestamps, in time order
+/// (the grid's slots: no 29 February; a year from April lists April first).
+pub fn write_hourly_csv(
+    path: &Path,
+    year: GridYear,
+    outputs: &HourlyOutputs,
+) -> anyhow::Result<()> {
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     let mut w = std::io::BufWriter::new(file);
     writeln!(w, "timestamp,{}", outputs.names.join(","))?;
-    let start = chrono::NaiveDate::from_ymd_opt(year, 1, 1)
-        .context("bad year")?
-        .and_hms_opt(0, 0, 0)
-        .context("bad time")?;
-    for t in 0..outputs.hours() {
-        let ts = start + chrono::Duration::hours(t as i64);
-        write!(w, "{}", ts.format("%Y-%m-%dT%H:%M"))?;
+    for t in year.chronological(outputs.hours()) {
+        write!(w, "{}", year.slot_time(t).format("%Y-%m-%dT%H:%M"))?;
         for s in &outputs.series {
             write!(w, ",{:.6}", s[t])?;
         }

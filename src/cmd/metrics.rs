@@ -192,6 +192,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // A measured hour written twice would be compared twice (counted twice in n, NMBE and
     // CV-RMSE), so it is refused like a simulated one.
     let meas_times = row_times(&meas, mt)?;
+    // Hours only one file has are left out of every figure: say how many, so that files of
+    // different years (a calendar year against twelve months from April) are not compared
+    // over a part of the year unnoticed.
+    let unmatched: Vec<&chrono::NaiveDateTime> = meas_times
+        .iter()
+        .filter(|t| !sim_rows.contains_key(*t))
+        .collect();
+    if let (Some(first), Some(last)) = (unmatched.iter().min(), unmatched.iter().max()) {
+        eprintln!(
+            "note: {} of {} measured rows ({first} to {last}) have no simulated row at the same \
+             time; the figures compare the other {}",
+            unmatched.len(),
+            meas_times.len(),
+            meas_times.len() - unmatched.len()
+        );
+    }
     let mut results = Vec::new();
     for &(i, j) in &outputs {
         let (mut y, mut yhat) = (Vec::new(), Vec::new());

@@ -21,9 +21,10 @@ pub struct Args {
     /// are detected from their names (heating / cooling / electricity / total building, unit kW).
     #[arg(long)]
     pub project: Option<PathBuf>,
-    /// Calendar year of the meters (default: the project's, else inferred from the timestamps).
+    /// Year of the meters: `2017`, or `2017-04` for twelve months from April 2017 (default:
+    /// the project's, else inferred from the timestamps).
     #[arg(long)]
-    pub year: Option<i32>,
+    pub year: Option<bemcal_weather::grid::GridYear>,
     /// Output directory.
     #[arg(long, default_value = "precal")]
     pub out: PathBuf,

@@ -16,9 +16,9 @@ pub struct Args {
     /// EPW weather file.
     #[arg(long)]
     pub weather: PathBuf,
-    /// Calendar year for day types and timestamps.
-    #[arg(long, default_value_t = 2021)]
-    pub year: i32,
+    /// Year for day types and timestamps: `2021`, or `2021-04` for twelve months from April.
+    #[arg(long, default_value = "2021")]
+    pub year: bemcal_weather::grid::GridYear,
     /// Parameter value, NAME=VALUE (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,

@@ -18,9 +18,10 @@ pub struct Args {
     /// The site's typical-year EPW (a path, or bundled:FILE from EnergyPlus's WeatherData).
     #[arg(long)]
     pub tmy: String,
-    /// Calendar year of the file to build (the metered year).
+    /// Year of the file to build (the metered year): `2017`, or `2017-04` for twelve months
+    /// from April 2017 (January-March then hold 2018's weather).
     #[arg(long)]
-    pub year: i32,
+    pub year: bemcal_weather::grid::GridYear,
     /// NOAA ISD-lite station-year files (UTC, gzipped or not); give the next year's too for
     /// the last hours of the year in local time.
     #[arg(long = "isd-lite", num_args = 1.., conflicts_with = "csv")]

@@ -103,8 +103,8 @@ pub(crate) fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
         s.push_str(&format!(",{}", inp.outputs[k]));
     }
     s.push('\n');
-    for (t, ts) in timestamps(inp.year, inp.bases[0].len()).iter().enumerate() {
-        s.push_str(ts);
+    for (t, ts) in timestamps(inp.year, inp.bases[0].len()) {
+        s.push_str(&ts);
         for &k in &with {
             let b = inp.bases[k][t];
             s.push_str(&if b.is_finite() {

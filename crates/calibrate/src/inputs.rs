@@ -1,6 +1,7 @@
 //! Stage 0, the inputs: the project's model (with pre-calibration priors applied), the
 //! weather it simulates with, and the meters it is compared with.
 
+use bemcal_weather::grid::GridYear;
 use std::path::{Path, PathBuf};
 
 use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
@@ -22,7 +23,11 @@ pub struct Inputs {
     /// How the EPW was built from `[measured_weather]` (None: the project's EPW as it is).
     pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
     pub features: HourlyFeatures,
-    pub year: i32,
+    /// The grid year of the meters and the model (a calendar year or twelve months from another
+    /// month).
+    pub year: GridYear,
+    /// What reading the meters decided or dropped ([`bemcal_precal::meters::MeterData::notes`]).
+    pub meter_notes: Vec<String>,
     /// Calibration outputs (model output names) and their measured series over the calibration
     /// period (kWh, NaN = missing or held out): what the likelihood, the surrogate's checks and
     /// the in-sample Guideline 14 see.
@@ -139,7 +144,7 @@ fn is_file_name(name: &str) -> bool {
 pub fn weather_for(
     project: &Project,
     engine: &Engine,
-    year: i32,
+    year: GridYear,
 ) -> Result<(PathBuf, Option<bemcal_weather::measured::BuildReport>), Error> {
     let tmy = resolve_weather(project, engine)?;
     let Some(m) = &project.measured_weather else {
@@ -295,6 +300,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         measured_weather,
         features,
         year: calendar.year,
+        meter_notes: data.notes.clone(),
         outputs,
         measured,
         held_out,

@@ -448,8 +448,8 @@ fn write_discrepancy_csv(cal: &Calibration, columns: &[(String, Vec<f64>)]) -> R
     }
     s.push('\n');
     let n = columns.first().map_or(0, |c| c.1.len());
-    for (h, ts) in timestamps(cal.inputs.year, n).iter().enumerate() {
-        s.push_str(ts);
+    for (h, ts) in timestamps(cal.inputs.year, n) {
+        s.push_str(&ts);
         for (_, v) in columns {
             s.push_str(&format!(",{:.4}", v[h]));
         }

@@ -3,6 +3,7 @@
 //! use this layout, as paths ([`OutputDir`]) or as the folder-relative names jobs carry
 //! ([`OutputDir::point_rel`], [`STATES_FILE`], ...).
 
+use bemcal_weather::grid::GridYear;
 use std::path::{Path, PathBuf};
 
 /// A chain-segment job's chain states at its end (and the next segment's input).
@@ -130,15 +131,11 @@ impl OutputDir {
     }
 }
 
-/// The hour-beginning stamps (`YYYY-MM-DDTHH:MM`) of the first `n` hour slots of `year` (the
-/// grid: no 29 February, [`bemcal_weather::grid`]): the first column of every hourly CSV in the
-/// folder.
-pub(crate) fn timestamps(year: i32, n: usize) -> Vec<String> {
-    (0..n)
-        .map(|t| {
-            bemcal_weather::grid::slot_time(year, t)
-                .format("%Y-%m-%dT%H:%M")
-                .to_string()
-        })
+/// The first `n` hour slots of `year` in time order, each with its hour-beginning stamp
+/// (`YYYY-MM-DDTHH:MM`; the grid has no 29 February, [`bemcal_weather::grid`]): the rows of
+/// every hourly CSV in the folder, which list a year from April from April on.
+pub(crate) fn timestamps(year: GridYear, n: usize) -> Vec<(usize, String)> {
+    year.chronological(n)
+        .map(|t| (t, year.slot_time(t).format("%Y-%m-%dT%H:%M").to_string()))
         .collect()
 }

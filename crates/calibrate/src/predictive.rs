@@ -345,8 +345,8 @@ fn write_intervals_csv(
         s.push_str(name);
     }
     s.push('\n');
-    for (h, ts) in timestamps(inp.year, fit.len()).iter().enumerate() {
-        s.push_str(ts);
+    for (h, ts) in timestamps(inp.year, fit.len()) {
+        s.push_str(&ts);
         s.push_str(if fit[h] { ",0" } else { ",1" });
         for (_, v) in columns {
             let x = v[h];

@@ -142,9 +142,10 @@ pub struct MeasuredWeather {
     pub stamp: bemcal_weather::measured::Stamp,
     #[serde(default)]
     pub columns: Vec<bemcal_weather::station::CsvColumn>,
-    /// The year to build; by default the model's calendar year.
+    /// The year to build (`2017`, or `"2017-04"` for twelve months from April 2017); by
+    /// default the model's year.
     #[serde(default)]
-    pub year: Option<i32>,
+    pub year: Option<bemcal_weather::grid::GridYear>,
     /// Gaps up to this many hours are interpolated; longer ones come from the TMY file.
     #[serde(default = "default_max_gap")]
     pub max_gap_h: usize,

@@ -74,9 +74,21 @@ impl OutputMetrics {
 pub const NOT_CONVERGED_EXIT: i32 = 3;
 
 /// `summary.json`.
+fn default_year() -> bemcal_weather::grid::GridYear {
+    bemcal_weather::grid::GridYear::calendar(2021)
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     pub project: String,
+    /// The grid year of the meters and the model: `2017`, or `"2017-04"` for twelve months from
+    /// April 2017.
+    #[serde(default = "default_year")]
+    pub year: bemcal_weather::grid::GridYear,
+    /// What reading the meters decided or dropped (hour convention, daylight saving, rows
+    /// outside the year, 29 February, duplicates).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub meter_notes: Vec<String>,
     /// The EPW built from `[measured_weather]`: where each field came from.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
@@ -291,6 +303,8 @@ pub fn write_summary(
     let draws = crate::predictive::draw_runs(cal, chains);
     let summary = Summary {
         project: cal.project.name.clone(),
+        year: inp.year,
+        meter_notes: inp.meter_notes.clone(),
         measured_weather: inp.measured_weather.clone(),
         bases: inp.base_reports.clone(),
         outputs: inp.outputs.clone(),
@@ -443,12 +457,12 @@ pub(crate) fn write_draws_csv(
 /// Writes hourly outputs as `timestamp,<output>...`.
 pub fn write_outputs_csv(
     path: &Path,
-    year: i32,
+    year: bemcal_weather::grid::GridYear,
     o: &bemcal_energyplus::HourlyOutputs,
 ) -> Result<(), Error> {
     let mut s = format!("timestamp,{}\n", o.names.join(","));
-    for (t, ts) in timestamps(year, o.hours()).iter().enumerate() {
-        s.push_str(ts);
+    for (t, ts) in timestamps(year, o.hours()) {
+        s.push_str(&ts);
         for series in &o.series {
             s.push_str(&format!(",{:.6}", series[t]));
         }
@@ -459,7 +473,7 @@ pub fn write_outputs_csv(
 
 pub(crate) fn write_bands_csv(
     path: &Path,
-    year: i32,
+    year: bemcal_weather::grid::GridYear,
     outputs: &[String],
     measured: &[Vec<f64>],
     bands: &[bemcal_stats::summary::PredictiveBands],
@@ -470,8 +484,8 @@ pub(crate) fn write_bands_csv(
     }
     s.push('\n');
     let n = bands.first().map_or(0, |b| b.q50.len());
-    for (t, ts) in timestamps(year, n).iter().enumerate() {
-        s.push_str(ts);
+    for (t, ts) in timestamps(year, n) {
+        s.push_str(&ts);
         for (k, b) in bands.iter().enumerate() {
             let m = measured[k][t];
             let m = if m.is_finite() {

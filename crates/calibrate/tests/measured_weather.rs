@@ -54,7 +54,7 @@ fn project_with_isd_lite_weather_simulates_the_metered_year() {
     assert_eq!(inputs.weather_path, d.join("measured-weather/2017.epw"));
     assert!(d.join("measured-weather/2017.json").is_file());
     let report = inputs.measured_weather.as_ref().expect("built");
-    assert_eq!(report.year, 2017);
+    assert_eq!(report.year, 2017.into());
     // The 07:00 UTC observation of January 1 is the first hour in local standard time.
     assert_eq!(inputs.features.dry_bulb_c[0], -2.8);
 

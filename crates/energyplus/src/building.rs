@@ -12,6 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use bemcal_weather::grid::GridYear;
 use bemcal_weather::{Calendar, Holidays};
 use chrono::Datelike;
 
@@ -97,9 +98,11 @@ pub struct BuildingSpec {
     /// One supply-air temperature parameter per AHU instead of one shared by both.
     #[serde(default)]
     pub separate_ahu_supply_air: bool,
-    /// Calendar year simulated (sets the day of week of January 1).
+    /// The year simulated: a calendar year (`2021`) or twelve months from another month
+    /// (`"2017-04"`: 1 April 2017 to 31 March 2018, the run period across the year end), which
+    /// sets the weekdays and holidays of each date; it must be the meters' year.
     #[serde(default = "default_year")]
-    pub year: i32,
+    pub year: GridYear,
     /// Holidays run on the weekend schedule (`RunPeriodControl:SpecialDays`); the same
     /// calendar gives the surrogate its day types.
     #[serde(default)]
@@ -161,8 +164,8 @@ pub fn default_weekday_bounds() -> Vec<u32> {
 pub fn default_weekend_bounds() -> Vec<u32> {
     vec![6, 8, 10, 12, 14, 16, 18, 20, 22, 24]
 }
-fn default_year() -> i32 {
-    2021
+fn default_year() -> GridYear {
+    GridYear::calendar(2021)
 }
 
 /// Reference Table 2 schedule priors (weekdays, 12 intervals).
@@ -361,7 +364,7 @@ impl BuildingSpec {
                 format!("occupied_hours = [{a}, {b}], expected start < end <= 24"),
             ));
         }
-        if !(1900..=2100).contains(&self.year) {
+        if !(1900..=2100).contains(&self.year.first_year()) {
             return Err(at(
                 "year",
                 format!("year = {}, expected 1900..=2100", self.year),
@@ -597,45 +600,48 @@ impl BuildingSpec {
         m.add("Sizing:Parameters", &["1.2", "1.2"]);
     }
 
-    /// The run period (the spec's year) and its special days (`RunPeriodControl:SpecialDays`)
-    /// from the spec's calendar.
+    /// The run period (the spec's year, across the year end for a year from another month) and
+    /// its special days (`RunPeriodControl:SpecialDays`) from the spec's calendar.
+    ///
+    /// EnergyPlus counts weekdays on from the run period's first day and simulates no
+    /// 29 February when the weather file has none, so after a leap day its weekdays run one day
+    /// behind the real calendar (1 March 2020, a Sunday, simulates as a Saturday). Each date's
+    /// schedule is therefore set against the weekday EnergyPlus will give it: a working day it
+    /// counts as a weekend is `CustomDay1` (the weekday schedule), an off day it counts as a
+    /// weekday is a `Holiday` (the weekend schedule).
     fn add_run_period(&self, m: &mut Idf) {
         let year = self.year;
-        let jan1 = chrono_weekday_name(year);
+        let (first, last) = (year.first_date(), year.last_date());
         m.add(
             "RunPeriod",
             &[
-                "Year",
-                "1",
-                "1",
-                &year.to_string(),
-                "12",
-                "31",
-                &year.to_string(),
-                jan1,
-                "No",
-                "No",
-                "No",
-                "Yes",
-                "Yes",
+                "Year".to_string(),
+                first.month().to_string(),
+                first.day().to_string(),
+                first.year().to_string(),
+                last.month().to_string(),
+                last.day().to_string(),
+                last.year().to_string(),
+                weekday_name(first.weekday()).into(),
+                "No".into(),
+                "No".into(),
+                "No".into(),
+                "Yes".into(),
+                "Yes".into(),
             ],
         );
-        // Days off run the weekend schedule as holidays; Saturdays and Sundays that the
-        // meters show as working days run the weekday schedule as CustomDay1 (the schedules'
-        // weekday `For:` lists it).
         let calendar = self.calendar();
         let mut special = 0;
-        let jan1 = chrono::NaiveDate::from_ymd_opt(year, 1, 1).expect("a valid year");
-        // EnergyPlus simulates 365 days: February 29 is not one of them.
-        for date in jan1
+        let simulated = first
             .iter_days()
-            .take_while(|d| d.year() == year)
-            .filter(|d| !(d.month() == 2 && d.day() == 29))
-        {
+            .take_while(|d| *d <= last)
+            .filter(|d| year.covers(*d));
+        for (k, date) in simulated.enumerate() {
             let t = calendar
                 .day_type(date.month(), date.day())
                 .expect("a date of the year");
-            let weekend = matches!(date.weekday(), chrono::Weekday::Sat | chrono::Weekday::Sun);
+            let energyplus_weekday = first.weekday().num_days_from_monday() as usize + k;
+            let weekend = energyplus_weekday % 7 >= 5;
             let kind = match (t.is_off_day(), weekend) {
                 (true, false) => "Holiday",
                 (false, true) => "CustomDay1",
@@ -1414,21 +1420,18 @@ fn interval_schedule(
     m.add("Schedule:Compact", &f);
 }
 
-/// Day of week of January 1 of `year`, as EnergyPlus spells it.
-fn chrono_weekday_name(year: i32) -> &'static str {
-    // Zeller-style computation (Sakamoto's method) to avoid a date dependency.
-    let t = [0, 3, 2, 5, 0, 3, 5, 1, 4, 6, 2, 4];
-    let y = year - 1; // January counts with the previous year
-    let dow = (y + y / 4 - y / 100 + y / 400 + t[0] + 1).rem_euclid(7);
-    [
-        "Sunday",
-        "Monday",
-        "Tuesday",
-        "Wednesday",
-        "Thursday",
-        "Friday",
-        "Saturday",
-    ][dow as usize]
+/// A day of the week as EnergyPlus spells it.
+fn weekday_name(d: chrono::Weekday) -> &'static str {
+    use chrono::Weekday::*;
+    match d {
+        Mon => "Monday",
+        Tue => "Tuesday",
+        Wed => "Wednesday",
+        Thu => "Thursday",
+        Fri => "Friday",
+        Sat => "Saturday",
+        Sun => "Sunday",
+    }
 }
 
 #[cfg(test)]
@@ -1490,11 +1493,69 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// The run period's first and last dates and weekday, and its special days, of a spec.
+    fn run_period(s: &BuildingSpec) -> (Vec<String>, Vec<(String, String)>) {
+        let v = complete_values(&s.parameters(), &Default::default()).unwrap();
+        let idf = s.to_idf(&v).unwrap();
+        let rp = idf.of_class("RunPeriod").next().unwrap().fields[1..8].to_vec();
+        let special = idf
+            .of_class("RunPeriodControl:SpecialDays")
+            .map(|o| (o.fields[1].clone(), o.fields[3].clone()))
+            .collect();
+        (rp, special)
+    }
+
     #[test]
-    fn weekday_of_jan1() {
-        assert_eq!(chrono_weekday_name(2021), "Friday");
-        assert_eq!(chrono_weekday_name(2011), "Saturday");
-        assert_eq!(chrono_weekday_name(2024), "Monday");
+    fn a_year_from_april_runs_across_the_year_end_from_its_weekday() {
+        let s = BuildingSpec {
+            year: "2021-04".parse().unwrap(),
+            holidays: bemcal_weather::Holidays::None,
+            ..Default::default()
+        };
+        let (rp, special) = run_period(&s);
+        assert_eq!(rp, ["4", "1", "2021", "3", "31", "2022", "Thursday"]);
+        assert!(special.is_empty(), "{special:?}");
+        let s = BuildingSpec {
+            year: 2021.into(),
+            ..Default::default()
+        };
+        assert_eq!(
+            run_period(&s).0,
+            ["1", "1", "2021", "12", "31", "2021", "Friday"]
+        );
+    }
+
+    #[test]
+    fn after_a_leap_day_the_real_weekdays_are_kept() {
+        // EnergyPlus simulates 2020 without 29 February and counts weekdays on: from 1 March it
+        // is one day behind. Real Sundays (its Saturdays) need nothing; real Mondays (its
+        // Sundays) run the weekday schedule; real Saturdays (its Fridays) the weekend one.
+        let s = BuildingSpec {
+            year: 2020.into(),
+            holidays: bemcal_weather::Holidays::None,
+            ..Default::default()
+        };
+        let (rp, special) = run_period(&s);
+        assert_eq!(rp[6], "Wednesday");
+        let kind = |md: &str| {
+            special
+                .iter()
+                .find(|(d, _)| d == md)
+                .map(|(_, k)| k.as_str())
+        };
+        assert_eq!(kind("2/28"), None); // a Friday, as EnergyPlus counts too
+        assert_eq!(kind("3/1"), None); // Sunday: EnergyPlus's Saturday
+        assert_eq!(kind("3/2"), Some("CustomDay1")); // Monday: EnergyPlus's Sunday
+        assert_eq!(kind("3/7"), Some("Holiday")); // Saturday: EnergyPlus's Friday
+        assert_eq!(kind("12/31"), None); // Thursday: EnergyPlus's Wednesday
+        assert_eq!(special.len(), 44 + 43, "{special:?}"); // the real Mondays and Saturdays from 2 March
+                                                           // A year without a leap day needs no special day at all.
+        let s = BuildingSpec {
+            year: 2021.into(),
+            holidays: bemcal_weather::Holidays::None,
+            ..Default::default()
+        };
+        assert!(run_period(&s).1.is_empty());
     }
 
     #[test]

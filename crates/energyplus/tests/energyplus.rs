@@ -116,20 +116,62 @@ fn lower_cooling_setpoint_raises_cooling() {
 #[test]
 fn one_weekday_interval_changes_only_its_hours_on_weekdays() {
     let Some(r) = runner() else { return };
+    // 2021 has 261 Monday-Fridays, 12 of them federal holidays as observed (New Year's Day
+    // 2022, a Saturday, is observed on Friday 31 December 2021).
+    assert_eq!(weekday_interval_hours(&r, 2021.into()), 2 * (261 - 12));
+}
+
+/// In a leap year EnergyPlus simulates no 29 February and counts weekdays on, one day behind the
+/// real calendar from 1 March; across a year end it runs from the first month's weekday. The
+/// weekday schedule must still fall on the real weekdays, as the meters' dates have them.
+#[test]
+fn weekdays_are_the_real_ones_in_a_leap_year_and_across_a_year_end() {
+    let Some(r) = runner() else { return };
+    for year in ["2020", "2021-04"] {
+        let year = year.parse().unwrap();
+        assert_eq!(
+            weekday_interval_hours(&r, year),
+            2 * working_days(year),
+            "{year}"
+        );
+    }
+}
+
+/// Monday-Fridays of the grid year that are not US federal holidays, by the real calendar.
+fn working_days(year: bemcal_weather::grid::GridYear) -> usize {
+    use chrono::Datelike;
+    let holidays: Vec<_> = (year.first_year()..=year.first_year() + 1)
+        .flat_map(bemcal_weather::us_federal_holidays)
+        .collect();
+    year.first_date()
+        .iter_days()
+        .take_while(|d| *d <= year.last_date())
+        .filter(|d| year.covers(*d) && d.weekday().num_days_from_monday() < 5)
+        .filter(|d| !holidays.contains(d))
+        .count()
+}
+
+/// Simulates the small model of `year` at two values of the weekday schedule's interval 5
+/// (09:00-11:00) and checks that exactly that interval's hours on the calendar's weekdays
+/// (the real dates of the grid year) changed, by the ratio of the values; returns their count.
+fn weekday_interval_hours(r: &Runner, year: bemcal_weather::grid::GridYear) -> usize {
     let tmp = tempfile::tempdir().unwrap();
-    let spec = small_spec();
+    let spec = BuildingSpec {
+        year,
+        ..small_spec()
+    };
     let model = Model::generated(spec.clone());
     // Interval 5 of the default weekday boundaries [6, 7, 8, 9, 11, ...] is 09:00-11:00.
     assert_eq!(&spec.weekday_boundaries[3..5], &[9, 11]);
     let a = simulate(
-        &r,
+        r,
         &model,
         &[("schedule_weekday_05", 0.5)],
         &tmp.path().join("a"),
     )
     .unwrap();
     let b = simulate(
-        &r,
+        r,
         &model,
         &[("schedule_weekday_05", 0.8)],
         &tmp.path().join("b"),
@@ -142,9 +184,8 @@ fn one_weekday_interval_changes_only_its_hours_on_weekdays() {
     );
     let mut changed = 0;
     for t in 0..8760 {
-        let day = t / 24;
         let hour = t % 24;
-        let date = chrono::NaiveDate::from_yo_opt(spec.year, day as u32 + 1).unwrap();
+        let date = year.day_date(t / 24);
         let dt = cal
             .day_type(chrono::Datelike::month(&date), chrono::Datelike::day(&date))
             .unwrap();
@@ -152,7 +193,7 @@ fn one_weekday_interval_changes_only_its_hours_on_weekdays() {
         if inside {
             assert!(
                 (lb[t] / la[t] - 1.6).abs() < 1e-3,
-                "hour {t}: {} vs {}",
+                "{year}: hour {t} ({date}, {dt}): {} vs {}",
                 la[t],
                 lb[t]
             );
@@ -160,14 +201,13 @@ fn one_weekday_interval_changes_only_its_hours_on_weekdays() {
         } else {
             assert!(
                 (la[t] - lb[t]).abs() < 1e-9,
-                "hour {t} ({dt}, {hour}h) changed: {} vs {}",
+                "{year}: hour {t} ({date}, {dt}, {hour}h) changed: {} vs {}",
                 la[t],
                 lb[t]
             );
         }
     }
-    // 2021 has 261 Monday-Fridays, 11 of them federal holidays (observed).
-    assert_eq!(changed, 2 * (261 - 11));
+    changed
 }
 
 #[test]
@@ -391,7 +431,7 @@ fn energyplus_runs_on_an_epw_built_from_isd_lite() {
     let tmy_text = std::fs::read_to_string(&tmy).unwrap();
     let obs = bemcal_weather::station::read_isd_lite(&isd, 254.0).unwrap();
     let opts = BuildOptions {
-        year: 2017,
+        year: 2017.into(),
         max_interpolated_gap_h: 6,
         stamp: Stamp::Instant,
         interval_min: 60,
@@ -402,7 +442,7 @@ fn energyplus_runs_on_an_epw_built_from_isd_lite() {
     let built = tmp.path().join("msp2017.epw");
     std::fs::write(&built, text).unwrap();
     let model = Model::generated(BuildingSpec {
-        year: 2017,
+        year: 2017.into(),
         ..small_spec()
     });
     let idf = model.instantiate(&ParameterValues::new(), r.idd()).unwrap();

@@ -18,7 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::meters::{day_date, slot_month};
+use crate::meters::{slot_month, GridYear};
 use crate::stats::{mean, median, quantile};
 use chrono::Datelike;
 
@@ -166,14 +166,14 @@ pub fn detect_cold_months(outdoor: &[f64; 12], cold_c: f64) -> Vec<u32> {
 }
 
 /// Hour of week (Monday 00:00 = 0 .. Sunday 23:00 = 167) of slot `t` in `year`.
-pub fn hour_of_week(year: i32, t: usize) -> usize {
-    let wd = day_date(year, t / 24).weekday().num_days_from_monday() as usize;
+pub fn hour_of_week(year: GridYear, t: usize) -> usize {
+    let wd = year.day_date(t / 24).weekday().num_days_from_monday() as usize;
     wd * 24 + t % 24
 }
 
 /// Median per hour of week over the slots in `months`; hours of week without data take the
 /// median of all selected values. `None` if no value is selected.
-pub fn hour_of_week_profile(values: &[f64], year: i32, months: &[u32]) -> Option<Vec<f64>> {
+pub fn hour_of_week_profile(values: &[f64], year: GridYear, months: &[u32]) -> Option<Vec<f64>> {
     let mut buckets: Vec<Vec<f64>> = vec![Vec::new(); 168];
     for (t, &v) in values.iter().enumerate() {
         if v.is_finite() && months.contains(&slot_month(t)) {
@@ -220,7 +220,7 @@ fn subtract_floor(total: &[f64], base: impl Fn(usize) -> f64) -> Vec<f64> {
 pub fn disaggregate_heating(
     heating: &[f64],
     outdoor_c: &[f64],
-    year: i32,
+    year: GridYear,
     opts: &DisaggregationOptions,
     out: &mut Disaggregation,
 ) {
@@ -436,7 +436,7 @@ mod tests {
             .collect();
         let opts = DisaggregationOptions::default();
         let mut d = Disaggregation::default();
-        disaggregate_heating(&heating, &outdoor, year, &opts, &mut d);
+        disaggregate_heating(&heating, &outdoor, year.into(), &opts, &mut d);
         assert_eq!(d.non_heating_months, vec![5, 6, 7, 8, 9]);
         assert_eq!(d.estimate("heating_base_peak_kw").unwrap().value, 10.0);
         let sh = &d.get("space_heating").unwrap().values;

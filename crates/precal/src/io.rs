@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::meters::{slot_time, MeterSpec, HOURS};
+use crate::meters::{GridYear, MeterSpec, HOURS};
 use crate::pipeline::{PrecalOptions, Precalibration, PriorsFile};
 use crate::PrecalError;
 
@@ -28,9 +28,9 @@ use crate::PrecalError;
 /// ```
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct PrecalProject {
-    /// Grid year.
+    /// Grid year: `2017`, or `"2017-04"` for twelve months from April 2017.
     #[serde(default)]
-    pub year: Option<i32>,
+    pub year: Option<GridYear>,
     /// How to read the meters.
     #[serde(default)]
     pub meters: Option<MeterSpec>,
@@ -256,8 +256,8 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
         let _ = write!(t, ",{n}_kwh");
     }
     t.push('\n');
-    for h in 0..HOURS {
-        let _ = write!(t, "{}", slot_time(year, h).format("%Y-%m-%dT%H:%M"));
+    for h in year.chronological(HOURS) {
+        let _ = write!(t, "{}", year.slot_time(h).format("%Y-%m-%dT%H:%M"));
         for (_, v) in &cols {
             let _ = write!(t, ",{}", num(v[h]));
         }
@@ -268,7 +268,10 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
     // calendar.csv
     let mut t =
         String::from("date,calendar_day_type,cluster,label,outlier,reason,medoid_distance\n");
-    for d in &r.clusters.days {
+    // In time order (a year from April lists April first).
+    let mut days: Vec<_> = r.clusters.days.iter().collect();
+    days.sort_by_key(|d| d.date);
+    for d in days {
         let _ = writeln!(
             t,
             "{},{},{},{},{},\"{}\",{}",

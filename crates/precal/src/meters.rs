@@ -10,16 +10,20 @@
 //!   `24:00` means 00:00 of the next day.
 //! * **Hour convention**: hour-ending stamps (`01:00` = the hour 00:00-01:00) are shifted back one
 //!   hour. `auto` picks hour-ending when a `24:00` stamp occurs, or the earliest stamp of the file
-//!   is 01:00 on January 1, or the latest is 00:00 on January 1; otherwise hour-beginning.
+//!   is 01:00 on the first of a month (January 1 for a calendar year), or the latest is 00:00 on
+//!   the first of a month at least 360 days after the earliest; otherwise hour-beginning.
+//! * **Year**: a calendar year, or twelve months from the first of another month
+//!   ([`GridYear`], `2017-04`); given, or inferred from the stamps ([`infer_year`]).
 //! * **Daylight saving**: `none` = the file is in local standard time all year. `us` = the clock
 //!   follows US DST (second Sunday of March to first Sunday of November, since 2007): stamps
 //!   inside DST are moved back one hour; in the autumn the first occurrence of the repeated
 //!   01:00 hour is DST and the second standard time. `auto` (default) chooses `us` when the
 //!   spring-forward hour (02:00 on the second Sunday of March) is absent while its neighbours are
 //!   present, or the autumn 01:00 hour occurs twice; otherwise `none`.
-//! * **Grid**: slot `t` of year `Y` is hour `t mod 24` of day `t / 24` counted without 29
-//!   February, so the grid lines up with a non-leap EPW file. Rows on 29 February and rows
-//!   outside year `Y` are dropped and counted in [`MeterData::notes`]. A slot without a row is
+//! * **Grid**: slot `t` is hour `t mod 24` of day `t / 24` counted from 1 January without 29
+//!   February, so the grid lines up with a non-leap EPW file (a year from April has January to
+//!   March of the next year in slots 0..2160). Rows on 29 February and rows outside the year are
+//!   dropped and counted in [`MeterData::notes`]. A slot without a row is
 //!   missing (NaN).
 //! * **Duplicates** (two rows in one slot that are not a DST repeat): [`DuplicatePolicy`]
 //!   (default: error naming both lines).
@@ -50,7 +54,7 @@ use crate::PrecalError;
 /// Hours in the (non-leap) meter year.
 pub const HOURS: usize = 8760;
 
-pub use bemcal_weather::grid::{day_date, slot_month, slot_of, slot_time, CUM_DAYS};
+pub use bemcal_weather::grid::{slot_month, GridYear, CUM_DAYS};
 
 /// Default timestamp format: `auto` = ISO 8601, else US `%m/%d/%Y %H:%M` (`01/13/2011 05:00`).
 pub const DEFAULT_TIMESTAMP_FORMAT: &str = "auto";
@@ -393,8 +397,8 @@ pub struct MeterSeries {
 /// Meters of one building-year on the hourly grid.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MeterData {
-    /// Calendar year of the grid.
-    pub year: i32,
+    /// The grid's year: a calendar year, or twelve months from another month.
+    pub year: GridYear,
     /// The source file.
     pub source: PathBuf,
     /// The meters, in spec order.
@@ -556,25 +560,39 @@ fn parse_timestamp(
     Ok((if plus_day { dt + Duration::days(1) } else { dt }, offset))
 }
 
-/// US daylight saving (2007 rules) of a meters file: detected (`auto`: the spring hour absent
-/// or the autumn hour repeated) or named (`us`); rows inside it move back one hour.
+/// US daylight saving (2007 rules) of a meters file: detected (`auto`: a spring hour absent or
+/// an autumn hour repeated, in either year a grid year from another month touches) or named
+/// (`us`); rows inside it (by their own year's dates) move back one hour.
 fn us_daylight_saving(
     rows: &mut [Row],
     dst: DstHandling,
-    year: i32,
+    year: GridYear,
     per_hour: u32,
     notes: &mut Vec<String>,
 ) -> Result<(), String> {
-    let dst_days = us_dst_days(year);
-    let dst = match (dst, dst_days) {
-        (DstHandling::Auto, Some((spring, fall))) => {
+    let first = year.first_date();
+    let last = year.last_date();
+    let inside = |d: NaiveDate| d >= first && d <= last;
+    // The years whose months the grid covers: one, or two for a year from another month.
+    let dst_days: Vec<(NaiveDate, NaiveDate)> = (year.first_year()..=year.year_of_month(1))
+        .filter_map(us_dst_days)
+        .collect();
+    let dst = match dst {
+        DstHandling::Auto if !dst_days.is_empty() => {
             let count = |d: NaiveDate, h: u32| {
                 rows.iter()
                     .filter(|r| !r.offset && r.clock.date() == d && r.clock.hour() == h)
                     .count()
             };
-            let skipped = count(spring, 2) == 0 && count(spring, 1) > 0 && count(spring, 3) > 0;
-            let repeated = count(fall, 1) > per_hour as usize;
+            let skipped = dst_days.iter().any(|&(spring, _)| {
+                inside(spring)
+                    && count(spring, 2) == 0
+                    && count(spring, 1) > 0
+                    && count(spring, 3) > 0
+            });
+            let repeated = dst_days
+                .iter()
+                .any(|&(_, fall)| inside(fall) && count(fall, 1) > per_hour as usize);
             let us = skipped || repeated;
             notes.push(format!(
                 "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
@@ -592,19 +610,24 @@ fn us_daylight_saving(
                 DstHandling::None
             }
         }
-        (DstHandling::Auto, None) => DstHandling::None,
-        (d, _) => d,
+        DstHandling::Auto => DstHandling::None,
+        d => d,
     };
     if dst == DstHandling::Us {
-        let (spring, fall) = dst_days.ok_or_else(|| "no DST dates".to_string())?;
-        let start = spring.and_hms_opt(3, 0, 0).expect("time");
-        let end = fall.and_hms_opt(1, 0, 0).expect("time");
+        if dst_days.is_empty() {
+            return Err("no DST dates".to_string());
+        }
         let mut seen_repeat = std::collections::HashSet::new();
         let mut moved = 0usize;
         for r in rows.iter_mut() {
             if r.offset {
                 continue;
             }
+            let Some((spring, fall)) = us_dst_days(r.clock.year()) else {
+                continue;
+            };
+            let start = spring.and_hms_opt(3, 0, 0).expect("time");
+            let end = fall.and_hms_opt(1, 0, 0).expect("time");
             let in_dst = if r.clock >= start && r.clock < end {
                 true
             } else if r.clock >= end && r.clock < end + Duration::hours(1) {
@@ -622,8 +645,33 @@ fn us_daylight_saving(
             "{moved} rows inside daylight saving time moved back one hour to local standard time"
         ));
     }
-
     Ok(())
+}
+
+/// The grid year of meters with these timestamps: the calendar year when they lie in one, or
+/// run past twelve months (the year holding most of them); otherwise twelve months from the
+/// first day of the first stamp's month (meters exported for "the last 12 months" or a fiscal
+/// year). Stamps are clock times, before daylight saving is undone.
+pub fn infer_year(stamps: impl Iterator<Item = NaiveDateTime>) -> GridYear {
+    let mut counts: HashMap<i32, usize> = HashMap::new();
+    let (mut min, mut max) = (NaiveDateTime::MAX, NaiveDateTime::MIN);
+    for t in stamps {
+        *counts.entry(t.year()).or_default() += 1;
+        min = min.min(t);
+        max = max.max(t);
+    }
+    let most = counts
+        .into_iter()
+        .max_by_key(|&(y, n)| (n, -y))
+        .map_or(min.year(), |(y, _)| y);
+    if min.year() == max.year() {
+        return GridYear::calendar(most);
+    }
+    match GridYear::starting(min.year(), min.month()) {
+        // Two hours of slack: a daylight-saving clock runs an hour past the last standard hour.
+        Ok(w) if (max - Duration::hours(2)).date() <= w.last_date() => w,
+        _ => GridYear::calendar(most),
+    }
 }
 
 /// The standard UTC offset of `tz` in `year`: the smaller of its January and July offsets
@@ -661,13 +709,13 @@ fn is_missing_token(s: &str) -> bool {
     )
 }
 
-/// Reads a meters CSV with `spec`. `year`: the grid year (default: the most common year of
-/// the timestamps). `std_offset_h`: the site's standard UTC offset, used only for ISO
+/// Reads a meters CSV with `spec`. `year`: the grid year (default: inferred from the timestamps,
+/// [`infer_year`]). `std_offset_h`: the site's standard UTC offset, used only for ISO
 /// timestamps that carry an offset (e.g. from the EPW `LOCATION` time zone).
 pub fn read_meters(
     path: &Path,
     spec: &MeterSpec,
-    year: Option<i32>,
+    year: Option<GridYear>,
     std_offset_h: Option<f64>,
 ) -> Result<MeterData, PrecalError> {
     let text = std::fs::read_to_string(path).map_err(|source| PrecalError::Io {
@@ -712,7 +760,7 @@ pub fn parse_meters(
     text: &str,
     path: &Path,
     spec: &MeterSpec,
-    year: Option<i32>,
+    year: Option<GridYear>,
     std_offset_h: Option<f64>,
 ) -> Result<MeterData, PrecalError> {
     let file_err = |message: String| PrecalError::MeterFile {
@@ -840,11 +888,13 @@ pub fn parse_meters(
         HourConvention::Auto => {
             let min = rows.iter().map(|r| r.clock).min().expect("rows");
             let max = rows.iter().map(|r| r.clock).max().expect("rows");
-            let jan1 = |t: NaiveDateTime, m: u32| {
-                t.month() == 1 && t.day() == 1 && t.hour() * 60 + t.minute() == m
-            };
-            let ending =
-                saw_24 || jan1(min, interval_min) || (jan1(max, 0) && max.year() > min.year());
+            // A year (calendar or from another month) of hour-ending stamps starts one interval
+            // after midnight on the first of a month and ends at midnight on the first of one.
+            let first_of_month =
+                |t: NaiveDateTime, m: u32| t.day() == 1 && t.hour() * 60 + t.minute() == m;
+            let ending = saw_24
+                || first_of_month(min, interval_min)
+                || (first_of_month(max, 0) && max - min >= Duration::days(360));
             notes.push(format!(
                 "hour convention detected: {} (earliest stamp {min}, latest {max})",
                 if ending {
@@ -872,16 +922,12 @@ pub fn parse_meters(
     let year = match year {
         Some(y) => y,
         None => {
-            let mut counts: HashMap<i32, usize> = HashMap::new();
-            for r in &rows {
-                *counts.entry(r.clock.year()).or_default() += 1;
-            }
-            let y = counts
-                .into_iter()
-                .max_by_key(|&(y, n)| (n, -y))
-                .map(|(y, _)| y)
-                .expect("rows");
-            notes.push(format!("year inferred from the timestamps: {y}"));
+            let y = infer_year(rows.iter().filter(|r| !r.offset).map(|r| r.clock));
+            notes.push(format!(
+                "year inferred from the timestamps: {y} ({} to {})",
+                y.first_date(),
+                y.last_date()
+            ));
             y
         }
     };
@@ -901,7 +947,7 @@ pub fn parse_meters(
                  \"America/Chicago\")"
             ))
         })?;
-        let standard = standard_offset(tz, year);
+        let standard = standard_offset(tz, year.first_year());
         let zone_h = standard.num_minutes() as f64 / 60.0;
         if let Some(site_h) = std_offset_h.filter(|h| (h - zone_h).abs() > 1e-6) {
             return Err(file_err(format!(
@@ -950,8 +996,13 @@ pub fn parse_meters(
     let mut stamp_line: HashMap<NaiveDateTime, u64> = HashMap::new();
     let (mut outside, mut feb29, mut dups) = (0usize, 0usize, 0usize);
     for r in &rows {
-        let Some(t) = slot_of(year, r.clock) else {
-            if r.clock.year() == year {
+        let Some(t) = year.slot_of(r.clock) else {
+            let date = r.clock.date();
+            if date.month() == 2
+                && date.day() == 29
+                && date >= year.first_date()
+                && date <= year.last_date()
+            {
                 feb29 += 1;
             } else {
                 outside += 1;
@@ -1103,7 +1154,21 @@ pub fn parse_meters(
         }
     }
     if outside > 0 {
-        notes.push(format!("{outside} rows outside year {year} dropped"));
+        let fits = infer_year(rows.iter().filter(|r| !r.offset).map(|r| r.clock));
+        let hint = if fits != year {
+            format!(
+                " (their stamps fit year = \"{fits}\", {} to {})",
+                fits.first_date(),
+                fits.last_date()
+            )
+        } else {
+            String::new()
+        };
+        notes.push(format!(
+            "{outside} rows outside {} to {} dropped{hint}",
+            year.first_date(),
+            year.last_date()
+        ));
     }
     if feb29 > 0 {
         notes.push(format!(
@@ -1117,7 +1182,11 @@ pub fn parse_meters(
         ));
     }
     if slot_line.iter().all(|&l| l == 0) {
-        return Err(file_err(format!("no rows fall in year {year}")));
+        return Err(file_err(format!(
+            "no rows fall in {} to {} (the grid year {year})",
+            year.first_date(),
+            year.last_date()
+        )));
     }
     let series = columns
         .into_iter()
@@ -1192,7 +1261,16 @@ pub struct MeterQuality {
 }
 
 /// Quality summary of one kWh-per-hour series on the grid of `year`.
-pub fn quality(name: &str, values: &[f64], year: i32, flat_run_min_hours: usize) -> MeterQuality {
+pub fn quality(
+    name: &str,
+    values: &[f64],
+    year: GridYear,
+    flat_run_min_hours: usize,
+) -> MeterQuality {
+    // Gaps and flat runs are runs in time: the slots in time order, each run's start mapped back.
+    let order: Vec<usize> = year.chronological(values.len()).collect();
+    let values: Vec<f64> = order.iter().map(|&t| values[t]).collect();
+    let values = &values[..];
     let n = values.len();
     let present = values.iter().filter(|v| v.is_finite()).count();
     let mut longest: Option<(usize, usize)> = None;
@@ -1226,8 +1304,8 @@ pub fn quality(name: &str, values: &[f64], year: i32, flat_run_min_hours: usize)
         if t - s >= min_h {
             flats.push(FlatRun {
                 hours: t - s,
-                start_slot: s,
-                start: slot_time(year, s).to_string(),
+                start_slot: order[s],
+                start: year.slot_time(order[s]).to_string(),
                 value: v,
             });
         }
@@ -1247,8 +1325,8 @@ pub fn quality(name: &str, values: &[f64], year: i32, flat_run_min_hours: usize)
         missing_hours: n - present,
         longest_gap: longest.map(|(s, h)| Gap {
             hours: h,
-            start_slot: s,
-            start: slot_time(year, s).to_string(),
+            start_slot: order[s],
+            start: year.slot_time(order[s]).to_string(),
         }),
         flat_runs: flats,
         flat_run_count,
@@ -1286,11 +1364,18 @@ mod tests {
             .unwrap()
             .and_hms_opt(5, 0, 0)
             .unwrap();
-        assert_eq!(slot_of(2011, t), Some(59 * 24 + 5));
-        assert_eq!(slot_time(2011, 59 * 24 + 5), t);
-        assert_eq!(slot_time(2016, 59 * 24).date().to_string(), "2016-03-01");
+        let y = GridYear::calendar(2011);
+        assert_eq!(y.slot_of(t), Some(59 * 24 + 5));
+        assert_eq!(y.slot_time(59 * 24 + 5), t);
+        assert_eq!(
+            GridYear::calendar(2016)
+                .slot_time(59 * 24)
+                .date()
+                .to_string(),
+            "2016-03-01"
+        );
         assert_eq!(slot_month(8759), 12);
-        assert_eq!(day_date(2011, 364).to_string(), "2011-12-31");
+        assert_eq!(y.day_date(364).to_string(), "2011-12-31");
     }
 
     #[test]
@@ -1307,7 +1392,7 @@ mod tests {
         assert!(msg.starts_with("m.csv:4: column 'Gas (therm)'"), "{msg}");
         let text = text.replace(",x\n", ",3\n");
         let d = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap();
-        assert_eq!(d.year, 2011);
+        assert_eq!(d.year, GridYear::calendar(2011));
         assert_eq!(d.series[0].values[0], 5.0);
         assert!(d.series[0].values[1].is_nan());
         assert!((d.series[1].values[1] - 2.0 * 29.307107).abs() < 1e-9);
@@ -1389,7 +1474,14 @@ mod tests {
         }
         let mut s = spec();
         s.convention = HourConvention::HourBeginning;
-        let d = parse_meters(&text, Path::new("m.csv"), &s, Some(2011), None).unwrap();
+        let d = parse_meters(
+            &text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2011)),
+            None,
+        )
+        .unwrap();
         assert!(
             d.notes.iter().any(|n| n.contains("US DST")),
             "{:?}",
@@ -1413,6 +1505,148 @@ mod tests {
     }
 
     #[test]
+    fn twelve_months_from_april_fill_the_grid_with_the_next_years_first_quarter() {
+        // An AMI export of April 2017 - March 2018 on a US DST clock, 15-minute readings: the
+        // grid year is inferred as 2017-04, every hour is filled, and daylight saving is
+        // undone in both years (November 2017 and March 2018).
+        let mut text = String::from("Time,Heat\n");
+        let mut t = NaiveDate::from_ymd_opt(2017, 4, 1)
+            .unwrap()
+            .and_hms_opt(0, 0, 0)
+            .unwrap();
+        let end = NaiveDate::from_ymd_opt(2018, 4, 1)
+            .unwrap()
+            .and_hms_opt(0, 0, 0)
+            .unwrap();
+        let clock = |t: NaiveDateTime| {
+            let dst = |y| us_dst_days(y).unwrap();
+            let (spring, fall) = dst(t.year());
+            let in_dst =
+                t >= spring.and_hms_opt(2, 0, 0).unwrap() && t < fall.and_hms_opt(1, 0, 0).unwrap();
+            if in_dst {
+                t + Duration::hours(1)
+            } else {
+                t
+            }
+        };
+        while t < end {
+            // A quarter-hour reading of 0.25 kWh, 1.0 kWh an hour; the day of month in January.
+            let v = if t.month() == 1 {
+                t.day() as f64 / 4.0
+            } else {
+                0.25
+            };
+            text += &format!("{},{v}\n", clock(t).format("%Y-%m-%d %H:%M"));
+            t += Duration::minutes(15);
+        }
+        let mut s = spec();
+        s.convention = HourConvention::HourBeginning;
+        let d = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap();
+        assert_eq!(d.year, "2017-04".parse().unwrap(), "{:?}", d.notes);
+        assert!(
+            d.notes
+                .iter()
+                .any(|n| n.contains("2017-04-01 to 2018-03-31")),
+            "{:?}",
+            d.notes
+        );
+        assert!(
+            d.notes.iter().any(|n| n.contains("US DST")),
+            "{:?}",
+            d.notes
+        );
+        let v = &d.series[0].values;
+        assert_eq!(
+            v.iter().filter(|x| x.is_finite()).count(),
+            HOURS,
+            "{:?}",
+            d.notes
+        );
+        // Slot 0 is 1 January 2018; 15 January reads 15/4 kWh every quarter hour.
+        assert_eq!(
+            d.year.slot_time(0).date(),
+            NaiveDate::from_ymd_opt(2018, 1, 1).unwrap()
+        );
+        assert!((v[14 * 24 + 5] - 15.0).abs() < 1e-9);
+        assert!(v
+            .iter()
+            .enumerate()
+            .filter(|(t, _)| slot_month(*t) != 1)
+            .all(|(_, &x)| (x - 1.0).abs() < 1e-9));
+        // The same file read as calendar year 2017 keeps April-December only, and says so.
+        let y17 = parse_meters(
+            &text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2017)),
+            None,
+        )
+        .unwrap();
+        assert_eq!(
+            y17.series[0]
+                .values
+                .iter()
+                .filter(|x| x.is_finite())
+                .count(),
+            HOURS - 90 * 24
+        );
+        assert!(
+            y17.notes.iter().any(|n| n.contains(
+                "outside 2017-01-01 to 2017-12-31 dropped (their stamps fit year = \"2017-04\""
+            )),
+            "{:?}",
+            y17.notes
+        );
+        // The same year as an hourly, hour-ending export (01:00 on 1 April 2017 to 00:00 on
+        // 1 April 2018, standard time): recognised as hour-ending, every hour filled.
+        let mut text = String::from("Time,Heat\n");
+        let mut t = NaiveDate::from_ymd_opt(2017, 4, 1)
+            .unwrap()
+            .and_hms_opt(1, 0, 0)
+            .unwrap();
+        while t <= end {
+            text += &format!("{},1\n", t.format("%Y-%m-%d %H:%M"));
+            t += Duration::hours(1);
+        }
+        let mut s = spec();
+        s.dst = DstHandling::None;
+        let d = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap();
+        assert!(
+            d.notes.iter().any(|n| n.contains("hour-ending")),
+            "{:?}",
+            d.notes
+        );
+        assert_eq!(d.year, "2017-04".parse().unwrap(), "{:?}", d.notes);
+        assert!(
+            d.series[0].values.iter().all(|v| *v == 1.0),
+            "{:?}",
+            d.notes
+        );
+        // Thirteen months or more: the calendar year holding most stamps.
+        let stamps = |a: (i32, u32), b: (i32, u32)| {
+            let d = |(y, m)| {
+                NaiveDate::from_ymd_opt(y, m, 1)
+                    .unwrap()
+                    .and_hms_opt(0, 0, 0)
+                    .unwrap()
+            };
+            [d(a), d(b)].into_iter()
+        };
+        assert_eq!(
+            infer_year(stamps((2017, 4), (2018, 3))),
+            "2017-04".parse().unwrap()
+        );
+        assert_eq!(
+            infer_year(stamps((2017, 4), (2018, 5))),
+            GridYear::calendar(2017)
+        );
+        assert_eq!(
+            infer_year(stamps((2017, 1), (2017, 12))),
+            GridYear::calendar(2017)
+        );
+    }
+
+    #[test]
     fn a_named_time_zone_gives_its_own_daylight_saving_in_either_hemisphere() {
         // Berlin, 2021: clocks forward 28 March 02:00 -> 03:00, back 31 October 03:00 -> 02:00.
         let mut text = String::from("Time,Heat\n");
@@ -1426,7 +1660,14 @@ mod tests {
         let mut s = spec();
         s.convention = HourConvention::HourBeginning;
         s.time_zone = Some("Europe/Berlin".into());
-        let d = parse_meters(&text, Path::new("m.csv"), &s, Some(2021), None).unwrap();
+        let d = parse_meters(
+            &text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        )
+        .unwrap();
         assert!(
             d.notes
                 .iter()
@@ -1456,7 +1697,14 @@ mod tests {
         // Sydney: daylight saving in January (the southern summer), standard UTC+10 in July.
         let text = "Time,Heat\n01/15/2021 12:00,1\n07/15/2021 12:00,2\n";
         s.time_zone = Some("Australia/Sydney".into());
-        let d = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None).unwrap();
+        let d = parse_meters(
+            text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        )
+        .unwrap();
         let v = &d.series[0].values;
         assert_eq!(v[14 * 24 + 11], 1.0);
         assert_eq!(v[(CUM_DAYS[6] + 14) * 24 + 12], 2.0);
@@ -1467,7 +1715,7 @@ mod tests {
             "Time,Heat\n03/28/2021 02:00,1\n",
             Path::new("m.csv"),
             &s,
-            Some(2021),
+            Some(GridYear::calendar(2021)),
             None,
         )
         .unwrap_err()
@@ -1477,27 +1725,51 @@ mod tests {
             "{e}"
         );
         s.time_zone = Some("Europe/Atlantis".into());
-        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None)
-            .unwrap_err()
-            .to_string();
+        let e = parse_meters(
+            text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("not an IANA time zone"), "{e}");
         s.time_zone = Some("Europe/Berlin".into());
         s.dst = DstHandling::Us;
-        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), None)
-            .unwrap_err()
-            .to_string();
+        let e = parse_meters(
+            text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("leave meters.dst out"), "{e}");
         s.dst = DstHandling::Auto;
-        let e = parse_meters(text, Path::new("m.csv"), &s, Some(2021), Some(-7.0))
-            .unwrap_err()
-            .to_string();
+        let e = parse_meters(
+            text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            Some(-7.0),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("weather file's site is at UTC-7.0 h"), "{e}");
     }
 
     #[test]
     fn empty_files_short_rows_and_infinite_values_are_errors_naming_the_line() {
         let s = spec();
-        let read = |text: &str| match parse_meters(text, Path::new("m.csv"), &s, Some(2021), None) {
+        let read = |text: &str| match parse_meters(
+            text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        ) {
             Ok(_) => "read without an error".to_string(),
             Err(e) => e.to_string(),
         };
@@ -1523,7 +1795,7 @@ mod tests {
             &format!("{head}01/01/2021 01:00,\n01/01/2021 02:00,NaN\n"),
             Path::new("m.csv"),
             &s,
-            Some(2021),
+            Some(GridYear::calendar(2021)),
             None,
         )
         .unwrap();
@@ -1572,7 +1844,7 @@ mod tests {
         for (i, x) in v.iter_mut().enumerate().take(50).skip(20) {
             *x = i as f64;
         }
-        let q = quality("heating", &v, 2011, 24);
+        let q = quality("heating", &v, GridYear::calendar(2011), 24);
         assert_eq!(q.missing_hours, 7);
         assert_eq!(q.longest_gap.as_ref().unwrap().hours, 5);
         assert_eq!(q.longest_gap.as_ref().unwrap().start_slot, 10);

@@ -33,7 +33,7 @@ use bemcal_weather::{Calendar, DayType, Holidays};
 
 use crate::cluster::{choose_k, pam, Clustering};
 use crate::dtw::{distance_matrix, Band, DistanceMatrix};
-use crate::meters::day_date;
+use crate::meters::GridYear;
 use crate::stats::{quantile, quantile_sorted, quartiles};
 use crate::PrecalError;
 
@@ -219,7 +219,7 @@ impl DayTypeClusters {
 /// Clusters the profiles with DTW + PAM and labels clusters by calendar majority.
 pub fn cluster_days(
     profiles: &DailyProfiles,
-    year: i32,
+    year: GridYear,
     opts: &ScheduleOptions,
 ) -> Result<(DayTypeClusters, DistanceMatrix), PrecalError> {
     let band = Band::from_signed(opts.band)?;
@@ -240,7 +240,7 @@ pub fn cluster_days(
     };
     let cal = Calendar::new(year, opts.holidays.clone());
     let cal_type = |d: usize| {
-        let date = day_date(year, d);
+        let date = year.day_date(d);
         use chrono::Datelike;
         cal.day_type(date.month(), date.day())
             .unwrap_or(DayType::Weekday)
@@ -283,7 +283,7 @@ pub fn cluster_days(
     let mut days: Vec<DayRecord> = (0..365)
         .map(|d| DayRecord {
             day: d,
-            date: day_date(year, d),
+            date: year.day_date(d),
             calendar: cal_type(d),
             cluster: None,
             label: None,
@@ -625,12 +625,12 @@ mod tests {
 
     #[test]
     fn synthetic_office_year_clusters_into_weekday_and_weekend() {
-        let year = 2011;
+        let year = GridYear::calendar(2011);
         let cal = Calendar::new(year, Holidays::UsFederal);
         let mut hourly = Vec::with_capacity(8760);
         let mut x = 7u64;
         for d in 0..365 {
-            let date = day_date(year, d);
+            let date = year.day_date(d);
             use chrono::Datelike;
             let off = cal.day_type(date.month(), date.day()).unwrap().is_off_day();
             for h in 0..24 {

@@ -28,7 +28,7 @@ fn rsf_meters_ingest_with_auto_detection() {
         return;
     };
     let m = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
-    assert_eq!(m.year, 2011);
+    assert_eq!(m.year, 2011.into());
     assert!(
         m.notes.iter().any(|n| n.contains("hour-ending")),
         "{:?}",
@@ -143,7 +143,7 @@ fn rsf_example_project_matches_auto_detection_and_writes_outputs() {
     };
     let proj_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/rsf_project.toml");
     let proj = bemcal_precal::io::PrecalProject::read(&proj_path).unwrap();
-    assert_eq!(proj.year, Some(2011));
+    assert_eq!(proj.year, Some(2011.into()));
     let spec = proj.meters.clone().unwrap();
     let m = read_meters(&csv, &spec, proj.year, None).unwrap();
     let auto = read_meters(&csv, &MeterSpec::default(), None, None).unwrap();
@@ -238,7 +238,7 @@ fn fifteen_minute_meters_in_clock_time_aggregate_to_the_hourly_meter() {
             &text,
             Path::new("ami.csv"),
             &spec,
-            Some(2011),
+            Some(2011.into()),
             None,
         )
         .unwrap();

@@ -229,30 +229,20 @@ fn date_of(ts: &str) -> Option<chrono::NaiveDate> {
 
 /// One week per season (starting on the first Monday on or after 15 January, April, July
 /// and October, midnight) plus, when the measured series has a gap, a week around the
-/// longest gap. `timestamps` are `YYYY-MM-DDTHH:MM` hourly from 1 January 00:00.
+/// longest gap. `timestamps` are `YYYY-MM-DDTHH:MM` hourly in time order (a year from April
+/// finds its winter week in the next January).
 pub fn zoom_windows(timestamps: &[String], measured: &[f64]) -> Vec<Window> {
     use chrono::Datelike;
     let n = timestamps.len();
     let mut out = vec![];
-    let first = timestamps.first().and_then(|t| date_of(t));
-    let hour0 = timestamps
-        .first()
-        .and_then(|t| t.get(11..13))
-        .and_then(|h| h.parse::<i64>().ok())
-        .unwrap_or(0);
     for (month, name) in [(1, "Winter"), (4, "Spring"), (7, "Summer"), (10, "Autumn")] {
-        let start = match first.and_then(|f| {
-            let mut d = chrono::NaiveDate::from_ymd_opt(f.year(), month, 15)?;
-            while d.weekday() != chrono::Weekday::Mon {
-                d = d.succ_opt()?;
-            }
-            let h = (d - f).num_days() * 24 - hour0;
-            usize::try_from(h).ok()
-        }) {
-            Some(s) => s,
-            // No parsable dates: spread the weeks evenly over the series.
-            None => (month as usize - 1) * n / 12,
-        };
+        let monday = timestamps.iter().position(|t| {
+            date_of(t).is_some_and(|d| {
+                d.month() == month && d.day() >= 15 && d.weekday() == chrono::Weekday::Mon
+            }) && t.get(11..13) == Some("00")
+        });
+        // No parsable dates: spread the weeks evenly over the series.
+        let start = monday.unwrap_or((month as usize - 1) * n / 12);
         // A week mostly without meter data says little: move on a week at a time (up to 8).
         let mut start = start;
         for _ in 0..8 {
@@ -303,7 +293,8 @@ pub fn zoom_windows(timestamps: &[String], measured: &[f64]) -> Vec<Window> {
 
 /// Monthly totals of a measured and a simulated hourly series over the hours both have (the
 /// hours Guideline 14's monthly figures compare): `(month 1-12, measured, simulated)` for each
-/// month with at least one such hour. The month of hour `i` is read from `timestamps[i]`
+/// month with at least one such hour, in the order the months come in `timestamps` (a year
+/// from April lists April first). The month of hour `i` is read from `timestamps[i]`
 /// (`YYYY-MM-...`).
 pub fn monthly_totals(
     timestamps: &[String],
@@ -311,18 +302,21 @@ pub fn monthly_totals(
     simulated: &[f64],
 ) -> Vec<(u32, f64, f64)> {
     let mut sums = [(0.0, 0.0, 0usize); 12];
+    let mut order: Vec<u32> = Vec::with_capacity(12);
     for ((t, &m), &s) in timestamps.iter().zip(measured).zip(simulated) {
         let month = t.get(5..7).and_then(|x| x.parse::<usize>().ok());
         if let (Some(k @ 1..=12), true) = (month, m.is_finite() && s.is_finite()) {
             sums[k - 1].0 += m;
             sums[k - 1].1 += s;
             sums[k - 1].2 += 1;
+            if !order.contains(&(k as u32)) {
+                order.push(k as u32);
+            }
         }
     }
-    (1..=12)
-        .zip(sums)
-        .filter(|(_, (_, _, n))| *n > 0)
-        .map(|(k, (m, s, _))| (k, m, s))
+    order
+        .into_iter()
+        .map(|k| (k, sums[k as usize - 1].0, sums[k as usize - 1].1))
         .collect()
 }
 

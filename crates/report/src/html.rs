@@ -1126,7 +1126,7 @@ fn hourly_fit(cal: &CalibrationData) -> Result<String, ReportError> {
                 &format!("{}: every hour, measured against calibrated (shade: hours per cell; line: 1:1)", esc(o)),
             ));
             h.push_str(&figure(
-                &plots::monthly_totals(&months, "kWh per month")?,
+                &plots::monthly_totals(&months, first_month(&pp.timestamps), "kWh per month")?,
                 &format!(
                     "{}: monthly totals over the hours the meter has (dark: measured; orange: calibrated)",
                     esc(o)
@@ -1473,4 +1473,15 @@ fn merged_intervals(h: &mut String, p: &PrecalData, types: &[String]) -> Result<
         );
     }
     Ok(())
+}
+
+/// The month (1..=12) of the first of `timestamps` (`YYYY-MM-...`): the grid year's first month;
+/// January when there is none.
+fn first_month(timestamps: &[String]) -> u32 {
+    timestamps
+        .first()
+        .and_then(|t| t.get(5..7))
+        .and_then(|m| m.parse().ok())
+        .filter(|m| (1..=12).contains(m))
+        .unwrap_or(1)
 }

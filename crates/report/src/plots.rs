@@ -550,8 +550,16 @@ pub fn measured_vs_calibrated(
 }
 
 /// Monthly totals, measured beside calibrated (bars per month; `months`: `(month 1-12,
-/// measured, calibrated)` from [`analysis::monthly_totals`]).
-pub fn monthly_totals(months: &[(u32, f64, f64)], unit: &str) -> Result<String, PlotError> {
+/// measured, calibrated)` from [`analysis::monthly_totals`]), twelve places from `first_month`
+/// (the grid year's first month: January, or April for a year from April).
+pub fn monthly_totals(
+    months: &[(u32, f64, f64)],
+    first_month: u32,
+    unit: &str,
+) -> Result<String, PlotError> {
+    // The place (1..=12) of month `k` in the year from `first_month`, and back.
+    let place = |k: u32| ((k + 12 - first_month.clamp(1, 12)) % 12 + 1) as f64;
+    let month_at = |p: usize| (p + first_month.clamp(1, 12) as usize - 2) % 12;
     const NAMES: [&str; 12] = [
         "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
     ];
@@ -575,10 +583,12 @@ pub fn monthly_totals(months: &[(u32, f64, f64)], unit: &str) -> Result<String, 
             .x_labels(12)
             .y_labels(5)
             .x_label_formatter(&|v: &f64| {
-                let k = v.round() as usize;
-                NAMES
-                    .get(k.wrapping_sub(1))
-                    .map_or(String::new(), |s| s.to_string())
+                let p = v.round() as usize;
+                if (1..=12).contains(&p) {
+                    NAMES[month_at(p)].to_string()
+                } else {
+                    String::new()
+                }
             })
             .y_label_formatter(&|v| tick(*v))
             .y_desc(unit)
@@ -586,11 +596,11 @@ pub fn monthly_totals(months: &[(u32, f64, f64)], unit: &str) -> Result<String, 
             .axis_desc_style((FONT, 11))
             .draw()?;
         c.draw_series(months.iter().map(|&(k, m, _)| {
-            let x = k as f64;
+            let x = place(k);
             Rectangle::new([(x - 0.38, 0.0), (x, m)], MEASURED.mix(0.75).filled())
         }))?;
         c.draw_series(months.iter().map(|&(k, _, s)| {
-            let x = k as f64;
+            let x = place(k);
             Rectangle::new([(x, 0.0), (x + 0.38, s)], CALIBRATED.filled())
         }))?;
         Ok(())

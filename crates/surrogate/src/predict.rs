@@ -7,13 +7,17 @@ use std::path::Path;
 use ndarray::ArrayView2;
 
 /// Hour-beginning ISO 8601 timestamps for EPW `(month, day, hour 1..=24)` rows in `year`
-/// (EPW hour 1 covers 00:00-01:00, so it becomes `T00:00:00`). Pure.
+/// (EPW hour 1 covers 00:00-01:00, so it becomes `T00:00:00`; a year from another month dates
+/// the months before it in the next year). Pure.
 pub fn hour_beginning_timestamps(
-    year: i32,
+    year: bemcal_weather::grid::GridYear,
     rows: impl IntoIterator<Item = (u32, u32, u32)>,
 ) -> Vec<String> {
     rows.into_iter()
-        .map(|(m, d, h)| format!("{year:04}-{m:02}-{d:02}T{:02}:00:00", h.saturating_sub(1)))
+        .map(|(m, d, h)| {
+            let y = year.year_of_month(m);
+            format!("{y:04}-{m:02}-{d:02}T{:02}:00:00", h.saturating_sub(1))
+        })
         .collect()
 }
 
@@ -53,7 +57,7 @@ mod tests {
 
     #[test]
     fn epw_hour_one_is_midnight_hour_beginning() {
-        let ts = hour_beginning_timestamps(2021, [(1, 1, 1), (12, 31, 24)]);
+        let ts = hour_beginning_timestamps(2021.into(), [(1, 1, 1), (12, 31, 24)]);
         assert_eq!(ts, ["2021-01-01T00:00:00", "2021-12-31T23:00:00"]);
     }
 }

@@ -472,10 +472,11 @@ pub fn read_holiday_list(path: &Path) -> Result<Vec<NaiveDate>, WeatherError> {
     Ok(dates)
 }
 
-/// Maps dates of one calendar year to day types.
+/// Maps the dates of one grid year ([`grid::GridYear`]: a calendar year or twelve months from
+/// another month) to day types.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Calendar {
-    pub year: i32,
+    pub year: grid::GridYear,
     #[serde(default)]
     pub holidays: Holidays,
     /// Dates whose day type is known from the meters (pre-calibration's day-type clusters,
@@ -485,17 +486,18 @@ pub struct Calendar {
 }
 
 impl Calendar {
-    pub fn new(year: i32, holidays: Holidays) -> Calendar {
+    pub fn new(year: impl Into<grid::GridYear>, holidays: Holidays) -> Calendar {
         Calendar {
-            year,
+            year: year.into(),
             holidays,
             observed: Default::default(),
         }
     }
 
-    /// Day type of a date in this calendar's year; `None` for an impossible date (e.g. 2/30).
+    /// Day type of a month's day in this calendar's grid year (the year [`grid::GridYear`]
+    /// gives the month); `None` for an impossible date (e.g. 2/30).
     pub fn day_type(&self, month: u32, day: u32) -> Option<DayType> {
-        let date = NaiveDate::from_ymd_opt(self.year, month, day)?;
+        let date = NaiveDate::from_ymd_opt(self.year.year_of_month(month), month, day)?;
         if let Some(t) = self.observed.get(&date) {
             return Some(*t);
         }
@@ -522,7 +524,10 @@ impl Calendar {
     }
 
     fn is_holiday(&self, date: NaiveDate) -> bool {
-        self.holidays.dates(self.year).contains(&date)
+        // A holiday of the next year may be observed on 31 December (New Year's Day on a
+        // Saturday).
+        let y = date.year();
+        self.holidays.dates(y).contains(&date) || self.holidays.dates(y + 1).contains(&date)
     }
 }
 

@@ -16,8 +16,14 @@
 //! Leap years: EnergyPlus reads a weather file of 8,760 rows unless its header declares a leap
 //! year, and bemcal's meters, surrogate and calendar are 8,760-hour years; February 29 is
 //! therefore left out (as typical-year files do) and the report says so.
+//!
+//! Years that start in another month ([`GridYear`], `2017-04`): the rows stay in calendar order
+//! (EnergyPlus reads a weather file by month and day) and January to the month before the first
+//! hold the next year's weather, with that year in their year field.
 
 use chrono::{Datelike, Duration, NaiveDate, NaiveDateTime, Timelike};
+
+use crate::grid::GridYear;
 use serde::{Deserialize, Serialize};
 
 use crate::solar;
@@ -130,8 +136,8 @@ pub struct Observation {
 /// Options of [`build_epw`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BuildOptions {
-    /// The calendar year the EPW covers.
-    pub year: i32,
+    /// The year the EPW covers: a calendar year or twelve months from another month.
+    pub year: GridYear,
     /// Gaps up to this many hours are interpolated linearly; longer ones come from the TMY file.
     pub max_interpolated_gap_h: usize,
     /// What the observations' time stamps mean.
@@ -176,11 +182,11 @@ pub enum SolarSource {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BuildReport {
     pub source: String,
-    pub year: i32,
+    pub year: GridYear,
     /// Observations given, and those that fell outside the year (local standard time).
     pub observations: usize,
     pub outside_year: usize,
-    /// True when the year is a leap year and February 29 was left out.
+    /// True when the year holds a 29 February, left out.
     pub leap_day_dropped: bool,
     pub solar: SolarSource,
     pub fields: Vec<FieldReport>,
@@ -196,17 +202,9 @@ impl BuildReport {
 /// Index of the EPW hour (0..8760, hour-ending, February 29 skipped) that local standard time
 /// `t` ends, or `None` outside `year` or on February 29. Midnight belongs to hour 24 of the day
 /// before.
-pub fn hour_slot(year: i32, t: NaiveDateTime) -> Option<usize> {
+pub fn hour_slot(year: GridYear, t: NaiveDateTime) -> Option<usize> {
     let ending = t - Duration::seconds(1);
-    let date = ending.date();
-    if date.year() != year || (date.month() == 2 && date.day() == 29) {
-        return None;
-    }
-    let mut doy = date.ordinal0() as usize;
-    if is_leap(year) && date.month() > 2 {
-        doy -= 1;
-    }
-    Some(doy * 24 + ending.hour() as usize)
+    year.slot_of(ending.date().and_hms_opt(ending.hour(), 0, 0)?)
 }
 
 /// True for a leap year of the Gregorian calendar.
@@ -215,10 +213,8 @@ pub fn is_leap(year: i32) -> bool {
 }
 
 /// Day of year (1-based, February 29 counted as in the real calendar) of EPW hour `slot`.
-fn slot_doy(year: i32, slot: usize) -> f64 {
-    let d = slot / 24;
-    let skip = usize::from(is_leap(year) && d >= 59);
-    (d + skip + 1) as f64
+fn slot_doy(year: GridYear, slot: usize) -> f64 {
+    year.day_date(slot / 24).ordinal() as f64
 }
 
 /// The EPW hour an observation belongs to, after moving it to local standard time.
@@ -488,7 +484,7 @@ pub fn build_epw(
                 opts.year
             ));
         } else if line.starts_with("DATA PERIODS") {
-            let jan1 = NaiveDate::from_ymd_opt(opts.year, 1, 1).expect("valid year");
+            let jan1 = opts.year.day_date(0);
             out.push_str(&format!(
                 "DATA PERIODS,1,1,Data,{}, 1/ 1,12/31\n",
                 weekday_name(jan1.weekday())
@@ -501,7 +497,7 @@ pub fn build_epw(
     let v = |f: Field, t: usize| filled[f.index()][t];
     for (t, row) in tmy.rows.iter().enumerate() {
         let mut r: Vec<String> = row.iter().map(|s| s.to_string()).collect();
-        r[0] = opts.year.to_string();
+        r[0] = opts.year.day_date(t / 24).year().to_string();
         let t_db = v(Field::DryBulb, t);
         let (t_dp, rh) = if humidity_from_dew_point {
             let dp = v(Field::DewPoint, t).min(t_db);
@@ -556,7 +552,7 @@ pub fn build_epw(
         year: opts.year,
         observations: observations.len(),
         outside_year: outside,
-        leap_day_dropped: is_leap(opts.year),
+        leap_day_dropped: opts.year.spans_leap_day(),
         solar,
         fields: reports,
     };
@@ -588,15 +584,21 @@ mod tests {
 
     #[test]
     fn hour_slots_are_hour_ending_and_skip_february_29() {
-        assert_eq!(hour_slot(2017, at(2017, 1, 1, 0, 0)), None); // hour 24 of 2016-12-31
-        assert_eq!(hour_slot(2017, at(2017, 1, 1, 0, 15)), Some(0));
-        assert_eq!(hour_slot(2017, at(2017, 1, 1, 1, 0)), Some(0));
-        assert_eq!(hour_slot(2017, at(2017, 1, 2, 0, 0)), Some(23));
-        assert_eq!(hour_slot(2017, at(2018, 1, 1, 0, 0)), Some(8759));
-        assert_eq!(hour_slot(2016, at(2016, 2, 29, 12, 0)), None);
-        assert_eq!(hour_slot(2016, at(2016, 3, 1, 1, 0)), Some(59 * 24));
-        assert_eq!(hour_slot(2016, at(2017, 1, 1, 0, 0)), Some(8759));
-        assert_eq!(slot_doy(2016, 59 * 24), 61.0); // March 1 of a leap year
+        assert_eq!(hour_slot(2017.into(), at(2017, 1, 1, 0, 0)), None); // hour 24 of 2016-12-31
+        assert_eq!(hour_slot(2017.into(), at(2017, 1, 1, 0, 15)), Some(0));
+        assert_eq!(hour_slot(2017.into(), at(2017, 1, 1, 1, 0)), Some(0));
+        assert_eq!(hour_slot(2017.into(), at(2017, 1, 2, 0, 0)), Some(23));
+        assert_eq!(hour_slot(2017.into(), at(2018, 1, 1, 0, 0)), Some(8759));
+        assert_eq!(hour_slot(2016.into(), at(2016, 2, 29, 12, 0)), None);
+        assert_eq!(hour_slot(2016.into(), at(2016, 3, 1, 1, 0)), Some(59 * 24));
+        assert_eq!(hour_slot(2016.into(), at(2017, 1, 1, 0, 0)), Some(8759));
+        assert_eq!(slot_doy(2016.into(), 59 * 24), 61.0); // March 1 of a leap year
+                                                          // Twelve months from April 2016: January 2017 is slot 0, March 2017 is not a leap year.
+        let april: GridYear = "2016-04".parse().unwrap();
+        assert_eq!(hour_slot(april, at(2017, 1, 1, 1, 0)), Some(0));
+        assert_eq!(hour_slot(april, at(2016, 1, 1, 1, 0)), None);
+        assert_eq!(hour_slot(april, at(2016, 4, 1, 1, 0)), Some(90 * 24));
+        assert_eq!(slot_doy(april, 59 * 24), 60.0);
     }
 
     #[test]

@@ -5,17 +5,18 @@
 //! Written as one string or a list of strings, each of which may hold several comma-separated
 //! parts, their union:
 //!
-//! - `last 3 months`: the three calendar months that end with the last month holding a
-//!   measured hour;
+//! - `last 3 months`: the three calendar months that end with the last month (in time order)
+//!   holding a measured hour;
 //! - `2017-10` or `oct` / `october`: a calendar month;
 //! - `2017-06-01..2017-08-31`: a range of dates, both ends included.
 //!
-//! Hours are the 8,760 hour-beginning slots of the grid year ([`crate::grid`]: from 1 January
-//! 00:00, without 29 February).
+//! Hours are the 8,760 hour-beginning slots of the grid year ([`crate::grid`]: in calendar
+//! position from 1 January 00:00, without 29 February; a year from April holds January-March of
+//! the next year).
 
 use std::fmt;
 
-use chrono::{Datelike, NaiveDate};
+use chrono::NaiveDate;
 
 use crate::grid;
 use serde::{Deserialize, Serialize};
@@ -165,11 +166,12 @@ pub fn months_of_hours(n: usize) -> Vec<u32> {
 
 impl Holdout {
     /// Which of the `n` hour slots of `year` are held out; `measured(h)` tells whether hour `h`
-    /// holds a measurement (for `last N months`). Errors when a part names another year, or
-    /// when the period holds out no measured hour or every one.
+    /// holds a measurement (for `last N months`, counted in time order). Errors when a part
+    /// names a month or dates the grid year does not cover, or when the period holds out no
+    /// measured hour or every one.
     pub fn hours(
         &self,
-        year: i32,
+        year: grid::GridYear,
         n: usize,
         measured: &dyn Fn(usize) -> bool,
     ) -> Result<Vec<bool>, String> {
@@ -178,29 +180,42 @@ impl Holdout {
         for part in &self.parts {
             match *part {
                 HoldoutPart::LastMonths(k) => {
-                    let last = (0..n).rev().find(|&h| measured(h)).ok_or_else(|| {
-                        "holdout 'last months': the meters hold no measured hour".to_string()
-                    })?;
-                    let end = months[last];
-                    let first = end.saturating_sub(k - 1).max(1);
+                    let last = year
+                        .chronological(n)
+                        .filter(|&h| measured(h))
+                        .last()
+                        .ok_or_else(|| {
+                            "holdout 'last months': the meters hold no measured hour".to_string()
+                        })?;
+                    let order: Vec<u32> = year.months().collect();
+                    let end = order.iter().position(|&m| m == months[last]).unwrap_or(11);
+                    let held = &order[(end + 1).saturating_sub(k as usize)..=end];
                     for (h, m) in months.iter().enumerate() {
-                        out[h] |= (first..=end).contains(m);
+                        out[h] |= held.contains(m);
                     }
                 }
                 HoldoutPart::Month { year: y, month } => {
-                    if let Some(y) = y.filter(|&y| y != year) {
-                        return Err(format!("holdout {y}-{month:02}: the meters are of {year}"));
+                    if let Some(y) = y.filter(|&y| y != year.year_of_month(month)) {
+                        return Err(format!(
+                            "holdout {y}-{month:02}: the meters cover {}..{}",
+                            year.first_date(),
+                            year.last_date()
+                        ));
                     }
                     for (h, m) in months.iter().enumerate() {
                         out[h] |= *m == month;
                     }
                 }
                 HoldoutPart::Dates(a, b) => {
-                    if a.year() != year || b.year() != year {
-                        return Err(format!("holdout {a}..{b}: the meters are of {year}"));
+                    if a < year.first_date() || b > year.last_date() {
+                        return Err(format!(
+                            "holdout {a}..{b}: the meters cover {}..{}",
+                            year.first_date(),
+                            year.last_date()
+                        ));
                     }
                     for (h, o) in out.iter_mut().enumerate() {
-                        let d = grid::slot_time(year, h).date();
+                        let d = year.slot_time(h).date();
                         *o |= a <= d && d <= b;
                     }
                 }
@@ -286,13 +301,18 @@ mod tests {
     fn months_and_dates_select_their_hours() {
         let n = 8760;
         let h: Holdout = "oct,2017-11,2017-12-01..2017-12-31".parse().unwrap();
-        let m = h.hours(2017, n, &all).unwrap();
+        let m = h.hours(2017.into(), n, &all).unwrap();
         // October 1 00:00 is day 273 of a non-leap year.
         assert_eq!(m.iter().position(|&x| x), Some(273 * 24));
         assert_eq!(m.iter().filter(|&&x| x).count(), (31 + 30 + 31) * 24);
         assert!(m[n - 1]);
-        let e = "2016-10".parse::<Holdout>().unwrap().hours(2017, n, &all);
-        assert!(e.unwrap_err().contains("meters are of 2017"));
+        let e = "2016-10"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(2017.into(), n, &all);
+        assert!(e
+            .unwrap_err()
+            .contains("meters cover 2017-01-01..2017-12-31"));
     }
 
     #[test]
@@ -301,7 +321,7 @@ mod tests {
         let m = "dec"
             .parse::<Holdout>()
             .unwrap()
-            .hours(2020, 8760, &all)
+            .hours(2020.into(), 8760, &all)
             .unwrap();
         assert_eq!(m.iter().position(|&x| x), Some(334 * 24));
         assert_eq!(m.iter().filter(|&&x| x).count(), 31 * 24);
@@ -313,10 +333,10 @@ mod tests {
         let n = 8760;
         let end = (273 * 24) as usize;
         let h: Holdout = "last 2 months".parse().unwrap();
-        let m = h.hours(2017, n, &|i| i < end).unwrap();
+        let m = h.hours(2017.into(), n, &|i| i < end).unwrap();
         let first = m.iter().position(|&x| x).unwrap();
         assert_eq!(
-            grid::slot_time(2017, first).date(),
+            grid::GridYear::calendar(2017).slot_time(first).date(),
             NaiveDate::from_ymd_opt(2017, 8, 1).unwrap()
         );
         assert!(m[end - 1] && !m[first - 1]);
@@ -324,13 +344,46 @@ mod tests {
         let none = "jan"
             .parse::<Holdout>()
             .unwrap()
-            .hours(2017, n, &|i| i > 24 * 40);
+            .hours(2017.into(), n, &|i| i > 24 * 40);
         assert!(none.unwrap_err().contains("no measured hour"));
         let every = "jan"
             .parse::<Holdout>()
             .unwrap()
-            .hours(2017, n, &|i| i < 24 * 31);
+            .hours(2017.into(), n, &|i| i < 24 * 31);
         assert!(every.unwrap_err().contains("every measured hour"));
+    }
+
+    #[test]
+    fn a_year_from_april_holds_out_its_last_months_in_time_order() {
+        let year: grid::GridYear = "2017-04".parse().unwrap();
+        let n = 8760;
+        // The last three months of April 2017 - March 2018 are January-March 2018.
+        let m = "last 3 months"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(year, n, &all)
+            .unwrap();
+        assert_eq!(m.iter().filter(|&&x| x).count(), (31 + 28 + 31) * 24);
+        assert!(m[0] && m[90 * 24 - 1] && !m[90 * 24]);
+        // Dates and months across the year end; a month of the wrong year is an error.
+        let d = "2017-12-15..2018-01-14"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(year, n, &all)
+            .unwrap();
+        assert_eq!(d.iter().filter(|&&x| x).count(), 31 * 24);
+        assert!(d[0] && d[8759] && !d[14 * 24]);
+        assert!("2018-02"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(year, n, &all)
+            .is_ok());
+        let e = "2017-02"
+            .parse::<Holdout>()
+            .unwrap()
+            .hours(year, n, &all)
+            .unwrap_err();
+        assert!(e.contains("meters cover 2017-04-01..2018-03-31"), "{e}");
     }
 
     #[test]

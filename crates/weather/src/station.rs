@@ -484,7 +484,7 @@ impl Source {
     pub fn build_epw(
         &self,
         tmy: &Path,
-        year: i32,
+        year: crate::grid::GridYear,
         max_interpolated_gap_h: usize,
         interval_min: u32,
     ) -> Result<(String, crate::measured::BuildReport), WeatherError> {

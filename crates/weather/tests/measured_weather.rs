@@ -26,7 +26,7 @@ const GOLDEN_TMY: &str = "epw/USA_CO_Golden-NREL.724666_TMY3.epw";
 
 fn options(year: i32, stamp: Stamp, source: &str) -> BuildOptions {
     BuildOptions {
-        year,
+        year: year.into(),
         max_interpolated_gap_h: 6,
         stamp,
         interval_min: 60,
@@ -96,6 +96,54 @@ fn isd_lite_in_utc_becomes_the_local_standard_hours_of_the_year() {
     assert!(text.contains("DATA PERIODS,1,1,Data,Sunday, 1/ 1,12/31"));
     assert!(text.contains("COMMENTS 2,bemcal weather: NOAA ISD-lite"));
     assert!(text.lines().nth(8).unwrap().starts_with("2017,1,1,1,"));
+}
+
+/// Twelve months from April 2017 with only the 2017 station-year file: April-December are the
+/// station's, January-March (2018, not in the file) come from the TMY file and are counted,
+/// and each row carries its own year, in calendar order as EnergyPlus reads weather files.
+#[test]
+fn a_year_from_april_takes_its_first_quarter_from_the_next_year() {
+    let (Some(tmy), Some(isd)) = (shared(MSP_TMY), shared(MSP_ISD)) else {
+        return;
+    };
+    let tmy_text = std::fs::read_to_string(&tmy).unwrap();
+    let tmy_epw = Epw::parse(&tmy_text, &tmy).unwrap();
+    let obs = read_isd_lite(&isd, tmy_epw.location.elevation_m).unwrap();
+    let opts = BuildOptions {
+        year: "2017-04".parse().unwrap(),
+        ..options(2017, Stamp::Instant, "NOAA ISD-lite 726580-14922-2017")
+    };
+    let (text, report) = build_epw(&tmy_text, &tmy, &obs, &opts).unwrap();
+    let epw = Epw::parse(&text, Path::new("built.epw")).unwrap();
+    let april = 90 * 24;
+    // January-March 2018: the TMY file's hours; April-December 2017: the station's.
+    assert!(epw.hours[..april]
+        .iter()
+        .zip(&tmy_epw.hours)
+        .all(|(a, b)| a.dry_bulb_c == b.dry_bulb_c));
+    let same = epw.hours[april..]
+        .iter()
+        .zip(&tmy_epw.hours[april..])
+        .filter(|(a, b)| a.dry_bulb_c == b.dry_bulb_c)
+        .count();
+    assert!(
+        same < 1_000,
+        "{same} hours of April-December equal to the TMY file"
+    );
+    let db = report.field(Field::DryBulb);
+    assert!(
+        db.from_tmy_h >= april && db.longest_tmy_run_h >= april - 7,
+        "{db:?}"
+    );
+    // 2017's January-March observations fall outside the year; April's first hours do not.
+    assert!(report.outside_year >= april - 24, "{}", report.outside_year);
+    // Rows in calendar order, each with its year; the header names the weekday of
+    // 1 January 2018 (a Monday), the first row's date.
+    let rows: Vec<&str> = text.lines().skip(8).collect();
+    assert!(rows[0].starts_with("2018,1,1,1,"), "{}", rows[0]);
+    assert!(rows[april].starts_with("2017,4,1,1,"), "{}", rows[april]);
+    assert!(text.contains("DATA PERIODS,1,1,Data,Monday, 1/ 1,12/31"));
+    assert!(text.contains("for 2017-04"));
 }
 
 /// A CSV of a station that measures global horizontal radiation only, in UTC, made from the
