@@ -755,7 +755,28 @@ struct Row {
     record: csv::StringRecord,
 }
 
-/// [`read_meters`] on text already in memory; `path` is used in messages.
+/// An error of the meters file as a whole.
+fn file_err(path: &Path, message: String) -> PrecalError {
+    PrecalError::MeterFile {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+/// An error at a line and column of the meters file.
+fn row_err(path: &Path, line: u64, column: &str, message: String) -> PrecalError {
+    PrecalError::Meter {
+        path: path.to_path_buf(),
+        line,
+        column: column.to_string(),
+        message,
+    }
+}
+
+/// [`read_meters`] on text already in memory; `path` is used in messages. The stages, in the
+/// order the rows go through them: the table ([`read_table`]), the reading interval, the hour
+/// convention ([`hour_convention`]), the grid year, daylight saving ([`zone_daylight_saving`]
+/// or [`us_daylight_saving`]), and the values on the grid ([`values_on_grid`]).
 pub fn parse_meters(
     text: &str,
     path: &Path,
@@ -763,117 +784,12 @@ pub fn parse_meters(
     year: Option<GridYear>,
     std_offset_h: Option<f64>,
 ) -> Result<MeterData, PrecalError> {
-    let file_err = |message: String| PrecalError::MeterFile {
-        path: path.to_path_buf(),
-        message,
-    };
-    let row_err = |line: u64, column: &str, message: String| PrecalError::Meter {
-        path: path.to_path_buf(),
-        line,
-        column: column.to_string(),
-        message,
-    };
-    let mut rdr = csv::ReaderBuilder::new()
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
-    let headers: Vec<String> = rdr
-        .headers()
-        .map_err(|e| file_err(format!("cannot read the header line: {e}")))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    if headers.iter().all(String::is_empty) {
-        return Err(file_err(
-            "empty file: expected a header line naming a timestamp column and the meters".into(),
-        ));
-    }
-    let find = |name: &str| -> Option<usize> {
-        headers.iter().position(|h| h == name.trim()).or_else(|| {
-            headers
-                .iter()
-                .position(|h| h.eq_ignore_ascii_case(name.trim()))
-        })
-    };
-    let ts_idx = match &spec.timestamp_column {
-        Some(c) => find(c).ok_or_else(|| {
-            file_err(format!(
-                "timestamp column '{c}' not found; headers: {headers:?}"
-            ))
-        })?,
-        None => headers
-            .iter()
-            .position(|h| {
-                let l = h.to_ascii_lowercase();
-                l.contains("time") || l.contains("date")
-            })
-            .unwrap_or(0),
-    };
-    let ts_name = headers[ts_idx].clone();
     let mut notes = Vec::new();
-    let columns = if spec.columns.is_empty() {
-        let hs: Vec<&str> = headers.iter().map(String::as_str).collect();
-        let c = detect_columns(&hs, Some(&ts_name));
-        if c.is_empty() {
-            return Err(file_err(format!(
-                "no meter column recognised among headers {headers:?}; list them in [meters] columns"
-            )));
-        }
-        notes.push(format!(
-            "columns detected from headers: {}",
-            c.iter()
-                .map(|c| format!("'{}' -> {} [{}]", c.column, c.role, c.unit.as_str()))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ));
-        c
-    } else {
-        spec.columns.clone()
-    };
-    let col_idx: Vec<usize> = columns
-        .iter()
-        .map(|c| {
-            find(&c.column).ok_or_else(|| {
-                file_err(format!(
-                    "meter column '{}' not found; headers: {headers:?}",
-                    c.column
-                ))
-            })
-        })
-        .collect::<Result<_, _>>()?;
-
-    // Pass 1: timestamps.
-    let mut rows: Vec<Row> = Vec::new();
-    let mut saw_24 = false;
-    for rec in rdr.records() {
-        let record = rec.map_err(|e| {
-            let line = e.position().map(|p| p.line()).unwrap_or(0);
-            row_err(line, "", format!("malformed CSV: {e}"))
-        })?;
-        let line = record.position().map(|p| p.line()).unwrap_or(0);
-        if record.iter().all(str::is_empty) {
-            continue;
-        }
-        let raw = record.get(ts_idx).unwrap_or("");
-        if raw.is_empty() {
-            return Err(row_err(line, &ts_name, "empty timestamp".into()));
-        }
-        saw_24 |= raw.contains("24:00");
-        let (clock, offset) = parse_timestamp(raw, &spec.timestamp_format, std_offset_h)
-            .map_err(|m| row_err(line, &ts_name, m))?;
-        rows.push(Row {
-            line,
-            clock,
-            offset,
-            record,
-        });
-    }
-    if rows.is_empty() {
-        return Err(file_err("no data rows".into()));
-    }
+    let mut table = read_table(text, path, spec, std_offset_h, &mut notes)?;
+    let rows = &mut table.rows;
 
     // Reading interval: sub-hourly meters (15-minute AMI) are aggregated to hours.
-    let interval_min = reading_interval_min(&rows);
+    let interval_min = reading_interval_min(rows);
     let per_hour = 60 / interval_min;
     if per_hour > 1 {
         notes.push(format!(
@@ -883,42 +799,20 @@ pub fn parse_meters(
         ));
     }
 
-    // Hour convention.
-    let convention = match spec.convention {
-        HourConvention::Auto => {
-            let min = rows.iter().map(|r| r.clock).min().expect("rows");
-            let max = rows.iter().map(|r| r.clock).max().expect("rows");
-            // A year (calendar or from another month) of hour-ending stamps starts one interval
-            // after midnight on the first of a month and ends at midnight on the first of one.
-            let first_of_month =
-                |t: NaiveDateTime, m: u32| t.day() == 1 && t.hour() * 60 + t.minute() == m;
-            let ending = saw_24
-                || first_of_month(min, interval_min)
-                || (first_of_month(max, 0) && max - min >= Duration::days(360));
-            notes.push(format!(
-                "hour convention detected: {} (earliest stamp {min}, latest {max})",
-                if ending {
-                    "hour-ending"
-                } else {
-                    "hour-beginning"
-                }
-            ));
-            if ending {
-                HourConvention::HourEnding
-            } else {
-                HourConvention::HourBeginning
-            }
-        }
-        c => c,
-    };
+    let convention = hour_convention(
+        spec.convention,
+        rows,
+        interval_min,
+        table.saw_24,
+        &mut notes,
+    );
     if convention == HourConvention::HourEnding {
         // A stamp ends its interval: an hour for hourly meters, 15 minutes for 15-minute ones.
-        for r in &mut rows {
+        for r in rows.iter_mut() {
             r.clock -= Duration::minutes(interval_min as i64);
         }
     }
 
-    // Grid year.
     let year = match year {
         Some(y) => y,
         None => {
@@ -934,68 +828,332 @@ pub fn parse_meters(
 
     // Daylight saving: the zone's rules, or US rules (detected or named), or none.
     if let Some(name) = &spec.time_zone {
-        if spec.dst != DstHandling::Auto {
-            return Err(file_err(format!(
-                "meters.time_zone = \"{name}\" gives the daylight saving rules: leave meters.dst \
-                 out (it is {:?})",
-                spec.dst
-            )));
-        }
-        let tz: chrono_tz::Tz = name.parse().map_err(|_| {
-            file_err(format!(
-                "meters.time_zone = \"{name}\": not an IANA time zone (e.g. \"Europe/Berlin\", \
-                 \"America/Chicago\")"
-            ))
-        })?;
-        let standard = standard_offset(tz, year.first_year());
-        let zone_h = standard.num_minutes() as f64 / 60.0;
-        if let Some(site_h) = std_offset_h.filter(|h| (h - zone_h).abs() > 1e-6) {
-            return Err(file_err(format!(
-                "meters.time_zone = \"{name}\" keeps standard time UTC{zone_h:+.1} h, but the \
-                 weather file's site is at UTC{site_h:+.1} h: meters and weather must be one place"
-            )));
-        }
-        // The zone's rule (`TimeBasis::to_utc`, as for a weather station's CSV): in the hour
-        // repeated when clocks go back, daylight time until the rows have passed it.
-        let basis = bemcal_weather::station::TimeBasis::Zone(tz);
-        let mut previous = None;
-        let mut moved = 0usize;
-        for r in &mut rows {
-            if r.offset {
-                continue;
-            }
-            let utc = basis.to_utc(r.clock, zone_h, previous).ok_or_else(|| {
-                row_err(
-                    r.line,
-                    &ts_name,
-                    format!(
-                        "{}: no such clock time in {name} (the hour skipped when clocks go \
-                         forward)",
-                        r.clock
-                    ),
-                )
-            })?;
-            previous = Some(utc);
-            let lst = utc + standard;
-            moved += usize::from(lst != r.clock);
-            r.clock = lst;
-        }
-        notes.push(format!(
-            "time zone {name}: standard time UTC{zone_h:+.1} h; {moved} rows in daylight saving \
-             time moved back to local standard time"
-        ));
+        zone_daylight_saving(
+            rows,
+            name,
+            spec.dst,
+            year,
+            std_offset_h,
+            path,
+            &table.ts_name,
+            &mut notes,
+        )?;
     } else {
-        us_daylight_saving(&mut rows, spec.dst, year, per_hour, &mut notes).map_err(file_err)?;
+        us_daylight_saving(rows, spec.dst, year, per_hour, &mut notes)
+            .map_err(|m| file_err(path, m))?;
     }
 
-    // Pass 2: values on the grid.
-    let n = columns.len();
+    let grid = values_on_grid(&table, spec, year, per_hour, path, &mut notes)?;
+    dropped_notes(&grid, &table.rows, year, spec.duplicates, &mut notes);
+    if grid.slot_line.iter().all(|&l| l == 0) {
+        return Err(file_err(
+            path,
+            format!(
+                "no rows fall in {} to {} (the grid year {year})",
+                year.first_date(),
+                year.last_date()
+            ),
+        ));
+    }
+    let series = table
+        .columns
+        .into_iter()
+        .zip(grid.values)
+        .map(|((c, _), values)| MeterSeries {
+            role: c.role,
+            column: c.column,
+            unit: c.unit,
+            values,
+        })
+        .collect();
+    Ok(MeterData {
+        year,
+        source: path.to_path_buf(),
+        series,
+        notes,
+    })
+}
+
+/// A meters file read as rows: the timestamp column's name, the meter columns with their field
+/// index, and every non-blank row with its stamp as written (clock time).
+struct Table {
+    ts_name: String,
+    columns: Vec<(MeterColumn, usize)>,
+    rows: Vec<Row>,
+    /// A `24:00` stamp occurred (an hour-ending file).
+    saw_24: bool,
+}
+
+/// The header (the timestamp column, the meter columns: listed in `spec` or detected from the
+/// names) and the rows with their parsed stamps.
+fn read_table(
+    text: &str,
+    path: &Path,
+    spec: &MeterSpec,
+    std_offset_h: Option<f64>,
+    notes: &mut Vec<String>,
+) -> Result<Table, PrecalError> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let headers: Vec<String> = rdr
+        .headers()
+        .map_err(|e| file_err(path, format!("cannot read the header line: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let (ts_idx, columns) = locate_columns(&headers, spec, path, notes)?;
+    let ts_name = headers[ts_idx].clone();
+    let mut rows: Vec<Row> = Vec::new();
+    let mut saw_24 = false;
+    for rec in rdr.records() {
+        let record = rec.map_err(|e| {
+            let line = e.position().map(|p| p.line()).unwrap_or(0);
+            row_err(path, line, "", format!("malformed CSV: {e}"))
+        })?;
+        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
+        let raw = record.get(ts_idx).unwrap_or("");
+        if raw.is_empty() {
+            return Err(row_err(path, line, &ts_name, "empty timestamp".into()));
+        }
+        saw_24 |= raw.contains("24:00");
+        let (clock, offset) = parse_timestamp(raw, &spec.timestamp_format, std_offset_h)
+            .map_err(|m| row_err(path, line, &ts_name, m))?;
+        rows.push(Row {
+            line,
+            clock,
+            offset,
+            record,
+        });
+    }
+    if rows.is_empty() {
+        return Err(file_err(path, "no data rows".into()));
+    }
+    Ok(Table {
+        ts_name,
+        columns,
+        rows,
+        saw_24,
+    })
+}
+
+/// The timestamp column's index (`spec.timestamp_column`, else the first header naming a time
+/// or date, else the first) and each meter column with its index.
+fn locate_columns(
+    headers: &[String],
+    spec: &MeterSpec,
+    path: &Path,
+    notes: &mut Vec<String>,
+) -> Result<(usize, Vec<(MeterColumn, usize)>), PrecalError> {
+    if headers.iter().all(String::is_empty) {
+        return Err(file_err(
+            path,
+            "empty file: expected a header line naming a timestamp column and the meters".into(),
+        ));
+    }
+    let find = |name: &str| -> Option<usize> {
+        headers.iter().position(|h| h == name.trim()).or_else(|| {
+            headers
+                .iter()
+                .position(|h| h.eq_ignore_ascii_case(name.trim()))
+        })
+    };
+    let ts_idx = match &spec.timestamp_column {
+        Some(c) => find(c).ok_or_else(|| {
+            file_err(
+                path,
+                format!("timestamp column '{c}' not found; headers: {headers:?}"),
+            )
+        })?,
+        None => headers
+            .iter()
+            .position(|h| {
+                let l = h.to_ascii_lowercase();
+                l.contains("time") || l.contains("date")
+            })
+            .unwrap_or(0),
+    };
+    let columns = if spec.columns.is_empty() {
+        let hs: Vec<&str> = headers.iter().map(String::as_str).collect();
+        let c = detect_columns(&hs, Some(&headers[ts_idx]));
+        if c.is_empty() {
+            return Err(file_err(
+                path,
+                format!(
+                    "no meter column recognised among headers {headers:?}; list them in [meters] columns"
+                ),
+            ));
+        }
+        notes.push(format!(
+            "columns detected from headers: {}",
+            c.iter()
+                .map(|c| format!("'{}' -> {} [{}]", c.column, c.role, c.unit.as_str()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        c
+    } else {
+        spec.columns.clone()
+    };
+    let columns = columns
+        .into_iter()
+        .map(|c| match find(&c.column) {
+            Some(i) => Ok((c, i)),
+            None => Err(file_err(
+                path,
+                format!(
+                    "meter column '{}' not found; headers: {headers:?}",
+                    c.column
+                ),
+            )),
+        })
+        .collect::<Result<_, _>>()?;
+    Ok((ts_idx, columns))
+}
+
+/// The hour convention: as given, or (`auto`) hour-ending when a `24:00` stamp occurs or the
+/// stamps run from one interval after midnight on the first of a month (or to midnight on the
+/// first of a month, a year on); the decision is noted.
+fn hour_convention(
+    given: HourConvention,
+    rows: &[Row],
+    interval_min: u32,
+    saw_24: bool,
+    notes: &mut Vec<String>,
+) -> HourConvention {
+    if given != HourConvention::Auto {
+        return given;
+    }
+    let min = rows.iter().map(|r| r.clock).min().expect("rows");
+    let max = rows.iter().map(|r| r.clock).max().expect("rows");
+    // A year (calendar or from another month) of hour-ending stamps starts one interval
+    // after midnight on the first of a month and ends at midnight on the first of one.
+    let first_of_month = |t: NaiveDateTime, m: u32| t.day() == 1 && t.hour() * 60 + t.minute() == m;
+    let ending = saw_24
+        || first_of_month(min, interval_min)
+        || (first_of_month(max, 0) && max - min >= Duration::days(360));
+    notes.push(format!(
+        "hour convention detected: {} (earliest stamp {min}, latest {max})",
+        if ending {
+            "hour-ending"
+        } else {
+            "hour-beginning"
+        }
+    ));
+    if ending {
+        HourConvention::HourEnding
+    } else {
+        HourConvention::HourBeginning
+    }
+}
+
+/// Daylight saving by an IANA zone's rules (`meters.time_zone`): each row's clock time to UTC
+/// and on to the zone's standard time (`TimeBasis::to_utc`, as for a weather station's CSV: in
+/// the hour repeated when clocks go back, daylight time until the rows have passed it).
+#[allow(clippy::too_many_arguments)]
+fn zone_daylight_saving(
+    rows: &mut [Row],
+    name: &str,
+    dst: DstHandling,
+    year: GridYear,
+    std_offset_h: Option<f64>,
+    path: &Path,
+    ts_name: &str,
+    notes: &mut Vec<String>,
+) -> Result<(), PrecalError> {
+    if dst != DstHandling::Auto {
+        return Err(file_err(
+            path,
+            format!(
+                "meters.time_zone = \"{name}\" gives the daylight saving rules: leave meters.dst \
+                 out (it is {dst:?})"
+            ),
+        ));
+    }
+    let tz: chrono_tz::Tz = name.parse().map_err(|_| {
+        file_err(
+            path,
+            format!(
+                "meters.time_zone = \"{name}\": not an IANA time zone (e.g. \"Europe/Berlin\", \
+                 \"America/Chicago\")"
+            ),
+        )
+    })?;
+    let standard = standard_offset(tz, year.first_year());
+    let zone_h = standard.num_minutes() as f64 / 60.0;
+    if let Some(site_h) = std_offset_h.filter(|h| (h - zone_h).abs() > 1e-6) {
+        return Err(file_err(
+            path,
+            format!(
+                "meters.time_zone = \"{name}\" keeps standard time UTC{zone_h:+.1} h, but the \
+                 weather file's site is at UTC{site_h:+.1} h: meters and weather must be one place"
+            ),
+        ));
+    }
+    let basis = bemcal_weather::station::TimeBasis::Zone(tz);
+    let mut previous = None;
+    let mut moved = 0usize;
+    for r in rows.iter_mut() {
+        if r.offset {
+            continue;
+        }
+        let utc = basis.to_utc(r.clock, zone_h, previous).ok_or_else(|| {
+            row_err(
+                path,
+                r.line,
+                ts_name,
+                format!(
+                    "{}: no such clock time in {name} (the hour skipped when clocks go \
+                     forward)",
+                    r.clock
+                ),
+            )
+        })?;
+        previous = Some(utc);
+        let lst = utc + standard;
+        moved += usize::from(lst != r.clock);
+        r.clock = lst;
+    }
+    notes.push(format!(
+        "time zone {name}: standard time UTC{zone_h:+.1} h; {moved} rows in daylight saving \
+         time moved back to local standard time"
+    ));
+    Ok(())
+}
+
+/// The meters on the hour grid, and what did not fit on it.
+struct Grid {
+    /// kWh per hour of each meter column (NaN = missing).
+    values: Vec<Vec<f64>>,
+    /// The first line of each slot (0: no row).
+    slot_line: Vec<u64>,
+    /// Rows outside the grid year, on its 29 February, and duplicates combined.
+    outside: usize,
+    feb29: usize,
+    dups: usize,
+}
+
+/// Pass 2: each row's readings in kWh on its slot; duplicates by `spec.duplicates`; sub-hourly
+/// readings combined into hours (energy summed, power averaged, a partial hour scaled).
+fn values_on_grid(
+    table: &Table,
+    spec: &MeterSpec,
+    year: GridYear,
+    per_hour: u32,
+    path: &Path,
+    notes: &mut Vec<String>,
+) -> Result<Grid, PrecalError> {
+    let n = table.columns.len();
     let mut sums = vec![vec![f64::NAN; HOURS]; n];
     let mut counts = vec![vec![0u32; HOURS]; n];
     let mut slot_line = vec![0u64; HOURS];
     let mut stamp_line: HashMap<NaiveDateTime, u64> = HashMap::new();
     let (mut outside, mut feb29, mut dups) = (0usize, 0usize, 0usize);
-    for r in &rows {
+    for r in &table.rows {
         let Some(t) = year.slot_of(r.clock) else {
             let date = r.clock.date();
             if date.month() == 2
@@ -1032,7 +1190,7 @@ pub fn parse_meters(
                         r.clock
                     )
                 };
-                return Err(row_err(r.line, &ts_name, message));
+                return Err(row_err(path, r.line, &table.ts_name, message));
             }
             if per_hour > 1 {
                 continue;
@@ -1042,59 +1200,8 @@ pub fn parse_meters(
             slot_line[t] = r.line;
         }
         let dup = per_hour == 1 && earlier.is_some();
-        for (k, (col, &idx)) in columns.iter().zip(&col_idx).enumerate() {
-            let raw = r.record.get(idx).ok_or_else(|| {
-                row_err(
-                    r.line,
-                    &col.column,
-                    format!(
-                        "the row has {} fields and ends before this column (field {}): a \
-                         truncated row? (an empty cell is a missing reading)",
-                        r.record.len(),
-                        idx + 1
-                    ),
-                )
-            })?;
-            let v = if is_missing_token(raw) {
-                f64::NAN
-            } else {
-                let v: f64 = raw.parse().map_err(|_| {
-                    row_err(
-                        r.line,
-                        &col.column,
-                        format!("value '{}' is not a number", excerpt(raw)),
-                    )
-                })?;
-                if !v.is_finite() {
-                    return Err(row_err(
-                        r.line,
-                        &col.column,
-                        format!(
-                            "value '{}' is not a finite number (an empty cell or NaN is a \
-                             missing reading)",
-                            excerpt(raw)
-                        ),
-                    ));
-                } else if v < 0.0 {
-                    match spec.negative {
-                        NegativePolicy::Error => {
-                            return Err(row_err(
-                                r.line,
-                                &col.column,
-                                format!(
-                                    "negative value {v}; set meters.negative = \"missing\" | \"zero\" | \"keep\" to accept"
-                                ),
-                            ))
-                        }
-                        NegativePolicy::Missing => f64::NAN,
-                        NegativePolicy::Zero => 0.0,
-                        NegativePolicy::Keep => v,
-                    }
-                } else {
-                    v
-                }
-            };
-            let v = v * col.unit.to_kwh();
+        for (k, (col, idx)) in table.columns.iter().enumerate() {
+            let v = reading_kwh(r, col, *idx, spec.negative, path)?;
             let (s, c) = (&mut sums[k][t], &mut counts[k][t]);
             if per_hour > 1 {
                 if v.is_finite() {
@@ -1125,7 +1232,7 @@ pub fn parse_meters(
     }
     if per_hour > 1 {
         let mut partial = 0usize;
-        for (k, col) in columns.iter().enumerate() {
+        for (k, (col, _)) in table.columns.iter().enumerate() {
             let scale = if col.unit.is_power() {
                 1.0
             } else {
@@ -1153,7 +1260,72 @@ pub fn parse_meters(
             }
         }
     }
-    if outside > 0 {
+    Ok(Grid {
+        values: sums,
+        slot_line,
+        outside,
+        feb29,
+        dups,
+    })
+}
+
+/// The reading of meter column `col` (field `idx`) of row `r` in kWh: missing tokens are NaN,
+/// text and non-finite numbers are errors, negative values follow `negative`.
+fn reading_kwh(
+    r: &Row,
+    col: &MeterColumn,
+    idx: usize,
+    negative: NegativePolicy,
+    path: &Path,
+) -> Result<f64, PrecalError> {
+    let err = |message: String| row_err(path, r.line, &col.column, message);
+    let raw = r.record.get(idx).ok_or_else(|| {
+        err(format!(
+            "the row has {} fields and ends before this column (field {}): a \
+             truncated row? (an empty cell is a missing reading)",
+            r.record.len(),
+            idx + 1
+        ))
+    })?;
+    if is_missing_token(raw) {
+        return Ok(f64::NAN);
+    }
+    let v: f64 = raw
+        .parse()
+        .map_err(|_| err(format!("value '{}' is not a number", excerpt(raw))))?;
+    let v = if !v.is_finite() {
+        return Err(err(format!(
+            "value '{}' is not a finite number (an empty cell or NaN is a \
+             missing reading)",
+            excerpt(raw)
+        )));
+    } else if v < 0.0 {
+        match negative {
+            NegativePolicy::Error => {
+                return Err(err(format!(
+                    "negative value {v}; set meters.negative = \"missing\" | \"zero\" | \"keep\" to accept"
+                )))
+            }
+            NegativePolicy::Missing => f64::NAN,
+            NegativePolicy::Zero => 0.0,
+            NegativePolicy::Keep => v,
+        }
+    } else {
+        v
+    };
+    Ok(v * col.unit.to_kwh())
+}
+
+/// Notes of the rows left out: outside the grid year (naming the year their stamps fit when it
+/// is another), on 29 February, duplicates combined.
+fn dropped_notes(
+    grid: &Grid,
+    rows: &[Row],
+    year: GridYear,
+    duplicates: DuplicatePolicy,
+    notes: &mut Vec<String>,
+) {
+    if grid.outside > 0 {
         let fits = infer_year(rows.iter().filter(|r| !r.offset).map(|r| r.clock));
         let hint = if fits != year {
             format!(
@@ -1165,45 +1337,24 @@ pub fn parse_meters(
             String::new()
         };
         notes.push(format!(
-            "{outside} rows outside {} to {} dropped{hint}",
+            "{} rows outside {} to {} dropped{hint}",
+            grid.outside,
             year.first_date(),
             year.last_date()
         ));
     }
-    if feb29 > 0 {
+    if grid.feb29 > 0 {
         notes.push(format!(
-            "{feb29} rows on 29 February dropped (the grid is a non-leap year)"
+            "{} rows on 29 February dropped (the grid is a non-leap year)",
+            grid.feb29
         ));
     }
-    if dups > 0 {
+    if grid.dups > 0 {
         notes.push(format!(
-            "{dups} duplicate rows combined with policy {:?}",
-            spec.duplicates
+            "{} duplicate rows combined with policy {duplicates:?}",
+            grid.dups
         ));
     }
-    if slot_line.iter().all(|&l| l == 0) {
-        return Err(file_err(format!(
-            "no rows fall in {} to {} (the grid year {year})",
-            year.first_date(),
-            year.last_date()
-        )));
-    }
-    let series = columns
-        .into_iter()
-        .zip(sums)
-        .map(|(c, values)| MeterSeries {
-            role: c.role,
-            column: c.column,
-            unit: c.unit,
-            values,
-        })
-        .collect();
-    Ok(MeterData {
-        year,
-        source: path.to_path_buf(),
-        series,
-        notes,
-    })
 }
 
 /// A run of missing hours.
