@@ -41,6 +41,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         eprintln!("skipping: no .venv (run `make setup`)");
         return;
     }
+    let _machine = common::whole_machine();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     write_project(dir);
@@ -631,6 +632,7 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
         eprintln!("skipping: no .venv (run `make setup`)");
         return;
     }
+    let _machine = common::whole_machine();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // Meters of twelve months from April 2021 (an AMI export's "last 12 months"): the model runs

@@ -42,6 +42,18 @@ pub fn have_engine() -> bool {
     repo().join(".venv/bin/python").exists()
 }
 
+/// Held by a test that runs whole local calibrations for its length: EnergyPlus runs in
+/// parallel, PyTorch training and chains each fill the cores, so two such tests side by side
+/// oversubscribe them (measured on 2 cores: `tests/calibrate.rs` took 790-852 s with its two
+/// calibrations at once, 502 s one after the other). Light tests of the same binary still run
+/// beside it. The coordinator tests (`tests/distributed.rs`) do not take it: they wait on leases
+/// and heartbeats and overlap well (573-751 s side by side, 911 s one after the other).
+pub fn whole_machine() -> std::sync::MutexGuard<'static, ()> {
+    static MACHINE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    // A test that failed while holding it leaves it poisoned; the next one may still run.
+    MACHINE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The Golden, CO TMY3 weather file shipped inside the EnergyPlus wheel.
 pub fn golden_epw() -> PathBuf {
     let out = Command::new(repo().join(".venv/bin/python"))
