@@ -1660,15 +1660,15 @@ mod tests {
         // An AMI export of April 2017 - March 2018 on a US DST clock, 15-minute readings: the
         // grid year is inferred as 2017-04, every hour is filled, and daylight saving is
         // undone in both years (November 2017 and March 2018).
+        let at = |y, m, h| {
+            NaiveDate::from_ymd_opt(y, m, 1)
+                .unwrap()
+                .and_hms_opt(h, 0, 0)
+                .unwrap()
+        };
         let mut text = String::from("Time,Heat\n");
-        let mut t = NaiveDate::from_ymd_opt(2017, 4, 1)
-            .unwrap()
-            .and_hms_opt(0, 0, 0)
-            .unwrap();
-        let end = NaiveDate::from_ymd_opt(2018, 4, 1)
-            .unwrap()
-            .and_hms_opt(0, 0, 0)
-            .unwrap();
+        let mut t = at(2017, 4, 0);
+        let end = at(2018, 4, 0);
         let clock = |t: NaiveDateTime| {
             let dst = |y| us_dst_days(y).unwrap();
             let (spring, fall) = dst(t.year());
@@ -1751,10 +1751,7 @@ mod tests {
         // The same year as an hourly, hour-ending export (01:00 on 1 April 2017 to 00:00 on
         // 1 April 2018, standard time): recognised as hour-ending, every hour filled.
         let mut text = String::from("Time,Heat\n");
-        let mut t = NaiveDate::from_ymd_opt(2017, 4, 1)
-            .unwrap()
-            .and_hms_opt(1, 0, 0)
-            .unwrap();
+        let mut t = at(2017, 4, 1);
         while t <= end {
             text += &format!("{},1\n", t.format("%Y-%m-%d %H:%M"));
             t += Duration::hours(1);
@@ -1774,15 +1771,7 @@ mod tests {
             d.notes
         );
         // Thirteen months or more: the calendar year holding most stamps.
-        let stamps = |a: (i32, u32), b: (i32, u32)| {
-            let d = |(y, m)| {
-                NaiveDate::from_ymd_opt(y, m, 1)
-                    .unwrap()
-                    .and_hms_opt(0, 0, 0)
-                    .unwrap()
-            };
-            [d(a), d(b)].into_iter()
-        };
+        let stamps = |a: (i32, u32), b: (i32, u32)| [at(a.0, a.1, 0), at(b.0, b.1, 0)].into_iter();
         assert_eq!(
             infer_year(stamps((2017, 4), (2018, 3))),
             "2017-04".parse().unwrap()
