@@ -622,7 +622,7 @@ impl BuildingSpec {
                 last.month().to_string(),
                 last.day().to_string(),
                 last.year().to_string(),
-                weekday_name(first.weekday()).into(),
+                bemcal_weather::grid::weekday_name(first.weekday()).into(),
                 "No".into(),
                 "No".into(),
                 "No".into(),
@@ -1418,20 +1418,6 @@ fn interval_schedule(
         f.push(num(*v));
     }
     m.add("Schedule:Compact", &f);
-}
-
-/// A day of the week as EnergyPlus spells it.
-fn weekday_name(d: chrono::Weekday) -> &'static str {
-    use chrono::Weekday::*;
-    match d {
-        Mon => "Monday",
-        Tue => "Tuesday",
-        Wed => "Wednesday",
-        Thu => "Thursday",
-        Fri => "Friday",
-        Sat => "Saturday",
-        Sun => "Sunday",
-    }
 }
 
 #[cfg(test)]

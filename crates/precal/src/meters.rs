@@ -570,9 +570,6 @@ fn us_daylight_saving(
     per_hour: u32,
     notes: &mut Vec<String>,
 ) -> Result<(), String> {
-    let first = year.first_date();
-    let last = year.last_date();
-    let inside = |d: NaiveDate| d >= first && d <= last;
     // The years whose months the grid covers: one, or two for a year from another month.
     let dst_days: Vec<(NaiveDate, NaiveDate)> = (year.first_year()..=year.year_of_month(1))
         .filter_map(us_dst_days)
@@ -585,14 +582,14 @@ fn us_daylight_saving(
                     .count()
             };
             let skipped = dst_days.iter().any(|&(spring, _)| {
-                inside(spring)
+                year.spans(spring)
                     && count(spring, 2) == 0
                     && count(spring, 1) > 0
                     && count(spring, 3) > 0
             });
             let repeated = dst_days
                 .iter()
-                .any(|&(_, fall)| inside(fall) && count(fall, 1) > per_hour as usize);
+                .any(|&(_, fall)| year.spans(fall) && count(fall, 1) > per_hour as usize);
             let us = skipped || repeated;
             notes.push(format!(
                 "daylight saving detected: {} (spring 02:00 {}, autumn 01:00 {})",
@@ -1156,11 +1153,7 @@ fn values_on_grid(
     for r in &table.rows {
         let Some(t) = year.slot_of(r.clock) else {
             let date = r.clock.date();
-            if date.month() == 2
-                && date.day() == 29
-                && date >= year.first_date()
-                && date <= year.last_date()
-            {
+            if bemcal_weather::grid::is_leap_day(date) && year.spans(date) {
                 feb29 += 1;
             } else {
                 outside += 1;

@@ -80,19 +80,20 @@ impl GridYear {
         next.pred_opt().expect("a date before")
     }
 
+    /// True when `date` falls in the twelve months, 29 February included.
+    pub fn spans(self, date: NaiveDate) -> bool {
+        date >= self.first_date() && date <= self.last_date()
+    }
+
     /// True when `date` is one of the grid's days (29 February never is).
     pub fn covers(self, date: NaiveDate) -> bool {
-        date >= self.first_date()
-            && date <= self.last_date()
-            && !(date.month() == 2 && date.day() == 29)
+        self.spans(date) && !is_leap_day(date)
     }
 
     /// True when the twelve months include a 29 February (which the grid leaves out).
     pub fn spans_leap_day(self) -> bool {
-        (self.year..=self.year + 1).any(|y| {
-            NaiveDate::from_ymd_opt(y, 2, 29)
-                .is_some_and(|d| d >= self.first_date() && d <= self.last_date())
-        })
+        (self.year..=self.year + 1)
+            .any(|y| NaiveDate::from_ymd_opt(y, 2, 29).is_some_and(|d| self.spans(d)))
     }
 
     /// Index of a (non-29-February) hour-beginning time of the grid year.
@@ -203,6 +204,25 @@ impl From<GridYear> for YearText {
         } else {
             YearText::Text(y.to_string())
         }
+    }
+}
+
+/// True for 29 February.
+pub fn is_leap_day(date: NaiveDate) -> bool {
+    date.month() == 2 && date.day() == 29
+}
+
+/// A day of the week as EPW headers and EnergyPlus's run periods spell it.
+pub fn weekday_name(d: chrono::Weekday) -> &'static str {
+    use chrono::Weekday::*;
+    match d {
+        Mon => "Monday",
+        Tue => "Tuesday",
+        Wed => "Wednesday",
+        Thu => "Thursday",
+        Fri => "Friday",
+        Sat => "Saturday",
+        Sun => "Sunday",
     }
 }
 

@@ -21,7 +21,7 @@
 //! (EnergyPlus reads a weather file by month and day) and January to the month before the first
 //! hold the next year's weather, with that year in their year field.
 
-use chrono::{Datelike, Duration, NaiveDate, NaiveDateTime, Timelike};
+use chrono::{Datelike, Duration, NaiveDateTime, Timelike};
 
 use crate::grid::GridYear;
 use serde::{Deserialize, Serialize};
@@ -205,11 +205,6 @@ impl BuildReport {
 pub fn hour_slot(year: GridYear, t: NaiveDateTime) -> Option<usize> {
     let ending = t - Duration::seconds(1);
     year.slot_of(ending.date().and_hms_opt(ending.hour(), 0, 0)?)
-}
-
-/// True for a leap year of the Gregorian calendar.
-pub fn is_leap(year: i32) -> bool {
-    NaiveDate::from_ymd_opt(year, 2, 29).is_some()
 }
 
 /// Day of year (1-based, February 29 counted as in the real calendar) of EPW hour `slot`.
@@ -487,7 +482,7 @@ pub fn build_epw(
             let jan1 = opts.year.day_date(0);
             out.push_str(&format!(
                 "DATA PERIODS,1,1,Data,{}, 1/ 1,12/31\n",
-                weekday_name(jan1.weekday())
+                crate::grid::weekday_name(jan1.weekday())
             ));
         } else {
             out.push_str(line);
@@ -559,21 +554,10 @@ pub fn build_epw(
     Ok((out, report))
 }
 
-fn weekday_name(d: chrono::Weekday) -> &'static str {
-    match d {
-        chrono::Weekday::Mon => "Monday",
-        chrono::Weekday::Tue => "Tuesday",
-        chrono::Weekday::Wed => "Wednesday",
-        chrono::Weekday::Thu => "Thursday",
-        chrono::Weekday::Fri => "Friday",
-        chrono::Weekday::Sat => "Saturday",
-        chrono::Weekday::Sun => "Sunday",
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use chrono::NaiveDate;
 
     fn at(y: i32, m: u32, d: u32, h: u32, min: u32) -> NaiveDateTime {
         NaiveDate::from_ymd_opt(y, m, d)
