@@ -365,6 +365,8 @@ fn refinement_round_local_and_distributed() {
     for dir in [&local, &dist] {
         let m = json(dir.join("surrogate/surrogate.json"));
         assert!(m["training"]["init"].is_string(), "{}", m["training"]);
+        // The project's `surrogate.hidden` reached the trainer, on the worker too.
+        assert_eq!(m["model"]["hidden"], 32, "{}", m["model"]);
         let after = held(&m);
         assert!(
             before.iter().all(|i| after.contains(i)),

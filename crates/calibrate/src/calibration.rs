@@ -216,6 +216,7 @@ impl Calibration {
             threads: sp.threads,
             quiet: true,
             init: init.map(Path::to_path_buf),
+            hidden: sp.hidden,
             ..TrainOptions::default()
         };
         bemcal_surrogate::train(&self.out.dataset(), &self.surrogate_dir(), &opts)?;

@@ -259,6 +259,10 @@ pub struct SurrogateSettings {
     /// first training (measured on the demo: a warm retraining of 27 points still running
     /// after 11 minutes under the first training's 200 epochs).
     pub warm_epochs: usize,
+    /// Hidden units in each of the LSTM's two layers (reference: 128, the default). Training
+    /// and every surrogate evaluation cost about hidden^2: a small model or a test may take 32
+    /// (measured on the 6-point small model: see docs/benchmarks.md), at some accuracy.
+    pub hidden: usize,
 }
 
 impl Default for SurrogateSettings {
@@ -273,6 +277,7 @@ impl Default for SurrogateSettings {
             held_out_fraction: 0.2,
             warm_start: true,
             warm_epochs: 60,
+            hidden: 128,
         }
     }
 }
@@ -661,6 +666,12 @@ impl Project {
             || self.surrogate.held_out_fraction == 0.0
         {
             return Err("surrogate.held_out_fraction must be in (0, 1)".into());
+        }
+        if !(4..=1024).contains(&self.surrogate.hidden) {
+            return Err(format!(
+                "surrogate.hidden = {} must be between 4 and 1024 (units per LSTM layer)",
+                self.surrogate.hidden
+            ));
         }
         self.surrogate
             .time_features
@@ -1075,6 +1086,23 @@ mod tests {
         assert!(e.contains("refine.points must be at least 1"), "{e}");
         let e = project("[refine]\nround = 1\n").unwrap_err();
         assert!(e.contains("round"), "{e}");
+    }
+
+    #[test]
+    fn the_surrogate_is_the_references_2_x_128_unless_asked() {
+        assert_eq!(project("").unwrap().surrogate.hidden, 128);
+        assert_eq!(
+            project("[surrogate]\nhidden = 32\n")
+                .unwrap()
+                .surrogate
+                .hidden,
+            32
+        );
+        let e = project("[surrogate]\nhidden = 2\n").unwrap_err();
+        assert!(
+            e.contains("surrogate.hidden = 2 must be between 4 and 1024"),
+            "{e}"
+        );
     }
 
     #[test]

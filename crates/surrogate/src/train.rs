@@ -109,6 +109,8 @@ pub struct TrainOptions {
     /// Warm start: a previous surrogate folder holding [`WEIGHTS_FILE`] (same parameters,
     /// outputs and architecture); `None` trains from a random initialisation.
     pub init: Option<PathBuf>,
+    /// Hidden units per LSTM layer (the reference's 128).
+    pub hidden: usize,
 }
 
 impl Default for TrainOptions {
@@ -124,6 +126,7 @@ impl Default for TrainOptions {
             python: None,
             quiet: false,
             init: None,
+            hidden: 128,
         }
     }
 }
@@ -191,7 +194,8 @@ pub fn train(
         .args(["--batch-size", &opts.batch_size.to_string()])
         .args(["--time-features", opts.time_features.as_str()])
         .args(["--device", &opts.device])
-        .args(["--threads", &opts.threads.to_string()]);
+        .args(["--threads", &opts.threads.to_string()])
+        .args(["--hidden", &opts.hidden.to_string()]);
     if let Some(init) = &opts.init {
         cmd.arg("--init").arg(init);
     }
