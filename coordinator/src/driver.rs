@@ -13,11 +13,11 @@ use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::refine::{close_round, pick_draws, RefineLog, SimulatedDraw, REFINE_FILE};
 use bemcal_calibrate::replacement::{Attempt, Step};
-use bemcal_calibrate::Project;
-use bemcal_calibrate::{
-    extended_target, next_candidate, write_summary, Calibration, ChainSummary, OutputMetrics,
-    Timings, ValidationStep, INITIAL_KEY,
+use bemcal_calibrate::sequence::{
+    after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, ValidationRun,
 };
+use bemcal_calibrate::Project;
+use bemcal_calibrate::{write_summary, Calibration, ChainSummary, OutputMetrics, Timings};
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::mcmc::Draws;
@@ -498,19 +498,19 @@ impl State {
             self.config.chains_per_job.min(n)
         };
         let log = self.refine_log(r)?;
-        let round = log.rounds.len() as u32;
-        let target = if round < project.refine.rounds {
-            project.refine.iterations
-        } else {
-            r.chain_target
+        let round = Round::after(project, log.rounds.len() as u32);
+        // The final chains' target grows with each extension (`after_final_chains`).
+        let target = match round {
+            Round::Final { .. } => r.chain_target,
+            Round::Preliminary { .. } => round.iterations(project),
         };
         let surrogate = self.surrogate_files(r)?;
         let settled = self.settled_design_file(r)?;
-        let group = |first: usize, round: u32| -> Vec<&JobRow> {
+        let group = |first: usize, round: Round| -> Vec<&JobRow> {
             done.iter()
                 .filter(|j| {
                     matches!(&j.spec.kind, Some(Kind::Chains(c))
-                        if c.first_chain as usize == first && c.round == round)
+                        if c.first_chain as usize == first && c.round == round.index())
                 })
                 .collect()
         };
@@ -559,15 +559,16 @@ impl State {
                 });
             }
             let seg = mine.len() as u32;
-            let label = if round < project.refine.rounds {
-                format!(
+            let label = match round {
+                Round::Preliminary { index } => format!(
                     "chains {}-{} segment {seg} (refinement round {})",
                     first,
                     first + count - 1,
-                    round + 1
-                )
-            } else {
-                format!("chains {}-{} segment {seg}", first, first + count - 1)
+                    index + 1
+                ),
+                Round::Final { .. } => {
+                    format!("chains {}-{} segment {seg}", first, first + count - 1)
+                }
             };
             jobs.push(NewJob {
                 stage: Stage::Chains,
@@ -581,7 +582,7 @@ impl State {
                         chains: count as u32,
                         iterations: m.segment.min(target - reached),
                         segment: seg,
-                        round,
+                        round: round.index(),
                     })),
                     ..Default::default()
                 },
@@ -669,11 +670,11 @@ impl State {
         let cal = self.load(r)?;
         self.place(&cal.out, &self.surrogate_files(r)?)?;
         let log = self.refine_log(r)?;
-        let round = log.rounds.len() as u32;
-        let (states, draws) = self.merged_chains(r, round)?;
+        let round = Round::after(&cal.project, log.rounds.len() as u32);
+        let (states, draws) = self.merged_chains(r, round.index())?;
         let mut sampler = cal.sampler().map_err(err)?;
-        if round < cal.project.refine.rounds {
-            // Refinement round `round + 1`: simulate posterior draws of these chains.
+        if let Round::Preliminary { index } = round {
+            // Refinement round `index + 1`: simulate posterior draws of these chains.
             let post = sampler.posterior();
             let first = cal.next_refine_key(&log);
             let hash = self.simulation_inputs_hash(r, &cal)?;
@@ -681,7 +682,7 @@ impl State {
                 .iter()
                 .enumerate()
                 .map(|(j, u)| {
-                    self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), round + 1)
+                    self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), index + 1)
                 })
                 .collect();
             self.store
@@ -691,13 +692,10 @@ impl State {
         }
         let mut chains = sampler.summarize(&states, &draws, &log).map_err(err)?;
         chains.extensions = r.extensions;
-        if let Some(target) = extended_target(
-            &cal.project.mcmc,
-            &chains.convergence,
-            r.extensions,
-            r.chain_target,
-        ) {
-            self.store.extend_chains(&r.id, target).map_err(err)?;
+        if let AfterFinalChains::Extend { iterations } =
+            after_final_chains(&cal.project.mcmc, &chains, r.chain_target)
+        {
+            self.store.extend_chains(&r.id, iterations).map_err(err)?;
             self.store
                 .set_stage(&r.id, Stage::Chains, vec![])
                 .map_err(err)?;
@@ -706,24 +704,14 @@ impl State {
         let ck = Checkpoint { states, draws };
         let bytes = serde_json::to_vec(&ck).map_err(err)?;
         bemcal_calibrate::write_atomic(&cal.out.chains_checkpoint(), &bytes).map_err(err)?;
-        let ValidationStep::Validate(first) = next_candidate(&chains, &[]) else {
-            return Err("validation: no estimate".into());
-        };
         self.store
             .set_merge(&r.id, &serde_json::to_string(&chains).map_err(err)?)
             .map_err(err)?;
-        let mut jobs = vec![validation_job(r, first.key, "calibrated", first.values)];
-        if cal.project.validation.initial {
-            jobs.push(validation_job(
-                r,
-                INITIAL_KEY,
-                "initial",
-                cal.initial_point(),
-            ));
-        }
-        for (c, label) in chains.predictive_candidates() {
-            jobs.push(validation_job(r, c.key, &label, c.values));
-        }
+        let initial = cal.project.validation.initial.then(|| cal.initial_point());
+        let jobs = validation_runs(&chains, initial)
+            .iter()
+            .map(|run| validation_job(r, run))
+            .collect();
         self.store
             .set_stage(&r.id, Stage::Validate, jobs)
             .map_err(err)?;
@@ -820,14 +808,14 @@ impl State {
         let tried: Vec<&JobRow> = jobs.iter().filter(|j| is_calibrated(j)).collect();
         let failures: Vec<String> = tried.iter().filter_map(|j| reported_failure(j)).collect();
         if failures.len() == tried.len() {
-            match next_candidate(&self.merged(r)?, &failures) {
-                ValidationStep::Validate(c) => {
-                    let job = validation_job(r, c.key, "calibrated", c.values);
+            match next_validation(&self.merged(r)?, &failures) {
+                Ok(run) => {
+                    let job = validation_job(r, &run);
                     self.store.add_jobs(&r.id, vec![job]).map_err(err)?;
                     // As in the design: a cached validation is done already.
                     return Ok(true);
                 }
-                ValidationStep::Exhausted(message) => return Err(format!("validation: {message}")),
+                Err(message) => return Err(format!("validation: {message}")),
             }
         }
         self.store
@@ -922,21 +910,21 @@ impl State {
     }
 }
 
-/// A validation job; the calibrated model's tolerates an EnergyPlus failure (the driver then
-/// validates the next-best draw).
-fn validation_job(r: &RunRow, key: usize, label: &str, values: Vec<f64>) -> NewJob {
+/// The job of a validation run of the sequence; the calibrated model's and a predictive
+/// draw's tolerate an EnergyPlus failure ([`ValidationRun::tolerates_failure`]: the driver then
+/// validates the next-best draw, or leaves the draw out).
+fn validation_job(r: &RunRow, run: &ValidationRun) -> NewJob {
     NewJob {
         stage: Stage::Validate,
         kind: JobKind::Validate,
-        label: format!("validation ({label})"),
+        label: format!("validation ({})", run.label),
         spec: proto::Job {
             bundle: crate::client::refs(&r.bundle),
             kind: Some(Kind::Validate(proto::ValidateJob {
-                index: key as u32,
-                label: label.into(),
-                values,
-                // The estimate's failure picks the next draw; a predictive draw's is left out.
-                tolerate_failure: label != "initial",
+                index: run.key as u32,
+                label: run.label.clone(),
+                values: run.values.clone(),
+                tolerate_failure: run.tolerates_failure(),
             })),
             ..Default::default()
         },

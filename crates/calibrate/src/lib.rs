@@ -25,6 +25,7 @@ pub mod predictive;
 pub mod project;
 pub mod refine;
 pub mod replacement;
+pub mod sequence;
 pub mod submitted;
 mod summary;
 pub mod surrogate_error;

@@ -14,9 +14,13 @@ use crate::project::Project;
 use crate::refine::{close_round, SimulatedDraw};
 use crate::refine::{RefineLog, RefineRound};
 use crate::replacement::Outcome;
+use crate::sequence::{
+    after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, ValidationRole,
+    ValidationRun,
+};
 use crate::{
-    chains_at, extended_target, next_candidate, write_summary, Calibration, ChainSummary, Error,
-    Log, OutputMetrics, Sampler, Summary, Timings, ValidationStep, INITIAL_KEY,
+    chains_at, write_summary, Calibration, ChainSummary, Error, Log, OutputMetrics, Sampler,
+    Summary, Timings,
 };
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::lhs::Design;
@@ -49,10 +53,10 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
         outputs.push(cal.simulate_point(p.index, &p.values)?.0);
     }
     let (mut sampler, ck) = loop {
-        let round = refined.rounds.len() as u32;
+        let round = Round::after(project, refined.rounds.len() as u32);
         let mut sampler = surrogate_stage(&cal, &design, &refined, &outputs, log, &mut timings)?;
-        let ck = round_chains(&cal, &mut sampler, &refined, log, &mut timings)?;
-        if round >= project.refine.rounds {
+        let ck = round_chains(&cal, &mut sampler, round, &refined, log, &mut timings)?;
+        if round.is_final() {
             break (sampler, ck);
         }
         let t = Instant::now();
@@ -194,17 +198,17 @@ fn surrogate_stage<'c>(
     Ok(sampler)
 }
 
-/// The chains of the current round (a preliminary round's `refine.iterations`, or the final
-/// `mcmc.iterations`), checkpointed after every segment and resumed from their checkpoint.
+/// The chains of `round` (a preliminary round's `refine.iterations`, or the final
+/// `mcmc.iterations`: [`Round::iterations`]), checkpointed after every segment and resumed from
+/// their checkpoint.
 fn round_chains(
     cal: &Calibration,
     sampler: &mut Sampler<'_>,
+    round: Round,
     refined: &RefineLog,
     log: Log<'_>,
     timings: &mut Timings,
 ) -> Result<Checkpoint, Error> {
-    let project = &cal.project;
-    let round = refined.rounds.len() as u32;
     let t = Instant::now();
     // Round 0 starts at dispersed prior draws; later rounds where the previous ended.
     // (A log from before starts were recorded gives prior draws again.)
@@ -212,24 +216,15 @@ fn round_chains(
         Some(r) if !r.starts.is_empty() => r.starts.clone(),
         _ => sampler.starts(),
     };
-    let config = sampler.config_for(round);
-    let hmc_config = sampler.hmc_config_for(round);
-    let settings = sampler.settings_for(round);
-    let last = round >= project.refine.rounds;
-    let iterations = if last {
-        project.mcmc.iterations
-    } else {
-        project.refine.iterations
-    };
-    let path = cal.chains_path(round);
+    let config = sampler.config_for(round.index());
+    let hmc_config = sampler.hmc_config_for(round.index());
+    let settings = sampler.settings_for(round.index());
+    let iterations = round.iterations(&cal.project);
+    let path = cal.chains_path(round.index());
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
-    let label = if last {
-        "chains".to_string()
-    } else {
-        format!("refinement round {} chains", round + 1)
-    };
+    let label = round.label();
     let ck = {
         let (post, eval) = sampler.split();
         run_chains(
@@ -237,7 +232,7 @@ fn round_chains(
             eval,
             |post, eval| chains_at(post, eval, &starts, config, &hmc_config, &settings, 0),
             iterations,
-            project.mcmc.segment,
+            cal.project.mcmc.segment,
             &path,
             &|done, n| log(&format!("{label}: {done}/{n} iterations")),
         )?
@@ -333,8 +328,8 @@ fn refine_round(
 }
 
 /// The final chains summarised, and extended from their checkpoint while they miss a
-/// convergence target (`mcmc.rhat_target`, `mcmc.ess_target`; the shared rule
-/// `extended_target`, as the coordinator does).
+/// convergence target (`mcmc.rhat_target`, `mcmc.ess_target`; the sequence's rule
+/// [`after_final_chains`], as the coordinator does).
 fn final_chains(
     cal: &Calibration,
     sampler: &mut Sampler<'_>,
@@ -350,7 +345,8 @@ fn final_chains(
     timings.summary_s = t.elapsed().as_secs_f64();
     let m = &project.mcmc;
     let mut target = m.iterations;
-    while let Some(next) = extended_target(m, &chains.convergence, chains.extensions, target) {
+    while let AfterFinalChains::Extend { iterations: next } = after_final_chains(m, &chains, target)
+    {
         log(&format!(
             "chains: {}: extending to {next} iterations (extension {} of at most {})",
             chains.convergence,
@@ -413,68 +409,80 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
     log(&format!("posterior: {}", chains.convergence));
 }
 
-/// EnergyPlus at the estimate, or at the next-best draws while it fails (the shared rule
-/// `next_candidate`; the estimate settled with `settle_estimate`), and at the initial model.
+/// The validation runs of the sequence ([`validation_runs`]): EnergyPlus at the estimate, or
+/// at the next-best draws while it fails there ([`next_validation`]; the estimate settled with
+/// `settle_estimate`), at the initial model, and at the predictive draws (in parallel; a draw
+/// EnergyPlus cannot simulate is left out, `crate::predictive::assess` counts it).
 fn validate_stage(
     cal: &Calibration,
     chains: &mut ChainSummary,
     log: Log<'_>,
 ) -> Result<(Vec<OutputMetrics>, Vec<OutputMetrics>), Error> {
+    let initial = cal.project.validation.initial.then(|| cal.initial_point());
+    let runs = validation_runs(chains, initial);
     log("validation: EnergyPlus at the calibrated parameters");
-    // The estimate, then the next-best draws while EnergyPlus fails (`next_candidate`).
     let mut failures: Vec<String> = vec![];
+    let mut run = runs
+        .iter()
+        .find(|r| matches!(r.role, ValidationRole::Calibrated { .. }))
+        .cloned();
     let validation = loop {
-        let c = match next_candidate(chains, &failures) {
-            ValidationStep::Validate(c) => c,
-            ValidationStep::Exhausted(message) => {
-                return Err(Error::Stage {
-                    stage: "validation",
-                    message,
-                })
-            }
+        let c = match run {
+            Some(c) => c,
+            None => match next_validation(chains, &failures) {
+                Ok(c) => c,
+                Err(message) => {
+                    return Err(Error::Stage {
+                        stage: "validation",
+                        message,
+                    })
+                }
+            },
         };
-        match cal.validate(c.key, "calibrated", &c.values) {
+        match cal.validate(c.key, &c.label, &c.values) {
             Ok(m) => break m,
             Err(e) => {
                 log(&format!(
                     "validation: EnergyPlus failed at candidate {}: {e}",
-                    c.rank
+                    failures.len()
                 ));
                 failures.push(e.to_string());
+                run = None;
             }
         }
     };
     chains.settle_estimate(&failures);
-    let initial = if cal.project.validation.initial {
+    let mut initial = vec![];
+    if let Some(r) = runs.iter().find(|r| r.role == ValidationRole::Initial) {
         log("validation: EnergyPlus at the initial parameters (prior modes)");
-        cal.validate(INITIAL_KEY, "initial", &cal.initial_point())?
-    } else {
-        vec![]
-    };
-    predictive_stage(cal, chains, log)?;
+        initial = cal.validate(r.key, &r.label, &r.values)?;
+    }
+    let predictive: Vec<&ValidationRun> = runs
+        .iter()
+        .filter(|r| r.role == ValidationRole::Predictive)
+        .collect();
+    predictive_stage(cal, &predictive, log)?;
     Ok((validation, initial))
 }
 
 /// EnergyPlus at the posterior draws of the predictive intervals, in parallel; a draw it
 /// cannot simulate is left out (`crate::predictive::assess` counts it).
-fn predictive_stage(cal: &Calibration, chains: &ChainSummary, log: Log<'_>) -> Result<(), Error> {
+fn predictive_stage(cal: &Calibration, runs: &[&ValidationRun], log: Log<'_>) -> Result<(), Error> {
     use rayon::prelude::*;
-    let candidates = chains.predictive_candidates();
-    if candidates.is_empty() {
+    if runs.is_empty() {
         return Ok(());
     }
     log(&format!(
         "validation: EnergyPlus at {} posterior draws for the predictive intervals",
-        candidates.len()
+        runs.len()
     ));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(cal.project.design.parallel.max(1))
         .build()
         .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
     let failed: Vec<String> = pool.install(|| {
-        candidates
-            .par_iter()
-            .filter_map(|(c, label)| cal.validate(c.key, label, &c.values).err())
+        runs.par_iter()
+            .filter_map(|r| cal.validate(r.key, &r.label, &r.values).err())
             .map(|e| e.to_string())
             .collect()
     });

@@ -128,10 +128,11 @@ impl Inputs {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn chains(fallbacks: usize) -> ChainSummary {
+    /// Merged chains with the estimate `[0.0]` and fallbacks `[1.0]`, `[2.0]`, ...
+    pub(crate) fn chains(fallbacks: usize) -> ChainSummary {
         ChainSummary {
             posterior: serde_json::from_value(serde_json::json!({
                 "parameters": [], "map_point": [], "map_log_density": 0.0,
