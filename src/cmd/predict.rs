@@ -16,9 +16,14 @@ pub struct Args {
     /// EPW weather file.
     #[arg(long)]
     pub weather: PathBuf,
-    /// Year for day types and timestamps: `2021`, or `2021-04` for twelve months from April.
+    /// Year for day types and timestamps: `2021`, or `2021-04` for twelve months from April
+    /// (US federal holidays; `--model` takes the model's calendar instead).
     #[arg(long, default_value = "2021")]
     pub year: bemcal_weather::grid::GridYear,
+    /// Building spec whose calendar to use: its year, holidays and the day types of its
+    /// `day_types_file` (pre-calibration's `calendar.csv`), as the calibration did.
+    #[arg(long, conflicts_with = "year")]
+    pub model: Option<PathBuf>,
     /// Parameter value, NAME=VALUE (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
@@ -62,12 +67,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         values[i] = v;
     }
+    let calendar = match &args.model {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            bemcal_energyplus::BuildingSpec::from_toml(&text, path)?.calendar()
+        }
+        None => Calendar::new(args.year, Holidays::UsFederal),
+    };
     let epw = Epw::read(&args.weather)?;
-    let features = HourlyFeatures::from_epw(&epw, &Calendar::new(args.year, Holidays::UsFederal));
+    let features = HourlyFeatures::from_epw(&epw, &calendar);
     let mut ev = surrogate.bind(&features)?;
     let y = ev.evaluate(&values)?;
     let ts = hour_beginning_timestamps(
-        args.year,
+        calendar.year,
         epw.hours.iter().map(|h| (h.month, h.day, h.hour)),
     );
     write_csv(&args.out, &ts, &meta.output_names(), y)
