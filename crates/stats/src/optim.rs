@@ -87,6 +87,169 @@ struct Search {
     done: bool,
 }
 
+impl Search {
+    /// A search from `u` (clamped into the box) whose log density is `lp`; a start with a
+    /// non-finite log density (or no dimension) is done before it begins. The inverse Hessian
+    /// starts as the identity.
+    fn start(u: &[f64], lp: f64) -> Search {
+        let d = u.len();
+        let mut h = vec![0.0; d * d];
+        for i in 0..d {
+            h[i * d + i] = 1.0;
+        }
+        Search {
+            z: u.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
+            f: if lp.is_finite() { -lp } else { f64::INFINITY },
+            g: vec![0.0; d],
+            h,
+            updated: false,
+            iterations: 0,
+            evaluations: 0,
+            small_steps: 0,
+            done: !lp.is_finite() || d == 0,
+        }
+    }
+
+    /// The search direction `p = -H g` on the free coordinates, capped at `max_step` in max
+    /// norm, with its slope `g^T p`: a coordinate at a bound whose descent points out of the box
+    /// stays there this iteration (projected quasi-Newton); steepest descent where `H` lost
+    /// positive definiteness (Nocedal & Wright 2006, Algorithm 6.1).
+    fn direction(&self, cfg: &BfgsConfig) -> (Vec<f64>, f64) {
+        let (s, d) = (self, self.z.len());
+        let held: Vec<bool> = (0..d)
+            .map(|k| (s.z[k] <= 0.0 && s.g[k] > 0.0) || (s.z[k] >= 1.0 && s.g[k] < 0.0))
+            .collect();
+        let g_free: Vec<f64> = (0..d).map(|k| if held[k] { 0.0 } else { s.g[k] }).collect();
+        let mut p: Vec<f64> = (0..d)
+            .map(|r| {
+                if held[r] {
+                    0.0
+                } else {
+                    -(0..d).map(|c| s.h[r * d + c] * g_free[c]).sum::<f64>()
+                }
+            })
+            .collect();
+        let mut slope: f64 = p.iter().zip(&s.g).map(|(a, b)| a * b).sum();
+        if slope >= 0.0 {
+            // Not a descent direction (H lost positive definiteness): steepest descent.
+            p = s.g.iter().map(|v| -v).collect();
+            slope = -s.g.iter().map(|v| v * v).sum::<f64>();
+        }
+        let norm = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if norm > cfg.max_step {
+            let k = cfg.max_step / norm;
+            p.iter_mut().for_each(|v| *v *= k);
+            slope *= k;
+        }
+        (p, slope)
+    }
+
+    /// Ends an iteration: moves to the line search's accepted point and returns the step
+    /// taken, or finishes the search where none was accepted; two steps in a row that gain
+    /// less than `tolerance` also finish it.
+    fn take_step(
+        &mut self,
+        accepted: Option<(Vec<f64>, f64)>,
+        cfg: &BfgsConfig,
+    ) -> Option<Vec<f64>> {
+        self.iterations += 1;
+        let Some((z, f)) = accepted else {
+            self.done = true;
+            return None;
+        };
+        let gain = self.f - f;
+        self.small_steps = if gain < cfg.tolerance {
+            self.small_steps + 1
+        } else {
+            0
+        };
+        let step: Vec<f64> = z.iter().zip(&self.z).map(|(a, b)| a - b).collect();
+        self.z = z;
+        self.f = f;
+        if self.small_steps >= 2 {
+            self.done = true;
+        }
+        Some(step)
+    }
+}
+
+/// Backtracking line search along `dirs` for the `active` searches, in lockstep (one batched
+/// call per halving, at most 30): the first `alpha` in 1, 1/2, ... whose trial point (projected
+/// onto the box) meets the Armijo condition `f(z + a p) <= f(z) + c1 a g^T p`, `c1 = 1e-4`
+/// (Nocedal & Wright 2006, Eq. 3.4, Algorithm 3.1). Returns the accepted point and its value
+/// per search (`None`: no step accepted).
+fn line_search(
+    searches: &mut [Search],
+    active: &[usize],
+    dirs: &[(Vec<f64>, f64)],
+    eval: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+) -> Vec<Option<(Vec<f64>, f64)>> {
+    let mut alpha: Vec<f64> = vec![1.0; searches.len()];
+    let mut accepted: Vec<Option<(Vec<f64>, f64)>> = vec![None; searches.len()];
+    let mut searching = active.to_vec();
+    for _ in 0..30 {
+        if searching.is_empty() {
+            break;
+        }
+        let trials: Vec<Vec<f64>> = searching
+            .iter()
+            .map(|&i| {
+                let s = &searches[i];
+                (0..s.z.len())
+                    .map(|r| (s.z[r] + alpha[i] * dirs[i].0[r]).clamp(0.0, 1.0))
+                    .collect()
+            })
+            .collect();
+        let fs = eval(&trials);
+        let mut still = Vec::new();
+        for ((&i, z), f) in searching.iter().zip(trials).zip(fs) {
+            let s = &mut searches[i];
+            s.evaluations += 1;
+            // Armijo: f(z + a p) <= f(z) + c1 a g^T p (Nocedal & Wright Eq. 3.4).
+            if f.is_finite() && f <= s.f + 1e-4 * alpha[i] * dirs[i].1.min(0.0) {
+                accepted[i] = Some((z, f));
+            } else {
+                alpha[i] *= 0.5;
+                still.push(i);
+            }
+        }
+        searching = still;
+    }
+    accepted
+}
+
+/// One Newton step with the Laplace covariance, `z - Sigma g` (Nocedal & Wright Eq. 3.30),
+/// kept where it raises the target: BFGS stops a few sds short of the mode in 40 dimensions
+/// (a 40-D Gaussian: 8-23 nats below it after 60 iterations), which would put an
+/// independence proposal's centre off the posterior's.
+fn newton_step(
+    searches: &[Search],
+    out: &mut [Optimum],
+    eval: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+) {
+    let trials: Vec<Vec<f64>> = searches
+        .iter()
+        .zip(out.iter())
+        .map(|(s, o)| {
+            let d = s.z.len();
+            (0..d)
+                .map(|r| {
+                    let step: f64 = (0..d).map(|c| o.covariance[r * d + c] * s.g[c]).sum();
+                    (s.z[r] - step).clamp(0.0, 1.0)
+                })
+                .collect()
+        })
+        .collect();
+    let fs = eval(&trials);
+    for ((o, z), f) in out.iter_mut().zip(trials).zip(fs) {
+        o.evaluations += 1;
+        if f.is_finite() && -f > o.log_density {
+            o.point = z;
+            o.log_density = -f;
+        }
+    }
+}
+
 /// Mode pruning for chains started at optima: every optimum more than `gap` nats below the
 /// best one is replaced by the best one (point, log density and Laplace covariance). For modes
 /// of similar curvature, a mode `gap` nats lower holds about e^-gap of the best one's mass, so
@@ -156,23 +319,7 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     let mut searches: Vec<Search> = starts
         .iter()
         .zip(initial_log_density)
-        .map(|(u, lp)| {
-            let mut h = vec![0.0; d * d];
-            for i in 0..d {
-                h[i * d + i] = 1.0;
-            }
-            Search {
-                z: u.iter().map(|v| v.clamp(0.0, 1.0)).collect(),
-                f: if lp.is_finite() { -lp } else { f64::INFINITY },
-                g: vec![0.0; d],
-                h,
-                updated: false,
-                iterations: 0,
-                evaluations: 0,
-                small_steps: 0,
-                done: !lp.is_finite() || d == 0,
-            }
-        })
+        .map(|(u, &lp)| Search::start(u, lp))
         .collect();
 
     // Gradients at the starts.
@@ -192,89 +339,13 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         // Search directions p = -H g, capped in max norm, with their slopes g^T p.
         let mut dirs: Vec<(Vec<f64>, f64)> = vec![(Vec::new(), 0.0); searches.len()];
         for &i in &active {
-            let s = &searches[i];
-            // Coordinates at a bound whose descent points out of the box stay there this
-            // iteration (projected quasi-Newton on the free variables).
-            let held: Vec<bool> = (0..d)
-                .map(|k| (s.z[k] <= 0.0 && s.g[k] > 0.0) || (s.z[k] >= 1.0 && s.g[k] < 0.0))
-                .collect();
-            let g_free: Vec<f64> = (0..d).map(|k| if held[k] { 0.0 } else { s.g[k] }).collect();
-            let mut p: Vec<f64> = (0..d)
-                .map(|r| {
-                    if held[r] {
-                        0.0
-                    } else {
-                        -(0..d).map(|c| s.h[r * d + c] * g_free[c]).sum::<f64>()
-                    }
-                })
-                .collect();
-            let mut slope: f64 = p.iter().zip(&s.g).map(|(a, b)| a * b).sum();
-            if slope >= 0.0 {
-                // Not a descent direction (H lost positive definiteness): steepest descent.
-                p = s.g.iter().map(|v| -v).collect();
-                slope = -s.g.iter().map(|v| v * v).sum::<f64>();
-            }
-            let norm = p.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            if norm > cfg.max_step {
-                let k = cfg.max_step / norm;
-                p.iter_mut().for_each(|v| *v *= k);
-                slope *= k;
-            }
-            dirs[i] = (p, slope);
+            dirs[i] = searches[i].direction(cfg);
         }
-        // Backtracking line search, all active starts in lockstep.
-        let mut alpha: Vec<f64> = vec![1.0; searches.len()];
-        let mut accepted: Vec<Option<(Vec<f64>, f64)>> = vec![None; searches.len()];
-        let mut searching = active.clone();
-        for _ in 0..30 {
-            if searching.is_empty() {
-                break;
-            }
-            let trials: Vec<Vec<f64>> = searching
-                .iter()
-                .map(|&i| {
-                    let s = &searches[i];
-                    (0..d)
-                        .map(|r| (s.z[r] + alpha[i] * dirs[i].0[r]).clamp(0.0, 1.0))
-                        .collect()
-                })
-                .collect();
-            let fs = eval(&trials);
-            let mut still = Vec::new();
-            for ((&i, z), f) in searching.iter().zip(trials).zip(fs) {
-                let s = &mut searches[i];
-                s.evaluations += 1;
-                // Armijo: f(z + a p) <= f(z) + c1 a g^T p (Nocedal & Wright Eq. 3.4).
-                if f.is_finite() && f <= s.f + 1e-4 * alpha[i] * dirs[i].1.min(0.0) {
-                    accepted[i] = Some((z, f));
-                } else {
-                    alpha[i] *= 0.5;
-                    still.push(i);
-                }
-            }
-            searching = still;
-        }
+        let mut accepted = line_search(&mut searches, &active, &dirs, &mut eval);
         let mut moved = Vec::new();
         for &i in &active {
-            let s = &mut searches[i];
-            s.iterations += 1;
-            match accepted[i].take() {
-                Some((z, f)) => {
-                    let gain = s.f - f;
-                    s.small_steps = if gain < cfg.tolerance {
-                        s.small_steps + 1
-                    } else {
-                        0
-                    };
-                    let step: Vec<f64> = (0..d).map(|r| z[r] - s.z[r]).collect();
-                    s.z = z;
-                    s.f = f;
-                    moved.push((i, step, s.g.clone()));
-                    if s.small_steps >= 2 {
-                        s.done = true;
-                    }
-                }
-                None => s.done = true,
+            if let Some(step) = searches[i].take_step(accepted[i].take(), cfg) {
+                moved.push((i, step, searches[i].g.clone()));
             }
         }
         // New gradients (also for starts that just finished: their curvature update).
@@ -335,31 +406,8 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         })
         .collect();
 
-    // One Newton step with the Laplace covariance, `z - Sigma g` (Nocedal & Wright Eq. 3.30),
-    // kept where it raises the target: BFGS stops a few sds short of the mode in 40 dimensions
-    // (a 40-D Gaussian: 8-23 nats below it after 60 iterations), which would put an
-    // independence proposal's centre off the posterior's.
     if cfg.hessian {
-        let trials: Vec<Vec<f64>> = searches
-            .iter()
-            .zip(&out)
-            .map(|(s, o)| {
-                (0..d)
-                    .map(|r| {
-                        let step: f64 = (0..d).map(|c| o.covariance[r * d + c] * s.g[c]).sum();
-                        (s.z[r] - step).clamp(0.0, 1.0)
-                    })
-                    .collect()
-            })
-            .collect();
-        let fs = eval(&trials);
-        for ((o, z), f) in out.iter_mut().zip(trials).zip(fs) {
-            o.evaluations += 1;
-            if f.is_finite() && -f > o.log_density {
-                o.point = z;
-                o.log_density = -f;
-            }
-        }
+        newton_step(&searches, &mut out, &mut eval);
     }
     out
 }
