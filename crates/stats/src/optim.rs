@@ -491,60 +491,103 @@ fn laplace_impl<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     mut target: F,
     gradient: Option<&mut GradientFn<'_>>,
 ) -> Vec<Laplace> {
-    let clamp_step = |h: f64| {
-        if h.is_finite() {
-            h.clamp(1e-4, 0.05)
-        } else {
-            0.01
-        }
+    // Pass 1: pilot curvatures along each coordinate set the steps.
+    let steps = curvature_steps(points, log_density, pilot_sd, &mut target);
+    // Pass 2: the Hessian at those steps, from gradients when the target has them.
+    let hessians: Vec<(Option<Vec<f64>>, usize)> = match gradient {
+        Some(grad) => hessians_from_gradients(points, &steps, grad),
+        None => hessians_from_values(points, log_density, &steps, &mut target),
     };
-    // Signed steps: +h where x + h and x - h both fit, else the one-sided direction.
-    let signed = |x: &[f64], h: &[f64]| -> (Vec<f64>, Vec<bool>) {
-        let central: Vec<bool> = x
-            .iter()
-            .zip(h)
-            .map(|(x, h)| x - h >= 0.0 && x + h <= 1.0)
-            .collect();
-        let a = x
-            .iter()
-            .zip(h)
-            .zip(&central)
-            .map(|((x, h), c)| if *c || x + 2.0 * h <= 1.0 { *h } else { -*h })
-            .collect();
-        (a, central)
-    };
-    let shifted = |x: &[f64], moves: &[(usize, f64)]| {
-        let mut z = x.to_vec();
-        for &(k, a) in moves {
-            z[k] = (z[k] + a).clamp(0.0, 1.0);
-        }
-        z
-    };
-    // Two points per coordinate: x + a_k, and x - a_k (central) or x + 2 a_k (one-sided).
-    let diagonal = |x: &[f64], a: &[f64], central: &[bool], pts: &mut Vec<Vec<f64>>| {
-        for k in 0..x.len() {
-            pts.push(shifted(x, &[(k, a[k])]));
-            let other = if central[k] { -a[k] } else { 2.0 * a[k] };
-            pts.push(shifted(x, &[(k, other)]));
-        }
-    };
-    // The second difference of those two points about f0 (central: f(+) + f(-) - 2 f0;
-    // one-sided: f(2a) - 2 f(a) + f0).
-    let second = |plus: f64, other: f64, f0: f64, central: bool| {
-        if central {
-            plus + other - 2.0 * f0
-        } else {
-            other - 2.0 * plus + f0
-        }
-    };
-    // Pass 1: pilot curvatures along each coordinate.
+    // Pass 3: every eigen-direction the differences found flat or curving upwards
+    // (eigenvalue below the floor) is probed along its line at widening steps.
+    let mut eig: Vec<Option<(Vec<f64>, Vec<f64>)>> = hessians
+        .iter()
+        .zip(points)
+        .map(|((h, _), x)| h.as_ref().and_then(|h| symmetric_eigen(h, x.len())))
+        .collect();
+    let (extra, floored) = probe_flat_directions(points, log_density, &mut eig, &mut target);
+    hessians
+        .into_iter()
+        .zip(eig)
+        .enumerate()
+        .map(|(p, ((_, evaluations), e))| Laplace {
+            covariance: e.map(|(u, lam)| inverse_from_eigen(&u, &lam)),
+            floored: floored[p],
+            evaluations: evaluations + extra[p],
+        })
+        .collect()
+}
+
+/// A finite-difference step clamped to `[1e-4, 0.05]` (0.01 when not finite).
+fn clamp_step(h: f64) -> f64 {
+    if h.is_finite() {
+        h.clamp(1e-4, 0.05)
+    } else {
+        0.01
+    }
+}
+
+/// Signed steps: `+h` where `x + h` and `x - h` both fit in the box (central), else the
+/// one-sided direction that fits.
+fn signed_steps(x: &[f64], h: &[f64]) -> (Vec<f64>, Vec<bool>) {
+    let central: Vec<bool> = x
+        .iter()
+        .zip(h)
+        .map(|(x, h)| x - h >= 0.0 && x + h <= 1.0)
+        .collect();
+    let a = x
+        .iter()
+        .zip(h)
+        .zip(&central)
+        .map(|((x, h), c)| if *c || x + 2.0 * h <= 1.0 { *h } else { -*h })
+        .collect();
+    (a, central)
+}
+
+/// `x` moved by `(coordinate, step)` pairs, clamped into the box.
+fn shifted(x: &[f64], moves: &[(usize, f64)]) -> Vec<f64> {
+    let mut z = x.to_vec();
+    for &(k, a) in moves {
+        z[k] = (z[k] + a).clamp(0.0, 1.0);
+    }
+    z
+}
+
+/// Two points per coordinate: `x + a_k`, and `x - a_k` (central) or `x + 2 a_k` (one-sided).
+fn diagonal_points(x: &[f64], a: &[f64], central: &[bool], pts: &mut Vec<Vec<f64>>) {
+    for k in 0..x.len() {
+        pts.push(shifted(x, &[(k, a[k])]));
+        let other = if central[k] { -a[k] } else { 2.0 * a[k] };
+        pts.push(shifted(x, &[(k, other)]));
+    }
+}
+
+/// The second difference of [`diagonal_points`]' two values about `f0` (central:
+/// `f(+) + f(-) - 2 f0`; one-sided: `f(2a) - 2 f(a) + f0`).
+fn second_difference(plus: f64, other: f64, f0: f64, central: bool) -> f64 {
+    if central {
+        plus + other - 2.0 * f0
+    } else {
+        other - 2.0 * plus + f0
+    }
+}
+
+/// [`laplace_batch`]'s steps 1-2: a pilot second difference along each coordinate at half
+/// the pilot sd gives the curvature `c_k`, and the step `sqrt(2 LAPLACE_STEP_DROP / c_k)`
+/// (the pilot step where the curvature is not positive). One batched call.
+fn curvature_steps(
+    points: &[Vec<f64>],
+    log_density: &[f64],
+    pilot_sd: &[Vec<f64>],
+    target: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+) -> Vec<Vec<f64>> {
     let mut pts = Vec::new();
-    let mut steps1 = Vec::new();
+    let mut pilot = Vec::new();
     for (x, sd) in points.iter().zip(pilot_sd) {
         let h: Vec<f64> = sd.iter().map(|s| clamp_step(0.5 * s)).collect();
-        let (a, central) = signed(x, &h);
-        diagonal(x, &a, &central, &mut pts);
-        steps1.push((a, central));
+        let (a, central) = signed_steps(x, &h);
+        diagonal_points(x, &a, &central, &mut pts);
+        pilot.push((a, central));
     }
     let f1 = if pts.is_empty() {
         Vec::new()
@@ -553,11 +596,11 @@ fn laplace_impl<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     };
     let mut at = 0;
     let mut steps = Vec::new();
-    for ((x, &f0), (a, central)) in points.iter().zip(log_density).zip(&steps1) {
+    for ((x, &f0), (a, central)) in points.iter().zip(log_density).zip(&pilot) {
         let h: Vec<f64> = (0..x.len())
             .map(|k| {
                 let (p, q) = (f1[at + 2 * k], f1[at + 2 * k + 1]);
-                let c = -second(p, q, f0, central[k]) / (a[k] * a[k]);
+                let c = -second_difference(p, q, f0, central[k]) / (a[k] * a[k]);
                 if c > 0.0 {
                     clamp_step((2.0 * LAPLACE_STEP_DROP / c).sqrt())
                 } else {
@@ -568,91 +611,104 @@ fn laplace_impl<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         at += 2 * x.len();
         steps.push(h);
     }
-    // Pass 2: the Hessian at the chosen steps, from gradients when the target has them.
-    let hessians: Vec<(Option<Vec<f64>>, usize)> = match gradient {
-        Some(grad) => hessians_from_gradients(points, &steps, grad),
-        None => {
-            let mut pts = Vec::new();
-            let mut layout = Vec::new();
-            for (x, h) in points.iter().zip(&steps) {
-                let d = x.len();
-                let (a, central) = signed(x, h);
-                let first = pts.len();
-                diagonal(x, &a, &central, &mut pts);
-                for i in 0..d {
-                    for j in 0..i {
-                        pts.push(shifted(x, &[(i, a[i]), (j, a[j])]));
-                        if central[i] && central[j] {
-                            pts.push(shifted(x, &[(i, -a[i]), (j, -a[j])]));
-                        }
-                    }
+    steps
+}
+
+/// [`laplace_batch`]'s step 3 from values: the negative log density's Hessian at each point
+/// from second-order differences at `steps` (central, or one-sided near a bound; the mixed
+/// ones the mean of the forward and backward forms where both fit; Nocedal & Wright 2006,
+/// Sec. 8.1), with the evaluations it took (the pilot pass's included). `None` where a value
+/// was not finite. One batched call.
+fn hessians_from_values(
+    points: &[Vec<f64>],
+    log_density: &[f64],
+    steps: &[Vec<f64>],
+    target: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+) -> Vec<(Option<Vec<f64>>, usize)> {
+    let mut pts = Vec::new();
+    let mut layout = Vec::new();
+    for (x, h) in points.iter().zip(steps) {
+        let d = x.len();
+        let (a, central) = signed_steps(x, h);
+        let first = pts.len();
+        diagonal_points(x, &a, &central, &mut pts);
+        for i in 0..d {
+            for j in 0..i {
+                pts.push(shifted(x, &[(i, a[i]), (j, a[j])]));
+                if central[i] && central[j] {
+                    pts.push(shifted(x, &[(i, -a[i]), (j, -a[j])]));
                 }
-                layout.push((first, a, central));
             }
-            let f2 = if pts.is_empty() {
-                Vec::new()
-            } else {
-                target(&pts)
-            };
-            let hessians: Vec<(Option<Vec<f64>>, usize)> = points
-                .iter()
-                .zip(log_density)
-                .zip(layout)
-                .map(|((x, &f0), (first, a, central))| {
-                    let d = x.len();
-                    let pairs: usize = (0..d)
-                        .map(|i| {
-                            (0..i)
-                                .map(|j| 1 + usize::from(central[i] && central[j]))
-                                .sum::<usize>()
-                        })
-                        .sum();
-                    let n_pass2 = 2 * d + pairs;
-                    let f = &f2[first..first + n_pass2];
-                    let plus = |k: usize| f[2 * k];
-                    let other = |k: usize| f[2 * k + 1];
-                    // Negative log density's Hessian.
-                    let mut hess = vec![0.0; d * d];
-                    for k in 0..d {
-                        hess[k * d + k] =
-                            -second(plus(k), other(k), f0, central[k]) / (a[k] * a[k]);
-                    }
-                    let mut m = 2 * d;
-                    for i in 0..d {
-                        for j in 0..i {
-                            let fwd = (f[m] - plus(i) - plus(j) + f0) / (a[i] * a[j]);
-                            m += 1;
-                            let v = if central[i] && central[j] {
-                                let bwd = (f[m] - other(i) - other(j) + f0) / (a[i] * a[j]);
-                                m += 1;
-                                0.5 * (fwd + bwd)
-                            } else {
-                                fwd
-                            };
-                            hess[i * d + j] = -v;
-                            hess[j * d + i] = -v;
-                        }
-                    }
-                    let evaluations = 2 * d + n_pass2;
-                    (
-                        hess.iter().all(|v| v.is_finite()).then_some(hess),
-                        evaluations,
-                    )
-                })
-                .collect();
-            hessians
         }
+        layout.push((first, a, central));
+    }
+    let f2 = if pts.is_empty() {
+        Vec::new()
+    } else {
+        target(&pts)
     };
-    // Pass 3: every eigen-direction the differences found flat or curving upwards
-    // (eigenvalue below the floor) is probed along its line at widening steps.
-    let eig: Vec<Option<(Vec<f64>, Vec<f64>)>> = hessians
+    points
         .iter()
-        .zip(points)
-        .map(|((h, _), x)| h.as_ref().and_then(|h| symmetric_eigen(h, x.len())))
-        .collect();
+        .zip(log_density)
+        .zip(layout)
+        .map(|((x, &f0), (first, a, central))| {
+            let d = x.len();
+            let pairs: usize = (0..d)
+                .map(|i| {
+                    (0..i)
+                        .map(|j| 1 + usize::from(central[i] && central[j]))
+                        .sum::<usize>()
+                })
+                .sum();
+            let n_pass2 = 2 * d + pairs;
+            let f = &f2[first..first + n_pass2];
+            let plus = |k: usize| f[2 * k];
+            let other = |k: usize| f[2 * k + 1];
+            // Negative log density's Hessian.
+            let mut hess = vec![0.0; d * d];
+            for k in 0..d {
+                hess[k * d + k] =
+                    -second_difference(plus(k), other(k), f0, central[k]) / (a[k] * a[k]);
+            }
+            let mut m = 2 * d;
+            for i in 0..d {
+                for j in 0..i {
+                    let fwd = (f[m] - plus(i) - plus(j) + f0) / (a[i] * a[j]);
+                    m += 1;
+                    let v = if central[i] && central[j] {
+                        let bwd = (f[m] - other(i) - other(j) + f0) / (a[i] * a[j]);
+                        m += 1;
+                        0.5 * (fwd + bwd)
+                    } else {
+                        fwd
+                    };
+                    hess[i * d + j] = -v;
+                    hess[j * d + i] = -v;
+                }
+            }
+            let evaluations = 2 * d + n_pass2;
+            (
+                hess.iter().all(|v| v.is_finite()).then_some(hess),
+                evaluations,
+            )
+        })
+        .collect()
+}
+
+/// [`laplace_batch`]'s step 4: each eigen-direction of `eig` (eigenvectors column-wise,
+/// eigenvalues) with an eigenvalue below [`LAPLACE_MIN_PRECISION`] is probed along its line at
+/// [`PROBE_STEPS`]; the first step whose symmetric drop reaches [`LAPLACE_STEP_DROP`] sets its
+/// eigenvalue to `2 drop / t^2` (if none does, the largest step's; never below the floor). One
+/// batched call. Returns the evaluations and the directions left at the floor, per point.
+fn probe_flat_directions(
+    points: &[Vec<f64>],
+    log_density: &[f64],
+    eig: &mut [Option<(Vec<f64>, Vec<f64>)>],
+    target: &mut impl FnMut(&[Vec<f64>]) -> Vec<f64>,
+) -> (Vec<usize>, Vec<usize>) {
     let mut pts = Vec::new();
     let mut probes = Vec::new(); // (point, eigen index, first probe row)
-    for (p, (x, e)) in points.iter().zip(&eig).enumerate() {
+    for (p, (x, e)) in points.iter().zip(eig.iter()).enumerate() {
         let Some((u, lam)) = e else { continue };
         let d = x.len();
         for k in (0..d).filter(|&k| lam[k] < LAPLACE_MIN_PRECISION) {
@@ -673,14 +729,11 @@ fn laplace_impl<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     } else {
         target(&pts)
     };
-    let mut eig = eig;
     let mut extra = vec![0usize; points.len()];
     let mut floored = vec![0usize; points.len()];
     for (p, k, first) in probes {
         let f0 = log_density[p];
         extra[p] += 2 * PROBE_STEPS.len();
-        // The first step whose symmetric drop reaches LAPLACE_STEP_DROP sets the curvature
-        // 2 drop / t^2; if none does, the largest step's (at least the floor).
         let mut curvature = LAPLACE_MIN_PRECISION;
         for (n, t) in PROBE_STEPS.iter().enumerate() {
             let (a, b) = (f3[first + 2 * n], f3[first + 2 * n + 1]);
@@ -702,30 +755,22 @@ fn laplace_impl<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
             lam[k] = curvature.min(f64::MAX);
         }
     }
-    hessians
-        .into_iter()
-        .zip(eig)
-        .enumerate()
-        .map(|(p, ((_, evaluations), e))| {
-            let covariance = e.map(|(u, lam)| {
-                let d = lam.len();
-                let mut inv = vec![0.0; d * d];
-                for i in 0..d {
-                    for j in 0..=i {
-                        let v: f64 = (0..d).map(|k| u[i * d + k] * u[j * d + k] / lam[k]).sum();
-                        inv[i * d + j] = v;
-                        inv[j * d + i] = v;
-                    }
-                }
-                inv
-            });
-            Laplace {
-                covariance,
-                floored: floored[p],
-                evaluations: evaluations + extra[p],
-            }
-        })
-        .collect()
+    (extra, floored)
+}
+
+/// The covariance `U diag(1 / lambda) U^T` from the Hessian's eigenvectors `u` (column-wise,
+/// row-major `d x d`) and eigenvalues `lam`.
+fn inverse_from_eigen(u: &[f64], lam: &[f64]) -> Vec<f64> {
+    let d = lam.len();
+    let mut inv = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..=i {
+            let v: f64 = (0..d).map(|k| u[i * d + k] * u[j * d + k] / lam[k]).sum();
+            inv[i * d + j] = v;
+            inv[j * d + i] = v;
+        }
+    }
+    inv
 }
 
 /// Hessians of the negative log density at `points` from central differences of the gradient
