@@ -1147,48 +1147,10 @@ impl BuildingSpec {
 
     /// Geometry: the zones of each storey and their surfaces (floors, ceilings and roof, exterior
     /// and matched interzone walls) with the windows.
+    /// Zones, floors, ceilings and walls (with their windows) of every storey.
     fn add_geometry(&self, m: &mut Idf) {
-        let [l, w] = self.footprint_m;
-        let h = self.floor_to_floor_m;
-        let d = self.perimeter_depth_m;
-        // Zone footprints, counterclockwise seen from above.
-        let plans: Vec<(&str, Vec<[f64; 2]>)> = match self.zoning {
-            Zoning::OnePerFloor => vec![("", vec![[0.0, 0.0], [l, 0.0], [l, w], [0.0, w]])],
-            Zoning::PerimeterCore => vec![
-                ("_South", vec![[0.0, 0.0], [l, 0.0], [l - d, d], [d, d]]),
-                ("_East", vec![[l, 0.0], [l, w], [l - d, w - d], [l - d, d]]),
-                ("_North", vec![[l, w], [0.0, w], [d, w - d], [l - d, w - d]]),
-                ("_West", vec![[0.0, w], [0.0, 0.0], [d, d], [d, w - d]]),
-                (
-                    "_Core",
-                    vec![[d, d], [l - d, d], [l - d, w - d], [d, w - d]],
-                ),
-            ],
-        };
-        let on_boundary = |a: [f64; 2], b: [f64; 2]| {
-            let eq = |x: f64, y: f64| (x - y).abs() < 1e-9;
-            (eq(a[1], 0.0) && eq(b[1], 0.0))
-                || (eq(a[0], l) && eq(b[0], l))
-                || (eq(a[1], w) && eq(b[1], w))
-                || (eq(a[0], 0.0) && eq(b[0], 0.0))
-        };
-        let fmt_pts = |pts: &[[f64; 3]]| -> Vec<String> {
-            pts.iter()
-                .flat_map(|p| [num(p[0]), num(p[1]), num(p[2])])
-                .collect()
-        };
-        // Map each directed edge to its zone suffix, to find the zone across an interior wall.
-        let edge_owner = |a: [f64; 2], b: [f64; 2]| -> Option<&str> {
-            plans.iter().find_map(|(suffix, poly)| {
-                let n = poly.len();
-                (0..n)
-                    .any(|i| poly[i] == a && poly[(i + 1) % n] == b)
-                    .then_some(*suffix)
-            })
-        };
+        let plans = self.zone_plans();
         for f in 1..=self.storeys {
-            let z0 = (f - 1) as f64 * h;
-            let z1 = z0 + h;
             for (suffix, poly) in &plans {
                 let zone = format!("F{f}{suffix}");
                 m.add(
@@ -1201,147 +1163,212 @@ impl BuildingSpec {
                         "0".into(),
                         "1".into(),
                         "1".into(),
-                        num(h),
+                        num(self.floor_to_floor_m),
                         "autocalculate".into(),
                     ],
                 );
-                let n = poly.len();
-                // Floor: outward normal down -> clockwise seen from above.
-                let floor: Vec<[f64; 3]> = poly.iter().rev().map(|p| [p[0], p[1], z0]).collect();
-                let (fc, fb, fo) = if f == 1 {
-                    (
-                        "Ground Floor".to_string(),
-                        "Ground".to_string(),
-                        String::new(),
-                    )
-                } else {
-                    (
-                        "Interior Floor".to_string(),
-                        "Surface".to_string(),
-                        format!("F{}{suffix} Ceiling", f - 1),
-                    )
-                };
-                let mut s = vec![
-                    format!("{zone} Floor"),
-                    "Floor".into(),
-                    fc,
-                    zone.clone(),
-                    "".into(),
-                    fb,
-                    fo,
-                    "NoSun".into(),
-                    "NoWind".into(),
-                    "autocalculate".into(),
-                    n.to_string(),
-                ];
-                s.extend(fmt_pts(&floor));
-                m.add("BuildingSurface:Detailed", &s);
-                let ceil: Vec<[f64; 3]> = poly.iter().map(|p| [p[0], p[1], z1]).collect();
-                let (ct, cc, cb, co, sun, wind) = if f == self.storeys {
-                    (
-                        "Roof",
-                        "Roof",
-                        "Outdoors",
-                        String::new(),
-                        "SunExposed",
-                        "WindExposed",
-                    )
-                } else {
-                    (
-                        "Ceiling",
-                        "Interior Ceiling",
-                        "Surface",
-                        format!("F{}{suffix} Floor", f + 1),
-                        "NoSun",
-                        "NoWind",
-                    )
-                };
-                let mut s = vec![
-                    format!("{zone} Ceiling"),
-                    ct.into(),
-                    cc.into(),
-                    zone.clone(),
-                    "".into(),
-                    cb.into(),
-                    co,
-                    sun.into(),
-                    wind.into(),
-                    "autocalculate".into(),
-                    n.to_string(),
-                ];
-                s.extend(fmt_pts(&ceil));
-                m.add("BuildingSurface:Detailed", &s);
-                for i in 0..n {
-                    let a = poly[i];
-                    let b = poly[(i + 1) % n];
-                    let wall = format!("{zone} Wall {}", i + 1);
-                    let pts = [
-                        [a[0], a[1], z1],
-                        [a[0], a[1], z0],
-                        [b[0], b[1], z0],
-                        [b[0], b[1], z1],
-                    ];
-                    if on_boundary(a, b) {
-                        let mut s = vec![
-                            wall.clone(),
-                            "Wall".into(),
-                            "Exterior Wall".into(),
-                            zone.clone(),
-                            "".into(),
-                            "Outdoors".into(),
-                            "".into(),
-                            "SunExposed".into(),
-                            "WindExposed".into(),
-                            "autocalculate".into(),
-                            "4".into(),
-                        ];
-                        s.extend(fmt_pts(&pts));
-                        m.add("BuildingSurface:Detailed", &s);
-                        // A centred strip window with the wall's window-to-wall ratio.
-                        let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
-                        let win_len = len * 0.98;
-                        let win_h = (self.window_to_wall * len * h / win_len).min(h - 0.2);
-                        m.add(
-                            "Window",
-                            &[
-                                format!("{wall} Window"),
-                                "Window".into(),
-                                wall,
-                                "".into(),
-                                "1".into(),
-                                num(len * 0.01),
-                                num((h - win_h) / 2.0),
-                                num(win_len),
-                                num(win_h),
-                            ],
-                        );
-                    } else {
-                        let other = edge_owner(b, a).expect("interior edge has a twin");
-                        let other_zone = format!("F{f}{other}");
-                        let other_poly = &plans.iter().find(|(s, _)| *s == other).unwrap().1;
-                        let j = (0..other_poly.len())
-                            .find(|&j| other_poly[j] == b)
-                            .expect("twin edge");
-                        let mut s = vec![
-                            wall,
-                            "Wall".into(),
-                            "Interior Wall".into(),
-                            zone.clone(),
-                            "".into(),
-                            "Surface".into(),
-                            format!("{other_zone} Wall {}", j + 1),
-                            "NoSun".into(),
-                            "NoWind".into(),
-                            "autocalculate".into(),
-                            "4".into(),
-                        ];
-                        s.extend(fmt_pts(&pts));
-                        m.add("BuildingSurface:Detailed", &s);
-                    }
+                self.add_floor_and_ceiling(m, f, suffix, poly);
+                for i in 0..poly.len() {
+                    self.add_wall(m, f, &plans, suffix, poly, i);
                 }
             }
         }
     }
+
+    /// Zone footprints of a storey, counterclockwise seen from above, with each zone's suffix
+    /// (`F{storey}{suffix}`).
+    fn zone_plans(&self) -> Vec<(&'static str, Vec<[f64; 2]>)> {
+        let [l, w] = self.footprint_m;
+        let d = self.perimeter_depth_m;
+        match self.zoning {
+            Zoning::OnePerFloor => vec![("", vec![[0.0, 0.0], [l, 0.0], [l, w], [0.0, w]])],
+            Zoning::PerimeterCore => vec![
+                ("_South", vec![[0.0, 0.0], [l, 0.0], [l - d, d], [d, d]]),
+                ("_East", vec![[l, 0.0], [l, w], [l - d, w - d], [l - d, d]]),
+                ("_North", vec![[l, w], [0.0, w], [d, w - d], [l - d, w - d]]),
+                ("_West", vec![[0.0, w], [0.0, 0.0], [d, d], [d, w - d]]),
+                (
+                    "_Core",
+                    vec![[d, d], [l - d, d], [l - d, w - d], [d, w - d]],
+                ),
+            ],
+        }
+    }
+
+    /// The floor (on the ground, or over the zone below) and the ceiling (the roof, or under
+    /// the zone above) of zone `F{f}{suffix}` with footprint `poly`.
+    fn add_floor_and_ceiling(&self, m: &mut Idf, f: u32, suffix: &str, poly: &[[f64; 2]]) {
+        let zone = format!("F{f}{suffix}");
+        let z0 = (f - 1) as f64 * self.floor_to_floor_m;
+        let z1 = z0 + self.floor_to_floor_m;
+        let n = poly.len();
+        // Floor: outward normal down -> clockwise seen from above.
+        let floor: Vec<[f64; 3]> = poly.iter().rev().map(|p| [p[0], p[1], z0]).collect();
+        let (fc, fb, fo) = if f == 1 {
+            (
+                "Ground Floor".to_string(),
+                "Ground".to_string(),
+                String::new(),
+            )
+        } else {
+            (
+                "Interior Floor".to_string(),
+                "Surface".to_string(),
+                format!("F{}{suffix} Ceiling", f - 1),
+            )
+        };
+        let mut s = vec![
+            format!("{zone} Floor"),
+            "Floor".into(),
+            fc,
+            zone.clone(),
+            "".into(),
+            fb,
+            fo,
+            "NoSun".into(),
+            "NoWind".into(),
+            "autocalculate".into(),
+            n.to_string(),
+        ];
+        s.extend(vertices(&floor));
+        m.add("BuildingSurface:Detailed", &s);
+        let ceil: Vec<[f64; 3]> = poly.iter().map(|p| [p[0], p[1], z1]).collect();
+        let (ct, cc, cb, co, sun, wind) = if f == self.storeys {
+            (
+                "Roof",
+                "Roof",
+                "Outdoors",
+                String::new(),
+                "SunExposed",
+                "WindExposed",
+            )
+        } else {
+            (
+                "Ceiling",
+                "Interior Ceiling",
+                "Surface",
+                format!("F{}{suffix} Floor", f + 1),
+                "NoSun",
+                "NoWind",
+            )
+        };
+        let mut s = vec![
+            format!("{zone} Ceiling"),
+            ct.into(),
+            cc.into(),
+            zone,
+            "".into(),
+            cb.into(),
+            co,
+            sun.into(),
+            wind.into(),
+            "autocalculate".into(),
+            n.to_string(),
+        ];
+        s.extend(vertices(&ceil));
+        m.add("BuildingSurface:Detailed", &s);
+    }
+
+    /// Wall `i + 1` of zone `F{f}{suffix}` (the edge from `poly[i]` to the next vertex): on the
+    /// footprint's boundary an exterior wall with a centred strip window at the spec's
+    /// window-to-wall ratio; inside, an interior wall facing its twin in the zone across
+    /// (`plans`: the storey's zones).
+    fn add_wall(
+        &self,
+        m: &mut Idf,
+        f: u32,
+        plans: &[(&str, Vec<[f64; 2]>)],
+        suffix: &str,
+        poly: &[[f64; 2]],
+        i: usize,
+    ) {
+        let [l, w] = self.footprint_m;
+        let h = self.floor_to_floor_m;
+        let zone = format!("F{f}{suffix}");
+        let z0 = (f - 1) as f64 * h;
+        let z1 = z0 + h;
+        let n = poly.len();
+        let a = poly[i];
+        let b = poly[(i + 1) % n];
+        let wall = format!("{zone} Wall {}", i + 1);
+        let pts = [
+            [a[0], a[1], z1],
+            [a[0], a[1], z0],
+            [b[0], b[1], z0],
+            [b[0], b[1], z1],
+        ];
+        let eq = |x: f64, y: f64| (x - y).abs() < 1e-9;
+        let on_boundary = (eq(a[1], 0.0) && eq(b[1], 0.0))
+            || (eq(a[0], l) && eq(b[0], l))
+            || (eq(a[1], w) && eq(b[1], w))
+            || (eq(a[0], 0.0) && eq(b[0], 0.0));
+        if on_boundary {
+            let mut s = vec![
+                wall.clone(),
+                "Wall".into(),
+                "Exterior Wall".into(),
+                zone,
+                "".into(),
+                "Outdoors".into(),
+                "".into(),
+                "SunExposed".into(),
+                "WindExposed".into(),
+                "autocalculate".into(),
+                "4".into(),
+            ];
+            s.extend(vertices(&pts));
+            m.add("BuildingSurface:Detailed", &s);
+            // A centred strip window with the wall's window-to-wall ratio.
+            let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+            let win_len = len * 0.98;
+            let win_h = (self.window_to_wall * len * h / win_len).min(h - 0.2);
+            m.add(
+                "Window",
+                &[
+                    format!("{wall} Window"),
+                    "Window".into(),
+                    wall,
+                    "".into(),
+                    "1".into(),
+                    num(len * 0.01),
+                    num((h - win_h) / 2.0),
+                    num(win_len),
+                    num(win_h),
+                ],
+            );
+        } else {
+            // The zone across: the one whose footprint has the same edge the other way round.
+            let (other, other_poly) = plans
+                .iter()
+                .find(|(_, q)| (0..q.len()).any(|j| q[j] == b && q[(j + 1) % q.len()] == a))
+                .expect("interior edge has a twin");
+            let j = (0..other_poly.len())
+                .find(|&j| other_poly[j] == b)
+                .expect("twin edge");
+            let mut s = vec![
+                wall,
+                "Wall".into(),
+                "Interior Wall".into(),
+                zone,
+                "".into(),
+                "Surface".into(),
+                format!("F{f}{other} Wall {}", j + 1),
+                "NoSun".into(),
+                "NoWind".into(),
+                "autocalculate".into(),
+                "4".into(),
+            ];
+            s.extend(vertices(&pts));
+            m.add("BuildingSurface:Detailed", &s);
+        }
+    }
+}
+
+/// A surface's vertices as IDF fields (x, y, z of each).
+fn vertices(pts: &[[f64; 3]]) -> Vec<String> {
+    pts.iter()
+        .flat_map(|p| [num(p[0]), num(p[1]), num(p[2])])
+        .collect()
 }
 
 /// Meters every generated model reports hourly.
