@@ -839,7 +839,6 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
 /// The estimated parameters (the reference's Table 4): prior, posterior and estimate per
 /// parameter (with the surrogate error carried in, where measured), and the correlated pairs.
 fn parameters_table(s: &crate::io::Summary) -> String {
-    let post = &s.posterior;
     let mut h = String::new();
     h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");
     let carried = s.surrogate_error.as_ref();
@@ -866,84 +865,96 @@ fn parameters_table(s: &crate::io::Summary) -> String {
         }
     );
     for (k, p) in s.parameters.iter().enumerate() {
-        let q = post.of(k, &p.name);
-        let est = s
-            .calibrated_values
-            .iter()
-            .find(|x| x.0 == p.name)
-            .map_or(f64::NAN, |x| x.1);
-        let p5 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.05);
-        let p95 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.95);
-        let _ = write!(
-            h,
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>",
-            esc(&p.name),
-            esc(&p.unit),
-            g(p.prior_min),
-            g(p.prior_mode),
-            g(p.prior_max),
-            g(p5),
-            g(p95)
-        );
-        match q {
-            Some(q) => {
-                let wr = if q.width_ratio > WIDTH_RATIO_LIMIT {
-                    " class=\"flag\""
-                } else {
-                    ""
-                };
-                let rh = if q.rhat > RHAT_LIMIT {
-                    " class=\"flag\""
-                } else {
-                    ""
-                };
-                let es = if q.ess_bulk < ESS_LIMIT {
-                    " class=\"flag\""
-                } else {
-                    ""
-                };
-                let with_error = carried.map_or(String::new(), |c| {
-                    c.parameters
-                        .iter()
-                        .find(|x| x.name == p.name)
-                        .map_or("<td>&ndash;</td>".into(), |x| {
-                            format!("<td>{}&ndash;{}</td>", g(x.q5), g(x.q95))
-                        })
-                });
-                let _ = write!(
-                    h,
-                    "<td>{} &plusmn; {}</td><td>{}&ndash;{}</td>{with_error}<td><b>{}</b></td><td{wr}>{}</td><td{rh}>{}</td><td{es}>{}</td><td>{}</td></tr>",
-                    g(q.mean),
-                    g(q.sd),
-                    g(q.q5),
-                    g(q.q95),
-                    g(est),
-                    f(q.width_ratio, 2),
-                    f(q.rhat, 3),
-                    f(q.ess_bulk, 0),
-                    f(q.ess_tail, 0)
-                );
-            }
-            None => {
-                let cols = if carried.is_some() { 8 } else { 7 };
-                let _ = write!(h, "<td colspan=\"{cols}\">no posterior summary</td></tr>");
-            }
-        }
+        h.push_str(&parameter_row(s, k, p));
     }
     h.push_str("</table>");
-    if !post.correlated_pairs.is_empty() {
-        h.push_str("<h3>Correlated pairs (|&rho;| &gt; 0.8)</h3><table><tr><th class=\"l\">a</th><th class=\"l\">b</th><th>&rho;</th></tr>");
-        for c in &post.correlated_pairs {
-            let _ = write!(
-                h,
-                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:+.3}</td></tr>",
-                esc(&c.a),
-                esc(&c.b),
-                c.rho
-            );
-        }
-        h.push_str("</table>");
+    h.push_str(&correlated_pairs_table(&s.posterior));
+    h
+}
+
+/// ` class="flag"` where a diagnostic misses its limit.
+fn flag(missed: bool) -> &'static str {
+    if missed {
+        " class=\"flag\""
+    } else {
+        ""
     }
+}
+
+/// One row of the parameters table: the prior, the posterior's summary and diagnostics (each
+/// flagged past its limit), the interval with the surrogate's error where it is carried, and
+/// the estimate.
+fn parameter_row(s: &crate::io::Summary, k: usize, p: &crate::io::PriorInfo) -> String {
+    let mut h = String::new();
+    let carried = s.surrogate_error.as_ref();
+    let est = s
+        .calibrated_values
+        .iter()
+        .find(|x| x.0 == p.name)
+        .map_or(f64::NAN, |x| x.1);
+    let p5 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.05);
+    let p95 = analysis::triangular_quantile(p.prior_min, p.prior_mode, p.prior_max, 0.95);
+    let _ = write!(
+        h,
+        "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>",
+        esc(&p.name),
+        esc(&p.unit),
+        g(p.prior_min),
+        g(p.prior_mode),
+        g(p.prior_max),
+        g(p5),
+        g(p95)
+    );
+    let Some(q) = s.posterior.of(k, &p.name) else {
+        let cols = if carried.is_some() { 8 } else { 7 };
+        let _ = write!(h, "<td colspan=\"{cols}\">no posterior summary</td></tr>");
+        return h;
+    };
+    let wr = flag(q.width_ratio > WIDTH_RATIO_LIMIT);
+    let rh = flag(q.rhat > RHAT_LIMIT);
+    let es = flag(q.ess_bulk < ESS_LIMIT);
+    let with_error = carried.map_or(String::new(), |c| {
+        c.parameters
+            .iter()
+            .find(|x| x.name == p.name)
+            .map_or("<td>&ndash;</td>".into(), |x| {
+                format!("<td>{}&ndash;{}</td>", g(x.q5), g(x.q95))
+            })
+    });
+    let _ = write!(
+        h,
+        "<td>{} &plusmn; {}</td><td>{}&ndash;{}</td>{with_error}<td><b>{}</b></td><td{wr}>{}</td><td{rh}>{}</td><td{es}>{}</td><td>{}</td></tr>",
+        g(q.mean),
+        g(q.sd),
+        g(q.q5),
+        g(q.q95),
+        g(est),
+        f(q.width_ratio, 2),
+        f(q.rhat, 3),
+        f(q.ess_bulk, 0),
+        f(q.ess_tail, 0)
+    );
+    h
+}
+
+/// The pairs of parameters whose posterior correlation exceeds 0.8 in magnitude (empty when
+/// there are none).
+fn correlated_pairs_table(post: &crate::io::PosteriorBlock) -> String {
+    let mut h = String::new();
+    if post.correlated_pairs.is_empty() {
+        return h;
+    }
+    h.push_str("<h3>Correlated pairs (|&rho;| &gt; 0.8)</h3><table><tr><th class=\"l\">a</th><th class=\"l\">b</th><th>&rho;</th></tr>");
+    for c in &post.correlated_pairs {
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{:+.3}</td></tr>",
+            esc(&c.a),
+            esc(&c.b),
+            c.rho
+        );
+    }
+    h.push_str("</table>");
     h
 }
 
