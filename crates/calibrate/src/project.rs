@@ -702,6 +702,15 @@ impl Project {
     /// every role that `[outputs]` or a `[[bases]]` sub-meter names is a column's role and
     /// every column's role is compared with a model output or is a base.
     pub fn check_model(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
+        self.check_fixed(model)?;
+        let outputs: Vec<&str> = model.outputs().iter().map(|o| o.name.as_str()).collect();
+        self.check_outputs(&outputs)?;
+        self.check_meter_roles(&outputs)
+    }
+
+    /// `[fixed]`: each a parameter of the model, finite, inside its prior, and together
+    /// within the model's constraints.
+    fn check_fixed(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
         let params = model.parameters();
         let param_names = || {
             params
@@ -745,7 +754,11 @@ impl Project {
                 self.error_at(&["fixed", &c.upper], format!("[fixed] {message}"))
             })?;
         }
-        let outputs: Vec<&str> = model.outputs().iter().map(|o| o.name.as_str()).collect();
+        Ok(())
+    }
+
+    /// `[outputs]` and `[[bases]]` name outputs the model has (`outputs`).
+    fn check_outputs(&self, outputs: &[&str]) -> Result<(), Error> {
         let roles = self.output_roles();
         for (name, role) in &roles {
             if !outputs.contains(&name.as_str()) {
@@ -774,8 +787,15 @@ impl Project {
                 ));
             }
         }
-        // Roles of the meters: known only when the columns are listed (otherwise they are
-        // detected from the CSV's headers, checked once it is read).
+        Ok(())
+    }
+
+    /// The meters' columns against the outputs and bases: every output's role and every
+    /// base's submeter has a column, and every column is used. Roles are known only when the
+    /// columns are listed (otherwise they are detected from the CSV's headers, checked once it
+    /// is read).
+    fn check_meter_roles(&self, outputs: &[&str]) -> Result<(), Error> {
+        let roles = self.output_roles();
         let columns = &self.meters.columns;
         if columns.is_empty() {
             return Ok(());
