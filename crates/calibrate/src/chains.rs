@@ -298,7 +298,6 @@ impl Sampler<'_> {
         let cal = self.cal;
         let inp = &cal.inputs;
         let d = inp.plan.calibrated.len();
-        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
         let theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
         let priors: Vec<Prior> = inp
             .plan
@@ -337,95 +336,15 @@ impl Sampler<'_> {
                 crate::predictive::pick(post.plan, &inp.model, draws, k),
             ),
         };
-        let mut residual_ar1: Vec<(String, f64)> = vec![];
-        let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
-            Some(b) => (0..n_out)
-                .map(|k| {
-                    let mut v: Vec<f64> = draws
-                        .iter()
-                        .flat_map(|dr| dr.column(d + k))
-                        .map(|u| b.sigma(k, u))
-                        .collect();
-                    v.sort_by(f64::total_cmp);
-                    (inp.outputs[k].clone(), v[v.len() / 2])
-                })
-                .collect(),
-            None if post.marginal => {
-                // Posterior mean of sigma_k^2 given the MAP parameters, InvGamma(n/2, SSR/2):
-                // SSR / (n - 2); sigma_delta is what is left after sigma_y and sigma_eta.
-                let y = eval.evaluate(&posterior.map_point)?;
-                let flat = y.as_slice().expect("contiguous prediction");
-                let ssr = post.likelihood.residual_sum_of_squares(flat);
-                if post.ar1 {
-                    residual_ar1 = inp
-                        .outputs
-                        .iter()
-                        .cloned()
-                        .zip(post.likelihood.ar1_coefficients(flat))
-                        .collect();
-                }
-                let n_obs = post.likelihood.n_observed();
-                inp.outputs
-                    .iter()
-                    .enumerate()
-                    .map(|(k, name)| {
-                        let total = ssr[k] / (n_obs[k] as f64 - 2.0).max(1.0);
-                        let z = &noise[k];
-                        let rest = total - z.sigma_y * z.sigma_y - z.sigma_eta * z.sigma_eta;
-                        (name.clone(), rest.max(0.0).sqrt())
-                    })
-                    .collect()
-            }
-            None => inp
-                .outputs
-                .iter()
-                .zip(&noise)
-                .map(|(n, z)| (n.clone(), z.sigma_delta))
-                .collect(),
-        };
-        // Posterior predictive bands from draws spread over all chains.
-        let all: Vec<Vec<f64>> = theta_draws
-            .iter()
-            .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
-            .collect();
-        let want = cal.project.mcmc.predictive_draws.max(1);
-        let step = (all.len() / want).max(1);
-        let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
-        let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
-        for chunk in picks.chunks(8) {
-            let y = eval.evaluate_batch(chunk)?;
-            for b in 0..chunk.len() {
-                for (k, p) in pred.iter_mut().enumerate() {
-                    p.extend((0..n_h).map(|h| y[[b, h, k]]));
-                }
-            }
-        }
-        let mut bands = vec![];
-        for (k, p) in pred.iter().enumerate() {
-            let mut b = predictive_bands(p, picks.len(), n_h)?;
-            for q in [&mut b.q5, &mut b.q50, &mut b.q95] {
-                *q = inp.with_base(k, q);
-            }
-            bands.push(b);
-        }
-        write_bands_csv(
-            &cal.out.posterior_predictive_csv(),
-            inp.year,
-            &inp.outputs,
-            &(0..n_out).map(|k| inp.meter(k)).collect::<Vec<_>>(),
-            &bands,
-        )?;
+        let (sigma_delta_kwh, residual_ar1) =
+            noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
+        write_posterior_predictive(cal, &post, eval, &theta_draws)?;
         let estimate: Vec<f64> = match cal.project.validation.estimate {
             Estimate::Map => posterior.map_point.clone(),
             Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
             Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
         };
-        let y = eval.evaluate(&estimate)?;
-        let mut surrogate_at_estimate = vec![];
-        for (k, name) in inp.outputs.iter().enumerate() {
-            let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
-            surrogate_at_estimate.push(inp.metrics(k, name, &pred)?);
-        }
+        let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
         let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
             .iter()
             .map(|u| post.theta(u))
@@ -455,6 +374,131 @@ impl Sampler<'_> {
             predictive,
         })
     }
+}
+
+/// One value per output, named.
+type PerOutput = Vec<(String, f64)>;
+
+/// The noise the summary reports: sigma_delta per output in kWh (the median of the sampled
+/// ones; with the variance integrated out, the posterior mean of sigma^2 at the MAP point,
+/// SSR / (n - 2), less sigma_y^2 and sigma_eta^2; else the fixed value) and, with AR(1)
+/// residuals, each output's profile phi at the MAP point.
+fn noise_summary(
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    inp: &crate::Inputs,
+    noise: &[OutputNoise],
+    draws: &[Draws],
+    map_point: &[f64],
+) -> Result<(PerOutput, PerOutput), Error> {
+    let d = inp.plan.calibrated.len();
+    let n_out = inp.outputs.len();
+    let mut residual_ar1: Vec<(String, f64)> = vec![];
+    let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
+        Some(b) => (0..n_out)
+            .map(|k| {
+                let mut v: Vec<f64> = draws
+                    .iter()
+                    .flat_map(|dr| dr.column(d + k))
+                    .map(|u| b.sigma(k, u))
+                    .collect();
+                v.sort_by(f64::total_cmp);
+                (inp.outputs[k].clone(), v[v.len() / 2])
+            })
+            .collect(),
+        None if post.marginal => {
+            // Posterior mean of sigma_k^2 given the MAP parameters, InvGamma(n/2, SSR/2):
+            // SSR / (n - 2); sigma_delta is what is left after sigma_y and sigma_eta.
+            let y = eval.evaluate(map_point)?;
+            let flat = y.as_slice().expect("contiguous prediction");
+            let ssr = post.likelihood.residual_sum_of_squares(flat);
+            if post.ar1 {
+                residual_ar1 = inp
+                    .outputs
+                    .iter()
+                    .cloned()
+                    .zip(post.likelihood.ar1_coefficients(flat))
+                    .collect();
+            }
+            let n_obs = post.likelihood.n_observed();
+            inp.outputs
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    let total = ssr[k] / (n_obs[k] as f64 - 2.0).max(1.0);
+                    let z = &noise[k];
+                    let rest = total - z.sigma_y * z.sigma_y - z.sigma_eta * z.sigma_eta;
+                    (name.clone(), rest.max(0.0).sqrt())
+                })
+                .collect()
+        }
+        None => inp
+            .outputs
+            .iter()
+            .zip(noise)
+            .map(|(n, z)| (n.clone(), z.sigma_delta))
+            .collect(),
+    };
+    Ok((sigma_delta_kwh, residual_ar1))
+}
+
+/// `posterior_predictive.csv`: the surrogate's 5 / 50 / 95 % bands (plus the bases) from
+/// `mcmc.predictive_draws` draws spread over all chains, beside the meters.
+fn write_posterior_predictive(
+    cal: &Calibration,
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    theta_draws: &[Draws],
+) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
+    let all: Vec<Vec<f64>> = theta_draws
+        .iter()
+        .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
+        .collect();
+    let want = cal.project.mcmc.predictive_draws.max(1);
+    let step = (all.len() / want).max(1);
+    let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
+    let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
+    for chunk in picks.chunks(8) {
+        let y = eval.evaluate_batch(chunk)?;
+        for b in 0..chunk.len() {
+            for (k, p) in pred.iter_mut().enumerate() {
+                p.extend((0..n_h).map(|h| y[[b, h, k]]));
+            }
+        }
+    }
+    let mut bands = vec![];
+    for (k, p) in pred.iter().enumerate() {
+        let mut b = predictive_bands(p, picks.len(), n_h)?;
+        for q in [&mut b.q5, &mut b.q50, &mut b.q95] {
+            *q = inp.with_base(k, q);
+        }
+        bands.push(b);
+    }
+    write_bands_csv(
+        &cal.out.posterior_predictive_csv(),
+        inp.year,
+        &inp.outputs,
+        &(0..n_out).map(|k| inp.meter(k)).collect::<Vec<_>>(),
+        &bands,
+    )
+}
+
+/// Guideline 14 of the surrogate at `estimate` against the meters, per output.
+fn surrogate_metrics_at(
+    inp: &crate::Inputs,
+    eval: &mut Evaluator,
+    estimate: &[f64],
+) -> Result<Vec<OutputMetrics>, Error> {
+    let n_h = inp.features.len();
+    let y = eval.evaluate(estimate)?;
+    let mut metrics = vec![];
+    for (k, name) in inp.outputs.iter().enumerate() {
+        let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
+        metrics.push(inp.metrics(k, name, &pred)?);
+    }
+    Ok(metrics)
 }
 
 /// Chain states at `starts` (chain `c` gets random stream `first_chain + c`): optimised first
