@@ -663,6 +663,13 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     let (weekday_05, weekend_06) = (0.75, 0.35);
     // EnergyPlus at the true values: `command` (synthesize or simulate) of `model` into `out`.
     let epw = golden_epw();
+    // The true values as `--set` arguments.
+    let truth_set = [
+        "--set".to_string(),
+        format!("schedule_weekday_05={weekday_05}"),
+        "--set".to_string(),
+        format!("schedule_weekend_06={weekend_06}"),
+    ];
     let at_truth = |command: &str, model: &str, out: &str| {
         run_ok(
             bemcal()
@@ -670,13 +677,8 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
                 .arg(dir.join(model))
                 .arg("--weather")
                 .arg(&epw)
-                .args([
-                    "--set",
-                    &format!("schedule_weekday_05={weekday_05}"),
-                    "--set",
-                    &format!("schedule_weekend_06={weekend_06}"),
-                    "--out",
-                ])
+                .args(&truth_set)
+                .arg("--out")
                 .arg(dir.join(out)),
         )
     };
@@ -822,13 +824,8 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
                 .arg("--weather")
                 .arg(&epw)
                 .args(calendar)
-                .args([
-                    "--set",
-                    &format!("schedule_weekday_05={weekday_05}"),
-                    "--set",
-                    &format!("schedule_weekend_06={weekend_06}"),
-                    "--out",
-                ])
+                .args(&truth_set)
+                .arg("--out")
                 .arg(dir.join(out)),
         );
         fridays(&dir.join(out))
