@@ -1201,7 +1201,6 @@ impl BuildingSpec {
         let zone = format!("F{f}{suffix}");
         let z0 = (f - 1) as f64 * self.floor_to_floor_m;
         let z1 = z0 + self.floor_to_floor_m;
-        let n = poly.len();
         // Floor: outward normal down -> clockwise seen from above.
         let floor: Vec<[f64; 3]> = poly.iter().rev().map(|p| [p[0], p[1], z0]).collect();
         let (fc, fb, fo) = if f == 1 {
@@ -1217,21 +1216,20 @@ impl BuildingSpec {
                 format!("F{}{suffix} Ceiling", f - 1),
             )
         };
-        let mut s = vec![
-            format!("{zone} Floor"),
-            "Floor".into(),
-            fc,
-            zone.clone(),
-            "".into(),
-            fb,
-            fo,
-            "NoSun".into(),
-            "NoWind".into(),
-            "autocalculate".into(),
-            n.to_string(),
-        ];
-        s.extend(vertices(&floor));
-        m.add("BuildingSurface:Detailed", &s);
+        add_surface(
+            m,
+            [
+                &format!("{zone} Floor"),
+                "Floor",
+                &fc,
+                &zone,
+                &fb,
+                &fo,
+                "NoSun",
+                "NoWind",
+            ],
+            &floor,
+        );
         let ceil: Vec<[f64; 3]> = poly.iter().map(|p| [p[0], p[1], z1]).collect();
         let (ct, cc, cb, co, sun, wind) = if f == self.storeys {
             (
@@ -1252,21 +1250,20 @@ impl BuildingSpec {
                 "NoWind",
             )
         };
-        let mut s = vec![
-            format!("{zone} Ceiling"),
-            ct.into(),
-            cc.into(),
-            zone,
-            "".into(),
-            cb.into(),
-            co,
-            sun.into(),
-            wind.into(),
-            "autocalculate".into(),
-            n.to_string(),
-        ];
-        s.extend(vertices(&ceil));
-        m.add("BuildingSurface:Detailed", &s);
+        add_surface(
+            m,
+            [
+                &format!("{zone} Ceiling"),
+                ct,
+                cc,
+                &zone,
+                cb,
+                &co,
+                sun,
+                wind,
+            ],
+            &ceil,
+        );
     }
 
     /// Wall `i + 1` of zone `F{f}{suffix}` (the edge from `poly[i]` to the next vertex): on the
@@ -1303,21 +1300,20 @@ impl BuildingSpec {
             || (eq(a[1], w) && eq(b[1], w))
             || (eq(a[0], 0.0) && eq(b[0], 0.0));
         if on_boundary {
-            let mut s = vec![
-                wall.clone(),
-                "Wall".into(),
-                "Exterior Wall".into(),
-                zone,
-                "".into(),
-                "Outdoors".into(),
-                "".into(),
-                "SunExposed".into(),
-                "WindExposed".into(),
-                "autocalculate".into(),
-                "4".into(),
-            ];
-            s.extend(vertices(&pts));
-            m.add("BuildingSurface:Detailed", &s);
+            add_surface(
+                m,
+                [
+                    &wall,
+                    "Wall",
+                    "Exterior Wall",
+                    &zone,
+                    "Outdoors",
+                    "",
+                    "SunExposed",
+                    "WindExposed",
+                ],
+                &pts,
+            );
             // A centred strip window with the wall's window-to-wall ratio.
             let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
             let win_len = len * 0.98;
@@ -1345,30 +1341,48 @@ impl BuildingSpec {
             let j = (0..other_poly.len())
                 .find(|&j| other_poly[j] == b)
                 .expect("twin edge");
-            let mut s = vec![
-                wall,
-                "Wall".into(),
-                "Interior Wall".into(),
-                zone,
-                "".into(),
-                "Surface".into(),
-                format!("F{f}{other} Wall {}", j + 1),
-                "NoSun".into(),
-                "NoWind".into(),
-                "autocalculate".into(),
-                "4".into(),
-            ];
-            s.extend(vertices(&pts));
-            m.add("BuildingSurface:Detailed", &s);
+            let facing = format!("F{f}{other} Wall {}", j + 1);
+            add_surface(
+                m,
+                [
+                    &wall,
+                    "Wall",
+                    "Interior Wall",
+                    &zone,
+                    "Surface",
+                    &facing,
+                    "NoSun",
+                    "NoWind",
+                ],
+                &pts,
+            );
         }
     }
 }
 
-/// A surface's vertices as IDF fields (x, y, z of each).
-fn vertices(pts: &[[f64; 3]]) -> Vec<String> {
-    pts.iter()
-        .flat_map(|p| [num(p[0]), num(p[1]), num(p[2])])
-        .collect()
+/// A `BuildingSurface:Detailed`: `[name, type, construction, zone, outside boundary condition,
+/// its object, sun exposure, wind exposure]` (the space field left empty), then the vertex
+/// count and each vertex's x, y, z.
+fn add_surface(m: &mut Idf, fields: [&str; 8], pts: &[[f64; 3]]) {
+    let [name, kind, construction, zone, boundary, object, sun, wind] = fields;
+    let mut s: Vec<String> = [
+        name,
+        kind,
+        construction,
+        zone,
+        "",
+        boundary,
+        object,
+        sun,
+        wind,
+    ]
+    .iter()
+    .map(|f| f.to_string())
+    .collect();
+    s.push("autocalculate".into());
+    s.push(pts.len().to_string());
+    s.extend(pts.iter().flat_map(|p| [num(p[0]), num(p[1]), num(p[2])]));
+    m.add("BuildingSurface:Detailed", &s);
 }
 
 /// Meters every generated model reports hourly.
