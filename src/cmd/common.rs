@@ -15,9 +15,9 @@ pub fn load_model(path: &Path) -> anyhow::Result<(Model, Runner)> {
     Ok((model, runner))
 }
 
-/// The year a model simulates (2021 for IDF models without a spec).
+/// The year a model simulates (its `year`, 2021 by default).
 pub fn model_year(model: &Model) -> GridYear {
-    model.spec().map_or(GridYear::calendar(2021), |s| s.year)
+    model.calendar().year
 }
 
 /// Writes `timestamp,<output>...` with ISO 8601 local, hour-beginning timestamps, in time order

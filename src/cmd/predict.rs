@@ -71,7 +71,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read {}", path.display()))?;
-            bemcal_energyplus::BuildingSpec::from_toml(&text, path)?.calendar()
+            bemcal_energyplus::Model::calendar_from_toml(&text, path)?
         }
         None => Calendar::new(args.year, Holidays::UsFederal),
     };

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
 use bemcal_precal::meters::{read_meters, MeterRole};
 use bemcal_precal::pipeline::PriorsFile;
-use bemcal_weather::{Calendar, Epw, Holidays, HourlyFeatures};
+use bemcal_weather::{Epw, HourlyFeatures};
 
 use crate::design::Plan;
 use crate::project::{excerpt, Project};
@@ -217,10 +217,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let runner = Runner::new(engine, RunOptions::default())?;
     let model = load_model(project, &runner)?;
     let plan = Plan::new(&model, &project.calibrate, &project.fixed)?;
-    let calendar = model
-        .spec()
-        .map(|s| s.calendar())
-        .unwrap_or(Calendar::new(2021, Holidays::UsFederal));
+    let calendar = model.calendar();
     let (weather_path, measured_weather) = weather_for(project, runner.engine(), calendar.year)?;
     let epw = Epw::read(&weather_path)?;
     let features = HourlyFeatures::from_epw(&epw, &calendar);

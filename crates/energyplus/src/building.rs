@@ -14,7 +14,6 @@ use serde::{Deserialize, Serialize};
 
 use bemcal_weather::grid::GridYear;
 use bemcal_weather::{Calendar, Holidays};
-use chrono::Datelike;
 
 use crate::idf::{num, Idf};
 use crate::params::{Constraint, ParameterDef, ParameterValues, TriangularPrior};
@@ -101,7 +100,7 @@ pub struct BuildingSpec {
     /// The year simulated: a calendar year (`2021`) or twelve months from another month
     /// (`"2017-04"`: 1 April 2017 to 31 March 2018, the run period across the year end), which
     /// sets the weekdays and holidays of each date; it must be the meters' year.
-    #[serde(default = "default_year")]
+    #[serde(default = "crate::calendar::default_year")]
     pub year: GridYear,
     /// Holidays run on the weekend schedule (`RunPeriodControl:SpecialDays`); the same
     /// calendar gives the surrogate its day types.
@@ -163,9 +162,6 @@ pub fn default_weekday_bounds() -> Vec<u32> {
 /// Default weekend intervals: 10, as in the reference.
 pub fn default_weekend_bounds() -> Vec<u32> {
     vec![6, 8, 10, 12, 14, 16, 18, 20, 22, 24]
-}
-fn default_year() -> GridYear {
-    GridYear::calendar(2021)
 }
 
 /// Reference Table 2 schedule priors (weekdays, 12 intervals).
@@ -256,30 +252,16 @@ impl BuildingSpec {
     /// Parses and validates a spec from TOML text.
     pub fn from_toml(text: &str, path: &std::path::Path) -> Result<BuildingSpec, Error> {
         let mut spec: BuildingSpec = crate::parse_toml(text, path)?;
-        if let Some(file) = &spec.holidays_file {
-            let file = path
-                .parent()
-                .unwrap_or(std::path::Path::new("."))
-                .join(file);
-            let dates = bemcal_weather::read_holiday_list(&file).map_err(|e| Error::Input {
-                path: path.to_path_buf(),
-                line: crate::toml_line(text, &["holidays_file"]),
-                message: format!("holidays_file: {e}"),
-            })?;
-            spec.holidays = Holidays::Dates(dates);
+        let (holidays, observed) = crate::calendar::read_calendar_files(
+            text,
+            path,
+            spec.holidays_file.as_ref(),
+            spec.day_types_file.as_ref(),
+        )?;
+        if let Some(h) = holidays {
+            spec.holidays = h;
         }
-        if let Some(file) = &spec.day_types_file {
-            let file = path
-                .parent()
-                .unwrap_or(std::path::Path::new("."))
-                .join(file);
-            spec.observed_day_types =
-                bemcal_weather::read_day_type_calendar(&file).map_err(|e| Error::Input {
-                    path: path.to_path_buf(),
-                    line: crate::toml_line(text, &["day_types_file"]),
-                    message: format!("day_types_file: {e}"),
-                })?;
-        }
+        spec.observed_day_types = observed;
         spec.check_fields().map_err(|(key, message)| Error::Input {
             path: path.to_path_buf(),
             line: crate::toml_line(text, &key.iter().map(String::as_str).collect::<Vec<_>>()),
@@ -526,7 +508,7 @@ impl BuildingSpec {
         let mut m = Idf::new();
         self.add_simulation_control(&mut m);
         self.add_sizing_periods(&mut m);
-        self.add_run_period(&mut m);
+        crate::calendar::add_run_period(&mut m, &self.calendar());
         m.add(
             "Site:GroundTemperature:BuildingSurface",
             &["18"; 12].map(String::from),
@@ -598,66 +580,6 @@ impl BuildingSpec {
             ],
         );
         m.add("Sizing:Parameters", &["1.2", "1.2"]);
-    }
-
-    /// The run period (the spec's year, across the year end for a year from another month) and
-    /// its special days (`RunPeriodControl:SpecialDays`) from the spec's calendar.
-    ///
-    /// EnergyPlus counts weekdays on from the run period's first day and simulates no
-    /// 29 February when the weather file has none, so after a leap day its weekdays run one day
-    /// behind the real calendar (1 March 2020, a Sunday, simulates as a Saturday). Each date's
-    /// schedule is therefore set against the weekday EnergyPlus will give it: a working day it
-    /// counts as a weekend is `CustomDay1` (the weekday schedule), an off day it counts as a
-    /// weekday is a `Holiday` (the weekend schedule).
-    fn add_run_period(&self, m: &mut Idf) {
-        let year = self.year;
-        let (first, last) = (year.first_date(), year.last_date());
-        m.add(
-            "RunPeriod",
-            &[
-                "Year".to_string(),
-                first.month().to_string(),
-                first.day().to_string(),
-                first.year().to_string(),
-                last.month().to_string(),
-                last.day().to_string(),
-                last.year().to_string(),
-                bemcal_weather::grid::weekday_name(first.weekday()).into(),
-                "No".into(),
-                "No".into(),
-                "No".into(),
-                "Yes".into(),
-                "Yes".into(),
-            ],
-        );
-        let calendar = self.calendar();
-        let mut special = 0;
-        let simulated = first
-            .iter_days()
-            .take_while(|d| *d <= last)
-            .filter(|d| year.covers(*d));
-        for (k, date) in simulated.enumerate() {
-            let t = calendar
-                .day_type(date.month(), date.day())
-                .expect("a date of the year");
-            let energyplus_weekday = first.weekday().num_days_from_monday() as usize + k;
-            let weekend = energyplus_weekday % 7 >= 5;
-            let kind = match (t.is_off_day(), weekend) {
-                (true, false) => "Holiday",
-                (false, true) => "CustomDay1",
-                _ => continue,
-            };
-            special += 1;
-            m.add(
-                "RunPeriodControl:SpecialDays",
-                &[
-                    format!("Special Day {special}"),
-                    format!("{}/{}", date.month(), date.day()),
-                    "1".into(),
-                    kind.into(),
-                ],
-            );
-        }
     }
 
     /// Schedule type limits, the constant `Always On` and `Activity` schedules, and the

@@ -9,6 +9,7 @@
 //!   in `eplusout.err` as failure whatever the exit code, and returns hourly outputs in kWh.
 
 pub mod building;
+pub mod calendar;
 pub mod engine;
 pub mod errfile;
 pub mod idd;
@@ -30,7 +31,7 @@ pub use runner::{RunOptions, Runner};
 /// Revision of what the runner and the model generator make of a given spec and parameter
 /// values. Caches of simulation results key on it: bump it whenever the same inputs would now
 /// simulate differently.
-pub const SIMULATION_REVISION: u32 = 2;
+pub const SIMULATION_REVISION: u32 = 3;
 
 /// Errors of the simulation layer. Each names the file, line, parameter or run directory
 /// concerned.

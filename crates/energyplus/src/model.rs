@@ -4,6 +4,9 @@
 //! user's IDF and maps each calibration parameter to fields of objects in it:
 //!
 //! ```toml
+//! year = 2017                       # the meters' year (default 2021); bemcal writes the
+//! holidays = "us_federal"            # run period and special days (see crate::calendar)
+//!
 //! [idf]
 //! path = "my_building.idf"          # relative to the model file
 //!
@@ -26,6 +29,8 @@
 
 use std::path::{Path, PathBuf};
 
+use bemcal_weather::grid::GridYear;
+use bemcal_weather::{Calendar, Holidays};
 use serde::{Deserialize, Serialize};
 
 use crate::building::{BuildingSpec, HeatingSource};
@@ -127,6 +132,23 @@ pub struct MappedParameter {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterMap {
+    /// The year simulated, as a building spec's `year`: a calendar year (`2017`) or twelve
+    /// months from another month (`"2017-04"`); it must be the meters' year. bemcal writes the
+    /// IDF's run period for it ([`crate::calendar`]).
+    #[serde(default = "crate::calendar::default_year")]
+    pub year: GridYear,
+    /// Holidays run on the weekend schedule, as a building spec's `holidays`; they replace the
+    /// IDF's own `RunPeriodControl:SpecialDays`.
+    #[serde(default)]
+    pub holidays: Holidays,
+    /// A file of holiday dates, relative to the model file; its dates replace `holidays`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holidays_file: Option<PathBuf>,
+    /// The day-type calendar the meters show (pre-calibration's `calendar.csv`), relative to
+    /// the model file: the surrogate's day types on the listed dates. (The IDF's schedules are
+    /// the user's: they are not rewritten for these dates.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub day_types_file: Option<PathBuf>,
     pub idf: IdfRef,
     #[serde(rename = "parameter", default)]
     pub parameters: Vec<MappedParameter>,
@@ -146,7 +168,11 @@ pub struct IdfRef {
 #[derive(Debug, Clone)]
 enum Source {
     Generated(BuildingSpec),
-    Mapped { idf: Idf, map: ParameterMap },
+    Mapped {
+        idf: Idf,
+        map: ParameterMap,
+        calendar: Calendar,
+    },
 }
 
 /// A calibratable model.
@@ -181,13 +207,16 @@ impl Model {
     }
 
     /// The files a model file names, as written (relative to the model file's folder): an
-    /// `[idf]` map's IDF, a building spec's `holidays_file` and `day_types_file` — what
+    /// `[idf]` map's IDF, and either form's `holidays_file` and `day_types_file` — what
     /// [`Model::from_toml`] reads besides the model file itself.
     pub fn named_files(text: &str, path: &Path) -> Result<Vec<PathBuf>, Error> {
         let value: toml::Table = crate::parse_toml(text, path)?;
         if value.contains_key("idf") {
             let map: ParameterMap = crate::parse_toml(text, path)?;
-            return Ok(vec![map.idf.path]);
+            return Ok(std::iter::once(map.idf.path)
+                .chain(map.holidays_file)
+                .chain(map.day_types_file)
+                .collect());
         }
         let spec: BuildingSpec = crate::parse_toml(text, path)?;
         Ok(spec
@@ -207,6 +236,7 @@ impl Model {
             return Ok(m);
         }
         let map: ParameterMap = crate::parse_toml(text, path)?;
+        let calendar = map_calendar(&map, text, path)?;
         let idf_path = path.parent().unwrap_or(Path::new(".")).join(&map.idf.path);
         let idf_text = std::fs::read_to_string(&idf_path).map_err(io_err(&idf_path))?;
         let idf = Idf::parse(&idf_text, &idf_path)?;
@@ -299,7 +329,7 @@ impl Model {
             parameters,
             constraints: map.constraints.clone(),
             outputs: map.outputs.clone(),
-            source: Source::Mapped { idf, map },
+            source: Source::Mapped { idf, map, calendar },
             path: path.into(),
         })
     }
@@ -341,6 +371,27 @@ impl Model {
         }
     }
 
+    /// The calendar the model simulates: its year, holidays and observed day types (the
+    /// surrogate's day types come from it, and EnergyPlus runs its dates).
+    pub fn calendar(&self) -> Calendar {
+        match &self.source {
+            Source::Generated(s) => s.calendar(),
+            Source::Mapped { calendar, .. } => calendar.clone(),
+        }
+    }
+
+    /// The calendar of a model file's text, either form, without loading its IDF or
+    /// checking its parameter map against EnergyPlus's IDD (for commands that only need the
+    /// dates, such as `bemcal predict`).
+    pub fn calendar_from_toml(text: &str, path: &Path) -> Result<Calendar, Error> {
+        let value: toml::Table = crate::parse_toml(text, path)?;
+        if value.contains_key("idf") {
+            let map: ParameterMap = crate::parse_toml(text, path)?;
+            return map_calendar(&map, text, path);
+        }
+        Ok(BuildingSpec::from_toml(text, path)?.calendar())
+    }
+
     /// Complete, checked values: unknown names rejected, missing ones at the prior mode,
     /// constraints enforced.
     pub fn values(&self, given: &ParameterValues) -> Result<ParameterValues, Error> {
@@ -356,8 +407,9 @@ impl Model {
         let v = self.values(given)?;
         match &self.source {
             Source::Generated(spec) => spec.to_idf(&v),
-            Source::Mapped { idf, map } => {
+            Source::Mapped { idf, map, calendar } => {
                 let mut out = idf.clone();
+                crate::calendar::set_run_period(&mut out, calendar);
                 for p in &map.parameters {
                     let value = v[&p.name];
                     for t in &p.targets {
@@ -394,6 +446,21 @@ impl Model {
             }
         }
     }
+}
+
+/// The calendar of an `[idf]` model file: its year, holidays (or `holidays_file`) and
+/// `day_types_file`.
+fn map_calendar(map: &ParameterMap, text: &str, path: &Path) -> Result<Calendar, Error> {
+    let (holidays, observed) = crate::calendar::read_calendar_files(
+        text,
+        path,
+        map.holidays_file.as_ref(),
+        map.day_types_file.as_ref(),
+    )?;
+    Ok(Calendar {
+        observed,
+        ..Calendar::new(map.year, holidays.unwrap_or_else(|| map.holidays.clone()))
+    })
 }
 
 /// The outputs of a generated building: heating (boiler gas or district hot water, domestic hot

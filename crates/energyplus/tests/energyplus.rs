@@ -414,6 +414,108 @@ meters = ["Electricity:Facility"]
     );
 }
 
+/// A user's IDF runs the calendar of its model file: `year` and `holidays_file` replace the
+/// IDF's own run period (2021, from the generated building it was written from) and special
+/// days; EnergyPlus then runs 2017's weekdays and the listed holidays on the weekend schedule.
+/// `bemcal predict` reads the same calendar without EnergyPlus (`Model::calendar_from_toml`).
+#[test]
+fn users_idf_runs_the_calendar_of_its_model_file() {
+    use chrono::Datelike;
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let idf = users_idf(&r, tmp.path());
+    let run_period = |idf: &bemcal_energyplus::idf::Idf| -> Vec<Vec<String>> {
+        idf.of_class("RunPeriod")
+            .map(|o| o.fields.clone())
+            .collect()
+    };
+    let special = |idf: &bemcal_energyplus::idf::Idf| -> Vec<(String, String)> {
+        idf.of_class("RunPeriodControl:SpecialDays")
+            .map(|o| (o.fields[1].clone(), o.fields[3].clone()))
+            .collect()
+    };
+    assert_eq!(run_period(&idf)[0][3], "2021", "the IDF as the user has it");
+    std::fs::write(
+        tmp.path().join("closures.csv"),
+        "date,name\n2017-01-02,New Year (observed)\n2017-03-15,plant shutdown\n",
+    )
+    .unwrap();
+    let map = r#"
+year = 2017
+holidays_file = "closures.csv"
+
+[idf]
+path = "mine.idf"
+
+[[parameter]]
+name = "lighting_multiplier"
+prior = { min = 0.5, mode = 1.0, max = 1.5 }
+targets = [{ class = "Lights", object = "*", field = "Watts per Floor Area", edit = "scale" }]
+
+[[output]]
+name = "lighting_kwh"
+meters = ["InteriorLights:Electricity"]
+"#;
+    let path = tmp.path().join("mine.toml");
+    std::fs::write(&path, map).unwrap();
+    let model = Model::load(&path, r.idd()).unwrap();
+    let calendar = model.calendar();
+    assert_eq!(calendar.year, 2017.into());
+    assert_eq!(
+        Model::calendar_from_toml(map, &path).unwrap(),
+        calendar,
+        "predict's calendar"
+    );
+    assert_eq!(
+        Model::named_files(map, &path).unwrap(),
+        vec![PathBuf::from("mine.idf"), PathBuf::from("closures.csv")]
+    );
+    let simulated = model.instantiate(&ParameterValues::new(), r.idd()).unwrap();
+    let periods = run_period(&simulated);
+    assert_eq!(periods.len(), 1, "{periods:?}");
+    assert_eq!(
+        periods[0][1..8],
+        ["1", "1", "2017", "12", "31", "2017", "Sunday"].map(String::from)
+    );
+    assert_eq!(
+        special(&simulated),
+        vec![
+            ("1/2".to_string(), "Holiday".to_string()),
+            ("3/15".to_string(), "Holiday".to_string())
+        ],
+        "only the listed holidays: the IDF's 2021 US holidays are gone"
+    );
+
+    let out = r
+        .run(
+            &simulated,
+            &weather(&r),
+            model.outputs(),
+            &tmp.path().join("a"),
+        )
+        .unwrap()
+        .outputs;
+    let lighting = out.get("lighting_kwh").unwrap();
+    let day = |month: u32, d: u32| -> f64 {
+        let n = chrono::NaiveDate::from_ymd_opt(2017, month, d)
+            .unwrap()
+            .ordinal0() as usize;
+        lighting[24 * n..24 * (n + 1)].iter().sum()
+    };
+    let (holiday, tuesday, sunday) = (day(1, 2), day(1, 3), day(1, 1));
+    let (shutdown, wednesday) = (day(3, 15), day(3, 22));
+    eprintln!(
+        "lighting kWh: Mon 2 Jan (holiday) {holiday:.1}, Tue 3 Jan {tuesday:.1}, Sun 1 Jan \
+         {sunday:.1}; Wed 15 Mar (holiday) {shutdown:.1}, Wed 22 Mar {wednesday:.1}"
+    );
+    assert!(
+        (holiday - sunday).abs() < 1e-6 * sunday,
+        "{holiday} vs {sunday}"
+    );
+    assert!(holiday < 0.8 * tuesday, "{holiday} vs {tuesday}");
+    assert!(shutdown < 0.8 * wednesday, "{shutdown} vs {wednesday}");
+}
+
 /// An EPW of 2017 built from the Minneapolis ISD-lite observations (UTC) merged onto the TMY3
 /// file: EnergyPlus reads it without a Severe (horizontal infrared left for EnergyPlus to
 /// derive), and the year's weather moves the results against the typical year's.

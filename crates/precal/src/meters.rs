@@ -843,10 +843,21 @@ pub fn parse_meters(
     let grid = values_on_grid(&table, spec, year, per_hour, path, &mut notes)?;
     dropped_notes(&grid, &table.rows, year, spec.duplicates, &mut notes);
     if grid.slot_line.iter().all(|&l| l == 0) {
+        let clocks = table.rows.iter().filter(|r| !r.offset).map(|r| r.clock);
+        let span = match (clocks.clone().min(), clocks.clone().max()) {
+            (Some(a), Some(b)) => format!(
+                "; the timestamps run {} to {}: set the model's `year` to the meters' year \
+                 (year = \"{}\")",
+                a.date(),
+                b.date(),
+                infer_year(clocks)
+            ),
+            _ => String::new(),
+        };
         return Err(file_err(
             path,
             format!(
-                "no rows fall in {} to {} (the grid year {year})",
+                "no rows fall in {} to {} (the grid year {year}){span}",
                 year.first_date(),
                 year.last_date()
             ),
@@ -1740,6 +1751,23 @@ mod tests {
             )),
             "{:?}",
             y17.notes
+        );
+        // Read as 2021 (a model whose `year` was left at its default), nothing is left: the
+        // message says which year the stamps fit.
+        let e = parse_meters(
+            &text,
+            Path::new("m.csv"),
+            &s,
+            Some(GridYear::calendar(2021)),
+            None,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("no rows fall in 2021-01-01 to 2021-12-31")
+                && e.contains("the timestamps run 2017-04-01 to 2018-04-01")
+                && e.contains("set the model's `year` to the meters' year (year = \"2017-04\")"),
+            "{e}"
         );
         // The same year as an hourly, hour-ending export (01:00 on 1 April 2017 to 00:00 on
         // 1 April 2018, standard time): recognised as hour-ending, every hour filled.
