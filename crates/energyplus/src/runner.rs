@@ -17,9 +17,13 @@ use crate::{io_err, Error};
 pub struct RunOptions {
     /// Wall-clock limit of one EnergyPlus process.
     pub timeout: Duration,
-    /// Replace the expanded water-coil models' `DetailedAnalysis` with `SimpleAnalysis` and set
-    /// water-coil controller tolerances to 0.1 K: about 3.5x faster for 1-2 % difference in annual
-    /// totals (measured; see docs/energyplus-notes).
+    /// Set the water-coil controllers' convergence tolerance to 0.1 K (the expanded templates
+    /// autosize it): about 20 % faster, annual totals within 0.05 % (measured on the example
+    /// building, docs/benchmarks.md). The coils keep the templates' `DetailedAnalysis`:
+    /// `SimpleAnalysis` was another 4 % faster but moved cooling by 1.6 %, and its design-UA
+    /// calculation found no root when the design inlet air's dew point lay just above the
+    /// chilled water's temperature (issue 17: 4 of 24 runs of a perimeter + core building at
+    /// Golden refused).
     pub fast_coils: bool,
 }
 
@@ -76,8 +80,9 @@ impl Runner {
     }
 
     /// The IDF EnergyPlus is given for `idf`: HVAC templates expanded (ExpandObjects runs in
-    /// `dir`) and, with [`RunOptions::fast_coils`], the coils' faster analysis. This is the
-    /// model as simulated, runnable with `energyplus -w EPW` and nothing else.
+    /// `dir`) and, with [`RunOptions::fast_coils`], the water-coil controllers' coarser
+    /// tolerance. This is the model as simulated, runnable with `energyplus -w EPW` and nothing
+    /// else.
     pub fn simulated_input(&self, idf: &Idf, dir: &Path) -> Result<Idf, Error> {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         let mut model = idf.clone();
@@ -198,26 +203,19 @@ impl Runner {
     }
 
     fn speed_up_coils(&self, model: &mut Idf) {
-        let analysis = self
+        // IDD indices count the name as field 0, as `fields` does.
+        let Some(i) = self
             .idd
-            .field_index("Coil:Cooling:Water", "Type of Analysis");
-        let tol = self
-            .idd
-            .field_index("Controller:WaterCoil", "Controller Convergence Tolerance");
+            .field_index("Controller:WaterCoil", "Controller Convergence Tolerance")
+        else {
+            return;
+        };
         for o in &mut model.objects {
-            let (idx, value) = if o.class.eq_ignore_ascii_case("Coil:Cooling:Water") {
-                // IDD indices count the name as field 0, as `fields` does.
-                (analysis, "SimpleAnalysis")
-            } else if o.class.eq_ignore_ascii_case("Controller:WaterCoil") {
-                (tol, "0.1")
-            } else {
-                continue;
-            };
-            if let Some(i) = idx {
+            if o.class.eq_ignore_ascii_case("Controller:WaterCoil") {
                 if o.fields.len() <= i {
                     o.fields.resize(i + 1, String::new());
                 }
-                o.fields[i] = value.into();
+                o.fields[i] = "0.1".into();
             }
         }
     }
