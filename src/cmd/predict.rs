@@ -20,8 +20,9 @@ pub struct Args {
     /// (US federal holidays; `--model` takes the model's calendar instead).
     #[arg(long, default_value = "2021")]
     pub year: bemcal_weather::grid::GridYear,
-    /// Building spec whose calendar to use: its year, holidays and the day types of its
-    /// `day_types_file` (pre-calibration's `calendar.csv`), as the calibration did.
+    /// Model file whose calendar to use (a building spec or an `[idf]` model file): its year,
+    /// holidays and the day types of its `day_types_file` (pre-calibration's `calendar.csv`),
+    /// as the calibration did.
     #[arg(long, conflicts_with = "year")]
     pub model: Option<PathBuf>,
     /// Parameter value, NAME=VALUE (repeatable).
