@@ -11,7 +11,9 @@ use std::sync::Arc;
 
 use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
-use bemcal_calibrate::refine::{close_round, pick_draws, RefineLog, SimulatedDraw, REFINE_FILE};
+use bemcal_calibrate::refine::{
+    close_round, refinement_points, RefineLog, SimulatedDraw, REFINE_FILE,
+};
 use bemcal_calibrate::replacement::{Attempt, Step};
 use bemcal_calibrate::sequence::{
     after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, ValidationRun,
@@ -678,13 +680,14 @@ impl State {
             let post = sampler.posterior();
             let first = cal.next_refine_key(&log);
             let hash = self.simulation_inputs_hash(r, &cal)?;
-            let jobs = pick_draws(&draws, cal.project.refine.points)
-                .iter()
-                .enumerate()
-                .map(|(j, u)| {
-                    self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), index + 1)
-                })
-                .collect();
+            let refine = &cal.project.refine;
+            let jobs = refinement_points(&draws, refine.points, refine.spread, |u| {
+                post.ln_prior(u).is_finite()
+            })
+            .iter()
+            .enumerate()
+            .map(|(j, u)| self.simulation_job(r, &cal, &hash, first + j, &post.theta(u), index + 1))
+            .collect();
             self.store
                 .set_stage(&r.id, Stage::Refine, jobs)
                 .map_err(err)?;

@@ -241,7 +241,7 @@ fn round_chains(
     Ok(ck)
 }
 
-/// A refinement round after its chains: posterior draws picked (`refine::pick_draws`),
+/// A refinement round after its chains: posterior draws picked (`refine::refinement_points`),
 /// simulated by EnergyPlus, and the round closed by the shared rule (`refine::close_round`).
 /// Returns the round and the new points' outputs; takes the round's sampler, so that it is
 /// gone (and its surrogate folder free to move) when the round is recorded.
@@ -255,10 +255,15 @@ fn refine_round(
     let (project, inp) = (&cal.project, &cal.inputs);
     let round = refined.rounds.len() as u32;
     let post = sampler.posterior();
-    let picks: Vec<Vec<f64>> = crate::refine::pick_draws(&ck.draws, project.refine.points)
-        .iter()
-        .map(|u| post.theta(u))
-        .collect();
+    let picks: Vec<Vec<f64>> = crate::refine::refinement_points(
+        &ck.draws,
+        project.refine.points,
+        project.refine.spread,
+        |u| post.ln_prior(u).is_finite(),
+    )
+    .iter()
+    .map(|u| post.theta(u))
+    .collect();
     let first = cal.next_refine_key(refined);
     let indexed: Vec<(usize, Vec<f64>)> = picks
         .iter()

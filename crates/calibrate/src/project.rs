@@ -482,6 +482,11 @@ pub struct RefineSettings {
     /// BFGS optima with the Laplace proposal costs one evaluation per iteration (give it
     /// `iterations` in thousands).
     pub kernel: Option<Kernel>,
+    /// How far the simulated draws are moved from the chains' mean, as a multiple of their
+    /// distance (default 1: the draws themselves; the highest-posterior draw is never moved):
+    /// the surrogate then learns EnergyPlus's response over a wider neighbourhood than the
+    /// posterior's own width ([`crate::refine::refinement_points`]).
+    pub spread: f64,
 }
 
 impl Default for RefineSettings {
@@ -493,6 +498,7 @@ impl Default for RefineSettings {
             burn_in: 60,
             restart_below: 20.0,
             kernel: None,
+            spread: 1.0,
         }
     }
 }
@@ -654,6 +660,12 @@ impl Project {
         if self.refine.rounds > 0 {
             if self.refine.points == 0 {
                 return Err("refine.points must be at least 1 when refine.rounds > 0".into());
+            }
+            let f = self.refine.spread;
+            if !(1.0..=20.0).contains(&f) {
+                return Err(format!(
+                    "refine.spread = {f} must be between 1 (the draws themselves) and 20"
+                ));
             }
             if self.refine.burn_in >= self.refine.iterations {
                 return Err(format!(

@@ -117,6 +117,68 @@ pub fn pick_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
     picks
 }
 
+/// The points a refinement round simulates (unit space): [`pick_draws`] of the round's chains,
+/// each but the first (the highest-posterior draw) moved `spread` times as far from the
+/// chains' mean ([`crate::project::RefineSettings::spread`]). A moved point is kept inside the
+/// unit box and where `allowed` (the prior: constraints, refused regions) admits it, by
+/// halving its excess spread up to four times, else the draw itself is simulated.
+///
+/// Why: the surrogate learns its response to a weakly identified parameter over the
+/// neighbourhood it is trained on. Draws of a narrow posterior teach it only the posterior's
+/// own width, where a wrong slope still recovers its own points; spread points carry
+/// EnergyPlus's response over a wider neighbourhood (docs/benchmarks.md, the wall insulation
+/// misses of the coverage runs).
+pub fn refinement_points(
+    draws: &[Draws],
+    k: usize,
+    spread: f64,
+    allowed: impl Fn(&[f64]) -> bool,
+) -> Vec<Vec<f64>> {
+    let picks = pick_draws(draws, k);
+    if spread == 1.0 || picks.is_empty() {
+        return picks;
+    }
+    let center = mean_point(draws);
+    let mut out = vec![picks[0].clone()];
+    for p in &picks[1..] {
+        let mut f = spread;
+        let moved = loop {
+            let x: Vec<f64> = p
+                .iter()
+                .zip(&center)
+                .map(|(v, c)| (c + f * (v - c)).clamp(1e-3, 1.0 - 1e-3))
+                .collect();
+            if allowed(&x) {
+                break x;
+            }
+            if f - 1.0 < (spread - 1.0) / 15.0 {
+                break p.clone();
+            }
+            f = 1.0 + (f - 1.0) / 2.0;
+        };
+        out.push(moved);
+    }
+    out
+}
+
+/// The mean of every draw of every chain (unit space).
+fn mean_point(draws: &[Draws]) -> Vec<f64> {
+    let n: usize = draws.iter().map(|d| d.len()).sum();
+    let dim = draws
+        .iter()
+        .find(|d| !d.is_empty())
+        .map_or(0, |d| d.point(0).len());
+    let mut mean = vec![0.0; dim];
+    for d in draws {
+        for i in 0..d.len() {
+            for (m, v) in mean.iter_mut().zip(d.point(i)) {
+                *m += v / n as f64;
+            }
+        }
+    }
+    mean
+}
+
 /// Where the next round's chains start: each chain where it ended (`last`), except a chain
 /// whose best log posterior is more than `gap` nats below the best chain's: it is stuck in a
 /// mode carrying under e^-gap of the posterior mass, and restarts at one of the best chain's
@@ -352,6 +414,38 @@ mod tests {
         sorted.dedup();
         assert_eq!(sorted.len(), 6);
         assert!(pick_draws(&[Draws::new(2)], 4).is_empty());
+    }
+
+    #[test]
+    fn refinement_points_spread_from_the_mean_except_the_best_and_stay_allowed() {
+        let a = chain(&[[0.4, 0.5], [0.5, 0.5]], &[-1.0, -2.0]);
+        let b = chain(&[[0.6, 0.5], [0.5, 0.6]], &[-3.0, -4.0]);
+        let draws = [a, b];
+        // Spread 1: the draws themselves.
+        assert_eq!(
+            refinement_points(&draws, 4, 1.0, |_| true),
+            pick_draws(&draws, 4)
+        );
+        // The mean is (0.5, 0.525): the best draw stays, the others move 3x as far.
+        let p = refinement_points(&draws, 4, 3.0, |_| true);
+        let near =
+            |x: &[f64], y: [f64; 2]| (x[0] - y[0]).abs() < 1e-12 && (x[1] - y[1]).abs() < 1e-12;
+        assert!(near(&p[0], [0.4, 0.5]), "{p:?}");
+        assert!(near(&p[1], [0.5, 0.45]), "{p:?}"); // a's last draw (0.5, 0.5)
+        assert!(near(&p[2], [0.5, 0.75]), "{p:?}"); // b's last draw (0.5, 0.6)
+        assert!(near(&p[3], [0.8, 0.45]), "{p:?}"); // (0.6, 0.5)
+                                                    // Far from the unit box's centre: clamped inside it.
+        let c = chain(&[[0.5, 0.5], [0.9, 0.1]], &[-1.0, -2.0]);
+        let p = refinement_points(&[c], 2, 10.0, |_| true);
+        assert_eq!(p[1], vec![0.999, 0.001]);
+        // Refused where the first coordinate exceeds 0.7: the excess spread is halved (3 -> 2)
+        // to (0.7, ...); refused everywhere off the draws: the draw itself.
+        let p = refinement_points(&draws, 4, 3.0, |x| x[0] <= 0.7 + 1e-12);
+        assert!(near(&p[3], [0.7, 0.475]), "{p:?}");
+        let p = refinement_points(&draws, 4, 3.0, |x| {
+            pick_draws(&draws, 4).iter().any(|d| d.as_slice() == x)
+        });
+        assert_eq!(p, pick_draws(&draws, 4));
     }
 
     #[test]
