@@ -73,6 +73,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&s)?);
         return converged_or_not(&s, &a.out);
     }
+    print_meters(&s);
+    print_posterior(&s);
+    print_surrogate_error(&s);
+    print_posterior_notes(&s);
+    print_guideline14(&s);
+    print_held_out(&s);
+    print_model_form(&s);
+    print_refinement(&s);
+    print_timings(&s, &a.out);
+    converged_or_not(&s, &a.out)
+}
+
+/// The meters' year and what ingestion decided.
+fn print_meters(s: &bemcal_calibrate::Summary) {
     println!(
         "\nmeters of {} ({} to {}):",
         s.year,
@@ -82,6 +96,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for note in &s.meter_notes {
         println!("  {note}");
     }
+}
+
+/// The posterior table: priors, posterior summaries, the estimate, R-hat, ESS, width.
+fn print_posterior(s: &bemcal_calibrate::Summary) {
     println!(
         "\nposterior ({} chains; {}):",
         s.acceptance_rate.len(),
@@ -112,6 +130,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             p.name, r.prior_min, r.prior_mode, r.prior_max, p.mean, p.q5, p.q95, est, p.rhat, p.ess_bulk, p.width_ratio
         );
     }
+}
+
+/// The intervals with the surrogate's error, when a refinement round measured it.
+fn print_surrogate_error(s: &bemcal_calibrate::Summary) {
     if let Some(e) = &s.surrogate_error {
         println!(
             "\nwith the surrogate's error (what a calibration through the round-{} surrogate recovered \
@@ -129,6 +151,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             );
         }
     }
+}
+
+/// Correlated pairs, chains moved to the best mode, independence steps switched off.
+fn print_posterior_notes(s: &bemcal_calibrate::Summary) {
     for c in &s.posterior.correlated_pairs {
         println!(
             "warning: {} and {} are strongly correlated (rho = {:.2}): not separately identifiable",
@@ -148,16 +174,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             bemcal_stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE * 100.0
         );
     }
+}
+
+/// Guideline 14 hourly: the initial model, the calibrated one and the surrogate at the estimate.
+fn print_guideline14(s: &bemcal_calibrate::Summary) {
     println!("\nASHRAE Guideline 14 (hourly: |NMBE| <= 10 %, CV-RMSE <= 30 %):");
     println!(
         "{:<18} {:>22} {:>22}      {:>22}",
         "output", "initial NMBE / CV-RMSE", "calibrated NMBE / CV", "surrogate at estimate"
     );
-    let pair = |m: Option<&bemcal_calibrate::OutputMetrics>| {
-        m.map_or("-".to_string(), |i| {
-            format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
-        })
-    };
     for v in &s.validation {
         let init = s.initial.iter().find(|i| i.output == v.output);
         let sur = s
@@ -167,15 +192,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!(
             "{:<18} {:>22} {:>6.1} % / {:5.1} % {:4} {:>22}",
             v.output,
-            pair(init),
+            metrics_pair(init),
             v.metrics.nmbe,
             v.metrics.cv_rmse,
             if v.metrics.pass { "pass" } else { "FAIL" },
-            pair(sur)
+            metrics_pair(sur)
         );
     }
-    print_held_out(&s);
-    print_model_form(&s);
+}
+
+/// Each refinement round: draws added, failures, the surrogate's error at them.
+fn print_refinement(s: &bemcal_calibrate::Summary) {
     for r in &s.refinement {
         println!(
             "\nrefinement round {}: {} posterior draws added, {} failed in EnergyPlus; surrogate vs EnergyPlus at them (NMBE / CV-RMSE): {}",
@@ -184,11 +211,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             r.failed.len(),
             r.surrogate_error
                 .iter()
-                .map(|m| format!("{} {}", m.output, pair(Some(m))))
+                .map(|m| format!("{} {}", m.output, metrics_pair(Some(m))))
                 .collect::<Vec<_>>()
                 .join(", ")
         );
     }
+}
+
+/// The stages' timings and the files written.
+fn print_timings(s: &bemcal_calibrate::Summary, out: &std::path::Path) {
     let t = &s.timings;
     println!(
         "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, refinement {:.0} s, summary {:.0} s, validation {:.0} s, total {:.0} s",
@@ -196,9 +227,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     println!(
         "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/ (discrepancy.csv: the model-form discrepancy), calibrated.idf",
-        a.out.display()
+        out.display()
     );
-    converged_or_not(&s, &a.out)
+}
+
+/// `NMBE / CV-RMSE` of a Guideline 14 comparison, `-` where there is none.
+fn metrics_pair(m: Option<&bemcal_calibrate::OutputMetrics>) -> String {
+    m.map_or("-".to_string(), |i| {
+        format!("{:6.1} % / {:5.1} %", i.metrics.nmbe, i.metrics.cv_rmse)
+    })
 }
 
 /// Whether the model reaches each meter, and what to look at where it does not.
