@@ -167,26 +167,7 @@ async fn handle(
 ) -> Outcome {
     let lease = job.lease_id;
     let ttl = Duration::from_millis(job.lease_ttl_ms.max(1000) as u64);
-    let beat = {
-        let mut c = client.clone();
-        let worker = worker.clone();
-        tokio::spawn(async move {
-            loop {
-                tokio::time::sleep(ttl / 3).await;
-                let r = c
-                    .heartbeat(HeartbeatRequest {
-                        worker_id: worker.clone(),
-                        lease_id: lease,
-                    })
-                    .await;
-                if let Ok(r) = r {
-                    if !r.into_inner().ok {
-                        return;
-                    }
-                }
-            }
-        })
-    };
+    let beat = heartbeat(client.clone(), worker.clone(), lease, ttl);
     let work = {
         let (cache, client, job) = (cache.clone(), client.clone(), job.clone());
         async move {
@@ -199,19 +180,10 @@ async fn handle(
             Ok::<_, String>((dir, out))
         }
     };
-    let give_back_wait = async {
-        loop {
-            if give_back.load(Ordering::SeqCst) {
-                return;
-            }
-            tokio::time::sleep(Duration::from_millis(200)).await;
-        }
-    };
     let outcome = tokio::select! {
         r = work => Some(r),
-        _ = give_back_wait => None,
+        _ = given_back(&give_back) => None,
     };
-    let patience = Duration::from_secs(600);
     let ended = match outcome {
         None => {
             let _ = client
@@ -225,79 +197,134 @@ async fn handle(
             Outcome::Returned
         }
         Some(Ok((dir, (files, result)))) => {
-            let mut outputs = vec![];
-            let mut upload_err = None;
-            for (rel, path) in files {
-                let r = retry(patience, || {
-                    let (path, rel, mut c) = (path.clone(), rel.clone(), client.clone());
-                    async move {
-                        upload_file(&mut c, &path, &rel)
-                            .await
-                            .map_err(|e| tonic::Status::unavailable(e.to_string()))
-                    }
-                })
-                .await;
-                match r {
-                    Ok(f) => outputs.push(proto::FileRef::from(&f)),
-                    Err(e) => upload_err = Some(e.message().to_string()),
-                }
-            }
-            let uploaded = upload_err.is_none();
-            let r = match upload_err {
-                Some(e) => retry(patience, || {
-                    let mut c = client.clone();
-                    let req = FailRequest {
-                        worker_id: worker.clone(),
-                        lease_id: lease,
-                        error: format!("uploading outputs: {e}"),
-                        requeue: false,
-                    };
-                    async move { c.fail(req).await }
-                })
-                .await
-                .map(|_| ()),
-                None => retry(patience, || {
-                    let mut c = client.clone();
-                    let req = CompleteRequest {
-                        worker_id: worker.clone(),
-                        lease_id: lease,
-                        outputs: outputs.clone(),
-                        result_json: result.clone(),
-                    };
-                    async move { c.complete(req).await }
-                })
-                .await
-                .map(|_| ()),
-            };
-            let reported = r.is_ok();
-            if let Err(e) = r {
-                eprintln!(
-                    "worker {worker}: reporting job {}: {}",
-                    job.job_id,
-                    e.message()
-                );
-            }
+            let ended = report_outputs(&client, &worker, &job, files, result).await;
             let _ = std::fs::remove_dir_all(&dir);
-            match uploaded && reported {
-                true => Outcome::Done,
-                false => Outcome::Failed,
-            }
+            ended
         }
         Some(Err(e)) => {
-            let _ = retry(patience, || {
-                let mut c = client.clone();
-                let req = FailRequest {
-                    worker_id: worker.clone(),
-                    lease_id: lease,
-                    error: e.clone(),
-                    requeue: false,
-                };
-                async move { c.fail(req).await }
-            })
-            .await;
+            report_failure(&client, &worker, lease, e).await;
             Outcome::Failed
         }
     };
     beat.abort();
     ended
+}
+
+/// How long a worker keeps retrying an upload or a report while the coordinator is away.
+const REPORT_PATIENCE: Duration = Duration::from_secs(600);
+
+/// Heartbeats the lease every third of its time to live until the coordinator no longer knows
+/// it (or the task is aborted).
+fn heartbeat(
+    mut client: Client,
+    worker: String,
+    lease: u64,
+    ttl: Duration,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(ttl / 3).await;
+            let r = client
+                .heartbeat(HeartbeatRequest {
+                    worker_id: worker.clone(),
+                    lease_id: lease,
+                })
+                .await;
+            if let Ok(r) = r {
+                if !r.into_inner().ok {
+                    return;
+                }
+            }
+        }
+    })
+}
+
+/// Resolves once the worker is asked to give its jobs back.
+async fn given_back(give_back: &AtomicBool) {
+    while !give_back.load(Ordering::SeqCst) {
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+/// Uploads a finished job's output files and completes its lease (or fails it, when an upload
+/// failed); done only when both went through.
+async fn report_outputs(
+    client: &Client,
+    worker: &str,
+    job: &proto::Job,
+    files: Vec<(String, std::path::PathBuf)>,
+    result: String,
+) -> Outcome {
+    let lease = job.lease_id;
+    let mut outputs = vec![];
+    let mut upload_err = None;
+    for (rel, path) in files {
+        let r = retry(REPORT_PATIENCE, || {
+            let (path, rel, mut c) = (path.clone(), rel.clone(), client.clone());
+            async move {
+                upload_file(&mut c, &path, &rel)
+                    .await
+                    .map_err(|e| tonic::Status::unavailable(e.to_string()))
+            }
+        })
+        .await;
+        match r {
+            Ok(f) => outputs.push(proto::FileRef::from(&f)),
+            Err(e) => upload_err = Some(e.message().to_string()),
+        }
+    }
+    let uploaded = upload_err.is_none();
+    let r = match upload_err {
+        Some(e) => retry(REPORT_PATIENCE, || {
+            let mut c = client.clone();
+            let req = FailRequest {
+                worker_id: worker.to_string(),
+                lease_id: lease,
+                error: format!("uploading outputs: {e}"),
+                requeue: false,
+            };
+            async move { c.fail(req).await }
+        })
+        .await
+        .map(|_| ()),
+        None => retry(REPORT_PATIENCE, || {
+            let mut c = client.clone();
+            let req = CompleteRequest {
+                worker_id: worker.to_string(),
+                lease_id: lease,
+                outputs: outputs.clone(),
+                result_json: result.clone(),
+            };
+            async move { c.complete(req).await }
+        })
+        .await
+        .map(|_| ()),
+    };
+    let reported = r.is_ok();
+    if let Err(e) = r {
+        eprintln!(
+            "worker {worker}: reporting job {}: {}",
+            job.job_id,
+            e.message()
+        );
+    }
+    match uploaded && reported {
+        true => Outcome::Done,
+        false => Outcome::Failed,
+    }
+}
+
+/// Fails a job's lease with its error (not requeued: the job itself failed).
+async fn report_failure(client: &Client, worker: &str, lease: u64, error: String) {
+    let _ = retry(REPORT_PATIENCE, || {
+        let mut c = client.clone();
+        let req = FailRequest {
+            worker_id: worker.to_string(),
+            lease_id: lease,
+            error: error.clone(),
+            requeue: false,
+        };
+        async move { c.fail(req).await }
+    })
+    .await;
 }
