@@ -131,11 +131,43 @@ pub fn run(
         .iter()
         .map(|s| quality(s.role.name(), &s.values, year, 24))
         .collect();
+    let (dis, e_base) = disaggregate(&meters, outdoor_c, &opts.disaggregation, &mut notes);
+    let schedule_series = schedule_series(&meters, &dis, e_base, opts.schedule.source)?;
+    let profiles = daily_profiles(&schedule_series.values, opts.schedule.normalise_quantile)?;
+    if !profiles.skipped_days.is_empty() {
+        notes.push(format!(
+            "{} days with missing hours skipped in the schedule analysis",
+            profiles.skipped_days.len()
+        ));
+    }
+    let (clusters, _) = cluster_days(&profiles, year, &opts.schedule)?;
+    let schedules = day_type_schedules(&profiles, &clusters, &opts.schedule)?;
+    let priors = priors_file(&schedules, &dis, &mut notes);
+    Ok(Precalibration {
+        meters,
+        quality,
+        disaggregation: dis,
+        schedule_series,
+        profiles,
+        clusters,
+        schedules,
+        priors,
+        notes,
+    })
+}
 
+/// The base loads (reference section 2.2.1): heating and cooling against the outdoor
+/// temperature, the electricity base (or the data-center sub-meter); returns them with the
+/// electricity base in kW.
+fn disaggregate(
+    meters: &MeterData,
+    outdoor_c: &[f64],
+    d_opts: &DisaggregationOptions,
+    notes: &mut Vec<String>,
+) -> (Disaggregation, f64) {
     let mut dis = Disaggregation::default();
-    let d_opts = &opts.disaggregation;
     if let Some(h) = meters.get(&MeterRole::Heating) {
-        disaggregate_heating(&h.values, outdoor_c, year, d_opts, &mut dis);
+        disaggregate_heating(&h.values, outdoor_c, meters.year, d_opts, &mut dis);
     } else {
         notes.push("no heating meter: heating base not estimated".into());
     }
@@ -149,8 +181,18 @@ pub fn run(
         .map(|s| s.values.as_slice());
     let dc = meters.submeter("data_center").map(|s| s.values.as_slice());
     let e_base = disaggregate_electricity(elec, dc, d_opts, &mut dis);
+    (dis, e_base)
+}
 
-    // Schedule series.
+/// The series whose daily profiles give the day types and schedules: the lighting and plug
+/// sub-meters summed, or the electricity less its base (`source` decides; `Auto`: the
+/// sub-meters where there are any).
+fn schedule_series(
+    meters: &MeterData,
+    dis: &Disaggregation,
+    e_base: f64,
+    source: ScheduleSource,
+) -> Result<DerivedSeries, PrecalError> {
     let lighting = meters.submeter("lighting").map(|s| s.values.as_slice());
     let plug = meters.submeter("plug_loads").map(|s| s.values.as_slice());
     let subs: Vec<&[f64]> = [lighting, plug].into_iter().flatten().collect();
@@ -159,7 +201,7 @@ pub fn run(
         .filter(|(_, s)| s.is_some())
         .map(|(n, _)| *n)
         .collect();
-    let use_subs = match opts.schedule.source {
+    let use_subs = match source {
         ScheduleSource::Submeters => {
             if subs.is_empty() {
                 return Err(PrecalError::Invalid(
@@ -171,38 +213,35 @@ pub fn run(
         ScheduleSource::Electricity => false,
         ScheduleSource::Auto => !subs.is_empty(),
     };
-    let schedule_series = if use_subs {
-        DerivedSeries {
+    if use_subs {
+        return Ok(DerivedSeries {
             name: "schedule_series".into(),
             values: sum_series(&subs),
             method: format!("sum of the {} sub-meters", names.join(" + ")),
-        }
-    } else {
-        let e = dis.get("electricity_variable").ok_or_else(|| {
-            PrecalError::Invalid(
-                "no electricity meter (nor lighting / plug_loads sub-meters) for the schedule analysis"
-                    .into(),
-            )
-        })?;
-        DerivedSeries {
-            name: "schedule_series".into(),
-            values: e.values.clone(),
-            method: format!("electricity minus the {e_base:.3} kW electricity base"),
-        }
-    };
-    let profiles = daily_profiles(&schedule_series.values, opts.schedule.normalise_quantile)?;
-    if !profiles.skipped_days.is_empty() {
-        notes.push(format!(
-            "{} days with missing hours skipped in the schedule analysis",
-            profiles.skipped_days.len()
-        ));
+        });
     }
-    let (clusters, _) = cluster_days(&profiles, year, &opts.schedule)?;
-    let schedules = day_type_schedules(&profiles, &clusters, &opts.schedule)?;
+    let e = dis.get("electricity_variable").ok_or_else(|| {
+        PrecalError::Invalid(
+            "no electricity meter (nor lighting / plug_loads sub-meters) for the schedule analysis"
+                .into(),
+        )
+    })?;
+    Ok(DerivedSeries {
+        name: "schedule_series".into(),
+        values: e.values.clone(),
+        method: format!("electricity minus the {e_base:.3} kW electricity base"),
+    })
+}
 
-    // priors.toml.
+/// `priors.toml`: the day types' schedule boundaries and interval priors, and the hot-water
+/// peak flow from the heating base.
+fn priors_file(
+    schedules: &[DayTypeSchedule],
+    dis: &Disaggregation,
+    notes: &mut Vec<String>,
+) -> PriorsFile {
     let mut parameter = Vec::new();
-    for s in &schedules {
+    for s in schedules {
         for (i, iv) in s.intervals.iter().enumerate() {
             parameter.push(ParameterPrior {
                 name: format!("schedule_{}_{:02}", s.label.as_str(), i + 1),
@@ -238,22 +277,11 @@ pub fn run(
                 .into(),
         ),
     }
-    let priors = PriorsFile {
+    PriorsFile {
         schedule: Some(ScheduleBoundaries {
             weekday_boundaries: schedules[0].boundaries(),
             weekend_boundaries: schedules[1].boundaries(),
         }),
         parameter,
-    };
-    Ok(Precalibration {
-        meters,
-        quality,
-        disaggregation: dis,
-        schedule_series,
-        profiles,
-        clusters,
-        schedules,
-        priors,
-        notes,
-    })
+    }
 }
