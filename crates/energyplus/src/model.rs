@@ -251,69 +251,7 @@ impl Model {
             ));
         }
         for p in &map.parameters {
-            TriangularPrior::new(p.prior.min, p.prior.mode, p.prior.max)
-                .map_err(|m| err(format!("parameter {}: {m}", p.name)))?;
-            if p.targets.is_empty() {
-                return Err(err(format!("parameter {}: no targets", p.name)));
-            }
-            for t in &p.targets {
-                if t.field == "*" && t.edit == Edit::Set {
-                    return Err(err(format!(
-                        "parameter {}: field = \"*\" needs edit = \"scale\" or \"offset\"",
-                        p.name
-                    )));
-                }
-                if t.field != "*" && idd.field_index(&t.class, &t.field).is_none() {
-                    let known = idd.fields(&t.class).map(|f| f.join(", "));
-                    return Err(err(format!(
-                        "parameter {}: class '{}' has no field '{}'{}",
-                        p.name,
-                        t.class,
-                        t.field,
-                        known
-                            .map(|k| format!(" (fields: {k})"))
-                            .unwrap_or_else(|| " (unknown class)".into())
-                    )));
-                }
-                let index = (t.field != "*")
-                    .then(|| idd.field_index(&t.class, &t.field))
-                    .flatten();
-                let matched: Vec<_> = idf
-                    .of_class(&t.class)
-                    .filter(|o| t.matches(o.name()))
-                    .collect();
-                if t.edit != Edit::Set {
-                    for o in &matched {
-                        let positions = t.positions(o, index);
-                        let bad = positions.iter().find(|&&i| {
-                            o.fields
-                                .get(i)
-                                .is_none_or(|f| f.trim().parse::<f64>().is_err())
-                        });
-                        if positions.is_empty() || bad.is_some() {
-                            return Err(err(format!(
-                                "parameter {}: edit = \"{:?}\" needs a number in {} '{}' field '{}' (found '{}')",
-                                p.name,
-                                t.edit,
-                                t.class,
-                                o.name().unwrap_or(""),
-                                t.field,
-                                bad.and_then(|&i| o.fields.get(i)).map_or("", |f| f.as_str())
-                            )));
-                        }
-                    }
-                }
-                let n = matched.len();
-                if n == 0 {
-                    return Err(err(format!(
-                        "parameter {}: {} has no object {} of class {}",
-                        p.name,
-                        idf_path.display(),
-                        t.object,
-                        t.class
-                    )));
-                }
-            }
+            check_parameter(p, &idf, &idf_path, idd).map_err(err)?;
         }
         let parameters = map
             .parameters
@@ -446,6 +384,81 @@ impl Model {
             }
         }
     }
+}
+
+/// Checks one mapped parameter against the IDF and the IDD: its prior, and each target's class,
+/// field and objects (relative edits need a number in every matched field); the message
+/// names what is wrong and what exists.
+fn check_parameter(
+    p: &MappedParameter,
+    idf: &Idf,
+    idf_path: &Path,
+    idd: &Idd,
+) -> Result<(), String> {
+    TriangularPrior::new(p.prior.min, p.prior.mode, p.prior.max)
+        .map_err(|m| format!("parameter {}: {m}", p.name))?;
+    if p.targets.is_empty() {
+        return Err(format!("parameter {}: no targets", p.name));
+    }
+    for t in &p.targets {
+        if t.field == "*" && t.edit == Edit::Set {
+            return Err(format!(
+                "parameter {}: field = \"*\" needs edit = \"scale\" or \"offset\"",
+                p.name
+            ));
+        }
+        if t.field != "*" && idd.field_index(&t.class, &t.field).is_none() {
+            let known = idd.fields(&t.class).map(|f| f.join(", "));
+            return Err(format!(
+                "parameter {}: class '{}' has no field '{}'{}",
+                p.name,
+                t.class,
+                t.field,
+                known
+                    .map(|k| format!(" (fields: {k})"))
+                    .unwrap_or_else(|| " (unknown class)".into())
+            ));
+        }
+        let index = (t.field != "*")
+            .then(|| idd.field_index(&t.class, &t.field))
+            .flatten();
+        let matched: Vec<_> = idf
+            .of_class(&t.class)
+            .filter(|o| t.matches(o.name()))
+            .collect();
+        if t.edit != Edit::Set {
+            for o in &matched {
+                let positions = t.positions(o, index);
+                let bad = positions.iter().find(|&&i| {
+                    o.fields
+                        .get(i)
+                        .is_none_or(|f| f.trim().parse::<f64>().is_err())
+                });
+                if positions.is_empty() || bad.is_some() {
+                    return Err(format!(
+                        "parameter {}: edit = \"{:?}\" needs a number in {} '{}' field '{}' (found '{}')",
+                        p.name,
+                        t.edit,
+                        t.class,
+                        o.name().unwrap_or(""),
+                        t.field,
+                        bad.and_then(|&i| o.fields.get(i)).map_or("", |f| f.as_str())
+                    ));
+                }
+            }
+        }
+        let n = matched.len();
+        if n == 0 {
+            return Err(format!(
+                "parameter {}: {} has no object {} of class {}",
+                p.name,
+                idf_path.display(),
+                t.object,
+                t.class
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The calendar of an `[idf]` model file: its year, holidays (or `holidays_file`) and
