@@ -427,6 +427,46 @@ pub fn build_epw(
             None => outside += 1,
         }
     }
+    let (filled, mut reports) = fill_fields(&tmy, &hourly, opts);
+    // What the observations gave, before a humidity field derived from the other is reported.
+    let measured: Vec<bool> = reports.iter().map(|r| r.measured_h > 0).collect();
+    let humidity_from_dew_point = derive_humidity_report(&mut reports, &measured);
+    let solar = if measured[Field::GlobalHorizontal.index()] {
+        SolarSource::MeasuredGlobalErbs
+    } else {
+        SolarSource::Tmy
+    };
+    let merged = Merged {
+        filled,
+        measured,
+        humidity_from_dew_point,
+        solar,
+    };
+    let mut out = String::with_capacity(tmy_text.len());
+    write_header(&mut out, &tmy.header, opts);
+    for (t, row) in tmy.rows.iter().enumerate() {
+        out.push_str(&merged.row(row, t, loc, opts.year).join(","));
+        out.push('\n');
+    }
+    let report = BuildReport {
+        source: opts.source.clone(),
+        year: opts.year,
+        observations: observations.len(),
+        outside_year: outside,
+        leap_day_dropped: opts.year.spans_leap_day(),
+        solar,
+        fields: reports,
+    };
+    Ok((out, report))
+}
+
+/// Each field's hourly series: the observations' hourly means, gaps up to
+/// `opts.max_interpolated_gap_h` interpolated, longer ones from the TMY file; with its report.
+fn fill_fields(
+    tmy: &TmyText<'_>,
+    hourly: &Hourly,
+    opts: &BuildOptions,
+) -> (Vec<Vec<f64>>, Vec<FieldReport>) {
     let tmy_value = |f: Field| -> Vec<f64> {
         tmy.rows
             .iter()
@@ -446,9 +486,15 @@ pub fn build_epw(
         reports.push(report_of(f, &origin, hourly.implausible[f.index()]));
         filled.push(values);
     }
-    // What the observations gave, before a humidity field derived from the other is reported.
-    let was_measured: Vec<bool> = reports.iter().map(|r| r.measured_h > 0).collect();
-    let measured = |f: Field| was_measured[f.index()];
+    (filled, reports)
+}
+
+/// Which humidity field the rows compute from dry bulb and the other: relative humidity from
+/// the dew point when the dew point was measured or relative humidity was not (returns
+/// `true`), else the dew point from relative humidity. When the source field was measured, the
+/// derived field's report becomes the source's, saying so.
+fn derive_humidity_report(reports: &mut [FieldReport], measured: &[bool]) -> bool {
+    let measured = |f: Field| measured[f.index()];
     let humidity_from_dew_point = measured(Field::DewPoint) || !measured(Field::RelHumidity);
     let (derived, from) = if humidity_from_dew_point {
         (Field::RelHumidity, Field::DewPoint)
@@ -464,14 +510,13 @@ pub fn build_epw(
             ..reports[from.index()].clone()
         };
     }
-    let solar = if measured(Field::GlobalHorizontal) {
-        SolarSource::MeasuredGlobalErbs
-    } else {
-        SolarSource::Tmy
-    };
+    humidity_from_dew_point
+}
 
-    let mut out = String::with_capacity(tmy_text.len());
-    for line in &tmy.header {
+/// The TMY file's header lines, with `COMMENTS 2` naming the source and `DATA PERIODS` the
+/// year's first weekday.
+fn write_header(out: &mut String, header: &[&str], opts: &BuildOptions) {
+    for line in header {
         if line.starts_with("COMMENTS 2") {
             out.push_str(&format!(
                 "COMMENTS 2,bemcal weather: {} merged onto this TMY file for {}\n",
@@ -489,31 +534,55 @@ pub fn build_epw(
             out.push('\n');
         }
     }
-    let v = |f: Field, t: usize| filled[f.index()][t];
-    for (t, row) in tmy.rows.iter().enumerate() {
+}
+
+/// The filled fields and what was measured, for writing the EPW's rows.
+struct Merged {
+    filled: Vec<Vec<f64>>,
+    measured: Vec<bool>,
+    humidity_from_dew_point: bool,
+    solar: SolarSource,
+}
+
+impl Merged {
+    fn v(&self, f: Field, t: usize) -> f64 {
+        self.filled[f.index()][t]
+    }
+
+    fn measured(&self, f: Field) -> bool {
+        self.measured[f.index()]
+    }
+
+    /// Row `t` of the EPW: the TMY row with the year, the filled fields and, from measured
+    /// global radiation, its Erbs split.
+    fn row(&self, row: &[&str], t: usize, loc: &crate::Location, year: GridYear) -> Vec<String> {
+        let v = |f: Field| self.v(f, t);
         let mut r: Vec<String> = row.iter().map(|s| s.to_string()).collect();
-        r[0] = opts.year.day_date(t / 24).year().to_string();
-        let t_db = v(Field::DryBulb, t);
-        let (t_dp, rh) = if humidity_from_dew_point {
-            let dp = v(Field::DewPoint, t).min(t_db);
+        r[0] = year.day_date(t / 24).year().to_string();
+        let t_db = v(Field::DryBulb);
+        let (t_dp, rh) = if self.humidity_from_dew_point {
+            let dp = v(Field::DewPoint).min(t_db);
             (dp, relative_humidity_pct(t_db, dp))
         } else {
-            let rh = v(Field::RelHumidity, t).clamp(1.0, 100.0);
+            let rh = v(Field::RelHumidity).clamp(1.0, 100.0);
             (dew_point_c(t_db, rh), rh)
         };
         r[6] = format!("{t_db:.1}");
         r[7] = format!("{t_dp:.1}");
         r[8] = format!("{:.0}", rh);
-        r[9] = format!("{:.0}", v(Field::Pressure, t));
-        if measured(Field::DryBulb) || measured(Field::DewPoint) || measured(Field::SkyCover) {
+        r[9] = format!("{:.0}", v(Field::Pressure));
+        if self.measured(Field::DryBulb)
+            || self.measured(Field::DewPoint)
+            || self.measured(Field::SkyCover)
+        {
             // Horizontal infrared radiation: missing, so that EnergyPlus derives it from this
             // row's dry bulb, dew point and opaque sky cover instead of the TMY year's.
             r[12] = "9999".into();
         }
-        if solar == SolarSource::MeasuredGlobalErbs {
+        if self.solar == SolarSource::MeasuredGlobalErbs {
             let hour_mid = (t % 24) as f64 + 0.5;
             let z = solar::zenith_deg(
-                slot_doy(opts.year, t),
+                slot_doy(year, t),
                 hour_mid,
                 loc.latitude_deg,
                 loc.longitude_deg,
@@ -521,8 +590,8 @@ pub fn build_epw(
             );
             // Measured radiation is kept as it is; at sunrise and sunset (zenith past 87 deg at
             // mid-hour) Erbs' split makes all of it diffuse.
-            let ghi = v(Field::GlobalHorizontal, t).max(0.0);
-            let split = solar::erbs(ghi, z, slot_doy(opts.year, t));
+            let ghi = v(Field::GlobalHorizontal).max(0.0);
+            let split = solar::erbs(ghi, z, slot_doy(year, t));
             r[13] = format!("{ghi:.0}");
             r[14] = format!("{:.0}", split.direct_normal);
             r[15] = format!("{:.0}", split.diffuse_horizontal);
@@ -532,26 +601,15 @@ pub fn build_epw(
             }
             r[19] = "9999".into();
         }
-        r[20] = format!("{:.0}", v(Field::WindDirection, t));
-        r[21] = format!("{:.1}", v(Field::WindSpeed, t));
-        if measured(Field::SkyCover) {
-            let tenths = v(Field::SkyCover, t).round().clamp(0.0, 10.0);
+        r[20] = format!("{:.0}", v(Field::WindDirection));
+        r[21] = format!("{:.1}", v(Field::WindSpeed));
+        if self.measured(Field::SkyCover) {
+            let tenths = v(Field::SkyCover).round().clamp(0.0, 10.0);
             r[22] = format!("{tenths:.0}");
             r[23] = format!("{tenths:.0}");
         }
-        out.push_str(&r.join(","));
-        out.push('\n');
+        r
     }
-    let report = BuildReport {
-        source: opts.source.clone(),
-        year: opts.year,
-        observations: observations.len(),
-        outside_year: outside,
-        leap_day_dropped: opts.year.spans_leap_day(),
-        solar,
-        fields: reports,
-    };
-    Ok((out, report))
 }
 
 #[cfg(test)]
