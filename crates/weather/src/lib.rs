@@ -176,85 +176,7 @@ impl Epw {
             if line.trim().is_empty() {
                 continue;
             }
-            let f: Vec<&str> = line.split(',').collect();
-            if f.len() < 22 {
-                return Err(err(
-                    lineno,
-                    format!(
-                        "expected at least 22 comma-separated fields, found {}",
-                        f.len()
-                    ),
-                ));
-            }
-            let field = |idx: usize, name: &str| -> Result<f64, WeatherError> {
-                match f[idx].trim().parse::<f64>() {
-                    Ok(v) if v.is_finite() => Ok(v),
-                    Ok(_) => Err(err(
-                        lineno,
-                        format!(
-                            "field {} ({name}) '{}' is not a finite number",
-                            idx + 1,
-                            excerpt(f[idx])
-                        ),
-                    )),
-                    Err(_) => Err(err(
-                        lineno,
-                        format!(
-                            "field {} ({name}) '{}' is not a number",
-                            idx + 1,
-                            excerpt(f[idx])
-                        ),
-                    )),
-                }
-            };
-            let int = |idx: usize, name: &str, lo: u32, hi: u32| -> Result<u32, WeatherError> {
-                let v = f[idx].trim().parse::<u32>().map_err(|_| {
-                    err(
-                        lineno,
-                        format!(
-                            "field {} ({name}) '{}' is not an integer",
-                            idx + 1,
-                            excerpt(f[idx])
-                        ),
-                    )
-                })?;
-                if v < lo || v > hi {
-                    return Err(err(
-                        lineno,
-                        format!("field {} ({name}) = {v}, expected {lo}..={hi}", idx + 1),
-                    ));
-                }
-                Ok(v)
-            };
-            let h = WeatherHour {
-                month: int(1, "month", 1, 12)?,
-                day: int(2, "day", 1, 31)?,
-                hour: int(3, "hour", 1, 24)?,
-                dry_bulb_c: field(6, "dry bulb temperature")?,
-                dew_point_c: field(7, "dew point temperature")?,
-                rel_humidity_pct: field(8, "relative humidity")?,
-                pressure_pa: field(9, "atmospheric pressure")?,
-                global_horizontal_wh_m2: field(13, "global horizontal radiation")?,
-                direct_normal_wh_m2: field(14, "direct normal radiation")?,
-                diffuse_horizontal_wh_m2: field(15, "diffuse horizontal radiation")?,
-                wind_direction_deg: field(20, "wind direction")?,
-                wind_speed_m_s: field(21, "wind speed")?,
-            };
-            if !(-90.0..=70.0).contains(&h.dry_bulb_c) {
-                return Err(err(
-                    lineno,
-                    format!("dry bulb {} C is outside -90..70 C", h.dry_bulb_c),
-                ));
-            }
-            if !(0.0..=110.0).contains(&h.rel_humidity_pct) {
-                return Err(err(
-                    lineno,
-                    format!(
-                        "relative humidity {} % is outside 0..110 %",
-                        h.rel_humidity_pct
-                    ),
-                ));
-            }
+            let h = parse_hour(line, lineno, path)?;
             // A repeated month/day/hour means another hour is missing: every later row would
             // be simulated an hour off.
             if let Some(first) = seen.insert((h.month, h.day, h.hour), lineno) {
@@ -280,6 +202,96 @@ impl Epw {
         }
         Ok(Epw { location, hours })
     }
+}
+
+/// One hourly row of an EPW (file line `lineno`): the fields bemcal reads, each a finite
+/// number, month, day and hour in range, dry bulb and relative humidity plausible.
+fn parse_hour(line: &str, lineno: usize, path: &Path) -> Result<WeatherHour, WeatherError> {
+    let err = |line: usize, message: String| WeatherError::Malformed {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    let f: Vec<&str> = line.split(',').collect();
+    if f.len() < 22 {
+        return Err(err(
+            lineno,
+            format!(
+                "expected at least 22 comma-separated fields, found {}",
+                f.len()
+            ),
+        ));
+    }
+    let field = |idx: usize, name: &str| -> Result<f64, WeatherError> {
+        match f[idx].trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => Err(err(
+                lineno,
+                format!(
+                    "field {} ({name}) '{}' is not a finite number",
+                    idx + 1,
+                    excerpt(f[idx])
+                ),
+            )),
+            Err(_) => Err(err(
+                lineno,
+                format!(
+                    "field {} ({name}) '{}' is not a number",
+                    idx + 1,
+                    excerpt(f[idx])
+                ),
+            )),
+        }
+    };
+    let int = |idx: usize, name: &str, lo: u32, hi: u32| -> Result<u32, WeatherError> {
+        let v = f[idx].trim().parse::<u32>().map_err(|_| {
+            err(
+                lineno,
+                format!(
+                    "field {} ({name}) '{}' is not an integer",
+                    idx + 1,
+                    excerpt(f[idx])
+                ),
+            )
+        })?;
+        if v < lo || v > hi {
+            return Err(err(
+                lineno,
+                format!("field {} ({name}) = {v}, expected {lo}..={hi}", idx + 1),
+            ));
+        }
+        Ok(v)
+    };
+    let h = WeatherHour {
+        month: int(1, "month", 1, 12)?,
+        day: int(2, "day", 1, 31)?,
+        hour: int(3, "hour", 1, 24)?,
+        dry_bulb_c: field(6, "dry bulb temperature")?,
+        dew_point_c: field(7, "dew point temperature")?,
+        rel_humidity_pct: field(8, "relative humidity")?,
+        pressure_pa: field(9, "atmospheric pressure")?,
+        global_horizontal_wh_m2: field(13, "global horizontal radiation")?,
+        direct_normal_wh_m2: field(14, "direct normal radiation")?,
+        diffuse_horizontal_wh_m2: field(15, "diffuse horizontal radiation")?,
+        wind_direction_deg: field(20, "wind direction")?,
+        wind_speed_m_s: field(21, "wind speed")?,
+    };
+    if !(-90.0..=70.0).contains(&h.dry_bulb_c) {
+        return Err(err(
+            lineno,
+            format!("dry bulb {} C is outside -90..70 C", h.dry_bulb_c),
+        ));
+    }
+    if !(0.0..=110.0).contains(&h.rel_humidity_pct) {
+        return Err(err(
+            lineno,
+            format!(
+                "relative humidity {} % is outside 0..110 %",
+                h.rel_humidity_pct
+            ),
+        ));
+    }
+    Ok(h)
 }
 
 /// The kind of day, as the surrogate and the schedules see it.
