@@ -575,120 +575,12 @@ impl Project {
             m.validate()?;
         }
         for b in &self.bases {
-            match (&b.submeter, b.kwh_per_hour) {
-                (Some(_), None) => {}
-                (None, Some(v)) if v.is_finite() && v >= 0.0 => {}
-                (None, Some(v)) => {
-                    return Err(format!(
-                        "[[bases]] output = \"{}\": kwh_per_hour = {v}, expected a load >= 0",
-                        b.output
-                    ))
-                }
-                _ => {
-                    return Err(format!(
-                        "[[bases]] output = \"{}\": give submeter = \"NAME\" or kwh_per_hour = NUMBER (one of them)",
-                        b.output
-                    ))
-                }
-            }
+            b.check()?;
         }
-        if self.design.points < 3 {
-            return Err(format!(
-                "design.points = {}, need at least 3",
-                self.design.points
-            ));
-        }
-        if self.design.parallel == 0 {
-            return Err("design.parallel must be at least 1".into());
-        }
-        if !(self.design.min_success > 0.0 && self.design.min_success <= 1.0) {
-            return Err(format!(
-                "design.min_success = {}: expected a share in (0, 1], such as 0.8",
-                self.design.min_success
-            ));
-        }
-        if self.mcmc.chains == 0 {
-            return Err("mcmc.chains must be at least 1".into());
-        }
-        if self.mcmc.burn_in >= self.mcmc.iterations {
-            return Err(format!(
-                "mcmc.burn_in = {} must be below mcmc.iterations = {}",
-                self.mcmc.burn_in, self.mcmc.iterations
-            ));
-        }
-        if self.mcmc.residuals == Residuals::Ar1
-            && self.mcmc.sigma_delta != SigmaDeltaMode::Marginal
-        {
-            return Err("mcmc.residuals = \"ar1\" needs mcmc.sigma_delta = \"marginal\"".into());
-        }
-        if self.mcmc.segment == 0 {
-            return Err("mcmc.segment must be at least 1".into());
-        }
-        if !(0.0..1.0).contains(&self.mcmc.independence) {
-            return Err(format!(
-                "mcmc.independence = {} must be in [0, 1)",
-                self.mcmc.independence
-            ));
-        }
-        if self.mcmc.kernel == Kernel::Hmc && self.mcmc.sigma_delta == SigmaDeltaMode::Sampled {
-            return Err(
-                "mcmc.kernel = \"hmc\" needs mcmc.sigma_delta = \"marginal\" or \"fixed\" \
-                 (sampled sigma_delta coordinates have no gradient through the surrogate)"
-                    .into(),
-            );
-        }
-        if !(self.mcmc.hmc_integration_time.is_finite() && self.mcmc.hmc_integration_time > 0.0) {
-            return Err(format!(
-                "mcmc.hmc_integration_time = {} must be positive",
-                self.mcmc.hmc_integration_time
-            ));
-        }
-        let t = self.mcmc.rhat_target;
-        if !(t.is_finite() && t > 0.0) {
-            return Err(format!("mcmc.rhat_target = {t} must be a positive number"));
-        }
-        let e = self.mcmc.ess_target;
-        if !(e.is_finite() && e >= 0.0) {
-            return Err(format!("mcmc.ess_target = {e} must be a number >= 0"));
-        }
-        if self.mcmc.restart_below.is_nan() || self.mcmc.restart_below < 0.0 {
-            return Err(format!(
-                "mcmc.restart_below = {} must be a number of nats >= 0",
-                self.mcmc.restart_below
-            ));
-        }
-        if self.refine.rounds > 0 {
-            if self.refine.points == 0 {
-                return Err("refine.points must be at least 1 when refine.rounds > 0".into());
-            }
-            let f = self.refine.spread;
-            if !(1.0..=20.0).contains(&f) {
-                return Err(format!(
-                    "refine.spread = {f} must be between 1 (the draws themselves) and 20"
-                ));
-            }
-            if self.refine.burn_in >= self.refine.iterations {
-                return Err(format!(
-                    "refine.burn_in = {} must be below refine.iterations = {}",
-                    self.refine.burn_in, self.refine.iterations
-                ));
-            }
-        }
-        if !(0.0..1.0).contains(&self.surrogate.held_out_fraction)
-            || self.surrogate.held_out_fraction == 0.0
-        {
-            return Err("surrogate.held_out_fraction must be in (0, 1)".into());
-        }
-        if !(4..=1024).contains(&self.surrogate.hidden) {
-            return Err(format!(
-                "surrogate.hidden = {} must be between 4 and 1024 (units per LSTM layer)",
-                self.surrogate.hidden
-            ));
-        }
-        self.surrogate
-            .time_features
-            .parse::<bemcal_surrogate::TimeFeatures>()
-            .map_err(|e| format!("surrogate.time_features: {e}"))?;
+        self.design.check()?;
+        self.mcmc.check()?;
+        self.refine.check()?;
+        self.surrogate.check()?;
         if self.meters.file.is_none() {
             return Err("[meters] needs file = \"...\"".into());
         }
@@ -919,6 +811,146 @@ impl Project {
 /// At most 40 bytes of a name from the file, for messages.
 pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
     bemcal_excerpt::excerpt(s, 40)
+}
+
+impl Base {
+    /// A base gives either a sub-meter or a constant load >= 0.
+    pub fn check(&self) -> Result<(), String> {
+        match (&self.submeter, self.kwh_per_hour) {
+            (Some(_), None) => {}
+            (None, Some(v)) if v.is_finite() && v >= 0.0 => {}
+            (None, Some(v)) => {
+                return Err(format!(
+                    "[[bases]] output = \"{}\": kwh_per_hour = {v}, expected a load >= 0",
+                    self.output
+                ))
+            }
+            _ => {
+                return Err(format!(
+                    "[[bases]] output = \"{}\": give submeter = \"NAME\" or kwh_per_hour = NUMBER (one of them)",
+                    self.output
+                ))
+            }
+        }
+        Ok(())
+    }
+}
+
+impl DesignSettings {
+    /// Checks the `[design]` settings.
+    pub fn check(&self) -> Result<(), String> {
+        if self.points < 3 {
+            return Err(format!("design.points = {}, need at least 3", self.points));
+        }
+        if self.parallel == 0 {
+            return Err("design.parallel must be at least 1".into());
+        }
+        if !(self.min_success > 0.0 && self.min_success <= 1.0) {
+            return Err(format!(
+                "design.min_success = {}: expected a share in (0, 1], such as 0.8",
+                self.min_success
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl McmcSettings {
+    /// Checks the `[mcmc]` settings.
+    pub fn check(&self) -> Result<(), String> {
+        if self.chains == 0 {
+            return Err("mcmc.chains must be at least 1".into());
+        }
+        if self.burn_in >= self.iterations {
+            return Err(format!(
+                "mcmc.burn_in = {} must be below mcmc.iterations = {}",
+                self.burn_in, self.iterations
+            ));
+        }
+        if self.residuals == Residuals::Ar1 && self.sigma_delta != SigmaDeltaMode::Marginal {
+            return Err("mcmc.residuals = \"ar1\" needs mcmc.sigma_delta = \"marginal\"".into());
+        }
+        if self.segment == 0 {
+            return Err("mcmc.segment must be at least 1".into());
+        }
+        if !(0.0..1.0).contains(&self.independence) {
+            return Err(format!(
+                "mcmc.independence = {} must be in [0, 1)",
+                self.independence
+            ));
+        }
+        if self.kernel == Kernel::Hmc && self.sigma_delta == SigmaDeltaMode::Sampled {
+            return Err(
+                "mcmc.kernel = \"hmc\" needs mcmc.sigma_delta = \"marginal\" or \"fixed\" \
+                 (sampled sigma_delta coordinates have no gradient through the surrogate)"
+                    .into(),
+            );
+        }
+        if !(self.hmc_integration_time.is_finite() && self.hmc_integration_time > 0.0) {
+            return Err(format!(
+                "mcmc.hmc_integration_time = {} must be positive",
+                self.hmc_integration_time
+            ));
+        }
+        let t = self.rhat_target;
+        if !(t.is_finite() && t > 0.0) {
+            return Err(format!("mcmc.rhat_target = {t} must be a positive number"));
+        }
+        let e = self.ess_target;
+        if !(e.is_finite() && e >= 0.0) {
+            return Err(format!("mcmc.ess_target = {e} must be a number >= 0"));
+        }
+        if self.restart_below.is_nan() || self.restart_below < 0.0 {
+            return Err(format!(
+                "mcmc.restart_below = {} must be a number of nats >= 0",
+                self.restart_below
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl RefineSettings {
+    /// Checks the `[refine]` settings (only when there are rounds).
+    pub fn check(&self) -> Result<(), String> {
+        if self.rounds > 0 {
+            if self.points == 0 {
+                return Err("refine.points must be at least 1 when refine.rounds > 0".into());
+            }
+            let f = self.spread;
+            if !(1.0..=20.0).contains(&f) {
+                return Err(format!(
+                    "refine.spread = {f} must be between 1 (the draws themselves) and 20"
+                ));
+            }
+            if self.burn_in >= self.iterations {
+                return Err(format!(
+                    "refine.burn_in = {} must be below refine.iterations = {}",
+                    self.burn_in, self.iterations
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl SurrogateSettings {
+    /// Checks the `[surrogate]` settings.
+    pub fn check(&self) -> Result<(), String> {
+        if !(0.0..1.0).contains(&self.held_out_fraction) || self.held_out_fraction == 0.0 {
+            return Err("surrogate.held_out_fraction must be in (0, 1)".into());
+        }
+        if !(4..=1024).contains(&self.hidden) {
+            return Err(format!(
+                "surrogate.hidden = {} must be between 4 and 1024 (units per LSTM layer)",
+                self.hidden
+            ));
+        }
+        self.time_features
+            .parse::<bemcal_surrogate::TimeFeatures>()
+            .map_err(|e| format!("surrogate.time_features: {e}"))?;
+        Ok(())
+    }
 }
 
 #[cfg(test)]
