@@ -103,6 +103,16 @@ pub fn read_priors(path: &Path) -> Result<PriorsFile, PrecalError> {
 /// The human-readable summary.
 pub fn summary_text(r: &Precalibration) -> String {
     let mut s = String::new();
+    write_meters(&mut s, r);
+    write_bases(&mut s, r);
+    write_day_types(&mut s, r);
+    write_schedules(&mut s, r);
+    write_priors(&mut s, r);
+    s
+}
+
+/// The meters' source and year, each meter's quality, ingestion's notes.
+fn write_meters(s: &mut String, r: &Precalibration) {
     let m = &r.meters;
     let _ = writeln!(
         s,
@@ -138,6 +148,10 @@ pub fn summary_text(r: &Precalibration) -> String {
     for n in &m.notes {
         let _ = writeln!(s, "  note: {n}");
     }
+}
+
+/// The base loads and derived series.
+fn write_bases(s: &mut String, r: &Precalibration) {
     let _ = writeln!(s, "\nBases (disaggregation):");
     for e in &r.disaggregation.estimates {
         let _ = writeln!(
@@ -149,6 +163,10 @@ pub fn summary_text(r: &Precalibration) -> String {
     for d in &r.disaggregation.series {
         let _ = writeln!(s, "  series {}: {}", d.name, d.method);
     }
+}
+
+/// The day-type clustering: series, band, k and silhouettes, clusters, outlier days.
+fn write_day_types(s: &mut String, r: &Precalibration) {
     let c = &r.clusters;
     let _ = writeln!(s, "\nDay types:");
     let _ = writeln!(s, "  schedule series: {}", r.schedule_series.method);
@@ -198,6 +216,10 @@ pub fn summary_text(r: &Precalibration) -> String {
             d.outlier.as_deref().unwrap_or("")
         );
     }
+}
+
+/// The schedule intervals of each day type.
+fn write_schedules(s: &mut String, r: &Precalibration) {
     let (before, after) = r.reduction();
     let _ = writeln!(
         s,
@@ -214,6 +236,10 @@ pub fn summary_text(r: &Precalibration) -> String {
             sch.boundaries()
         );
     }
+}
+
+/// The priors written to priors.toml, and the pipeline's notes.
+fn write_priors(s: &mut String, r: &Precalibration) {
     let _ = writeln!(s, "\nPriors (priors.toml):");
     for p in &r.priors.parameter {
         let _ = writeln!(
@@ -225,7 +251,6 @@ pub fn summary_text(r: &Precalibration) -> String {
     for n in &r.notes {
         let _ = writeln!(s, "note: {n}");
     }
-    s
 }
 
 /// Writes all outputs into `dir` (created if needed); returns the paths written.
