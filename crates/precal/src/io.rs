@@ -263,9 +263,19 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
         written.push(p);
         Ok(())
     };
-    let year = r.meters.year;
+    put("disaggregated.csv", disaggregated_csv(r))?;
+    put("calendar.csv", calendar_csv(r))?;
+    put("schedule_priors.csv", schedule_priors_csv(r))?;
+    put("intervals.csv", intervals_csv(r))?;
+    put("priors.toml", priors_toml(&r.priors)?)?;
+    put("quality.json", quality_json(r)?)?;
+    put("summary.txt", summary_text(r))?;
+    Ok(written)
+}
 
-    // disaggregated.csv
+/// `disaggregated.csv`: the meters, the derived series and the schedule series, hour by hour
+/// in time order.
+fn disaggregated_csv(r: &Precalibration) -> String {
     let mut cols: Vec<(&str, &[f64])> = r
         .meters
         .series
@@ -281,16 +291,18 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
         let _ = write!(t, ",{n}_kwh");
     }
     t.push('\n');
-    for h in year.chronological(HOURS) {
-        let _ = write!(t, "{}", year.slot_time(h).format("%Y-%m-%dT%H:%M"));
+    for h in r.meters.year.chronological(HOURS) {
+        let _ = write!(t, "{}", r.meters.year.slot_time(h).format("%Y-%m-%dT%H:%M"));
         for (_, v) in &cols {
             let _ = write!(t, ",{}", num(v[h]));
         }
         t.push('\n');
     }
-    put("disaggregated.csv", t)?;
+    t
+}
 
-    // calendar.csv
+/// `calendar.csv`: each day's calendar type, cluster, label and outlier reason.
+fn calendar_csv(r: &Precalibration) -> String {
     let mut t =
         String::from("date,calendar_day_type,cluster,label,outlier,reason,medoid_distance\n");
     // In time order (a year from April lists April first).
@@ -309,9 +321,11 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
             num(d.medoid_distance)
         );
     }
-    put("calendar.csv", t)?;
+    t
+}
 
-    // schedule_priors.csv
+/// `schedule_priors.csv`: each day type's hourly quartiles.
+fn schedule_priors_csv(r: &Precalibration) -> String {
     let mut t = String::from("day_type,hour,n_days,q1,median,q3\n");
     for s in &r.schedules {
         for h in &s.hours {
@@ -327,9 +341,11 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
             );
         }
     }
-    put("schedule_priors.csv", t)?;
+    t
+}
 
-    // intervals.csv
+/// `intervals.csv`: each day type's schedule intervals and their priors.
+fn intervals_csv(r: &Precalibration) -> String {
     let mut t = String::from(
         "day_type,interval,start_hour,end_hour,q1_mean,median_mean,q3_mean,min,mode,max\n",
     );
@@ -351,11 +367,13 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
             );
         }
     }
-    put("intervals.csv", t)?;
-    put("priors.toml", priors_toml(&r.priors)?)?;
+    t
+}
 
+/// `quality.json`: the meters' quality, the bases and the clustering's figures.
+fn quality_json(r: &Precalibration) -> Result<String, PrecalError> {
     let q = serde_json::json!({
-        "year": year,
+        "year": r.meters.year,
         "source": r.meters.source,
         "notes": r.meters.notes,
         "meters": r.quality,
@@ -368,7 +386,5 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
     });
     let qtext = serde_json::to_string_pretty(&q)
         .map_err(|e| PrecalError::Invalid(format!("quality.json: {e}")))?;
-    put("quality.json", qtext)?;
-    put("summary.txt", summary_text(r))?;
-    Ok(written)
+    Ok(qtext)
 }
