@@ -248,25 +248,14 @@ pub fn simulate_design(
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
         .unwrap_or_default();
-    let mut attempts: Vec<Attempt> = vec![];
-    let mut outputs = std::collections::BTreeMap::new();
-    let (mut reused, mut seconds) = (0, vec![]);
+    let mut progress = Progress::default();
     loop {
-        let wave = match replacement::next_step(plan, hypercube, spares, policy, &attempts) {
+        let wave = match replacement::next_step(plan, hypercube, spares, policy, &progress.attempts)
+        {
             Step::Simulate(wave) => wave,
             Step::Done(outcome) => {
                 write_outcome(dir, &outcome)?;
-                let outputs = outcome
-                    .slots
-                    .iter()
-                    .map(|s| outputs.remove(s).expect("a settled slot has outputs"))
-                    .collect();
-                return Ok(SimulatedDesign {
-                    outcome,
-                    outputs,
-                    reused,
-                    seconds,
-                });
+                return Ok(progress.settle(outcome));
             }
             Step::Failed(message) => {
                 return Err(Error::Stage {
@@ -275,17 +264,12 @@ pub fn simulate_design(
                 })
             }
         };
-        let failed_before = |(s, x): &(usize, Vec<f64>)| {
-            known
-                .iter()
-                .find(|a| a.slot == *s && &a.values == x && a.error.is_some())
-        };
         let to_run: Vec<(usize, Vec<f64>)> = wave
             .iter()
-            .filter(|p| failed_before(p).is_none())
+            .filter(|p| failed_before(&known, p).is_none())
             .cloned()
             .collect();
-        let replacing = !attempts.is_empty();
+        let replacing = !progress.attempts.is_empty();
         let results = simulate_points(
             runner,
             model,
@@ -302,15 +286,38 @@ pub fn simulate_design(
                 }
             },
         )?;
-        let mut results = to_run.iter().map(|p| p.0).zip(results);
-        for p in &wave {
-            if let Some(a) = failed_before(p) {
+        progress.record(&wave, &known, to_run.iter().map(|p| p.0).zip(results), log);
+        save_failures(&failures_path, &known, &progress.attempts)?;
+    }
+}
+
+/// A design's attempts so far, and the outputs of the points that simulated.
+#[derive(Default)]
+struct Progress {
+    attempts: Vec<Attempt>,
+    outputs: std::collections::BTreeMap<usize, HourlyOutputs>,
+    reused: usize,
+    seconds: Vec<f64>,
+}
+
+impl Progress {
+    /// Records a wave: a point that failed in an earlier run of the folder (`known`) is not
+    /// repeated, the others take their `results` in order.
+    fn record(
+        &mut self,
+        wave: &[(usize, Vec<f64>)],
+        known: &[Attempt],
+        mut results: impl Iterator<Item = (usize, PointRun)>,
+        log: &(dyn Fn(&str) + Sync),
+    ) {
+        for p in wave {
+            if let Some(a) = failed_before(known, p) {
                 log(&format!(
                     "design point {}: failed in an earlier run ({}), not repeated",
                     p.0,
                     failure_reason(a.error.as_deref().unwrap_or_default())
                 ));
-                attempts.push(a.clone());
+                self.attempts.push(a.clone());
                 continue;
             }
             let (slot, r) = results.next().expect("one result per point run");
@@ -318,11 +325,11 @@ pub fn simulate_design(
             match r {
                 Ok((o, secs)) => {
                     match secs {
-                        Some(s) => seconds.push(s),
-                        None => reused += 1,
+                        Some(s) => self.seconds.push(s),
+                        None => self.reused += 1,
                     }
-                    outputs.insert(slot, o);
-                    attempts.push(Attempt {
+                    self.outputs.insert(slot, o);
+                    self.attempts.push(Attempt {
                         slot,
                         values: p.1.clone(),
                         error: None,
@@ -334,7 +341,7 @@ pub fn simulate_design(
                         "design point {slot}: EnergyPlus failed ({}); it will be replaced if it has replacements left",
                         failure_reason(&text)
                     ));
-                    attempts.push(Attempt {
+                    self.attempts.push(Attempt {
                         slot,
                         values: p.1.clone(),
                         error: Some(text),
@@ -342,18 +349,46 @@ pub fn simulate_design(
                 }
             }
         }
-        let mut failures: Vec<Attempt> = known.clone();
-        for a in attempts.iter().filter(|a| a.error.is_some()) {
-            if !failures.contains(a) {
-                failures.push(a.clone());
-            }
-        }
-        if !failures.is_empty() {
-            let json =
-                serde_json::to_vec_pretty(&failures).map_err(|e| Error::Config(e.to_string()))?;
-            crate::write_atomic(&failures_path, &json)?;
+    }
+
+    /// The settled design: each settled slot's outputs in the outcome's order.
+    fn settle(mut self, outcome: Outcome) -> SimulatedDesign {
+        let outputs = outcome
+            .slots
+            .iter()
+            .map(|s| self.outputs.remove(s).expect("a settled slot has outputs"))
+            .collect();
+        SimulatedDesign {
+            outcome,
+            outputs,
+            reused: self.reused,
+            seconds: self.seconds,
         }
     }
+}
+
+/// The failed attempt at this slot and point in an earlier run of the folder, if any.
+fn failed_before<'a>(known: &'a [Attempt], (s, x): &(usize, Vec<f64>)) -> Option<&'a Attempt> {
+    known
+        .iter()
+        .find(|a| a.slot == *s && &a.values == x && a.error.is_some())
+}
+
+/// Writes every failed attempt, earlier runs' first, to the folder's failures file (when
+/// there is any).
+fn save_failures(path: &Path, known: &[Attempt], attempts: &[Attempt]) -> Result<(), Error> {
+    let mut failures: Vec<Attempt> = known.to_vec();
+    for a in attempts.iter().filter(|a| a.error.is_some()) {
+        if !failures.contains(a) {
+            failures.push(a.clone());
+        }
+    }
+    if !failures.is_empty() {
+        let json =
+            serde_json::to_vec_pretty(&failures).map_err(|e| Error::Config(e.to_string()))?;
+        crate::write_atomic(path, &json)?;
+    }
+    Ok(())
 }
 
 /// The settled design of simulations folder `dir` (written by [`simulate_design`] or a
