@@ -61,118 +61,133 @@ pub enum Sub {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let rt = bemcal_client::runtime()?;
     match a.command {
-        Sub::Submit { manifest, client } => {
-            let m = portfolio::load_manifest(&manifest)?;
-            let connect = client.connect()?;
-            let id = portfolio::new_id();
-            let subs = rt.block_on(async {
-                let mut c = connect.client()?;
-                portfolio::submit(&mut c, &m, &id).await
-            })?;
-            for (b, r) in &subs {
-                match r {
-                    Ok(run) => eprintln!("{b}: run {run}"),
-                    Err(e) => eprintln!("{b}: not submitted: {e}"),
-                }
-            }
-            println!("{id}");
-            Ok(())
-        }
+        Sub::Submit { manifest, client } => submit(&manifest, client),
         Sub::Status {
             portfolio: id,
             client,
             json,
-        } => {
-            let connect = client.connect()?;
-            let runs = rt.block_on(async {
-                let mut c = connect.client()?;
-                portfolio::statuses(&mut c, &id, true).await
-            })?;
-            if runs.is_empty() {
-                anyhow::bail!("no portfolio {id:?} on the coordinator");
-            }
-            let p = portfolio::summarize(&id, &id, &runs, &[]);
-            if json {
-                println!("{}", serde_json::to_string_pretty(&p)?);
-            } else {
-                print_table(&p);
-            }
-            Ok(())
-        }
+        } => status(&id, client, json),
         Sub::Results {
             portfolio: id,
             out,
             client,
-        } => {
-            let connect = client.connect()?;
-            let runs = rt.block_on(async {
-                let mut c = connect.client()?;
-                let runs = portfolio::statuses(&mut c, &id, true).await?;
-                portfolio::fetch(&mut c, &runs, &out).await?;
-                Ok::<_, anyhow::Error>(runs)
-            })?;
-            if runs.is_empty() {
-                anyhow::bail!("no portfolio {id:?} on the coordinator");
-            }
-            let p = finish(&out, &id, &id, &runs, &[])?;
-            print_table(&p);
-            Ok(())
-        }
+        } => results(&id, &out, client),
         Sub::Run {
             manifest,
             local_workers,
             out,
-        } => {
-            let m = portfolio::load_manifest(&manifest)?;
-            let t0 = std::time::Instant::now();
-            let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
-            std::fs::create_dir_all(&out)?;
-            let (children, connect) =
-                super::coordinator::start_local(&out, local_workers.max(1), &log)?;
-            let id = portfolio::new_id();
-            let (runs, local_failures) = rt.block_on(async {
-                let mut c: Client = connect.client()?;
-                let subs = portfolio::submit(&mut c, &m, &id).await?;
-                let mut failed = vec![];
-                for (b, r) in subs {
-                    match r {
-                        Ok(run) => log(&format!("{b}: submitted as run {run}")),
-                        Err(e) => {
-                            log(&format!("{b}: FAILED before submission: {e}"));
-                            failed.push((b, e));
-                        }
-                    }
-                }
-                let runs = portfolio::follow(&mut c, &id, &log).await?;
-                portfolio::fetch(&mut c, &runs, &out).await?;
-                Ok::<_, anyhow::Error>((runs, failed))
-            })?;
-            drop(children);
-            let p = finish(&out, &id, &m.name, &runs, &local_failures)?;
-            print_table(&p);
-            log(&format!(
-                "portfolio {}: {} of {} buildings done, {} failed; wrote {}/portfolio.{{csv,json,html}}",
-                m.name,
-                p.done,
-                p.buildings,
-                p.failed,
-                out.display()
-            ));
-            // Every finished building's results are written above; a failed one still makes
-            // the exit status non-zero, so that scripts and CI notice it.
-            if p.failed > 0 {
-                anyhow::bail!(
-                    "{} of {} buildings failed (reasons in {}/portfolio.csv); the others' results are written",
-                    p.failed,
-                    p.buildings,
-                    out.display()
-                );
-            }
-            Ok(())
+        } => run_local(&manifest, local_workers, &out),
+    }
+}
+
+/// `portfolio submit`: every building of the manifest submitted; prints the portfolio id.
+fn submit(manifest: &Path, client: ClientArgs) -> anyhow::Result<()> {
+    let rt = bemcal_client::runtime()?;
+    let m = portfolio::load_manifest(manifest)?;
+    let connect = client.connect()?;
+    let id = portfolio::new_id();
+    let subs = rt.block_on(async {
+        let mut c = connect.client()?;
+        portfolio::submit(&mut c, &m, &id).await
+    })?;
+    for (b, r) in &subs {
+        match r {
+            Ok(run) => eprintln!("{b}: run {run}"),
+            Err(e) => eprintln!("{b}: not submitted: {e}"),
         }
     }
+    println!("{id}");
+    Ok(())
+}
+
+/// `portfolio status`: the table (or JSON) of a portfolio's runs.
+fn status(id: &str, client: ClientArgs, json: bool) -> anyhow::Result<()> {
+    let rt = bemcal_client::runtime()?;
+    let connect = client.connect()?;
+    let runs = rt.block_on(async {
+        let mut c = connect.client()?;
+        portfolio::statuses(&mut c, id, true).await
+    })?;
+    if runs.is_empty() {
+        anyhow::bail!("no portfolio {id:?} on the coordinator");
+    }
+    let p = portfolio::summarize(id, id, &runs, &[]);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&p)?);
+    } else {
+        print_table(&p);
+    }
+    Ok(())
+}
+
+/// `portfolio results`: every finished building's files downloaded, and the portfolio table.
+fn results(id: &str, out: &Path, client: ClientArgs) -> anyhow::Result<()> {
+    let rt = bemcal_client::runtime()?;
+    let connect = client.connect()?;
+    let runs = rt.block_on(async {
+        let mut c = connect.client()?;
+        let runs = portfolio::statuses(&mut c, id, true).await?;
+        portfolio::fetch(&mut c, &runs, out).await?;
+        Ok::<_, anyhow::Error>(runs)
+    })?;
+    if runs.is_empty() {
+        anyhow::bail!("no portfolio {id:?} on the coordinator");
+    }
+    let p = finish(out, id, id, &runs, &[])?;
+    print_table(&p);
+    Ok(())
+}
+
+/// `portfolio run`: a local coordinator and workers calibrate every building; a failed one
+/// makes the exit status non-zero after the others' results are written.
+fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Result<()> {
+    let rt = bemcal_client::runtime()?;
+    let m = portfolio::load_manifest(manifest)?;
+    let t0 = std::time::Instant::now();
+    let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
+    std::fs::create_dir_all(out)?;
+    let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), &log)?;
+    let id = portfolio::new_id();
+    let (runs, local_failures) = rt.block_on(async {
+        let mut c: Client = connect.client()?;
+        let subs = portfolio::submit(&mut c, &m, &id).await?;
+        let mut failed = vec![];
+        for (b, r) in subs {
+            match r {
+                Ok(run) => log(&format!("{b}: submitted as run {run}")),
+                Err(e) => {
+                    log(&format!("{b}: FAILED before submission: {e}"));
+                    failed.push((b, e));
+                }
+            }
+        }
+        let runs = portfolio::follow(&mut c, &id, &log).await?;
+        portfolio::fetch(&mut c, &runs, out).await?;
+        Ok::<_, anyhow::Error>((runs, failed))
+    })?;
+    drop(children);
+    let p = finish(out, &id, &m.name, &runs, &local_failures)?;
+    print_table(&p);
+    log(&format!(
+        "portfolio {}: {} of {} buildings done, {} failed; wrote {}/portfolio.{{csv,json,html}}",
+        m.name,
+        p.done,
+        p.buildings,
+        p.failed,
+        out.display()
+    ));
+    // Every finished building's results are written above; a failed one still makes
+    // the exit status non-zero, so that scripts and CI notice it.
+    if p.failed > 0 {
+        anyhow::bail!(
+            "{} of {} buildings failed (reasons in {}/portfolio.csv); the others' results are written",
+            p.failed,
+            p.buildings,
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// Writes each finished building's report.html, then the summary files.
