@@ -106,14 +106,31 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
         source,
     })?;
     let names = output_names(p);
-    let parameters = parameter_names(p);
+    write_atomic(
+        &dir.join("portfolio.csv"),
+        portfolio_csv(p, &names, &parameter_names(p)).as_bytes(),
+    )?;
+    let json = serde_json::to_string_pretty(p).map_err(|e| ReportError::Parse {
+        path: dir.join("portfolio.json"),
+        msg: e.to_string(),
+    })?;
+    write_atomic(&dir.join("portfolio.json"), json.as_bytes())?;
+    write_atomic(
+        &dir.join("portfolio.html"),
+        portfolio_html(p, &names).as_bytes(),
+    )?;
+    Ok(())
+}
+
+/// `portfolio.csv`: a row per building with its state, Guideline 14 per output and estimates.
+fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) -> String {
     let mut csv = String::from(
         "building,run,state,stage,g14_pass,max_rhat,converged,run_time_s,simulations_run,simulations_shared",
     );
-    for n in &names {
+    for n in names {
         csv.push_str(&format!(",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass"));
     }
-    for n in &parameters {
+    for n in parameters {
         csv.push_str(&format!(",{}", csv_field(n)));
     }
     csv.push_str(",error\n");
@@ -131,7 +148,7 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
             r.simulations_run,
             r.simulations_shared
         ));
-        for n in &names {
+        for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
                 Some(o) => csv.push_str(&format!(
                     ",{},{},{}",
@@ -142,7 +159,7 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
                 None => csv.push_str(",,,"),
             }
         }
-        for n in &parameters {
+        for n in parameters {
             let v = r.estimate.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
             csv.push_str(&format!(",{}", v.map_or(String::new(), |v| v.to_string())));
         }
@@ -151,12 +168,11 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
             csv_field(r.error.as_deref().unwrap_or(""))
         ));
     }
-    write_atomic(&dir.join("portfolio.csv"), csv.as_bytes())?;
-    let json = serde_json::to_string_pretty(p).map_err(|e| ReportError::Parse {
-        path: dir.join("portfolio.json"),
-        msg: e.to_string(),
-    })?;
-    write_atomic(&dir.join("portfolio.json"), json.as_bytes())?;
+    csv
+}
+
+/// `portfolio.html`: the same table, with each building's report linked or its error shown.
+fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
     let mut h = format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>Portfolio {name}</title><style>\
          body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
@@ -173,7 +189,7 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
         sr = p.simulations_run,
         ss = p.simulations_shared
     );
-    for n in &names {
+    for n in names {
         h.push_str(&format!(
             "<th>{0} NMBE %</th><th>{0} CV-RMSE %</th>",
             esc(n)
@@ -197,7 +213,7 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
             num(r.max_rhat, 3),
             r.run_time_s
         ));
-        for n in &names {
+        for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
                 Some(o) => {
                     let c = if o.pass { "pass" } else { "fail" };
@@ -218,6 +234,5 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
         h.push_str(&format!("<td class=\"l\">{last}</td></tr>\n"));
     }
     h.push_str("</table>\n</body></html>\n");
-    write_atomic(&dir.join("portfolio.html"), h.as_bytes())?;
-    Ok(())
+    h
 }
