@@ -47,7 +47,19 @@ struct Kind {
 /// when none is, so that a dashboard's series exist before the first job.
 pub fn render(s: &MetricsSnapshot) -> String {
     let mut registry = Registry::with_prefix("bemcal");
+    register_jobs(&mut registry, s);
+    register_runs(&mut registry, s);
+    register_attempts(&mut registry, s);
+    register_durations(&mut registry, s);
+    register_store(&mut registry, s);
 
+    let mut text = String::new();
+    encode(&mut text, &registry).expect("writing to a String cannot fail");
+    text
+}
+
+/// Jobs by kind and state, every pair present (0 where none).
+fn register_jobs(registry: &mut Registry, s: &MetricsSnapshot) {
     let jobs = Family::<KindState, Gauge>::default();
     for kind in JobKind::ALL {
         for state in JobState::ALL {
@@ -62,7 +74,10 @@ pub fn render(s: &MetricsSnapshot) -> String {
         "Jobs by kind and state (queued = the queue depth)",
         jobs,
     );
+}
 
+/// Runs by state, every state present.
+fn register_runs(registry: &mut Registry, s: &MetricsSnapshot) {
     let runs = Family::<OfState, Gauge>::default();
     for state in RunState::ALL {
         let _ = runs.get_or_create(&OfState {
@@ -76,7 +91,10 @@ pub fn render(s: &MetricsSnapshot) -> String {
         .set(*n as i64);
     }
     registry.register("runs", "Runs by state", runs);
+}
 
+/// Leases that ended, by kind and outcome, and the lease expiries among them.
+fn register_attempts(registry: &mut Registry, s: &MetricsSnapshot) {
     let attempts = Family::<KindOutcome, Counter>::default();
     for kind in JobKind::ALL {
         for outcome in ["done", "failed", "lost", "returned"] {
@@ -114,7 +132,10 @@ pub fn render(s: &MetricsSnapshot) -> String {
         "Leases that expired without heartbeats",
         expiries,
     );
+}
 
+/// Wall time of the finished attempts, per job kind.
+fn register_durations(registry: &mut Registry, s: &MetricsSnapshot) {
     let durations = Family::<Kind, Histogram>::new_with_constructor(|| {
         Histogram::new(bemcal_client::metrics::DURATION_BUCKETS.iter().copied())
     });
@@ -134,7 +155,10 @@ pub fn render(s: &MetricsSnapshot) -> String {
         Unit::Seconds,
         durations,
     );
+}
 
+/// Bytes held in the artifact store.
+fn register_store(registry: &mut Registry, s: &MetricsSnapshot) {
     let store = Gauge::<i64>::default();
     store.set(s.artifact_bytes as i64);
     registry.register_with_unit(
@@ -143,10 +167,6 @@ pub fn render(s: &MetricsSnapshot) -> String {
         Unit::Bytes,
         store,
     );
-
-    let mut text = String::new();
-    encode(&mut text, &registry).expect("writing to a String cannot fail");
-    text
 }
 
 fn labels(kind: &str, state: &str) -> KindState {
