@@ -347,7 +347,6 @@ impl Model {
             Source::Generated(spec) => spec.to_idf(&v),
             Source::Mapped { idf, map, calendar } => {
                 let mut out = idf.clone();
-                crate::calendar::set_run_period(&mut out, calendar);
                 for p in &map.parameters {
                     let value = v[&p.name];
                     for t in &p.targets {
@@ -380,6 +379,8 @@ impl Model {
                         }
                     }
                 }
+                // After the edits, which pair each object with the user's by position.
+                crate::calendar::set_run_period(&mut out, calendar);
                 Ok(out)
             }
         }
