@@ -202,7 +202,7 @@ async fn handle(
             ended
         }
         Some(Err(e)) => {
-            report_failure(&client, &worker, lease, e).await;
+            let _ = report_failure(&client, &worker, lease, e).await;
             Outcome::Failed
         }
     };
@@ -275,18 +275,7 @@ async fn report_outputs(
     }
     let uploaded = upload_err.is_none();
     let r = match upload_err {
-        Some(e) => retry(REPORT_PATIENCE, || {
-            let mut c = client.clone();
-            let req = FailRequest {
-                worker_id: worker.to_string(),
-                lease_id: lease,
-                error: format!("uploading outputs: {e}"),
-                requeue: false,
-            };
-            async move { c.fail(req).await }
-        })
-        .await
-        .map(|_| ()),
+        Some(e) => report_failure(client, worker, lease, format!("uploading outputs: {e}")).await,
         None => retry(REPORT_PATIENCE, || {
             let mut c = client.clone();
             let req = CompleteRequest {
@@ -314,9 +303,15 @@ async fn report_outputs(
     }
 }
 
-/// Fails a job's lease with its error (not requeued: the job itself failed).
-async fn report_failure(client: &Client, worker: &str, lease: u64, error: String) {
-    let _ = retry(REPORT_PATIENCE, || {
+/// Fails a job's lease with its error (not requeued: the job itself failed), retried while the
+/// coordinator is away.
+async fn report_failure(
+    client: &Client,
+    worker: &str,
+    lease: u64,
+    error: String,
+) -> Result<(), tonic::Status> {
+    retry(REPORT_PATIENCE, || {
         let mut c = client.clone();
         let req = FailRequest {
             worker_id: worker.to_string(),
@@ -326,5 +321,6 @@ async fn report_failure(client: &Client, worker: &str, lease: u64, error: String
         };
         async move { c.fail(req).await }
     })
-    .await;
+    .await
+    .map(|_| ())
 }
