@@ -19,58 +19,22 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
         .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", project_file.display()))?;
     let mut doc: toml::Table = toml::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: {}", project_file.display(), e.message()))?;
-    let base = project_file
-        .parent()
-        .unwrap_or(Path::new("."))
-        .to_path_buf();
-    let mut files: BTreeMap<String, PathBuf> = BTreeMap::new();
-    let mut place = |p: &str| -> anyhow::Result<String> {
-        let src = if Path::new(p).is_absolute() {
-            PathBuf::from(p)
-        } else {
-            base.join(p)
-        };
-        let name = match safe_relative(p) {
-            Ok(_) => p.to_string(),
-            Err(_) => {
-                let stem = src
-                    .file_name()
-                    .map(|s| s.to_string_lossy().to_string())
-                    .unwrap_or_else(|| "file".into());
-                let stem: String = stem
-                    .chars()
-                    .map(|c| {
-                        if c.is_ascii_alphanumeric() || "._-".contains(c) {
-                            c
-                        } else {
-                            '_'
-                        }
-                    })
-                    .collect();
-                format!("files/{}-{stem}", files.len())
-            }
-        };
-        if !src.is_file() {
-            anyhow::bail!(
-                "{}: file {} not found",
-                project_file.display(),
-                src.display()
-            );
-        }
-        files.insert(name.clone(), src);
-        Ok(name)
+    let mut files = Collector {
+        project_file,
+        base: project_file.parent().unwrap_or(Path::new(".")),
+        files: BTreeMap::new(),
     };
     let str_at = |t: &toml::Table, k: &str| t.get(k).and_then(|v| v.as_str()).map(str::to_string);
     let model = str_at(&doc, "model")
         .ok_or_else(|| anyhow::anyhow!("{}: missing model = \"...\"", project_file.display()))?;
-    let model_name = place(&model)?;
+    let model_name = files.place(&model)?;
     if let Some(p) = str_at(&doc, "priors") {
-        let n = place(&p)?;
+        let n = files.place(&p)?;
         doc.insert("priors".into(), n.into());
     }
     if let Some(w) = str_at(&doc, "weather") {
         if !w.starts_with("bundled:") {
-            let n = place(&w)?;
+            let n = files.place(&w)?;
             doc.insert("weather".into(), n.into());
         }
     }
@@ -79,30 +43,81 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
         .and_then(|v| v.as_table_mut())
     {
         if let Some(f) = str_at(mw, "csv") {
-            let n = place(&f)?;
+            let n = files.place(&f)?;
             mw.insert("csv".into(), n.into());
         }
         if let Some(list) = mw.get_mut("isd_lite").and_then(|v| v.as_array_mut()) {
             for item in list.iter_mut() {
                 if let Some(f) = item.as_str().map(str::to_string) {
-                    *item = place(&f)?.into();
+                    *item = files.place(&f)?.into();
                 }
             }
         }
     }
     if let Some(m) = doc.get_mut("meters").and_then(|v| v.as_table_mut()) {
         if let Some(f) = str_at(m, "file") {
-            let n = place(&f)?;
+            let n = files.place(&f)?;
             m.insert("file".into(), n.into());
         }
     }
     doc.insert("model".into(), model_name.clone().into());
-    // A model with an [idf] table names an IDF relative to itself.
-    let model_src = files[&model_name].clone();
-    let model_text = std::fs::read_to_string(&model_src)
-        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", model_src.display()))?;
-    if let Ok(mt) = toml::from_str::<toml::Table>(&model_text) {
-        // A building spec's calendar files are relative to it, like an [idf] path.
+    files.beside_model(&model_name)?;
+    let mut out = vec![(
+        PROJECT_FILE.to_string(),
+        toml::to_string(&doc)?.into_bytes(),
+    )];
+    for (name, src) in files.files {
+        if name == PROJECT_FILE {
+            anyhow::bail!("a project input may not be named {PROJECT_FILE}");
+        }
+        let bytes = std::fs::read(&src)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", src.display()))?;
+        out.push((name, bytes));
+    }
+    Ok(out)
+}
+
+/// The files of a bundle being collected: each one's name in the bundle and where it is read.
+struct Collector<'a> {
+    project_file: &'a Path,
+    /// The project file's folder: relative paths in it start there.
+    base: &'a Path,
+    files: BTreeMap<String, PathBuf>,
+}
+
+impl Collector<'_> {
+    /// Adds the file a project names as `p` and returns its name in the bundle: `p` itself
+    /// when it is a safe relative path, else `files/N-<file name>`.
+    fn place(&mut self, p: &str) -> anyhow::Result<String> {
+        let src = if Path::new(p).is_absolute() {
+            PathBuf::from(p)
+        } else {
+            self.base.join(p)
+        };
+        let name = match safe_relative(p) {
+            Ok(_) => p.to_string(),
+            Err(_) => format!("files/{}-{}", self.files.len(), bundle_stem(&src)),
+        };
+        if !src.is_file() {
+            anyhow::bail!(
+                "{}: file {} not found",
+                self.project_file.display(),
+                src.display()
+            );
+        }
+        self.files.insert(name.clone(), src);
+        Ok(name)
+    }
+
+    /// Adds the files a model file names relative to itself (an `[idf]` table's `path`, a
+    /// calendar's `holidays_file` and `day_types_file`), beside the model in the bundle.
+    fn beside_model(&mut self, model_name: &str) -> anyhow::Result<()> {
+        let model_src = self.files[model_name].clone();
+        let model_text = std::fs::read_to_string(&model_src)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", model_src.display()))?;
+        let Ok(mt) = toml::from_str::<toml::Table>(&model_text) else {
+            return Ok(());
+        };
         let beside_model = ["holidays_file", "day_types_file"]
             .iter()
             .filter_map(|k| mt.get(*k).and_then(|v| v.as_str()));
@@ -112,7 +127,7 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
             .and_then(|t| t.get("path"))
             .and_then(|v| v.as_str());
         for idf in idf_path.into_iter().chain(beside_model) {
-            let dir = Path::new(&model_name).parent().unwrap_or(Path::new(""));
+            let dir = Path::new(model_name).parent().unwrap_or(Path::new(""));
             let rel = dir.join(idf).to_string_lossy().replace('\\', "/");
             safe_relative(&rel).map_err(|e| {
                 anyhow::anyhow!(
@@ -121,22 +136,27 @@ pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
                 )
             })?;
             let src = model_src.parent().unwrap_or(Path::new(".")).join(idf);
-            files.insert(rel, src);
+            self.files.insert(rel, src);
         }
+        Ok(())
     }
-    let mut out = vec![(
-        PROJECT_FILE.to_string(),
-        toml::to_string(&doc)?.into_bytes(),
-    )];
-    for (name, src) in files {
-        if name == PROJECT_FILE {
-            anyhow::bail!("a project input may not be named {PROJECT_FILE}");
-        }
-        let bytes = std::fs::read(&src)
-            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", src.display()))?;
-        out.push((name, bytes));
-    }
-    Ok(out)
+}
+
+/// A file's name made safe for a bundle: characters other than ASCII letters, digits and
+/// `._-` become `_`.
+fn bundle_stem(src: &Path) -> String {
+    src.file_name()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "file".into())
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 /// Lays out `files` (from `store`) under `dir`, checking every path; returns the project file.

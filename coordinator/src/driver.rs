@@ -548,34 +548,13 @@ impl State {
             if let Some(last) = mine.last() {
                 inputs.push((&states_of(last)?).into());
             } else if let Some(prev) = log.rounds.last().filter(|p| !p.starts.is_empty()) {
-                // Where the previous round's chains ended (or restarted: `next_starts`).
-                let mine = prev
-                    .starts
-                    .get(first..first + count)
-                    .ok_or_else(|| format!("chains {first}: no starting points"))?;
-                let bytes = serde_json::to_vec(mine).map_err(err)?;
-                inputs.push(proto::FileRef {
-                    path: WARM_FILE.into(),
-                    sha256: self.put_artifact(&bytes)?,
-                    size: bytes.len() as u64,
-                });
+                inputs.push(self.warm_starts(&prev.starts, first, count)?);
             }
             let seg = mine.len() as u32;
-            let label = match round {
-                Round::Preliminary { index } => format!(
-                    "chains {}-{} segment {seg} (refinement round {})",
-                    first,
-                    first + count - 1,
-                    index + 1
-                ),
-                Round::Final { .. } => {
-                    format!("chains {}-{} segment {seg}", first, first + count - 1)
-                }
-            };
             jobs.push(NewJob {
                 stage: Stage::Chains,
                 kind: JobKind::Chains,
-                label,
+                label: segment_label(round, first, count, seg),
                 spec: proto::Job {
                     bundle: crate::client::refs(&r.bundle),
                     inputs,
@@ -592,6 +571,25 @@ impl State {
             });
         }
         Ok(jobs)
+    }
+
+    /// A round's first segment of chains `first..first + count` starts where the previous
+    /// round's chains ended (or restarted: `next_starts`): their `starts`, as `warm.json`.
+    fn warm_starts(
+        &self,
+        starts: &[Vec<f64>],
+        first: usize,
+        count: usize,
+    ) -> Result<proto::FileRef> {
+        let mine = starts
+            .get(first..first + count)
+            .ok_or_else(|| format!("chains {first}: no starting points"))?;
+        let bytes = serde_json::to_vec(mine).map_err(err)?;
+        Ok(proto::FileRef {
+            path: WARM_FILE.into(),
+            sha256: self.put_artifact(&bytes)?,
+            size: bytes.len() as u64,
+        })
     }
 
     fn stage_chains(&self, r: &RunRow) -> Result<bool> {
@@ -916,6 +914,18 @@ impl State {
 /// The job of a validation run of the sequence; the calibrated model's and a predictive
 /// draw's tolerate an EnergyPlus failure ([`ValidationRun::tolerates_failure`]: the driver then
 /// validates the next-best draw, or leaves the draw out).
+/// How the job of segment `seg` of chains `first..first + count` in `round` is labelled.
+fn segment_label(round: Round, first: usize, count: usize, seg: u32) -> String {
+    let last = first + count - 1;
+    match round {
+        Round::Preliminary { index } => format!(
+            "chains {first}-{last} segment {seg} (refinement round {})",
+            index + 1
+        ),
+        Round::Final { .. } => format!("chains {first}-{last} segment {seg}"),
+    }
+}
+
 fn validation_job(r: &RunRow, run: &ValidationRun) -> NewJob {
     NewJob {
         stage: Stage::Validate,

@@ -59,53 +59,9 @@ pub async fn serve(
         let _ = st.kick.send(r);
     }
     spawn_driver(st.clone(), rx);
-    let reaper = st.clone();
-    tokio::spawn(async move {
-        loop {
-            tokio::time::sleep(Duration::from_millis(500)).await;
-            let st = reaper.clone();
-            let runs = tokio::task::spawn_blocking(move || st.store.expire(st.config.max_failures))
-                .await
-                .ok()
-                .and_then(|r| r.ok())
-                .unwrap_or_default();
-            for r in runs {
-                let _ = reaper.kick.send(r);
-            }
-        }
-    });
-
-    // Artifacts nothing refers to, past their grace period: at start, then hourly.
-    let collector = st.clone();
-    tokio::spawn(async move {
-        loop {
-            let st = collector.clone();
-            let _ = tokio::task::spawn_blocking(move || st.collect_artifacts()).await;
-            tokio::time::sleep(Duration::from_secs(3600)).await;
-        }
-    });
-
-    // Standard gRPC health (grpc.health.v1, no token: Kubernetes probes cannot send one):
-    // SERVING while the database answers the query behind the Health RPC.
-    let (health, health_svc) = tonic_health::server::health_reporter();
-    let probe = st.clone();
-    tokio::spawn(async move {
-        loop {
-            let st = probe.clone();
-            let ok = tokio::task::spawn_blocking(move || st.store.queue_depth().is_ok())
-                .await
-                .unwrap_or(false);
-            let status = match ok {
-                true => tonic_health::ServingStatus::Serving,
-                false => tonic_health::ServingStatus::NotServing,
-            };
-            health.set_service_status("", status).await;
-            health
-                .set_service_status("bemcal.v1.Coordinator", status)
-                .await;
-            tokio::time::sleep(Duration::from_secs(5)).await;
-        }
-    });
+    spawn_reaper(st.clone());
+    spawn_artifact_collector(st.clone());
+    let health_svc = spawn_health(st.clone());
 
     let listener = tokio::net::TcpListener::bind(opts.listen).await?;
     let (stop_metrics, metrics_stopped) = tokio::sync::oneshot::channel::<()>();
@@ -126,16 +82,7 @@ pub async fn serve(
         svc,
         CheckToken::with_roles(&opts.token, opts.worker_token.as_deref()),
     );
-    let mut builder = Server::builder();
-    if let Some((cert, key)) = &opts.tls {
-        let cert = std::fs::read(cert)
-            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", cert.display()))?;
-        let key = std::fs::read(key)
-            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", key.display()))?;
-        builder =
-            builder.tls_config(ServerTlsConfig::new().identity(Identity::from_pem(cert, key)))?;
-    }
-    builder
+    builder(opts.tls.as_ref())?
         .add_service(health_svc)
         .add_service(svc)
         .serve_with_incoming_shutdown(
@@ -145,4 +92,74 @@ pub async fn serve(
         .await?;
     let _ = stop_metrics.send(());
     Ok(())
+}
+
+/// Expired leases, every 500 ms: their jobs go back to the queue (or fail after
+/// `max_failures`), and their runs' drivers are woken.
+fn spawn_reaper(reaper: Arc<State>) {
+    tokio::spawn(async move {
+        loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let st = reaper.clone();
+            let runs = tokio::task::spawn_blocking(move || st.store.expire(st.config.max_failures))
+                .await
+                .ok()
+                .and_then(|r| r.ok())
+                .unwrap_or_default();
+            for r in runs {
+                let _ = reaper.kick.send(r);
+            }
+        }
+    });
+}
+
+/// Artifacts nothing refers to, past their grace period: collected at start, then hourly.
+fn spawn_artifact_collector(collector: Arc<State>) {
+    tokio::spawn(async move {
+        loop {
+            let st = collector.clone();
+            let _ = tokio::task::spawn_blocking(move || st.collect_artifacts()).await;
+            tokio::time::sleep(Duration::from_secs(3600)).await;
+        }
+    });
+}
+
+/// Standard gRPC health (grpc.health.v1, no token: Kubernetes probes cannot send one):
+/// SERVING while the database answers the query behind the Health RPC, checked every 5 s.
+fn spawn_health(
+    probe: Arc<State>,
+) -> tonic_health::pb::health_server::HealthServer<impl tonic_health::pb::health_server::Health> {
+    let (health, health_svc) = tonic_health::server::health_reporter();
+    tokio::spawn(async move {
+        loop {
+            let st = probe.clone();
+            let ok = tokio::task::spawn_blocking(move || st.store.queue_depth().is_ok())
+                .await
+                .unwrap_or(false);
+            let status = match ok {
+                true => tonic_health::ServingStatus::Serving,
+                false => tonic_health::ServingStatus::NotServing,
+            };
+            health.set_service_status("", status).await;
+            health
+                .set_service_status("bemcal.v1.Coordinator", status)
+                .await;
+            tokio::time::sleep(Duration::from_secs(5)).await;
+        }
+    });
+    health_svc
+}
+
+/// The server, serving TLS with `tls` (PEM certificate and key files) when given.
+fn builder(tls: Option<&(PathBuf, PathBuf)>) -> anyhow::Result<Server> {
+    let mut builder = Server::builder();
+    if let Some((cert, key)) = tls {
+        let cert = std::fs::read(cert)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", cert.display()))?;
+        let key = std::fs::read(key)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", key.display()))?;
+        builder =
+            builder.tls_config(ServerTlsConfig::new().identity(Identity::from_pem(cert, key)))?;
+    }
+    Ok(builder)
 }

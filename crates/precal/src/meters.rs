@@ -789,11 +789,7 @@ pub fn parse_meters(
     let interval_min = reading_interval_min(rows);
     let per_hour = 60 / interval_min;
     if per_hour > 1 {
-        notes.push(format!(
-            "readings every {interval_min} min: {per_hour} per hour aggregated to hourly kWh \
-             (energy units summed, power units averaged; an hour with missing readings is the \
-             mean of those present, scaled to the hour)"
-        ));
+        notes.push(aggregation_note(interval_min, per_hour));
     }
 
     let convention = hour_convention(
@@ -843,25 +839,7 @@ pub fn parse_meters(
     let grid = values_on_grid(&table, spec, year, per_hour, path, &mut notes)?;
     dropped_notes(&grid, &table.rows, year, spec.duplicates, &mut notes);
     if grid.slot_line.iter().all(|&l| l == 0) {
-        let clocks = table.rows.iter().filter(|r| !r.offset).map(|r| r.clock);
-        let span = match (clocks.clone().min(), clocks.clone().max()) {
-            (Some(a), Some(b)) => format!(
-                "; the timestamps run {} to {}: set the model's `year` to the meters' year \
-                 (year = \"{}\")",
-                a.date(),
-                b.date(),
-                infer_year(clocks)
-            ),
-            _ => String::new(),
-        };
-        return Err(file_err(
-            path,
-            format!(
-                "no rows fall in {} to {} (the grid year {year}){span}",
-                year.first_date(),
-                year.last_date()
-            ),
-        ));
+        return Err(no_rows_in_year(&table.rows, year, path));
     }
     let series = table
         .columns
@@ -880,6 +858,39 @@ pub fn parse_meters(
         series,
         notes,
     })
+}
+
+/// The note of sub-hourly readings aggregated to hours.
+fn aggregation_note(interval_min: u32, per_hour: u32) -> String {
+    format!(
+        "readings every {interval_min} min: {per_hour} per hour aggregated to hourly kWh \
+         (energy units summed, power units averaged; an hour with missing readings is the \
+         mean of those present, scaled to the hour)"
+    )
+}
+
+/// The error of meters none of whose rows falls in the grid `year`: the span the timestamps
+/// run and the `year` that would hold them.
+fn no_rows_in_year(rows: &[Row], year: GridYear, path: &Path) -> PrecalError {
+    let clocks = rows.iter().filter(|r| !r.offset).map(|r| r.clock);
+    let span = match (clocks.clone().min(), clocks.clone().max()) {
+        (Some(a), Some(b)) => format!(
+            "; the timestamps run {} to {}: set the model's `year` to the meters' year \
+             (year = \"{}\")",
+            a.date(),
+            b.date(),
+            infer_year(clocks)
+        ),
+        _ => String::new(),
+    };
+    file_err(
+        path,
+        format!(
+            "no rows fall in {} to {} (the grid year {year}){span}",
+            year.first_date(),
+            year.last_date()
+        ),
+    )
 }
 
 /// A meters file read as rows: the timestamp column's name, the meter columns with their field
@@ -1181,19 +1192,7 @@ fn values_on_grid(
         if let Some(first) = earlier {
             dups += 1;
             if spec.duplicates == DuplicatePolicy::Error {
-                let message = if per_hour > 1 {
-                    format!(
-                        "duplicate reading {} (standard time): line {first} has the same stamp; \
-                         set meters.duplicates = \"first\" to keep the first",
-                        r.clock
-                    )
-                } else {
-                    format!(
-                        "duplicate hour {} (hour-beginning, standard time): line {first} has the same hour; \
-                         set meters.duplicates = \"first\" | \"last\" | \"mean\" | \"sum\" to accept",
-                        r.clock
-                    )
-                };
+                let message = duplicate_message(r.clock, first, per_hour);
                 return Err(row_err(path, r.line, &table.ts_name, message));
             }
             if per_hour > 1 {
@@ -1206,34 +1205,85 @@ fn values_on_grid(
         let dup = per_hour == 1 && earlier.is_some();
         for (k, (col, idx)) in table.columns.iter().enumerate() {
             let v = reading_kwh(r, col, *idx, spec.negative, path)?;
-            let (s, c) = (&mut sums[k][t], &mut counts[k][t]);
-            if per_hour > 1 {
-                if v.is_finite() {
-                    *s = if *c == 0 { v } else { *s + v };
-                    *c += 1;
-                }
-                continue;
-            }
-            if !dup {
-                *s = v;
-                *c = u32::from(v.is_finite());
-                continue;
-            }
-            match spec.duplicates {
-                DuplicatePolicy::Error | DuplicatePolicy::First => {}
-                DuplicatePolicy::Last => {
-                    *s = v;
-                    *c = u32::from(v.is_finite());
-                }
-                DuplicatePolicy::Mean | DuplicatePolicy::Sum => {
-                    if v.is_finite() {
-                        *s = if *c == 0 { v } else { *s + v };
-                        *c += 1;
-                    }
-                }
-            }
+            add_reading(
+                (&mut sums[k][t], &mut counts[k][t]),
+                v,
+                per_hour,
+                dup,
+                spec.duplicates,
+            );
         }
     }
+    finish_hours(&mut sums, &counts, table, spec, per_hour, notes);
+    Ok(Grid {
+        values: sums,
+        slot_line,
+        outside,
+        feb29,
+        dups,
+    })
+}
+
+/// The error of a duplicated reading (sub-hourly: the same stamp) or hour, at `clock`; `first`
+/// is the line that had it first.
+fn duplicate_message(clock: NaiveDateTime, first: u64, per_hour: u32) -> String {
+    if per_hour > 1 {
+        format!(
+            "duplicate reading {clock} (standard time): line {first} has the same stamp; \
+             set meters.duplicates = \"first\" to keep the first"
+        )
+    } else {
+        format!(
+            "duplicate hour {clock} (hour-beginning, standard time): line {first} has the same hour; \
+             set meters.duplicates = \"first\" | \"last\" | \"mean\" | \"sum\" to accept"
+        )
+    }
+}
+
+/// One reading `v` (kWh, NaN = missing) into its slot's running `(sum, count)`: sub-hourly
+/// readings accumulate; an hourly one sets the slot, or, when it repeats an hour (`dup`), is
+/// combined by `policy`.
+fn add_reading(
+    (s, c): (&mut f64, &mut u32),
+    v: f64,
+    per_hour: u32,
+    dup: bool,
+    policy: DuplicatePolicy,
+) {
+    let accumulate = |s: &mut f64, c: &mut u32| {
+        if v.is_finite() {
+            *s = if *c == 0 { v } else { *s + v };
+            *c += 1;
+        }
+    };
+    if per_hour > 1 {
+        return accumulate(s, c);
+    }
+    if !dup {
+        *s = v;
+        *c = u32::from(v.is_finite());
+        return;
+    }
+    match policy {
+        DuplicatePolicy::Error | DuplicatePolicy::First => {}
+        DuplicatePolicy::Last => {
+            *s = v;
+            *c = u32::from(v.is_finite());
+        }
+        DuplicatePolicy::Mean | DuplicatePolicy::Sum => accumulate(s, c),
+    }
+}
+
+/// The slots' sums made hours: sub-hourly energy readings scaled to the hour from those
+/// present (power readings averaged), or duplicated hours averaged under `mean`.
+fn finish_hours(
+    sums: &mut [Vec<f64>],
+    counts: &[Vec<u32>],
+    table: &Table,
+    spec: &MeterSpec,
+    per_hour: u32,
+    notes: &mut Vec<String>,
+) {
     if per_hour > 1 {
         let mut partial = 0usize;
         for (k, (col, _)) in table.columns.iter().enumerate() {
@@ -1256,21 +1306,14 @@ fn values_on_grid(
             ));
         }
     } else if spec.duplicates == DuplicatePolicy::Mean {
-        for k in 0..n {
-            for t in 0..HOURS {
-                if counts[k][t] > 1 {
-                    sums[k][t] /= counts[k][t] as f64;
+        for (sum, count) in sums.iter_mut().zip(counts) {
+            for (s, &c) in sum.iter_mut().zip(count) {
+                if c > 1 {
+                    *s /= c as f64;
                 }
             }
         }
     }
-    Ok(Grid {
-        values: sums,
-        slot_line,
-        outside,
-        feb29,
-        dups,
-    })
 }
 
 /// The reading of meter column `col` (field `idx`) of row `r` in kWh: missing tokens are NaN,

@@ -203,6 +203,42 @@ pub struct DayTypeClusters {
     pub band: Band,
 }
 
+/// Per cluster, how many of its days the calendar calls working days and how many off days.
+fn calendar_counts(
+    clustering: &Clustering,
+    days: &[usize],
+    cal_type: impl Fn(usize) -> DayType,
+) -> Vec<(usize, usize)> {
+    let mut counts = vec![(0usize, 0usize); clustering.k];
+    for (i, &d) in days.iter().enumerate() {
+        let c = &mut counts[clustering.labels[i]];
+        if cal_type(d).is_off_day() {
+            c.1 += 1;
+        } else {
+            c.0 += 1;
+        }
+    }
+    counts
+}
+
+/// Per cluster, the distance to its medoid beyond which a day is an outlier: Tukey's fence,
+/// Q3 + 1.5 IQR of its days' distances (`med_dist`, one per profile).
+fn outlier_limits(clustering: &Clustering, med_dist: &[f64]) -> Vec<f64> {
+    (0..clustering.k)
+        .map(|c| {
+            let mut v: Vec<f64> = med_dist
+                .iter()
+                .zip(&clustering.labels)
+                .filter(|&(_, &l)| l == c)
+                .map(|(&m, _)| m)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            let (q1, q3) = (quantile_sorted(&v, 0.25), quantile_sorted(&v, 0.75));
+            q3 + 1.5 * (q3 - q1)
+        })
+        .collect()
+}
+
 impl DayTypeClusters {
     /// Indices (into the profiles) of the days of day type `label`.
     pub fn members(&self, profiles: &DailyProfiles, label: DayLabel) -> Vec<usize> {
@@ -245,16 +281,7 @@ pub fn cluster_days(
         cal.day_type(date.month(), date.day())
             .unwrap_or(DayType::Weekday)
     };
-    let k = clustering.k;
-    let mut counts = vec![(0usize, 0usize); k];
-    for (i, &d) in profiles.days.iter().enumerate() {
-        let c = &mut counts[clustering.labels[i]];
-        if cal_type(d).is_off_day() {
-            c.1 += 1;
-        } else {
-            c.0 += 1;
-        }
-    }
+    let counts = calendar_counts(&clustering, &profiles.days, cal_type);
     let cluster_labels: Vec<DayLabel> = counts
         .iter()
         .map(|&(wd, off)| {
@@ -269,17 +296,7 @@ pub fn cluster_days(
     let med_dist: Vec<f64> = (0..n)
         .map(|i| dm.get(i, clustering.medoids[clustering.labels[i]]))
         .collect();
-    let limits: Vec<f64> = (0..k)
-        .map(|c| {
-            let mut v: Vec<f64> = (0..n)
-                .filter(|&i| clustering.labels[i] == c)
-                .map(|i| med_dist[i])
-                .collect();
-            v.sort_by(f64::total_cmp);
-            let (q1, q3) = (quantile_sorted(&v, 0.25), quantile_sorted(&v, 0.75));
-            q3 + 1.5 * (q3 - q1)
-        })
-        .collect();
+    let limits = outlier_limits(&clustering, &med_dist);
     let mut days: Vec<DayRecord> = (0..365)
         .map(|d| DayRecord {
             day: d,

@@ -861,79 +861,9 @@ pub fn read_precal(dir: &Path) -> Result<PrecalData, ReportError> {
             what: "the pre-calibration folder (`bemcal precalibrate --out PDIR`)".into(),
         });
     }
-    let what = "written by `bemcal precalibrate`";
-
-    let p = dir.join("calendar.csv");
-    require(&p, &format!("the day-type calendar {what}"))?;
-    let mut r = csv_reader(&p)?;
-    let h = headers(&p, &mut r)?;
-    let [d, c, cl, l, o, m] = [
-        "date",
-        "calendar_day_type",
-        "cluster",
-        "label",
-        "outlier",
-        "medoid_distance",
-    ]
-    .map(|n| col_index(&p, &h, n));
-    let (d, c, cl, l, o, m) = (d?, c?, cl?, l?, o?, m?);
-    let mut calendar = Vec::new();
-    for (i, rec) in r.records().enumerate() {
-        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
-        calendar.push(CalendarDay {
-            date: rec[d].to_string(),
-            calendar: rec[c].to_string(),
-            cluster: rec[cl].trim().parse().ok(),
-            label: rec[l].to_string(),
-            outlier: rec[o].trim() == "true",
-            medoid_distance: num(&p, i + 2, "medoid_distance", &rec[m])?,
-        });
-    }
-
-    let p = dir.join("schedule_priors.csv");
-    require(&p, &format!("the per-hour schedule quartiles {what}"))?;
-    let mut r = csv_reader(&p)?;
-    let h = headers(&p, &mut r)?;
-    let idx: Vec<usize> = ["day_type", "hour", "n_days", "q1", "median", "q3"]
-        .iter()
-        .map(|n| col_index(&p, &h, n))
-        .collect::<Result<_, _>>()?;
-    let mut schedule = Vec::new();
-    for (i, rec) in r.records().enumerate() {
-        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
-        let line = i + 2;
-        schedule.push(ScheduleHour {
-            day_type: rec[idx[0]].to_string(),
-            hour: num(&p, line, "hour", &rec[idx[1]])? as usize,
-            n_days: num(&p, line, "n_days", &rec[idx[2]])? as usize,
-            q1: num(&p, line, "q1", &rec[idx[3]])?,
-            median: num(&p, line, "median", &rec[idx[4]])?,
-            q3: num(&p, line, "q3", &rec[idx[5]])?,
-        });
-    }
-
-    let p = dir.join("intervals.csv");
-    require(&p, &format!("the merged schedule intervals {what}"))?;
-    let mut r = csv_reader(&p)?;
-    let h = headers(&p, &mut r)?;
-    let idx: Vec<usize> = ["day_type", "start_hour", "end_hour", "min", "mode", "max"]
-        .iter()
-        .map(|n| col_index(&p, &h, n))
-        .collect::<Result<_, _>>()?;
-    let mut intervals = Vec::new();
-    for (i, rec) in r.records().enumerate() {
-        let rec = rec.map_err(|e| parse_err(&p, e.to_string()))?;
-        let line = i + 2;
-        intervals.push(ScheduleInterval {
-            day_type: rec[idx[0]].to_string(),
-            start_hour: num(&p, line, "start_hour", &rec[idx[1]])? as usize,
-            end_hour: num(&p, line, "end_hour", &rec[idx[2]])? as usize,
-            min: num(&p, line, "min", &rec[idx[3]])?,
-            mode: num(&p, line, "mode", &rec[idx[4]])?,
-            max: num(&p, line, "max", &rec[idx[5]])?,
-        });
-    }
-
+    let calendar = read_day_types(&dir.join("calendar.csv"))?;
+    let schedule = read_schedule_quartiles(&dir.join("schedule_priors.csv"))?;
+    let intervals = read_schedule_intervals(&dir.join("intervals.csv"))?;
     let p = dir.join("disaggregated.csv");
     let schedule_series = if p.is_file() {
         let t = read_hourly(&p, "the disaggregated meters")?;
@@ -955,6 +885,95 @@ pub fn read_precal(dir: &Path) -> Result<PrecalData, ReportError> {
         schedule_series,
         summary_text,
     })
+}
+
+/// What pre-calibration's files are, for messages.
+const PRECAL_WRITTEN: &str = "written by `bemcal precalibrate`";
+
+/// Pre-calibration's `calendar.csv`: each day's calendar day type, cluster, label and outlier.
+fn read_day_types(p: &Path) -> Result<Vec<CalendarDay>, ReportError> {
+    require(p, &format!("the day-type calendar {PRECAL_WRITTEN}"))?;
+    let mut r = csv_reader(p)?;
+    let h = headers(p, &mut r)?;
+    let [d, c, cl, l, o, m] = [
+        "date",
+        "calendar_day_type",
+        "cluster",
+        "label",
+        "outlier",
+        "medoid_distance",
+    ]
+    .map(|n| col_index(p, &h, n));
+    let (d, c, cl, l, o, m) = (d?, c?, cl?, l?, o?, m?);
+    let mut calendar = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(p, e.to_string()))?;
+        calendar.push(CalendarDay {
+            date: rec[d].to_string(),
+            calendar: rec[c].to_string(),
+            cluster: rec[cl].trim().parse().ok(),
+            label: rec[l].to_string(),
+            outlier: rec[o].trim() == "true",
+            medoid_distance: num(p, i + 2, "medoid_distance", &rec[m])?,
+        });
+    }
+    Ok(calendar)
+}
+
+/// Pre-calibration's `schedule_priors.csv`: per day type and hour, the box-plot quartiles.
+fn read_schedule_quartiles(p: &Path) -> Result<Vec<ScheduleHour>, ReportError> {
+    require(
+        p,
+        &format!("the per-hour schedule quartiles {PRECAL_WRITTEN}"),
+    )?;
+    let mut r = csv_reader(p)?;
+    let h = headers(p, &mut r)?;
+    let idx: Vec<usize> = ["day_type", "hour", "n_days", "q1", "median", "q3"]
+        .iter()
+        .map(|n| col_index(p, &h, n))
+        .collect::<Result<_, _>>()?;
+    let mut schedule = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(p, e.to_string()))?;
+        let line = i + 2;
+        schedule.push(ScheduleHour {
+            day_type: rec[idx[0]].to_string(),
+            hour: num(p, line, "hour", &rec[idx[1]])? as usize,
+            n_days: num(p, line, "n_days", &rec[idx[2]])? as usize,
+            q1: num(p, line, "q1", &rec[idx[3]])?,
+            median: num(p, line, "median", &rec[idx[4]])?,
+            q3: num(p, line, "q3", &rec[idx[5]])?,
+        });
+    }
+    Ok(schedule)
+}
+
+/// Pre-calibration's `intervals.csv`: the merged schedule intervals and their triangular priors.
+fn read_schedule_intervals(p: &Path) -> Result<Vec<ScheduleInterval>, ReportError> {
+    require(
+        p,
+        &format!("the merged schedule intervals {PRECAL_WRITTEN}"),
+    )?;
+    let mut r = csv_reader(p)?;
+    let h = headers(p, &mut r)?;
+    let idx: Vec<usize> = ["day_type", "start_hour", "end_hour", "min", "mode", "max"]
+        .iter()
+        .map(|n| col_index(p, &h, n))
+        .collect::<Result<_, _>>()?;
+    let mut intervals = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.map_err(|e| parse_err(p, e.to_string()))?;
+        let line = i + 2;
+        intervals.push(ScheduleInterval {
+            day_type: rec[idx[0]].to_string(),
+            start_hour: num(p, line, "start_hour", &rec[idx[1]])? as usize,
+            end_hour: num(p, line, "end_hour", &rec[idx[2]])? as usize,
+            min: num(p, line, "min", &rec[idx[3]])?,
+            mode: num(p, line, "mode", &rec[idx[4]])?,
+            max: num(p, line, "max", &rec[idx[5]])?,
+        });
+    }
+    Ok(intervals)
 }
 
 /// Writes the report atomically (temporary file + rename).

@@ -248,7 +248,18 @@ fn repair(w: &mut Work, rng: &mut ChaCha8Rng) -> Result<RepairReport> {
         return Ok(report);
     }
     report.rows_infeasible_before = (0..n).filter(|&r| w.viol(r) > 0.0).count();
-    // 1. Swaps within columns: keep every column's strata.
+    repair_by_swaps(w, rng, &mut report);
+    let still = repair_by_resampling(w, rng, &mut report);
+    if !still.is_empty() {
+        return Err(StatsError::InfeasibleDesign { rows: still });
+    }
+    Ok(report)
+}
+
+/// Repair, step 1: swaps of a cell between rows within its column, which keep every
+/// column's strata, until no row is infeasible or a pass makes no progress.
+fn repair_by_swaps(w: &mut Work, rng: &mut ChaCha8Rng, report: &mut RepairReport) {
+    let n = w.p.len();
     for _pass in 0..(4 * n).max(16) {
         let bad: Vec<usize> = (0..n).filter(|&r| w.viol(r) > 0.0).collect();
         if bad.is_empty() {
@@ -261,28 +272,7 @@ fn repair(w: &mut Work, rng: &mut ChaCha8Rng) -> Result<RepairReport> {
                 continue;
             }
             let offset = rng.random_range(0..n);
-            let mut best: Option<(f64, usize, usize)> = None;
-            'search: for k in w.violated_columns(r) {
-                for t in 0..n {
-                    let s = (offset + t) % n;
-                    if s == r {
-                        continue;
-                    }
-                    let vs = w.viol(s);
-                    w.swap(r, s, k);
-                    let (nr, ns) = (w.viol(r), w.viol(s));
-                    w.swap(r, s, k);
-                    // A swap that fixes r without breaking a feasible s is taken at once.
-                    if nr == 0.0 && (ns == 0.0 || vs > 0.0 && ns < vs) {
-                        best = Some((f64::NEG_INFINITY, s, k));
-                        break 'search;
-                    }
-                    let gain = (nr + ns) - (vr + vs);
-                    if gain < 0.0 && (vs > 0.0 || ns == 0.0) && best.is_none_or(|b| gain < b.0) {
-                        best = Some((gain, s, k));
-                    }
-                }
-            }
+            let best = best_swap(w, r, vr, offset);
             if let Some((_, s, k)) = best {
                 w.swap(r, s, k);
                 report.swaps += 1;
@@ -293,7 +283,46 @@ fn repair(w: &mut Work, rng: &mut ChaCha8Rng) -> Result<RepairReport> {
             break;
         }
     }
-    // 2. Resample a cell of each row still infeasible: inside its stratum, else anywhere.
+}
+
+/// The swap (gain, other row, column) that best repairs infeasible row `r` (violation `vr`),
+/// trying rows from `offset` on: the first that makes `r` feasible without breaking a
+/// feasible row (gain -inf), else the largest fall of the two rows' total violation.
+fn best_swap(w: &mut Work, r: usize, vr: f64, offset: usize) -> Option<(f64, usize, usize)> {
+    let n = w.p.len();
+    let mut best: Option<(f64, usize, usize)> = None;
+    'search: for k in w.violated_columns(r) {
+        for t in 0..n {
+            let s = (offset + t) % n;
+            if s == r {
+                continue;
+            }
+            let vs = w.viol(s);
+            w.swap(r, s, k);
+            let (nr, ns) = (w.viol(r), w.viol(s));
+            w.swap(r, s, k);
+            // A swap that fixes r without breaking a feasible s is taken at once.
+            if nr == 0.0 && (ns == 0.0 || vs > 0.0 && ns < vs) {
+                best = Some((f64::NEG_INFINITY, s, k));
+                break 'search;
+            }
+            let gain = (nr + ns) - (vr + vs);
+            if gain < 0.0 && (vs > 0.0 || ns == 0.0) && best.is_none_or(|b| gain < b.0) {
+                best = Some((gain, s, k));
+            }
+        }
+    }
+    best
+}
+
+/// Repair, step 2: a cell of each row still infeasible resampled inside its stratum, else
+/// anywhere in its prior. Returns the rows that stay infeasible.
+fn repair_by_resampling(
+    w: &mut Work,
+    rng: &mut ChaCha8Rng,
+    report: &mut RepairReport,
+) -> Vec<usize> {
+    let n = w.p.len();
     let mut still = Vec::new();
     for r in 0..n {
         for outside in [false, true] {
@@ -360,10 +389,7 @@ fn repair(w: &mut Work, rng: &mut ChaCha8Rng) -> Result<RepairReport> {
             still.push(r);
         }
     }
-    if !still.is_empty() {
-        return Err(StatsError::InfeasibleDesign { rows: still });
-    }
-    Ok(report)
+    still
 }
 
 // Symmetric updates of the distance matrix read clearest with indices.

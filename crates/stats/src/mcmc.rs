@@ -647,8 +647,9 @@ impl ChainState {
         let Pending {
             ln_u, ln_q_ratio, ..
         } = pending;
+        let independence = ln_q_ratio.is_some();
         let post_burn_in = self.iteration >= self.config.burn_in;
-        if ln_q_ratio.is_some() {
+        if independence {
             if post_burn_in {
                 self.ind_proposed += 1;
             } else {
@@ -659,31 +660,12 @@ impl ChainState {
         // random walk); 0 outside the support or for NaN.
         let mut alpha = 0.0;
         let q = ln_q_ratio.unwrap_or(0.0);
-
-        if let Some(lp) = lp {
-            if !lp.is_nan() {
-                let r = lp - self.log_density + q;
-                alpha = if r >= 0.0 {
-                    1.0
-                } else if r.is_nan() {
-                    0.0
-                } else {
-                    r.exp()
-                };
-            }
+        if let Some(lp) = lp.filter(|lp| !lp.is_nan()) {
+            let r = lp - self.log_density + q;
+            alpha = acceptance_probability(r);
             // Metropolis-Hastings acceptance (Algorithm 1, step 6).
-            if !lp.is_nan() && ln_u < lp - self.log_density + q {
-                self.position.copy_from_slice(proposal);
-                self.log_density = lp;
-                self.accepted += 1;
-                if post_burn_in {
-                    self.accepted_post_burn_in += 1;
-                    if ln_q_ratio.is_some() {
-                        self.ind_accepted += 1;
-                    }
-                } else if ln_q_ratio.is_some() {
-                    self.ind_burn_accepted += 1;
-                }
+            if ln_u < r {
+                self.accept(proposal, lp, post_burn_in, independence);
             }
         }
         self.iteration += 1;
@@ -708,6 +690,28 @@ impl ChainState {
             draws.push(&self.position, self.log_density, stats);
             return;
         }
+        self.adapt_burn_in(t, alpha, independence);
+    }
+
+    /// Moves the chain to an accepted `proposal` of log density `lp`, counting it.
+    fn accept(&mut self, proposal: &[f64], lp: f64, post_burn_in: bool, independence: bool) {
+        self.position.copy_from_slice(proposal);
+        self.log_density = lp;
+        self.accepted += 1;
+        if post_burn_in {
+            self.accepted_post_burn_in += 1;
+            if independence {
+                self.ind_accepted += 1;
+            }
+        } else if independence {
+            self.ind_burn_accepted += 1;
+        }
+    }
+
+    /// The burn-in's adaptation after iteration `t` (acceptance probability `alpha`; an
+    /// `independence` step leaves the random walk's scale alone): Haario et al.'s covariance,
+    /// and with a target acceptance Robbins-Monro on the scale.
+    fn adapt_burn_in(&mut self, t: u64, alpha: f64, independence: bool) {
         match self.config.target_acceptance {
             None => {
                 // Plain Haario et al. (2001): covariance of the whole burn-in so far.
@@ -723,7 +727,7 @@ impl ChainState {
                 // Robbins-Monro on ln lambda (Andrieu & Thoms 2008, Algorithm 4, with the
                 // covariance part of AM below): ln lambda += gamma_k (alpha_k - target), over
                 // the random-walk steps.
-                if ln_q_ratio.is_none() {
+                if !independence {
                     self.scale_steps += 1;
                     let gamma = (self.scale_steps as f64).powf(-self.config.scale_decay);
                     self.ln_lambda = (self.ln_lambda + gamma * (alpha - target)).clamp(-40.0, 10.0);
@@ -953,6 +957,18 @@ pub fn dispersed_starts(priors: &[Triangular], n_chains: usize, seed: u64) -> Ve
                 .collect()
         })
         .collect()
+}
+
+/// The Metropolis-Hastings acceptance probability `min(1, exp(r))` of a proposal whose log
+/// ratio (target and proposal densities) is `r`; 0 for NaN.
+fn acceptance_probability(r: f64) -> f64 {
+    if r >= 0.0 {
+        1.0
+    } else if r.is_nan() {
+        0.0
+    } else {
+        r.exp()
+    }
 }
 
 #[cfg(test)]

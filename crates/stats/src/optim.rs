@@ -306,7 +306,6 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     mut target: F,
     mut gradient: Option<&mut GradientFn<'_>>,
 ) -> Vec<Optimum> {
-    let d = starts.first().map_or(0, Vec::len);
     let mut eval = |zs: &[Vec<f64>]| -> Vec<f64> {
         if zs.is_empty() {
             return Vec::new();
@@ -322,15 +321,27 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         .map(|(u, &lp)| Search::start(u, lp))
         .collect();
 
-    // Gradients at the starts.
+    bfgs_iterations(&mut searches, cfg, &mut eval, gradient.as_deref_mut());
+
+    let mut out = optima(&searches, cfg, &mut eval, gradient);
+    if cfg.hessian {
+        newton_step(&searches, &mut out, &mut eval);
+    }
+    out
+}
+
+/// BFGS on every live search at once (Nocedal & Wright 2006, Algorithm 6.1): gradients at
+/// the starts, then up to `cfg.max_iterations` rounds of directions, one batched line search,
+/// steps, new gradients and inverse-Hessian updates. `eval` gives negative log densities.
+fn bfgs_iterations<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
+    searches: &mut [Search],
+    cfg: &BfgsConfig,
+    eval: &mut F,
+    mut gradient: Option<&mut GradientFn<'_>>,
+) {
+    let d = searches.first().map_or(0, |s| s.z.len());
     let live: Vec<usize> = (0..searches.len()).filter(|&i| !searches[i].done).collect();
-    gradients_of(
-        &mut searches,
-        &live,
-        cfg,
-        &mut eval,
-        gradient.as_deref_mut(),
-    );
+    gradients_of(searches, &live, cfg, eval, gradient.as_deref_mut());
     for _ in 0..cfg.max_iterations {
         let active: Vec<usize> = (0..searches.len()).filter(|&i| !searches[i].done).collect();
         if active.is_empty() {
@@ -341,7 +352,7 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         for &i in &active {
             dirs[i] = searches[i].direction(cfg);
         }
-        let mut accepted = line_search(&mut searches, &active, &dirs, &mut eval);
+        let mut accepted = line_search(searches, &active, &dirs, eval);
         let mut moved = Vec::new();
         for &i in &active {
             if let Some(step) = searches[i].take_step(accepted[i].take(), cfg) {
@@ -350,16 +361,24 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         }
         // New gradients (also for starts that just finished: their curvature update).
         let idx: Vec<usize> = moved.iter().map(|(i, _, _)| *i).collect();
-        gradients_of(&mut searches, &idx, cfg, &mut eval, gradient.as_deref_mut());
+        gradients_of(searches, &idx, cfg, eval, gradient.as_deref_mut());
         for (i, step, g_old) in moved {
             let s = &mut searches[i];
             let y: Vec<f64> = (0..d).map(|r| s.g[r] - g_old[r]).collect();
             bfgs_update(&mut s.h, &step, &y, &mut s.updated, d);
         }
     }
+}
 
-    // Laplace covariance at each optimum (see [`laplace_batch`]); the BFGS estimate where it
-    // has none (a non-finite difference) or `hessian` is off.
+/// The searches' optima, each with the Laplace covariance at it (see [`laplace_batch`]), or
+/// the BFGS estimate where it has none (a non-finite difference) or `cfg.hessian` is off.
+fn optima<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
+    searches: &[Search],
+    cfg: &BfgsConfig,
+    eval: &mut F,
+    gradient: Option<&mut GradientFn<'_>>,
+) -> Vec<Optimum> {
+    let d = searches.first().map_or(0, |s| s.z.len());
     let live: Vec<usize> = (0..searches.len())
         .filter(|&i| cfg.hessian && searches[i].f.is_finite())
         .collect();
@@ -383,8 +402,7 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
     for (i, l) in live.into_iter().zip(laplace) {
         laplace_of[i] = Some(l);
     }
-
-    let mut out: Vec<Optimum> = searches
+    searches
         .iter()
         .zip(laplace_of)
         .map(|(s, lap)| {
@@ -404,12 +422,7 @@ fn maximise<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
                 evaluations,
             }
         })
-        .collect();
-
-    if cfg.hessian {
-        newton_step(&searches, &mut out, &mut eval);
-    }
-    out
+        .collect()
 }
 
 /// A Laplace approximation's covariance at one point ([`laplace_batch`]).

@@ -612,6 +612,117 @@ fn check_io(s: &Session, file: &Path, input: bool, name: &str, dims: &[Option<i6
     Ok(())
 }
 
+/// The graphs' dimensions the metadata fixes: parameters, features of the plain graph,
+/// outputs, and hourly features of the windowed graphs.
+#[derive(Clone, Copy)]
+struct GraphDims {
+    params: i64,
+    features: i64,
+    outputs: i64,
+    hourly: i64,
+}
+
+impl GraphDims {
+    fn of(meta: &SurrogateMeta) -> GraphDims {
+        GraphDims {
+            params: meta.params.len() as i64,
+            features: meta.n_features as i64,
+            outputs: meta.outputs.len() as i64,
+            hourly: meta.n_hourly() as i64,
+        }
+    }
+}
+
+/// The hot path's graph files at `precision`: the windowed graph and the fused one (when
+/// the metadata lists it); `Int8` without an int8 graph is an error.
+fn graph_files(
+    meta: &SurrogateMeta,
+    precision: Precision,
+    dir: &Path,
+) -> Result<(String, Option<String>)> {
+    Ok(match precision {
+        Precision::F32 => (meta.files.fast.clone(), meta.files.fused.clone()),
+        Precision::Int8 => match (&meta.files.fused_int8, &meta.files.fast_int8) {
+            (Some(f), _) => (meta.files.fast.clone(), Some(f.clone())),
+            (None, Some(f)) => (f.clone(), None),
+            (None, None) => {
+                return Err(SurrogateError::Metadata {
+                    path: dir.join(METADATA_FILE),
+                    message: "no int8 graph (files.fused_int8); retrain with `bemcal train`".into(),
+                })
+            }
+        },
+    })
+}
+
+/// The fused graph `file` as `threads` single-threaded sessions, its inputs and outputs
+/// checked; its chunk length is read from the graph's fixed `xw` shape.
+fn load_fused(dir: &Path, file: String, threads: usize, d: GraphDims) -> Result<Fused> {
+    let sessions = (0..threads.max(1))
+        .map(|_| session_with(dir, &file, 1, false))
+        .collect::<Result<Vec<_>>>()?;
+    let s0 = &sessions[0];
+    let path = dir.join(&file);
+    check_io(s0, &path, true, "p", &[Some(1), Some(d.params)])?;
+    check_io(s0, &path, true, "xw", &[None, None, Some(d.hourly)])?;
+    let rows = s0
+        .inputs()
+        .iter()
+        .find(|o| o.name() == "xw")
+        .and_then(|o| o.dtype().tensor_shape().map(|s| s[1]))
+        .unwrap_or(-1);
+    if rows < LOOKBACK as i64 {
+        return Err(SurrogateError::Metadata {
+            path,
+            message: format!("input 'xw' needs a fixed chunk length, has {rows}"),
+        });
+    }
+    let chunk = rows as usize - (LOOKBACK - 1);
+    check_io(
+        s0,
+        &path,
+        false,
+        "y",
+        &[None, Some(chunk as i64), Some(d.outputs)],
+    )?;
+    Ok(Fused {
+        sessions,
+        chunk,
+        file,
+    })
+}
+
+/// The fused graph's reverse-mode derivative `file` (`v . dy/dtheta`) as `threads`
+/// single-threaded sessions over the fused graph's `chunk`, its inputs and outputs checked.
+fn load_vjp(dir: &Path, file: &str, chunk: usize, threads: usize, d: GraphDims) -> Result<Fused> {
+    let sessions = (0..threads.max(1))
+        .map(|_| session_with(dir, file, 1, false))
+        .collect::<Result<Vec<_>>>()?;
+    let path = dir.join(file);
+    let s0 = &sessions[0];
+    check_io(s0, &path, true, "p", &[Some(1), Some(d.params)])?;
+    check_io(
+        s0,
+        &path,
+        true,
+        "xw",
+        &[None, Some((chunk + LOOKBACK - 1) as i64), Some(d.hourly)],
+    )?;
+    check_io(
+        s0,
+        &path,
+        true,
+        "v",
+        &[None, Some(chunk as i64), Some(d.outputs)],
+    )?;
+    check_io(s0, &path, false, "g", &[Some(1), Some(d.params)])?;
+    Ok(Fused {
+        sessions,
+        chunk,
+        file: file.to_string(),
+    })
+}
+
 impl Surrogate {
     /// Loads `dir/surrogate.json` (validated) and its graphs, with `threads` intra-op threads
     /// per session and graph optimisation level 3. Checks every graph's inputs and outputs
@@ -631,27 +742,9 @@ impl Surrogate {
         let dir = dir.as_ref().to_path_buf();
         let meta = SurrogateMeta::read(&dir)?;
         let plain = session(&dir, &meta.files.plain, threads)?;
-        let (fast_file, fused_file) = match precision {
-            Precision::F32 => (meta.files.fast.clone(), meta.files.fused.clone()),
-            Precision::Int8 => match (&meta.files.fused_int8, &meta.files.fast_int8) {
-                (Some(f), _) => (meta.files.fast.clone(), Some(f.clone())),
-                (None, Some(f)) => (f.clone(), None),
-                (None, None) => {
-                    return Err(SurrogateError::Metadata {
-                        path: dir.join(METADATA_FILE),
-                        message: "no int8 graph (files.fused_int8); retrain with `bemcal train`"
-                            .into(),
-                    })
-                }
-            },
-        };
+        let (fast_file, fused_file) = graph_files(&meta, precision, &dir)?;
         let fast = session(&dir, &fast_file, threads)?;
-        let (np, nf, no, nh) = (
-            meta.params.len() as i64,
-            meta.n_features as i64,
-            meta.outputs.len() as i64,
-            meta.n_hourly() as i64,
-        );
+        let d = GraphDims::of(&meta);
         let f = |n: &str| dir.join(n);
         let lb = Some(LOOKBACK as i64);
         check_io(
@@ -659,78 +752,35 @@ impl Surrogate {
             &f(&meta.files.plain),
             true,
             "x",
-            &[None, lb, Some(nf)],
+            &[None, lb, Some(d.features)],
         )?;
-        check_io(&plain, &f(&meta.files.plain), false, "y", &[None, Some(no)])?;
-        check_io(&fast, &f(&fast_file), true, "p", &[Some(1), Some(np)])?;
-        check_io(&fast, &f(&fast_file), true, "xw", &[lb, None, Some(nh)])?;
+        check_io(
+            &plain,
+            &f(&meta.files.plain),
+            false,
+            "y",
+            &[None, Some(d.outputs)],
+        )?;
+        check_io(&fast, &f(&fast_file), true, "p", &[Some(1), Some(d.params)])?;
+        check_io(
+            &fast,
+            &f(&fast_file),
+            true,
+            "xw",
+            &[lb, None, Some(d.hourly)],
+        )?;
         check_io(
             &fast,
             &f(&fast_file),
             false,
             "y",
-            &[Some(1), None, Some(no)],
+            &[Some(1), None, Some(d.outputs)],
         )?;
-        let fused = match fused_file {
-            None => None,
-            Some(file) => {
-                let sessions = (0..threads.max(1))
-                    .map(|_| session_with(&dir, &file, 1, false))
-                    .collect::<Result<Vec<_>>>()?;
-                let s0 = &sessions[0];
-                let path = f(&file);
-                check_io(s0, &path, true, "p", &[Some(1), Some(np)])?;
-                check_io(s0, &path, true, "xw", &[None, None, Some(nh)])?;
-                let rows = s0
-                    .inputs()
-                    .iter()
-                    .find(|o| o.name() == "xw")
-                    .and_then(|o| o.dtype().tensor_shape().map(|s| s[1]))
-                    .unwrap_or(-1);
-                if rows < LOOKBACK as i64 {
-                    return Err(SurrogateError::Metadata {
-                        path,
-                        message: format!("input 'xw' needs a fixed chunk length, has {rows}"),
-                    });
-                }
-                let chunk = rows as usize - (LOOKBACK - 1);
-                check_io(s0, &path, false, "y", &[None, Some(chunk as i64), Some(no)])?;
-                Some(Fused {
-                    sessions,
-                    chunk,
-                    file,
-                })
-            }
-        };
+        let fused = fused_file
+            .map(|file| load_fused(&dir, file, threads, d))
+            .transpose()?;
         let vjp = match (&meta.files.vjp, &fused) {
-            (Some(file), Some(fz)) => {
-                let sessions = (0..threads.max(1))
-                    .map(|_| session_with(&dir, file, 1, false))
-                    .collect::<Result<Vec<_>>>()?;
-                let path = f(file);
-                let s0 = &sessions[0];
-                check_io(s0, &path, true, "p", &[Some(1), Some(np)])?;
-                check_io(
-                    s0,
-                    &path,
-                    true,
-                    "xw",
-                    &[None, Some((fz.chunk + LOOKBACK - 1) as i64), Some(nh)],
-                )?;
-                check_io(
-                    s0,
-                    &path,
-                    true,
-                    "v",
-                    &[None, Some(fz.chunk as i64), Some(no)],
-                )?;
-                check_io(s0, &path, false, "g", &[Some(1), Some(np)])?;
-                Some(Fused {
-                    sessions,
-                    chunk: fz.chunk,
-                    file: file.clone(),
-                })
-            }
+            (Some(file), Some(fz)) => Some(load_vjp(&dir, file, fz.chunk, threads, d)?),
             _ => None,
         };
         Ok(Surrogate {
