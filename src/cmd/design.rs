@@ -28,9 +28,10 @@ pub struct Args {
     /// Design CSV: point,<parameter>...
     #[arg(long)]
     pub out: PathBuf,
-    /// Simulate every point with this weather file (outputs under --runs).
+    /// Simulate every point with this weather file (outputs under --runs), a path or
+    /// `bundled:FILE` from EnergyPlus's WeatherData folder.
     #[arg(long)]
-    pub weather: Option<PathBuf>,
+    pub weather: Option<String>,
     /// Folder for the simulations (default: next to --out).
     #[arg(long)]
     pub runs: Option<PathBuf>,
@@ -58,6 +59,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         r.resampled_outside_stratum
     );
     if let Some(w) = &a.weather {
+        let w = &common::resolve_weather_ref(w)?;
         let runs = a
             .runs
             .clone()

@@ -14,9 +14,10 @@ pub struct Args {
     /// Meters CSV (overrides the project's `[meters] file`).
     #[arg(long)]
     pub meters: Option<PathBuf>,
-    /// EPW weather file (outdoor temperature for the heating / non-heating seasons).
+    /// EPW weather file (outdoor temperature for the heating / non-heating seasons), or
+    /// `bundled:FILE` from EnergyPlus's WeatherData folder.
     #[arg(long)]
-    pub weather: PathBuf,
+    pub weather: String,
     /// Project TOML with `[meters]` and `[precalibration]` tables. Without it, meter columns
     /// are detected from their names (heating / cooling / electricity / total building, unit kW).
     #[arg(long)]
@@ -74,7 +75,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .clone()
         .or_else(|| spec.file.clone())
         .context("no meters file: pass --meters or set [meters] file in the project")?;
-    let epw = Epw::read(&args.weather)?;
+    let epw = Epw::read(&super::common::resolve_weather_ref(&args.weather)?)?;
     let year = args.year.or(project.year);
     let mut meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
     let holdout = match (&args.holdout, &project.validation.holdout, &args.project) {

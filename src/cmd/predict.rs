@@ -13,9 +13,9 @@ pub struct Args {
     /// Surrogate directory written by `bemcal train`.
     #[arg(long)]
     pub surrogate: PathBuf,
-    /// EPW weather file.
+    /// EPW weather file, or `bundled:FILE` from EnergyPlus's WeatherData folder.
     #[arg(long)]
-    pub weather: PathBuf,
+    pub weather: String,
     /// Year for day types and timestamps: `2021`, or `2021-04` for twelve months from April
     /// (US federal holidays; `--model` takes the model's calendar instead).
     #[arg(long, default_value = "2021")]
@@ -76,7 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => Calendar::new(args.year, Holidays::UsFederal),
     };
-    let epw = Epw::read(&args.weather)?;
+    let epw = Epw::read(&super::common::resolve_weather_ref(&args.weather)?)?;
     let features = HourlyFeatures::from_epw(&epw, &calendar);
     let mut ev = surrogate.bind(&features)?;
     let y = ev.evaluate(&values)?;

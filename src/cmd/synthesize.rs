@@ -15,9 +15,10 @@ pub struct Args {
     /// Model file: a building spec (TOML) or an `[idf]` parameter map.
     #[arg(long)]
     pub model: PathBuf,
-    /// EnergyPlus weather file (EPW) of the synthetic year.
+    /// EnergyPlus weather file (EPW) of the synthetic year, or `bundled:FILE` from
+    /// EnergyPlus's WeatherData folder.
     #[arg(long)]
-    pub weather: PathBuf,
+    pub weather: String,
     /// True parameter value, NAME=VALUE (repeatable); others at their prior mode.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
@@ -58,7 +59,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let values = model.values(&given)?;
     let idf = model.instantiate(&values, runner.idd())?;
     let tmp = tempfile::tempdir()?;
-    let r = runner.run(&idf, &a.weather, model.outputs(), &tmp.path().join("truth"))?;
+    let weather = common::resolve_weather_ref(&a.weather)?;
+    let r = runner.run(&idf, &weather, model.outputs(), &tmp.path().join("truth"))?;
     let mut opts = SynthOptions {
         relative_noise: a.noise,
         seed: a.seed,
