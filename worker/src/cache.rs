@@ -17,6 +17,7 @@ pub struct Cache {
 }
 
 impl Cache {
+    /// The cache in `root`: artifacts under `root/artifacts`, beside the job folders.
     pub fn new(root: &Path) -> std::io::Result<Cache> {
         Ok(Cache {
             root: root.into(),

@@ -5,6 +5,7 @@
 //!
 //! On shutdown (SIGTERM) the worker leases nothing more, lets running jobs finish for up to
 //! `drain` and gives back the leases of those still running after that.
+#![deny(missing_docs)]
 
 pub mod cache;
 pub mod exec;
@@ -26,11 +27,13 @@ use crate::metrics::{Metrics, Outcome};
 /// How to run a worker.
 #[derive(Debug, Clone)]
 pub struct Options {
+    /// The coordinator: its URL, token and TLS trust.
     pub connect: Connect,
     /// Jobs at once.
     pub slots: usize,
     /// Artifact cache and job folders.
     pub cache: PathBuf,
+    /// The name this worker leases under (its leases belong to it).
     pub worker_id: String,
     /// How long running jobs may take to finish after a shutdown request.
     pub drain: Duration,

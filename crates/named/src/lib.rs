@@ -4,6 +4,7 @@
 //! `[[name, value], ...]` pairs that summaries before issue 22 wrote. Used with
 //! `#[serde(with = "bemcal_named")]` (the writer, `bemcal-calibrate`) and by every reader
 //! (the report, the portfolio, `simulate --values`).
+#![deny(missing_docs)]
 
 use std::fmt;
 use std::marker::PhantomData;

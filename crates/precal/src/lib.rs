@@ -11,6 +11,7 @@
 //!    with a Sakoe-Chiba band, k-medoids (PAM) day-type clusters labelled by calendar majority,
 //!    per day type and hour box-plot quartiles -> triangular priors -> merged schedule intervals.
 //! 4. [`pipeline::run`] ties them together; [`io`] writes `priors.toml` and the reports.
+#![deny(missing_docs)]
 
 pub mod cluster;
 pub mod disaggregate;

@@ -9,6 +9,7 @@
 //! directory and its ancestors, then in the ancestors of the running executable (so
 //! `target/release/bemcal` finds the repository's `.venv`). Each tool also has its own override
 //! variable, checked first by its user.
+#![deny(missing_docs)]
 
 use std::env;
 use std::path::{Path, PathBuf};

@@ -57,7 +57,12 @@ pub enum DatasetError {
     Invalid(String),
     /// A file could not be read or written.
     #[error("{path}: {}", bemcal_excerpt::shorten(.message))]
-    Io { path: PathBuf, message: String },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
 }
 
 fn invalid(msg: impl Into<String>) -> DatasetError {

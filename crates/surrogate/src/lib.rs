@@ -9,6 +9,7 @@
 //! * [`predict`]: CSV output of an evaluation.
 //! * [`parity`]: the trainer's PyTorch outputs, against which every trained surrogate's graphs
 //!   are checked.
+#![deny(missing_docs)]
 
 pub mod dataset;
 pub mod parity;

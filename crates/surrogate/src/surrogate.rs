@@ -66,7 +66,12 @@ pub enum SurrogateError {
     Runtime(String),
     /// The surrogate directory or its metadata is missing or invalid.
     #[error("{path}: {}", bemcal_excerpt::shorten(.message))]
-    Metadata { path: PathBuf, message: String },
+    Metadata {
+        /// The folder or file at fault.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
     /// Arguments do not fit the surrogate (wrong number of parameters, hours, ...).
     #[error("{0}")]
     Input(String),
