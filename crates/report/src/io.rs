@@ -387,8 +387,11 @@ pub struct DesignBlock {
 /// A failed EnergyPlus run of the design.
 #[derive(Debug, Clone, Deserialize)]
 pub struct FailedRun {
+    /// The design slot it was run for.
     pub slot: usize,
+    /// The parameter values EnergyPlus was given.
     pub values: Vec<f64>,
+    /// EnergyPlus's error lines.
     #[serde(default)]
     pub error: Option<String>,
 }
@@ -396,15 +399,20 @@ pub struct FailedRun {
 /// Failures of one reason.
 #[derive(Debug, Clone, Deserialize)]
 pub struct FailureGroup {
+    /// The reason, as EnergyPlus's messages are classified.
     pub reason: String,
+    /// Failed runs with it.
     pub count: usize,
+    /// Their design points.
     pub points: Vec<usize>,
 }
 
 /// A usable Severe message of a design point.
 #[derive(Debug, Clone, Deserialize)]
 pub struct PointNote {
+    /// The design point.
     pub point: usize,
+    /// EnergyPlus's message.
     pub message: String,
 }
 

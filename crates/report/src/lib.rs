@@ -13,6 +13,7 @@
 //!
 //! Layout: [`io`] does all file reading and writing; [`analysis`], [`plots`] (data in, SVG out)
 //! and [`html`] are pure.
+#![deny(missing_docs)]
 
 pub mod analysis;
 pub mod html;

@@ -13,16 +13,22 @@ use crate::ReportError;
 /// G14 metrics of one output at the calibrated parameters.
 #[derive(Debug, Clone, Serialize)]
 pub struct OutputRow {
+    /// The model output (and its meter).
     pub output: String,
+    /// Normalised mean bias error, %.
     pub nmbe: f64,
+    /// Coefficient of variation of the RMSE, %.
     pub cv_rmse: f64,
+    /// Both within Guideline 14's hourly limits.
     pub pass: bool,
 }
 
 /// One building in the summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct BuildingRow {
+    /// The building's name in the portfolio's manifest.
     pub building: String,
+    /// Its run on the coordinator (empty for a building that failed to load locally).
     pub run: String,
     /// done, failed, cancelled, running.
     pub state: String,
@@ -32,7 +38,9 @@ pub struct BuildingRow {
     pub error: Option<String>,
     /// Every output passes ASHRAE Guideline 14 (None: no validation).
     pub g14_pass: Option<bool>,
+    /// Guideline 14 per output at the estimate.
     pub outputs: Vec<OutputRow>,
+    /// The largest R-hat over the parameters (None: no chains yet).
     pub max_rhat: Option<f64>,
     /// The chains met their R-hat and ESS targets (None: no chains yet).
     pub converged: Option<bool>,
@@ -40,8 +48,12 @@ pub struct BuildingRow {
     /// portfolio.json, one column per parameter in portfolio.csv).
     #[serde(serialize_with = "bemcal_named::serialize")]
     pub estimate: Vec<(String, f64)>,
+    /// Wall time of its run, s.
     pub run_time_s: f64,
+    /// Design simulations EnergyPlus ran for it.
     pub simulations_run: u32,
+    /// Design simulations it took from the coordinator's cache (the same inputs run earlier,
+    /// for another building or run).
     pub simulations_shared: u32,
     /// The building's report, relative to the summary folder.
     pub report: Option<String>,
@@ -50,13 +62,21 @@ pub struct BuildingRow {
 /// `portfolio.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct PortfolioSummary {
+    /// The portfolio's id on the coordinator.
     pub portfolio: String,
+    /// Its name (the manifest's `name`).
     pub name: String,
+    /// Buildings in it.
     pub buildings: usize,
+    /// Buildings whose calibration finished.
     pub done: usize,
+    /// Buildings that failed (to load, or in a stage).
     pub failed: usize,
+    /// Design simulations EnergyPlus ran, over all buildings.
     pub simulations_run: u32,
+    /// Design simulations taken from the coordinator's cache, over all buildings.
     pub simulations_shared: u32,
+    /// One row per building: those submitted, then those whose files could not be read.
     pub rows: Vec<BuildingRow>,
 }
 
