@@ -645,10 +645,12 @@ fn us_daylight_saving(
     Ok(())
 }
 
-/// The grid year of meters with these timestamps: the calendar year when they lie in one, or
-/// run past twelve months (the year holding most of them); otherwise twelve months from the
-/// first day of the first stamp's month (meters exported for "the last 12 months" or a fiscal
-/// year). Stamps are clock times, before daylight saving is undone.
+/// The grid year of meters with these timestamps: the calendar year when they lie in one;
+/// twelve months from the first day of the first stamp's month when they fit in those
+/// (meters exported for "the last 12 months" or a fiscal year); for a longer record, its
+/// latest twelve whole months (as a baseline period is chosen in M&V: the twelve months
+/// before the end of the data), or, when it holds no twelve whole months, the calendar year
+/// holding most stamps. Stamps are clock times, before daylight saving is undone.
 pub fn infer_year(stamps: impl Iterator<Item = NaiveDateTime>) -> GridYear {
     let mut counts: HashMap<i32, usize> = HashMap::new();
     let (mut min, mut max) = (NaiveDateTime::MAX, NaiveDateTime::MIN);
@@ -664,11 +666,30 @@ pub fn infer_year(stamps: impl Iterator<Item = NaiveDateTime>) -> GridYear {
     if min.year() == max.year() {
         return GridYear::calendar(most);
     }
+    // Two hours of slack: a daylight-saving clock runs an hour past the last standard hour,
+    // and an hour-ending export's last stamp is midnight after its last day.
+    let last = (max - Duration::hours(2)).date();
     match GridYear::starting(min.year(), min.month()) {
-        // Two hours of slack: a daylight-saving clock runs an hour past the last standard hour.
-        Ok(w) if (max - Duration::hours(2)).date() <= w.last_date() => w,
-        _ => GridYear::calendar(most),
+        Ok(w) if last <= w.last_date() => w,
+        _ => latest_whole_year(min.date(), last).unwrap_or(GridYear::calendar(most)),
     }
+}
+
+/// The twelve whole months that end last in a record from `first` to `last` (dates): ending
+/// with `last`'s month when `last` is its month's last day, else with the month before; `None`
+/// when they would start before `first`.
+fn latest_whole_year(first: NaiveDate, last: NaiveDate) -> Option<GridYear> {
+    let month_ends = last.succ_opt().is_some_and(|d| d.day() == 1);
+    let end = if month_ends {
+        last
+    } else {
+        last.with_day(1)?.pred_opt()?
+    };
+    // The window starts on the first of the month after `end`'s, a year earlier.
+    let next = end.succ_opt()?;
+    let start = next.with_year(next.year() - 1)?;
+    let w = GridYear::starting(start.year(), start.month()).ok()?;
+    (w.first_date() >= first).then_some(w)
 }
 
 /// The standard UTC offset of `tz` in `year`: the smaller of its January and July offsets
@@ -1834,7 +1855,7 @@ mod tests {
             "{:?}",
             d.notes
         );
-        // Thirteen months or more: the calendar year holding most stamps.
+        // Thirteen months or more: the latest twelve whole months.
         let stamps = |a: (i32, u32), b: (i32, u32)| [at(a.0, a.1, 0), at(b.0, b.1, 0)].into_iter();
         assert_eq!(
             infer_year(stamps((2017, 4), (2018, 3))),
@@ -1842,7 +1863,27 @@ mod tests {
         );
         assert_eq!(
             infer_year(stamps((2017, 4), (2018, 5))),
-            GridYear::calendar(2017)
+            "2017-05".parse().unwrap(),
+            "1 April 2017 to 1 May 2018 00:00: May 2017 to April 2018"
+        );
+        // An AMI export of 17 months ending mid-month: the twelve whole months before.
+        let hourly = |a: NaiveDateTime, b: NaiveDateTime| {
+            (0..=(b - a).num_hours()).map(move |h| a + Duration::hours(h))
+        };
+        let t = |y, m, d, h| {
+            NaiveDate::from_ymd_opt(y, m, d)
+                .unwrap()
+                .and_hms_opt(h, 0, 0)
+                .unwrap()
+        };
+        assert_eq!(
+            infer_year(hourly(t(2023, 6, 15, 0), t(2024, 11, 20, 13))),
+            "2023-11".parse().unwrap()
+        );
+        // Ending with a year: that calendar year, not the one the record starts in.
+        assert_eq!(
+            infer_year(hourly(t(2023, 7, 1, 0), t(2024, 12, 31, 23))),
+            GridYear::calendar(2024)
         );
         assert_eq!(
             infer_year(stamps((2017, 1), (2017, 12))),
