@@ -69,14 +69,7 @@ fn coordinator(data: &Path, listen: &str) -> (Proc, String) {
 }
 
 fn worker(url: &str, id: &str, cache: &Path) -> Proc {
-    Proc(
-        bemcal()
-            .args(["worker", "--coordinator", url, "--id", id, "--cache"])
-            .arg(cache)
-            .env("BEMCAL_TOKEN", TOKEN)
-            .spawn()
-            .unwrap(),
-    )
+    common::worker(url, id, cache, TOKEN)
 }
 
 /// [`worker`] serving its own `/metrics` on a free loopback port; returns it with that URL.
@@ -900,19 +893,5 @@ fn chaos_kills_do_not_change_the_results() {
         );
     }
     // Nothing half written: no temporary file left in the store or the results.
-    let mut stack = vec![data.clone(), out.clone()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            let name = p.file_name().unwrap().to_string_lossy().to_string();
-            assert!(
-                !name.contains(".partial") && !name.contains(".upload"),
-                "left half written: {}",
-                p.display()
-            );
-            if p.is_dir() {
-                stack.push(p);
-            }
-        }
-    }
+    common::nothing_half_written(&[&data, &out]);
 }

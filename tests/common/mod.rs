@@ -169,6 +169,38 @@ pub fn coordinator_with_metrics(
     (Proc(c), format!("http://{addr}"), metrics)
 }
 
+/// A `bemcal worker` leasing from `url` as `id`, with its artifact cache in `cache`.
+pub fn worker(url: &str, id: &str, cache: &Path, token: &str) -> Proc {
+    Proc(
+        bemcal()
+            .args(["worker", "--coordinator", url, "--id", id, "--cache"])
+            .arg(cache)
+            .env("BEMCAL_TOKEN", token)
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// Asserts that no temporary file (`.partial`, `.upload`) is left anywhere under `roots`:
+/// nothing half written.
+pub fn nothing_half_written(roots: &[&Path]) {
+    let mut stack: Vec<PathBuf> = roots.iter().map(|r| r.to_path_buf()).collect();
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap().to_string_lossy().to_string();
+            assert!(
+                !name.contains(".partial") && !name.contains(".upload"),
+                "left half written: {}",
+                p.display()
+            );
+            if p.is_dir() {
+                stack.push(p);
+            }
+        }
+    }
+}
+
 /// `GET url` over plain HTTP/1.1 (a `/metrics` page): the status code and the body.
 pub fn http_get(url: &str) -> (u16, String) {
     use std::io::{Read, Write};
