@@ -130,8 +130,10 @@ pub struct MetricsSnapshot {
 /// Errors of the store.
 #[derive(Debug, thiserror::Error)]
 pub enum DbError {
+    /// SQLite's error.
     #[error("database: {0}")]
     Sql(#[from] rusqlite::Error),
+    /// A stored value that does not read back (a bad JSON column, an unknown word).
     #[error("database: {0}")]
     Other(String),
 }
@@ -141,20 +143,35 @@ type Result<T> = std::result::Result<T, DbError>;
 /// A run row.
 #[derive(Debug, Clone)]
 pub struct RunRow {
+    /// The run's id (`r` and 10 random characters).
     pub id: String,
+    /// The project's name.
     pub name: String,
+    /// Running, done, failed or cancelled.
     pub state: RunState,
+    /// The stage it is in (where it failed, for a failed run).
     pub stage: Stage,
+    /// Why it failed.
     pub error: Option<String>,
+    /// The project bundle's files (artifacts).
     pub bundle: Vec<File>,
+    /// A surrogate given at submission (empty: one is trained).
     pub surrogate: Vec<File>,
+    /// Iterations per chain the final chains are to reach (each extension raises it).
     pub chain_target: u64,
+    /// Extensions of the final chains so far.
     pub extensions: u32,
+    /// JSON of the merged final chains (`ChainSummary`), once merged.
     pub merge: Option<String>,
+    /// `summary.json`, when done.
     pub summary: Option<String>,
+    /// When it was submitted, ms since the Unix epoch.
     pub created_ms: u64,
+    /// When it ended, ms since the Unix epoch.
     pub finished_ms: Option<u64>,
+    /// The portfolio it belongs to.
     pub portfolio: Option<String>,
+    /// Its building's name in that portfolio.
     pub building: Option<String>,
     /// JSON `RefineLog` of the finished surrogate refinement rounds (None: none yet).
     pub refine: Option<String>,
@@ -163,16 +180,27 @@ pub struct RunRow {
 /// A job row.
 #[derive(Debug, Clone)]
 pub struct JobRow {
+    /// The job's id (creation order).
     pub id: u64,
+    /// The run it belongs to.
     pub run_id: String,
+    /// The stage that created it.
     pub stage: Stage,
+    /// Simulate, train, chains or validate.
     pub kind: JobKind,
+    /// How logs and status name it (`point 3`, `chains 0-1 segment 2`).
     pub label: String,
+    /// What a worker is sent: kind, bundle and inputs.
     pub spec: proto::Job,
+    /// Queued, leased, done, failed or cancelled.
     pub state: JobState,
+    /// Failed attempts so far.
     pub failures: u32,
+    /// The files it produced (artifacts).
     pub outputs: Vec<File>,
+    /// The worker's JSON result (or its reported failure).
     pub result: Option<String>,
+    /// Answered from the simulation cache (the same inputs run before).
     pub cached: bool,
 }
 
@@ -257,10 +285,16 @@ fn job_row_at(r: &rusqlite::Row<'_>, at: usize) -> rusqlite::Result<JobRow> {
 
 /// A new job to add.
 pub struct NewJob {
+    /// The stage that creates it.
     pub stage: Stage,
+    /// Simulate, train, chains or validate.
     pub kind: JobKind,
+    /// How logs and status name it.
     pub label: String,
+    /// What a worker is sent.
     pub spec: proto::Job,
+    /// For a simulation: the hash of its model, weather and values, under which its outputs
+    /// are shared with every job of the same inputs.
     pub cache_key: Option<String>,
 }
 
@@ -349,6 +383,7 @@ impl Store {
         })
     }
 
+    /// The run `id`, if there is one.
     pub fn run(&self, id: &str) -> Result<Option<RunRow>> {
         self.with(|c| {
             Ok(c.query_row(
@@ -360,6 +395,7 @@ impl Store {
         })
     }
 
+    /// Every run, oldest first.
     pub fn runs(&self) -> Result<Vec<RunRow>> {
         self.with(|c| {
             let mut st = c.prepare(&format!("SELECT {RUN_COLS} FROM runs ORDER BY created_ms"))?;
@@ -498,6 +534,7 @@ impl Store {
         })
     }
 
+    /// Stores the run's merged final chains (JSON).
     pub fn set_merge(&self, run: &str, merge: &str) -> Result<()> {
         self.with(|c| {
             c.execute(
@@ -541,6 +578,7 @@ impl Store {
         Ok(())
     }
 
+    /// The result files of a finished run, by path.
     pub fn results(&self, run: &str) -> Result<Vec<File>> {
         self.with(|c| {
             let mut st = c.prepare(
@@ -966,6 +1004,7 @@ impl Store {
         })
     }
 
+    /// Records an artifact in the store (`sha` = its SHA-256, `size` in bytes).
     pub fn add_artifact(&self, sha: &str, size: u64) -> Result<()> {
         self.with(|c| {
             c.execute(

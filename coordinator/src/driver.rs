@@ -66,9 +66,13 @@ impl Default for Config {
 
 /// Shared coordinator state.
 pub struct State {
+    /// Runs, jobs, leases and results (SQLite).
     pub store: Store,
+    /// The content-addressed artifact files.
     pub artifacts: ArtifactDir,
+    /// The coordinator's data folder.
     pub data: PathBuf,
+    /// Settings that shape runs.
     pub config: Config,
     /// Asks the driver task to advance a run.
     pub kick: tokio::sync::mpsc::UnboundedSender<String>,

@@ -5,6 +5,7 @@
 //!
 //! The protocol and the client side (channel, artifacts, bundles) are `bemcal-client`,
 //! re-exported here under their old paths.
+#![deny(missing_docs)]
 
 pub mod db;
 pub mod driver;

@@ -17,6 +17,7 @@ use crate::proto::{self, RunStatus};
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Building {
+    /// The building's name (unique in the manifest).
     pub name: String,
     /// Project file, relative to the manifest.
     pub project: PathBuf,
@@ -26,8 +27,10 @@ pub struct Building {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
+    /// The portfolio's name.
     #[serde(default)]
     pub name: String,
+    /// Its buildings, in order.
     #[serde(rename = "building", default)]
     pub buildings: Vec<Building>,
 }

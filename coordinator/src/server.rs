@@ -21,6 +21,7 @@ use crate::MAX_MESSAGE_BYTES;
 /// How to run a coordinator.
 #[derive(Debug, Clone)]
 pub struct Options {
+    /// Where to serve gRPC (port 0: any free port).
     pub listen: SocketAddr,
     /// State: `coordinator.db`, `artifacts/`, `runs/`.
     pub data: PathBuf,
@@ -32,6 +33,7 @@ pub struct Options {
     pub tls: Option<(PathBuf, PathBuf)>,
     /// Where to serve Prometheus metrics (`GET /metrics`, plain HTTP, no token); `None`: not.
     pub metrics: Option<SocketAddr>,
+    /// Settings that shape runs.
     pub config: Config,
 }
 

@@ -24,6 +24,7 @@ pub const MAX_ARTIFACT_BYTES: u64 = 1 << 30;
 
 /// The coordinator service over the shared state.
 pub struct Service {
+    /// The coordinator's shared state.
     pub st: Arc<State>,
 }
 

@@ -78,9 +78,13 @@ words! {
 words! {
     /// A run's state.
     RunState {
+        /// Submitted and not finished.
         Running = "running",
+        /// Finished: its summary and results are stored.
         Done = "done",
+        /// Stopped by an error (its `error` says which).
         Failed = "failed",
+        /// Cancelled by a client.
         Cancelled = "cancelled",
     }
 }
@@ -92,6 +96,7 @@ words! {
         Queued = "queued",
         /// Leased to a worker.
         Leased = "leased",
+        /// Completed, its outputs stored.
         Done = "done",
         /// Failed too often (its run failed).
         Failed = "failed",
