@@ -6,6 +6,7 @@
 //! reports malformed input with its file, line and field. [`Calendar`] turns the rows' month/day
 //! into day types (weekday, weekend, holiday) for a chosen calendar year, because typical-year
 //! (TMY) files mix source years and so carry no usable weekday.
+#![deny(missing_docs)]
 
 pub mod grid;
 pub mod measured;
@@ -30,15 +31,20 @@ pub enum WeatherError {
     /// The file could not be read at all.
     #[error("cannot read weather file {path}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// A line or field is not what the EPW format requires.
     #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Malformed {
+        /// The file.
         path: PathBuf,
+        /// The line at fault (1-based).
         line: usize,
+        /// What was expected, with a short excerpt of what was found.
         message: String,
     },
 }
@@ -46,13 +52,19 @@ pub enum WeatherError {
 /// Site information from the EPW `LOCATION` header.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Location {
+    /// The site's city (the header's field 2).
     pub city: String,
+    /// Its state or province.
     pub state: String,
+    /// Its country.
     pub country: String,
+    /// Latitude, degrees north.
     pub latitude_deg: f64,
+    /// Longitude, degrees east (west is negative).
     pub longitude_deg: f64,
     /// Hours from UTC (standard time).
     pub time_zone_h: f64,
+    /// Elevation above sea level, m.
     pub elevation_m: f64,
 }
 
@@ -110,26 +122,38 @@ impl Location {
 /// One hourly EPW record (the fields bemcal uses).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct WeatherHour {
+    /// Month, 1..=12.
     pub month: u32,
+    /// Day of the month.
     pub day: u32,
     /// EPW hour, 1..=24, hour-ending: hour 1 covers 00:00-01:00.
     pub hour: u32,
+    /// Dry-bulb air temperature, C.
     pub dry_bulb_c: f64,
+    /// Dew-point temperature, C.
     pub dew_point_c: f64,
+    /// Relative humidity, %.
     pub rel_humidity_pct: f64,
+    /// Station atmospheric pressure, Pa.
     pub pressure_pa: f64,
     /// Global horizontal radiation, Wh/m2 over the hour.
     pub global_horizontal_wh_m2: f64,
+    /// Direct normal radiation, Wh/m2 over the hour.
     pub direct_normal_wh_m2: f64,
+    /// Diffuse horizontal radiation, Wh/m2 over the hour.
     pub diffuse_horizontal_wh_m2: f64,
+    /// Wind direction, degrees clockwise from north (where it blows from).
     pub wind_direction_deg: f64,
+    /// Wind speed, m/s.
     pub wind_speed_m_s: f64,
 }
 
 /// A parsed EPW file: its location and 8,760 hourly records in file order (Jan 1 hour 1 first).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Epw {
+    /// The site, from the `LOCATION` header.
     pub location: Location,
+    /// The 8,760 hourly records.
     pub hours: Vec<WeatherHour>,
 }
 
@@ -298,8 +322,11 @@ fn parse_hour(line: &str, lineno: usize, path: &Path) -> Result<WeatherHour, Wea
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DayType {
+    /// A working day.
     Weekday,
+    /// Saturday or Sunday (or a day the meters show as such).
     Weekend,
+    /// A holiday of the calendar's list.
     Holiday,
 }
 
@@ -488,7 +515,9 @@ pub fn read_holiday_list(path: &Path) -> Result<Vec<NaiveDate>, WeatherError> {
 /// another month) to day types.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Calendar {
+    /// The grid year its dates are in.
     pub year: grid::GridYear,
+    /// Which dates are holidays.
     #[serde(default)]
     pub holidays: Holidays,
     /// Dates whose day type is known from the meters (pre-calibration's day-type clusters,
@@ -498,6 +527,7 @@ pub struct Calendar {
 }
 
 impl Calendar {
+    /// The calendar of `year` with `holidays` and no observed day types.
     pub fn new(year: impl Into<grid::GridYear>, holidays: Holidays) -> Calendar {
         Calendar {
             year: year.into(),
@@ -639,10 +669,15 @@ fn observed(d: NaiveDate) -> NaiveDate {
 /// wind speed, solar radiation, day type), one value per hour of the year.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HourlyFeatures {
+    /// Dry-bulb air temperature, C.
     pub dry_bulb_c: Vec<f64>,
+    /// Relative humidity, %.
     pub rel_humidity_pct: Vec<f64>,
+    /// Wind speed, m/s.
     pub wind_speed_m_s: Vec<f64>,
+    /// Global horizontal radiation, Wh/m2.
     pub global_horizontal_wh_m2: Vec<f64>,
+    /// The day type of the hour's date.
     pub day_type: Vec<DayType>,
 }
 

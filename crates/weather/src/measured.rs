@@ -129,7 +129,9 @@ pub enum Stamp {
 /// One observation: a time in UTC and the fields measured then (`None`: not measured).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Observation {
+    /// When it was observed, UTC.
     pub utc: NaiveDateTime,
+    /// Each [`Field`] in the order of [`Field::ALL`], in its unit.
     pub values: [Option<f64>; 8],
 }
 
@@ -151,6 +153,7 @@ pub struct BuildOptions {
 /// How one field of the built EPW was obtained, in hours.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FieldReport {
+    /// The field.
     pub field: Field,
     /// Hours with a measured value (the mean of the observations in the hour).
     pub measured_h: usize,
@@ -181,14 +184,19 @@ pub enum SolarSource {
 /// What [`build_epw`] did, for the user and the calibration report.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BuildReport {
+    /// Where the measured data came from (the EPW's COMMENTS 2 line).
     pub source: String,
+    /// The year built.
     pub year: GridYear,
-    /// Observations given, and those that fell outside the year (local standard time).
+    /// Observations given.
     pub observations: usize,
+    /// Observations outside the year (in local standard time), left out.
     pub outside_year: usize,
     /// True when the year holds a 29 February, left out.
     pub leap_day_dropped: bool,
+    /// Where the solar radiation came from.
     pub solar: SolarSource,
+    /// How each field was obtained.
     pub fields: Vec<FieldReport>,
 }
 

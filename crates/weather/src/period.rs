@@ -27,7 +27,12 @@ pub enum HoldoutPart {
     /// The `n` calendar months that end with the last month holding a measured hour.
     LastMonths(u32),
     /// A calendar month (1-12), of the grid year or of the year given.
-    Month { year: Option<i32>, month: u32 },
+    Month {
+        /// The year (`None`: the grid year's).
+        year: Option<i32>,
+        /// The month, 1..=12.
+        month: u32,
+    },
     /// Dates, both ends included.
     Dates(NaiveDate, NaiveDate),
 }
@@ -36,6 +41,7 @@ pub enum HoldoutPart {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(try_from = "HoldoutText", into = "HoldoutText")]
 pub struct Holdout {
+    /// The parts, in the order written.
     pub parts: Vec<HoldoutPart>,
     text: Vec<String>,
 }
@@ -44,7 +50,9 @@ pub struct Holdout {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum HoldoutText {
+    /// `holdout = "last 3 months"`.
     One(String),
+    /// `holdout = ["jan", "2021-06-01..2021-06-30"]`.
     Many(Vec<String>),
 }
 

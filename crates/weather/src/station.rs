@@ -181,36 +181,52 @@ impl<'de> Deserialize<'de> for TimeBasis {
 /// A unit a weather CSV column may be in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Unit {
+    /// Degrees Celsius.
     #[serde(rename = "C")]
     Celsius,
+    /// Degrees Fahrenheit.
     #[serde(rename = "F")]
     Fahrenheit,
+    /// Kelvin.
     #[serde(rename = "K")]
     Kelvin,
+    /// Percent (relative humidity).
     #[serde(rename = "%")]
     Percent,
+    /// Pascal.
     #[serde(rename = "Pa")]
     Pascal,
+    /// Hectopascal (millibar).
     #[serde(rename = "hPa", alias = "mbar")]
     Hectopascal,
+    /// Kilopascal.
     #[serde(rename = "kPa")]
     Kilopascal,
+    /// Inches of mercury.
     #[serde(rename = "inHg")]
     InchMercury,
+    /// Metres per second.
     #[serde(rename = "m/s")]
     MetrePerSecond,
+    /// Kilometres per hour.
     #[serde(rename = "km/h")]
     KilometrePerHour,
+    /// Miles per hour.
     #[serde(rename = "mph")]
     MilePerHour,
+    /// Knots.
     #[serde(rename = "kn")]
     Knot,
+    /// Watts per square metre.
     #[serde(rename = "W/m2")]
     WattPerSquareMetre,
+    /// Degrees (wind direction).
     #[serde(rename = "deg")]
     Degree,
+    /// Tenths of the sky (cover).
     #[serde(rename = "tenths")]
     Tenths,
+    /// Eighths of the sky (cover).
     #[serde(rename = "oktas")]
     Oktas,
 }
@@ -274,8 +290,11 @@ impl Unit {
 /// One column of a weather CSV: its header, the field it measures and its unit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CsvColumn {
+    /// The column's header.
     pub column: String,
+    /// The field it measures.
     pub field: Field,
+    /// Its unit.
     pub unit: Unit,
 }
 
@@ -293,6 +312,7 @@ pub struct CsvSpec {
     /// What a stamp means (an instant, or the end or start of an averaging interval).
     #[serde(default)]
     pub stamp: Stamp,
+    /// The measured columns.
     pub columns: Vec<CsvColumn>,
 }
 
@@ -467,7 +487,12 @@ pub enum Source {
     /// NOAA ISD-lite station-year files (several for a period across years).
     IsdLite(Vec<PathBuf>),
     /// A CSV of measured weather.
-    Csv { file: PathBuf, spec: CsvSpec },
+    Csv {
+        /// The CSV file.
+        file: PathBuf,
+        /// How to read it.
+        spec: CsvSpec,
+    },
 }
 
 impl Source {
