@@ -64,21 +64,28 @@ pub enum HeatingSource {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BuildingSpec {
+    /// The building's name (the IDF's `Building` object).
     #[serde(default = "default_name")]
     pub name: String,
+    /// Storeys above ground.
     #[serde(default = "default_storeys")]
     pub storeys: u32,
     /// Footprint length (east-west, x) and width (north-south, y), m.
     #[serde(default = "default_footprint")]
     pub footprint_m: [f64; 2],
+    /// Height of a storey, floor to floor, m.
     #[serde(default = "default_floor_height")]
     pub floor_to_floor_m: f64,
+    /// One zone per floor, or perimeter and core zones.
     #[serde(default = "default_zoning")]
     pub zoning: Zoning,
+    /// Depth of the perimeter zones, m (with perimeter and core zoning).
     #[serde(default = "default_perimeter_depth")]
     pub perimeter_depth_m: f64,
+    /// Window-to-wall ratio of every facade, 0..1.
     #[serde(default = "default_wwr")]
     pub window_to_wall: f64,
+    /// Where the hot water comes from.
     #[serde(default = "default_heating")]
     pub heating_source: HeatingSource,
     /// Simulation time steps per hour (EnergyPlus `Timestep`).

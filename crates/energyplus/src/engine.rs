@@ -40,7 +40,9 @@ fn ensure_executable(tool: &Path) -> Result<(), String> {
 /// An EnergyPlus installation: the executable and its folder (IDD, ExpandObjects, WeatherData).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Engine {
+    /// The `energyplus` executable.
     pub executable: PathBuf,
+    /// Its folder (`Energy+.idd`, `ExpandObjects`, `WeatherData/`).
     pub root: PathBuf,
 }
 

@@ -15,21 +15,29 @@ pub enum Class {
     /// harmless falls here: the cautious default).
     Invalidating,
     /// The run completed and its results are usable; `reason` says why, for the run's notes.
-    Usable { reason: String },
+    Usable {
+        /// Why the results stand.
+        reason: String,
+    },
 }
 
 /// One message of `eplusout.err`: its first line and its continuation lines.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Message {
+    /// As EnergyPlus wrote it.
     pub severity: Severity,
+    /// Its first line, then its continuation lines (`**   ~~~   **`).
     pub lines: Vec<String>,
 }
 
 /// A message's own severity, as EnergyPlus wrote it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Severity {
+    /// `** Warning **`.
     Warning,
+    /// `** Severe  **`.
     Severe,
+    /// `**  Fatal  **`: the run stopped.
     Fatal,
 }
 
@@ -48,6 +56,7 @@ pub struct ErrFile {
     pub problems: Vec<Message>,
     /// Warning messages: how many, and the first line of each distinct kind (see [`kind`]).
     pub warnings: usize,
+    /// Per kind of warning: its first line and how many.
     pub warning_kinds: Vec<(String, usize)>,
     /// "EnergyPlus Completed Successfully" was written.
     pub completed: bool,

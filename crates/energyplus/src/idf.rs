@@ -12,7 +12,9 @@ use crate::Error;
 /// One IDF object: its class and its fields (the first field is usually the name).
 #[derive(Debug, Clone, PartialEq)]
 pub struct IdfObject {
+    /// The object's class (`Lights`, `Schedule:Compact`).
     pub class: String,
+    /// Its fields, in order, without comments.
     pub fields: Vec<String>,
     /// 1-based line of the class keyword in the source (0 for generated objects).
     pub line: usize,
@@ -28,6 +30,7 @@ impl IdfObject {
 /// An IDF file as an ordered list of objects.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Idf {
+    /// The objects, in file order.
     pub objects: Vec<IdfObject>,
 }
 

@@ -7,6 +7,7 @@
 //!   priors and turns a set of values into an IDF, refusing physically impossible combinations.
 //! - [`runner::Runner`] runs one simulation in its own directory, treats `** Severe` / `** Fatal`
 //!   in `eplusout.err` as failure whatever the exit code, and returns hourly outputs in kWh.
+#![deny(missing_docs)]
 
 pub mod building;
 pub mod calendar;
@@ -43,30 +44,48 @@ pub enum Error {
     /// A file could not be read or written.
     #[error("cannot access {path}")]
     Io {
+        /// The file or folder.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// A model, spec or parameter-map file is malformed.
     #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Input {
+        /// The file.
         path: PathBuf,
+        /// The line at fault (0: the file as a whole).
         line: usize,
+        /// What was expected, with a short excerpt of what was found.
         message: String,
     },
     /// A parameter is unknown, missing, out of range or violates a constraint.
     #[error("parameter {}: {}", bemcal_excerpt::excerpt(.name, 80), bemcal_excerpt::shorten(.message))]
-    Parameter { name: String, message: String },
+    Parameter {
+        /// The parameter.
+        name: String,
+        /// What is wrong with it.
+        message: String,
+    },
     /// EnergyPlus ran but failed (severe/fatal errors, missing output).
     #[error("EnergyPlus failed in {dir}: {message}\n{}", .details.join("\n"))]
     Simulation {
+        /// The run's folder.
         dir: PathBuf,
+        /// What failed.
         message: String,
+        /// EnergyPlus's Severe and Fatal lines.
         details: Vec<String>,
     },
     /// EnergyPlus exceeded its time limit and was killed.
     #[error("EnergyPlus exceeded its time limit of {seconds} s in {dir}")]
-    Timeout { dir: PathBuf, seconds: u64 },
+    Timeout {
+        /// The run's folder.
+        dir: PathBuf,
+        /// The limit, s.
+        seconds: u64,
+    },
 }
 
 /// Parses TOML text into `T`; an error names the file and the line of the offending key.

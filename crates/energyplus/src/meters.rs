@@ -14,7 +14,9 @@ pub const J_PER_KWH: f64 = 3.6e6;
 /// A calibration output (e.g. `heating_kwh`) as the sum of EnergyPlus meters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OutputSpec {
+    /// The output's name (`heating_kwh`).
     pub name: String,
+    /// The EnergyPlus meters summed into it (`DistrictHeatingWater:Facility`).
     pub meters: Vec<String>,
 }
 
@@ -31,6 +33,7 @@ impl OutputSpec {
 /// Hourly outputs of one simulation, kWh per hour, in file order (hour-beginning, 8,760 rows).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HourlyOutputs {
+    /// The outputs' names, in the order of `series`.
     pub names: Vec<String>,
     /// `series[k][t]`: output k at hour t.
     pub series: Vec<Vec<f64>>,

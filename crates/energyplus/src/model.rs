@@ -51,9 +51,14 @@ use crate::{io_err, Error};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FieldTarget {
+    /// The objects' class.
     pub class: String,
+    /// Their name, `*`, or a pattern with `*` wildcards.
     pub object: String,
+    /// The field's name as the IDD spells it, or `*` (every numeric field, with `scale` or
+    /// `offset`).
     pub field: String,
+    /// How the value enters the field.
     #[serde(default)]
     pub edit: Edit,
 }
@@ -119,12 +124,17 @@ fn glob_match(pattern: &str, s: &str) -> bool {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MappedParameter {
+    /// The parameter's name.
     pub name: String,
+    /// Its unit, for listings.
     #[serde(default)]
     pub unit: String,
+    /// What it is, for listings.
     #[serde(default)]
     pub description: String,
+    /// Its triangular prior.
     pub prior: TriangularPrior,
+    /// The fields it sets.
     pub targets: Vec<FieldTarget>,
 }
 
@@ -149,11 +159,15 @@ pub struct ParameterMap {
     /// the user's: they are not rewritten for these dates.)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub day_types_file: Option<PathBuf>,
+    /// The user's IDF (`[idf] path`).
     pub idf: IdfRef,
+    /// `[[parameter]]`: the calibration parameters and the fields they set.
     #[serde(rename = "parameter", default)]
     pub parameters: Vec<MappedParameter>,
+    /// `[[output]]`: the outputs compared with meters.
     #[serde(rename = "output", default)]
     pub outputs: Vec<OutputSpec>,
+    /// `[[constraint]]`: physical constraints between parameters.
     #[serde(rename = "constraint", default)]
     pub constraints: Vec<Constraint>,
 }
@@ -162,6 +176,7 @@ pub struct ParameterMap {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IdfRef {
+    /// The IDF file, relative to the model file.
     pub path: PathBuf,
 }
 

@@ -11,8 +11,11 @@ use crate::Error;
 /// itself lives in `bemcal-stats`; this is the record.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TriangularPrior {
+    /// The lower bound.
     pub min: f64,
+    /// The most likely value.
     pub mode: f64,
+    /// The upper bound.
     pub max: f64,
 }
 
@@ -39,18 +42,26 @@ impl TriangularPrior {
 /// A calibration parameter of a model.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParameterDef {
+    /// The parameter's name.
     pub name: String,
+    /// Its unit.
     pub unit: String,
+    /// What it is.
     pub description: String,
+    /// Its triangular prior.
     pub prior: TriangularPrior,
 }
 
 /// A physical constraint `value(lower) + margin <= value(upper)` between two parameters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Constraint {
+    /// The parameter that must stay below.
     pub lower: String,
+    /// The parameter that must stay above.
     pub upper: String,
+    /// The least gap between them, in their unit.
     pub margin: f64,
+    /// Why, for messages.
     pub reason: String,
 }
 

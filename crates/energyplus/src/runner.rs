@@ -48,8 +48,11 @@ pub struct Runner {
 /// What one run produced.
 #[derive(Debug, Clone)]
 pub struct RunResult {
+    /// The hourly outputs, kWh.
     pub outputs: HourlyOutputs,
+    /// The run's folder.
     pub dir: PathBuf,
+    /// Wall time of the run, s.
     pub seconds: f64,
     /// Warning count from `eplusout.err`.
     pub warnings: usize,
