@@ -71,6 +71,7 @@ pub struct ArtifactDir {
 }
 
 impl ArtifactDir {
+    /// The store in `root`, created when missing.
     pub fn new(root: &Path) -> std::io::Result<ArtifactDir> {
         std::fs::create_dir_all(root)?;
         Ok(ArtifactDir { root: root.into() })
@@ -92,6 +93,7 @@ impl ArtifactDir {
         }
     }
 
+    /// Whether the artifact `sha` is stored (false for a name that is not a SHA-256).
     pub fn has(&self, sha: &str) -> bool {
         valid_sha(sha) && self.path(sha).is_file()
     }
@@ -133,6 +135,7 @@ impl ArtifactDir {
         Ok(got)
     }
 
+    /// The artifact `sha`'s bytes.
     pub fn read(&self, sha: &str) -> std::io::Result<Vec<u8>> {
         if !valid_sha(sha) {
             return Err(std::io::Error::new(

@@ -155,6 +155,7 @@ pub struct AddToken {
 }
 
 impl AddToken {
+    /// Adds `authorization: Bearer <token>`; a token that cannot be a header value is an error.
     pub fn new(token: &str) -> anyhow::Result<AddToken> {
         let value = format!("Bearer {token}")
             .parse()

@@ -22,6 +22,7 @@ pub type Client = CoordinatorClient<InterceptedService<Channel, AddToken>>;
 pub struct Connect {
     /// `http://HOST:PORT` or `https://HOST:PORT`.
     pub url: String,
+    /// The bearer token.
     pub token: String,
     /// CA certificate (PEM) to trust for `https://`.
     pub tls_ca: Option<PathBuf>,

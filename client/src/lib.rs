@@ -3,6 +3,7 @@
 //! ([`client::Connect`]), content-addressed artifacts and their transfer in chunks, and project
 //! bundles. It links no server state (no SQLite): a worker or a CLI command depends on this
 //! crate, not on the coordinator.
+#![deny(missing_docs)]
 
 pub mod artifacts;
 pub mod auth;
@@ -26,8 +27,11 @@ pub const CHUNK_BYTES: usize = 1024 * 1024;
 /// A file by relative path and content hash (the serde twin of `proto::FileRef`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct File {
+    /// Where it goes, relative to the bundle's or the job's folder.
     pub path: String,
+    /// Its content's SHA-256, hex.
     pub sha256: String,
+    /// Its size, bytes.
     pub size: u64,
 }
 
