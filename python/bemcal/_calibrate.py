@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Callable, Optional, Sequence, Union
 
 from ._binary import run
+from ._progress import NotebookEcho, in_notebook
 from .results import Calibration, load
 
 #: ``bemcal calibrate``'s status for a calibration that finished without converging (its
@@ -20,11 +21,14 @@ def calibrate(
     *,
     workers: int = 2,
     extra_args: Sequence[str] = (),
-    echo: Optional[Callable[[str], None]] = print,
+    echo: Union[Callable[[str], None], str, None] = "auto",
 ) -> Calibration:
     """Calibrates ``project`` (a project TOML) into the folder ``out`` with a local coordinator
     and ``workers`` worker processes (``bemcal calibrate PROJECT --local-workers N --out OUT``),
     streaming its progress lines to ``echo``, and returns :func:`load` of the folder.
+
+    ``echo="auto"`` prints each line, except in a Jupyter notebook, where the progress block is
+    shown once and updated in place (``NotebookEcho``); ``None`` is silent.
 
     A held-out period is set in the project (``[validation] holdout = "last 3 months"``). A
     calibration that finishes without converging is returned with a warning (its
@@ -35,7 +39,13 @@ def calibrate(
     if workers > 0:
         args += ["--local-workers", str(workers)]
     args += list(extra_args)
-    status = run(args, echo=echo, ok=(0, NOT_CONVERGED))
+    if echo == "auto":
+        echo = NotebookEcho() if in_notebook() else print
+    try:
+        status = run(args, echo=echo, ok=(0, NOT_CONVERGED))
+    finally:
+        if isinstance(echo, NotebookEcho):
+            echo.finish()
     result = load(out)
     if status == NOT_CONVERGED:
         warnings.warn(

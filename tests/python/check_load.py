@@ -122,5 +122,28 @@ assert any("reusing" in l for l in lines), lines[-20:]
 assert again.draws.equals(result.draws)
 assert again.estimate == result.estimate
 
+# In a notebook the progress block is shown once and updated in place: the block's lines are
+# grouped, every other line kept (stamped log lines too, once no bars follow them).
+from bemcal._progress import ProgressLines  # noqa: E402
+
+progress = ProgressLines()
+fed = [
+    "[    0.0 s] coordinator on http://127.0.0.1:1; starting 2 workers",
+    "[    0.1 s] design (running)",
+    "  design    [--------------------]   0/1   running",
+    "[    0.6 s] simulate (running)",
+    "  design    [####################]   1/1   done",
+    "  simulate  [--------------------]   0/12  running",
+    "[   50.0 s] 64 result files written to out",
+    "  a detail",
+    "timings: total 50 s",
+    "[   51.0 s] stamped last line",
+]
+events = [e for line in fed for e in progress.feed(line)] + progress.finish()
+kept = [t for k, t in events if k == "line"]
+assert kept == [fed[0], fed[6], fed[7], fed[8], fed[9]], kept
+blocks = [t for k, t in events if k == "block"]
+assert blocks[-1] == "\n".join(fed[3:6]) and len(blocks) == 3, blocks
+
 print(f"bemcal.load: {len(data.groups())} groups, {len(chains)} chains x {per_chain.iloc[0]} draws, "
       f"{len(calibrated)} parameters; ArviZ summary within {worst:.1e} of bemcal diagnose")
