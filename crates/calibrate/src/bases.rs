@@ -13,6 +13,7 @@ use crate::{Calibration, Inputs};
 /// A base load in `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct BaseReport {
+    /// The calibrated output (and its meter) the base is part of.
     pub output: String,
     /// `submeter data_center` or `constant 102 kWh/h`.
     pub source: String,

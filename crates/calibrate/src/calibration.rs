@@ -23,8 +23,11 @@ pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
 /// [`calibrate`](crate::calibrate) runs them in order on this machine, and the coordinator dispatches the same
 /// methods to workers (simulations, training and chain segments as separate jobs).
 pub struct Calibration {
+    /// The project file's settings.
     pub project: Project,
+    /// The model, weather, meters and bases, checked against each other.
     pub inputs: Inputs,
+    /// The output folder every stage writes to and a rerun resumes from.
     pub out: OutputDir,
 }
 

@@ -24,11 +24,19 @@ use crate::{Calibration, Error, OutputMetrics};
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
 pub struct Sampler<'c> {
     cal: &'c Calibration,
+    /// The surrogate bound to the calibration's weather ([`Surrogate::bind`]).
     pub evaluator: Evaluator,
+    /// The Gaussian likelihood of each meter less its base over the calibration period, given
+    /// the surrogate (reference Eq. 7).
     pub likelihood: GaussianLikelihood,
+    /// Per output, the likelihood's noise sds, kWh: sigma_y and sigma_delta from `[mcmc]`'s
+    /// fractions of the meter's mean and sd, sigma_eta from the surrogate.
     pub noise: Vec<OutputNoise>,
+    /// Bounds of each output's `ln sigma_delta`, sampled with `mcmc.sigma_delta = "sampled"`.
     pub sigma_box: SigmaDeltaBox,
+    /// The surrogate's held-out RMSE per output, kWh (its part of the likelihood's noise).
     pub sigma_eta: Vec<f64>,
+    /// The surrogate's held-out metrics (its metadata's `held_out`), as JSON.
     pub held_out: serde_json::Value,
 }
 
@@ -627,7 +635,12 @@ pub struct ChainSummary {
     /// ([`crate::predictive`]).
     #[serde(default)]
     pub predictive: Vec<Vec<f64>>,
+    /// The calibrated parameters' posterior (physical units): per-parameter statistics, the
+    /// MAP draw, correlated pairs, R-hat and ESS.
     pub posterior: PosteriorSummary,
+    /// Model inadequacy sigma_delta per output, kWh: the sampled ones' median; with the variance
+    /// integrated out, what the MAP's residual variance leaves after sigma_y and sigma_eta;
+    /// else the fixed value.
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
     #[serde(default)]
@@ -728,7 +741,9 @@ pub fn extended_target(
 /// (`mcmc.restart_below`, [`bemcal_stats::optim::keep_best_modes`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MovedChain {
+    /// The chain's index.
     pub chain: usize,
+    /// How far its own optimum's log posterior was below the best one's, nats.
     pub nats_below: f64,
 }
 

@@ -21,6 +21,7 @@ pub struct Plan {
     pub calibrated: Vec<String>,
     /// Their priors.
     pub priors: Vec<Triangular>,
+    /// Their units, as the model declares them (empty where it declares none).
     pub units: Vec<String>,
     /// Values of every parameter that is not calibrated.
     pub fixed: ParameterValues,

@@ -16,22 +16,27 @@ use crate::{write_atomic, Error};
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
 /// measurements.
 pub struct Inputs {
+    /// Runs EnergyPlus (the engine found on this machine, default run options).
     pub runner: Runner,
+    /// The project's model, with the priors file's priors and schedule applied.
     pub model: Model,
+    /// Which parameters are calibrated, their priors, and the values of the others.
     pub plan: Plan,
+    /// The EPW the model simulates with ([`weather_for`]).
     pub weather_path: PathBuf,
     /// How the EPW was built from `[measured_weather]` (None: the project's EPW as it is).
     pub measured_weather: Option<bemcal_weather::measured::BuildReport>,
+    /// The surrogate's hourly weather features, from that EPW on the model's calendar.
     pub features: HourlyFeatures,
     /// The grid year of the meters and the model (a calendar year or twelve months from another
     /// month).
     pub year: GridYear,
     /// What reading the meters decided or dropped ([`bemcal_precal::meters::MeterData::notes`]).
     pub meter_notes: Vec<String>,
-    /// Calibration outputs (model output names) and their measured series over the calibration
-    /// period (kWh, NaN = missing or held out): what the likelihood, the surrogate's checks and
-    /// the in-sample Guideline 14 see.
+    /// Calibration outputs: the model outputs that have a meter, in model order.
     pub outputs: Vec<String>,
+    /// Per output, its meter over the calibration period (kWh, NaN = missing or held out):
+    /// what the likelihood, the surrogate's checks and the in-sample Guideline 14 see.
     pub measured: Vec<Vec<f64>>,
     /// The held-out period (`[validation] holdout`): its hours and the meters there.
     pub held_out: Option<HeldOut>,

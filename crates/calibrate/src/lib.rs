@@ -9,6 +9,7 @@
 //! every stage on this machine; the coordinator runs the same stage methods as jobs. Each stage's
 //! results are written under the output folder and reused by a rerun, so an interrupted
 //! calibration resumes.
+#![deny(missing_docs)]
 
 pub mod bases;
 mod calibration;
@@ -56,35 +57,55 @@ pub use validation::{
 /// Errors of the pipeline, each naming the stage, file or setting concerned.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
+    /// A file (the project, priors, a saved result) is unreadable or malformed, or a setting in
+    /// it does not fit the model or the meters.
     #[error("{path}:{line}: {}", bemcal_excerpt::shorten(.message))]
     Input {
+        /// The file.
         path: PathBuf,
+        /// The line at fault (0: the file as a whole).
         line: usize,
+        /// What was expected, with a short excerpt of what was found.
         message: String,
     },
+    /// A file or folder could not be read or written.
     #[error("cannot access {path}")]
     Io {
+        /// The file or folder.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
+    /// Settings that do not fit the inputs, the model or the output folder's earlier results;
+    /// also failures tied to no file (the thread pool, encoding JSON).
     #[error("{}", bemcal_excerpt::shorten(.0))]
     Config(String),
+    /// A stage could not go on with what the earlier stages left.
     #[error("{stage}: {}", bemcal_excerpt::shorten(.message))]
     Stage {
+        /// The stage ("design", "training set", "surrogate", "chains", "refinement",
+        /// "validation").
         stage: &'static str,
+        /// What is wrong.
         message: String,
     },
+    /// From the simulation layer: EnergyPlus, the model and parameters, TOML files.
     #[error(transparent)]
     Simulation(#[from] bemcal_energyplus::Error),
+    /// From the numerics (priors, statistics, designs).
     #[error(transparent)]
     Stats(#[from] bemcal_stats::StatsError),
+    /// From loading or evaluating the surrogate.
     #[error(transparent)]
     Surrogate(#[from] bemcal_surrogate::SurrogateError),
+    /// From building, writing or reading the training set.
     #[error(transparent)]
     Dataset(#[from] bemcal_surrogate::DatasetError),
+    /// From reading the weather files.
     #[error(transparent)]
     Weather(#[from] bemcal_weather::WeatherError),
+    /// From reading the meters (the pre-calibration stage).
     #[error(transparent)]
     Meters(#[from] bemcal_precal::PrecalError),
 }

@@ -55,6 +55,7 @@ pub enum Factor {
 pub struct ModelFormReport {
     /// Posterior draws of EnergyPlus the reach is judged with (besides the estimate).
     pub draws: usize,
+    /// Each meter's model form (a meter with too few hours to judge is left out).
     pub meters: Vec<MeterForm>,
     /// Parameters whose posterior median lies against a prior bound.
     pub piled: Vec<PiledParameter>,
@@ -65,12 +66,16 @@ pub struct ModelFormReport {
 /// One meter's model form, over the calibration period's measured hours.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MeterForm {
+    /// The calibrated output (and its meter).
     pub output: String,
+    /// The meter's total against the model's (with its base) at the estimate and at the
+    /// posterior draws, kWh, and the verdict: whether the model can reach the meter.
     pub reach: Reach,
     /// The residuals (measured - model, kWh per hour) grouped by each factor.
     pub patterns: Vec<FactorPattern>,
     /// Slope of the residuals on the outdoor dry-bulb temperature, kWh per hour per K.
     pub temperature_slope_kwh_per_k: f64,
+    /// The additive discrepancy fitted to the residuals at the estimate.
     pub discrepancy: Discrepancy,
     /// In words: whether the model reaches the meter, and what to look at if not.
     pub findings: Vec<String>,
@@ -79,7 +84,10 @@ pub struct MeterForm {
 /// The residuals grouped by one factor.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FactorPattern {
+    /// What the residuals are grouped by.
     pub factor: Factor,
+    /// The groups' mean residuals (kWh per hour) and the share of the residuals' variance they
+    /// explain (`eta^2`).
     #[serde(flatten)]
     pub pattern: Pattern,
 }
@@ -101,10 +109,15 @@ pub struct Discrepancy {
 /// A parameter piled against a prior bound.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PiledParameter {
+    /// The calibrated parameter.
     pub name: String,
+    /// The prior bound its posterior median lies against.
     pub bound: Bound,
+    /// Its posterior median (the parameter's unit).
     pub median: f64,
+    /// Its prior's minimum (the parameter's unit).
     pub prior_min: f64,
+    /// Its prior's maximum (the parameter's unit).
     pub prior_max: f64,
 }
 

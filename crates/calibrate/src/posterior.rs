@@ -21,7 +21,9 @@ use bemcal_energyplus::Model;
 /// Bounds of `ln sigma_delta` per output in hyperparameter mode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SigmaDeltaBox {
+    /// Lower bounds, `ln(0.001 s_k)` (`s_k` the measured sd, kWh).
     pub lo: Vec<f64>,
+    /// Upper bounds, `ln(2 s_k)`.
     pub hi: Vec<f64>,
     /// Half-Cauchy scales (measured sds).
     pub scale: Vec<f64>,
@@ -45,8 +47,11 @@ impl SigmaDeltaBox {
 
 /// Everything the log posterior needs.
 pub struct Posterior<'a> {
+    /// The calibrated parameters, their priors and the region the chains refuse.
     pub plan: &'a Plan,
+    /// The model, whose constraints between parameters a point must satisfy.
     pub model: &'a Model,
+    /// The meters' likelihood given the surrogate's prediction.
     pub likelihood: &'a GaussianLikelihood,
     /// Sampled `ln sigma_delta` dimensions (hyperparameter mode).
     pub sigma_box: Option<&'a SigmaDeltaBox>,
@@ -227,7 +232,9 @@ impl Posterior<'_> {
 /// Checkpoint of all chains: states and the draws so far.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Checkpoint {
+    /// Each chain's complete state, to resume it from.
     pub states: Vec<Chain>,
+    /// Each chain's post-burn-in draws so far (unit space) and their log densities.
     pub draws: Vec<Draws>,
 }
 

@@ -110,12 +110,14 @@ pub struct PredictiveReport {
     /// The held-out period, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<String>,
+    /// Each meter's intervals.
     pub outputs: Vec<OutputPredictive>,
 }
 
 /// One meter's intervals.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct OutputPredictive {
+    /// The calibrated output (and its meter).
     pub output: String,
     /// Root mean square residual of EnergyPlus at the estimate over the calibration hours (kWh).
     pub noise_kwh: f64,
@@ -135,7 +137,9 @@ pub struct OutputPredictive {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TotalPeriod {
+    /// Each day's total (24 hour slots).
     Day,
+    /// Each calendar month's total.
     Month,
 }
 
@@ -157,6 +161,7 @@ impl TotalPeriod {
 /// periods judged: those whose every hour is measured and in the period judged).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TotalsCoverage {
+    /// What the totals are taken over.
     pub period: TotalPeriod,
     /// With the AR(1) noise of a sum (`residual_phi`): the intervals to read.
     pub ar1: PeriodCoverage,
@@ -167,6 +172,7 @@ pub struct TotalsCoverage {
 /// 50 % and 90 % coverage, in-sample and held out.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PeriodCoverage {
+    /// Over the calibration period, one per level.
     pub in_sample: Vec<Coverage>,
     /// Empty without a held-out period.
     pub held_out: Vec<Coverage>,
@@ -175,7 +181,9 @@ pub struct PeriodCoverage {
 /// Coverage of the 50 % and 90 % hourly intervals under one error model.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ModelCoverage {
+    /// The error model the intervals use.
     pub error_model: ErrorModel,
+    /// Their coverage, in-sample and held out.
     #[serde(flatten)]
     pub coverage: PeriodCoverage,
 }

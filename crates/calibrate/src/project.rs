@@ -49,6 +49,8 @@ use crate::Error;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Project {
+    /// The calibration's name, for the summary and the calibrated model (default
+    /// `calibration`).
     #[serde(default = "default_name")]
     pub name: String,
     /// Model file (building spec or `[idf]` parameter map).
@@ -79,14 +81,19 @@ pub struct Project {
     /// the calibration compares the model plus these bases with the meter (`[[bases]]`).
     #[serde(default)]
     pub bases: Vec<Base>,
+    /// `[design]`: the Latin hypercube and its EnergyPlus runs.
     #[serde(default)]
     pub design: DesignSettings,
+    /// `[surrogate]`: its training.
     #[serde(default)]
     pub surrogate: SurrogateSettings,
+    /// `[mcmc]`: the chains and the likelihood's noise.
     #[serde(default)]
     pub mcmc: McmcSettings,
+    /// `[refine]`: the surrogate's refinement rounds near the posterior.
     #[serde(default)]
     pub refine: RefineSettings,
+    /// `[validation]`: the estimate, the held-out period and the predictive intervals.
     #[serde(default)]
     pub validation: ValidationSettings,
     /// Folder of the project file (set on load).
@@ -131,15 +138,19 @@ pub struct MeasuredWeather {
     /// `columns`.
     #[serde(default)]
     pub csv: Option<PathBuf>,
+    /// Header of the CSV's time-stamp column (default `timestamp`).
     #[serde(default = "default_weather_timestamp")]
     pub timestamp_column: String,
+    /// A chrono format of the CSV's time stamps (`%m/%d/%Y %H:%M`); by default ISO 8601.
     #[serde(default)]
     pub timestamp_format: Option<String>,
     /// `utc`, `local_standard` or an IANA zone (`America/Denver`).
     #[serde(default = "default_weather_zone")]
     pub time_zone: bemcal_weather::station::TimeBasis,
+    /// What a CSV time stamp means (an instant, or the end or start of an averaging interval).
     #[serde(default)]
     pub stamp: bemcal_weather::measured::Stamp,
+    /// The CSV's measured columns: header, the weather field it measures, its unit.
     #[serde(default)]
     pub columns: Vec<bemcal_weather::station::CsvColumn>,
     /// The year to build (`2017`, or `"2017-04"` for twelve months from April 2017); by
@@ -206,6 +217,7 @@ impl MeasuredWeather {
 pub struct DesignSettings {
     /// Number of Latin hypercube points (reference: 20).
     pub points: usize,
+    /// Seed of the hypercube (and, derived from it, of the spare one).
     pub seed: u64,
     /// Maximin column-swap iterations.
     pub maximin_iterations: usize,
@@ -238,8 +250,11 @@ impl Default for DesignSettings {
 pub struct SurrogateSettings {
     /// Maximum epochs (reference: 200), with early stopping.
     pub epochs: usize,
+    /// Early stopping: training ends after this many epochs without a better held-out loss.
     pub patience: usize,
+    /// Seed of the training (torch and numpy) and of the held-out split.
     pub seed: u64,
+    /// Training mini-batch size, in (design point, hour) samples.
     pub batch_size: usize,
     /// `hour+schedule` (default), `hour`, or `none` (the reference: the LSTM must infer the
     /// schedule hour from the weather). Measured on an 8-point design of the small model, held-out
@@ -324,13 +339,17 @@ pub enum Residuals {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct McmcSettings {
+    /// Number of chains (default 4).
     pub chains: usize,
     /// Iterations per chain including burn-in (default 500, for HMC; the reference's
     /// random walk: 10,000).
     pub iterations: u64,
     /// Burn-in (reference: 2,000); the proposal adapts only during burn-in.
     pub burn_in: u64,
+    /// Seed of the chains' starts and random streams (each refinement round derives its own).
     pub seed: u64,
+    /// How the model-inadequacy sd sigma_delta is treated: `marginal` (default), `sampled` or
+    /// `fixed`.
     pub sigma_delta: SigmaDeltaMode,
     /// Residual model of the marginal likelihood: `ar1` (default) or `iid` (the reference).
     pub residuals: Residuals,
@@ -520,6 +539,8 @@ pub enum Estimate {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ValidationSettings {
+    /// Which posterior statistic becomes the calibrated estimate: `map` (default), `mean` or
+    /// `median`.
     pub estimate: Estimate,
     /// Also simulate the initial model (prior modes), as the reference's Table 5.
     pub initial: bool,

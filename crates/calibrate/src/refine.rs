@@ -27,6 +27,7 @@ pub const REFINE_FILE: &str = "refine.json";
 /// Every finished refinement round, in order.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct RefineLog {
+    /// The finished rounds, first round first.
     pub rounds: Vec<RefineRound>,
 }
 
@@ -70,7 +71,9 @@ pub struct RefinePoint {
 /// A posterior draw EnergyPlus could not simulate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FailedPoint {
+    /// Calibrated parameter values (physical units, plan order).
     pub values: Vec<f64>,
+    /// EnergyPlus's message.
     pub error: String,
 }
 
@@ -298,8 +301,11 @@ impl Calibration {
 /// values (physical units) and its outputs or EnergyPlus's failure.
 #[derive(Debug, Clone)]
 pub struct SimulatedDraw {
+    /// Key in `simulations/` (after the hypercube's points).
     pub index: usize,
+    /// Calibrated parameter values (physical units, plan order).
     pub values: Vec<f64>,
+    /// EnergyPlus's hourly outputs, or its failure message.
     pub outputs: Result<HourlyOutputs, String>,
 }
 

@@ -193,6 +193,7 @@ pub fn next_step(
 /// unknown, and half-way is the nearest-neighbour guess.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct InvalidRegion {
+    /// One ball per design point EnergyPlus refused (empty: the chains refuse nothing).
     pub balls: Vec<InvalidBall>,
 }
 
@@ -262,8 +263,11 @@ fn probabilities(priors: &[Triangular], x: &[f64]) -> Vec<f64> {
 /// Failures of one reason ([`failure_reason`]): how many runs, at which slots.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FailureGroup {
+    /// The reason, in a few words ([`failure_reason`]).
     pub reason: String,
+    /// Failed runs with this reason.
     pub count: usize,
+    /// The hypercube slots they were at, each once, in order of first failure.
     pub points: Vec<usize>,
 }
 

@@ -24,10 +24,16 @@ use crate::{extended_target, ChainSummary};
 pub enum Round {
     /// Before refinement round `index + 1`: `refine.iterations` per chain, then posterior draws
     /// of these chains are simulated by EnergyPlus and the surrogate is retrained.
-    Preliminary { index: u32 },
+    Preliminary {
+        /// Refinement rounds finished before these chains.
+        index: u32,
+    },
     /// The final chains: `mcmc.iterations` per chain, extended while they miss a convergence
     /// target ([`after_final_chains`]).
-    Final { index: u32 },
+    Final {
+        /// Refinement rounds finished before these chains (all of `refine.rounds`).
+        index: u32,
+    },
 }
 
 impl Round {
@@ -74,7 +80,10 @@ impl Round {
 pub enum AfterFinalChains {
     /// They miss a convergence target and extensions are left: run them on from their
     /// checkpoint to this many iterations per chain, then summarise again.
-    Extend { iterations: u64 },
+    Extend {
+        /// The new iteration target per chain, burn-in included.
+        iterations: u64,
+    },
     /// Converged, or out of extensions: validate.
     Validate,
 }
@@ -98,7 +107,10 @@ pub fn after_final_chains(
 pub enum ValidationRole {
     /// The calibrated model: the estimate (`rank` 0) or the `rank`-th next-best draw after
     /// EnergyPlus failed at those before it.
-    Calibrated { rank: usize },
+    Calibrated {
+        /// 0 for the estimate; `k` for the `k`-th fallback draw ([`crate::FALLBACKS`]).
+        rank: usize,
+    },
     /// The initial model (the prior modes), for comparison (`validation.initial`).
     Initial,
     /// A posterior draw of the predictive intervals (`validation.predictive_draws`).
@@ -108,6 +120,7 @@ pub enum ValidationRole {
 /// One EnergyPlus run of the validation stage, saved as `validation/<label>.csv` under `key`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ValidationRun {
+    /// What the run is for.
     pub role: ValidationRole,
     /// Its key in `validation/`.
     pub key: usize,

@@ -20,16 +20,24 @@ use crate::{write_atomic, Calibration, ChainSummary, Error, MovedChain};
 /// Wall time of each stage, s.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Timings {
+    /// The Latin hypercube and its spares.
     pub design_s: f64,
+    /// EnergyPlus at the design points, replacements included.
     pub simulations_s: f64,
+    /// Training sets and surrogate training, every round's.
     pub training_s: f64,
+    /// The chains, every round's, extensions included.
     pub chains_s: f64,
+    /// Summarising the final chains (posterior summary, draws and predictive bands).
     pub summary_s: f64,
+    /// EnergyPlus at the estimate (or its fallbacks), the initial model and the predictive
+    /// draws, with Guideline 14.
     pub validation_s: f64,
     /// Refinement rounds: simulating posterior draws (their retraining is in `training_s`,
     /// their preliminary chains in `chains_s`).
     #[serde(default)]
     pub refinement_s: f64,
+    /// The whole calibration.
     pub total_s: f64,
 }
 
@@ -37,7 +45,10 @@ pub struct Timings {
 /// flattened `metrics`) and monthly over the calibration period, and on the held-out period.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct OutputMetrics {
+    /// The calibrated output (and its meter).
     pub output: String,
+    /// Hourly Guideline 14 over the calibration period: hours, measured mean (kWh), NMBE and
+    /// CV-RMSE (%), pass.
     #[serde(flatten)]
     pub metrics: G14Metrics,
     /// On monthly totals of the same hours (absent under two months of data).
@@ -51,7 +62,9 @@ pub struct OutputMetrics {
 /// Guideline 14 of one period, hourly and monthly.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PeriodMetrics {
+    /// On the period's hours.
     pub hourly: G14Metrics,
+    /// On monthly totals of the same hours (absent under two months of data).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub monthly: Option<G14Metrics>,
 }
@@ -73,13 +86,14 @@ impl OutputMetrics {
 /// output was written, and `summary.json` `converged` is false. 1 stays "failed".
 pub const NOT_CONVERGED_EXIT: i32 = 3;
 
-/// `summary.json`.
 fn default_year() -> bemcal_weather::grid::GridYear {
     bemcal_weather::grid::GridYear::calendar(2021)
 }
 
+/// `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
+    /// The project's name.
     pub project: String,
     /// The grid year of the meters and the model: `2017`, or `"2017-04"` for twelve months from
     /// April 2017.
@@ -95,8 +109,12 @@ pub struct Summary {
     /// Loads in the meters that the model does not have, added to its outputs (`[[bases]]`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub bases: Vec<crate::bases::BaseReport>,
+    /// The calibrated outputs: the model outputs that have a meter.
     pub outputs: Vec<String>,
+    /// The calibrated parameters' units and priors.
     pub parameters: Vec<ParameterReport>,
+    /// The calibrated parameters' posterior from the chains on the surrogate (physical units):
+    /// per-parameter statistics, the MAP draw, correlated pairs, R-hat and ESS.
     pub posterior: PosteriorSummary,
     /// Model-discrepancy standard deviation per output, kWh (`{output: value}`).
     #[serde(with = "crate::named")]
@@ -107,6 +125,7 @@ pub struct Summary {
     /// The surrogate's held-out error per output, kWh (`{output: value}`).
     #[serde(with = "crate::named")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
+    /// Acceptance rate after burn-in, per chain (of the final chains).
     pub acceptance_rate: Vec<f64>,
     /// Times the final chains were extended because a convergence target was missed.
     #[serde(default)]
@@ -118,6 +137,7 @@ pub struct Summary {
     /// `stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE`): their recorded draws are random-walk steps.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub independence_dropped: Vec<usize>,
+    /// Which posterior statistic the estimate is (`[validation] estimate`).
     pub estimate: Estimate,
     /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -125,7 +145,10 @@ pub struct Summary {
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
     #[serde(with = "crate::named")]
     pub calibrated_values: Vec<(String, f64)>,
+    /// Guideline 14 of EnergyPlus at the estimate against the meters, per output.
     pub validation: Vec<OutputMetrics>,
+    /// The same for the initial model (the prior modes); empty with `validation.initial =
+    /// false`.
     pub initial: Vec<OutputMetrics>,
     /// The held-out period (`[validation] holdout`): its hours fit nothing; `validation`'s
     /// `held_out` judges the model on them.
@@ -158,15 +181,21 @@ pub struct Summary {
     /// The verdict behind `converged`: targets, worst figures, the parameters short of them.
     #[serde(default)]
     pub convergence: Convergence,
+    /// Points of the settled design (the hypercube's slots with a simulated point), before
+    /// refinement.
     pub design_points: usize,
+    /// What the hypercube's constraint repair changed.
     pub design_repair: bemcal_stats::lhs::RepairReport,
     /// What EnergyPlus made of the design: failed runs, replacements, usable warnings.
     #[serde(default)]
     pub design: DesignReport,
+    /// The final surrogate's held-out accuracy (its metadata's `held_out`: the held-out design
+    /// points and, per output, RMSE and mean in kWh, CV-RMSE and NMBE in %).
     pub surrogate_held_out: serde_json::Value,
     /// Surrogate refinement rounds (empty without `[refine]`).
     #[serde(default)]
     pub refinement: Vec<crate::refine::RefineRound>,
+    /// Wall time of each stage, s.
     pub timings: Timings,
 }
 
@@ -242,7 +271,9 @@ pub struct DesignReport {
 /// A Severe message accepted as usable at a design point.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PointNote {
+    /// The design point's hypercube slot.
     pub point: usize,
+    /// The message's first line, with why the results stand.
     pub message: String,
 }
 
@@ -280,10 +311,15 @@ impl DesignReport {
 /// A parameter's prior next to its posterior.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ParameterReport {
+    /// The calibrated parameter.
     pub name: String,
+    /// Its unit, as the model declares it (empty where it declares none).
     pub unit: String,
+    /// Its prior's minimum (the parameter's unit).
     pub prior_min: f64,
+    /// Its prior's mode (the parameter's unit).
     pub prior_mode: f64,
+    /// Its prior's maximum (the parameter's unit).
     pub prior_max: f64,
 }
 

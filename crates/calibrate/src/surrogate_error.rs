@@ -32,14 +32,20 @@ pub struct SurrogateError {
 /// One parameter's shift and its intervals with it (physical units).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CarriedParameter {
+    /// The calibrated parameter.
     pub name: String,
     /// Root mean square of recovered - true over the points: the standard deviation the
     /// surrogate's error adds.
     pub rms_shift: f64,
+    /// 5 % quantile of the shifted draws.
     pub q5: f64,
+    /// 25 % quantile of the shifted draws.
     pub q25: f64,
+    /// Median of the shifted draws.
     pub median: f64,
+    /// 75 % quantile of the shifted draws.
     pub q75: f64,
+    /// 95 % quantile of the shifted draws.
     pub q95: f64,
 }
 

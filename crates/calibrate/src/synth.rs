@@ -16,6 +16,7 @@ pub struct SynthOptions {
     pub absolute_noise: f64,
     /// Missing hours `[start, end)` (hour of year).
     pub gap: Option<(usize, usize)>,
+    /// Seed of the noise's random generator.
     pub seed: u64,
 }
 

@@ -29,9 +29,11 @@ pub fn candidate_key(rank: usize) -> usize {
 /// A point to validate the calibration at: the estimate (`rank` 0) or the `rank`-th fallback.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidate {
+    /// 0 for the estimate; `k` for the `k`-th fallback ([`ChainSummary::fallbacks`]).
     pub rank: usize,
     /// Its key in `validation/`: 0 the estimate, then `rank + 1` (1 is the initial model).
     pub key: usize,
+    /// Calibrated parameter values (physical units, plan order).
     pub values: Vec<f64>,
 }
 
