@@ -792,9 +792,9 @@ fn row_err(path: &Path, line: u64, column: &str, message: String) -> PrecalError
 }
 
 /// [`read_meters`] on text already in memory; `path` is used in messages. The stages, in the
-/// order the rows go through them: the table ([`read_table`]), the reading interval, the hour
-/// convention ([`hour_convention`]), the grid year, daylight saving ([`zone_daylight_saving`]
-/// or [`us_daylight_saving`]), and the values on the grid ([`values_on_grid`]).
+/// order the rows go through them: the table (`read_table`), the reading interval, the hour
+/// convention (`hour_convention`), the grid year, daylight saving (`zone_daylight_saving`
+/// or `us_daylight_saving`), and the values on the grid (`values_on_grid`).
 pub fn parse_meters(
     text: &str,
     path: &Path,

@@ -458,7 +458,7 @@ pub const LAPLACE_STEP_DROP: f64 = 0.5;
 ///    from it;
 /// 4. each eigen-direction `v` of `H` with an eigenvalue below [`LAPLACE_MIN_PRECISION`] (flat
 ///    or curving upwards at the difference steps) is probed along its line, `f(x +- t v)` at
-///    `t` in [`PROBE_STEPS`]; the first `t` whose mean drop reaches `LAPLACE_STEP_DROP` gives
+///    `t` in `PROBE_STEPS`; the first `t` whose mean drop reaches `LAPLACE_STEP_DROP` gives
 ///    the eigenvalue `2 drop / t^2`, never below the floor (an eigenvalue repair of an
 ///    indefinite Hessian, cf. Nocedal & Wright 2006, Sec. 3.4, with the curvature measured
 ///    instead of assumed). A ridge on the diagonal was tried first: the 10 % it took to make
