@@ -85,7 +85,7 @@ pub const INSTALL_HINT: &str =
 /// The `bemcal` Python module (`python/bemcal`), carried inside the binary so that commands
 /// that need it (`bemcal export`) run it in the environment's interpreter from a repository
 /// build as well as from an installed wheel: `(relative path, contents)`.
-pub const MODULE_FILES: [(&str, &str); 5] = [
+pub const MODULE_FILES: [(&str, &str); 6] = [
     (
         "bemcal/__init__.py",
         include_str!("../../../python/bemcal/__init__.py"),
@@ -101,6 +101,10 @@ pub const MODULE_FILES: [(&str, &str); 5] = [
     (
         "bemcal/_calibrate.py",
         include_str!("../../../python/bemcal/_calibrate.py"),
+    ),
+    (
+        "bemcal/_progress.py",
+        include_str!("../../../python/bemcal/_progress.py"),
     ),
     (
         "bemcal/results.py",
@@ -145,6 +149,25 @@ pub fn run_module(venv: &Path, args: &[&std::ffi::OsStr]) -> std::io::Result<i32
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_file_of_the_python_module_is_embedded() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/bemcal");
+        let mut files: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .filter(|n| n.ends_with(".py"))
+            .map(|n| format!("bemcal/{n}"))
+            .collect();
+        files.sort();
+        let mut embedded: Vec<String> = MODULE_FILES.iter().map(|(p, _)| p.to_string()).collect();
+        embedded.sort();
+        assert_eq!(
+            files, embedded,
+            "python/bemcal and pyenv::MODULE_FILES differ: a module file the binary does not carry \
+             breaks `bemcal export` on an import"
+        );
+    }
 
     #[test]
     fn a_binary_in_an_environments_bin_finds_that_environment() {
