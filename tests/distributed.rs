@@ -778,19 +778,10 @@ fn token_and_input_validation() {
 #[test]
 #[ignore = "several minutes; run with `make chaos`"]
 fn chaos_kills_do_not_change_the_results() {
-    use rand::{Rng, SeedableRng};
     if !have_engine() {
         eprintln!("skipping: no .venv (run `make setup`)");
         return;
     }
-    let env = |k: &str, d: u64| {
-        std::env::var(k)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(d)
-    };
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(env("BEMCAL_CHAOS_SEED", 1));
-    let max_kills = env("BEMCAL_CHAOS_KILLS", 8);
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
     // The undisturbed run (trains the surrogate both runs use).
@@ -798,22 +789,8 @@ fn chaos_kills_do_not_change_the_results() {
     calibrate(&pf, &reference, None);
 
     let data = tmp.path().join("coord");
-    // A job whose worker is killed counts a failed attempt, and three fail its run (a job that
-    // kills its worker each time should); the schedule may hit one job more often than that.
-    let chaos_coordinator = |listen: &str| {
-        common::coordinator(
-            &data,
-            listen,
-            TOKEN,
-            &["--lease-ttl", "3", "--max-failures", "20"],
-        )
-    };
-    let (mut coord, url) = chaos_coordinator("127.0.0.1:0");
-    let port = url.rsplit(':').next().unwrap().to_string();
-    let cache = |i: usize| tmp.path().join(format!("w{i}"));
-    let mut workers: Vec<Proc> = (0..2)
-        .map(|i| worker(&url, &format!("w{i}"), &cache(i)))
-        .collect();
+    let mut chaos = common::Chaos::start(&data, tmp.path(), TOKEN);
+    let url = chaos.url.clone();
     let o = client(
         &[
             "submit",
@@ -836,30 +813,15 @@ fn chaos_kills_do_not_change_the_results() {
             .collect()
     };
     let mut finished_before: Vec<(u64, u64)> = vec![];
-    let mut kills = vec![];
-    let t0 = Instant::now();
-    while (kills.len() as u64) < max_kills && t0.elapsed() < Duration::from_secs(900) {
-        std::thread::sleep(Duration::from_millis(rng.random_range(1_500..8_000)));
+    while chaos.pause() {
         let s = status(&url, &run);
         if s["state"] != "running" {
             break;
         }
-        let victim = rng.random_range(0..3usize);
-        if victim == 2 {
-            finished_before.extend(done_jobs(&s));
-            drop(coord);
-            std::thread::sleep(Duration::from_millis(rng.random_range(200..2_000)));
-            let (c, u) = chaos_coordinator(&format!("127.0.0.1:{port}"));
-            assert_eq!(u, url);
-            coord = c;
-            kills.push(format!("coordinator (stage {})", s["stage"]));
-        } else {
-            let _ = workers[victim].0.kill();
-            let _ = workers[victim].0.wait();
-            workers[victim] = worker(&url, &format!("w{victim}"), &cache(victim));
-            kills.push(format!("w{victim} (stage {})", s["stage"]));
-        }
+        let note = format!(" (stage {})", s["stage"]);
+        chaos.strike(|| finished_before.extend(done_jobs(&s)), &note);
     }
+    let kills = &chaos.kills;
     eprintln!("chaos: {} kills: {kills:?}", kills.len());
     let s = wait_for(&url, &run, 1_200, |_| false);
     assert_eq!(

@@ -202,6 +202,22 @@ fn portfolio_of_small_buildings_with_one_broken() {
 
 const TOKEN: &str = "test-token-portfolio-0123456789";
 
+/// `bemcal ARGS --coordinator URL` with the token, which must succeed: its stdout.
+fn cli(url: &str, args: &[&str]) -> String {
+    let o = bemcal()
+        .args(args)
+        .args(["--coordinator", url])
+        .env("BEMCAL_TOKEN", TOKEN)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8(o.stdout).unwrap()
+}
+
 #[test]
 fn portfolio_submit_status_results_on_a_coordinator() {
     if !have_engine() {
@@ -241,20 +257,7 @@ fn portfolio_submit_status_results_on_a_coordinator() {
     .unwrap();
 
     let (_coord, url) = common::coordinator(&root.join("data"), "127.0.0.1:0", TOKEN, &[]);
-    let cli = |args: &[&str]| {
-        let o = bemcal()
-            .args(args)
-            .args(["--coordinator", &url])
-            .env("BEMCAL_TOKEN", TOKEN)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        String::from_utf8(o.stdout).unwrap()
-    };
+    let cli = |args: &[&str]| cli(&url, args);
     let id = cli(&["portfolio", "submit", manifest.to_str().unwrap()]);
     let id = id.trim();
     assert!(id.starts_with('p'), "{id}");
@@ -328,20 +331,11 @@ fn portfolio_submit_status_results_on_a_coordinator() {
 #[test]
 #[ignore = "several minutes; run with `make chaos`"]
 fn chaos_kills_do_not_lose_a_portfolio() {
-    use rand::{Rng, SeedableRng};
     use std::time::Duration;
     if !have_engine() {
         eprintln!("skipping: no .venv (run `make setup`)");
         return;
     }
-    let env = |k: &str, d: u64| {
-        std::env::var(k)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(d)
-    };
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(env("BEMCAL_CHAOS_SEED", 1));
-    let max_kills = env("BEMCAL_CHAOS_KILLS", 8);
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
     building(&root.join("north"), "north", "", (12.5, 22.5));
@@ -365,34 +359,9 @@ fn chaos_kills_do_not_lose_a_portfolio() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
     let data = root.join("coord");
-    let chaos_coordinator = |listen: &str| {
-        common::coordinator(
-            &data,
-            listen,
-            TOKEN,
-            &["--lease-ttl", "3", "--max-failures", "20"],
-        )
-    };
-    let (mut coord, url) = chaos_coordinator("127.0.0.1:0");
-    let port = url.rsplit(':').next().unwrap().to_string();
-    let cache = |i: usize| root.join(format!("w{i}"));
-    let mut workers: Vec<common::Proc> = (0..2)
-        .map(|i| common::worker(&url, &format!("w{i}"), &cache(i), TOKEN))
-        .collect();
-    let cli = |args: &[&str]| {
-        let o = bemcal()
-            .args(args)
-            .args(["--coordinator", &url])
-            .env("BEMCAL_TOKEN", TOKEN)
-            .output()
-            .unwrap();
-        assert!(
-            o.status.success(),
-            "{args:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        String::from_utf8(o.stdout).unwrap()
-    };
+    let mut chaos = common::Chaos::start(&data, root, TOKEN);
+    let url = chaos.url.clone();
+    let cli = |args: &[&str]| cli(&url, args);
     let id = cli(&["portfolio", "submit", manifest.to_str().unwrap()]);
     let id = id.trim().to_string();
     let portfolio = || -> serde_json::Value {
@@ -423,30 +392,15 @@ fn chaos_kills_do_not_lose_a_portfolio() {
         done
     };
     let mut finished_before = vec![];
-    let mut kills = vec![];
     let t0 = Instant::now();
-    while (kills.len() as u64) < max_kills && t0.elapsed() < Duration::from_secs(900) {
-        std::thread::sleep(Duration::from_millis(rng.random_range(1_500..8_000)));
+    while chaos.pause() {
         let p = portfolio();
         if !running(&p) {
             break;
         }
-        let victim = rng.random_range(0..3usize);
-        if victim == 2 {
-            finished_before.extend(done_jobs(&p));
-            drop(coord);
-            std::thread::sleep(Duration::from_millis(rng.random_range(200..2_000)));
-            let (c, u) = chaos_coordinator(&format!("127.0.0.1:{port}"));
-            assert_eq!(u, url);
-            coord = c;
-            kills.push("coordinator".to_string());
-        } else {
-            let _ = workers[victim].0.kill();
-            let _ = workers[victim].0.wait();
-            workers[victim] = common::worker(&url, &format!("w{victim}"), &cache(victim), TOKEN);
-            kills.push(format!("w{victim}"));
-        }
+        chaos.strike(|| finished_before.extend(done_jobs(&p)), "");
     }
+    let kills = &chaos.kills;
     eprintln!("portfolio chaos: {} kills: {kills:?}", kills.len());
     let p = loop {
         let p = portfolio();

@@ -181,6 +181,110 @@ pub fn worker(url: &str, id: &str, cache: &Path, token: &str) -> Proc {
     )
 }
 
+/// Chaos (`make chaos`): a coordinator (lease TTL 3 s) and two workers that a seeded schedule
+/// kills (SIGKILL) and restarts at random moments. `BEMCAL_CHAOS_SEED` picks the schedule
+/// (default 1), `BEMCAL_CHAOS_KILLS` bounds it (default 8); 15 minutes bound it too.
+pub struct Chaos {
+    data: PathBuf,
+    caches: PathBuf,
+    token: String,
+    port: String,
+    /// The coordinator's URL (the same after every restart).
+    pub url: String,
+    coordinator: Proc,
+    workers: Vec<Proc>,
+    rng: rand_chacha::ChaCha8Rng,
+    max_kills: u64,
+    started: std::time::Instant,
+    /// What was killed, in order, with the caller's note.
+    pub kills: Vec<String>,
+}
+
+impl Chaos {
+    /// Starts the coordinator with its state in `data` and two workers with their caches in
+    /// `caches/w0` and `caches/w1`.
+    pub fn start(data: &Path, caches: &Path, token: &str) -> Chaos {
+        use rand::SeedableRng;
+        let env = |k: &str, d: u64| {
+            std::env::var(k)
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(d)
+        };
+        let (coordinator, url) = Chaos::coordinator_on(data, token, "127.0.0.1:0");
+        let mut chaos = Chaos {
+            data: data.to_path_buf(),
+            caches: caches.to_path_buf(),
+            token: token.to_string(),
+            port: url.rsplit(':').next().unwrap().to_string(),
+            url,
+            coordinator,
+            workers: vec![],
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(env("BEMCAL_CHAOS_SEED", 1)),
+            max_kills: env("BEMCAL_CHAOS_KILLS", 8),
+            started: std::time::Instant::now(),
+            kills: vec![],
+        };
+        chaos.workers = (0..2).map(|i| chaos.worker(i)).collect();
+        chaos
+    }
+
+    // A job whose worker is killed counts a failed attempt, and three fail its run (a job that
+    // kills its worker each time should); the schedule may hit one job more often than that.
+    fn coordinator_on(data: &Path, token: &str, listen: &str) -> (Proc, String) {
+        coordinator(
+            data,
+            listen,
+            token,
+            &["--lease-ttl", "3", "--max-failures", "20"],
+        )
+    }
+
+    fn worker(&self, i: usize) -> Proc {
+        let id = format!("w{i}");
+        worker(&self.url, &id, &self.caches.join(&id), &self.token)
+    }
+
+    /// Waits 1.5-8 s (seeded) before the next kill; false once the kills or the time are spent.
+    pub fn pause(&mut self) -> bool {
+        use rand::Rng;
+        if self.kills.len() as u64 >= self.max_kills
+            || self.started.elapsed() >= std::time::Duration::from_secs(900)
+        {
+            return false;
+        }
+        let ms = self.rng.random_range(1_500..8_000);
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+        true
+    }
+
+    /// Kills a worker or (one time in three) the coordinator, calling `before_coordinator`
+    /// first, and restarts it; records `who` + `note`.
+    pub fn strike(&mut self, before_coordinator: impl FnOnce(), note: &str) {
+        use rand::Rng;
+        let victim = self.rng.random_range(0..3usize);
+        if victim == 2 {
+            before_coordinator();
+            let ms = self.rng.random_range(200..2_000);
+            let listen = format!("127.0.0.1:{}", self.port);
+            // The old coordinator is killed (dropped) before the new one binds its port.
+            let _ = self.coordinator.0.kill();
+            let _ = self.coordinator.0.wait();
+            std::thread::sleep(std::time::Duration::from_millis(ms));
+            let (c, url) = Chaos::coordinator_on(&self.data, &self.token, &listen);
+            assert_eq!(url, self.url);
+            self.coordinator = c;
+            self.kills.push(format!("coordinator{note}"));
+        } else {
+            let w = &mut self.workers[victim];
+            let _ = w.0.kill();
+            let _ = w.0.wait();
+            self.workers[victim] = self.worker(victim);
+            self.kills.push(format!("w{victim}{note}"));
+        }
+    }
+}
+
 /// Asserts that no temporary file (`.partial`, `.upload`) is left anywhere under `roots`:
 /// nothing half written.
 pub fn nothing_half_written(roots: &[&Path]) {
