@@ -8,7 +8,7 @@
 //!   the output folder, as the local path reuses it) because two trainings are not bit-identical.
 //!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
 //!   posterior must then be identical to the single-process ones. The project asks for an
-//!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): both drivers extend the
+//!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): the one driver extends the
 //!   final chains once, by the same rule, to the same draws, and both report the run as not
 //!   converged (exit status 3, `summary.json` `convergence`, the report's banner).
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
@@ -527,7 +527,13 @@ fn failed_design_point_is_replaced_local_and_distributed() {
             "{f}"
         );
     }
-    // A rerun reuses every simulation, the failed one included: nothing runs again.
+    // A rerun reads the settled design (simulations/design.json) and runs nothing.
+    let log = calibrate(&pf, &local, None);
+    assert!(log.contains("design: settled earlier"), "{log}");
+    assert!(!log.contains("simulations: 1/"), "{log}");
+    // A design interrupted before it settled resumes: every simulated point is reused and
+    // the failed one is not run again (simulations/failures.json).
+    std::fs::remove_file(local.join("simulations/design.json")).unwrap();
     let log = calibrate(&pf, &local, None);
     assert!(log.contains("failed in an earlier run"), "{log}");
     assert!(log.contains("simulations: 0 run"), "{log}");

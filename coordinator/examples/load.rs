@@ -60,7 +60,7 @@ fn main() -> anyhow::Result<()> {
     for r in 0..runs {
         let id = format!("load{r}");
         store
-            .create_run(&id, &id, &[], &[], 0)
+            .create_run(&id, &id, &[], &[])
             .map_err(anyhow::Error::msg)?;
         let n = jobs / runs + usize::from(r < jobs % runs);
         let new = (0..n)

@@ -157,12 +157,6 @@ pub struct RunRow {
     pub bundle: Vec<File>,
     /// A surrogate given at submission (empty: one is trained).
     pub surrogate: Vec<File>,
-    /// Iterations per chain the final chains are to reach (each extension raises it).
-    pub chain_target: u64,
-    /// Extensions of the final chains so far.
-    pub extensions: u32,
-    /// JSON of the merged final chains (`ChainSummary`), once merged.
-    pub merge: Option<String>,
     /// `summary.json`, when done.
     pub summary: Option<String>,
     /// When it was submitted, ms since the Unix epoch.
@@ -173,8 +167,6 @@ pub struct RunRow {
     pub portfolio: Option<String>,
     /// Its building's name in that portfolio.
     pub building: Option<String>,
-    /// JSON `RefineLog` of the finished surrogate refinement rounds (None: none yet).
-    pub refine: Option<String>,
 }
 
 /// A job row.
@@ -227,7 +219,11 @@ fn parse_files(s: Option<String>) -> Vec<File> {
         .unwrap_or_default()
 }
 
-const RUN_COLS: &str = "id, name, state, stage, error, bundle, surrogate, chain_target, extensions, merge, summary, created_ms, finished_ms, portfolio, building, refine";
+/// The columns a [`RunRow`] reads. `chain_target`, `extensions`, `merge` and `refine` are
+/// left from the coordinator's own driver: the one driver keeps that state in the run's
+/// output folder (`chains_summary.json`, `refine.json`).
+const RUN_COLS: &str =
+    "id, name, state, stage, error, bundle, surrogate, summary, created_ms, finished_ms, portfolio, building";
 const JOB_COLS: &str =
     "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
 
@@ -245,19 +241,15 @@ fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
         id: r.get(0)?,
         name: r.get(1)?,
         state: r.get(2)?,
-        stage: r.get(3)?,
+        stage: crate::states::stage_column(r, 3)?,
         error: r.get(4)?,
         bundle: parse_files(r.get(5)?),
         surrogate: parse_files(r.get(6)?),
-        chain_target: r.get::<_, i64>(7)? as u64,
-        extensions: r.get::<_, i64>(8)? as u32,
-        merge: r.get(9)?,
-        summary: r.get(10)?,
-        created_ms: r.get::<_, i64>(11)? as u64,
-        finished_ms: r.get::<_, Option<i64>>(12)?.map(|v| v as u64),
-        portfolio: r.get(13)?,
-        building: r.get(14)?,
-        refine: r.get(15)?,
+        summary: r.get(7)?,
+        created_ms: r.get::<_, i64>(8)? as u64,
+        finished_ms: r.get::<_, Option<i64>>(9)?.map(|v| v as u64),
+        portfolio: r.get(10)?,
+        building: r.get(11)?,
     })
 }
 
@@ -271,7 +263,7 @@ fn job_row_at(r: &rusqlite::Row<'_>, at: usize) -> rusqlite::Result<JobRow> {
     Ok(JobRow {
         id: r.get::<_, i64>(at)? as u64,
         run_id: r.get(at + 1)?,
-        stage: r.get(at + 2)?,
+        stage: crate::states::stage_column(r, at + 2)?,
         kind: r.get(at + 3)?,
         label: r.get(at + 4)?,
         spec: proto::Job::decode(spec.as_slice()).unwrap_or_default(),
@@ -284,6 +276,7 @@ fn job_row_at(r: &rusqlite::Row<'_>, at: usize) -> rusqlite::Result<JobRow> {
 }
 
 /// A new job to add.
+#[derive(Debug, Clone)]
 pub struct NewJob {
     /// The stage that creates it.
     pub stage: Stage,
@@ -340,15 +333,14 @@ impl Store {
         name: &str,
         bundle: &[File],
         surrogate: &[File],
-        chain_target: u64,
     ) -> Result<()> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
             tx.execute(
-                "INSERT INTO runs (id, name, state, stage, bundle, surrogate, chain_target, created_ms)
-                 VALUES (?1, ?2, 'running', 'design', ?3, ?4, ?5, ?6)",
-                params![id, name, files_json(bundle), files_json(surrogate), chain_target as i64, now],
+                "INSERT INTO runs (id, name, state, stage, bundle, surrogate, created_ms)
+                 VALUES (?1, ?2, 'running', 'design', ?3, ?4, ?5)",
+                params![id, name, files_json(bundle), files_json(surrogate), now],
             )?;
             tx.execute(
                 "INSERT INTO stages (run_id, stage, started_ms) VALUES (?1, 'design', ?2)",
@@ -421,18 +413,6 @@ impl Store {
     /// are added in the same transaction. A stage visited again (chains of a later refinement
     /// round, an extension) keeps the seconds of its earlier visits.
     pub fn set_stage(&self, run: &str, stage: Stage, jobs: Vec<NewJob>) -> Result<()> {
-        self.set_stage_refined(run, stage, jobs, None)
-    }
-
-    /// [`Self::set_stage`], also recording the refinement log `refine` (JSON) in the same
-    /// transaction when given.
-    pub fn set_stage_refined(
-        &self,
-        run: &str,
-        stage: Stage,
-        jobs: Vec<NewJob>,
-        refine: Option<&str>,
-    ) -> Result<()> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -446,18 +426,12 @@ impl Store {
                     seconds_before = seconds_before
                         + (COALESCE(finished_ms, excluded.started_ms) - started_ms) / 1000.0,
                     started_ms = excluded.started_ms, finished_ms = NULL",
-                params![run, stage, now],
+                params![run, stage.as_str(), now],
             )?;
             tx.execute(
                 "UPDATE runs SET stage = ?2 WHERE id = ?1",
-                params![run, stage],
+                params![run, stage.as_str()],
             )?;
-            if let Some(refine) = refine {
-                tx.execute(
-                    "UPDATE runs SET refine = ?2 WHERE id = ?1",
-                    params![run, refine],
-                )?;
-            }
             for j in jobs {
                 insert_job(&tx, run, j)?;
             }
@@ -487,7 +461,7 @@ impl Store {
             let rows = st
                 .query_map(params![run, now_ms() as i64], |r| {
                     Ok((
-                        r.get::<_, Stage>(0)?,
+                        crate::states::stage_column(r, 0)?,
                         r.get::<_, f64>(3)?
                             + (r.get::<_, i64>(2)? - r.get::<_, i64>(1)?) as f64 / 1000.0,
                     ))
@@ -525,34 +499,12 @@ impl Store {
                 if state == RunState::Done {
                     tx.execute(
                         "UPDATE runs SET stage = ?2 WHERE id = ?1",
-                        params![run, Stage::Done],
+                        params![run, Stage::Done.as_str()],
                     )?;
                 }
             }
             tx.commit()?;
             Ok(n > 0)
-        })
-    }
-
-    /// Stores the run's merged final chains (JSON).
-    pub fn set_merge(&self, run: &str, merge: &str) -> Result<()> {
-        self.with(|c| {
-            c.execute(
-                "UPDATE runs SET merge = ?2 WHERE id = ?1",
-                params![run, merge],
-            )?;
-            Ok(())
-        })
-    }
-
-    /// Raises the chains' target (an extension because R-hat is above its target).
-    pub fn extend_chains(&self, run: &str, target: u64) -> Result<()> {
-        self.with(|c| {
-            c.execute(
-                "UPDATE runs SET chain_target = ?2, extensions = extensions + 1, merge = NULL WHERE id = ?1",
-                params![run, target as i64],
-            )?;
-            Ok(())
         })
     }
 
@@ -604,7 +556,7 @@ impl Store {
                 "SELECT {JOB_COLS} FROM jobs WHERE run_id = ?1 AND (?2 IS NULL OR stage = ?2) ORDER BY id"
             ))?;
             let rows = st
-                .query_map(params![run, stage], job_row)?
+                .query_map(params![run, stage.map(Stage::as_str)], job_row)?
                 .collect::<rusqlite::Result<Vec<_>>>()?;
             Ok(rows)
         })
@@ -1048,14 +1000,22 @@ fn insert_job(tx: &rusqlite::Transaction<'_>, run: &str, j: NewJob) -> Result<()
             tx.execute(
                 "INSERT INTO jobs (run_id, stage, kind, label, spec, cache_key, state, outputs, result, cached, created_ms, finished_ms)
                  VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'done', ?7, ?8, 1, ?9, ?9)",
-                params![run, j.stage, j.kind, j.label, spec, j.cache_key, outputs, result, now],
+                params![run, j.stage.as_str(), j.kind, j.label, spec, j.cache_key, outputs, result, now],
             )?;
         }
         None => {
             tx.execute(
                 "INSERT INTO jobs (run_id, stage, kind, label, spec, cache_key, state, created_ms)
                  VALUES (?1, ?2, ?3, ?4, ?5, ?6, 'queued', ?7)",
-                params![run, j.stage, j.kind, j.label, spec, j.cache_key, now],
+                params![
+                    run,
+                    j.stage.as_str(),
+                    j.kind,
+                    j.label,
+                    spec,
+                    j.cache_key,
+                    now
+                ],
             )?;
         }
     }
@@ -1165,7 +1125,7 @@ mod tests {
             s.add_artifact(&sha(c), 1).unwrap();
         }
         // a: a run's bundle; b: a job's spec (proto bytes); c: a job's outputs; d, e: nothing.
-        s.create_run("R", "r", &[file('a')], &[], 0).unwrap();
+        s.create_run("R", "r", &[file('a')], &[]).unwrap();
         let spec = proto::Job {
             inputs: vec![proto::FileRef::from(&file('b'))],
             ..Default::default()
@@ -1191,8 +1151,8 @@ mod tests {
     #[test]
     fn lease_alternates_between_runs_instead_of_draining_the_first() {
         let (s, dir) = store("fair");
-        s.create_run("A", "big", &[], &[], 0).unwrap();
-        s.create_run("B", "small", &[], &[], 0).unwrap();
+        s.create_run("A", "big", &[], &[]).unwrap();
+        s.create_run("B", "small", &[], &[]).unwrap();
         s.set_stage("A", Stage::Simulate, jobs(50, |_| None))
             .unwrap();
         s.set_stage("B", Stage::Simulate, jobs(2, |_| None))
@@ -1204,7 +1164,7 @@ mod tests {
         let order: Vec<&str> = held.iter().map(|j| j.run_id.as_str()).collect();
         assert_eq!(order, ["A", "B", "A", "B", "A", "A"]);
         // A third run arriving while A and B hold leases goes first (it has none leased).
-        s.create_run("C", "third", &[], &[], 0).unwrap();
+        s.create_run("C", "third", &[], &[]).unwrap();
         s.set_stage("C", Stage::Simulate, jobs(2, |_| None))
             .unwrap();
         assert_eq!(s.lease("w", 60_000).unwrap().unwrap().run_id, "C");
@@ -1212,8 +1172,8 @@ mod tests {
 
         // One worker completing each job before the next lease: still round-robin.
         let (s, dir) = store("fair1");
-        s.create_run("A", "big", &[], &[], 0).unwrap();
-        s.create_run("B", "small", &[], &[], 0).unwrap();
+        s.create_run("A", "big", &[], &[]).unwrap();
+        s.create_run("B", "small", &[], &[]).unwrap();
         s.set_stage("A", Stage::Simulate, jobs(50, |_| None))
             .unwrap();
         s.set_stage("B", Stage::Simulate, jobs(2, |_| None))
@@ -1231,8 +1191,8 @@ mod tests {
     #[test]
     fn identical_simulations_of_two_runs_run_once() {
         let (s, dir) = store("share");
-        s.create_run("A", "a", &[], &[], 0).unwrap();
-        s.create_run("B", "b", &[], &[], 0).unwrap();
+        s.create_run("A", "a", &[], &[]).unwrap();
+        s.create_run("B", "b", &[], &[]).unwrap();
         s.set_stage("A", Stage::Simulate, jobs(2, |i| Some(format!("k{i}"))))
             .unwrap();
         s.set_stage("B", Stage::Simulate, jobs(2, |i| Some(format!("k{i}"))))

@@ -485,7 +485,7 @@ impl Coordinator for Service {
                 // and the other buildings go on.
                 let store = &self.st.store;
                 store
-                    .create_run(&id, &r.building, &bundle_files, &surrogate, 0)
+                    .create_run(&id, &r.building, &bundle_files, &surrogate)
                     .map_err(internal)?;
                 store
                     .set_portfolio(&id, &r.portfolio, &r.building)
@@ -498,13 +498,7 @@ impl Coordinator for Service {
         };
         self.st
             .store
-            .create_run(
-                &id,
-                &project.name,
-                &bundle_files,
-                &surrogate,
-                project.mcmc.iterations,
-            )
+            .create_run(&id, &project.name, &bundle_files, &surrogate)
             .map_err(internal)?;
         if !r.portfolio.is_empty() {
             self.st

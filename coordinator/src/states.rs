@@ -51,28 +51,16 @@ macro_rules! words {
     };
 }
 
-words! {
-    /// Where a run is in its calibration: the stages in order, then `Done`.
-    Stage {
-        /// The Latin hypercube and the first wave of design-point simulations.
-        Design = "design",
-        /// EnergyPlus at the design points (with replacements of failed points).
-        Simulate = "simulate",
-        /// The surrogate's training (again after each refinement round).
-        Train = "train",
-        /// Chain segments.
-        Chains = "chains",
-        /// The merged chains: a refinement round, an extension, or the summary of the chains.
-        Merge = "merge",
-        /// EnergyPlus at posterior draws of a refinement round.
-        Refine = "refine",
-        /// EnergyPlus at the estimate (and the initial model).
-        Validate = "validate",
-        /// `summary.json` and the results.
-        Summary = "summary",
-        /// Finished.
-        Done = "done",
-    }
+/// Where a run is in its calibration: the driver's stages (`bemcal_calibrate::sequence`),
+/// stored as their names ([`stage_column`] reads one back).
+pub use bemcal_calibrate::sequence::Stage;
+
+/// The [`Stage`] in column `i` of a row.
+pub(crate) fn stage_column(r: &rusqlite::Row<'_>, i: usize) -> rusqlite::Result<Stage> {
+    let s: String = r.get(i)?;
+    s.parse().map_err(|e: String| {
+        rusqlite::Error::FromSqlConversionFailure(i, rusqlite::types::Type::Text, e.into())
+    })
 }
 
 words! {

@@ -1,5 +1,5 @@
 //! A loaded calibration ([`Calibration`]): the project, its inputs and the output folder, with
-//! one method per stage that both drivers call.
+//! one method per stage that the driver and the workers call.
 
 use std::path::{Path, PathBuf};
 
@@ -20,8 +20,9 @@ use crate::{Error, Inputs, OutputDir};
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
 
 /// A loaded calibration: the project, its inputs and the output folder. Each stage is a method;
-/// [`calibrate`](crate::calibrate) runs them in order on this machine, and the coordinator dispatches the same
-/// methods to workers (simulations, training and chain segments as separate jobs).
+/// the driver ([`crate::driver::drive`]) calls them in order, and the executors do the
+/// expensive ones here ([`calibrate`](crate::calibrate)) or on workers (simulations, training
+/// and chain segments as separate jobs).
 pub struct Calibration {
     /// The project file's settings.
     pub project: Project,
@@ -89,7 +90,7 @@ impl Calibration {
         }
     }
 
-    /// The next step of the design after `attempts` (the one rule both drivers follow).
+    /// The next step of the design after `attempts` (the one rule the driver follows).
     pub fn design_step(
         &self,
         hypercube: &Design,

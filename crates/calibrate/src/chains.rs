@@ -719,7 +719,7 @@ fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
 /// stop: `convergence` meets its targets, or `m.max_extensions` are done. An extension adds
 /// `iterations - burn_in` iterations per chain (as many draws again), or what the smallest
 /// ESS says the ESS target needs ([`bemcal_stats::convergence::draws_for_ess`]), at most
-/// four times that. One rule for both drivers.
+/// four times that. One rule, the driver's.
 pub fn extended_target(
     m: &McmcSettings,
     convergence: &Convergence,

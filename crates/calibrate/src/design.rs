@@ -245,10 +245,7 @@ pub fn simulate_design(
     log: &(dyn Fn(&str) + Sync),
 ) -> Result<SimulatedDesign, Error> {
     let failures_path = dir.join(FAILURES_FILE);
-    let known: Vec<Attempt> = std::fs::read_to_string(&failures_path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or_default();
+    let known = read_failures(dir);
     let mut progress = Progress::default();
     loop {
         let wave = match replacement::next_step(plan, hypercube, spares, policy, &progress.attempts)
@@ -368,8 +365,19 @@ impl Progress {
     }
 }
 
+/// The failed attempts of earlier runs of simulations folder `dir` (`failures.json`).
+pub(crate) fn read_failures(dir: &Path) -> Vec<Attempt> {
+    std::fs::read_to_string(dir.join(FAILURES_FILE))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default()
+}
+
 /// The failed attempt at this slot and point in an earlier run of the folder, if any.
-fn failed_before<'a>(known: &'a [Attempt], (s, x): &(usize, Vec<f64>)) -> Option<&'a Attempt> {
+pub(crate) fn failed_before<'a>(
+    known: &'a [Attempt],
+    (s, x): &(usize, Vec<f64>),
+) -> Option<&'a Attempt> {
     known
         .iter()
         .find(|a| a.slot == *s && &a.values == x && a.error.is_some())
@@ -377,7 +385,11 @@ fn failed_before<'a>(known: &'a [Attempt], (s, x): &(usize, Vec<f64>)) -> Option
 
 /// Writes every failed attempt, earlier runs' first, to the folder's failures file (when
 /// there is any).
-fn save_failures(path: &Path, known: &[Attempt], attempts: &[Attempt]) -> Result<(), Error> {
+pub(crate) fn save_failures(
+    path: &Path,
+    known: &[Attempt],
+    attempts: &[Attempt],
+) -> Result<(), Error> {
     let mut failures: Vec<Attempt> = known.to_vec();
     for a in attempts.iter().filter(|a| a.error.is_some()) {
         if !failures.contains(a) {

@@ -1,20 +1,21 @@
-//! The calibration: its inputs, stages and rules, and the local driver that runs them in order.
+//! The calibration: its inputs, stages and rules, and the one driver that runs them in order.
 //!
 //! One file per stage, in the order the data flows: [`inputs`](load_inputs) (model, weather,
 //! meters, bases) -> [`design`] (Latin hypercube, EnergyPlus runs, [`replacement`] of failed
 //! points) -> training set and surrogate ([`Calibration`]) -> chains ([`Sampler`], [`posterior`])
 //! -> [`refine`]ment rounds -> the [`surrogate_error`] carried into the intervals -> validation
 //! -> [`predictive`] intervals and [`model_form`] (can the model reach each meter) -> summary
-//! ([`write_summary`]). [`calibrate`] runs
-//! every stage on this machine; the coordinator runs the same stage methods as jobs. Each stage's
-//! results are written under the output folder and reused by a rerun, so an interrupted
-//! calibration resumes.
+//! ([`write_summary`]). One [`driver`] sequences the stages and takes every decision; an
+//! [`driver::Executor`] does the work: [`calibrate`] in this process, the coordinator as jobs
+//! leased to workers. Each stage's results are written under the output folder and reused by
+//! a rerun, so an interrupted calibration resumes.
 #![deny(missing_docs)]
 
 pub mod bases;
 mod calibration;
 mod chains;
 pub mod design;
+pub mod driver;
 pub mod examples;
 mod inputs;
 mod local;
@@ -40,10 +41,11 @@ pub use chains::{
     chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
     Sampler,
 };
+pub use driver::log_design_outcome;
 pub use inputs::{
     load_inputs, load_model, resolve_weather, weather_for, weather_reference, HeldOut, Inputs,
 };
-pub use local::{calibrate, log_design_outcome};
+pub use local::{calibrate, stage_seconds};
 pub use output::OutputDir;
 pub use project::Project;
 pub use summary::{
@@ -90,6 +92,10 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// The executor could not start or read back its work (the coordinator's store, an
+    /// artifact, a worker's result that does not answer its job).
+    #[error("{}", bemcal_excerpt::shorten(.0))]
+    Executor(String),
     /// From the simulation layer: EnergyPlus, the model and parameters, TOML files.
     #[error(transparent)]
     Simulation(#[from] bemcal_energyplus::Error),

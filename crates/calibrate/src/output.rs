@@ -1,4 +1,4 @@
-//! The output folder of a calibration: where each stage writes, named once. The local driver,
+//! The output folder of a calibration: where each stage writes, named once. The driver,
 //! the coordinator's run folder (`DATA/runs/<id>/out`), a worker's job folder and the report all
 //! use this layout, as paths ([`OutputDir`]) or as the folder-relative names jobs carry
 //! ([`OutputDir::point_rel`], [`STATES_FILE`], ...).
@@ -82,6 +82,12 @@ impl OutputDir {
     /// `chains.json`: the final chains' checkpoint.
     pub fn chains_checkpoint(&self) -> PathBuf {
         self.root.join("chains.json")
+    }
+
+    /// `chains_summary.json`: the final chains' target (raised by each extension) and their
+    /// summary at it, the driver's record of the extensions.
+    pub fn chains_summary(&self) -> PathBuf {
+        self.root.join("chains_summary.json")
     }
 
     /// `draws.csv`: the final chains' draws after burn-in.

@@ -7,7 +7,7 @@
 //! carried, where a refinement round measured it, so that the surrogate's bias in parameter
 //! space is in the spread); the noise is the error model's scale of EnergyPlus's residuals at
 //! the estimate over the calibration hours (`[validation] error_model`). Numerics in
-//! [`bemcal_stats::predictive`]; both drivers simulate [`ChainSummary::predictive_candidates`]
+//! [`bemcal_stats::predictive`]; the driver has EnergyPlus simulate [`ChainSummary::predictive_candidates`]
 //! and [`crate::write_summary`] reads their runs once and calls [`assess`].
 //!
 //! Totals over days and months ([`TotalPeriod`]) get intervals too: the draws' sums with the

@@ -314,7 +314,7 @@ pub struct SimulatedDraw {
 /// the round's chains is measured against EnergyPlus at the new points ([`pooled_error`], and
 /// in parameter space: what it recovers from their outputs, [`Sampler::recover`]); and
 /// the next round's chains start where these ended ([`next_starts`], from the round's merged
-/// chains: `draws` and each chain's `last` position). The one rule both drivers follow;
+/// chains: `draws` and each chain's `last` position). The one rule the driver follows;
 /// returns the round and the new points' outputs (in the round's point order).
 pub fn close_round(
     round: u32,

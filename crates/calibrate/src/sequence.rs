@@ -1,9 +1,9 @@
 //! The calibration's sequence, written once: which chains run after how many refinement rounds
 //! and for how long, what the finished final chains lead to (an extension or the validation),
-//! and which EnergyPlus runs validate the result, in which order. Both drivers take each of
-//! these transitions from here: the local one (`local.rs`, everything in this process, state in
-//! the output folder) and the coordinator's (jobs leased to workers, state in SQLite). They
-//! differ only in how the work is done and where its state is kept. Pure: no I/O.
+//! and which EnergyPlus runs validate the result, in which order; and the stages themselves
+//! ([`Stage`]). The one driver ([`crate::driver::drive`]) takes each of these transitions from
+//! here, whichever executor does the work (this process, or workers leased jobs by the
+//! coordinator). Pure: no I/O.
 //!
 //! ```text
 //! design -> simulate (failed points replaced) -> train
@@ -16,6 +16,78 @@
 use crate::project::{McmcSettings, Project};
 use crate::validation::{next_candidate, ValidationStep, INITIAL_KEY};
 use crate::{extended_target, ChainSummary};
+
+/// The stages of a calibration, in the order the driver ([`crate::driver`]) enters them; a
+/// stage is entered again for each refinement round and extension. The coordinator stores a
+/// run's stage as [`Stage::as_str`]; both executors time the stages by it ([`crate::Timings`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// The Latin hypercube and its spares (in-process).
+    Design,
+    /// EnergyPlus at the design points, failed points replaced.
+    Simulate,
+    /// The training set and the surrogate's training.
+    Train,
+    /// The chains of a round (or an extension of the final ones).
+    Chains,
+    /// The final chains summarised (in-process).
+    Merge,
+    /// EnergyPlus at a refinement round's posterior draws.
+    Refine,
+    /// EnergyPlus at the estimate (or its fallbacks), the initial model and the predictive draws.
+    Validate,
+    /// `summary.json` and the output files (in-process).
+    Summary,
+    /// Finished.
+    Done,
+}
+
+impl Stage {
+    /// Every stage, in order.
+    pub const ALL: &'static [Stage] = &[
+        Stage::Design,
+        Stage::Simulate,
+        Stage::Train,
+        Stage::Chains,
+        Stage::Merge,
+        Stage::Refine,
+        Stage::Validate,
+        Stage::Summary,
+        Stage::Done,
+    ];
+
+    /// The stage's name: `design`, `simulate`, ... (the coordinator's SQL and its replies).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stage::Design => "design",
+            Stage::Simulate => "simulate",
+            Stage::Train => "train",
+            Stage::Chains => "chains",
+            Stage::Merge => "merge",
+            Stage::Refine => "refine",
+            Stage::Validate => "validate",
+            Stage::Summary => "summary",
+            Stage::Done => "done",
+        }
+    }
+}
+
+impl std::str::FromStr for Stage {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Stage, String> {
+        Stage::ALL
+            .iter()
+            .copied()
+            .find(|x| x.as_str() == s)
+            .ok_or_else(|| format!("unknown Stage {s:?}"))
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
 
 /// The chains of one round. `index` is the number of refinement rounds finished before them:
 /// the key of their checkpoint (`OutputDir::chains_checkpoint_of`), their sampler settings
@@ -139,7 +211,7 @@ impl ValidationRun {
     }
 }
 
-/// The validation runs both drivers start once the final chains are settled, in this order:
+/// The validation runs the driver starts once the final chains are settled, in this order:
 /// the estimate, the initial model at `initial` (when `validation.initial`), and the posterior
 /// draws of the predictive intervals.
 pub fn validation_runs(chains: &ChainSummary, initial: Option<Vec<f64>>) -> Vec<ValidationRun> {

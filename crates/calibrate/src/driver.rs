@@ -1,0 +1,618 @@
+//! The one driver of a calibration: every stage in the order the data flows, every decision
+//! taken once, here, by the rules of [`crate::sequence`], [`crate::replacement`],
+//! [`crate::refine`] and [`crate::validation`]. How the work is done is an [`Executor`]'s:
+//! the local one ([`crate::calibrate`]) runs it in this process and answers at once; the
+//! coordinator's leases it to workers as jobs and answers [`Ready::Pending`] until they are
+//! done, then calls [`drive`] again.
+//!
+//! [`drive`] is re-entrant: it reads what is settled from the output folder (the settled
+//! design `simulations/design.json`, the rounds in `refine.json`, the surrogate in place, the
+//! final chains' target and summary in `chains_summary.json`) and asks the executor for the
+//! rest, so a call after any interruption, on either side, goes on where the last one
+//! stopped.
+//!
+//! ```text
+//! design (waves until replacement::next_step settles it) -> training set -> surrogate
+//!   -> chains of Round::Preliminary(r) -> EnergyPlus at its draws -> close_round  (refine.rounds times)
+//!   -> chains of Round::Final -> summarised -> extended while short of the targets
+//!   -> validation_runs (the estimate; next_validation while EnergyPlus fails) -> summary
+//! ```
+
+use std::path::Path;
+
+use bemcal_energyplus::HourlyOutputs;
+use serde::{Deserialize, Serialize};
+
+use crate::design::{read_outcome, saved_outputs};
+use crate::posterior::Checkpoint;
+use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
+use crate::replacement::{Attempt, Outcome, Step};
+use crate::sequence::{
+    after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, Stage,
+    ValidationRole, ValidationRun,
+};
+use crate::{
+    write_summary, Calibration, ChainSummary, Error, Log, OutputMetrics, Sampler, Summary, Timings,
+};
+
+/// Work done now, or not yet (an executor that leases jobs: the driver is called again when
+/// they finish).
+#[derive(Debug)]
+pub enum Ready<T> {
+    /// Done, with its result.
+    Done(T),
+    /// Not done yet: the driver stops here and is called again later.
+    Pending,
+}
+
+/// Unwraps [`Ready::Done`], or returns [`Ready::Pending`] from the calling function.
+macro_rules! ready {
+    ($e:expr) => {
+        match $e {
+            Ready::Done(v) => v,
+            Ready::Pending => return Ok(Ready::Pending),
+        }
+    };
+}
+
+/// One simulated point's result: its hourly outputs, or EnergyPlus's failure.
+pub type PointResult = Result<HourlyOutputs, String>;
+
+/// One validation run's result: Guideline 14 per output, or EnergyPlus's failure.
+pub type ValidationResult = Result<Vec<OutputMetrics>, String>;
+
+/// The validation's metrics: the calibrated model's, and the initial model's (empty unless
+/// `validation.initial`).
+struct Validated {
+    calibrated: Vec<OutputMetrics>,
+    initial: Vec<OutputMetrics>,
+}
+
+/// How the expensive work of a calibration is done (EnergyPlus, training, chains), and where
+/// the time goes. Each method either does the work and answers [`Ready::Done`], or starts it
+/// (or finds it started) and answers [`Ready::Pending`]; asked again with the same arguments
+/// it answers for the same work. Results land in the calibration's output folder, as the
+/// in-process executor writes them.
+pub trait Executor {
+    /// The driver enters `stage` (for status and [`Executor::timings`]).
+    fn enter(&mut self, stage: Stage) -> Result<(), Error>;
+
+    /// EnergyPlus at each `(key, values)` of `wave` (`round` 0: design points; `r`: posterior
+    /// draws of refinement round `r`), saved under its key in `simulations/`. One result per
+    /// point, in order; a failed run does not stop the others.
+    fn simulate(
+        &mut self,
+        cal: &Calibration,
+        wave: &[(usize, Vec<f64>)],
+        round: u32,
+    ) -> Result<Ready<Vec<PointResult>>, Error>;
+
+    /// The surrogate trained on `dataset/` into `surrogate/` (`round`: refinement rounds
+    /// finished before; `init`: the surrogate folder to warm-start from).
+    fn train(
+        &mut self,
+        cal: &Calibration,
+        round: u32,
+        init: Option<&Path>,
+    ) -> Result<Ready<()>, Error>;
+
+    /// The chains of `round` run to `iterations` per chain (burn-in included), starting at
+    /// `starts` (`None`: the sampler's starts), their draws in order. `sampler` is the
+    /// round's, for an executor that runs them here.
+    fn chains(
+        &mut self,
+        cal: &Calibration,
+        round: Round,
+        iterations: u64,
+        starts: Option<&[Vec<f64>]>,
+        sampler: &mut LazySampler<'_>,
+    ) -> Result<Ready<Checkpoint>, Error>;
+
+    /// EnergyPlus at each validation run, saved as `validation/<label>.csv`, with Guideline
+    /// 14 against the meters; a run's failure as its message (fatal only where the driver
+    /// says so: [`ValidationRun::tolerates_failure`]).
+    fn validate(
+        &mut self,
+        cal: &Calibration,
+        runs: &[ValidationRun],
+    ) -> Result<Ready<Vec<ValidationResult>>, Error>;
+
+    /// The time spent per stage so far, and in all.
+    fn timings(&self) -> Timings;
+}
+
+/// The sampler of a round, loaded when first needed (a driver call that finds the round's
+/// work pending never loads the surrogate).
+pub struct LazySampler<'c> {
+    cal: &'c Calibration,
+    sampler: Option<Sampler<'c>>,
+}
+
+impl<'c> LazySampler<'c> {
+    /// Nothing loaded yet.
+    pub fn new(cal: &'c Calibration) -> LazySampler<'c> {
+        LazySampler { cal, sampler: None }
+    }
+
+    /// The sampler, loaded on the first call.
+    pub fn get(&mut self) -> Result<&mut Sampler<'c>, Error> {
+        if self.sampler.is_none() {
+            self.sampler = Some(self.cal.sampler()?);
+        }
+        Ok(self.sampler.as_mut().expect("loaded above"))
+    }
+}
+
+/// Drives the calibration as far as `exec` lets it go now: [`Ready::Done`] with the summary
+/// written, or [`Ready::Pending`] where the executor's work is not done yet.
+pub fn drive(
+    cal: &mut Calibration,
+    exec: &mut dyn Executor,
+    log: Log<'_>,
+) -> Result<Ready<Summary>, Error> {
+    let outcome = match read_outcome(&cal.simulations_dir()) {
+        Some(o) => {
+            log(&format!(
+                "design: settled earlier (simulations/design.json): 0 run, {} reused",
+                o.slots.len()
+            ));
+            o
+        }
+        None => ready!(design_points(cal, exec, log)?),
+    };
+    cal.learn_invalid_region(&outcome);
+    let cal: &Calibration = cal;
+    let mut refined = cal.refine_log()?;
+    let finished = loop {
+        let round = Round::after(&cal.project, refined.rounds.len() as u32);
+        ready!(surrogate(cal, exec, &refined, log)?);
+        let mut sampler = LazySampler::new(cal);
+        let starts = refined
+            .rounds
+            .last()
+            .filter(|r| !r.starts.is_empty())
+            .map(|r| r.starts.clone());
+        if round.is_final() {
+            break ready!(final_chains(
+                cal,
+                exec,
+                &mut sampler,
+                &refined,
+                starts,
+                log
+            )?);
+        }
+        exec.enter(Stage::Chains)?;
+        let iterations = round.iterations(&cal.project);
+        let ck = ready!(exec.chains(cal, round, iterations, starts.as_deref(), &mut sampler)?);
+        exec.enter(Stage::Refine)?;
+        let closed = ready!(refine_round(cal, exec, &mut sampler, &ck, &refined, log)?);
+        drop(sampler);
+        cal.record_round(&mut refined, closed)?;
+    };
+    let mut chains = finished;
+    let validated = ready!(validate(cal, exec, &mut chains, log)?);
+    exec.enter(Stage::Summary)?;
+    let (_, design) = cal.settled_design()?;
+    let (calibrated, initial) = (validated.calibrated, validated.initial);
+    let summary = write_summary(cal, &design, &chains, calibrated, initial, exec.timings())?;
+    exec.enter(Stage::Done)?;
+    Ok(Ready::Done(summary))
+}
+
+/// The design: the hypercube's points simulated in waves, a failed point replaced by a spare
+/// or dropped as [`crate::replacement::next_step`] says, until the design is settled
+/// (recorded as `simulations/design.json`) or too few points are left.
+fn design_points(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    log: Log<'_>,
+) -> Result<Ready<Outcome>, Error> {
+    exec.enter(Stage::Design)?;
+    let hypercube = cal.design()?;
+    let spares = cal.spares()?;
+    log(&format!(
+        "design: {} points over {} parameters (constraint repair: {} swaps, {} cells resampled)",
+        hypercube.points.len(),
+        cal.inputs.plan.calibrated.len(),
+        hypercube.repair.swaps,
+        hypercube.repair.resampled_in_stratum + hypercube.repair.resampled_outside_stratum
+    ));
+    exec.enter(Stage::Simulate)?;
+    let mut attempts: Vec<Attempt> = vec![];
+    loop {
+        match cal.design_step(&hypercube, &spares, &attempts) {
+            Step::Simulate(wave) => {
+                let results = ready!(exec.simulate(cal, &wave, 0)?);
+                for ((slot, values), r) in wave.into_iter().zip(results) {
+                    attempts.push(Attempt {
+                        slot,
+                        values,
+                        error: r.err(),
+                    });
+                }
+            }
+            Step::Failed(message) => {
+                return Err(Error::Stage {
+                    stage: "design",
+                    message,
+                })
+            }
+            Step::Done(outcome) => {
+                cal.record_outcome(&outcome)?;
+                log_design_outcome(&outcome, log);
+                if !outcome.failed.is_empty() {
+                    log(
+                        "chains: proposals near the design points EnergyPlus could not simulate \
+                         are refused (summary.json design.invalid_region)",
+                    );
+                }
+                return Ok(Ready::Done(outcome));
+            }
+        }
+    }
+}
+
+/// The surrogate of the current round, unless one is in place: the training set (the settled
+/// design, then every finished round's draws) written, then trained (warm-started from the
+/// last round's surrogate where `surrogate.warm_start` allows).
+fn surrogate(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    refined: &RefineLog,
+    log: Log<'_>,
+) -> Result<Ready<()>, Error> {
+    if cal.has_surrogate() {
+        log("surrogate: reusing the one trained earlier");
+        return Ok(Ready::Done(()));
+    }
+    exec.enter(Stage::Train)?;
+    let (outcome, design) = cal.settled_design()?;
+    let full = cal.full_design(&design, refined);
+    let keys = outcome
+        .slots
+        .iter()
+        .copied()
+        .chain(refined.points().map(|p| p.index));
+    let outputs = keys
+        .zip(&full.points)
+        .map(|(i, x)| {
+            saved_outputs(&cal.simulations_dir(), i, &cal.inputs.plan.values(x)).ok_or_else(|| {
+                Error::Stage {
+                    stage: "training set",
+                    message: format!("point {i}: no simulation saved in simulations/"),
+                }
+            })
+        })
+        .collect::<Result<Vec<_>, Error>>()?;
+    cal.training_set(design.points.len(), &full, &outputs)?;
+    let init = cal.warm_start(refined);
+    log(&format!(
+        "training the surrogate (PyTorch) on {} points{}",
+        full.points.len(),
+        init.as_ref().map_or(String::new(), |d| format!(
+            ", warm start from {}",
+            d.display()
+        ))
+    ));
+    ready!(exec.train(cal, refined.rounds.len() as u32, init.as_deref())?);
+    if !cal.has_surrogate() {
+        return Err(Error::Stage {
+            stage: "surrogate",
+            message: format!(
+                "training left no valid surrogate in {}",
+                cal.surrogate_dir().display()
+            ),
+        });
+    }
+    if let Ok(meta) = bemcal_surrogate::SurrogateMeta::read(&cal.surrogate_dir()) {
+        log(&format!(
+            "surrogate: held-out RMSE (sigma_eta) {}",
+            cal.inputs
+                .outputs
+                .iter()
+                .zip(meta.sigma_eta_kwh())
+                .map(|(n, s)| format!("{n} {s:.2} kWh"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    Ok(Ready::Done(()))
+}
+
+/// A refinement round after its chains: posterior draws picked
+/// ([`refinement_points`]), simulated by EnergyPlus, and the round closed by
+/// [`close_round`] (the surrogate's error there, the next round's starts).
+fn refine_round(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    sampler: &mut LazySampler<'_>,
+    ck: &Checkpoint,
+    refined: &RefineLog,
+    log: Log<'_>,
+) -> Result<Ready<RefineRound>, Error> {
+    let round = refined.rounds.len() as u32 + 1;
+    let refine = &cal.project.refine;
+    let first = cal.next_refine_key(refined);
+    let wave: Vec<(usize, Vec<f64>)> = {
+        let post = sampler.get()?.posterior();
+        refinement_points(&ck.draws, refine.points, refine.spread, |u| {
+            post.ln_prior(u).is_finite()
+        })
+        .iter()
+        .enumerate()
+        .map(|(j, u)| (first + j, post.theta(u)))
+        .collect()
+    };
+    let results = ready!(exec.simulate(cal, &wave, round)?);
+    let simulated = wave
+        .into_iter()
+        .zip(results)
+        .map(|((index, values), outputs)| {
+            if let Err(e) = &outputs {
+                log(&format!(
+                    "refinement: posterior draw left out, EnergyPlus failed: {e}"
+                ));
+            }
+            SimulatedDraw {
+                index,
+                values,
+                outputs,
+            }
+        })
+        .collect();
+    let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position().to_vec()).collect();
+    let (closed, _) = close_round(
+        round,
+        simulated,
+        sampler.get()?,
+        &ck.draws,
+        &last,
+        refine.restart_below,
+    )?;
+    log_round(&closed, log);
+    Ok(Ready::Done(closed))
+}
+
+/// The final chains' target and their summary at it (`chains_summary.json`): the state of
+/// the extensions, so that a later call neither summarises the same chains again nor loses
+/// an extension. It holds only for the settings it was written under (`mcmc`, and the
+/// refinement rounds before the chains), and a summary only for the chains it summarised
+/// (each chain's last position): a rerun with other settings, or after `chains.json` was
+/// deleted and the chains ran again differently, starts it afresh.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct FinalChains {
+    /// The settings it holds for.
+    settings: String,
+    /// Iterations per chain the final chains run to (raised by each extension).
+    target: u64,
+    /// Extensions so far.
+    extensions: u32,
+    /// The chains summarised at `target`, once they got there, with each chain's last
+    /// position then.
+    summary: Option<(Vec<Vec<f64>>, ChainSummary)>,
+}
+
+impl FinalChains {
+    /// The record of the folder's final chains under the current settings, or a fresh one.
+    fn read(cal: &Calibration, rounds: usize) -> FinalChains {
+        let settings = format!("{:?} after {rounds} refinement rounds", cal.project.mcmc);
+        std::fs::read(cal.out.chains_summary())
+            .ok()
+            .and_then(|b| serde_json::from_slice::<FinalChains>(&b).ok())
+            .filter(|f| f.settings == settings)
+            .unwrap_or(FinalChains {
+                settings,
+                target: cal.project.mcmc.iterations,
+                extensions: 0,
+                summary: None,
+            })
+    }
+
+    /// The summary of chains that ended at `last`, if it is theirs.
+    fn summary_of(&self, last: &[Vec<f64>]) -> Option<ChainSummary> {
+        match &self.summary {
+            Some((at, s)) if at.as_slice() == last => Some(s.clone()),
+            _ => None,
+        }
+    }
+
+    fn write(&self, cal: &Calibration) -> Result<(), Error> {
+        let json = serde_json::to_vec(self).map_err(|e| Error::Config(e.to_string()))?;
+        crate::write_atomic(&cal.out.chains_summary(), &json)
+    }
+}
+
+/// The final chains, summarised, and extended while they miss a convergence target
+/// ([`after_final_chains`]).
+fn final_chains(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    sampler: &mut LazySampler<'_>,
+    refined: &RefineLog,
+    starts: Option<Vec<Vec<f64>>>,
+    log: Log<'_>,
+) -> Result<Ready<ChainSummary>, Error> {
+    let m = &cal.project.mcmc;
+    let round = Round::after(&cal.project, refined.rounds.len() as u32);
+    let mut state = FinalChains::read(cal, refined.rounds.len());
+    loop {
+        exec.enter(Stage::Chains)?;
+        let ck = ready!(exec.chains(cal, round, state.target, starts.as_deref(), sampler)?);
+        let last: Vec<Vec<f64>> = ck.states.iter().map(|s| s.position()).collect();
+        let chains = match state.summary_of(&last) {
+            Some(c) => c,
+            None => {
+                exec.enter(Stage::Merge)?;
+                let mut c = sampler.get()?.summarize(&ck.states, &ck.draws, refined)?;
+                c.extensions = state.extensions;
+                log_chains(&c, &ck, log);
+                state.summary = Some((last, c.clone()));
+                state.write(cal)?;
+                c
+            }
+        };
+        match after_final_chains(m, &chains, state.target) {
+            AfterFinalChains::Extend { iterations } => {
+                log(&format!(
+                    "chains: {}: extending to {iterations} iterations (extension {} of at most {})",
+                    chains.convergence,
+                    chains.extensions + 1,
+                    m.max_extensions
+                ));
+                state.target = iterations;
+                state.extensions += 1;
+                state.summary = None;
+                state.write(cal)?;
+            }
+            AfterFinalChains::Validate => return Ok(Ready::Done(chains)),
+        }
+    }
+}
+
+/// The validation runs of the sequence ([`validation_runs`]): EnergyPlus at the estimate, the
+/// initial model and the predictive draws; while EnergyPlus fails at the calibrated model, at
+/// the next-best draw ([`next_validation`]), the estimate then settled on the draw that ran.
+/// A predictive draw EnergyPlus cannot simulate is left out of the intervals.
+fn validate(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    chains: &mut ChainSummary,
+    log: Log<'_>,
+) -> Result<Ready<Validated>, Error> {
+    exec.enter(Stage::Validate)?;
+    let initial_point = cal.project.validation.initial.then(|| cal.initial_point());
+    let runs = validation_runs(chains, initial_point);
+    let results = ready!(exec.validate(cal, &runs)?);
+    let (mut calibrated, mut initial, mut failures) = (None, vec![], vec![]);
+    for (run, r) in runs.iter().zip(results) {
+        match (run.role, r) {
+            (ValidationRole::Calibrated { .. }, Ok(m)) => calibrated = Some(m),
+            (ValidationRole::Calibrated { .. }, Err(e)) => failures.push(e),
+            (ValidationRole::Initial, Ok(m)) => initial = m,
+            (ValidationRole::Initial, Err(message)) => {
+                return Err(Error::Stage {
+                    stage: "validation",
+                    message: format!("EnergyPlus at the initial model: {message}"),
+                })
+            }
+            (ValidationRole::Predictive, Ok(_)) => {}
+            (ValidationRole::Predictive, Err(e)) => log(&format!(
+                "validation: a predictive draw failed in EnergyPlus: {e}"
+            )),
+        }
+    }
+    let validation = loop {
+        if let Some(m) = calibrated.take() {
+            break m;
+        }
+        if let Some(e) = failures.last() {
+            log(&format!(
+                "validation: EnergyPlus failed at candidate {}: {e}",
+                failures.len() - 1
+            ));
+        }
+        let run = next_validation(chains, &failures).map_err(|message| Error::Stage {
+            stage: "validation",
+            message,
+        })?;
+        let mut r = ready!(exec.validate(cal, std::slice::from_ref(&run))?);
+        match r.pop() {
+            Some(Ok(m)) => calibrated = Some(m),
+            Some(Err(e)) => failures.push(e),
+            None => {
+                return Err(Error::Stage {
+                    stage: "validation",
+                    message: "the executor returned no result".into(),
+                })
+            }
+        }
+    };
+    chains.settle_estimate(&failures);
+    Ok(Ready::Done(Validated {
+        calibrated: validation,
+        initial,
+    }))
+}
+
+/// Logs what became of the design points EnergyPlus could not simulate.
+pub fn log_design_outcome(outcome: &Outcome, log: Log<'_>) {
+    if outcome.failed.is_empty() {
+        return;
+    }
+    log(&format!(
+        "design: {} EnergyPlus run(s) failed; {} point(s) replaced by spare hypercube points, \
+         {} dropped ({} of {} design points simulated)",
+        outcome.failed.len(),
+        outcome.replaced.len(),
+        outcome.dropped.len(),
+        outcome.slots.len(),
+        outcome.slot_count()
+    ));
+    for g in outcome.reasons() {
+        log(&format!(
+            "design:   {} x {} (design points {:?})",
+            g.count, g.reason, g.points
+        ));
+    }
+}
+
+/// What a refinement round found: the surrogate against EnergyPlus at its draws, the chains
+/// restarted in the best mode.
+fn log_round(closed: &RefineRound, log: Log<'_>) {
+    log(&format!(
+        "refinement round {}: {} posterior draws simulated ({} failed); surrogate vs EnergyPlus there: {}",
+        closed.round,
+        closed.points.len(),
+        closed.failed.len(),
+        closed
+            .surrogate_error
+            .iter()
+            .map(|m| format!(
+                "{} NMBE {:.1} % CV-RMSE {:.1} %",
+                m.output, m.metrics.nmbe, m.metrics.cv_rmse
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
+    for (c, gap) in &closed.restarted {
+        log(&format!(
+            "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
+            closed.round
+        ));
+    }
+}
+
+/// What the final chains did: acceptance, HMC trajectories stopped, chains moved to the best
+/// mode, independence steps switched off, R-hat and ESS.
+fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
+    log(&format!(
+        "chains: acceptance after burn-in {:.3?}",
+        chains.acceptance
+    ));
+    let divergent: Vec<u64> = ck
+        .states
+        .iter()
+        .map(bemcal_stats::chain::Chain::divergent_post_burn_in)
+        .collect();
+    if divergent.iter().any(|&n| n > 0) {
+        log(&format!(
+            "chains: HMC trajectories stopped after burn-in (divergent or against a constraint; \
+             rejected) per chain: {divergent:?}"
+        ));
+    }
+    for m in &chains.moved_chains {
+        log(&format!(
+            "chains: chain {} started in the best optimum's mode (its own was {:.0} nats lower)",
+            m.chain, m.nats_below
+        ));
+    }
+    if !chains.independence_dropped.is_empty() {
+        log(&format!(
+            "chains: independence steps switched off after burn-in (accepted under {} %) in chains {:?}",
+            bemcal_stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE * 100.0,
+            chains.independence_dropped
+        ));
+    }
+    log(&format!("posterior: {}", chains.convergence));
+}
