@@ -144,6 +144,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{e}"
     );
 
+    cross_validation_by_month(dir, &out);
+
     // The same posterior with HMC (gradients through the surrogate's VJP graph), from optimised
     // starts: short chains, the same recovery and Guideline 14.
     let project = std::fs::read_to_string(dir.join("project.toml"))
@@ -853,4 +855,136 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
             && (with_calendar - measured).abs() < (with_rule - measured).abs(),
         "Friday electricity, kWh: meters {measured:.0}, predict --model {with_calendar:.0}, --year {with_rule:.0}"
     );
+}
+
+/// Cross-validation by month (issue 24) on two months: the calibration on every month reuses
+/// this test's design and surrogate (laid into `cv/all` as a fold's folder is seeded), each
+/// fold reuses them again (no EnergyPlus design run, no training), and each fold's held-out
+/// Guideline 14, and the pooled figures, are those of EnergyPlus at the fold's estimate
+/// (`validation/calibrated.csv`) against the meters on the held-out month, recomputed here.
+fn cross_validation_by_month(dir: &Path, out: &Path) {
+    let project = std::fs::read_to_string(dir.join("project.toml"))
+        .unwrap()
+        .replace("holdout = \"last 2 months\"\n", "");
+    std::fs::write(dir.join("project_cv.toml"), project).unwrap();
+    let cv = dir.join("cv");
+    let all = cv.join("all");
+    std::fs::create_dir_all(all.join("simulations")).unwrap();
+    std::fs::copy(out.join("design.csv"), all.join("design.csv")).unwrap();
+    for e in std::fs::read_dir(out.join("simulations")).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_file() {
+            std::fs::copy(&p, all.join("simulations").join(p.file_name().unwrap())).unwrap();
+        }
+    }
+    std::fs::create_dir_all(all.join("surrogate")).unwrap();
+    for e in std::fs::read_dir(out.join("surrogate")).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, all.join("surrogate").join(p.file_name().unwrap())).unwrap();
+    }
+    let r = bemcal()
+        .arg("crossval")
+        .arg(dir.join("project_cv.toml"))
+        .arg("--out")
+        .arg(&cv)
+        .args(["--months", "jan,jul"])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{log}");
+    for fold in ["fold jan", "fold jul"] {
+        assert!(
+            log.contains(&format!("{fold}: design: settled earlier"))
+                && log.contains(&format!(
+                    "{fold}: surrogate: reusing the one trained earlier"
+                )),
+            "{log}"
+        );
+    }
+    assert!(!log.contains("simulations: 1/"), "{log}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(cv.join("crossval.json")).unwrap()).unwrap();
+    let folds = json["folds"].as_array().unwrap();
+    assert_eq!(folds.len(), 2, "{json}");
+
+    // Guideline 14 recomputed from the CSV files: residual = meter - model, p = 1.
+    let read = |p: &Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(p)
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect()
+    };
+    let meters = read(&dir.join("meters.csv"));
+    let mut pooled: std::collections::BTreeMap<String, (usize, f64, f64, f64)> = Default::default();
+    for (f, month) in folds.iter().zip(["01", "07"]) {
+        let fold = cv.join(format!("fold_{month}"));
+        let model = read(&fold.join("validation/calibrated.csv"));
+        let summary: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(fold.join("summary.json")).unwrap()).unwrap();
+        assert_eq!(
+            summary["holdout"]["period"],
+            ["jan", "jul"][(month == "07") as usize]
+        );
+        for o in f["outputs"].as_array().unwrap() {
+            let name = o["output"].as_str().unwrap();
+            let col = meters[0].iter().position(|c| c == name).unwrap();
+            let mcol = model[0].iter().position(|c| c == name).unwrap();
+            let (mut n, mut y, mut r, mut r2) = (0usize, 0.0, 0.0, 0.0);
+            for (a, b) in meters[1..].iter().zip(&model[1..]) {
+                assert_eq!(a[0], b[0]);
+                if &a[0][5..7] != month {
+                    continue;
+                }
+                let (Ok(m), Ok(s)) = (a[col].parse::<f64>(), b[mcol].parse::<f64>()) else {
+                    continue;
+                };
+                if m.is_finite() && s.is_finite() {
+                    n += 1;
+                    y += m;
+                    r += m - s;
+                    r2 += (m - s) * (m - s);
+                }
+            }
+            let held = &o["held_out"];
+            let ybar = y / n as f64;
+            let nmbe = r / ((n - 1) as f64 * ybar) * 100.0;
+            let cv_rmse = (r2 / (n - 1) as f64).sqrt() / ybar * 100.0;
+            assert_eq!(held["n"].as_u64(), Some(n as u64), "{name} {month}: {held}");
+            assert!(
+                (held["nmbe"].as_f64().unwrap() - nmbe).abs() < 1e-3,
+                "{name} {month}: {held} vs {nmbe}"
+            );
+            assert!(
+                (held["cv_rmse"].as_f64().unwrap() - cv_rmse).abs() < 1e-3,
+                "{name} {month}: {held} vs {cv_rmse}"
+            );
+            let p = pooled.entry(name.to_string()).or_default();
+            *p = (p.0 + n, p.1 + y, p.2 + r, p.3 + r2);
+        }
+    }
+    for p in json["pooled"].as_array().unwrap() {
+        let name = p["output"].as_str().unwrap();
+        let Some(&(n, y, r, r2)) = pooled.get(name) else {
+            continue;
+        };
+        let ybar = y / n as f64;
+        let h = &p["hourly"];
+        assert_eq!(h["n"].as_u64(), Some(n as u64), "{p}");
+        assert!(
+            (h["nmbe"].as_f64().unwrap() - r / ((n - 1) as f64 * ybar) * 100.0).abs() < 1e-3,
+            "{p}"
+        );
+        assert!(
+            (h["cv_rmse"].as_f64().unwrap() - (r2 / (n - 1) as f64).sqrt() / ybar * 100.0).abs()
+                < 1e-3,
+            "{p}"
+        );
+        for c in p["coverage"].as_array().unwrap() {
+            assert!(
+                (0.0..=1.0).contains(&c["fraction"].as_f64().unwrap()),
+                "{p}"
+            );
+        }
+    }
 }

@@ -8,6 +8,7 @@ pub mod check;
 mod common;
 pub mod completions;
 pub mod coordinator;
+pub mod crossval;
 pub mod design;
 pub mod diagnose;
 pub mod doctor;
@@ -63,6 +64,8 @@ pub enum Command {
     Check(check::Args),
     /// The whole calibration on this machine: design, training, chains, validation.
     Calibrate(calibrate::Args),
+    /// Cross-validation by month: each month held out in turn, design and surrogate shared.
+    Crossval(crossval::Args),
     /// Synthetic meters: EnergyPlus at hidden true parameters, with noise and a gap.
     Synthesize(synthesize::Args),
     /// ASHRAE Guideline 14 NMBE and CV-RMSE of simulated vs measured hourly CSVs.
@@ -122,6 +125,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Design(a) => design::run(a),
         Command::Check(a) => check::run(a),
         Command::Calibrate(a) => calibrate::run(a),
+        Command::Crossval(a) => crossval::run(a),
         Command::Synthesize(a) => synthesize::run(a),
         Command::Coordinator(a) => coordinator::run(a),
         Command::Worker(a) => worker::run(a),

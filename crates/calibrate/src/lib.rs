@@ -14,6 +14,7 @@
 pub mod bases;
 mod calibration;
 mod chains;
+pub mod crossval;
 pub mod design;
 pub mod driver;
 pub mod examples;

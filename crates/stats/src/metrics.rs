@@ -112,6 +112,68 @@ pub fn g14_monthly(measured: &[f64], simulated: &[f64], months: &[u32]) -> Resul
     })
 }
 
+/// The sums behind a set of hours' metrics: (measured total, residual total, sum of squared
+/// residuals), recovered exactly from `n`, `ybar`, NMBE and CV-RMSE (the definitions above).
+fn sums(m: &G14Metrics) -> (f64, f64, f64) {
+    let dof = (m.n - P) as f64;
+    let sum_y = m.n as f64 * m.mean_measured;
+    let sum_r = m.nmbe / 100.0 * dof * m.mean_measured;
+    let sum_r2 = (m.cv_rmse / 100.0 * m.mean_measured).powi(2) * dof;
+    (sum_y, sum_r, sum_r2)
+}
+
+/// Hourly Guideline 14 over the union of disjoint sets of hours, from each set's metrics: the
+/// same figures [`g14`] gives on the hours pooled (cross-validation: each month judged by the
+/// model that did not fit it, all months together).
+pub fn g14_pooled(parts: &[G14Metrics]) -> Result<G14Metrics> {
+    let (mut n, mut sum_y, mut sum_r, mut sum_r2) = (0usize, 0.0, 0.0, 0.0);
+    for m in parts {
+        let (y, r, r2) = sums(m);
+        n += m.n;
+        sum_y += y;
+        sum_r += r;
+        sum_r2 += r2;
+    }
+    if n <= P {
+        return Err(StatsError::NotEnoughData(format!(
+            "{n} hours in {} sets; need more than {P}",
+            parts.len()
+        )));
+    }
+    let ybar = sum_y / n as f64;
+    let dof = (n - P) as f64;
+    let nmbe = sum_r / (dof * ybar) * 100.0;
+    let cv_rmse = (sum_r2 / dof).sqrt() / ybar * 100.0;
+    Ok(G14Metrics {
+        n,
+        mean_measured: ybar,
+        nmbe,
+        cv_rmse,
+        pass: nmbe.abs() <= HOURLY_NMBE_LIMIT && cv_rmse <= HOURLY_CV_RMSE_LIMIT,
+    })
+}
+
+/// Guideline 14 of totals, one per set of hours (a held-out month each): each set's measured
+/// and residual totals, from its hourly metrics, are one point, judged by the monthly criteria
+/// as [`g14_monthly`] judges months (the same figures when each set is one month's measured
+/// hours).
+pub fn g14_of_totals(parts: &[G14Metrics]) -> Result<G14Metrics> {
+    let totals: Vec<(f64, f64)> = parts
+        .iter()
+        .map(|m| {
+            let (y, r, _) = sums(m);
+            (y, y - r)
+        })
+        .collect();
+    let y: Vec<f64> = totals.iter().map(|t| t.0).collect();
+    let s: Vec<f64> = totals.iter().map(|t| t.1).collect();
+    let m = g14(&y, &s)?;
+    Ok(G14Metrics {
+        pass: m.nmbe.abs() <= MONTHLY_NMBE_LIMIT && m.cv_rmse <= MONTHLY_CV_RMSE_LIMIT,
+        ..m
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,5 +232,34 @@ mod tests {
         assert!(g14(&[1.0, 2.0], &[1.0]).is_err());
         assert!(g14(&[1.0, -1.0], &[0.0, 0.0]).is_err());
         assert!(g14(&[f64::NAN, 1.0, 2.0], &[1.0, f64::NAN, 2.0]).is_err());
+    }
+
+    #[test]
+    fn pooled_sets_give_the_metrics_of_all_their_hours() {
+        let y: Vec<f64> = (0..48)
+            .map(|h| 10.0 + (h as f64 * 0.7).sin() * 3.0)
+            .collect();
+        let s: Vec<f64> = (0..48)
+            .map(|h| 9.5 + (h as f64 * 0.9).cos() * 2.0)
+            .collect();
+        let parts = [
+            g14(&y[..20], &s[..20]).unwrap(),
+            g14(&y[20..], &s[20..]).unwrap(),
+        ];
+        let all = g14(&y, &s).unwrap();
+        let pooled = g14_pooled(&parts).unwrap();
+        assert_eq!(pooled.n, 48);
+        assert!((pooled.mean_measured - all.mean_measured).abs() < 1e-12);
+        assert!((pooled.nmbe - all.nmbe).abs() < 1e-9);
+        assert!((pooled.cv_rmse - all.cv_rmse).abs() < 1e-9);
+        // Each set a month: the totals' metrics are the monthly metrics of all the hours.
+        let months: Vec<u32> = (0..48).map(|h| if h < 20 { 1 } else { 2 }).collect();
+        let monthly = g14_monthly(&y, &s, &months).unwrap();
+        let totals = g14_of_totals(&parts).unwrap();
+        assert_eq!(totals.n, 2);
+        assert!((totals.nmbe - monthly.nmbe).abs() < 1e-9);
+        assert!((totals.cv_rmse - monthly.cv_rmse).abs() < 1e-9);
+        assert_eq!(totals.pass, monthly.pass);
+        assert!(g14_pooled(&[]).is_err());
     }
 }

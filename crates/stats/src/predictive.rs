@@ -369,6 +369,30 @@ pub fn coverage(
     })
 }
 
+/// One interval level's coverage over the union of disjoint sets of hours, from each set's
+/// (hours, share inside and mean width weighted by hours; the relative width where every set
+/// has one). None without hours.
+pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
+    let n: usize = parts.iter().map(|c| c.hours).sum();
+    if n == 0 {
+        return None;
+    }
+    let nf = n as f64;
+    let inside: f64 = parts.iter().map(|c| c.fraction * c.hours as f64).sum();
+    let width: f64 = parts.iter().map(|c| c.mean_width * c.hours as f64).sum();
+    let level: Option<f64> = parts
+        .iter()
+        .map(|c| c.relative_width.map(|r| c.mean_width * c.hours as f64 / r))
+        .sum();
+    Some(Coverage {
+        nominal: parts[0].nominal,
+        hours: n,
+        fraction: inside / nf,
+        mean_width: width / nf,
+        relative_width: level.filter(|l| *l != 0.0).map(|l| width / l),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -590,5 +614,25 @@ mod tests {
             .scales(&y, &vec![0.0; n], &fit)
             .unwrap();
         assert_eq!(c[0], 0.0);
+    }
+
+    #[test]
+    fn pooled_coverage_is_the_coverage_of_all_the_hours() {
+        let y = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        let lo = [0.5, 2.5, 2.0, 3.0, 5.5, 5.0, 6.0];
+        let hi = [1.5, 3.5, 4.0, 5.0, 6.5, 8.0, 9.0];
+        let sel =
+            |r: std::ops::Range<usize>| -> Vec<bool> { (0..7).map(|h| r.contains(&h)).collect() };
+        let all = coverage(0.9, &y, &lo, &hi, &[true; 7]).unwrap();
+        let parts = [
+            coverage(0.9, &y, &lo, &hi, &sel(0..3)).unwrap(),
+            coverage(0.9, &y, &lo, &hi, &sel(3..7)).unwrap(),
+        ];
+        let pooled = pooled_coverage(&parts).unwrap();
+        assert_eq!(pooled.hours, 7);
+        assert!((pooled.fraction - all.fraction).abs() < 1e-12);
+        assert!((pooled.mean_width - all.mean_width).abs() < 1e-12);
+        assert!((pooled.relative_width.unwrap() - all.relative_width.unwrap()).abs() < 1e-12);
+        assert!(pooled_coverage(&[]).is_none());
     }
 }
