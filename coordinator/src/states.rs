@@ -52,7 +52,7 @@ macro_rules! words {
 }
 
 /// Where a run is in its calibration: the driver's stages (`bemcal_calibrate::sequence`),
-/// stored as their names ([`stage_column`] reads one back).
+/// stored as their names (`stage_column` reads one back).
 pub use bemcal_calibrate::sequence::Stage;
 
 /// The [`Stage`] in column `i` of a row.

@@ -1,6 +1,6 @@
 //! The one driver of a calibration: every stage in the order the data flows, every decision
 //! taken once, here, by the rules of [`crate::sequence`], [`crate::replacement`],
-//! [`crate::refine`] and [`crate::validation`]. How the work is done is an [`Executor`]'s:
+//! [`crate::refine`] and [`crate::next_candidate`]. How the work is done is an [`Executor`]'s:
 //! the local one ([`crate::calibrate`]) runs it in this process and answers at once; the
 //! coordinator's leases it to workers as jobs and answers [`Ready::Pending`] until they are
 //! done, then calls [`drive`] again.
