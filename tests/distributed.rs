@@ -188,6 +188,11 @@ fn distributed_matches_single_process() {
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
     let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")));
+    // The one driver says the same through the coordinator (its messages in the run's status).
+    assert!(
+        log.contains("extending to 500 iterations (extension 1 of at most 1)"),
+        "{log}"
+    );
 
     // Both ran to their end short of the target: reported as not converged, by the exit
     // status, the last lines, summary.json and the report's first screen.
@@ -498,6 +503,7 @@ fn failed_design_point_is_replaced_local_and_distributed() {
     let dist = tmp.path().join("dist");
     let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
     let sb = summary(&dist);
+    assert!(log.contains("replaced by spare hypercube points"), "{log}");
     // The same design, failures and replacements (the error texts name each run's own folder).
     for k in [
         "reasons",

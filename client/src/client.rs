@@ -305,7 +305,13 @@ pub async fn watch(
             }
             Err(e) => anyhow::bail!("{}", e.message()),
         };
-        let key = format!("{} {} {:?}", st.state, st.stage, progress_lines(&st));
+        let key = format!(
+            "{} {} {:?} {}",
+            st.state,
+            st.stage,
+            progress_lines(&st),
+            st.log.len()
+        );
         if key != last {
             on_change(&st);
             last = key;

@@ -108,6 +108,14 @@ ALTER TABLE stages ADD COLUMN seconds_before REAL NOT NULL DEFAULT 0; -- earlier
     r#"
 CREATE INDEX jobs_run_state ON jobs(run_id, state, id); -- a run's queued / leased jobs (leasing)
 "#,
+    r#"
+CREATE TABLE run_log (                                -- the driver's messages, each once per run
+    run_id TEXT NOT NULL,
+    ms     INTEGER NOT NULL,
+    line   TEXT NOT NULL,
+    UNIQUE (run_id, line)
+);
+"#,
 ];
 
 pub use bemcal_client::File;
@@ -545,6 +553,30 @@ impl Store {
                     })
                 })?
                 .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Records a message of the driver for `run` (a message it gave before is not repeated:
+    /// the driver runs again after every change and says what it found settled again).
+    pub fn add_log(&self, run: &str, line: &str) -> Result<()> {
+        let line = crate::excerpt(line, crate::MAX_ERROR_BYTES);
+        self.with(|c| {
+            c.execute(
+                "INSERT OR IGNORE INTO run_log (run_id, ms, line) VALUES (?1, ?2, ?3)",
+                params![run, now_ms() as i64, line],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// The driver's messages for `run`, in order.
+    pub fn log_lines(&self, run: &str) -> Result<Vec<String>> {
+        self.with(|c| {
+            let mut st = c.prepare("SELECT line FROM run_log WHERE run_id = ?1 ORDER BY rowid")?;
+            let rows = st
+                .query_map([run], |r| r.get(0))?
+                .collect::<rusqlite::Result<Vec<String>>>()?;
             Ok(rows)
         })
     }

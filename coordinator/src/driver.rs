@@ -82,18 +82,6 @@ pub struct State {
     pub uploads: tokio::sync::Semaphore,
 }
 
-/// The stages a run goes through, in order (every [`Stage`] but `Done`).
-pub const STAGES: &[Stage] = &[
-    Stage::Design,
-    Stage::Simulate,
-    Stage::Train,
-    Stage::Chains,
-    Stage::Merge,
-    Stage::Refine,
-    Stage::Validate,
-    Stage::Summary,
-];
-
 type Result<T> = std::result::Result<T, String>;
 
 fn err<E: std::fmt::Display>(e: E) -> String {
@@ -177,7 +165,11 @@ impl State {
             r,
             inputs_hash: None,
         };
-        match drive(&mut cal, &mut exec, &|_| {}).map_err(err)? {
+        let log = |m: &str| {
+            // A message that cannot be stored is not worth failing the run for.
+            let _ = self.store.add_log(run, m);
+        };
+        match drive(&mut cal, &mut exec, &log).map_err(err)? {
             Ready::Pending => Ok(()),
             Ready::Done(summary) => self.finish(&exec.r, &cal, &summary),
         }

@@ -9,11 +9,11 @@ use tonic::{Code, Request, Response, Status, Streaming};
 use crate::artifacts::{safe_relative, valid_sha};
 use crate::auth::{require, Role};
 use crate::db::{File, JobRow, Outcome, RunRow};
-use crate::driver::{State, STAGES};
+use crate::driver::State;
 use crate::proto::coordinator_server::Coordinator;
 use crate::proto::job::Kind;
 use crate::proto::*;
-use crate::states::{JobKind, JobState, RunState};
+use crate::states::{JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
 use bemcal_calibrate::OutputDir;
@@ -132,11 +132,17 @@ impl Service {
     /// The status of a run, with per-stage progress.
     pub fn status(&self, r: &RunRow, with_results: bool) -> Result<RunStatus, Status> {
         let jobs = self.st.store.jobs(&r.id, None).map_err(internal)?;
-        let cur = STAGES
+        // The stages a run goes through, in order (every stage but `Done`).
+        let order: Vec<Stage> = Stage::ALL
+            .iter()
+            .copied()
+            .filter(|s| *s != Stage::Done)
+            .collect();
+        let cur = order
             .iter()
             .position(|s| *s == r.stage)
-            .unwrap_or(STAGES.len());
-        let stages = STAGES
+            .unwrap_or(order.len());
+        let stages = order
             .iter()
             .enumerate()
             .map(|(i, s)| {
@@ -196,6 +202,11 @@ impl Service {
                 r.summary.clone().unwrap_or_default()
             } else {
                 String::new()
+            },
+            log: if with_results {
+                self.st.store.log_lines(&r.id).map_err(internal)?
+            } else {
+                vec![]
             },
             jobs: if with_results {
                 let att = self.st.store.job_attempts(&r.id).map_err(internal)?;

@@ -248,7 +248,14 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
         let run =
             client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path())).await?;
         log(&format!("run {run} submitted"));
+        let mut said = 0;
         let st = client::watch(&mut c, &run, |s| {
+            // The driver's messages since the last change (the same as a local calibration
+            // prints), then the stage and its jobs.
+            for l in s.log.iter().skip(said) {
+                log(l);
+            }
+            said = said.max(s.log.len());
             log(&format!("{} ({})", s.stage, s.state));
             for l in client::progress_lines(s) {
                 eprintln!("{l}");

@@ -17,7 +17,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let t0 = std::time::Instant::now();
     let st = rt.block_on(async {
         let mut c = connect.client()?;
+        let mut said = 0;
         bemcal_client::client::watch(&mut c, &a.run, |s| {
+            // The driver's messages since the last change, then the stages.
+            for l in s.log.iter().skip(said) {
+                println!("[{:>7.1} s] {l}", t0.elapsed().as_secs_f64());
+            }
+            said = said.max(s.log.len());
             println!(
                 "[{:>7.1} s] run {} {} (stage {})",
                 t0.elapsed().as_secs_f64(),

@@ -60,6 +60,12 @@ pub fn g14(measured: &[f64], simulated: &[f64]) -> Result<G14Metrics> {
             sum_r2 += r * r;
         }
     }
+    from_sums(n, sum_y, sum_r, sum_r2)
+}
+
+/// The hourly metrics of `n` hours from their sums: measured values, residuals and squared
+/// residuals (the definitions above).
+fn from_sums(n: usize, sum_y: f64, sum_r: f64, sum_r2: f64) -> Result<G14Metrics> {
     if n <= P {
         return Err(StatsError::NotEnoughData(format!(
             "{n} hours with both measured and simulated values; need more than {P}"
@@ -134,23 +140,7 @@ pub fn g14_pooled(parts: &[G14Metrics]) -> Result<G14Metrics> {
         sum_r += r;
         sum_r2 += r2;
     }
-    if n <= P {
-        return Err(StatsError::NotEnoughData(format!(
-            "{n} hours in {} sets; need more than {P}",
-            parts.len()
-        )));
-    }
-    let ybar = sum_y / n as f64;
-    let dof = (n - P) as f64;
-    let nmbe = sum_r / (dof * ybar) * 100.0;
-    let cv_rmse = (sum_r2 / dof).sqrt() / ybar * 100.0;
-    Ok(G14Metrics {
-        n,
-        mean_measured: ybar,
-        nmbe,
-        cv_rmse,
-        pass: nmbe.abs() <= HOURLY_NMBE_LIMIT && cv_rmse <= HOURLY_CV_RMSE_LIMIT,
-    })
+    from_sums(n, sum_y, sum_r, sum_r2)
 }
 
 /// Guideline 14 of totals, one per set of hours (a held-out month each): each set's measured
