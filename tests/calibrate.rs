@@ -928,6 +928,20 @@ fn cross_validation_by_month(dir: &Path, out: &Path) {
         );
         for o in f["outputs"].as_array().unwrap() {
             let name = o["output"].as_str().unwrap();
+            if o["held_out"].is_null() {
+                // No Guideline 14 for this meter in this month (a zero measured mean): the
+                // pooled figures say so and leave the month out.
+                let p = json["pooled"].as_array().unwrap();
+                let p = p.iter().find(|p| p["output"] == name).unwrap();
+                let m: u64 = month.parse().unwrap();
+                assert!(
+                    p["months_without_figures"]
+                        .as_array()
+                        .is_some_and(|v| v.iter().any(|x| x.as_u64() == Some(m))),
+                    "{p}"
+                );
+                continue;
+            }
             let col = meters[0].iter().position(|c| c == name).unwrap();
             let mcol = model[0].iter().position(|c| c == name).unwrap();
             let (mut n, mut y, mut r, mut r2) = (0usize, 0.0, 0.0, 0.0);

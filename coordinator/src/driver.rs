@@ -456,7 +456,9 @@ impl Leased<'_> {
                     .iter()
                     .filter(|j| {
                         matches!(&j.spec.kind, Some(Kind::Chains(c))
-                            if c.first_chain as usize == first && c.round == round.index())
+                            if c.first_chain as usize == first
+                                && c.chains as usize == per.min(n - first)
+                                && c.round == round.index())
                     })
                     .cloned()
                     .collect();
@@ -726,7 +728,7 @@ impl Executor for Leased<'_> {
             .collect();
         let same = |j: &JobRow, s: &NewJob| match (&j.spec.kind, &s.spec.kind) {
             (Some(Kind::Validate(a)), Some(Kind::Validate(b))) => {
-                a.index == b.index && a.label == b.label
+                a.index == b.index && a.label == b.label && a.values == b.values
             }
             _ => false,
         };
@@ -758,6 +760,11 @@ impl Executor for Leased<'_> {
         }
         t.total_s = (crate::now_ms().saturating_sub(self.r.created_ms)) as f64 / 1000.0;
         t
+    }
+
+    /// The driver runs again after every finished job: what it finds settled is not news.
+    fn announces_reuse(&self) -> bool {
+        false
     }
 }
 

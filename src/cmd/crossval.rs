@@ -102,6 +102,23 @@ fn print(cv: &CrossValidation) {
             cov.join(", ")
         );
     }
+    for p in cv
+        .pooled
+        .iter()
+        .filter(|p| !p.months_without_figures.is_empty())
+    {
+        let names: Vec<&str> = p
+            .months_without_figures
+            .iter()
+            .map(|m| MONTHS[*m as usize - 1])
+            .collect();
+        println!(
+            "  {}: no Guideline 14 for {} (no measured hour, or a zero measured mean): the pooled \
+             figures leave those months out",
+            p.output,
+            names.join(", ")
+        );
+    }
     println!("\nper fold (hourly, held-out month):");
     for f in &cv.folds {
         let name = MONTHS[f.month as usize - 1];
@@ -112,7 +129,7 @@ fn print(cv: &CrossValidation) {
         let cells: Vec<String> = f
             .outputs
             .iter()
-            .map(|o| format!("{} {}", o.output, g14(&Some(o.held_out))))
+            .map(|o| format!("{} {}", o.output, g14(&o.held_out)))
             .collect();
         let conv = if f.converged { "" } else { " (not converged)" };
         println!("  {name}{conv}: {}", cells.join("; "));

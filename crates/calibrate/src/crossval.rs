@@ -49,8 +49,9 @@ pub struct Fold {
 pub struct FoldOutput {
     /// The calibrated output (and its meter).
     pub output: String,
-    /// Hourly Guideline 14 of EnergyPlus at the fold's estimate.
-    pub held_out: G14Metrics,
+    /// Hourly Guideline 14 of EnergyPlus at the fold's estimate (none where the month has
+    /// no measured hour of this meter, or their mean is zero).
+    pub held_out: Option<G14Metrics>,
     /// Coverage of the hourly 50 % and 90 % predictive intervals (the project's error model);
     /// empty without predictive draws.
     pub coverage: Vec<Coverage>,
@@ -69,6 +70,10 @@ pub struct PooledOutput {
     pub monthly: Option<G14Metrics>,
     /// Predictive coverage over the held-out hours of every fold, per level.
     pub coverage: Vec<Coverage>,
+    /// Months whose fold ran but gave this meter no Guideline 14 (no measured hour, or a zero
+    /// measured mean): the pooled Guideline 14 leaves them out.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub months_without_figures: Vec<u32>,
 }
 
 /// `crossval.json`: the folds and their pooled figures.
@@ -101,8 +106,8 @@ pub fn fold_of(month: u32, s: &Summary) -> Fold {
         .validation
         .iter()
         .enumerate()
-        .filter_map(|(k, m)| {
-            let held_out = m.held_out.as_ref()?.hourly;
+        .map(|(k, m)| {
+            let held_out = m.held_out.as_ref().map(|h| h.hourly);
             let coverage = s
                 .predictive
                 .as_ref()
@@ -110,11 +115,11 @@ pub fn fold_of(month: u32, s: &Summary) -> Fold {
                 .and_then(|o| o.by_error_model.first())
                 .map(|c| c.coverage.held_out.clone())
                 .unwrap_or_default();
-            Some(FoldOutput {
+            FoldOutput {
                 output: m.output.clone(),
                 held_out,
                 coverage,
-            })
+            }
         })
         .collect();
     Fold {
@@ -136,7 +141,17 @@ pub fn pool(all: &Summary, folds: &[Fold]) -> Vec<PooledOutput> {
                 .iter()
                 .flat_map(|f| f.outputs.iter().filter(|o| &o.output == name))
                 .collect();
-            let parts: Vec<G14Metrics> = mine.iter().map(|o| o.held_out).collect();
+            let parts: Vec<G14Metrics> = mine.iter().filter_map(|o| o.held_out).collect();
+            let months_without_figures = folds
+                .iter()
+                .filter(|f| f.error.is_none())
+                .filter(|f| {
+                    f.outputs
+                        .iter()
+                        .any(|o| &o.output == name && o.held_out.is_none())
+                })
+                .map(|f| f.month)
+                .collect();
             let levels: Vec<f64> = mine
                 .first()
                 .map(|o| o.coverage.iter().map(|c| c.nominal).collect())
@@ -161,6 +176,7 @@ pub fn pool(all: &Summary, folds: &[Fold]) -> Vec<PooledOutput> {
                 hourly: g14_pooled(&parts).ok(),
                 monthly: g14_of_totals(&parts).ok(),
                 coverage,
+                months_without_figures,
             }
         })
         .collect()
@@ -185,12 +201,15 @@ pub fn cross_validate(
     let base = out.join("all");
     log("cross-validation: the calibration on every month (all/)");
     let all = calibrate(project, &base, log)?;
+    let mut months = months.to_vec();
+    months.sort_unstable();
+    months.dedup();
     let mut folds = vec![];
-    for &month in months {
+    for &month in &months {
         let fold_project = fold_project(project, month)?;
         let dir = out.join(format!("fold_{month:02}"));
         let name = MONTHS[month as usize - 1];
-        seed_fold(&OutputDir::new(&base), &OutputDir::new(&dir), project)?;
+        seed_fold(&OutputDir::new(&base), &OutputDir::new(&dir))?;
         let fold_log = |m: &str| log(&format!("fold {name}: {m}"));
         let fold = match calibrate(&fold_project, &dir, &fold_log) {
             Ok(s) => fold_of(month, &s),
@@ -221,7 +240,7 @@ pub fn cross_validate(
 /// Lays what the folds share into a fold's folder (once): the design (`design.csv`,
 /// `simulations/`, hard-linked where the file system allows) and the first surrogate (the
 /// design's: `refine/round_1/surrogate` when refinement moved it there).
-fn seed_fold(base: &OutputDir, fold: &OutputDir, project: &Project) -> Result<(), Error> {
+fn seed_fold(base: &OutputDir, fold: &OutputDir) -> Result<(), Error> {
     let sims = fold.simulations();
     std::fs::create_dir_all(&sims).map_err(|e| Error::io(&sims, e))?;
     let from = base.simulations();
@@ -236,9 +255,13 @@ fn seed_fold(base: &OutputDir, fold: &OutputDir, project: &Project) -> Result<()
     if !csv.exists() {
         link_or_copy(&base.design_csv(), &csv)?;
     }
-    let first = match project.refine.rounds {
-        0 => base.surrogate(),
-        _ => base.refine_round(1).join("surrogate"),
+    // The design's surrogate: where a refinement round ran in `all/` (now or in an earlier
+    // run of the folder), the one it moved aside; the folder's last surrogate saw draws of a
+    // posterior fitted on every month.
+    let moved = base.refine_round(1).join("surrogate");
+    let first = match moved.is_dir() {
+        true => moved,
+        false => base.surrogate(),
     };
     let to = fold.surrogate();
     let fitted =

@@ -119,6 +119,13 @@ pub trait Executor {
 
     /// The time spent per stage so far, and in all.
     fn timings(&self) -> Timings;
+
+    /// Whether a call of [`drive`] is a start or restart of the calibration, so that what it
+    /// finds settled is worth saying (the local executor: a rerun reuses the folder's work);
+    /// not where the driver is called again after every finished job (the coordinator's).
+    fn announces_reuse(&self) -> bool {
+        true
+    }
 }
 
 /// The sampler of a round, loaded when first needed (a driver call that finds the round's
@@ -152,10 +159,12 @@ pub fn drive(
 ) -> Result<Ready<Summary>, Error> {
     let outcome = match read_outcome(&cal.simulations_dir()) {
         Some(o) => {
-            log(&format!(
-                "design: settled earlier (simulations/design.json): 0 run, {} reused",
-                o.slots.len()
-            ));
+            if exec.announces_reuse() {
+                log(&format!(
+                    "design: settled earlier (simulations/design.json): 0 run, {} reused",
+                    o.slots.len()
+                ));
+            }
             o
         }
         None => ready!(design_points(cal, exec, log)?),
@@ -263,7 +272,9 @@ fn surrogate(
     log: Log<'_>,
 ) -> Result<Ready<()>, Error> {
     if cal.has_surrogate() {
-        log("surrogate: reusing the one trained earlier");
+        if exec.announces_reuse() {
+            log("surrogate: reusing the one trained earlier");
+        }
         return Ok(Ready::Done(()));
     }
     exec.enter(Stage::Train)?;

@@ -82,6 +82,18 @@ impl RefineLog {
     pub fn points(&self) -> impl Iterator<Item = &RefinePoint> {
         self.rounds.iter().flat_map(|r| r.points.iter())
     }
+
+    /// The simulation key of the first posterior draw of the next round, after
+    /// `design_points` hypercube slots: past every draw of every earlier round, those
+    /// EnergyPlus could not simulate included (their keys were used too).
+    pub fn next_key(&self, design_points: usize) -> usize {
+        design_points
+            + self
+                .rounds
+                .iter()
+                .map(|r| r.points.len() + r.failed.len())
+                .sum::<usize>()
+    }
 }
 
 /// Up to `k` distinct draws for refinement (unit space), from chains' post-burn-in draws: the
@@ -219,10 +231,11 @@ pub fn next_starts(
 
 impl Calibration {
     /// The simulation key of the first posterior draw of the next refinement round, after the
-    /// rounds in `log`: after every hypercube slot and every earlier round's draws (a dropped
-    /// design point keeps its slot, so keys never collide).
+    /// rounds in `log`: after every hypercube slot and every earlier round's draws, failed ones
+    /// included (a dropped design point keeps its slot, so keys never collide):
+    /// [`RefineLog::next_key`].
     pub fn next_refine_key(&self, log: &RefineLog) -> usize {
-        self.project.design.points + log.points().count()
+        log.next_key(self.project.design.points)
     }
 
     /// The finished refinement rounds (`refine.json`; none when it does not exist).
@@ -472,5 +485,35 @@ mod tests {
         let (starts, restarted) = next_starts(&[a, b, c], &last, 1e9);
         assert!(restarted.is_empty());
         assert_eq!(starts, last);
+    }
+
+    #[test]
+    fn the_next_rounds_keys_follow_every_draw_failed_ones_included() {
+        let round = |points: &[usize], failed: usize| RefineRound {
+            round: 1,
+            points: points
+                .iter()
+                .map(|&index| RefinePoint {
+                    index,
+                    values: vec![0.0],
+                })
+                .collect(),
+            failed: (0..failed)
+                .map(|_| FailedPoint {
+                    values: vec![1.0],
+                    error: "Fatal".into(),
+                })
+                .collect(),
+            surrogate_error: vec![],
+            recovered: vec![],
+            starts: vec![],
+            restarted: vec![],
+        };
+        // Round 1 used keys 20..30 and the draw at 23 failed: round 2 starts at 30, not 29.
+        let log = RefineLog {
+            rounds: vec![round(&[20, 21, 22, 24, 25, 26, 27, 28, 29], 1)],
+        };
+        assert_eq!(log.next_key(20), 30);
+        assert_eq!(RefineLog::default().next_key(20), 20);
     }
 }
