@@ -431,6 +431,14 @@ impl Leased<'_> {
         self.artifact(WARM_FILE.into(), &bytes)
     }
 
+    /// Chains per chain job of `n` chains ([`Config::chains_per_job`]; 0: all in one).
+    fn chains_per_group(&self, n: usize) -> usize {
+        match self.st.config.chains_per_job {
+            0 => n,
+            k => k.min(n),
+        }
+    }
+
     /// The chain jobs of `round` as groups of [`Config::chains_per_job`] chains, each group
     /// segment after segment (a segment from the last one's checkpoint); the segments of
     /// each group so far, in order.
@@ -440,10 +448,7 @@ impl Leased<'_> {
         round: Round,
     ) -> std::result::Result<Vec<(usize, Vec<JobRow>)>, Error> {
         let n = cal.project.mcmc.chains;
-        let per = match self.st.config.chains_per_job {
-            0 => n,
-            k => k.min(n),
-        };
+        let per = self.chains_per_group(n);
         let jobs = self
             .st
             .store
@@ -673,10 +678,7 @@ impl Executor for Leased<'_> {
     ) -> std::result::Result<Ready<Checkpoint>, Error> {
         let groups = self.chain_groups(cal, round)?;
         let n = cal.project.mcmc.chains;
-        let per = match self.st.config.chains_per_job {
-            0 => n,
-            k => k.min(n),
-        };
+        let per = self.chains_per_group(n);
         let mut next = vec![];
         let mut short = false;
         for (first, done) in &groups {

@@ -262,17 +262,11 @@ pub fn simulate_design(
                 })
             }
         };
-        let to_run: Vec<(usize, Vec<f64>)> = wave
-            .iter()
-            .filter(|p| failed_before(&known, p).is_none())
-            .cloned()
-            .collect();
         let replacing = !progress.attempts.is_empty();
-        let results = simulate_points(
-            runner,
-            model,
-            plan,
-            &to_run,
+        let ran = simulate_wave(
+            (runner, model, plan),
+            &wave,
+            &known,
             weather,
             dir,
             parallel,
@@ -283,8 +277,9 @@ pub fn simulate_design(
                     log(&format!("simulations: {done}/{n}"))
                 }
             },
+            log,
         )?;
-        progress.record(&wave, &known, to_run.iter().map(|p| p.0).zip(results), log);
+        progress.record(&wave, ran);
         save_failures(&failures_path, &known, &progress.attempts)?;
     }
 }
@@ -299,53 +294,23 @@ struct Progress {
 }
 
 impl Progress {
-    /// Records a wave: a point that failed in an earlier run of the folder (`known`) is not
-    /// repeated, the others take their `results` in order.
-    fn record(
-        &mut self,
-        wave: &[(usize, Vec<f64>)],
-        known: &[Attempt],
-        mut results: impl Iterator<Item = (usize, PointRun)>,
-        log: &(dyn Fn(&str) + Sync),
-    ) {
-        for p in wave {
-            if let Some(a) = failed_before(known, p) {
-                log(&format!(
-                    "design point {}: failed in an earlier run ({}), not repeated",
-                    p.0,
-                    failure_reason(a.error.as_deref().unwrap_or_default())
-                ));
-                self.attempts.push(a.clone());
-                continue;
-            }
-            let (slot, r) = results.next().expect("one result per point run");
-            debug_assert_eq!(slot, p.0);
-            match r {
-                Ok((o, secs)) => {
-                    match secs {
-                        Some(s) => self.seconds.push(s),
-                        None => self.reused += 1,
-                    }
-                    self.outputs.insert(slot, o);
-                    self.attempts.push(Attempt {
-                        slot,
-                        values: p.1.clone(),
-                        error: None,
-                    });
+    /// Records a simulated wave, its results in the wave's order.
+    fn record(&mut self, wave: &[(usize, Vec<f64>)], ran: WaveRun) {
+        self.seconds.extend(ran.seconds);
+        self.reused += ran.reused;
+        for ((slot, values), r) in wave.iter().zip(ran.results) {
+            let error = match r {
+                Ok(o) => {
+                    self.outputs.insert(*slot, o);
+                    None
                 }
-                Err(e) => {
-                    let text = e.to_string();
-                    log(&format!(
-                        "design point {slot}: EnergyPlus failed ({}); it will be replaced if it has replacements left",
-                        failure_reason(&text)
-                    ));
-                    self.attempts.push(Attempt {
-                        slot,
-                        values: p.1.clone(),
-                        error: Some(text),
-                    });
-                }
-            }
+                Err(e) => Some(e),
+            };
+            self.attempts.push(Attempt {
+                slot: *slot,
+                values: values.clone(),
+                error,
+            });
         }
     }
 
@@ -365,6 +330,84 @@ impl Progress {
     }
 }
 
+/// A wave of points simulated ([`simulate_wave`]).
+pub(crate) struct WaveRun {
+    /// Per point, in the wave's order: its outputs, or EnergyPlus's failure (now or in an
+    /// earlier run of the folder).
+    pub results: Vec<Result<HourlyOutputs, String>>,
+    /// EnergyPlus seconds per point simulated now.
+    pub seconds: Vec<f64>,
+    /// Points reloaded from an earlier run of the folder.
+    pub reused: usize,
+    /// Points that failed in an earlier run of the folder and were not run again.
+    pub not_repeated: usize,
+}
+
+/// Simulates (or reloads) the points `(key, values)` of `wave` in `dir`, with `parallel`
+/// EnergyPlus processes, except those that failed in an earlier run of the folder (`known`,
+/// from `failures.json`): they keep that failure and are not run again. The one wave step of
+/// [`simulate_design`] and of the calibration's in-process executor.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn simulate_wave(
+    (runner, model, plan): (&Runner, &Model, &Plan),
+    wave: &[(usize, Vec<f64>)],
+    known: &[Attempt],
+    weather: &Path,
+    dir: &Path,
+    parallel: usize,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    log: &(dyn Fn(&str) + Sync),
+) -> Result<WaveRun, Error> {
+    let to_run: Vec<(usize, Vec<f64>)> = wave
+        .iter()
+        .filter(|p| failed_before(known, p).is_none())
+        .cloned()
+        .collect();
+    let mut ran = simulate_points(
+        runner, model, plan, &to_run, weather, dir, parallel, progress,
+    )?
+    .into_iter();
+    let mut run = WaveRun {
+        results: vec![],
+        seconds: vec![],
+        reused: 0,
+        not_repeated: wave.len() - to_run.len(),
+    };
+    for p in wave {
+        let r = match failed_before(known, p) {
+            Some(a) => {
+                let e = a.error.clone().unwrap_or_default();
+                log(&format!(
+                    "design point {}: failed in an earlier run ({}), not repeated",
+                    p.0,
+                    failure_reason(&e)
+                ));
+                Err(e)
+            }
+            None => match ran.next().expect("one result per point run") {
+                Ok((o, secs)) => {
+                    match secs {
+                        Some(s) => run.seconds.push(s),
+                        None => run.reused += 1,
+                    }
+                    Ok(o)
+                }
+                Err(e) => {
+                    let e = e.to_string();
+                    log(&format!(
+                        "point {}: EnergyPlus failed ({})",
+                        p.0,
+                        failure_reason(&e)
+                    ));
+                    Err(e)
+                }
+            },
+        };
+        run.results.push(r);
+    }
+    Ok(run)
+}
+
 /// The failed attempts of earlier runs of simulations folder `dir` (`failures.json`).
 pub(crate) fn read_failures(dir: &Path) -> Vec<Attempt> {
     std::fs::read_to_string(dir.join(FAILURES_FILE))
@@ -374,7 +417,7 @@ pub(crate) fn read_failures(dir: &Path) -> Vec<Attempt> {
 }
 
 /// The failed attempt at this slot and point in an earlier run of the folder, if any.
-pub(crate) fn failed_before<'a>(
+fn failed_before<'a>(
     known: &'a [Attempt],
     (s, x): &(usize, Vec<f64>),
 ) -> Option<&'a Attempt> {

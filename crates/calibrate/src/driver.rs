@@ -157,7 +157,8 @@ pub fn drive(
     exec: &mut dyn Executor,
     log: Log<'_>,
 ) -> Result<Ready<Summary>, Error> {
-    let outcome = match read_outcome(&cal.simulations_dir()) {
+    match read_outcome(&cal.simulations_dir()) {
+        // Settled before this call: `Calibration::load` learnt its invalid region.
         Some(o) => {
             if exec.announces_reuse() {
                 log(&format!(
@@ -165,11 +166,12 @@ pub fn drive(
                     o.slots.len()
                 ));
             }
-            o
         }
-        None => ready!(design_points(cal, exec, log)?),
-    };
-    cal.learn_invalid_region(&outcome);
+        None => {
+            let outcome = ready!(design_points(cal, exec, log)?);
+            cal.learn_invalid_region(&outcome);
+        }
+    }
     let cal: &Calibration = cal;
     let mut refined = cal.refine_log()?;
     let finished = loop {

@@ -9,14 +9,13 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::design::{failed_before, read_failures, save_failures, simulate_points, FAILURES_FILE};
+use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
 use crate::posterior::{run_chains, Checkpoint};
 use crate::project::Project;
 use crate::replacement::Attempt;
 use crate::sequence::{Round, Stage, ValidationRun};
 use crate::{chains_at, Calibration, Error, Log, Summary, Timings};
-use bemcal_energyplus::errfile::failure_reason;
 
 /// Runs the whole calibration of `project` into `out` on this machine: each stage in the
 /// order the data flows, every decision taken by the one driver.
@@ -140,65 +139,31 @@ impl Executor for InProcess<'_> {
             0 => read_failures(&dir),
             _ => vec![],
         };
-        let to_run: Vec<(usize, Vec<f64>)> = wave
-            .iter()
-            .filter(|p| failed_before(&known, p).is_none())
-            .cloned()
-            .collect();
         let progress = |done: usize, n: usize| match round {
             0 => log(&format!("simulations: {done}/{n}")),
             r => log(&format!("refinement round {r}: {done}/{n} simulations")),
         };
         let inp = &cal.inputs;
-        let parallel = cal.project.design.parallel;
-        let (model, plan, weather) = (&inp.model, &inp.plan, &inp.weather_path);
-        let mut ran = simulate_points(
-            &inp.runner,
-            model,
-            plan,
-            &to_run,
-            weather,
+        let ran = simulate_wave(
+            (&inp.runner, &inp.model, &inp.plan),
+            wave,
+            &known,
+            &inp.weather_path,
             &dir,
-            parallel,
+            cal.project.design.parallel,
             &progress,
-        )?
-        .into_iter();
-        let (mut results, mut attempts, mut seconds) = (vec![], vec![], vec![]);
-        for p in wave {
-            let r = match failed_before(&known, p) {
-                Some(a) => {
-                    let e = a.error.clone().unwrap_or_default();
-                    log(&format!(
-                        "design point {}: failed in an earlier run ({}), not repeated",
-                        p.0,
-                        failure_reason(&e)
-                    ));
-                    Err(e)
-                }
-                None => match ran.next().expect("one result per point run") {
-                    Ok((o, secs)) => {
-                        seconds.extend(secs);
-                        Ok(o)
-                    }
-                    Err(e) => {
-                        let e = e.to_string();
-                        log(&format!(
-                            "point {}: EnergyPlus failed ({})",
-                            p.0,
-                            failure_reason(&e)
-                        ));
-                        attempts.push(Attempt {
-                            slot: p.0,
-                            values: p.1.clone(),
-                            error: Some(e.clone()),
-                        });
-                        Err(e)
-                    }
-                },
-            };
-            results.push(r);
-        }
+            log,
+        )?;
         if round == 0 {
+            let attempts: Vec<Attempt> = wave
+                .iter()
+                .zip(&ran.results)
+                .map(|((slot, values), r)| Attempt {
+                    slot: *slot,
+                    values: values.clone(),
+                    error: r.as_ref().err().cloned(),
+                })
+                .collect();
             save_failures(&dir.join(FAILURES_FILE), &known, &attempts)?;
         }
         log(&format!(
@@ -207,12 +172,12 @@ impl Executor for InProcess<'_> {
                 0 => String::new(),
                 r => format!("refinement round {r}: "),
             },
-            seconds.len(),
-            seconds.iter().sum::<f64>() / seconds.len().max(1) as f64,
-            to_run.len() - seconds.len() - attempts.len(),
-            wave.len() - to_run.len()
+            ran.seconds.len(),
+            ran.seconds.iter().sum::<f64>() / ran.seconds.len().max(1) as f64,
+            ran.reused,
+            ran.not_repeated
         ));
-        Ok(Ready::Done(results))
+        Ok(Ready::Done(ran.results))
     }
 
     fn train(
