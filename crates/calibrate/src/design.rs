@@ -417,10 +417,7 @@ pub(crate) fn read_failures(dir: &Path) -> Vec<Attempt> {
 }
 
 /// The failed attempt at this slot and point in an earlier run of the folder, if any.
-fn failed_before<'a>(
-    known: &'a [Attempt],
-    (s, x): &(usize, Vec<f64>),
-) -> Option<&'a Attempt> {
+fn failed_before<'a>(known: &'a [Attempt], (s, x): &(usize, Vec<f64>)) -> Option<&'a Attempt> {
     known
         .iter()
         .find(|a| a.slot == *s && &a.values == x && a.error.is_some())

@@ -4,7 +4,8 @@
 //! [`BuildingSpec`] (a short TOML file) describes the massing, zoning, glazing and HVAC; bemcal
 //! writes the IDF itself: rectangular storeys, one zone per floor or perimeter + core zones with
 //! matched interzone surfaces, a VAV system with hot-water reheat split over two air-handling
-//! units (HVACTemplate objects, expanded before the run), chilled water from a district plant,
+//! units (or dedicated outdoor-air systems with fan coils, [`HvacSystem`]; HVACTemplate
+//! objects, expanded before the run), chilled water from a district plant,
 //! hot water from a boiler or district heating, and a stand-alone domestic hot water heater.
 //!
 //! Every calibration parameter of the reference study (its Tables 1-2) is exposed by name with
@@ -60,6 +61,32 @@ pub enum HeatingSource {
     District,
 }
 
+/// The HVAC system the generator writes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HvacSystem {
+    /// VAV with hot-water reheat on the air-handling units (the reference building's system):
+    /// the AHUs supply cold air all year and each zone's box reheats it.
+    #[default]
+    VavReheat,
+    /// A dedicated outdoor-air system per AHU (100 % outdoor air at the zones' occupied
+    /// outdoor-air rate, running at occupied hours only; optional sensible heat recovery; its
+    /// coils at the supply-air and preheat set-points) and a four-pipe fan coil per zone on the
+    /// same chilled- and hot-water loops, cycling with the load around the clock. Zones are
+    /// heated and cooled by water at the zone, with ventilation decoupled and no reheat: the
+    /// energy pattern of radiant slabs or chilled beams with a DOAS, which the HVACTemplate
+    /// objects cannot write directly. The DOAS's terminals hold their design flow (the
+    /// templates ignore the zones' outdoor-air schedule), so this system has no
+    /// `outdoor_air_ach_unoccupied` parameter: its unoccupied outdoor air is none.
+    DoasFanCoil,
+}
+
+impl HvacSystem {
+    fn is_default(&self) -> bool {
+        *self == HvacSystem::default()
+    }
+}
+
 /// The building description.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -104,6 +131,20 @@ pub struct BuildingSpec {
     /// One supply-air temperature parameter per AHU instead of one shared by both.
     #[serde(default)]
     pub separate_ahu_supply_air: bool,
+    /// The HVAC system: `vav_reheat` (the default) or `doas_fan_coil`. Left out of the
+    /// serialised spec at its default, so that earlier specs serialise as they did.
+    #[serde(default, skip_serializing_if = "HvacSystem::is_default")]
+    pub hvac: HvacSystem,
+    /// Sensible effectiveness of the dedicated outdoor-air system's heat recovery (0..0.95;
+    /// 0, the default, for none). Only with `hvac = "doas_fan_coil"`.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub heat_recovery_effectiveness: f64,
+    /// A differential dry-bulb economizer on the VAV air-handling units: outdoor air beyond the
+    /// minimum whenever it is cooler than the return air and cooling is wanted (free cooling,
+    /// which in a dry climate carries most of an efficient building's cooling). Off by default
+    /// (the reference building has none). Only with `hvac = "vav_reheat"`.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub economizer: bool,
     /// The year simulated: a calendar year (`2021`) or twelve months from another month
     /// (`"2017-04"`: 1 April 2017 to 31 March 2018, the run period across the year end), which
     /// sets the weekdays and holidays of each date; it must be the meters' year.
@@ -129,6 +170,10 @@ pub struct BuildingSpec {
     /// Overrides of default priors, by parameter name.
     #[serde(default)]
     pub priors: std::collections::BTreeMap<String, TriangularPrior>,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn default_name() -> String {
@@ -346,6 +391,27 @@ impl BuildingSpec {
                 ),
             ));
         }
+        let hr = self.heat_recovery_effectiveness;
+        if !(0.0..=0.95).contains(&hr) {
+            return Err(at(
+                "heat_recovery_effectiveness",
+                format!("heat_recovery_effectiveness = {hr:?}, expected 0..0.95"),
+            ));
+        }
+        if hr > 0.0 && self.hvac != HvacSystem::DoasFanCoil {
+            return Err(at(
+                "heat_recovery_effectiveness",
+                format!(
+                    "heat_recovery_effectiveness = {hr} needs hvac = \"doas_fan_coil\" (the generated VAV system has no heat recovery)"
+                ),
+            ));
+        }
+        if self.economizer && self.hvac != HvacSystem::VavReheat {
+            return Err(at(
+                "economizer",
+                "economizer = true needs hvac = \"vav_reheat\" (fan coils have no outdoor-air mixing)".into(),
+            ));
+        }
         let [a, b] = self.occupied_hours;
         if !(a < b && b <= 24) {
             return Err(at(
@@ -387,6 +453,9 @@ impl BuildingSpec {
     pub fn parameters(&self) -> Vec<ParameterDef> {
         let mut out = Vec::new();
         for p in &ENGINEERING {
+            if p.name == "outdoor_air_ach_unoccupied" && self.hvac == HvacSystem::DoasFanCoil {
+                continue;
+            }
             if p.name == "supply_air_temp" && self.separate_ahu_supply_air {
                 for ahu in 1..=2 {
                     out.push(def(
@@ -636,13 +705,20 @@ impl BuildingSpec {
             Some(DESIGN_COOLING_SETPOINT_C),
         );
         let oa_occ = value(v, "outdoor_air_ach_occupied")?;
-        let oa_unocc = value(v, "outdoor_air_ach_unoccupied")?;
+        let oa_unocc = match self.hvac {
+            HvacSystem::VavReheat => value(v, "outdoor_air_ach_unoccupied")?,
+            HvacSystem::DoasFanCoil => 0.0,
+        };
         let oa_frac = if oa_occ > 0.0 {
             (oa_unocc / oa_occ).min(1.0)
         } else {
             0.0
         };
         self.occupied_schedule(m, "Outdoor Air Fraction", "Fraction", 1.0, oa_frac, None);
+        if self.hvac == HvacSystem::DoasFanCoil {
+            // The DOAS runs at occupied hours (and on the sizing days).
+            self.occupied_schedule(m, "DOAS Availability", "Fraction", 1.0, 0.0, Some(1.0));
+        }
         let chw = value(v, "chilled_water_supply_temp")?;
         constant(m, "CHW Setpoint", "Temperature", chw);
         constant(m, "HW Setpoint", "Temperature", 80.0);
@@ -861,10 +937,8 @@ impl BuildingSpec {
     }
 
     /// The air side of the HVAC (HVACTemplate objects): the thermostat, the zones' outdoor air,
-    /// one VAV terminal with hot-water reheat per zone and the VAV air-handling units.
+    /// then the spec's [`HvacSystem`].
     fn add_air_systems(&self, m: &mut Idf, v: &ParameterValues) -> Result<(), Error> {
-        // HVAC: VAV with hot-water reheat, two AHUs, district chilled water, boiler or district
-        // hot water.
         let oa_occ = value(v, "outdoor_air_ach_occupied")?;
         m.add(
             "HVACTemplate:Thermostat",
@@ -882,6 +956,15 @@ impl BuildingSpec {
                 "Outdoor Air Fraction".into(),
             ],
         );
+        match self.hvac {
+            HvacSystem::VavReheat => self.add_vav_reheat(m),
+            HvacSystem::DoasFanCoil => self.add_doas_fan_coils(m),
+        }
+        Ok(())
+    }
+
+    /// One VAV terminal with hot-water reheat per zone and the VAV air-handling units.
+    fn add_vav_reheat(&self, m: &mut Idf) {
         let zones = self.zone_names();
         let ahus = self.ahu_count();
         for (i, z) in zones.iter().enumerate() {
@@ -944,13 +1027,69 @@ impl BuildingSpec {
                 "autosize".into(),
                 "FixedMinimum".into(),
                 "Outdoor Air Fraction".into(),
-                "NoEconomizer".into(),
+                if self.economizer {
+                    "DifferentialDryBulb"
+                } else {
+                    "NoEconomizer"
+                }
+                .into(),
             ];
             f.resize(38, String::new());
             f.push("StayOff".into()); // night cycle: the AHUs run around the clock anyway
             m.add("HVACTemplate:System:VAV", &f);
         }
-        Ok(())
+    }
+
+    /// One four-pipe fan coil per zone (cycling with the load, its outdoor air from the AHU's
+    /// dedicated outdoor-air system) and the dedicated outdoor-air systems, their coils on the
+    /// supply-air and preheat schedules (the same parameters as the VAV AHUs').
+    fn add_doas_fan_coils(&self, m: &mut Idf) {
+        for (i, z) in self.zone_names().iter().enumerate() {
+            let ahu = self.ahu_of_zone(i);
+            let mut f: Vec<String> = vec![
+                z.clone(),
+                "Thermostat".into(),
+                "autosize".into(),
+                "".into(),
+                "".into(),
+                "DetailedSpecification".into(),
+            ];
+            f.resize(10, String::new());
+            f.extend(["", "", "", "", "ChilledWater", ""].map(String::from));
+            f.push(num(DESIGN_SUPPLY_AIR_C));
+            f.extend(["HotWater", "", ""].map(String::from));
+            f.push(format!("AHU{ahu}")); // the zone's dedicated outdoor-air system
+            f.extend(["", "", "", ""].map(String::from));
+            f.push("Outdoor Air".into());
+            f.push("".into());
+            f.push("CyclingFan".into());
+            f.extend(["", "", ""].map(String::from)); // outdoor air: the DOAS's, not a schedule
+            f.push("None".into());
+            m.add("HVACTemplate:Zone:FanCoil", &f);
+        }
+        let hr = self.heat_recovery_effectiveness;
+        for ahu in 1..=self.ahu_count() {
+            let mut f: Vec<String> = vec![
+                format!("AHU{ahu}"),
+                "DOAS Availability".into(),
+                "DirectIntoZone".into(),
+                "autosize".into(),
+            ];
+            f.resize(8, String::new());
+            f.extend(["DrawThrough", "ChilledWater", "", "Scheduled"].map(String::from));
+            f.push(num(DESIGN_SUPPLY_AIR_C));
+            f.push(format!("AHU{ahu} Supply Air"));
+            f.resize(21, String::new());
+            f.extend(["HotWater", "", "Scheduled", ""].map(String::from));
+            f.push(format!("AHU{ahu} Preheat"));
+            f.resize(32, String::new());
+            if hr > 0.0 {
+                f.extend(["Sensible".to_string(), num(hr), "".into(), "Plate".into()]);
+            } else {
+                f.push("None".into());
+            }
+            m.add("HVACTemplate:System:DedicatedOutdoorAir", &f);
+        }
     }
 
     /// The plant (HVACTemplate objects): the chilled-water loop on district cooling and the
@@ -1531,6 +1670,65 @@ mod tests {
         }
         assert_eq!(idf.of_class("HVACTemplate:Zone:VAV").count(), 20);
         assert_eq!(idf.of_class("HVACTemplate:System:VAV").count(), 2);
+    }
+
+    #[test]
+    fn the_air_system_follows_the_spec() {
+        let v = crate::params::complete_values(
+            &BuildingSpec::default().parameters(),
+            &ParameterValues::new(),
+        )
+        .unwrap();
+        let vav = BuildingSpec::default().to_idf(&v).unwrap();
+        assert_eq!(vav.of_class("HVACTemplate:Zone:FanCoil").count(), 0);
+        let ahu = vav.of_class("HVACTemplate:System:VAV").next().unwrap();
+        assert_eq!(ahu.fields[28], "NoEconomizer");
+        let spec = |text: &str| BuildingSpec::from_toml(text, std::path::Path::new("b.toml"));
+        let econ = spec("economizer = true\n").unwrap().to_idf(&v).unwrap();
+        let ahu = econ.of_class("HVACTemplate:System:VAV").next().unwrap();
+        assert_eq!(ahu.fields[28], "DifferentialDryBulb");
+        let doas = spec("hvac = \"doas_fan_coil\"\nheat_recovery_effectiveness = 0.7\n")
+            .unwrap()
+            .to_idf(&v)
+            .unwrap();
+        assert_eq!(doas.of_class("HVACTemplate:System:VAV").count(), 0);
+        assert_eq!(doas.of_class("HVACTemplate:Zone:VAV").count(), 0);
+        let coils: Vec<_> = doas.of_class("HVACTemplate:Zone:FanCoil").collect();
+        assert_eq!(coils.len(), 20);
+        assert_eq!(coils[0].fields[20], "AHU1");
+        assert_eq!(coils[19].fields[20], "AHU2");
+        assert_eq!(coils[0].fields[31], "None");
+        let names: Vec<String> = spec("hvac = \"doas_fan_coil\"\n")
+            .unwrap()
+            .parameters()
+            .into_iter()
+            .map(|d| d.name)
+            .collect();
+        assert!(!names.contains(&"outdoor_air_ach_unoccupied".to_string()));
+        assert!(names.contains(&"outdoor_air_ach_occupied".to_string()));
+        let units: Vec<_> = doas
+            .of_class("HVACTemplate:System:DedicatedOutdoorAir")
+            .collect();
+        assert_eq!(units.len(), 2);
+        assert_eq!(units[1].fields[13], "AHU2 Supply Air");
+        assert_eq!(units[1].fields[25], "AHU2 Preheat");
+        assert_eq!(units[1].fields[32..34], ["Sensible", "0.7"]);
+        // Options that the system does not have are refused, naming the key.
+        let e = spec("heat_recovery_effectiveness = 0.6\n").unwrap_err();
+        assert!(
+            e.to_string().contains("needs hvac = \"doas_fan_coil\""),
+            "{e}"
+        );
+        let e = spec("hvac = \"doas_fan_coil\"\neconomizer = true\n").unwrap_err();
+        assert!(e.to_string().contains("b.toml:2"), "{e}");
+        let e = spec("hvac = \"radiant\"\n").unwrap_err();
+        assert!(e.to_string().contains("b.toml:1"), "{e}");
+        // The default system is left out of the serialised spec (simulation cache keys).
+        let text = toml::to_string(&BuildingSpec::default()).unwrap();
+        assert!(
+            !text.contains("hvac") && !text.contains("economizer"),
+            "{text}"
+        );
     }
 
     #[test]

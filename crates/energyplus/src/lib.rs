@@ -22,7 +22,7 @@ pub mod runner;
 
 use std::path::PathBuf;
 
-pub use building::BuildingSpec;
+pub use building::{BuildingSpec, HvacSystem};
 pub use engine::Engine;
 pub use meters::{HourlyOutputs, OutputSpec};
 pub use model::Model;

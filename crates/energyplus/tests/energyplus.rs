@@ -719,3 +719,45 @@ fn a_day_type_calendar_moves_the_weekend() {
     // New Year's Day (a Friday) is listed as a weekend day; a listed weekday overrides a holiday.
     assert_eq!(cal.day_type(1, 1), Some(bemcal_weather::DayType::Weekend));
 }
+
+/// The other air systems (issue 19: a real building's system, not only the reference's VAV
+/// reheat) simulate, and their options and the set-points move the results the way physics
+/// says: an economizer takes cooling off the coils, heat recovery takes heating off the DOAS's
+/// coils, and the fan coils follow the zones' cooling set-point.
+#[test]
+fn economizer_and_doas_fan_coils_simulate_and_respond() {
+    let Some(r) = runner() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |spec: BuildingSpec, set: &[(&str, f64)], name: &str| {
+        let out = simulate(&r, &Model::generated(spec), set, &tmp.path().join(name)).unwrap();
+        (total(&out, "heating_kwh"), total(&out, "cooling_kwh"))
+    };
+    let econ = BuildingSpec {
+        economizer: true,
+        ..small_spec()
+    };
+    let (_, c_vav) = run(small_spec(), &[], "vav");
+    let (_, c_econ) = run(econ, &[], "econ");
+    assert!(
+        c_econ < 0.97 * c_vav,
+        "economizer: cooling {c_vav} -> {c_econ}"
+    );
+    let doas = |hr: f64| BuildingSpec {
+        hvac: bemcal_energyplus::HvacSystem::DoasFanCoil,
+        heat_recovery_effectiveness: hr,
+        ..small_spec()
+    };
+    let warm = [("cooling_setpoint_occupied", 25.5)];
+    let (h_none, _) = run(doas(0.0), &warm, "doas0");
+    let (h_hr, c_warm) = run(doas(0.7), &warm, "doas7");
+    let (_, c_cool) = run(doas(0.7), &[("cooling_setpoint_occupied", 21.5)], "doas7c");
+    eprintln!("DOAS heating {h_none:.0} -> {h_hr:.0} kWh with heat recovery; cooling {c_warm:.0} -> {c_cool:.0} kWh at 25.5 -> 21.5 C");
+    assert!(
+        h_hr < 0.95 * h_none,
+        "heat recovery: heating {h_none} -> {h_hr}"
+    );
+    assert!(
+        c_cool > 1.02 * c_warm,
+        "fan coils: cooling {c_warm} -> {c_cool}"
+    );
+}

@@ -144,6 +144,20 @@ fn write_meters(s: &mut String, r: &Precalibration) {
             q.flat_run_min_hours,
             q.flat_run_count
         );
+        for z in &q.zero_runs {
+            let start = m.year.slot_time(z.start_slot);
+            let end = start + chrono::Duration::hours(z.hours as i64);
+            let _ = writeln!(
+                s,
+                "    zero for {:.0} days, {} to {} (an outage? if the meter was active then, \
+                 `exclude = \"{}..{}\"` in its [[meters.columns]])",
+                z.hours as f64 / 24.0,
+                start.format("%Y-%m-%d %H:%M"),
+                end.format("%Y-%m-%d %H:%M"),
+                start.date(),
+                (end - chrono::Duration::hours(1)).date(),
+            );
+        }
     }
     for n in &m.notes {
         let _ = writeln!(s, "  note: {n}");

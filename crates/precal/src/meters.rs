@@ -300,6 +300,12 @@ pub struct MeterColumn {
     /// Unit of the values (default kW, hourly mean).
     #[serde(default)]
     pub unit: EnergyUnit,
+    /// Periods whose readings this meter got wrong (an outage that reads zero, a test, a
+    /// logger fault): their hours become missing for this meter alone, with a note, so that
+    /// neither pre-calibration nor the calibration fits them. Written like `[validation]
+    /// holdout`: `"2011-03-04..2011-03-31"`, `"mar"`, or a list.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exclude: Option<bemcal_weather::period::Holdout>,
 }
 
 /// How to read a meters CSV. Sits in the project file as `[meters]`:
@@ -496,6 +502,7 @@ pub fn detect_columns(headers: &[&str], timestamp_column: Option<&str>) -> Vec<M
             column: h.to_string(),
             role,
             unit,
+            exclude: None,
         });
     }
     out
@@ -862,23 +869,53 @@ pub fn parse_meters(
     if grid.slot_line.iter().all(|&l| l == 0) {
         return Err(no_rows_in_year(&table.rows, year, path));
     }
-    let series = table
-        .columns
-        .into_iter()
-        .zip(grid.values)
-        .map(|((c, _), values)| MeterSeries {
+    let mut series = Vec::new();
+    for ((c, _), mut values) in table.columns.into_iter().zip(grid.values) {
+        if let Some(period) = &c.exclude {
+            exclude_period(&mut values, period, year, &c.column, &mut notes)
+                .map_err(|m| file_err(path, m))?;
+        }
+        series.push(MeterSeries {
             role: c.role,
             column: c.column,
             unit: c.unit,
             values,
-        })
-        .collect();
+        });
+    }
     Ok(MeterData {
         year,
         source: path.to_path_buf(),
         series,
         notes,
     })
+}
+
+/// Marks a meter's excluded `period` missing (`[[meters.columns]] exclude`) and notes how many
+/// readings that removed.
+fn exclude_period(
+    values: &mut [f64],
+    period: &bemcal_weather::period::Holdout,
+    year: GridYear,
+    column: &str,
+    notes: &mut Vec<String>,
+) -> Result<(), String> {
+    let present = |h: usize| values[h].is_finite();
+    let hours = period.hours(year, values.len(), &present).map_err(|m| {
+        let m = m.strip_prefix("holdout ").unwrap_or(&m);
+        format!("column '{column}', exclude {m}")
+    })?;
+    let mut removed = 0;
+    for (v, &out) in values.iter_mut().zip(&hours) {
+        if out && v.is_finite() {
+            *v = f64::NAN;
+            removed += 1;
+        }
+    }
+    notes.push(format!(
+        "column '{column}': {removed} readings in {period} excluded as the project says \
+         (`exclude`): missing for this meter"
+    ));
+    Ok(())
 }
 
 /// The note of sub-hourly readings aggregated to hours.
@@ -1469,6 +1506,12 @@ pub struct MeterQuality {
     pub flat_run_min_hours: usize,
     /// Hours with exactly zero.
     pub zero_hours: usize,
+    /// Runs of zero readings lasting a week or more ([`ZERO_RUN_MIN_HOURS`]), in time order
+    /// (a missing hour ends a run; each [`Gap`] here is a run of zeros, not of missing hours).
+    /// A heating meter's summer is one; a week of zeros where the meter is otherwise active is
+    /// usually an outage, to be excluded (`[[meters.columns]] exclude`) rather than fitted.
+    #[serde(default)]
+    pub zero_runs: Vec<Gap>,
     /// Hours with a negative value (kept by policy).
     pub negative_hours: usize,
     /// Sum of the values, kWh.
@@ -1478,6 +1521,9 @@ pub struct MeterQuality {
     /// Largest value, kWh per hour.
     pub max_kwh: f64,
 }
+
+/// The shortest run of zero readings that [`MeterQuality::zero_runs`] lists: a week.
+pub const ZERO_RUN_MIN_HOURS: usize = 7 * 24;
 
 /// Quality summary of one kWh-per-hour series on the grid of `year`.
 pub fn quality(
@@ -1529,6 +1575,22 @@ pub fn quality(
             });
         }
     }
+    let mut zero_runs = Vec::new();
+    let mut t = 0;
+    while t < n {
+        let s = t;
+        while t < n && values[t] == 0.0 {
+            t += 1;
+        }
+        if t - s >= ZERO_RUN_MIN_HOURS {
+            zero_runs.push(Gap {
+                hours: t - s,
+                start_slot: order[s],
+                start: year.slot_time(order[s]).to_string(),
+            });
+        }
+        t = t.max(s + 1);
+    }
     let flat_run_count = flats.len();
     flats.sort_by(|a, b| b.hours.cmp(&a.hours).then(a.start_slot.cmp(&b.start_slot)));
     flats.truncate(10);
@@ -1551,6 +1613,7 @@ pub fn quality(
         flat_run_count,
         flat_run_min_hours: min_h,
         zero_hours: values.iter().filter(|&&v| v == 0.0).count(),
+        zero_runs,
         negative_hours: values.iter().filter(|&&v| v < 0.0).count(),
         total_kwh: total,
         mean_kwh: if present == 0 {
@@ -1572,6 +1635,7 @@ mod tests {
                 column: "Heat".into(),
                 role: MeterRole::Heating,
                 unit: EnergyUnit::KWh,
+                exclude: None,
             }],
             ..MeterSpec::default()
         }
@@ -1605,6 +1669,7 @@ mod tests {
             column: "Gas (therm)".into(),
             role: MeterRole::Submeter("gas".into()),
             unit: EnergyUnit::Therm,
+            exclude: None,
         });
         let e = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap_err();
         let msg = e.to_string();
@@ -2112,5 +2177,52 @@ mod tests {
         assert_eq!(s.timestamp_format, DEFAULT_TIMESTAMP_FORMAT);
         let j = serde_json::to_string(&s).unwrap();
         assert!(j.contains("\"role\":\"data_center\""), "{j}");
+    }
+
+    #[test]
+    fn an_excluded_period_is_missing_for_its_meter_alone() {
+        // Three days of two meters; the heating meter read zero through an outage on the 2nd.
+        let mut text = String::from("Time,Heat,Elec\n");
+        for d in 1..=3 {
+            for h in 0..24 {
+                let heat = if d == 2 { 0.0 } else { 5.0 };
+                text.push_str(&format!("2011-01-0{d}T{h:02}:00,{heat},7\n"));
+            }
+        }
+        let mut s: MeterSpec = toml::from_str(
+            r#"
+timestamp_format = "iso8601"
+convention = "hour_beginning"
+[[columns]]
+column = "Heat"
+role = "heating"
+unit = "kWh"
+exclude = "2011-01-02..2011-01-02"
+[[columns]]
+column = "Elec"
+role = "electricity"
+unit = "kWh"
+"#,
+        )
+        .unwrap();
+        let d = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap();
+        let heat = &d.series[0].values;
+        assert!(heat[..24].iter().all(|v| *v == 5.0));
+        assert!(heat[24..48].iter().all(|v| v.is_nan()));
+        assert!(heat[48..72].iter().all(|v| *v == 5.0));
+        assert!(d.series[1].values[..72].iter().all(|v| *v == 7.0));
+        let note = d.notes.iter().find(|n| n.contains("exclude")).unwrap();
+        assert!(
+            note.starts_with("column 'Heat': 24 readings in 2011-01-02..2011-01-02"),
+            "{note}"
+        );
+        // A period outside the meters' year is a clear error naming the column.
+        s.columns[0].exclude = Some("2012-03".parse().unwrap());
+        let e = parse_meters(&text, Path::new("m.csv"), &s, None, None).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("column 'Heat', exclude 2012-03: the meters cover"),
+            "{e}"
+        );
     }
 }

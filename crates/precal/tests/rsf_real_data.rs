@@ -255,3 +255,39 @@ fn fifteen_minute_meters_in_clock_time_aggregate_to_the_hourly_meter() {
         assert!(got[8759].is_nan());
     }
 }
+
+/// The RSF's heating meter reads zero from 4 to 30 March 2011 (Golden's March is
+/// not without heating: February averages 300 kW, April 65 kW): the quality summary lists that
+/// run beside the summer's, and `exclude` makes it missing.
+#[test]
+fn rsf_heating_outage_is_listed_and_can_be_excluded() {
+    let Some((csv, _)) = rsf() else {
+        eprintln!("shared data absent; skipping");
+        return;
+    };
+    let mut spec = MeterSpec::default();
+    let m = read_meters(&csv, &spec, None, None).unwrap();
+    let h = m.get(&MeterRole::Heating).unwrap();
+    let q = bemcal_precal::meters::quality("heating", &h.values, m.year, 24);
+    let starts: Vec<&str> = q.zero_runs.iter().map(|z| &z.start[..10]).collect();
+    let march = q
+        .zero_runs
+        .iter()
+        .find(|z| z.start.starts_with("2011-03"))
+        .unwrap_or_else(|| panic!("no zero run in March: {starts:?}"));
+    // 4 March 03:00 to 30 March 10:00, hour-beginning.
+    assert_eq!(
+        (march.start.as_str(), march.hours),
+        ("2011-03-04 03:00:00", 26 * 24 + 8)
+    );
+    spec.columns = bemcal_precal::meters::detect_columns(
+        &["Date and Time", "Total Heating (kW)"],
+        Some("Date and Time"),
+    );
+    spec.timestamp_column = Some("Date and Time".into());
+    spec.columns[0].exclude = Some("2011-03-04..2011-03-30".parse().unwrap());
+    let x = read_meters(&csv, &spec, None, None).unwrap();
+    let hx = x.get(&MeterRole::Heating).unwrap();
+    let missing = hx.values.iter().filter(|v| v.is_nan()).count();
+    assert_eq!(missing, 1 + 27 * 24, "{:?}", x.notes);
+}
