@@ -1522,6 +1522,29 @@ pub struct MeterQuality {
     pub max_kwh: f64,
 }
 
+/// The maximal runs of consecutive `values` that are `member`s, a run going on while `same`
+/// holds between its first value and the next: (first index, length), in order.
+fn runs(
+    values: &[f64],
+    member: impl Fn(f64) -> bool,
+    same: impl Fn(f64, f64) -> bool,
+) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    let mut t = 0;
+    while t < values.len() {
+        let s = t;
+        t += 1;
+        if !member(values[s]) {
+            continue;
+        }
+        while t < values.len() && member(values[t]) && same(values[s], values[t]) {
+            t += 1;
+        }
+        out.push((s, t - s));
+    }
+    out
+}
+
 /// The shortest run of zero readings that [`MeterQuality::zero_runs`] lists: a week.
 pub const ZERO_RUN_MIN_HOURS: usize = 7 * 24;
 
@@ -1538,59 +1561,32 @@ pub fn quality(
     let values = &values[..];
     let n = values.len();
     let present = values.iter().filter(|v| v.is_finite()).count();
-    let mut longest: Option<(usize, usize)> = None;
-    let mut t = 0;
-    while t < n {
-        if values[t].is_finite() {
-            t += 1;
-            continue;
-        }
-        let s = t;
-        while t < n && !values[t].is_finite() {
-            t += 1;
-        }
-        if longest.is_none_or(|(_, h)| t - s > h) {
-            longest = Some((s, t - s));
-        }
-    }
-    let mut flats = Vec::new();
+    let gap = |&(s, hours): &(usize, usize)| Gap {
+        hours,
+        start_slot: order[s],
+        start: year.slot_time(order[s]).to_string(),
+    };
+    // The first of the longest runs of missing hours.
+    let longest = runs(values, |v| !v.is_finite(), |_, _| true)
+        .into_iter()
+        .rev()
+        .max_by_key(|&(_, h)| h);
     let min_h = flat_run_min_hours.max(2);
-    let mut t = 0;
-    while t < n {
-        let v = values[t];
-        let s = t;
-        t += 1;
-        if !v.is_finite() || v == 0.0 {
-            continue;
-        }
-        while t < n && values[t] == v {
-            t += 1;
-        }
-        if t - s >= min_h {
-            flats.push(FlatRun {
-                hours: t - s,
-                start_slot: order[s],
-                start: year.slot_time(order[s]).to_string(),
-                value: v,
-            });
-        }
-    }
-    let mut zero_runs = Vec::new();
-    let mut t = 0;
-    while t < n {
-        let s = t;
-        while t < n && values[t] == 0.0 {
-            t += 1;
-        }
-        if t - s >= ZERO_RUN_MIN_HOURS {
-            zero_runs.push(Gap {
-                hours: t - s,
-                start_slot: order[s],
-                start: year.slot_time(order[s]).to_string(),
-            });
-        }
-        t = t.max(s + 1);
-    }
+    let mut flats: Vec<FlatRun> = runs(values, |v| v.is_finite() && v != 0.0, |a, b| a == b)
+        .into_iter()
+        .filter(|&(_, h)| h >= min_h)
+        .map(|(s, hours)| FlatRun {
+            hours,
+            start_slot: order[s],
+            start: year.slot_time(order[s]).to_string(),
+            value: values[s],
+        })
+        .collect();
+    let zero_runs: Vec<Gap> = runs(values, |v| v == 0.0, |_, _| true)
+        .iter()
+        .filter(|&&(_, h)| h >= ZERO_RUN_MIN_HOURS)
+        .map(gap)
+        .collect();
     let flat_run_count = flats.len();
     flats.sort_by(|a, b| b.hours.cmp(&a.hours).then(a.start_slot.cmp(&b.start_slot)));
     flats.truncate(10);
@@ -1604,11 +1600,7 @@ pub fn quality(
             100.0 * present as f64 / n as f64
         },
         missing_hours: n - present,
-        longest_gap: longest.map(|(s, h)| Gap {
-            hours: h,
-            start_slot: order[s],
-            start: year.slot_time(order[s]).to_string(),
-        }),
+        longest_gap: longest.as_ref().map(gap),
         flat_runs: flats,
         flat_run_count,
         flat_run_min_hours: min_h,
@@ -2162,6 +2154,20 @@ mod tests {
         // 70..100 = 30 hours of 1.0.
         assert_eq!(q.flat_run_count, 1);
         assert_eq!(q.flat_runs[0].hours, 30);
+        // Ten zero hours are no zero run; a week is, and two equal gaps report the first.
+        assert!(q.zero_runs.is_empty());
+        let mut v = vec![1.0; 400];
+        v[5..8].fill(f64::NAN);
+        v[20..23].fill(f64::NAN);
+        v[100..268].fill(0.0);
+        let q = quality("heating", &v, GridYear::calendar(2011), 24);
+        assert_eq!(q.longest_gap.as_ref().unwrap().start_slot, 5);
+        assert_eq!(q.zero_runs.len(), 1);
+        assert_eq!(
+            (q.zero_runs[0].start_slot, q.zero_runs[0].hours),
+            (100, 168)
+        );
+        assert_eq!(q.zero_runs[0].start, "2011-01-05 04:00:00");
     }
 
     #[test]
