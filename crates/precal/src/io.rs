@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::meters::{GridYear, MeterSpec, HOURS};
+use crate::meters::{zero_run_in_off_season, GridYear, MeterSpec, HOURS};
 use crate::pipeline::{PrecalOptions, Precalibration, PriorsFile};
 use crate::PrecalError;
 
@@ -144,18 +144,30 @@ fn write_meters(s: &mut String, r: &Precalibration) {
             q.flat_run_min_hours,
             q.flat_run_count
         );
+        let season = &r.disaggregation.non_heating_months;
         for z in &q.zero_runs {
             let start = m.year.slot_time(z.start_slot);
             let end = start + chrono::Duration::hours(z.hours as i64);
+            let hint = match zero_run_in_off_season(&series.role, z, m.year, season) {
+                Some(true) => "its meter's off season".to_string(),
+                in_season => format!(
+                    "{}an outage? if the meter was active then, `exclude = \"{}..{}\"` in its \
+                     [[meters.columns]]",
+                    if in_season == Some(false) {
+                        "in its meter's season: "
+                    } else {
+                        ""
+                    },
+                    start.date(),
+                    (end - chrono::Duration::hours(1)).date(),
+                ),
+            };
             let _ = writeln!(
                 s,
-                "    zero for {:.0} days, {} to {} (an outage? if the meter was active then, \
-                 `exclude = \"{}..{}\"` in its [[meters.columns]])",
+                "    zero for {:.0} days, {} to {} ({hint})",
                 z.hours as f64 / 24.0,
                 start.format("%Y-%m-%d %H:%M"),
                 end.format("%Y-%m-%d %H:%M"),
-                start.date(),
-                (end - chrono::Duration::hours(1)).date(),
             );
         }
     }

@@ -1545,6 +1545,31 @@ fn runs(
     out
 }
 
+/// Whether a run of zero readings lies in the season when its meter is expected to read zero:
+/// a heating meter's in the non-heating months (pre-calibration's
+/// [`crate::disaggregate::Disaggregation::non_heating_months`]), a cooling meter's outside them;
+/// at least half its hours there. `None` for the other meters, whose zeros have no season.
+pub fn zero_run_in_off_season(
+    role: &MeterRole,
+    run: &Gap,
+    year: GridYear,
+    non_heating_months: &[u32],
+) -> Option<bool> {
+    let off_when_non_heating = match role {
+        MeterRole::Heating => true,
+        MeterRole::Cooling => false,
+        _ => return None,
+    };
+    let start = year.slot_time(run.start_slot);
+    let off = (0..run.hours)
+        .filter(|&k| {
+            let month = (start + Duration::hours(k as i64)).month();
+            non_heating_months.contains(&month) == off_when_non_heating
+        })
+        .count();
+    Some(2 * off >= run.hours)
+}
+
 /// The shortest run of zero readings that [`MeterQuality::zero_runs`] lists: a week.
 pub const ZERO_RUN_MIN_HOURS: usize = 7 * 24;
 
@@ -2168,6 +2193,22 @@ mod tests {
             (100, 168)
         );
         assert_eq!(q.zero_runs[0].start, "2011-01-05 04:00:00");
+        // In January a cooling meter's zeros are its season's; a heating meter's are not.
+        let y = GridYear::calendar(2011);
+        let summer = [6, 7, 8, 9];
+        let run = &q.zero_runs[0];
+        assert_eq!(
+            zero_run_in_off_season(&MeterRole::Cooling, run, y, &summer),
+            Some(true)
+        );
+        assert_eq!(
+            zero_run_in_off_season(&MeterRole::Heating, run, y, &summer),
+            Some(false)
+        );
+        assert_eq!(
+            zero_run_in_off_season(&MeterRole::Electricity, run, y, &summer),
+            None
+        );
     }
 
     #[test]
