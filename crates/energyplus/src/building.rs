@@ -435,7 +435,12 @@ impl BuildingSpec {
         for (name, p) in &self.priors {
             let at = |m: String| (vec!["priors".to_string(), name.clone()], m);
             if !names.contains(name) {
-                return Err(at(format!("priors.{name}: unknown parameter")));
+                let why = if name == "outdoor_air_ach_unoccupied" {
+                    " (hvac = \"doas_fan_coil\" has none: its DOAS runs at occupied hours only)"
+                } else {
+                    ""
+                };
+                return Err(at(format!("priors.{name}: unknown parameter{why}")));
             }
             TriangularPrior::new(p.min, p.mode, p.max)
                 .map_err(|m| at(format!("priors.{name}: {m}")))?;

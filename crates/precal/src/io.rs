@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::meters::{zero_run_in_off_season, GridYear, MeterSpec, HOURS};
+use crate::meters::{run_hours, zero_run_in_off_season, GridYear, MeterSpec, HOURS};
 use crate::pipeline::{PrecalOptions, Precalibration, PriorsFile};
 use crate::PrecalError;
 
@@ -144,12 +144,20 @@ fn write_meters(s: &mut String, r: &Precalibration) {
             q.flat_run_min_hours,
             q.flat_run_count
         );
-        let season = &r.disaggregation.non_heating_months;
+        let d = &r.disaggregation;
         for z in &q.zero_runs {
-            let start = m.year.slot_time(z.start_slot);
-            let end = start + chrono::Duration::hours(z.hours as i64);
-            let hint = match zero_run_in_off_season(&series.role, z, m.year, season) {
-                Some(true) => "its meter's off season".to_string(),
+            let mut hours = run_hours(z, m.year);
+            let (first, last) = (hours.next().unwrap_or_default(), hours.last());
+            let last = last.unwrap_or(first);
+            let season = zero_run_in_off_season(
+                &series.role,
+                z,
+                m.year,
+                &d.non_heating_months,
+                &d.heating_months,
+            );
+            let hint = match season {
+                Some(true) => "in its meter's off season: expected".to_string(),
                 in_season => format!(
                     "{}an outage? if the meter was active then, `exclude = \"{}..{}\"` in its \
                      [[meters.columns]]",
@@ -158,16 +166,16 @@ fn write_meters(s: &mut String, r: &Precalibration) {
                     } else {
                         ""
                     },
-                    start.date(),
-                    (end - chrono::Duration::hours(1)).date(),
+                    first.date(),
+                    last.date(),
                 ),
             };
             let _ = writeln!(
                 s,
                 "    zero for {:.0} days, {} to {} ({hint})",
                 z.hours as f64 / 24.0,
-                start.format("%Y-%m-%d %H:%M"),
-                end.format("%Y-%m-%d %H:%M"),
+                first.format("%Y-%m-%d %H:%M"),
+                last.format("%Y-%m-%d %H:%M"),
             );
         }
     }

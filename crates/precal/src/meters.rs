@@ -1546,28 +1546,35 @@ fn runs(
 }
 
 /// Whether a run of zero readings lies in the season when its meter is expected to read zero:
-/// a heating meter's in the non-heating months (pre-calibration's
-/// [`crate::disaggregate::Disaggregation::non_heating_months`]), a cooling meter's outside them;
-/// at least half its hours there. `None` for the other meters, whose zeros have no season.
+/// a heating meter's in the non-heating months, a cooling meter's in the heating (cold) months
+/// (pre-calibration's [`crate::disaggregate::Disaggregation`] `non_heating_months` and
+/// `heating_months`); at least half its hours there. `None` for the other meters, whose zeros
+/// have no season, and when that season is unknown (an empty list).
 pub fn zero_run_in_off_season(
     role: &MeterRole,
     run: &Gap,
     year: GridYear,
     non_heating_months: &[u32],
+    heating_months: &[u32],
 ) -> Option<bool> {
-    let off_when_non_heating = match role {
-        MeterRole::Heating => true,
-        MeterRole::Cooling => false,
+    let off_months = match role {
+        MeterRole::Heating => non_heating_months,
+        MeterRole::Cooling => heating_months,
         _ => return None,
     };
-    let start = year.slot_time(run.start_slot);
-    let off = (0..run.hours)
-        .filter(|&k| {
-            let month = (start + Duration::hours(k as i64)).month();
-            non_heating_months.contains(&month) == off_when_non_heating
-        })
+    if off_months.is_empty() {
+        return None;
+    }
+    let off = run_hours(run, year)
+        .filter(|t| off_months.contains(&t.month()))
         .count();
     Some(2 * off >= run.hours)
+}
+
+/// The hours of a run on the grid, in time order (a year from another month runs on across
+/// the year end; the grid has no 29 February).
+pub fn run_hours(run: &Gap, year: GridYear) -> impl Iterator<Item = NaiveDateTime> + '_ {
+    (0..run.hours).map(move |k| year.slot_time((run.start_slot + k) % HOURS))
 }
 
 /// The shortest run of zero readings that [`MeterQuality::zero_runs`] lists: a week.
@@ -2195,20 +2202,22 @@ mod tests {
         assert_eq!(q.zero_runs[0].start, "2011-01-05 04:00:00");
         // In January a cooling meter's zeros are its season's; a heating meter's are not.
         let y = GridYear::calendar(2011);
-        let summer = [6, 7, 8, 9];
+        let (summer, cold) = ([6, 7, 8, 9], [1, 2, 3, 11, 12]);
         let run = &q.zero_runs[0];
-        assert_eq!(
-            zero_run_in_off_season(&MeterRole::Cooling, run, y, &summer),
-            Some(true)
-        );
-        assert_eq!(
-            zero_run_in_off_season(&MeterRole::Heating, run, y, &summer),
-            Some(false)
-        );
-        assert_eq!(
-            zero_run_in_off_season(&MeterRole::Electricity, run, y, &summer),
-            None
-        );
+        let judge = |role| zero_run_in_off_season(&role, run, y, &summer, &cold);
+        assert_eq!(judge(MeterRole::Cooling), Some(true));
+        assert_eq!(judge(MeterRole::Heating), Some(false));
+        assert_eq!(judge(MeterRole::Electricity), None);
+        let unknown = zero_run_in_off_season(&MeterRole::Cooling, run, y, &summer, &[]);
+        assert_eq!(unknown, None);
+        // A run across 28 February in a leap year: the grid has no 29 February.
+        let feb = Gap {
+            hours: 48,
+            start_slot: 58 * 24,
+            start: String::new(),
+        };
+        let last = run_hours(&feb, GridYear::calendar(2016)).last().unwrap();
+        assert_eq!(last.to_string(), "2016-03-01 23:00:00");
     }
 
     #[test]

@@ -280,27 +280,28 @@ fn rsf_heating_outage_is_listed_and_can_be_excluded() {
         (march.start.as_str(), march.hours),
         ("2011-03-04 03:00:00", 26 * 24 + 8)
     );
-    // With June-September the non-heating season (what pre-calibration finds for these meters
-    // and the Golden TMY3), the March run is the one in its meter's season; the summer's and
-    // every zero run of the cooling meter (all in the heating season) are off-season.
+    // With June-September the non-heating season and the months below 10 C the heating season
+    // (what pre-calibration finds for these meters and the Golden TMY3), the March run is the
+    // one in its meter's season; the summer's and the cooling meter's seven (all in the cold
+    // months) are off-season.
     use bemcal_precal::meters::zero_run_in_off_season;
-    let season = [6, 7, 8, 9];
+    let (summer, cold) = ([6, 7, 8, 9], [1, 2, 3, 4, 10, 11, 12]);
+    let judge = |role, z| zero_run_in_off_season(&role, z, m.year, &summer, &cold);
+    assert_eq!(q.zero_runs.len(), 2, "{:?}", q.zero_runs);
     let in_season: Vec<&str> = q
         .zero_runs
         .iter()
-        .filter(|z| zero_run_in_off_season(&MeterRole::Heating, z, m.year, &season) == Some(false))
+        .filter(|z| judge(MeterRole::Heating, z) == Some(false))
         .map(|z| &z.start[..10])
         .collect();
     assert_eq!(in_season, ["2011-03-04"]);
     let c = m.get(&MeterRole::Cooling).unwrap();
     let qc = bemcal_precal::meters::quality("cooling", &c.values, m.year, 24);
-    assert!(qc.zero_runs.len() >= 5, "{:?}", qc.zero_runs);
-    assert!(qc.zero_runs.iter().all(|z| zero_run_in_off_season(
-        &MeterRole::Cooling,
-        z,
-        m.year,
-        &season
-    ) == Some(true)));
+    assert_eq!(qc.zero_runs.len(), 7, "{:?}", qc.zero_runs);
+    assert!(qc
+        .zero_runs
+        .iter()
+        .all(|z| judge(MeterRole::Cooling, z) == Some(true)));
     spec.columns = bemcal_precal::meters::detect_columns(
         &["Date and Time", "Total Heating (kW)"],
         Some("Date and Time"),
