@@ -85,6 +85,17 @@ impl HvacSystem {
     fn is_default(&self) -> bool {
         *self == HvacSystem::default()
     }
+
+    /// The generator's parameters this system does not have, each with the reason.
+    fn omitted(self) -> &'static [(&'static str, &'static str)] {
+        match self {
+            HvacSystem::VavReheat => &[],
+            HvacSystem::DoasFanCoil => &[(
+                "outdoor_air_ach_unoccupied",
+                "hvac = \"doas_fan_coil\" has none: its DOAS runs at occupied hours only",
+            )],
+        }
+    }
 }
 
 /// The building description.
@@ -435,10 +446,9 @@ impl BuildingSpec {
         for (name, p) in &self.priors {
             let at = |m: String| (vec!["priors".to_string(), name.clone()], m);
             if !names.contains(name) {
-                let why = if name == "outdoor_air_ach_unoccupied" {
-                    " (hvac = \"doas_fan_coil\" has none: its DOAS runs at occupied hours only)"
-                } else {
-                    ""
+                let why = match self.hvac.omitted().iter().find(|(n, _)| n == name) {
+                    Some((_, reason)) => format!(" ({reason})"),
+                    None => String::new(),
                 };
                 return Err(at(format!("priors.{name}: unknown parameter{why}")));
             }
@@ -458,7 +468,7 @@ impl BuildingSpec {
     pub fn parameters(&self) -> Vec<ParameterDef> {
         let mut out = Vec::new();
         for p in &ENGINEERING {
-            if p.name == "outdoor_air_ach_unoccupied" && self.hvac == HvacSystem::DoasFanCoil {
+            if self.hvac.omitted().iter().any(|(n, _)| *n == p.name) {
                 continue;
             }
             if p.name == "supply_air_temp" && self.separate_ahu_supply_air {
@@ -1726,6 +1736,16 @@ mod tests {
         );
         let e = spec("hvac = \"doas_fan_coil\"\neconomizer = true\n").unwrap_err();
         assert!(e.to_string().contains("b.toml:2"), "{e}");
+        let e = spec(
+            "hvac = \"doas_fan_coil\"\n[priors]\n\
+             outdoor_air_ach_unoccupied = { min = 0.1, mode = 0.2, max = 0.3 }\n",
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("its DOAS runs at occupied hours only"),
+            "{e}"
+        );
         let e = spec("hvac = \"radiant\"\n").unwrap_err();
         assert!(e.to_string().contains("b.toml:1"), "{e}");
         // The default system is left out of the serialised spec (simulation cache keys).

@@ -156,19 +156,16 @@ fn write_meters(s: &mut String, r: &Precalibration) {
                 &d.non_heating_months,
                 &d.heating_months,
             );
+            let outage = format!(
+                "an outage? if the meter was active then, `exclude = \"{}..{}\"` in its \
+                 [[meters.columns]]",
+                first.date(),
+                last.date(),
+            );
             let hint = match season {
                 Some(true) => "in its meter's off season: expected".to_string(),
-                in_season => format!(
-                    "{}an outage? if the meter was active then, `exclude = \"{}..{}\"` in its \
-                     [[meters.columns]]",
-                    if in_season == Some(false) {
-                        "in its meter's season: "
-                    } else {
-                        ""
-                    },
-                    first.date(),
-                    last.date(),
-                ),
+                Some(false) => format!("in its meter's season: {outage}"),
+                None => outage,
             };
             let _ = writeln!(
                 s,

@@ -437,11 +437,7 @@ impl MeterData {
     pub fn hold_out(&mut self, holdout: &bemcal_weather::period::Holdout) -> Result<usize, String> {
         let hours = self.held_out_hours(holdout)?;
         for s in &mut self.series {
-            for (v, &out) in s.values.iter_mut().zip(&hours) {
-                if out {
-                    *v = f64::NAN;
-                }
-            }
+            set_missing(&mut s.values, &hours);
         }
         let count = hours.iter().filter(|o| **o).count();
         self.notes.push(format!(
@@ -904,18 +900,24 @@ fn exclude_period(
         let m = m.strip_prefix("holdout ").unwrap_or(&m);
         format!("column '{column}', exclude {m}")
     })?;
-    let mut removed = 0;
-    for (v, &out) in values.iter_mut().zip(&hours) {
-        if out && v.is_finite() {
-            *v = f64::NAN;
-            removed += 1;
-        }
-    }
+    let removed = set_missing(values, &hours);
     notes.push(format!(
         "column '{column}': {removed} readings in {period} excluded as the project says \
          (`exclude`): missing for this meter"
     ));
     Ok(())
+}
+
+/// Marks the hours flagged in `hours` missing; returns how many readings that removed.
+fn set_missing(values: &mut [f64], hours: &[bool]) -> usize {
+    let mut removed = 0;
+    for (v, &out) in values.iter_mut().zip(hours) {
+        if out {
+            removed += usize::from(v.is_finite());
+            *v = f64::NAN;
+        }
+    }
+    removed
 }
 
 /// The note of sub-hourly readings aggregated to hours.
