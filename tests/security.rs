@@ -220,7 +220,7 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         // Roles: a worker cannot submit, a client cannot lease.
         let e = submit_project(&mut w, &p, None).await.unwrap_err();
         assert!(format!("{e:#}").contains("client token"), "{e:#}");
-        let run = submit_project(&mut c, &p, None).await.unwrap();
+        let run = submit_project(&mut c, &p, None).await.unwrap().run_id;
         let lease = |id: &str| LeaseRequest {
             worker_id: id.into(),
             free_slots: 1,
@@ -296,7 +296,27 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         let j = st.jobs.iter().find(|j| j.job_id == job.job_id).unwrap();
         assert_eq!(j.state, "leased");
         assert!(j.result_json.is_empty());
-        c.cancel(RunRequest { run_id: run }).await.unwrap();
+        // The same project submitted again while its run runs (an interrupted client coming
+        // back) is that run, its lease untouched; once the run has ended, a new one.
+        let again = submit_project(&mut c, &p, None).await.unwrap();
+        assert_eq!((again.run_id.as_str(), again.resumed), (run.as_str(), true));
+        let hb = HeartbeatRequest {
+            worker_id: "w1".into(),
+            lease_id: id,
+        };
+        assert!(w.heartbeat(hb).await.unwrap().into_inner().ok);
+        c.cancel(RunRequest {
+            run_id: run.clone(),
+        })
+        .await
+        .unwrap();
+        let after = submit_project(&mut c, &p, None).await.unwrap();
+        assert!(after.run_id != run && !after.resumed, "{after:?}");
+        c.cancel(RunRequest {
+            run_id: after.run_id,
+        })
+        .await
+        .unwrap();
     });
     assert!(alive(&mut proc));
 }

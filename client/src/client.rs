@@ -170,13 +170,23 @@ pub fn refs(files: &[File]) -> Vec<proto::FileRef> {
     files.iter().map(proto::FileRef::from).collect()
 }
 
+/// A submission's answer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Submitted {
+    /// The run's id.
+    pub run_id: String,
+    /// The same project was still running (an interrupted client's run): this is that run,
+    /// going on with every job it finished.
+    pub resumed: bool,
+}
+
 /// Bundles a project (uploading its files) and submits it; `surrogate`: a trained surrogate
-/// folder to use instead of training. Returns the run id.
+/// folder to use instead of training. A project whose run is still running gets that run.
 pub async fn submit_project(
     client: &mut Client,
     project_file: &Path,
     surrogate: Option<&Path>,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<Submitted> {
     submit_building(client, project_file, surrogate, "", "").await
 }
 
@@ -188,7 +198,7 @@ pub async fn submit_building(
     surrogate: Option<&Path>,
     portfolio: &str,
     building: &str,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<Submitted> {
     let files = crate::bundle::collect(project_file)?;
     let mut bundle = vec![];
     for (rel, bytes) in files {
@@ -212,8 +222,12 @@ pub async fn submit_building(
             building: building.to_string(),
         })
         .await
-        .map_err(|e| anyhow::anyhow!("{}", e.message()))?;
-    Ok(r.into_inner().run_id)
+        .map_err(|e| anyhow::anyhow!("{}", e.message()))?
+        .into_inner();
+    Ok(Submitted {
+        run_id: r.run_id,
+        resumed: r.resumed,
+    })
 }
 
 /// Downloads a finished run's files into `out` (the layout of the local `calibrate`).

@@ -177,6 +177,30 @@ pub struct RunRow {
     pub building: Option<String>,
 }
 
+impl RunRow {
+    /// Whether a submission of `bundle` and `surrogate` as building `building` of `portfolio`
+    /// (empty: a lone run) is this run's again: the same files by path and content, in any
+    /// order. While the run is running, such a submission is answered with it (a client that
+    /// was interrupted comes back to its run, and every job the run finished is kept).
+    pub fn is_submission_of(
+        &self,
+        bundle: &[File],
+        surrogate: &[File],
+        portfolio: &str,
+        building: &str,
+    ) -> bool {
+        fn sorted(f: &[File]) -> Vec<&File> {
+            let mut v: Vec<&File> = f.iter().collect();
+            v.sort_by(|a, b| a.path.cmp(&b.path));
+            v
+        }
+        self.portfolio.as_deref().unwrap_or("") == portfolio
+            && self.building.as_deref().unwrap_or("") == building
+            && sorted(&self.bundle) == sorted(bundle)
+            && sorted(&self.surrogate) == sorted(surrogate)
+    }
+}
+
 /// A job row.
 #[derive(Debug, Clone)]
 pub struct JobRow {

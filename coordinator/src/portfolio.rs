@@ -96,6 +96,7 @@ pub async fn submit(
     for b in &m.buildings {
         let r = client::submit_building(c, &b.project, None, id, &b.name)
             .await
+            .map(|s| s.run_id)
             .map_err(|e| format!("{e:#}"));
         out.push((b.name.clone(), r));
     }

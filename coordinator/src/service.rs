@@ -466,6 +466,24 @@ impl Coordinator for Service {
                 f.path
             )));
         }
+        // The same project again while its run still runs: that run (it goes on, keeping its
+        // finished jobs), not a second one competing with it for the workers.
+        let same = self
+            .st
+            .store
+            .runs()
+            .map_err(internal)?
+            .into_iter()
+            .find(|run| {
+                run.state == RunState::Running
+                    && run.is_submission_of(&bundle_files, &surrogate, &r.portfolio, &r.building)
+            });
+        if let Some(run) = same {
+            return Ok(Response::new(SubmitReply {
+                run_id: run.id,
+                resumed: true,
+            }));
+        }
         let id = format!("r{}", &crate::auth::random_token()[..10]);
         let st = self.st.clone();
         let (idc, files) = (id.clone(), bundle_files.clone());
@@ -504,7 +522,10 @@ impl Coordinator for Service {
                 store
                     .end_run(&id, RunState::Failed, Some(&msg))
                     .map_err(internal)?;
-                return Ok(Response::new(SubmitReply { run_id: id }));
+                return Ok(Response::new(SubmitReply {
+                    run_id: id,
+                    resumed: false,
+                }));
             }
         };
         self.st
@@ -518,7 +539,10 @@ impl Coordinator for Service {
                 .map_err(internal)?;
         }
         let _ = self.st.kick.send(id.clone());
-        Ok(Response::new(SubmitReply { run_id: id }))
+        Ok(Response::new(SubmitReply {
+            run_id: id,
+            resumed: false,
+        }))
     }
 
     async fn list_runs(

@@ -223,31 +223,44 @@ pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Re
     let rt = bemcal_client::runtime()?;
     let summary = rt.block_on(async {
         let mut c = connect.client()?;
+        if reuse {
+            log("surrogate: reusing the one trained earlier");
+        }
         // A run that an interrupted calibration left in this folder is resumed by the
-        // coordinator, and would compete with the new one for the workers: cancel it (its
-        // simulations stay in the coordinator's cache and the new run reuses them).
+        // coordinator. The same project again is that run (the coordinator answers it, with
+        // every job it finished); a run of another project would compete with the new one for
+        // the workers: cancelled (its simulations stay in the coordinator's cache and the new
+        // run reuses them).
+        let sub =
+            client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path())).await?;
+        let run = sub.run_id;
+        if sub.resumed {
+            log(&format!(
+                "run {run}, left running by an interrupted calibration of this project in this \
+                 folder, goes on where it stopped"
+            ));
+        } else {
+            log(&format!("run {run} submitted"));
+        }
         let runs = c
             .list_runs(ListRunsRequest::default())
             .await?
             .into_inner()
             .runs;
-        for left in runs.iter().filter(|s| s.state == "running") {
+        for left in runs
+            .iter()
+            .filter(|s| s.state == "running" && s.run_id != run)
+        {
             c.cancel(RunRequest {
                 run_id: left.run_id.clone(),
             })
             .await?;
             log(&format!(
-                "run {} was left running by an interrupted calibration in this folder: \
-                 cancelled (the new run reuses its simulations)",
+                "run {} was left running by an interrupted calibration of another project in \
+                 this folder: cancelled (the new run reuses its simulations)",
                 left.run_id
             ));
         }
-        if reuse {
-            log("surrogate: reusing the one trained earlier");
-        }
-        let run =
-            client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path())).await?;
-        log(&format!("run {run} submitted"));
         let mut said = 0;
         let st = client::watch(&mut c, &run, |s| {
             // The driver's messages since the last change (the same as a local calibration

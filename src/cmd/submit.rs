@@ -1,4 +1,5 @@
-//! `bemcal submit`: bundles a project's files, uploads them and starts a run; prints its id.
+//! `bemcal submit`: bundles a project's files, uploads them and starts a run; prints its id
+//! (the same project while its run still runs: that run's id, said on stderr).
 
 use std::path::PathBuf;
 
@@ -19,10 +20,16 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
     let rt = bemcal_client::runtime()?;
-    let id = rt.block_on(async {
+    let s = rt.block_on(async {
         let mut c = connect.client()?;
         bemcal_client::client::submit_project(&mut c, &a.project, a.surrogate.as_deref()).await
     })?;
-    println!("{id}");
+    if s.resumed {
+        eprintln!(
+            "the same project is still running as run {}: that run goes on (its finished jobs are kept)",
+            s.run_id
+        );
+    }
+    println!("{}", s.run_id);
     Ok(())
 }
