@@ -147,13 +147,19 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     cross_validation_by_month(dir, &out);
 
     // The same posterior with HMC (gradients through the surrogate's VJP graph), from optimised
-    // starts: short chains, the same recovery and Guideline 14.
+    // starts, and the heating meter compared but not fitted (`fit = false`: the two parameters
+    // are the electricity's and the cooling's): short chains, the same recovery and Guideline
+    // 14, heating's included.
     let project = std::fs::read_to_string(dir.join("project.toml"))
         .unwrap()
         .replace(
         "iterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\n",
         "iterations = 80\nburn_in = 30\nsegment = 500\nkernel = \"hmc\"\nstart = \"optimised\"\n",
-    );
+    )
+        .replace(
+            "role = \"heating\"\n",
+            "role = \"heating\"\nfit = false\n",
+        );
     std::fs::write(dir.join("project.toml"), project).unwrap();
     std::fs::remove_file(out.join("chains.json")).unwrap();
     let (log3, summary) = calibrate(dir, &out);
@@ -171,6 +177,9 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "HMC: G14 failed: {v}\n{log3}");
     }
+    assert_eq!(summary["validation"].as_array().unwrap().len(), 3);
+    assert_eq!(summary["not_fitted"], serde_json::json!(["heating_kwh"]));
+    assert!(summary["sigma_delta_kwh"].get("heating_kwh").is_none());
     results_load_in_python_as_arviz(&out, &dir.join("project.toml"));
     model_form_tells_reached_from_out_of_reach(dir, &out, &summary);
 }

@@ -199,6 +199,12 @@ fn print_guideline14(s: &bemcal_calibrate::Summary) {
             metrics_pair(sur)
         );
     }
+    if !s.not_fitted.is_empty() {
+        println!(
+            "not fitted (fit = false), compared only: {}",
+            s.not_fitted.join(", ")
+        );
+    }
 }
 
 /// Each refinement round: draws added, failures, the surrogate's error at them.

@@ -61,9 +61,10 @@ impl Calibration {
         let sigma_eta = meta.sigma_eta_kwh();
         let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
         let mut observed = vec![f64::NAN; n_h * n_out];
-        // The surrogate predicts the model's share of each meter (the meter less its base).
+        // The surrogate predicts the model's share of each meter (the meter less its base);
+        // a meter with `fit = false` stays missing at every hour: the likelihood leaves it out.
         let shares: Vec<Vec<f64>> = (0..n_out).map(|k| inp.model_share(k)).collect();
-        for (k, s) in shares.iter().enumerate() {
+        for (k, s) in shares.iter().enumerate().filter(|(k, _)| inp.fitted[*k]) {
             for (h, v) in s.iter().enumerate() {
                 observed[h * n_out + k] = *v;
             }
@@ -390,7 +391,7 @@ type PerOutput = Vec<(String, f64)>;
 /// The noise the summary reports: sigma_delta per output in kWh (the median of the sampled
 /// ones; with the variance integrated out, the posterior mean of sigma^2 at the MAP point,
 /// SSR / (n - 2), less sigma_y^2 and sigma_eta^2; else the fixed value) and, with AR(1)
-/// residuals, each output's profile phi at the MAP point.
+/// residuals, each output's profile phi at the MAP point; the fitted outputs only.
 fn noise_summary(
     post: &Posterior<'_>,
     eval: &mut Evaluator,
@@ -447,7 +448,18 @@ fn noise_summary(
             .map(|(n, z)| (n.clone(), z.sigma_delta))
             .collect(),
     };
-    Ok((sigma_delta_kwh, residual_ar1))
+    // A meter the likelihood leaves out (`fit = false`) has no noise estimate.
+    let fitted = |v: PerOutput| -> PerOutput {
+        v.into_iter()
+            .filter(|(o, _)| {
+                inp.outputs
+                    .iter()
+                    .zip(&inp.fitted)
+                    .any(|(n, f)| n == o && *f)
+            })
+            .collect()
+    };
+    Ok((fitted(sigma_delta_kwh), fitted(residual_ar1)))
 }
 
 /// `posterior_predictive.csv`: the surrogate's 5 / 50 / 95 % bands (plus the bases) from

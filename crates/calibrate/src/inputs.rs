@@ -38,6 +38,9 @@ pub struct Inputs {
     /// Per output, its meter over the calibration period (kWh, NaN = missing or held out):
     /// what the likelihood, the surrogate's checks and the in-sample Guideline 14 see.
     pub measured: Vec<Vec<f64>>,
+    /// Per output, whether the likelihood fits its meter (`[[meters.columns]] fit`, default
+    /// true); a meter not fitted is still compared in validation and model form.
+    pub fitted: Vec<bool>,
     /// The held-out period (`[validation] holdout`): its hours and the meters there.
     pub held_out: Option<HeldOut>,
     /// Per output, the hourly load (kWh) in its meter that the model does not have
@@ -275,6 +278,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
                 .collect::<Vec<_>>()
         )));
     }
+    let fitted = fitted_outputs(project, &outputs)?;
     let held_out = match &project.validation.holdout {
         None => None,
         Some(h) => {
@@ -305,8 +309,100 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         meter_notes: data.notes.clone(),
         outputs,
         measured,
+        fitted,
         held_out,
         bases,
         base_reports,
     })
+}
+
+/// Per output (`outputs`, named by the model), whether the calibration fits its meter: not
+/// when a listed column of its role says `fit = false`. At least one must be fitted.
+fn fitted_outputs(project: &Project, outputs: &[String]) -> Result<Vec<bool>, Error> {
+    let roles = project.output_roles();
+    let fitted: Vec<bool> = outputs
+        .iter()
+        .map(|o| {
+            let role = roles.get(o).map(|r| MeterRole::from(r.clone()));
+            !project
+                .meters
+                .columns
+                .iter()
+                .any(|c| Some(&c.role) == role.as_ref() && !c.fit)
+        })
+        .collect();
+    if !fitted.contains(&true) {
+        return Err(project.error_at(
+            &["meters", "columns"],
+            format!(
+                "every meter the model has ({}) says fit = false: the calibration needs at \
+                 least one meter to fit",
+                outputs.join(", ")
+            ),
+        ));
+    }
+    Ok(fitted)
+}
+
+#[cfg(test)]
+mod tests {
+    //! `[[meters.columns]] fit = false`: a meter read and compared but left out of the
+    //! likelihood (issue 19: a meter the model cannot reach, such as the RSF's cooling).
+
+    use super::load_inputs;
+    use crate::project::Project;
+
+    fn project(dir: &std::path::Path, fit: [bool; 2]) -> Project {
+        std::fs::copy(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../examples/office/small.toml"),
+            dir.join("model.toml"),
+        )
+        .unwrap();
+        let mut meters = String::from("timestamp,heating_kwh,electricity_kwh\n");
+        let start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1)
+            .unwrap()
+            .and_hms_opt(0, 0, 0)
+            .unwrap();
+        for t in 0..8760 {
+            let ts = start + chrono::Duration::hours(t);
+            meters.push_str(&format!("{},2,3\n", ts.format("%Y-%m-%dT%H:%M")));
+        }
+        std::fs::write(dir.join("meters.csv"), meters).unwrap();
+        std::fs::write(
+            dir.join("project.toml"),
+            format!(
+                "model = \"model.toml\"\nweather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"\n\
+                 [meters]\nfile = \"meters.csv\"\n\
+                 [[meters.columns]]\ncolumn = \"heating_kwh\"\nrole = \"heating\"\nunit = \"kWh\"\nfit = {}\n\
+                 [[meters.columns]]\ncolumn = \"electricity_kwh\"\nrole = \"electricity\"\nunit = \"kWh\"\nfit = {}\n",
+                fit[0], fit[1]
+            ),
+        )
+        .unwrap();
+        Project::load(&dir.join("project.toml")).unwrap()
+    }
+
+    #[test]
+    fn a_meter_with_fit_false_is_read_but_not_fitted_and_one_must_be_fitted() {
+        if bemcal_energyplus::Engine::locate().is_err() {
+            eprintln!("no EnergyPlus; skipping");
+            return;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let inputs = load_inputs(&project(dir.path(), [false, true])).unwrap();
+        assert_eq!(inputs.outputs, ["heating_kwh", "electricity_kwh"]);
+        assert_eq!(inputs.fitted, [false, true]);
+        // Still read: validation and model form compare it.
+        assert!(inputs.measured[0].iter().all(|v| *v == 2.0));
+
+        let Err(e) = load_inputs(&project(dir.path(), [false, false])) else {
+            panic!("every meter fit = false was accepted");
+        };
+        let e = e.to_string();
+        assert!(
+            e.contains("project.toml") && e.contains("fit = false") && e.contains("at least one"),
+            "{e}"
+        );
+    }
 }

@@ -111,6 +111,10 @@ pub struct Summary {
     pub bases: Vec<crate::bases::BaseReport>,
     /// The calibrated outputs: the model outputs that have a meter.
     pub outputs: Vec<String>,
+    /// Those of `outputs` whose meters the likelihood left out (`[[meters.columns]] fit =
+    /// false`): compared in validation and model form, not fitted.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub not_fitted: Vec<String>,
     /// The calibrated parameters' units and priors.
     pub parameters: Vec<ParameterReport>,
     /// The calibrated parameters' posterior from the chains on the surrogate (physical units):
@@ -344,6 +348,13 @@ pub fn write_summary(
         measured_weather: inp.measured_weather.clone(),
         bases: inp.base_reports.clone(),
         outputs: inp.outputs.clone(),
+        not_fitted: inp
+            .outputs
+            .iter()
+            .zip(&inp.fitted)
+            .filter(|(_, f)| !**f)
+            .map(|(o, _)| o.clone())
+            .collect(),
         parameters: inp
             .plan
             .calibrated

@@ -306,6 +306,21 @@ pub struct MeterColumn {
     /// holdout`: `"2011-03-04..2011-03-31"`, `"mar"`, or a list.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exclude: Option<bemcal_weather::period::Holdout>,
+    /// Whether the calibration fits this meter (default true). `fit = false`: the meter is
+    /// read, compared with the model in validation and model form, and reported, but the
+    /// likelihood leaves it out: for a meter the model cannot reach (a system it does not
+    /// have) that would otherwise pull every parameter to its bounds. Pre-calibration reads
+    /// it as any other.
+    #[serde(default = "fitted", skip_serializing_if = "is_fitted")]
+    pub fit: bool,
+}
+
+fn fitted() -> bool {
+    true
+}
+
+fn is_fitted(fit: &bool) -> bool {
+    *fit
 }
 
 /// How to read a meters CSV. Sits in the project file as `[meters]`:
@@ -499,6 +514,7 @@ pub fn detect_columns(headers: &[&str], timestamp_column: Option<&str>) -> Vec<M
             role,
             unit,
             exclude: None,
+            fit: true,
         });
     }
     out
@@ -1662,6 +1678,7 @@ mod tests {
                 role: MeterRole::Heating,
                 unit: EnergyUnit::KWh,
                 exclude: None,
+                fit: true,
             }],
             ..MeterSpec::default()
         }
@@ -1696,6 +1713,7 @@ mod tests {
             role: MeterRole::Submeter("gas".into()),
             unit: EnergyUnit::Therm,
             exclude: None,
+            fit: true,
         });
         let e = parse_meters(text, Path::new("m.csv"), &s, None, None).unwrap_err();
         let msg = e.to_string();

@@ -823,8 +823,13 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         let n = c.or(i).map_or(0, |m| m.n);
         let _ = write!(
             h,
-            "<tr><td class=\"l\">{}</td><td>{n}</td>{}{}{}<td>{}</td><td>{}</td></tr>",
+            "<tr><td class=\"l\">{}{}</td><td>{n}</td>{}{}{}<td>{}</td><td>{}</td></tr>",
             esc(o),
+            if s.not_fitted.contains(o) {
+                " (not fitted)"
+            } else {
+                ""
+            },
             pass_cell(i),
             pass_cell(c),
             pass_cell(sur),
@@ -832,7 +837,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
             g(lookup(&s.sigma_eta_kwh, o)),
         );
     }
-    h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points.</p>\n");
+    h.push_str("</table><p class=\"sub\">&sigma;<sub>&delta;</sub>: estimated model discrepancy (posterior); &sigma;<sub>&eta;</sub>: surrogate error on held-out design points; not fitted: a meter the likelihood left out (<code>fit = false</code>), compared only.</p>\n");
     h
 }
 

@@ -435,6 +435,9 @@ pub struct Summary {
     pub project: String,
     /// Calibrated outputs (meters).
     pub outputs: Vec<String>,
+    /// Outputs whose meters were compared but not fitted (`fit = false`).
+    #[serde(default)]
+    pub not_fitted: Vec<String>,
     /// Priors, in calibration order.
     pub parameters: Vec<PriorInfo>,
     /// Posterior summary.

@@ -233,14 +233,15 @@ impl GaussianLikelihood {
     /// Analysis, 3rd ed., sec. 3.2):
     /// `∫ N(y | f, sigma^2 I) sigma^-2 dsigma^2 = Γ(n/2) (π SSR)^(-n/2)`, so
     /// `ln p = sum_k [ ln Γ(n_k/2) - n_k/2 ln(π SSR_k) ]`.
-    /// Exact Bayesian treatment of an unknown noise level with no extra sampled dimension. No
-    /// allocation.
+    /// Exact Bayesian treatment of an unknown noise level with no extra sampled dimension. An
+    /// output with no observed hour contributes nothing (`p(∅) = 1`). No allocation.
     ///
     /// # Panics
     /// If `predicted` does not have `hours x outputs` values.
     pub fn log_marginal_sigma(&self, predicted: &[f32]) -> f64 {
         self.check_len(predicted);
         (0..self.n_outputs)
+            .filter(|&k| self.n_obs[k] > 0)
             .map(|k| {
                 let n = self.n_obs[k] as f64;
                 let ssr = self.ssr(predicted, k).max(f64::MIN_POSITIVE);
@@ -265,6 +266,7 @@ impl GaussianLikelihood {
     pub fn log_marginal_sigma_ar1(&self, predicted: &[f32]) -> f64 {
         self.check_len(predicted);
         (0..self.n_outputs)
+            .filter(|&k| self.n_obs[k] > 0)
             .map(|k| {
                 let a = self.ar1_sums(predicted, k);
                 let phi = a.profile_phi();
@@ -766,6 +768,43 @@ mod tests {
         )
         .unwrap();
         assert_eq!(lik2.log_likelihood(&pred), lik.log_likelihood(&pred));
+    }
+
+    #[test]
+    fn an_output_with_no_observed_hour_contributes_nothing() {
+        // A meter the calibration does not fit (`fit = false`): output 1 missing at every hour.
+        let one = [1.0, 2.0, 4.0, 3.0];
+        let both = [1.0, f64::NAN, 2.0, f64::NAN, 4.0, f64::NAN, 3.0, f64::NAN];
+        let pred1 = [1.5f32, 2.0, 3.0, 3.5];
+        let pred2 = [1.5f32, 7.0, 2.0, 7.0, 3.0, 7.0, 3.5, 7.0];
+        let nz = noise(0.5, 0.0, 0.0);
+        let l1 = GaussianLikelihood::new(&one, &[nz]).unwrap();
+        let l2 = GaussianLikelihood::new(&both, &[nz, nz]).unwrap();
+        assert_eq!(l2.n_observed(), &[4, 0]);
+        type Value = fn(&GaussianLikelihood, &[f32]) -> f64;
+        let values: [Value; 3] = [
+            GaussianLikelihood::log_likelihood,
+            GaussianLikelihood::log_marginal_sigma,
+            GaussianLikelihood::log_marginal_sigma_ar1,
+        ];
+        for f in values {
+            let (a, b) = (f(&l1, &pred1), f(&l2, &pred2));
+            assert!(b.is_finite() && (a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+        type Gradient = fn(&GaussianLikelihood, &[f32], &mut [f32]) -> f64;
+        let gradients: [Gradient; 3] = [
+            GaussianLikelihood::log_likelihood_gradient,
+            GaussianLikelihood::log_marginal_sigma_gradient,
+            GaussianLikelihood::log_marginal_sigma_ar1_gradient,
+        ];
+        for g in gradients {
+            let (mut g1, mut g2) = ([0f32; 4], [1f32; 8]);
+            let (a, b) = (g(&l1, &pred1, &mut g1), g(&l2, &pred2, &mut g2));
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+            for t in 0..4 {
+                assert_eq!((g2[2 * t], g2[2 * t + 1]), (g1[t], 0.0));
+            }
+        }
     }
 
     #[test]
