@@ -297,6 +297,20 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
             Some(held)
         }
     };
+    // A fitted meter with no reading left (every hour excluded or missing) would add nothing
+    // to the likelihood: the chains would sample the prior without a word.
+    if let Some(k) =
+        (0..outputs.len()).find(|&k| fitted[k] && !measured[k].iter().any(|v| v.is_finite()))
+    {
+        return Err(project.error_at(
+            &["meters", "columns"],
+            format!(
+                "the meter of {} has no reading left to fit (every hour missing or excluded): \
+                 give it readings, or say fit = false to compare it only",
+                outputs[k]
+            ),
+        ));
+    }
     let (bases, base_reports) = crate::bases::bases_of(project, &outputs, &data)?;
     Ok(Inputs {
         runner,
@@ -404,5 +418,14 @@ mod tests {
             e.contains("project.toml") && e.contains("fit = false") && e.contains("at least one"),
             "{e}"
         );
+
+        // A fitted meter with no reading (an empty column) is refused, not silently the prior.
+        project(dir.path(), [true, false]);
+        let meters = std::fs::read_to_string(dir.path().join("meters.csv")).unwrap();
+        std::fs::write(dir.path().join("meters.csv"), meters.replace(",2,3", ",,3")).unwrap();
+        let Err(e) = load_inputs(&Project::load(&dir.path().join("project.toml")).unwrap()) else {
+            panic!("a fitted meter with no reading was accepted");
+        };
+        assert!(e.to_string().contains("no reading left to fit"), "{e}");
     }
 }
