@@ -468,21 +468,17 @@ impl Coordinator for Service {
         }
         // The same project again while its run still runs: that run (it goes on, keeping its
         // finished jobs), not a second one competing with it for the workers.
-        let same = self
-            .st
-            .store
-            .runs()
-            .map_err(internal)?
-            .into_iter()
-            .find(|run| {
-                run.state == RunState::Running
-                    && run.is_submission_of(&bundle_files, &surrogate, &r.portfolio, &r.building)
+        let store = &self.st.store;
+        for id in store.running_runs().map_err(internal)? {
+            let same = store.run(&id).map_err(internal)?.is_some_and(|run| {
+                run.is_submission_of(&bundle_files, &surrogate, &r.portfolio, &r.building)
             });
-        if let Some(run) = same {
-            return Ok(Response::new(SubmitReply {
-                run_id: run.id,
-                resumed: true,
-            }));
+            if same {
+                return Ok(Response::new(SubmitReply {
+                    run_id: id,
+                    resumed: true,
+                }));
+            }
         }
         let id = format!("r{}", &crate::auth::random_token()[..10]);
         let st = self.st.clone();

@@ -449,14 +449,10 @@ fn noise_summary(
             .collect(),
     };
     // A meter the likelihood leaves out (`fit = false`) has no noise estimate.
+    let not_fitted = inp.not_fitted();
     let fitted = |v: PerOutput| -> PerOutput {
         v.into_iter()
-            .filter(|(o, _)| {
-                inp.outputs
-                    .iter()
-                    .zip(&inp.fitted)
-                    .any(|(n, f)| n == o && *f)
-            })
+            .filter(|(o, _)| !not_fitted.contains(o))
             .collect()
     };
     Ok((fitted(sigma_delta_kwh), fitted(residual_ar1)))

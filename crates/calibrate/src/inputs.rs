@@ -95,6 +95,16 @@ impl HeldOut {
 }
 
 impl Inputs {
+    /// The outputs whose meters the likelihood leaves out (`fit = false`), in output order.
+    pub fn not_fitted(&self) -> Vec<String> {
+        self.outputs
+            .iter()
+            .zip(&self.fitted)
+            .filter(|(_, f)| !**f)
+            .map(|(o, _)| o.clone())
+            .collect()
+    }
+
     /// Meter `k` whole: the calibration period's values and the held-out ones.
     pub fn meter(&self, k: usize) -> Vec<f64> {
         match &self.held_out {

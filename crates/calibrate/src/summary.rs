@@ -348,13 +348,7 @@ pub fn write_summary(
         measured_weather: inp.measured_weather.clone(),
         bases: inp.base_reports.clone(),
         outputs: inp.outputs.clone(),
-        not_fitted: inp
-            .outputs
-            .iter()
-            .zip(&inp.fitted)
-            .filter(|(_, f)| !**f)
-            .map(|(o, _)| o.clone())
-            .collect(),
+        not_fitted: inp.not_fitted(),
         parameters: inp
             .plan
             .calibrated
