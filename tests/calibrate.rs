@@ -161,6 +161,19 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
             "role = \"heating\"\nfit = false\n",
         );
     std::fs::write(dir.join("project.toml"), project).unwrap();
+    // The folder's chains fitted heating: refused until they are removed.
+    let refused = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        refused.status.code() == Some(1) && e.contains("not fitted: heating_kwh"),
+        "{e}"
+    );
     std::fs::remove_file(out.join("chains.json")).unwrap();
     let (log3, summary) = calibrate(dir, &out);
     for a in summary["acceptance_rate"].as_array().unwrap() {

@@ -182,15 +182,24 @@ fn estimate(summary_json: &str) -> Vec<(String, f64)> {
 /// The summary row of a run.
 pub fn row(s: &RunStatus) -> BuildingRow {
     let summary: serde_json::Value = serde_json::from_str(&s.summary_json).unwrap_or_default();
+    let not_fitted = |output: &str| {
+        summary["not_fitted"]
+            .as_array()
+            .is_some_and(|n| n.iter().any(|o| o.as_str() == Some(output)))
+    };
     let outputs: Vec<OutputRow> = summary["validation"]
         .as_array()
         .map(|v| {
             v.iter()
-                .map(|o| OutputRow {
-                    output: o["output"].as_str().unwrap_or_default().to_string(),
-                    nmbe: o["nmbe"].as_f64().unwrap_or(f64::NAN),
-                    cv_rmse: o["cv_rmse"].as_f64().unwrap_or(f64::NAN),
-                    pass: o["pass"].as_bool().unwrap_or(false),
+                .map(|o| {
+                    let output = o["output"].as_str().unwrap_or_default().to_string();
+                    OutputRow {
+                        fitted: !not_fitted(&output),
+                        output,
+                        nmbe: o["nmbe"].as_f64().unwrap_or(f64::NAN),
+                        cv_rmse: o["cv_rmse"].as_f64().unwrap_or(f64::NAN),
+                        pass: o["pass"].as_bool().unwrap_or(false),
+                    }
                 })
                 .collect()
         })
@@ -211,7 +220,8 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         state: s.state.clone(),
         stage: s.stage.clone(),
         error: (!s.error.is_empty()).then(|| s.error.clone()),
-        g14_pass: (!outputs.is_empty()).then(|| outputs.iter().all(|o| o.pass)),
+        g14_pass: (!outputs.is_empty())
+            .then(|| outputs.iter().filter(|o| o.fitted).all(|o| o.pass)),
         max_rhat: summary["posterior"]["max_rhat"].as_f64(),
         converged: summary["converged"].as_bool(),
         estimate: estimate(&s.summary_json),
@@ -274,4 +284,36 @@ pub async fn fetch(c: &mut Client, runs: &[RunStatus], out: &Path) -> anyhow::Re
         client::fetch_results(c, &r.run_id, &out.join(name)).await?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{row, RunStatus};
+
+    /// A meter left out of the fit (`fit = false`, summary `not_fitted`) is shown with its
+    /// Guideline 14 figures and does not fail the building.
+    #[test]
+    fn a_meter_not_fitted_is_shown_and_not_counted_in_the_buildings_pass() {
+        let status = |not_fitted: &str| RunStatus {
+            run_id: "r1".into(),
+            name: "rsf".into(),
+            state: "done".into(),
+            summary_json: format!(
+                r#"{{"validation": [
+                    {{"output": "heating_kwh", "nmbe": 2.0, "cv_rmse": 20.0, "pass": true}},
+                    {{"output": "cooling_kwh", "nmbe": -900.0, "cv_rmse": 1600.0, "pass": false}}],
+                   "not_fitted": [{not_fitted}]}}"#
+            ),
+            ..Default::default()
+        };
+        let r = row(&status(r#""cooling_kwh""#));
+        assert_eq!(r.g14_pass, Some(true));
+        assert_eq!(
+            r.outputs.iter().map(|o| o.fitted).collect::<Vec<_>>(),
+            [true, false]
+        );
+        let r = row(&status(""));
+        assert_eq!(r.g14_pass, Some(false));
+        assert!(r.outputs.iter().all(|o| o.fitted));
+    }
 }

@@ -437,5 +437,33 @@ mod tests {
             panic!("a fitted meter with no reading was accepted");
         };
         assert!(e.to_string().contains("no reading left to fit"), "{e}");
+
+        // `fit` is about a meter the model is compared with: refused on a base's column, and
+        // where two columns of one role disagree.
+        let refused = |extra: &str, line: usize, expected: &str| {
+            project(dir.path(), [false, true]);
+            let path = dir.path().join("project.toml");
+            let text = std::fs::read_to_string(&path).unwrap();
+            std::fs::write(&path, format!("{text}{extra}")).unwrap();
+            let Err(e) = load_inputs(&Project::load(&path).unwrap()) else {
+                panic!("accepted: {extra}");
+            };
+            let e = e.to_string();
+            assert!(
+                e.contains(&format!("project.toml:{line}")) && e.contains(expected),
+                "{e}"
+            );
+        };
+        refused(
+            "[[meters.columns]]\ncolumn = \"electricity_kwh\"\nrole = \"plug\"\nfit = false\n\
+             [[bases]]\noutput = \"heating_kwh\"\nsubmeter = \"plug\"\n",
+            18,
+            "which no model output is compared with",
+        );
+        refused(
+            "[[meters.columns]]\ncolumn = \"electricity_kwh\"\nrole = \"heating\"\n",
+            9,
+            "says fit = true and column = \"heating_kwh\"",
+        );
     }
 }

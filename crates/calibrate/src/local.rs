@@ -22,7 +22,7 @@ use crate::{chains_at, Calibration, Error, Log, Summary, Timings};
 pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
     let mut exec = InProcess::new(log);
     let mut cal = Calibration::load(project.clone(), out)?;
-    same_hours_as_before(&cal)?;
+    same_data_as_before(&cal)?;
     let inp = &cal.inputs;
     log(&format!(
         "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
@@ -44,13 +44,18 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 }
 
 /// A rerun reuses the folder's chains and refinement rounds: refuses when they were fitted
-/// with another held-out period (they saw other hours), then records this run's in
-/// `holdout.txt`.
-fn same_hours_as_before(cal: &Calibration) -> Result<(), Error> {
-    let now = match &cal.inputs.held_out {
+/// to other data (another held-out period, or other meters fitted: they saw other hours),
+/// then records this run's in `holdout.txt` (the held-out period, and a `not fitted:` line
+/// when a meter says `fit = false`; a folder written before that line existed fitted all).
+fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
+    let mut now = match &cal.inputs.held_out {
         Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
         None => "none".into(),
     };
+    let not_fitted = cal.inputs.not_fitted();
+    if !not_fitted.is_empty() {
+        now.push_str(&format!("\nnot fitted: {}", not_fitted.join(", ")));
+    }
     let path = cal.out.holdout_txt();
     let before = std::fs::read_to_string(&path).unwrap_or_else(|_| "none".into());
     let fitted = [
@@ -60,12 +65,15 @@ fn same_hours_as_before(cal: &Calibration) -> Result<(), Error> {
     .iter()
     .any(|p| p.exists());
     if fitted && before.trim() != now {
+        let one_line = |s: &str| s.trim().replace('\n', "; ");
         return Err(Error::Config(format!(
-            "{} holds chains fitted with holdout {}, and this run holds out {now}: they saw \
-             other hours. Use a new --out, or delete chains.json, chains_summary.json, \
-             refine.json and refine/ there (simulations and the first surrogate are kept)",
+            "{} holds chains fitted with holdout {}, and this run has holdout {}: they were \
+             fitted to other data. Use a new --out, or delete chains.json, \
+             chains_summary.json, refine.json and refine/ there (simulations and the first \
+             surrogate are kept)",
             cal.out.display(),
-            before.trim()
+            one_line(&before),
+            one_line(&now)
         )));
     }
     crate::write_atomic(&path, now.as_bytes())

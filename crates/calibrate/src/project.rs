@@ -795,6 +795,54 @@ impl Project {
                 ));
             }
         }
+        self.check_fit_flags()
+    }
+
+    /// `fit = false` is a choice about a meter the model is compared with: refused on a
+    /// column that is only a base (a base is never fitted), and on one of two columns of the
+    /// same role that disagree (which one would the calibration follow?).
+    fn check_fit_flags(&self) -> Result<(), Error> {
+        use bemcal_precal::meters::MeterRole;
+        let compared: Vec<MeterRole> = self
+            .output_roles()
+            .into_values()
+            .map(MeterRole::from)
+            .collect();
+        let columns = &self.meters.columns;
+        for (i, c) in columns.iter().enumerate() {
+            if !c.fit && !compared.contains(&c.role) {
+                return Err(self.error_at(
+                    &["meters", "columns", &i.to_string(), "fit"],
+                    format!(
+                        "[[meters.columns]] column = \"{}\": fit = false on role '{}', which no \
+                         model output is compared with (a [[bases]] submeter is never fitted); \
+                         remove fit = false",
+                        excerpt(&c.column),
+                        excerpt(c.role.name())
+                    ),
+                ));
+            }
+            if let Some((j, other)) = columns[..i]
+                .iter()
+                .enumerate()
+                .find(|(_, o)| o.role == c.role && o.fit != c.fit)
+            {
+                // The line of the one that writes `fit = false` (the other may not write it).
+                let written = if c.fit { j } else { i };
+                return Err(self.error_at(
+                    &["meters", "columns", &written.to_string(), "fit"],
+                    format!(
+                        "[[meters.columns]] column = \"{}\" says fit = {} and column = \"{}\" of \
+                         the same role '{}' says fit = {}: give both the same",
+                        excerpt(&c.column),
+                        c.fit,
+                        excerpt(&other.column),
+                        excerpt(c.role.name()),
+                        other.fit
+                    ),
+                ));
+            }
+        }
         Ok(())
     }
 

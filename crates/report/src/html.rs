@@ -712,8 +712,13 @@ fn warnings(s: &crate::io::Summary) -> String {
     }
     for m in &s.validation {
         if !g14_pass(m) {
+            let not_fitted = if s.not_fitted.contains(&m.output) {
+                " It was not fitted (<code>fit = false</code>): compared, not calibrated."
+            } else {
+                ""
+            };
             warn.push(format!(
-                "Output <b>{}</b>: the calibrated model fails ASHRAE Guideline 14 (NMBE {:.1} %, CV-RMSE {:.1} %).",
+                "Output <b>{}</b>: the calibrated model fails ASHRAE Guideline 14 (NMBE {:.1} %, CV-RMSE {:.1} %).{not_fitted}",
                 esc(&m.output),
                 m.nmbe,
                 m.cv_rmse

@@ -21,6 +21,9 @@ pub struct OutputRow {
     pub cv_rmse: f64,
     /// Both within Guideline 14's hourly limits.
     pub pass: bool,
+    /// The calibration fitted this meter (false: `fit = false`, compared only; its pass or
+    /// fail does not count in the building's [`BuildingRow::g14_pass`]).
+    pub fitted: bool,
 }
 
 /// One building in the summary.
@@ -36,7 +39,8 @@ pub struct BuildingRow {
     pub stage: String,
     /// Why it failed: the loader's message or the job's error (EnergyPlus error lines).
     pub error: Option<String>,
-    /// Every output passes ASHRAE Guideline 14 (None: no validation).
+    /// Every fitted output passes ASHRAE Guideline 14 (None: no validation). A meter left
+    /// out of the fit (`fit = false`) is shown, not counted.
     pub g14_pass: Option<bool>,
     /// Guideline 14 per output at the estimate.
     pub outputs: Vec<OutputRow>,
@@ -148,7 +152,9 @@ fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) 
         "building,run,state,stage,g14_pass,max_rhat,converged,run_time_s,simulations_run,simulations_shared",
     );
     for n in names {
-        csv.push_str(&format!(",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass"));
+        csv.push_str(&format!(
+            ",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass,{n}_fitted"
+        ));
     }
     for n in parameters {
         csv.push_str(&format!(",{}", csv_field(n)));
@@ -171,12 +177,13 @@ fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) 
         for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
                 Some(o) => csv.push_str(&format!(
-                    ",{},{},{}",
+                    ",{},{},{},{}",
                     num(Some(o.nmbe), 3),
                     num(Some(o.cv_rmse), 3),
-                    o.pass
+                    o.pass,
+                    o.fitted
                 )),
-                None => csv.push_str(",,,"),
+                None => csv.push_str(",,,,"),
             }
         }
         for n in parameters {
@@ -237,8 +244,9 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
             match r.outputs.iter().find(|o| &o.output == n) {
                 Some(o) => {
                     let c = if o.pass { "pass" } else { "fail" };
+                    let not_fitted = if o.fitted { "" } else { " (not fitted)" };
                     h.push_str(&format!(
-                        "<td class=\"{c}\">{}</td><td class=\"{c}\">{}</td>",
+                        "<td class=\"{c}\">{}</td><td class=\"{c}\">{}{not_fitted}</td>",
                         num(Some(o.nmbe), 1),
                         num(Some(o.cv_rmse), 1)
                     ))
