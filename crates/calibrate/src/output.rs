@@ -116,7 +116,8 @@ impl OutputDir {
         self.validation().join("bases.csv")
     }
 
-    /// `holdout.txt`: the held-out period the folder's chains were fitted without (`none`).
+    /// `holdout.txt`: the held-out period the folder's chains were fitted without (`none`),
+    /// and a `not fitted:` line naming the meters they left out (`fit = false`).
     pub fn holdout_txt(&self) -> PathBuf {
         self.root.join("holdout.txt")
     }
