@@ -201,6 +201,16 @@ pub fn train(
     }
     cmd.env("PYTHONPATH", pkg.path())
         .env("PYTHONDONTWRITEBYTECODE", "1");
+    // PyTorch's OpenMP (libgomp, in its Linux wheels) threads spin about 300,000 times at
+    // each barrier before they sleep: two trainings on one host with more threads than cores
+    // then burn their time slices waiting on each other. Two 8-epoch trainings of 2 threads
+    // at once on 2 cores: 568 s with the default, 142 s with a spin count of 10,000, 69 s
+    // with OMP_WAIT_POLICY=PASSIVE (single runs); alone, neither setting differed from the
+    // default beyond the noise of 3 pairs (docs/benchmarks.md). A user's own setting wins.
+    if std::env::var_os("OMP_WAIT_POLICY").is_none() && std::env::var_os("GOMP_SPINCOUNT").is_none()
+    {
+        cmd.env("GOMP_SPINCOUNT", "10000");
+    }
     let start = std::time::Instant::now();
     let (ok, log) = if opts.quiet {
         let out = cmd
