@@ -139,8 +139,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let e = String::from_utf8_lossy(&other.stderr);
     assert!(
         other.status.code() == Some(1)
-            && e.contains("chains fitted with holdout last 2 months (1464 hours)")
-            && e.contains("last 1 month (744 hours)"),
+            && e.contains("chains fitted to other data (holdout last 2 months (1464 hours)")
+            && e.contains("this run's (holdout last 1 month (744 hours), every meter fitted)"),
         "{e}"
     );
 
@@ -171,13 +171,17 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         .unwrap();
     let e = String::from_utf8_lossy(&refused.stderr);
     assert!(
-        refused.status.code() == Some(1) && e.contains("not fitted: heating_kwh"),
+        refused.status.code() == Some(1)
+            && e.contains("every meter fitted) than this run's")
+            && e.contains("not fitted: heating_kwh)"),
         "{e}"
     );
     std::fs::remove_file(out.join("chains.json")).unwrap();
     let (log3, summary) = calibrate(dir, &out);
+    // Dual averaging aims at 0.7 over a 30-iteration burn-in; 50 draws after it scatter around
+    // that (0.48-0.84 seen on one machine): a broken kernel sits near 0.
     for a in summary["acceptance_rate"].as_array().unwrap() {
-        assert!(a.as_f64().unwrap() > 0.5, "HMC acceptance {a}\n{log3}");
+        assert!(a.as_f64().unwrap() > 0.3, "HMC acceptance {a}\n{log3}");
     }
     for (name, truth) in TRUTH {
         let (range, estimate) = range_and_estimate(&summary, name);

@@ -220,7 +220,9 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         state: s.state.clone(),
         stage: s.stage.clone(),
         error: (!s.error.is_empty()).then(|| s.error.clone()),
-        g14_pass: (!outputs.is_empty())
+        g14_pass: outputs
+            .iter()
+            .any(|o| o.fitted)
             .then(|| outputs.iter().filter(|o| o.fitted).all(|o| o.pass)),
         max_rhat: summary["posterior"]["max_rhat"].as_f64(),
         converged: summary["converged"].as_bool(),

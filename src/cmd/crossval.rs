@@ -95,7 +95,11 @@ fn print(cv: &CrossValidation) {
             .collect();
         println!(
             "{:<18} {:<26} {:<26} {:<26} {}",
-            p.output,
+            if p.fitted {
+                p.output.clone()
+            } else {
+                format!("{} (not fitted)", p.output)
+            },
             g14(&p.in_sample),
             g14(&p.hourly),
             g14(&p.monthly),

@@ -221,11 +221,12 @@ fn print_table(p: &PortfolioSummary) {
             .iter()
             .map(|o| {
                 format!(
-                    "{} {:.1}/{:.1}{}",
+                    "{} {:.1}/{:.1}{}{}",
                     o.output,
                     o.nmbe,
                     o.cv_rmse,
-                    if o.pass { "" } else { " FAIL" }
+                    if o.pass { "" } else { " FAIL" },
+                    if o.fitted { "" } else { " (not fitted)" }
                 )
             })
             .collect();

@@ -48,6 +48,17 @@ impl Calibration {
         Ok(cal)
     }
 
+    /// What the chains are fitted to, as `holdout.txt` records it: the held-out period
+    /// (`none`) and, when a meter says `fit = false`, a `not fitted:` line naming those
+    /// meters. A rerun into the folder reuses chains fitted to the same.
+    pub fn fitted_data(&self) -> String {
+        let holdout = match &self.inputs.held_out {
+            Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
+            None => "none".into(),
+        };
+        format!("{holdout}{}", not_fitted_line(&self.inputs.not_fitted()))
+    }
+
     /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
     /// the chains refuse proposals there (see [`crate::replacement::InvalidRegion`]).
     pub fn learn_invalid_region(&mut self, outcome: &Outcome) {
@@ -225,5 +236,14 @@ impl Calibration {
         };
         bemcal_surrogate::train(&self.out.dataset(), &self.surrogate_dir(), &opts)?;
         Ok(())
+    }
+}
+
+/// `holdout.txt`'s line naming the meters not fitted (empty when every meter is).
+pub(crate) fn not_fitted_line(not_fitted: &[String]) -> String {
+    if not_fitted.is_empty() {
+        String::new()
+    } else {
+        format!("\nnot fitted: {}", not_fitted.join(", "))
     }
 }

@@ -70,10 +70,17 @@ pub struct PooledOutput {
     pub monthly: Option<G14Metrics>,
     /// Predictive coverage over the held-out hours of every fold, per level.
     pub coverage: Vec<Coverage>,
+    /// The calibrations fitted this meter (false: `fit = false`, held out and compared only).
+    #[serde(default = "fitted")]
+    pub fitted: bool,
     /// Months whose fold ran but gave this meter no Guideline 14 (no measured hour, or a zero
     /// measured mean): the pooled Guideline 14 leaves them out.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub months_without_figures: Vec<u32>,
+}
+
+fn fitted() -> bool {
+    true
 }
 
 /// `crossval.json`: the folds and their pooled figures.
@@ -176,6 +183,7 @@ pub fn pool(all: &Summary, folds: &[Fold]) -> Vec<PooledOutput> {
                 hourly: g14_pooled(&parts).ok(),
                 monthly: g14_of_totals(&parts).ok(),
                 coverage,
+                fitted: !all.not_fitted.contains(name),
                 months_without_figures,
             }
         })

@@ -157,6 +157,8 @@ pub fn drive(
     exec: &mut dyn Executor,
     log: Log<'_>,
 ) -> Result<Ready<Summary>, Error> {
+    // What the folder's chains are fitted to, for a later rerun into it (local or fetched).
+    crate::write_atomic(&cal.out.holdout_txt(), cal.fitted_data().as_bytes())?;
     match read_outcome(&cal.simulations_dir()) {
         // Settled before this call: `Calibration::load` learnt its invalid region.
         Some(o) => {

@@ -347,12 +347,9 @@ fn fitted_outputs(project: &Project, outputs: &[String]) -> Result<Vec<bool>, Er
     let fitted: Vec<bool> = outputs
         .iter()
         .map(|o| {
-            let role = roles.get(o).map(|r| MeterRole::from(r.clone()));
-            !project
-                .meters
-                .columns
-                .iter()
-                .any(|c| Some(&c.role) == role.as_ref() && !c.fit)
+            roles
+                .get(o)
+                .is_none_or(|r| project.fits(&MeterRole::from(r.clone())))
         })
         .collect();
     if !fitted.contains(&true) {
@@ -462,8 +459,8 @@ mod tests {
         );
         refused(
             "[[meters.columns]]\ncolumn = \"electricity_kwh\"\nrole = \"heating\"\n",
-            9,
-            "says fit = true and column = \"heating_kwh\"",
+            17,
+            "one column per role",
         );
     }
 }

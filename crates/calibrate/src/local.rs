@@ -44,39 +44,62 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 }
 
 /// A rerun reuses the folder's chains and refinement rounds: refuses when they were fitted
-/// to other data (another held-out period, or other meters fitted: they saw other hours),
-/// then records this run's in `holdout.txt` (the held-out period, and a `not fitted:` line
-/// when a meter says `fit = false`; a folder written before that line existed fitted all).
+/// to other data than this run's ([`Calibration::fitted_data`]: another held-out period, or
+/// other meters fitted); the driver then records this run's in `holdout.txt`.
 fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
-    let mut now = match &cal.inputs.held_out {
-        Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
-        None => "none".into(),
-    };
-    let not_fitted = cal.inputs.not_fitted();
-    if !not_fitted.is_empty() {
-        now.push_str(&format!("\nnot fitted: {}", not_fitted.join(", ")));
-    }
-    let path = cal.out.holdout_txt();
-    let before = std::fs::read_to_string(&path).unwrap_or_else(|_| "none".into());
+    let now = cal.fitted_data();
     let fitted = [
         cal.out.chains_checkpoint(),
         cal.out.join(crate::refine::REFINE_FILE),
     ]
     .iter()
     .any(|p| p.exists());
-    if fitted && before.trim() != now {
-        let one_line = |s: &str| s.trim().replace('\n', "; ");
-        return Err(Error::Config(format!(
-            "{} holds chains fitted with holdout {}, and this run has holdout {}: they were \
-             fitted to other data. Use a new --out, or delete chains.json, \
-             chains_summary.json, refine.json and refine/ there (simulations and the first \
-             surrogate are kept)",
-            cal.out.display(),
-            one_line(&before),
-            one_line(&now)
-        )));
+    if !fitted {
+        return Ok(());
     }
-    crate::write_atomic(&path, now.as_bytes())
+    let mut before =
+        std::fs::read_to_string(cal.out.holdout_txt()).unwrap_or_else(|_| "none".into());
+    // Written before holdout.txt named the meters not fitted: the summary did.
+    if !before.contains("not fitted:") {
+        before = format!(
+            "{}{}",
+            before.trim(),
+            crate::calibration::not_fitted_line(&summary_not_fitted(cal))
+        );
+    }
+    if before.trim() == now.trim() {
+        return Ok(());
+    }
+    let say = |s: &str| {
+        let mut lines = s.trim().lines();
+        let holdout = lines.next().unwrap_or("none");
+        match lines.next() {
+            Some(n) => format!("holdout {holdout}, {n}"),
+            None => format!("holdout {holdout}, every meter fitted"),
+        }
+    };
+    Err(Error::Config(format!(
+        "{} holds chains fitted to other data ({}) than this run's ({}). Use a new --out, or \
+         delete chains.json, chains_summary.json, refine.json and refine/ there (simulations \
+         and the first surrogate are kept)",
+        cal.out.display(),
+        say(&before),
+        say(&now)
+    )))
+}
+
+/// The meters the folder's `summary.json` says were not fitted (none without one).
+fn summary_not_fitted(cal: &Calibration) -> Vec<String> {
+    #[derive(serde::Deserialize)]
+    struct NotFitted {
+        #[serde(default)]
+        not_fitted: Vec<String>,
+    }
+    std::fs::read_to_string(cal.out.summary_json())
+        .ok()
+        .and_then(|t| serde_json::from_str::<NotFitted>(&t).ok())
+        .map(|n| n.not_fitted)
+        .unwrap_or_default()
 }
 
 /// The executor of `bemcal calibrate` without workers: all work in this process, at once.

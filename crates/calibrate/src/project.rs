@@ -769,11 +769,14 @@ impl Project {
         }
         // A column whose role no model output is compared with and no base uses would be read
         // and then ignored: a misspelt `heatng` left heating out of the calibration unnoticed.
-        let used: Vec<MeterRole> = roles
-            .values()
-            .cloned()
-            .chain(self.bases.iter().filter_map(|b| b.submeter.clone()))
-            .map(MeterRole::from)
+        let used: Vec<MeterRole> = self
+            .compared_roles()
+            .into_iter()
+            .chain(
+                self.bases
+                    .iter()
+                    .filter_map(|b| b.submeter.clone().map(MeterRole::from)),
+            )
             .collect();
         for (i, c) in columns.iter().enumerate() {
             if !used.contains(&c.role) {
@@ -798,18 +801,26 @@ impl Project {
         self.check_fit_flags()
     }
 
-    /// `fit = false` is a choice about a meter the model is compared with: refused on a
-    /// column that is only a base (a base is never fitted), and on one of two columns of the
-    /// same role that disagree (which one would the calibration follow?).
+    /// One column per role (the meters keep the first column of a role: a second would be
+    /// read and ignored), and `fit = false` only on a meter the model is compared with (a
+    /// `[[bases]]` submeter is never fitted).
     fn check_fit_flags(&self) -> Result<(), Error> {
-        use bemcal_precal::meters::MeterRole;
-        let compared: Vec<MeterRole> = self
-            .output_roles()
-            .into_values()
-            .map(MeterRole::from)
-            .collect();
+        let compared = self.compared_roles();
         let columns = &self.meters.columns;
         for (i, c) in columns.iter().enumerate() {
+            if let Some(first) = columns[..i].iter().find(|o| o.role == c.role) {
+                return Err(self.error_at(
+                    &["meters", "columns", &i.to_string(), "role"],
+                    format!(
+                        "[[meters.columns]] column = \"{}\" has role '{}', as column = \"{}\" \
+                         before it: one column per role (give the same column another role to \
+                         use it twice)",
+                        excerpt(&c.column),
+                        excerpt(c.role.name()),
+                        excerpt(&first.column)
+                    ),
+                ));
+            }
             if !c.fit && !compared.contains(&c.role) {
                 return Err(self.error_at(
                     &["meters", "columns", &i.to_string(), "fit"],
@@ -822,28 +833,26 @@ impl Project {
                     ),
                 ));
             }
-            if let Some((j, other)) = columns[..i]
-                .iter()
-                .enumerate()
-                .find(|(_, o)| o.role == c.role && o.fit != c.fit)
-            {
-                // The line of the one that writes `fit = false` (the other may not write it).
-                let written = if c.fit { j } else { i };
-                return Err(self.error_at(
-                    &["meters", "columns", &written.to_string(), "fit"],
-                    format!(
-                        "[[meters.columns]] column = \"{}\" says fit = {} and column = \"{}\" of \
-                         the same role '{}' says fit = {}: give both the same",
-                        excerpt(&c.column),
-                        c.fit,
-                        excerpt(&other.column),
-                        excerpt(c.role.name()),
-                        other.fit
-                    ),
-                ));
-            }
         }
         Ok(())
+    }
+
+    /// The meter roles the model's outputs are compared with ([`Project::output_roles`]).
+    pub fn compared_roles(&self) -> Vec<bemcal_precal::meters::MeterRole> {
+        self.output_roles()
+            .into_values()
+            .map(bemcal_precal::meters::MeterRole::from)
+            .collect()
+    }
+
+    /// Whether the calibration fits the meter of `role`: not when its column says
+    /// `fit = false`.
+    pub fn fits(&self, role: &bemcal_precal::meters::MeterRole) -> bool {
+        !self
+            .meters
+            .columns
+            .iter()
+            .any(|c| &c.role == role && !c.fit)
     }
 
     /// A path from the project file, resolved against its folder.

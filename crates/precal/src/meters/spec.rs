@@ -319,7 +319,7 @@ pub struct MeterSpec {
     /// Hours a value must repeat to count as a flat run in the quality summary (default 24).
     #[serde(default = "default_flat")]
     pub flat_run_hours: usize,
-    /// The meter columns; empty = detect from the headers ([`detect_columns`]).
+    /// The meter columns; empty = detect from the headers ([`detect_columns`](super::detect_columns)).
     #[serde(default)]
     pub columns: Vec<MeterColumn>,
 }
