@@ -77,7 +77,7 @@ fn print(cv: &CrossValidation) {
         fold_s.iter().sum::<f64>() / fold_s.len().max(1) as f64
     );
     println!(
-        "{:<18} {:<26} {:<26} {:<26} predictive coverage, held out (mean width)",
+        "{:<30} {:<26} {:<26} {:<26} predictive coverage, held out (mean width)",
         "output", "in-sample hourly", "held out, hourly", "held-out months' totals"
     );
     for p in &cv.pooled {
@@ -94,7 +94,7 @@ fn print(cv: &CrossValidation) {
             })
             .collect();
         println!(
-            "{:<18} {:<26} {:<26} {:<26} {}",
+            "{:<30} {:<26} {:<26} {:<26} {}",
             if p.fitted {
                 p.output.clone()
             } else {

@@ -49,8 +49,8 @@ impl Calibration {
     }
 
     /// What the chains are fitted to, as `holdout.txt` records it: the held-out period
-    /// (`none`) and, when a meter says `fit = false`, a `not fitted:` line naming those
-    /// meters. A rerun into the folder reuses chains fitted to the same.
+    /// (`none`) and a `not fitted:` line naming the meters that say `fit = false` (`none`).
+    /// A rerun into the folder reuses chains fitted to the same.
     pub fn fitted_data(&self) -> String {
         let holdout = match &self.inputs.held_out {
             Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
@@ -239,11 +239,18 @@ impl Calibration {
     }
 }
 
-/// `holdout.txt`'s line naming the meters not fitted (empty when every meter is).
+/// `holdout.txt`'s line naming the meters not fitted (`none` when every meter is: a file
+/// without the line was written before it existed).
 pub(crate) fn not_fitted_line(not_fitted: &[String]) -> String {
     if not_fitted.is_empty() {
-        String::new()
+        format!("\n{NOT_FITTED} {EVERY_METER_FITTED}")
     } else {
-        format!("\nnot fitted: {}", not_fitted.join(", "))
+        format!("\n{NOT_FITTED} {}", not_fitted.join(", "))
     }
 }
+
+/// The label of `holdout.txt`'s second line.
+pub(crate) const NOT_FITTED: &str = "not fitted:";
+
+/// Its value when every meter is fitted.
+pub(crate) const EVERY_METER_FITTED: &str = "none";

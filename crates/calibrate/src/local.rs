@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::calibration::{EVERY_METER_FITTED, NOT_FITTED};
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
 use crate::posterior::{run_chains, Checkpoint};
@@ -59,8 +60,8 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
     }
     let mut before =
         std::fs::read_to_string(cal.out.holdout_txt()).unwrap_or_else(|_| "none".into());
-    // Written before holdout.txt named the meters not fitted: the summary did.
-    if !before.contains("not fitted:") {
+    // Written before holdout.txt had its second line: the summary named them.
+    if !before.contains(NOT_FITTED) {
         before = format!(
             "{}{}",
             before.trim(),
@@ -73,9 +74,11 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
     let say = |s: &str| {
         let mut lines = s.trim().lines();
         let holdout = lines.next().unwrap_or("none");
-        match lines.next() {
-            Some(n) => format!("holdout {holdout}, {n}"),
-            None => format!("holdout {holdout}, every meter fitted"),
+        match lines.next().and_then(|l| l.strip_prefix(NOT_FITTED)) {
+            Some(n) if n.trim() != EVERY_METER_FITTED => {
+                format!("holdout {holdout}, {NOT_FITTED} {}", n.trim())
+            }
+            _ => format!("holdout {holdout}, every meter fitted"),
         }
     };
     Err(Error::Config(format!(
