@@ -129,17 +129,9 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     );
     assert!(log2.contains("reusing the one trained earlier"), "{log2}");
     // ... but not chains fitted with another held-out period: they saw other hours.
-    let other = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .args(["--holdout", "last 1 month", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let e = String::from_utf8_lossy(&other.stderr);
+    let e = refused_rerun(dir, &out, &["--holdout", "last 1 month"]);
     assert!(
-        other.status.code() == Some(1)
-            && e.contains("chains fitted to other data (holdout last 2 months (1464 hours)")
+        e.contains("chains fitted to other data (holdout last 2 months (1464 hours)")
             && e.contains("this run's (holdout last 1 month (744 hours), every meter fitted)"),
         "{e}"
     );
@@ -162,18 +154,9 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         );
     std::fs::write(dir.join("project.toml"), project).unwrap();
     // The folder's chains fitted heating: refused until they are removed.
-    let refused = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let e = String::from_utf8_lossy(&refused.stderr);
+    let e = refused_rerun(dir, &out, &[]);
     assert!(
-        refused.status.code() == Some(1)
-            && e.contains("every meter fitted) than this run's")
-            && e.contains("not fitted: heating_kwh)"),
+        e.contains("every meter fitted) than this run's") && e.contains("not fitted: heating_kwh)"),
         "{e}"
     );
     std::fs::remove_file(out.join("chains.json")).unwrap();
@@ -472,6 +455,22 @@ fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
     let summary =
         serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     (log, summary)
+}
+
+/// `bemcal calibrate DIR/project.toml ARGS --out OUT`, which must be refused (exit status 1)
+/// before it runs anything: its error output.
+fn refused_rerun(dir: &Path, out: &Path, args: &[&str]) -> String {
+    let run = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert_eq!(run.status.code(), Some(1), "{e}");
+    e
 }
 
 /// A parameter's prior range and its calibrated value in summary.json.

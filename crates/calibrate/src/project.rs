@@ -716,7 +716,8 @@ impl Project {
     }
 
     /// The meters' columns against the outputs and bases: every output's role and every
-    /// base's submeter has a column, and every column is used. Roles are known only when the
+    /// base's submeter has a column, every column is used, one column per role, and
+    /// `fit = false` only on a compared meter. Roles are known only when the
     /// columns are listed (otherwise they are detected from the CSV's headers, checked once it
     /// is read).
     fn check_meter_roles(&self, outputs: &[&str]) -> Result<(), Error> {
@@ -769,9 +770,10 @@ impl Project {
         }
         // A column whose role no model output is compared with and no base uses would be read
         // and then ignored: a misspelt `heatng` left heating out of the calibration unnoticed.
-        let used: Vec<MeterRole> = self
-            .compared_roles()
-            .into_iter()
+        let compared: Vec<MeterRole> = roles.values().cloned().map(MeterRole::from).collect();
+        let used: Vec<MeterRole> = compared
+            .iter()
+            .cloned()
             .chain(
                 self.bases
                     .iter()
@@ -798,15 +800,9 @@ impl Project {
                 ));
             }
         }
-        self.check_fit_flags()
-    }
-
-    /// One column per role (the meters keep the first column of a role: a second would be
-    /// read and ignored), and `fit = false` only on a meter the model is compared with (a
-    /// `[[bases]]` submeter is never fitted).
-    fn check_fit_flags(&self) -> Result<(), Error> {
-        let compared = self.compared_roles();
-        let columns = &self.meters.columns;
+        // One column per role (the meters keep the first column of a role: a second would be
+        // read and ignored), and `fit = false` only on a meter the model is compared with (a
+        // `[[bases]]` submeter is never fitted).
         for (i, c) in columns.iter().enumerate() {
             if let Some(first) = columns[..i].iter().find(|o| o.role == c.role) {
                 return Err(self.error_at(
@@ -837,17 +833,9 @@ impl Project {
         Ok(())
     }
 
-    /// The meter roles the model's outputs are compared with ([`Project::output_roles`]).
-    pub fn compared_roles(&self) -> Vec<bemcal_precal::meters::MeterRole> {
-        self.output_roles()
-            .into_values()
-            .map(bemcal_precal::meters::MeterRole::from)
-            .collect()
-    }
-
     /// Whether the calibration fits the meter of `role`: not when its column says
     /// `fit = false`.
-    pub fn fits(&self, role: &bemcal_precal::meters::MeterRole) -> bool {
+    pub(crate) fn fits(&self, role: &bemcal_precal::meters::MeterRole) -> bool {
         !self
             .meters
             .columns
