@@ -112,7 +112,7 @@ impl Target<'_> {
         if self.marginal {
             0
         } else {
-            self.sigma_box.lo.len()
+            self.sigma_box.len()
         }
     }
 }
@@ -318,7 +318,7 @@ fn main() -> BoxResult<()> {
         .collect();
     let lik = GaussianLikelihood::new(&observed, &noise)?;
     let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
-    let sigma_box = SigmaDeltaBox::new(&sd);
+    let sigma_box = SigmaDeltaBox::new(&sd, &vec![true; sd.len()]);
     let target = Target {
         priors: &priors,
         lik: &lik,

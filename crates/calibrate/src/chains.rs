@@ -87,7 +87,7 @@ impl Calibration {
             evaluator: surrogate.bind(&inp.features)?,
             likelihood,
             noise,
-            sigma_box: SigmaDeltaBox::new(&sd),
+            sigma_box: SigmaDeltaBox::new(&sd, &inp.fitted),
             sigma_eta,
             held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
         })
@@ -176,8 +176,8 @@ impl Sampler<'_> {
                 }
                 tries += 1;
             }
-            if post.sigma_box.is_some() {
-                s.extend(std::iter::repeat_n(0.6, cal.inputs.outputs.len()));
+            if let Some(b) = post.sigma_box {
+                s.extend(std::iter::repeat_n(0.6, b.len()));
             }
         }
         starts
@@ -278,8 +278,8 @@ impl Sampler<'_> {
                 .zip(x)
                 .map(|(p, v)| p.to_unit(*v))
                 .collect();
-            if post.sigma_box.is_some() {
-                start.extend(std::iter::repeat_n(0.6, names.len()));
+            if let Some(b) = post.sigma_box {
+                start.extend(std::iter::repeat_n(0.6, b.len()));
             }
             let starts = [start];
             let lps = post.ln_posterior_batch(eval, &starts);
@@ -401,15 +401,14 @@ fn noise_summary(
     map_point: &[f64],
 ) -> Result<(PerOutput, PerOutput), Error> {
     let d = inp.plan.calibrated.len();
-    let n_out = inp.outputs.len();
     let mut residual_ar1: Vec<(String, f64)> = vec![];
     let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
-        Some(b) => (0..n_out)
-            .map(|k| {
+        Some(b) => (b.outputs.iter().enumerate())
+            .map(|(j, &k)| {
                 let mut v: Vec<f64> = draws
                     .iter()
-                    .flat_map(|dr| dr.column(d + k))
-                    .map(|u| b.sigma(k, u))
+                    .flat_map(|dr| dr.column(d + j))
+                    .map(|u| b.sigma(j, u))
                     .collect();
                 v.sort_by(f64::total_cmp);
                 (inp.outputs[k].clone(), v[v.len() / 2])

@@ -18,9 +18,12 @@ use crate::design::Plan;
 use crate::Error;
 use bemcal_energyplus::Model;
 
-/// Bounds of `ln sigma_delta` per output in hyperparameter mode.
+/// Bounds of `ln sigma_delta` in hyperparameter mode: one sampled dimension per fitted
+/// output (a meter with `fit = false` is not in the likelihood, so it has no dimension).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SigmaDeltaBox {
+    /// The output each sampled dimension belongs to (indices into the calibration's outputs).
+    pub outputs: Vec<usize>,
     /// Lower bounds, `ln(0.001 s_k)` (`s_k` the measured sd, kWh).
     pub lo: Vec<f64>,
     /// Upper bounds, `ln(2 s_k)`.
@@ -30,18 +33,42 @@ pub struct SigmaDeltaBox {
 }
 
 impl SigmaDeltaBox {
-    /// The box for measured sds `s`.
-    pub fn new(measured_sd: &[f64]) -> SigmaDeltaBox {
+    /// The box for the outputs' measured sds `s`, with a dimension for each output `fitted`.
+    pub fn new(measured_sd: &[f64], fitted: &[bool]) -> SigmaDeltaBox {
+        let outputs: Vec<usize> = (0..measured_sd.len()).filter(|&k| fitted[k]).collect();
+        let sd = |k: &usize| measured_sd[*k];
         SigmaDeltaBox {
-            lo: measured_sd.iter().map(|s| (1e-3 * s).ln()).collect(),
-            hi: measured_sd.iter().map(|s| (2.0 * s).ln()).collect(),
-            scale: measured_sd.to_vec(),
+            lo: outputs.iter().map(|k| (1e-3 * sd(k)).ln()).collect(),
+            hi: outputs.iter().map(|k| (2.0 * sd(k)).ln()).collect(),
+            scale: outputs.iter().map(sd).collect(),
+            outputs,
         }
     }
 
-    /// `sigma_delta,k` at unit coordinate `u`.
-    pub fn sigma(&self, k: usize, u: f64) -> f64 {
-        (self.lo[k] + u * (self.hi[k] - self.lo[k])).exp()
+    /// Number of sampled dimensions.
+    pub fn len(&self) -> usize {
+        self.outputs.len()
+    }
+
+    /// Whether no output is sampled.
+    pub fn is_empty(&self) -> bool {
+        self.outputs.is_empty()
+    }
+
+    /// `sigma_delta` of sampled dimension `j` (output `outputs[j]`) at unit coordinate `u`.
+    pub fn sigma(&self, j: usize, u: f64) -> f64 {
+        (self.lo[j] + u * (self.hi[j] - self.lo[j])).exp()
+    }
+
+    /// `sigma_delta` per output (`n_outputs` long) at the sampled coordinates `u` (one per
+    /// dimension); an output without a dimension gets 1, which the likelihood never reads
+    /// (it has no observed hour).
+    pub fn per_output(&self, n_outputs: usize, u: &[f64]) -> Vec<f64> {
+        let mut sd = vec![1.0; n_outputs];
+        for (j, &k) in self.outputs.iter().enumerate() {
+            sd[k] = self.sigma(j, u[j]);
+        }
+        sd
     }
 }
 
@@ -64,7 +91,7 @@ pub struct Posterior<'a> {
 impl Posterior<'_> {
     /// Dimension of the sampled space.
     pub fn dim(&self) -> usize {
-        self.plan.calibrated.len() + self.sigma_box.map_or(0, |b| b.lo.len())
+        self.plan.calibrated.len() + self.sigma_box.map_or(0, SigmaDeltaBox::len)
     }
 
     /// Physical parameter values of a unit-space point (calibrated ones only).
@@ -92,9 +119,9 @@ impl Posterior<'_> {
             .sum();
         if let Some(b) = self.sigma_box {
             let d = self.plan.calibrated.len();
-            for k in 0..b.lo.len() {
-                let ln_s = b.lo[k] + u[d + k] * (b.hi[k] - b.lo[k]);
-                lp += ln_prior_log_sigma_delta(ln_s, b.scale[k], SigmaPrior::HalfCauchy);
+            for j in 0..b.len() {
+                let ln_s = b.lo[j] + u[d + j] * (b.hi[j] - b.lo[j]);
+                lp += ln_prior_log_sigma_delta(ln_s, b.scale[j], SigmaPrior::HalfCauchy);
             }
         }
         lp
@@ -108,7 +135,7 @@ impl Posterior<'_> {
             None => self.likelihood.log_likelihood(predicted),
             Some(b) => {
                 let d = self.plan.calibrated.len();
-                let sd: Vec<f64> = (0..b.lo.len()).map(|k| b.sigma(k, u[d + k])).collect();
+                let sd = b.per_output(self.likelihood.n_outputs(), &u[d..]);
                 self.likelihood.log_likelihood_with_delta(predicted, &sd)
             }
         }
@@ -331,4 +358,25 @@ pub fn advance_chains(
         *c = Chain::Hmc(s);
     }
     Ok(draws)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_meter_not_fitted_gets_no_sampled_sigma_delta() {
+        // Three outputs, the second with `fit = false`: two sampled dimensions, for 0 and 2.
+        let b = SigmaDeltaBox::new(&[10.0, 20.0, 30.0], &[true, false, true]);
+        assert_eq!((b.len(), b.outputs.as_slice()), (2, &[0, 2][..]));
+        assert_eq!(b.scale, [10.0, 30.0]);
+        let sd = b.per_output(3, &[0.0, 1.0]);
+        assert!(
+            (sd[0] - 0.01).abs() < 1e-12,
+            "ln(0.001 s) at u = 0: {}",
+            sd[0]
+        );
+        assert_eq!(sd[1], 1.0);
+        assert!((sd[2] - 60.0).abs() < 1e-9, "ln(2 s) at u = 1: {}", sd[2]);
+    }
 }

@@ -451,8 +451,8 @@ pub(crate) fn write_draws_csv(
     let d = post.plan.calibrated.len();
     let mut s = format!("chain,draw,{}", post.plan.calibrated.join(","));
     if post.sigma_box.is_some() {
-        for o in outputs {
-            s.push_str(&format!(",sigma_delta_{o}"));
+        for &k in &sbox.outputs {
+            s.push_str(&format!(",sigma_delta_{}", outputs[k]));
         }
     }
     if log_posterior {
@@ -475,8 +475,8 @@ pub(crate) fn write_draws_csv(
                 s.push_str(&format!(",{x}"));
             }
             if post.sigma_box.is_some() {
-                for k in 0..outputs.len() {
-                    s.push_str(&format!(",{}", sbox.sigma(k, u[d + k])));
+                for j in 0..sbox.len() {
+                    s.push_str(&format!(",{}", sbox.sigma(j, u[d + j])));
                 }
             }
             if log_posterior {
