@@ -136,6 +136,17 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{e}"
     );
 
+    // ... nor chains fitted to other readings: a meter file edited since.
+    let meters = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
+    let mut lines: Vec<String> = meters.lines().map(String::from).collect();
+    let mut cells: Vec<String> = lines[1].split(',').map(String::from).collect();
+    cells[1] = format!("{}", cells[1].parse::<f64>().unwrap_or(0.0) * 3.0 + 1.0);
+    lines[1] = cells.join(",");
+    std::fs::write(dir.join("meters.csv"), lines.join("\n") + "\n").unwrap();
+    let e = refused_rerun(dir, &out, &[]);
+    assert!(e.contains("chains fitted to other meter readings"), "{e}");
+    std::fs::write(dir.join("meters.csv"), meters).unwrap();
+
     cross_validation_by_month(dir, &out);
 
     // The same posterior with HMC (gradients through the surrogate's VJP graph), from optimised
@@ -380,7 +391,7 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
 
     // The same chains from the same seeds, on meters altered in the held-out months or not.
     // (The project's own output folder gives the surrogate.)
-    let chains_on = |months: &[&str]| -> String {
+    let chains_on = |months: &[&str]| -> (String, String) {
         let altered = tempfile::tempdir().unwrap();
         for f in ["model.toml", "project.toml"] {
             std::fs::copy(dir.join(f), altered.path().join(f)).unwrap();
@@ -407,17 +418,19 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
         // 60 iterations of burn-in: the chains' whole states (positions, log posteriors,
         // adaptation, random streams) decide every later draw.
         sampler.advance(&mut states, 60).unwrap();
-        serde_json::to_string(&states).unwrap()
+        (serde_json::to_string(&states).unwrap(), cal.fitted_data())
     };
     let original = chains_on(&[]);
+    // The readings' fingerprint follows the fitted hours only, as the chains do.
     assert_eq!(
         original,
         chains_on(&["11", "12"]),
-        "held-out meters changed the chains"
+        "held-out meters changed the chains or the fitted readings"
     );
+    let (chains_06, fitted_06) = chains_on(&["06"]);
+    assert_ne!(original.1, fitted_06, "June altered, same fingerprint");
     assert_ne!(
-        original,
-        chains_on(&["06"]),
+        original.0, chains_06,
         "a calibration month must change the chains"
     );
 }

@@ -49,14 +49,19 @@ impl Calibration {
     }
 
     /// What the chains are fitted to, as `holdout.txt` records it: the held-out period
-    /// (`none`) and a `not fitted:` line naming the meters that say `fit = false` (`none`).
-    /// A rerun into the folder reuses chains fitted to the same.
+    /// (`none`), a `not fitted:` line naming the meters that say `fit = false` (`none`), and a
+    /// `fitted readings:` line with the fingerprint of the series the likelihood fits
+    /// ([`readings_fingerprint`]). A rerun into the folder reuses chains fitted to the same.
     pub fn fitted_data(&self) -> String {
         let holdout = match &self.inputs.held_out {
             Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
             None => "none".into(),
         };
-        format!("{holdout}{}", not_fitted_line(&self.inputs.not_fitted()))
+        format!(
+            "{holdout}{}\n{FITTED_READINGS} {}",
+            not_fitted_line(&self.inputs.not_fitted()),
+            readings_fingerprint(&self.inputs)
+        )
     }
 
     /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
@@ -248,6 +253,33 @@ pub(crate) fn not_fitted_line(not_fitted: &[String]) -> String {
         format!("\n{NOT_FITTED} {}", not_fitted.join(", "))
     }
 }
+
+/// The first 16 hex digits of the SHA-256 of what the likelihood fits: each fitted meter's
+/// name and its hourly series less its base (NaN where missing, excluded or held out). A
+/// changed meter file, `exclude` period or base changes it. Values enter rounded to 9
+/// significant digits, so the same files give the same fingerprint whatever the order in
+/// which floating-point sums were taken.
+pub(crate) fn readings_fingerprint(inputs: &crate::Inputs) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for k in (0..inputs.outputs.len()).filter(|&k| inputs.fitted[k]) {
+        h.update(inputs.outputs[k].as_bytes());
+        for v in inputs.model_share(k) {
+            match v.is_finite() {
+                true => h.update(format!(";{v:.8e}").as_bytes()),
+                false => h.update(b";-"),
+            }
+        }
+        h.update(b"\n");
+    }
+    h.finalize()[..8]
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// The label of `holdout.txt`'s third line ([`readings_fingerprint`]).
+pub(crate) const FITTED_READINGS: &str = "fitted readings:";
 
 /// The label of `holdout.txt`'s second line.
 pub(crate) const NOT_FITTED: &str = "not fitted:";

@@ -157,8 +157,16 @@ pub fn drive(
     exec: &mut dyn Executor,
     log: Log<'_>,
 ) -> Result<Ready<Summary>, Error> {
-    // What the folder's chains are fitted to, for a later rerun into it (local or fetched).
-    crate::write_atomic(&cal.out.holdout_txt(), cal.fitted_data().as_bytes())?;
+    // What the folder's chains are fitted to, for a later rerun into it (local or fetched);
+    // written when it changes, not on every call (the coordinator calls once per job).
+    let fitted = cal.fitted_data();
+    if std::fs::read_to_string(cal.out.holdout_txt())
+        .ok()
+        .as_deref()
+        != Some(fitted.as_str())
+    {
+        crate::write_atomic(&cal.out.holdout_txt(), fitted.as_bytes())?;
+    }
     match read_outcome(&cal.simulations_dir()) {
         // Settled before this call: `Calibration::load` learnt its invalid region.
         Some(o) => {

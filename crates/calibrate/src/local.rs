@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::calibration::{EVERY_METER_FITTED, NOT_FITTED};
+use crate::calibration::{EVERY_METER_FITTED, FITTED_READINGS, NOT_FITTED};
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
 use crate::posterior::{run_chains, Checkpoint};
@@ -45,10 +45,10 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 }
 
 /// A rerun reuses the folder's chains and refinement rounds: refuses when they were fitted
-/// to other data than this run's ([`Calibration::fitted_data`]: another held-out period, or
-/// other meters fitted); the driver then records this run's in `holdout.txt`.
+/// to other data than this run's ([`Calibration::fitted_data`]: another held-out period, other
+/// meters fitted, or other readings); the driver then records this run's in `holdout.txt`.
 fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
-    let now = cal.fitted_data();
+    let mut now = cal.fitted_data();
     let fitted = [
         cal.out.chains_checkpoint(),
         cal.out.join(crate::refine::REFINE_FILE),
@@ -68,6 +68,10 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
             crate::calibration::not_fitted_line(&summary_not_fitted(cal))
         );
     }
+    // Written before the readings were fingerprinted: what it records is all that is compared.
+    if !before.contains(FITTED_READINGS) {
+        now = without_line(&now, FITTED_READINGS);
+    }
     if before.trim() == now.trim() {
         return Ok(());
     }
@@ -81,14 +85,35 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
             _ => format!("holdout {holdout}, every meter fitted"),
         }
     };
+    let readings = |s: &str| {
+        let line = s.lines().find_map(|l| l.strip_prefix(FITTED_READINGS));
+        line.unwrap_or_default().trim().to_string()
+    };
+    let what = match say(&before) == say(&now) {
+        true => format!(
+            "other meter readings (fingerprint {}) than this run's ({}: a meter file, an \
+             `exclude` period or a base changed)",
+            readings(&before),
+            readings(&now)
+        ),
+        false => format!(
+            "other data ({}) than this run's ({})",
+            say(&before),
+            say(&now)
+        ),
+    };
     Err(Error::Config(format!(
-        "{} holds chains fitted to other data ({}) than this run's ({}). Use a new --out, or \
-         delete chains.json, chains_summary.json, refine.json and refine/ there (simulations \
-         and the first surrogate are kept)",
+        "{} holds chains fitted to {what}. Use a new --out, or delete chains.json, \
+         chains_summary.json, refine.json and refine/ there (simulations and the first \
+         surrogate are kept)",
         cal.out.display(),
-        say(&before),
-        say(&now)
     )))
+}
+
+/// `text` without its line that starts with `label`.
+fn without_line(text: &str, label: &str) -> String {
+    let kept: Vec<&str> = text.lines().filter(|l| !l.starts_with(label)).collect();
+    kept.join("\n")
 }
 
 /// The meters the folder's `summary.json` says were not fitted (none without one).

@@ -117,7 +117,8 @@ impl OutputDir {
     }
 
     /// `holdout.txt`: the held-out period the folder's chains were fitted without (`none`),
-    /// and a `not fitted:` line naming the meters they left out (`fit = false`).
+    /// a `not fitted:` line naming the meters they left out (`fit = false`), and a `fitted
+    /// readings:` fingerprint of the series they fitted.
     pub fn holdout_txt(&self) -> PathBuf {
         self.root.join("holdout.txt")
     }
