@@ -143,8 +143,11 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     cells[1] = format!("{}", cells[1].parse::<f64>().unwrap_or(0.0) * 3.0 + 1.0);
     lines[1] = cells.join(",");
     std::fs::write(dir.join("meters.csv"), lines.join("\n") + "\n").unwrap();
+    let recorded = std::fs::read_to_string(out.join("holdout.txt")).unwrap();
     let e = refused_rerun(dir, &out, &[]);
     assert!(e.contains("chains fitted to other meter readings"), "{e}");
+    let after = std::fs::read_to_string(out.join("holdout.txt")).unwrap();
+    assert_eq!(recorded, after, "a refused rerun rewrote holdout.txt");
     std::fs::write(dir.join("meters.csv"), meters).unwrap();
 
     cross_validation_by_month(dir, &out);
@@ -432,6 +435,21 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
     assert_ne!(
         original.0, chains_06,
         "a calibration month must change the chains"
+    );
+
+    // Chains saved in another space (here without the sampled ln sigma_delta of each meter)
+    // are refused, never read as this posterior's coordinates.
+    let mut project = bemcal_calibrate::Project::load(&dir.join("project.toml")).unwrap();
+    let cal = bemcal_calibrate::Calibration::load(project.clone(), out).unwrap();
+    let mut sampler = cal.sampler().unwrap();
+    let mut saved = sampler.new_chains(&sampler.starts(), 0, 0).unwrap();
+    project.mcmc.sigma_delta = bemcal_calibrate::project::SigmaDeltaMode::Sampled;
+    let cal = bemcal_calibrate::Calibration::load(project, out).unwrap();
+    let e = cal.sampler().unwrap().advance(&mut saved, 1).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("saved chains have 2 dimensions, this run samples 5"),
+        "{e}"
     );
 }
 

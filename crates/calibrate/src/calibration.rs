@@ -256,9 +256,10 @@ pub(crate) fn not_fitted_line(not_fitted: &[String]) -> String {
 
 /// The first 16 hex digits of the SHA-256 of what the likelihood fits: each fitted meter's
 /// name and its hourly series less its base (NaN where missing, excluded or held out). A
-/// changed meter file, `exclude` period or base changes it. Values enter rounded to 9
-/// significant digits, so the same files give the same fingerprint whatever the order in
-/// which floating-point sums were taken.
+/// changed meter file, `exclude` period, base or meter time zone changes it. Deterministic:
+/// the path from the files to these series has no parallel sums and no hash-ordered maps;
+/// values enter rounded to 9 significant digits, in text, so the fingerprint does not depend
+/// on how a platform prints or stores the last bits.
 pub(crate) fn readings_fingerprint(inputs: &crate::Inputs) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();

@@ -32,7 +32,8 @@ pub struct Sampler<'c> {
     /// Per output, the likelihood's noise sds, kWh: sigma_y and sigma_delta from `[mcmc]`'s
     /// fractions of the meter's mean and sd, sigma_eta from the surrogate.
     pub noise: Vec<OutputNoise>,
-    /// Bounds of each output's `ln sigma_delta`, sampled with `mcmc.sigma_delta = "sampled"`.
+    /// Bounds of each fitted output's `ln sigma_delta`, sampled with `mcmc.sigma_delta =
+    /// "sampled"`.
     pub sigma_box: SigmaDeltaBox,
     /// The surrogate's held-out RMSE per output, kWh (its part of the likelihood's noise).
     pub sigma_eta: Vec<f64>,

@@ -23,7 +23,7 @@ use crate::{chains_at, Calibration, Error, Log, Summary, Timings};
 pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary, Error> {
     let mut exec = InProcess::new(log);
     let mut cal = Calibration::load(project.clone(), out)?;
-    same_data_as_before(&cal)?;
+    same_data_as_before(&cal, log)?;
     let inp = &cal.inputs;
     log(&format!(
         "model {}: {} parameters, {} calibrated; outputs {:?}; weather {}",
@@ -47,7 +47,7 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 /// A rerun reuses the folder's chains and refinement rounds: refuses when they were fitted
 /// to other data than this run's ([`Calibration::fitted_data`]: another held-out period, other
 /// meters fitted, or other readings); the driver then records this run's in `holdout.txt`.
-fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
+fn same_data_as_before(cal: &Calibration, log: Log<'_>) -> Result<(), Error> {
     let mut now = cal.fitted_data();
     let fitted = [
         cal.out.chains_checkpoint(),
@@ -71,6 +71,11 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
     // Written before the readings were fingerprinted: what it records is all that is compared.
     if !before.contains(FITTED_READINGS) {
         now = without_line(&now, FITTED_READINGS);
+        log(&format!(
+            "{} predates the readings' fingerprint: the chains are reused without checking \
+             that the meters are the ones they were fitted to",
+            cal.out.holdout_txt().display()
+        ));
     }
     if before.trim() == now.trim() {
         return Ok(());
@@ -91,8 +96,8 @@ fn same_data_as_before(cal: &Calibration) -> Result<(), Error> {
     };
     let what = match say(&before) == say(&now) {
         true => format!(
-            "other meter readings (fingerprint {}) than this run's ({}: a meter file, an \
-             `exclude` period or a base changed)",
+            "other meter readings (fingerprint {}) than this run's (fingerprint {}): a meter \
+             file, an `exclude` period or a base changed since, for instance",
             readings(&before),
             readings(&now)
         ),

@@ -35,6 +35,11 @@ pub struct SigmaDeltaBox {
 impl SigmaDeltaBox {
     /// The box for the outputs' measured sds `s`, with a dimension for each output `fitted`.
     pub fn new(measured_sd: &[f64], fitted: &[bool]) -> SigmaDeltaBox {
+        assert_eq!(
+            measured_sd.len(),
+            fitted.len(),
+            "one fitted flag per output"
+        );
         let outputs: Vec<usize> = (0..measured_sd.len()).filter(|&k| fitted[k]).collect();
         let sd = |k: &usize| measured_sd[*k];
         SigmaDeltaBox {
@@ -306,6 +311,25 @@ pub fn run_chains(
     Ok(ck)
 }
 
+/// Chains saved by a run that sampled another space (another `mcmc.sigma_delta` mode, other
+/// meters fitted, other parameters calibrated) cannot be resumed here: their coordinates would
+/// be read as this posterior's.
+fn same_space(post: &Posterior<'_>, states: &[Chain]) -> Result<(), Error> {
+    match states.iter().find(|s| s.dim() != post.dim()) {
+        None => Ok(()),
+        Some(s) => Err(Error::Stage {
+            stage: "chains",
+            message: format!(
+                "saved chains have {} dimensions, this run samples {} (mcmc.sigma_delta, the \
+                 meters fitted or the parameters calibrated changed): delete chains.json and \
+                 chains_summary.json to start them again",
+                s.dim(),
+                post.dim()
+            ),
+        }),
+    }
+}
+
 /// Advances chains of one kernel by `n` iterations with batched targets: log posteriors for
 /// Metropolis-Hastings, log posteriors and gradients for HMC. Returns this segment's draws.
 ///
@@ -319,6 +343,7 @@ pub fn advance_chains(
     states: &mut [Chain],
     n: u64,
 ) -> Result<Vec<Draws>, Error> {
+    same_space(post, states)?;
     let mh: Option<Vec<ChainState>> = states
         .iter()
         .map(|c| match c {

@@ -309,8 +309,8 @@ pub enum SigmaDeltaMode {
     /// posterior is so narrow (relative sd ~ 1/sqrt(2n)) that adaptive Metropolis spends its
     /// burn-in learning it. The posterior mean of sigma_delta at the estimate is reported.
     Marginal,
-    /// Sampled per output on the log scale with a half-Cauchy prior (scale = the output's
-    /// measured sd), as extra chain dimensions.
+    /// Sampled per fitted output on the log scale with a half-Cauchy prior (scale = the
+    /// output's measured sd), as extra chain dimensions.
     Sampled,
     /// Fixed at `sigma_delta_fraction` x the output's measured sd.
     Fixed,
