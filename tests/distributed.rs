@@ -19,6 +19,9 @@
 //!   done by the other worker, and no job finished before the restart is run again.
 //! - `token_and_input_validation`: a call with a wrong token is refused; a project with an
 //!   unknown parameter is refused at submit with a clear message.
+//! - `a_killed_local_run_leaves_no_process_behind`: `calibrate --local-workers 2` killed with
+//!   SIGKILL while its workers simulate, and `bemcal.calibrate` interrupted in Python; the
+//!   coordinator and workers end too.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -868,4 +871,129 @@ fn chaos_kills_do_not_change_the_results() {
     }
     // Nothing half written: no temporary file left in the store or the results.
     common::nothing_half_written(&[&data, &out]);
+}
+
+/// `calibrate --local-workers 2` killed outright (SIGKILL: no clean-up of its own runs) takes
+/// its coordinator and workers with it, a worker in the middle of an EnergyPlus run included:
+/// nothing is left running on the machine (Linux, `PR_SET_PDEATHSIG`).
+#[test]
+#[cfg(target_os = "linux")]
+fn a_killed_local_run_leaves_no_process_behind() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let _machine = common::whole_machine();
+    let tmp = tempfile::tempdir().unwrap();
+    let pf = project(tmp.path());
+    let mut parent = bemcal()
+        .arg("calibrate")
+        .arg(&pf)
+        .args(["--local-workers", "2", "--out"])
+        .arg(tmp.path().join("out"))
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let mut children = children_of(parent.id());
+    while children.len() < 3 && t0.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(100));
+        children = children_of(parent.id());
+    }
+    assert_eq!(children.len(), 3, "coordinator and 2 workers: {children:?}");
+    // Long enough for the workers to lease design points and start EnergyPlus.
+    std::thread::sleep(Duration::from_secs(4));
+    parent.kill().unwrap();
+    parent.wait().unwrap();
+    let t1 = Instant::now();
+    while children.iter().any(|&p| running(p)) && t1.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let left: Vec<u32> = children.into_iter().filter(|&p| running(p)).collect();
+    assert!(
+        left.is_empty(),
+        "still running after the parent was killed: {left:?}"
+    );
+    eprintln!(
+        "children ended {:.1} s after the parent",
+        t1.elapsed().as_secs_f64()
+    );
+
+    // The same from Python: `bemcal.calibrate` interrupted (KeyboardInterrupt) stops the run
+    // and everything it started, instead of leaving it going unseen.
+    let out = tmp.path().join("out-python");
+    let py = std::process::Command::new(repo().join(".venv/bin/python"))
+        .arg(repo().join("tests/python/interrupt_calibrate.py"))
+        .arg(&pf)
+        .arg(&out)
+        .env("PYTHONPATH", repo().join("python"))
+        .env("BEMCAL_BIN", env!("CARGO_BIN_EXE_bemcal"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&py.stdout);
+    assert!(
+        py.status.success() && said.contains("interrupted"),
+        "{said}\n{py:?}"
+    );
+    let mark = out.to_string_lossy().into_owned();
+    let t2 = Instant::now();
+    let mut left = processes_naming(&mark);
+    while !left.is_empty() && t2.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(200));
+        left = processes_naming(&mark);
+    }
+    assert!(
+        left.is_empty(),
+        "still running after the interrupt: {left:?}"
+    );
+}
+
+/// Running processes whose command line names `text` (`/proc/*/cmdline`).
+#[cfg(target_os = "linux")]
+fn processes_naming(text: &str) -> Vec<u32> {
+    let mut out = vec![];
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(e.path().join("cmdline")) else {
+            continue;
+        };
+        if String::from_utf8_lossy(&cmd).contains(text) && running(pid) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// Processes whose parent is `pid` (`/proc/*/stat`).
+#[cfg(target_os = "linux")]
+fn children_of(pid: u32) -> Vec<u32> {
+    let mut out = vec![];
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(child) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+            continue;
+        };
+        // `pid (comm) state ppid ...`: comm may hold spaces, so read after its ')'.
+        let rest = &stat[stat.rfind(')').map_or(0, |i| i + 1)..];
+        if rest.split_whitespace().nth(1) == Some(&pid.to_string()) {
+            out.push(child);
+        }
+    }
+    out
+}
+
+/// Whether `pid` is alive (a zombie waiting for a reaper has ended).
+#[cfg(target_os = "linux")]
+fn running(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => false,
+        Ok(stat) => {
+            let rest = &stat[stat.rfind(')').map_or(0, |i| i + 1)..];
+            rest.split_whitespace().next() != Some("Z")
+        }
+    }
 }

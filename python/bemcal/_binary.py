@@ -73,11 +73,23 @@ def run(
         bufsize=1,
     ) as proc:
         assert proc.stdout is not None
-        for line in proc.stdout:
-            line = line.rstrip("\n")
-            tail.append(line)
-            if echo is not None:
-                echo(line)
+        try:
+            for line in proc.stdout:
+                line = line.rstrip("\n")
+                tail.append(line)
+                if echo is not None:
+                    echo(line)
+        except BaseException:
+            # Interrupted (Ctrl-C, a notebook's stop button) or `echo` failed: the run stops
+            # with this call instead of going on unseen (Popen's own exit would leave it
+            # running). Its local coordinator and workers end with it; a rerun into the same
+            # folder resumes from its finished stages.
+            proc.terminate()
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+            raise
         status = proc.wait()
     if status not in ok:
         raise BemcalError(cmd, status, tail)

@@ -44,7 +44,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         metrics: a.metrics_listen,
     };
     let rt = bemcal_client::runtime()?;
-    rt.block_on(bemcal_worker::run(
+    let ran = rt.block_on(bemcal_worker::run(
         opts,
         |metrics| {
             if let Some(m) = metrics {
@@ -53,5 +53,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             }
         },
         bemcal_client::shutdown_signal(),
-    ))
+    ));
+    // The drain has bounded the wait for running jobs and given back their leases: a job
+    // still running on a blocking thread (EnergyPlus, a chain segment) must not hold the
+    // process, as dropping the runtime would (it waits for blocking tasks without limit).
+    rt.shutdown_timeout(Duration::from_secs(1));
+    ran
 }
