@@ -89,6 +89,7 @@ def run(
                 proc.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 proc.kill()
+                proc.wait()
             raise
         status = proc.wait()
     if status not in ok:

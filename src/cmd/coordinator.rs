@@ -5,7 +5,7 @@
 use std::io::{BufRead, Write};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 
 use anyhow::Context;
 use bemcal_calibrate::Summary;
@@ -161,34 +161,6 @@ impl Drop for Children {
     }
 }
 
-/// A command for `exe` whose process gets SIGTERM when this one ends, however it ends (on
-/// Linux: `PR_SET_PDEATHSIG`): a `calibrate --local-workers` killed outright, where no
-/// [`Children`] guard runs, leaves no coordinator or worker behind. Called on the main
-/// thread, whose end the signal follows.
-fn child_of_this_process(exe: &Path) -> Command {
-    #[allow(unused_mut)]
-    let mut cmd = Command::new(exe);
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::unix::process::CommandExt;
-        // SAFETY: between fork and exec the closure calls only async-signal-safe functions
-        // (prctl, getppid) and allocates nothing.
-        let parent = unsafe { libc::getpid() };
-        unsafe {
-            cmd.pre_exec(move || {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-                // The parent ended before the prctl: the signal will never come, so do not
-                // start at all.
-                match libc::getppid() == parent {
-                    true => Ok(()),
-                    false => Err(std::io::Error::from_raw_os_error(libc::ESRCH)),
-                }
-            });
-        }
-    }
-    cmd
-}
-
 /// Starts a coordinator (state in `out/.distributed/coordinator`) and `workers` worker processes
 /// on loopback; they stop when the returned guard is dropped.
 pub(crate) fn start_local(
@@ -200,7 +172,7 @@ pub(crate) fn start_local(
     let base = out.join(".distributed");
     std::fs::create_dir_all(&base)?;
     let token = random_token();
-    let mut coord = child_of_this_process(&exe)
+    let mut coord = bemcal_pyenv::child_command(&exe)
         .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
         .arg(base.join("coordinator"))
         .env(TOKEN_ENV, &token)
@@ -220,7 +192,7 @@ pub(crate) fn start_local(
     log(&format!("coordinator on {url}; starting {workers} workers"));
     for i in 0..workers {
         // A local worker's coordinator stops with it: nothing to drain for.
-        let w = child_of_this_process(&exe)
+        let w = bemcal_pyenv::child_command(&exe)
             .args([
                 "worker",
                 "--coordinator",

@@ -120,7 +120,7 @@ impl Runner {
         let model = self.simulated_input(idf, dir)?;
         let input = dir.join("model.idf");
         std::fs::write(&input, model.to_text()).map_err(io_err(&input))?;
-        let mut cmd = Command::new(&self.engine.executable);
+        let mut cmd = bemcal_pyenv::child_command(&self.engine.executable);
         cmd.args(["-w", "in.epw", "-d", "."])
             .arg("model.idf")
             .current_dir(dir)
@@ -189,7 +189,7 @@ impl Runner {
         if std::os::unix::fs::symlink(self.engine.idd(), &idd).is_err() {
             std::fs::copy(self.engine.idd(), &idd).map_err(io_err(&idd))?;
         }
-        let mut cmd = Command::new(self.engine.expand_objects());
+        let mut cmd = bemcal_pyenv::child_command(self.engine.expand_objects());
         cmd.current_dir(&xdir).stdin(Stdio::null());
         let status = run_with_timeout(cmd, &xdir, Duration::from_secs(120))?;
         let out = xdir.join("expanded.idf");

@@ -14,6 +14,38 @@
 use std::env;
 use std::path::{Path, PathBuf};
 
+/// A command for `program` whose process bemcal does not leave behind: on Linux the kernel
+/// sends it SIGTERM when the thread that starts it ends, however that ends (SIGKILL
+/// included; `PR_SET_PDEATHSIG`). Every process bemcal starts (EnergyPlus, ExpandObjects,
+/// the PyTorch trainer, the local coordinator and workers) is made here. The starting thread
+/// must live as long as the child should: the main thread, or a thread that waits for it.
+pub fn child_command(program: impl AsRef<std::ffi::OsStr>) -> std::process::Command {
+    #[allow(unused_mut)]
+    let mut cmd = std::process::Command::new(program);
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: getpid before the fork; between fork and exec the closure calls only
+        // async-signal-safe functions (prctl, getppid) and allocates nothing.
+        let parent = unsafe { libc::getpid() };
+        unsafe {
+            cmd.pre_exec(move || {
+                let signal = libc::SIGTERM as libc::c_ulong;
+                if libc::prctl(libc::PR_SET_PDEATHSIG, signal) == -1 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // The parent ended before the prctl: the signal will never come, so do not
+                // start at all.
+                match libc::getppid() == parent {
+                    true => Ok(()),
+                    false => Err(std::io::Error::from_raw_os_error(libc::ESRCH)),
+                }
+            });
+        }
+    }
+    cmd
+}
+
 /// Variable naming the Python environment folder explicitly.
 pub const VENV_VAR: &str = "BEMCAL_VENV";
 
@@ -135,7 +167,7 @@ pub fn run_module(venv: &Path, args: &[&std::ffi::OsStr]) -> std::io::Result<i32
         path.push(":");
         path.push(old);
     }
-    let mut cmd = std::process::Command::new(python(venv));
+    let mut cmd = child_command(python(venv));
     cmd.arg("-m")
         .arg("bemcal")
         .args(args)

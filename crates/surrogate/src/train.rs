@@ -6,7 +6,6 @@
 //! `$BEMCAL_PYTHON`, else the Python environment's (`bemcal-pyenv`).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use crate::parity::{ParityFixture, PARITY_FILE, PARITY_TOLERANCE};
 use crate::surrogate::{Surrogate, SurrogateError, SurrogateMeta};
@@ -181,7 +180,7 @@ pub fn train(
         path: out_dir.to_path_buf(),
         message: format!("cannot create: {e}"),
     })?;
-    let mut cmd = Command::new(&python);
+    let mut cmd = bemcal_pyenv::child_command(&python);
     cmd.arg("-m")
         .arg("bemcal_train")
         .arg("--dataset")
