@@ -394,7 +394,7 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
 
     // The same chains from the same seeds, on meters altered in the held-out months or not.
     // (The project's own output folder gives the surrogate.)
-    let chains_on = |months: &[&str]| -> (String, String) {
+    let chains_on = |months: &[&str]| -> (String, bemcal_calibrate::FittedData) {
         let altered = tempfile::tempdir().unwrap();
         for f in ["model.toml", "project.toml"] {
             std::fs::copy(dir.join(f), altered.path().join(f)).unwrap();

@@ -898,23 +898,18 @@ fn a_killed_local_run_leaves_no_process_behind() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let t0 = Instant::now();
     let energyplus = || {
         processes_under(&mark)
             .iter()
             .any(|(_, comm)| comm.contains("nergy"))
     };
-    while !energyplus() && t0.elapsed() < Duration::from_secs(120) {
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    poll_until(120, energyplus);
     let started = processes_under(&mark);
     assert!(energyplus(), "no EnergyPlus started: {started:?}");
     parent.kill().unwrap();
     parent.wait().unwrap();
     let t1 = Instant::now();
-    while !processes_under(&mark).is_empty() && t1.elapsed() < Duration::from_secs(60) {
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    poll_until(60, || processes_under(&mark).is_empty());
     let left = processes_under(&mark);
     assert!(
         left.is_empty(),
@@ -937,10 +932,7 @@ fn a_killed_local_run_leaves_no_process_behind() {
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let t2 = Instant::now();
-    while py.try_wait().unwrap().is_none() && t2.elapsed() < Duration::from_secs(300) {
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    poll_until(300, || py.try_wait().unwrap().is_some());
     let _ = py.kill();
     let py = py.wait_with_output().unwrap();
     let said = String::from_utf8_lossy(&py.stdout);
@@ -948,15 +940,20 @@ fn a_killed_local_run_leaves_no_process_behind() {
         py.status.success() && said.contains("interrupted"),
         "{said}\n{py:?}"
     );
-    let t3 = Instant::now();
-    while !processes_under(&mark).is_empty() && t3.elapsed() < Duration::from_secs(60) {
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    poll_until(60, || processes_under(&mark).is_empty());
     let left = processes_under(&mark);
     assert!(
         left.is_empty(),
         "still running after the interrupt: {left:?}"
     );
+}
+
+/// Checks `done` every 100 ms until it holds or `secs` seconds have passed.
+fn poll_until(secs: u64, mut done: impl FnMut() -> bool) {
+    let t0 = Instant::now();
+    while !done() && t0.elapsed() < Duration::from_secs(secs) {
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 /// Kills (SIGKILL) every process [`processes_under`] its folder when dropped.

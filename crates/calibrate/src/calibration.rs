@@ -48,20 +48,17 @@ impl Calibration {
         Ok(cal)
     }
 
-    /// What the chains are fitted to, as `holdout.txt` records it: the held-out period
-    /// (`none`), a `not fitted:` line naming the meters that say `fit = false` (`none`), and a
-    /// `fitted readings:` line with the fingerprint of the series the likelihood fits
-    /// ([`readings_fingerprint`]). A rerun into the folder reuses chains fitted to the same.
-    pub fn fitted_data(&self) -> String {
-        let holdout = match &self.inputs.held_out {
-            Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
-            None => "none".into(),
-        };
-        format!(
-            "{holdout}{}\n{FITTED_READINGS} {}",
-            not_fitted_line(&self.inputs.not_fitted()),
-            readings_fingerprint(&self.inputs)
-        )
+    /// What the chains are fitted to ([`FittedData`], recorded in `holdout.txt`). A rerun
+    /// into the folder reuses chains fitted to the same.
+    pub fn fitted_data(&self) -> FittedData {
+        FittedData {
+            holdout: match &self.inputs.held_out {
+                Some(h) => format!("{} ({} hours)", h.period, h.hour_count()),
+                None => NO_HOLDOUT.into(),
+            },
+            not_fitted: self.inputs.not_fitted(),
+            readings: Some(readings_fingerprint(&self.inputs)),
+        }
     }
 
     /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
@@ -244,13 +241,68 @@ impl Calibration {
     }
 }
 
-/// `holdout.txt`'s line naming the meters not fitted (`none` when every meter is: a file
-/// without the line was written before it existed).
-pub(crate) fn not_fitted_line(not_fitted: &[String]) -> String {
-    if not_fitted.is_empty() {
-        format!("\n{NOT_FITTED} {EVERY_METER_FITTED}")
-    } else {
-        format!("\n{NOT_FITTED} {}", not_fitted.join(", "))
+/// What a folder's chains were fitted to, as `holdout.txt` records it in three lines: the
+/// held-out period (`none`), `not fitted:` and the meters that say `fit = false` (`none`),
+/// and `fitted readings:` with [`readings_fingerprint`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FittedData {
+    /// The held-out period and its hour count, or `none`.
+    pub holdout: String,
+    /// The meters the likelihood leaves out, in output order.
+    pub not_fitted: Vec<String>,
+    /// The fitted readings' fingerprint; `None` in a file written before it was recorded.
+    pub readings: Option<String>,
+}
+
+impl FittedData {
+    /// `holdout.txt`'s text.
+    pub fn to_text(&self) -> String {
+        let not_fitted = match self.not_fitted.is_empty() {
+            true => EVERY_METER_FITTED.to_string(),
+            false => self.not_fitted.join(", "),
+        };
+        let mut text = format!("{}\n{NOT_FITTED} {not_fitted}", self.holdout);
+        if let Some(r) = &self.readings {
+            text.push_str(&format!("\n{FITTED_READINGS} {r}"));
+        }
+        text
+    }
+
+    /// Reads `holdout.txt`'s text (a missing file reads as `none`). A file written before it
+    /// had its `not fitted:` line takes the meters from `not_fitted_before` (the folder's
+    /// summary named them).
+    pub(crate) fn parse(text: &str, not_fitted_before: impl FnOnce() -> Vec<String>) -> Self {
+        let mut lines = text.trim().lines().map(str::trim);
+        let holdout = lines.next().unwrap_or(NO_HOLDOUT).to_string();
+        let (mut not_fitted, mut readings) = (None, None);
+        for line in lines {
+            if let Some(n) = line.strip_prefix(NOT_FITTED).map(str::trim) {
+                not_fitted = Some(match n == EVERY_METER_FITTED {
+                    true => vec![],
+                    false => n.split(',').map(|m| m.trim().to_string()).collect(),
+                });
+            } else if let Some(r) = line.strip_prefix(FITTED_READINGS) {
+                readings = Some(r.trim().to_string());
+            }
+        }
+        FittedData {
+            holdout,
+            not_fitted: not_fitted.unwrap_or_else(not_fitted_before),
+            readings,
+        }
+    }
+
+    /// The period and meters, for a message: `holdout H, every meter fitted` or `holdout H,
+    /// not fitted: M`.
+    pub(crate) fn describe(&self) -> String {
+        match self.not_fitted.is_empty() {
+            true => format!("holdout {}, every meter fitted", self.holdout),
+            false => format!(
+                "holdout {}, {NOT_FITTED} {}",
+                self.holdout,
+                self.not_fitted.join(", ")
+            ),
+        }
     }
 }
 
@@ -280,10 +332,40 @@ pub(crate) fn readings_fingerprint(inputs: &crate::Inputs) -> String {
 }
 
 /// The label of `holdout.txt`'s third line ([`readings_fingerprint`]).
-pub(crate) const FITTED_READINGS: &str = "fitted readings:";
+const FITTED_READINGS: &str = "fitted readings:";
 
 /// The label of `holdout.txt`'s second line.
-pub(crate) const NOT_FITTED: &str = "not fitted:";
+const NOT_FITTED: &str = "not fitted:";
 
 /// Its value when every meter is fitted.
-pub(crate) const EVERY_METER_FITTED: &str = "none";
+const EVERY_METER_FITTED: &str = "none";
+
+/// `holdout.txt`'s first line without a held-out period.
+const NO_HOLDOUT: &str = "none";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn holdout_txt_reads_back_what_it_records_and_older_files_as_they_were() {
+        let now = FittedData {
+            holdout: "last 2 months (1464 hours)".into(),
+            not_fitted: vec!["cooling_kwh".into(), "heating_kwh".into()],
+            readings: Some("0123456789abcdef".into()),
+        };
+        let never = || panic!("the file names its meters");
+        assert_eq!(FittedData::parse(&now.to_text(), never), now);
+        let every = FittedData {
+            not_fitted: vec![],
+            ..now.clone()
+        };
+        assert_eq!(FittedData::parse(&every.to_text(), never), every);
+        // Before the fingerprint: two lines; before the meters' line: the summary's.
+        let old = FittedData::parse("none\nnot fitted: none\n", never);
+        assert_eq!((old.holdout.as_str(), old.readings), ("none", None));
+        let oldest = FittedData::parse("", || vec!["heating_kwh".into()]);
+        assert_eq!(oldest.not_fitted, ["heating_kwh"]);
+        assert_eq!(oldest.describe(), "holdout none, not fitted: heating_kwh");
+    }
+}

@@ -159,12 +159,8 @@ pub fn drive(
 ) -> Result<Ready<Summary>, Error> {
     // What the folder's chains are fitted to, for a later rerun into it (local or fetched);
     // written when it changes, not on every call (the coordinator calls once per job).
-    let fitted = cal.fitted_data();
-    if std::fs::read_to_string(cal.out.holdout_txt())
-        .ok()
-        .as_deref()
-        != Some(fitted.as_str())
-    {
+    let fitted = cal.fitted_data().to_text();
+    if std::fs::read_to_string(cal.out.holdout_txt()).ok() != Some(fitted.clone()) {
         crate::write_atomic(&cal.out.holdout_txt(), fitted.as_bytes())?;
     }
     match read_outcome(&cal.simulations_dir()) {

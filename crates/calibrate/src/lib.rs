@@ -37,7 +37,7 @@ mod validation;
 
 use std::path::{Path, PathBuf};
 
-pub use calibration::{Calibration, Log};
+pub use calibration::{Calibration, FittedData, Log};
 pub use chains::{
     chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
     Sampler,

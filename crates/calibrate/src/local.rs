@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::calibration::{EVERY_METER_FITTED, FITTED_READINGS, NOT_FITTED};
+use crate::calibration::FittedData;
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
 use crate::posterior::{run_chains, Checkpoint};
@@ -48,7 +48,6 @@ pub fn calibrate(project: &Project, out: &Path, log: Log<'_>) -> Result<Summary,
 /// to other data than this run's ([`Calibration::fitted_data`]: another held-out period, other
 /// meters fitted, or other readings); the driver then records this run's in `holdout.txt`.
 fn same_data_as_before(cal: &Calibration, log: Log<'_>) -> Result<(), Error> {
-    let mut now = cal.fitted_data();
     let fitted = [
         cal.out.chains_checkpoint(),
         cal.out.join(crate::refine::REFINE_FILE),
@@ -58,53 +57,32 @@ fn same_data_as_before(cal: &Calibration, log: Log<'_>) -> Result<(), Error> {
     if !fitted {
         return Ok(());
     }
-    let mut before =
-        std::fs::read_to_string(cal.out.holdout_txt()).unwrap_or_else(|_| "none".into());
-    // Written before holdout.txt had its second line: the summary named them.
-    if !before.contains(NOT_FITTED) {
-        before = format!(
-            "{}{}",
-            before.trim(),
-            crate::calibration::not_fitted_line(&summary_not_fitted(cal))
-        );
-    }
+    let text = std::fs::read_to_string(cal.out.holdout_txt()).unwrap_or_default();
+    let before = FittedData::parse(&text, || summary_not_fitted(cal));
+    let mut now = cal.fitted_data();
     // Written before the readings were fingerprinted: what it records is all that is compared.
-    if !before.contains(FITTED_READINGS) {
-        now = without_line(&now, FITTED_READINGS);
+    if before.readings.is_none() {
+        now.readings = None;
         log(&format!(
             "{} predates the readings' fingerprint: the chains are reused without checking \
              that the meters are the ones they were fitted to",
             cal.out.holdout_txt().display()
         ));
     }
-    if before.trim() == now.trim() {
+    if before == now {
         return Ok(());
     }
-    let say = |s: &str| {
-        let mut lines = s.trim().lines();
-        let holdout = lines.next().unwrap_or("none");
-        match lines.next().and_then(|l| l.strip_prefix(NOT_FITTED)) {
-            Some(n) if n.trim() != EVERY_METER_FITTED => {
-                format!("holdout {holdout}, {NOT_FITTED} {}", n.trim())
-            }
-            _ => format!("holdout {holdout}, every meter fitted"),
-        }
-    };
-    let readings = |s: &str| {
-        let line = s.lines().find_map(|l| l.strip_prefix(FITTED_READINGS));
-        line.unwrap_or_default().trim().to_string()
-    };
-    let what = match say(&before) == say(&now) {
+    let what = match before.describe() == now.describe() {
         true => format!(
             "other meter readings (fingerprint {}) than this run's (fingerprint {}): a meter \
              file, an `exclude` period or a base changed since, for instance",
-            readings(&before),
-            readings(&now)
+            before.readings.unwrap_or_default(),
+            now.readings.unwrap_or_default()
         ),
         false => format!(
             "other data ({}) than this run's ({})",
-            say(&before),
-            say(&now)
+            before.describe(),
+            now.describe()
         ),
     };
     Err(Error::Config(format!(
@@ -113,12 +91,6 @@ fn same_data_as_before(cal: &Calibration, log: Log<'_>) -> Result<(), Error> {
          surrogate are kept)",
         cal.out.display(),
     )))
-}
-
-/// `text` without its line that starts with `label`.
-fn without_line(text: &str, label: &str) -> String {
-    let kept: Vec<&str> = text.lines().filter(|l| !l.starts_with(label)).collect();
-    kept.join("\n")
 }
 
 /// The meters the folder's `summary.json` says were not fitted (none without one).
