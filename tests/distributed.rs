@@ -10,7 +10,8 @@
 //!   posterior must then be identical to the single-process ones. The project asks for an
 //!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): the one driver extends the
 //!   final chains once, by the same rule, to the same draws, and both report the run as not
-//!   converged (exit status 3, `summary.json` `convergence`, the report's banner).
+//!   converged (exit status 3, `summary.json` `convergence`, the report's banner). The chains
+//!   sample a tempered likelihood (`mcmc.temperature = 3`), which the chain jobs carry.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -174,7 +175,7 @@ fn distributed_matches_single_process() {
     let text = project_text()
         .replace(
             "max_extensions = 0\n",
-            "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\n",
+            "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\ntemperature = 3\n",
         )
         .replace(
             "predictive_draws = 0\n",
@@ -251,9 +252,12 @@ fn distributed_matches_single_process() {
         "holdout",
         "predictive",
         "model_form",
+        "temperature",
     ] {
         assert_eq!(sa[k], sb[k], "summary.json {k}");
     }
+    // The tempered likelihood reached the workers' chains (the draws above are identical).
+    assert_eq!(sa["temperature"]["value"], 3.0, "{}", sa["temperature"]);
     assert_eq!(sa["model_form"]["meters"].as_array().map(Vec::len), Some(3));
     assert_eq!(sa["holdout"]["hours"], 31 * 24);
     assert_eq!(sa["predictive"]["draws"], 3, "{}", sa["predictive"]);
@@ -333,8 +337,15 @@ fn refinement_round_local_and_distributed() {
     surrogate_error_is_carried(&sa, &local, added.len());
 
     // The distributed run, given the same first surrogate, picks and simulates the same draws.
+    // Its final chains carry the surrogate's error in the likelihood instead (the first
+    // round's chains run untempered either way, so the rounds are the same).
     let dist = tmp.path().join("dist");
-    calibrate(&pf, &dist, Some(&first));
+    let tempered = std::fs::read_to_string(&pf)
+        .unwrap()
+        .replace("[mcmc]\n", "[mcmc]\ntemperature = \"surrogate_error\"\n");
+    assert!(tempered.contains("surrogate_error"));
+    std::fs::write(&pf, tempered).unwrap();
+    let dist_log = calibrate(&pf, &dist, Some(&first));
     let sb = summary(&dist);
     assert_eq!(
         sa["refinement"], sb["refinement"],
@@ -350,7 +361,7 @@ fn refinement_round_local_and_distributed() {
     }
     assert!(sb["timings"]["refinement_s"].as_f64().unwrap() > 0.0);
     assert!(sb["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
-    surrogate_error_is_carried(&sb, &dist, added.len());
+    surrogate_error_is_in_the_likelihood(&sb, &dist, &dist_log);
 
     // Both retrainings warm-started from the first surrogate's weights, on a nested split:
     // every point held out from the first surrogate is still held out.
@@ -419,6 +430,25 @@ fn surrogate_error_is_carried(s: &serde_json::Value, dir: &Path, points: usize) 
     let (own, with) = (lines("draws.csv"), lines("draws_with_surrogate_error.csv"));
     assert_eq!(own.lines().count(), with.lines().count());
     assert!(!with.lines().next().unwrap().contains("log_posterior"));
+}
+
+/// With `mcmc.temperature = "surrogate_error"` the final chains ran at the temperature round
+/// 1's recoveries measured (on the workers: the chain jobs carry it), and no shifts were added.
+fn surrogate_error_is_in_the_likelihood(s: &serde_json::Value, dir: &Path, log: &str) {
+    let t = &s["temperature"];
+    assert_eq!(t["measured_at_round"], 1, "{t}");
+    let value = t["value"].as_f64().unwrap();
+    assert!(value.is_finite() && value >= 1.0, "{t}");
+    assert_eq!(
+        s["refinement"][0]["temperature"], 1.0,
+        "{}",
+        s["refinement"][0]
+    );
+    assert!(s["surrogate_error"].is_null(), "{}", s["surrogate_error"]);
+    assert!(!dir.join("draws_with_surrogate_error.csv").exists());
+    if value > 1.0 {
+        assert!(log.contains("likelihood temperature"), "{log}");
+    }
 }
 
 /// A design point EnergyPlus cannot simulate, made on purpose: the lighting prior reaches

@@ -75,6 +75,7 @@ fn main() -> anyhow::Result<()> {
                         iterations: 100,
                         segment: i as u32,
                         round: 0,
+                        temperature: 1.0,
                     })),
                     ..Default::default()
                 },

@@ -484,6 +484,7 @@ impl Leased<'_> {
         done: &[JobRow],
         target: u64,
         starts: Option<&[Vec<f64>]>,
+        temperature: f64,
     ) -> std::result::Result<NewJob, Error> {
         let reached: u64 = done
             .iter()
@@ -518,6 +519,7 @@ impl Leased<'_> {
                     iterations: cal.project.mcmc.segment.min(target - reached),
                     segment: seg,
                     round: round.index(),
+                    temperature,
                 })),
                 ..Default::default()
             },
@@ -674,7 +676,7 @@ impl Executor for Leased<'_> {
         round: Round,
         iterations: u64,
         starts: Option<&[Vec<f64>]>,
-        _sampler: &mut LazySampler<'_>,
+        sampler: &mut LazySampler<'_>,
     ) -> std::result::Result<Ready<Checkpoint>, Error> {
         let groups = self.chain_groups(cal, round)?;
         let n = cal.project.mcmc.chains;
@@ -701,6 +703,7 @@ impl Executor for Leased<'_> {
                     done,
                     iterations,
                     starts,
+                    sampler.temperature().value,
                 )?);
             }
         }

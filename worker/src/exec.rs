@@ -75,6 +75,15 @@ fn train(cal: &Calibration, t: &proto::TrainJob, work: &Path) -> Result<Outputs,
 /// coordinator's starts, or prior draws); their states and draws.
 fn chains(cal: &Calibration, c: &proto::ChainSegmentJob, work: &Path) -> Result<Outputs, String> {
     let mut sampler = cal.sampler().map_err(err)?;
+    // 0 in a job written before the field existed: the posterior itself.
+    if c.temperature.is_finite() && c.temperature >= 1.0 {
+        sampler.set_temperature(c.temperature);
+    } else if c.temperature != 0.0 {
+        return Err(format!(
+            "chain job with temperature {} (at least 1)",
+            c.temperature
+        ));
+    }
     let states_path = work.join(STATES_FILE);
     let mut states: Vec<Chain> = if states_path.is_file() {
         let bytes = std::fs::read(&states_path).map_err(err)?;

@@ -14,10 +14,12 @@ use bemcal_surrogate::{Evaluator, Surrogate};
 use serde::{Deserialize, Serialize};
 
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
-use crate::project::{ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::project::{
+    ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode, Temperature,
+};
 use crate::refine::RefineLog;
 use crate::summary::{write_bands_csv, write_draws_csv};
-use crate::surrogate_error::{carry, SurrogateError};
+use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
 use crate::validation::{fallback_note, FALLBACKS};
 use crate::{Calibration, Error, OutputMetrics};
 
@@ -39,6 +41,9 @@ pub struct Sampler<'c> {
     pub sigma_eta: Vec<f64>,
     /// The surrogate's held-out metrics (its metadata's `held_out`), as JSON.
     pub held_out: serde_json::Value,
+    /// The likelihood's temperature of the chains this sampler runs (1 until
+    /// [`Sampler::set_temperature`]; [`crate::project::Temperature`]).
+    temperature: f64,
 }
 
 impl Calibration {
@@ -91,6 +96,7 @@ impl Calibration {
             sigma_box: SigmaDeltaBox::new(&sd, &inp.fitted),
             sigma_eta,
             held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
+            temperature: 1.0,
         })
     }
 }
@@ -99,6 +105,18 @@ impl Sampler<'_> {
     /// The calibration's outputs, in the order the surrogate predicts them.
     pub fn outputs(&self) -> &[String] {
         &self.cal.inputs.outputs
+    }
+
+    /// Sets the likelihood's temperature of the chains to come (at least 1; the driver's
+    /// [`crate::sequence::temperature`] for the round).
+    pub fn set_temperature(&mut self, temperature: f64) {
+        debug_assert!(temperature >= 1.0, "temperature {temperature}");
+        self.temperature = temperature;
+    }
+
+    /// The likelihood's temperature of the chains this sampler runs.
+    pub fn temperature(&self) -> f64 {
+        self.temperature
     }
 
     /// The posterior over the unit space.
@@ -111,6 +129,7 @@ impl Sampler<'_> {
                 .then_some(&self.sigma_box),
             marginal: self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Marginal,
             ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+            temperature: self.temperature,
         }
     }
 
@@ -194,6 +213,7 @@ impl Sampler<'_> {
             sigma_box: (mode == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
             marginal: mode == SigmaDeltaMode::Marginal,
             ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+            temperature: self.temperature,
         };
         (post, &mut self.evaluator)
     }
@@ -268,8 +288,10 @@ impl Sampler<'_> {
             }
             let likelihood = self.likelihood.with_observed(&observed)?;
             let (post, eval) = self.split();
+            // The surrogate's error alone: the untempered posterior's mode.
             let post = Posterior {
                 likelihood: &likelihood,
+                temperature: 1.0,
                 ..post
             };
             let mut start: Vec<f64> = post
@@ -332,7 +354,12 @@ impl Sampler<'_> {
         // Seeded apart from the chains' streams.
         let seed = cal.project.mcmc.seed ^ 0x5EED_5EED_0E44_0420;
         let k = cal.project.validation.predictive_draws;
-        let (surrogate_error, predictive) = match carry(post.plan, draws, refined, seed)? {
+        // With the temperature measured from the surrogate's error, the chains carry it already.
+        let carried = match cal.project.mcmc.temperature {
+            Temperature::SurrogateError => None,
+            Temperature::Fixed(_) => carry(post.plan, draws, refined, seed)?,
+        };
+        let (surrogate_error, predictive) = match carried {
             Some((report, shifted)) => {
                 let path = cal.out.draws_with_surrogate_error_csv();
                 write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
@@ -382,6 +409,10 @@ impl Sampler<'_> {
             convergence,
             surrogate_error,
             predictive,
+            temperature: ChainTemperature {
+                value: self.temperature,
+                measured_at_round: None,
+            },
         })
     }
 }
@@ -685,9 +716,13 @@ pub struct ChainSummary {
     #[serde(default)]
     pub convergence: Convergence,
     /// The intervals with the surrogate's error ([`crate::surrogate_error`]); `None` without a
-    /// refinement round that measured it.
+    /// refinement round that measured it, and with `mcmc.temperature = "surrogate_error"`
+    /// (the chains' own intervals carry it then).
     #[serde(default)]
     pub surrogate_error: Option<SurrogateError>,
+    /// The likelihood's temperature the chains ran at.
+    #[serde(default = "ChainTemperature::one")]
+    pub temperature: ChainTemperature,
 }
 
 impl ChainSummary {

@@ -31,6 +31,7 @@ use crate::sequence::{
     after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, Stage,
     ValidationRole, ValidationRun,
 };
+use crate::surrogate_error::{chain_temperature, ChainTemperature};
 use crate::{
     write_summary, Calibration, ChainSummary, Error, Log, OutputMetrics, Sampler, Summary, Timings,
 };
@@ -132,19 +133,31 @@ pub trait Executor {
 /// work pending never loads the surrogate).
 pub struct LazySampler<'c> {
     cal: &'c Calibration,
+    temperature: ChainTemperature,
     sampler: Option<Sampler<'c>>,
 }
 
 impl<'c> LazySampler<'c> {
-    /// Nothing loaded yet.
-    pub fn new(cal: &'c Calibration) -> LazySampler<'c> {
-        LazySampler { cal, sampler: None }
+    /// Nothing loaded yet; the round's chains at `temperature`.
+    pub fn new(cal: &'c Calibration, temperature: ChainTemperature) -> LazySampler<'c> {
+        LazySampler {
+            cal,
+            temperature,
+            sampler: None,
+        }
+    }
+
+    /// The likelihood's temperature of the round's chains.
+    pub fn temperature(&self) -> ChainTemperature {
+        self.temperature
     }
 
     /// The sampler, loaded on the first call.
     pub fn get(&mut self) -> Result<&mut Sampler<'c>, Error> {
         if self.sampler.is_none() {
-            self.sampler = Some(self.cal.sampler()?);
+            let mut sampler = self.cal.sampler()?;
+            sampler.set_temperature(self.temperature.value);
+            self.sampler = Some(sampler);
         }
         Ok(self.sampler.as_mut().expect("loaded above"))
     }
@@ -183,7 +196,13 @@ pub fn drive(
     let finished = loop {
         let round = Round::after(&cal.project, refined.rounds.len() as u32);
         ready!(surrogate(cal, exec, &refined, log)?);
-        let mut sampler = LazySampler::new(cal);
+        let temperature = chain_temperature(
+            cal.project.mcmc.temperature,
+            &cal.inputs.plan,
+            &refined,
+            cal.project.refine.spread,
+        )?;
+        let mut sampler = LazySampler::new(cal, temperature);
         let starts = refined
             .rounds
             .last()
@@ -465,6 +484,7 @@ fn final_chains(
                 exec.enter(Stage::Merge)?;
                 let mut c = sampler.get()?.summarize(&ck.states, &ck.draws, refined)?;
                 c.extensions = state.extensions;
+                c.temperature = sampler.temperature();
                 log_chains(&c, &ck, log);
                 state.summary = Some((last, c.clone()));
                 state.write(cal)?;
@@ -594,6 +614,12 @@ fn log_round(closed: &RefineRound, log: Log<'_>) {
             .collect::<Vec<_>>()
             .join(", ")
     ));
+    if closed.temperature != 1.0 {
+        log(&format!(
+            "refinement round {}: its chains ran at likelihood temperature {:.1}",
+            closed.round, closed.temperature
+        ));
+    }
     for (c, gap) in &closed.restarted {
         log(&format!(
             "refinement round {}: chain {c} ended {gap:.0} nats below the best: restarts in its mode",
@@ -631,6 +657,20 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
             "chains: independence steps switched off after burn-in (accepted under {} %) in chains {:?}",
             bemcal_stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE * 100.0,
             chains.independence_dropped
+        ));
+    }
+    let t = chains.temperature;
+    if t.value != 1.0 {
+        let from = match t.measured_at_round {
+            Some(r) => format!(
+                "measured from the surrogate's error at refinement round {r}'s points, so that \
+                 the intervals carry it"
+            ),
+            None => "mcmc.temperature".into(),
+        };
+        log(&format!(
+            "chains: likelihood temperature {:.1} ({from}): the chains sample p(theta) L(theta)^(1/T)",
+            t.value
         ));
     }
     log(&format!("posterior: {}", chains.convergence));

@@ -91,6 +91,8 @@ pub struct Posterior<'a> {
     pub marginal: bool,
     /// With `marginal`: AR(1) residuals (phi profiled) instead of independent ones.
     pub ar1: bool,
+    /// The likelihood's temperature `T >= 1` ([`crate::project::Temperature`]): `ln L / T`.
+    pub temperature: f64,
 }
 
 impl Posterior<'_> {
@@ -132,9 +134,10 @@ impl Posterior<'_> {
         lp
     }
 
-    /// ln likelihood given the surrogate's prediction (`hours x outputs`) for `u`.
+    /// ln likelihood given the surrogate's prediction (`hours x outputs`) for `u`, divided by
+    /// the temperature.
     pub fn ln_likelihood(&self, u: &[f64], predicted: &[f32]) -> f64 {
-        match self.sigma_box {
+        let ln_l = match self.sigma_box {
             None if self.marginal && self.ar1 => self.likelihood.log_marginal_sigma_ar1(predicted),
             None if self.marginal => self.likelihood.log_marginal_sigma(predicted),
             None => self.likelihood.log_likelihood(predicted),
@@ -143,7 +146,8 @@ impl Posterior<'_> {
                 let sd = b.per_output(self.likelihood.n_outputs(), &u[d..]);
                 self.likelihood.log_likelihood_with_delta(predicted, &sd)
             }
-        }
+        };
+        ln_l / self.temperature
     }
 
     /// Log posterior of several unit-space points with one batched surrogate call.
@@ -222,11 +226,16 @@ impl Posterior<'_> {
                     &flat[b * per..(b + 1) * per],
                     &mut cflat[b * per..(b + 1) * per],
                 );
-                out[i].0 += match (self.marginal, self.ar1) {
+                let ln_l = match (self.marginal, self.ar1) {
                     (true, true) => self.likelihood.log_marginal_sigma_ar1_gradient(y, g),
                     (true, false) => self.likelihood.log_marginal_sigma_gradient(y, g),
                     (false, _) => self.likelihood.log_likelihood_gradient(y, g),
                 };
+                out[i].0 += ln_l / self.temperature;
+                if self.temperature != 1.0 {
+                    let w = (1.0 / self.temperature) as f32;
+                    g.iter_mut().for_each(|v| *v *= w);
+                }
             }
         }
         let grads = eval.vjp_batch(&thetas, cot.view())?;

@@ -403,6 +403,52 @@ pub struct McmcSettings {
     /// and report only). Each adds at least `iterations - burn_in` draws per chain, more when
     /// the ESS shortfall asks for it (at most 4x that).
     pub max_extensions: u32,
+    /// The likelihood's temperature `T`: the chains sample `p(theta) L(theta)^(1/T)`
+    /// ([`Temperature`]; default 1, the posterior itself).
+    pub temperature: Temperature,
+}
+
+/// The likelihood's temperature `T >= 1`: the chains sample the power posterior `p(theta)
+/// L(theta)^(1/T)`, `T` times wider than the likelihood alone makes it, with barriers between
+/// its modes `T` times lower (a coarsened posterior, Miller & Dunson 2019, JASA 114). In the
+/// project: a number, or `"surrogate_error"`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Temperature {
+    /// This `T` for every round's chains (1: the posterior itself, the default).
+    Fixed(f64),
+    /// Measured for each round's chains from the last refinement round's recoveries: the `T`
+    /// that makes the posterior as wide as the surrogate's error near it on the typical
+    /// parameter ([`bemcal_stats::surrogate_error::temperature`]); the first round's chains
+    /// run at 1. The intervals then carry that error themselves: no shifts are added to the
+    /// draws (`draws_with_surrogate_error.csv` is not written). Needs `refine.rounds >= 1`.
+    SurrogateError,
+}
+
+impl Default for Temperature {
+    fn default() -> Self {
+        Temperature::Fixed(1.0)
+    }
+}
+
+impl<'de> Deserialize<'de> for Temperature {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Number(f64),
+            Name(String),
+        }
+        let expected = "a number >= 1 or \"surrogate_error\"";
+        match Raw::deserialize(d) {
+            Ok(Raw::Number(t)) => Ok(Temperature::Fixed(t)),
+            Ok(Raw::Name(n)) if n == "surrogate_error" => Ok(Temperature::SurrogateError),
+            Ok(Raw::Name(n)) => Err(serde::de::Error::custom(format!(
+                "unknown temperature {n:?}: expected {expected}"
+            ))),
+            Err(_) => Err(serde::de::Error::custom(format!("expected {expected}"))),
+        }
+    }
 }
 
 impl McmcSettings {
@@ -467,6 +513,7 @@ impl Default for McmcSettings {
             rhat_target: 1.01,
             ess_target: 400.0,
             max_extensions: 3,
+            temperature: Temperature::default(),
         }
     }
 }
@@ -601,6 +648,13 @@ impl Project {
         self.design.check()?;
         self.mcmc.check()?;
         self.refine.check()?;
+        if self.mcmc.temperature == Temperature::SurrogateError && self.refine.rounds == 0 {
+            return Err(
+                "mcmc.temperature = \"surrogate_error\" needs refine.rounds >= 1: the \
+                        surrogate's error is measured at a refinement round's points"
+                    .into(),
+            );
+        }
         self.surrogate.check()?;
         if self.meters.file.is_none() {
             return Err("[meters] needs file = \"...\"".into());
@@ -952,6 +1006,11 @@ impl McmcSettings {
                     .into(),
             );
         }
+        if let Temperature::Fixed(t) = self.temperature {
+            if !(t.is_finite() && t >= 1.0) {
+                return Err(format!("mcmc.temperature = {t} must be at least 1"));
+            }
+        }
         if !(self.hmc_integration_time.is_finite() && self.hmc_integration_time > 0.0) {
             return Err(format!(
                 "mcmc.hmc_integration_time = {} must be positive",
@@ -1216,6 +1275,39 @@ mod tests {
         assert!(e.contains("refine.points must be at least 1"), "{e}");
         let e = project("[refine]\nround = 1\n").unwrap_err();
         assert!(e.contains("round"), "{e}");
+    }
+
+    #[test]
+    fn the_temperature_is_one_a_number_at_least_one_or_the_surrogates_error() {
+        assert_eq!(
+            project("").unwrap().mcmc.temperature,
+            Temperature::Fixed(1.0)
+        );
+        let t = |text: &str| project(&format!("[mcmc]\ntemperature = {text}\n"));
+        assert_eq!(t("20").unwrap().mcmc.temperature, Temperature::Fixed(20.0));
+        assert_eq!(t("2.5").unwrap().mcmc.temperature, Temperature::Fixed(2.5));
+        assert_eq!(
+            t("\"surrogate_error\"").unwrap().mcmc.temperature,
+            Temperature::SurrogateError
+        );
+        let e = t("0.5").unwrap_err();
+        assert!(
+            e.contains("mcmc.temperature = 0.5 must be at least 1"),
+            "{e}"
+        );
+        let e = t("\"surogate_error\"").unwrap_err();
+        assert!(
+            e.contains("unknown temperature \"surogate_error\": expected a number >= 1 or \"surrogate_error\""),
+            "{e}"
+        );
+        let e = t("true").unwrap_err();
+        assert!(
+            e.contains("expected a number >= 1 or \"surrogate_error\""),
+            "{e}"
+        );
+        let e = project("[mcmc]\ntemperature = \"surrogate_error\"\n[refine]\nrounds = 0\n")
+            .unwrap_err();
+        assert!(e.contains("needs refine.rounds >= 1"), "{e}");
     }
 
     #[test]

@@ -57,6 +57,14 @@ pub struct RefineRound {
     /// best log posterior was below the best chain's.
     #[serde(default)]
     pub restarted: Vec<(usize, f64)>,
+    /// The likelihood's temperature the round's chains ran at (1 in rounds recorded before it
+    /// existed; [`crate::surrogate_error::chain_temperature`]).
+    #[serde(default = "untempered")]
+    pub temperature: f64,
+}
+
+fn untempered() -> f64 {
+    1.0
 }
 
 /// A posterior draw added as a design point.
@@ -369,6 +377,7 @@ pub fn close_round(
         recovered,
         starts,
         restarted,
+        temperature: sampler.temperature(),
     };
     Ok((round, outputs))
 }
@@ -508,6 +517,7 @@ mod tests {
             recovered: vec![],
             starts: vec![],
             restarted: vec![],
+            temperature: 1.0,
         };
         // Round 1 used keys 20..30 and the draw at 23 failed: round 2 starts at 30, not 29.
         let log = RefineLog {

@@ -134,6 +134,11 @@ pub struct Summary {
     /// Times the final chains were extended because a convergence target was missed.
     #[serde(default)]
     pub chain_extensions: u32,
+    /// The likelihood's temperature of the final chains (`mcmc.temperature`): they sample
+    /// `p(theta) L(theta)^(1/T)`; with `measured_at_round`, `T` was measured from the
+    /// surrogate's error at that refinement round's points.
+    #[serde(default = "crate::surrogate_error::ChainTemperature::one")]
+    pub temperature: crate::surrogate_error::ChainTemperature,
     /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub moved_chains: Vec<MovedChain>,
@@ -376,6 +381,7 @@ pub fn write_summary(
             .collect(),
         acceptance_rate: chains.acceptance.clone(),
         chain_extensions: chains.extensions,
+        temperature: chains.temperature,
         estimate: cal.project.validation.estimate,
         estimate_note: chains.estimate_note.clone(),
         moved_chains: chains.moved_chains.clone(),

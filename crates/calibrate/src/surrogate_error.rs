@@ -11,11 +11,12 @@
 
 use bemcal_stats::diagnostics::quantile_sorted;
 use bemcal_stats::mcmc::Draws;
-use bemcal_stats::surrogate_error::{add_to_draws, rms, shifts};
+use bemcal_stats::surrogate_error::{add_to_draws, rms, shifts, temperature};
 use serde::{Deserialize, Serialize};
 
 use crate::design::Plan;
-use crate::refine::RefineLog;
+use crate::project::Temperature;
+use crate::refine::{RefineLog, RefineRound};
 use crate::Error;
 
 /// `summary.json` `surrogate_error`: the intervals with the surrogate's error.
@@ -58,24 +59,10 @@ pub fn carry(
     log: &RefineLog,
     seed: u64,
 ) -> Result<Option<(SurrogateError, Vec<Draws>)>, Error> {
-    let Some(round) = log
-        .rounds
-        .iter()
-        .rev()
-        .find(|r| !r.points.is_empty() && r.recovered.len() == r.points.len())
-    else {
+    let Some(round) = last_recovered(log) else {
         return Ok(None);
     };
-    let unit = |x: &[f64]| -> Vec<f64> {
-        plan.priors
-            .iter()
-            .zip(x)
-            .map(|(p, v)| p.to_unit(*v))
-            .collect()
-    };
-    let truths: Vec<Vec<f64>> = round.points.iter().map(|p| unit(&p.values)).collect();
-    let recovered: Vec<Vec<f64>> = round.recovered.iter().map(|x| unit(x)).collect();
-    let unit_shifts = shifts(&truths, &recovered)?;
+    let (_, unit_shifts) = unit_points_and_shifts(plan, round)?;
     let shifted = add_to_draws(draws, &unit_shifts, seed)?;
     let widths: Vec<f64> = plan.priors.iter().map(|p| p.max() - p.min()).collect();
     let rms_unit = rms(&unit_shifts);
@@ -110,10 +97,94 @@ pub fn carry(
     Ok(Some((report, shifted)))
 }
 
+/// The last round of `log` that recorded what its points recover.
+fn last_recovered(log: &RefineLog) -> Option<&RefineRound> {
+    log.rounds
+        .iter()
+        .rev()
+        .find(|r| !r.points.is_empty() && r.recovered.len() == r.points.len())
+}
+
+/// Points (or shifts), one unit-space vector each.
+type UnitVectors = Vec<Vec<f64>>;
+
+/// A round's points and their shifts (recovered - true), in the unit space.
+fn unit_points_and_shifts(
+    plan: &Plan,
+    round: &RefineRound,
+) -> Result<(UnitVectors, UnitVectors), Error> {
+    let unit = |x: &[f64]| -> Vec<f64> {
+        plan.priors
+            .iter()
+            .zip(x)
+            .map(|(p, v)| p.to_unit(*v))
+            .collect()
+    };
+    let truths: Vec<Vec<f64>> = round.points.iter().map(|p| unit(&p.values)).collect();
+    let recovered: Vec<Vec<f64>> = round.recovered.iter().map(|x| unit(x)).collect();
+    let unit_shifts = shifts(&truths, &recovered)?;
+    Ok((truths, unit_shifts))
+}
+
+/// The likelihood's temperature of a round's chains (`summary.json` `temperature`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ChainTemperature {
+    /// `T`: the chains sample `p(theta) L(theta)^(1/T)`.
+    pub value: f64,
+    /// The refinement round whose recoveries measured it (`mcmc.temperature =
+    /// "surrogate_error"`); `None` for a fixed temperature, or before any round.
+    pub measured_at_round: Option<u32>,
+}
+
+impl ChainTemperature {
+    /// The posterior itself.
+    pub const ONE: ChainTemperature = ChainTemperature {
+        value: 1.0,
+        measured_at_round: None,
+    };
+
+    /// [`ChainTemperature::ONE`], for serde's defaults.
+    pub fn one() -> ChainTemperature {
+        ChainTemperature::ONE
+    }
+}
+
+/// The temperature of the chains that run after `log`'s rounds: the setting's number, or, with
+/// `"surrogate_error"`, [`bemcal_stats::surrogate_error::temperature`] of the last round that
+/// recorded its recoveries (its points moved `spread` times from the chains' mean, `refine.
+/// spread`; the highest-posterior one, never moved, counted as moved too), 1 before any.
+///
+/// # Errors
+/// If the round's points and recoveries do not fit the plan, or have no spread.
+pub fn chain_temperature(
+    setting: Temperature,
+    plan: &Plan,
+    log: &RefineLog,
+    spread: f64,
+) -> Result<ChainTemperature, Error> {
+    match setting {
+        Temperature::Fixed(value) => Ok(ChainTemperature {
+            value,
+            measured_at_round: None,
+        }),
+        Temperature::SurrogateError => {
+            let Some(round) = last_recovered(log) else {
+                return Ok(ChainTemperature::ONE);
+            };
+            let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;
+            let value = temperature(&unit_shifts, &points, round.temperature, spread)?;
+            Ok(ChainTemperature {
+                value,
+                measured_at_round: Some(round.round),
+            })
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::refine::{RefinePoint, RefineRound};
+    use crate::refine::RefinePoint;
     use bemcal_stats::Triangular;
 
     fn plan() -> Plan {
@@ -148,6 +219,7 @@ mod tests {
             recovered,
             starts: vec![],
             restarted: vec![],
+            temperature: 1.0,
         }
     }
 
@@ -189,5 +261,30 @@ mod tests {
         let b = &report.parameters[1];
         assert_eq!((b.rms_shift, b.q5, b.q95), (0.0, 2.0, 2.0));
         assert_eq!(shifted[0].len(), d.len());
+    }
+
+    #[test]
+    fn the_temperature_is_measured_at_the_last_recorded_round() {
+        let p = plan();
+        let none = RefineLog::default();
+        let fixed = chain_temperature(Temperature::Fixed(3.0), &p, &none, 1.0).unwrap();
+        assert_eq!((fixed.value, fixed.measured_at_round), (3.0, None));
+        let first = chain_temperature(Temperature::SurrogateError, &p, &none, 1.0).unwrap();
+        assert_eq!(first, ChainTemperature::ONE);
+        // Round 2: a recovered off by +-1 (unit 0.1; its points' unit variance 0.005: ratio
+        // 2), b exactly (ratio 0): the median ratio 1, T = 1 + 1.
+        let mut log = RefineLog {
+            rounds: vec![
+                round(1, vec![]),
+                round(2, vec![vec![6.0, 2.0], vec![3.0, 2.5]]),
+            ],
+        };
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log, 1.0).unwrap();
+        assert!((t.value - 2.0).abs() < 1e-9, "{t:?}");
+        assert_eq!(t.measured_at_round, Some(2));
+        // The round's chains already ran at T = 4: their points were twice as wide.
+        log.rounds[1].temperature = 4.0;
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log, 1.0).unwrap();
+        assert!((t.value - 5.0).abs() < 1e-9, "{t:?}");
     }
 }

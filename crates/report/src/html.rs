@@ -863,6 +863,22 @@ fn parameters_table(s: &crate::io::Summary) -> String {
             c.points, c.round
         );
     }
+    if let Some(t) = s.temperature.filter(|t| t.value != 1.0) {
+        let why = match t.measured_at_round {
+            Some(r) => format!(
+                "measured from the surrogate's error at the EnergyPlus points of refinement \
+                 round {r}, so that the posterior is as wide as that error on the typical \
+                 parameter"
+            ),
+            None => "set in the project (<code>mcmc.temperature</code>)".into(),
+        };
+        let _ = write!(
+            h,
+            "<p class=\"sub\">Tempered likelihood: the chains sampled p(&theta;) \
+             L(&theta;)<sup>1/T</sup> with T = {:.1}, {why}.</p>",
+            t.value
+        );
+    }
     let _ = write!(
         h,
         "<table><tr><th class=\"l\">parameter</th><th class=\"l\">unit</th><th>prior min</th><th>mode</th><th>max</th>\

@@ -427,6 +427,16 @@ impl PosteriorBlock {
     }
 }
 
+/// `summary.json` `temperature`: the chains sampled `p(theta) L(theta)^(1/T)`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+pub struct Temperature {
+    /// `T`.
+    pub value: f64,
+    /// The refinement round whose surrogate error measured it, if measured.
+    #[serde(default)]
+    pub measured_at_round: Option<u32>,
+}
+
 /// `summary.json` as written by `bemcal calibrate`.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Summary {
@@ -496,6 +506,9 @@ pub struct Summary {
     /// The intervals with the surrogate's error (absent without a refinement round).
     #[serde(default)]
     pub surrogate_error: Option<SurrogateErrorBlock>,
+    /// The likelihood's temperature of the final chains (`mcmc.temperature`), if tempered.
+    #[serde(default)]
+    pub temperature: Option<Temperature>,
     /// Stage timings.
     #[serde(default)]
     pub timings: Timings,

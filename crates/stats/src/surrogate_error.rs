@@ -22,6 +22,14 @@
 //! covariance and keeps the shifts' correlations (compensating parameters move together): the
 //! draws of `theta_true = theta_posterior + delta`, whose covariance is the posterior's plus
 //! `S` (law of total variance). Draws are in the unit space and clamped to the prior box.
+//!
+//! **Or in the likelihood** ([`temperature`]): the chains sample the power posterior
+//! `p(theta) L(theta)^(1/T)` (a coarsened posterior in the sense of Miller & Dunson 2019,
+//! "Robust Bayesian inference via coarsening", JASA 114, eq. 2.3), with `T` such that the
+//! posterior's variance is its own plus the shifts' on the typical parameter. A posterior `T`
+//! times wider than the likelihood alone allows is also one whose barriers between modes are
+//! `T` times lower: what lets gradient-based chains mix on a surrogate that is rugged at the
+//! scale of the untempered posterior.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -105,6 +113,70 @@ pub fn add_to_draws(chains: &[Draws], shifts: &[Vec<f64>], seed: u64) -> Result<
     Ok(out)
 }
 
+/// The likelihood's temperature that carries the surrogate's error: `T = 1 + T_r s^2 median_j
+/// (S_jj / V_j)`, with `S_jj` the shifts' second moment ([`rms`] squared), `V_j` the sample
+/// variance of the points they were measured at (posterior draws of chains that ran at
+/// temperature `T_r`, moved `s` = `spread` times farther from their mean), coordinates with no
+/// spread left out. Why: the points' variance is `s^2 T_r` times the untempered posterior's
+/// `V1`, and `T V1 = V1 + S` is the posterior variance with the shift added (law of total
+/// variance, as in the module docs); one `T` for every parameter, so the median over them (a
+/// few parameters whose shift is many posterior widths, where one temperature cannot be right
+/// for all, do not set it for the others). At least 1.
+///
+/// # Errors
+/// With fewer than two points, shifts and points of other shapes, a non-finite value, `T_r`
+/// below 1 or `spread` not positive, or no coordinate with any spread.
+pub fn temperature(
+    shifts: &[Vec<f64>],
+    points: &[Vec<f64>],
+    round_temperature: f64,
+    spread: f64,
+) -> Result<f64> {
+    let m = points.len();
+    if m < 2 || shifts.len() != m {
+        return Err(StatsError::NotEnoughData(format!(
+            "{} shifts at {m} points (at least two points, one shift each)",
+            shifts.len()
+        )));
+    }
+    let d = points[0].len();
+    if shifts.iter().chain(points).any(|v| v.len() != d) {
+        return Err(StatsError::Shape(
+            "shifts and points of different lengths".into(),
+        ));
+    }
+    let valid = round_temperature.is_finite() && round_temperature >= 1.0 && spread > 0.0;
+    if !valid {
+        return Err(StatsError::Invalid(format!(
+            "round temperature {round_temperature} (at least 1) and spread {spread} (positive)"
+        )));
+    }
+    let second_moment = rms(shifts);
+    let mut ratios: Vec<f64> = (0..d)
+        .filter_map(|j| {
+            let mean = points.iter().map(|p| p[j]).sum::<f64>() / m as f64;
+            let var = points.iter().map(|p| (p[j] - mean).powi(2)).sum::<f64>() / (m - 1) as f64;
+            (var > 0.0).then(|| second_moment[j].powi(2) / var)
+        })
+        .collect();
+    if ratios.iter().any(|r| !r.is_finite()) {
+        return Err(StatsError::Invalid("a shift or point is not finite".into()));
+    }
+    if ratios.is_empty() {
+        return Err(StatsError::NotEnoughData(
+            "the points have no spread".into(),
+        ));
+    }
+    ratios.sort_by(f64::total_cmp);
+    let k = ratios.len();
+    let median = if k % 2 == 1 {
+        ratios[k / 2]
+    } else {
+        0.5 * (ratios[k / 2 - 1] + ratios[k / 2])
+    };
+    Ok(1.0 + round_temperature * spread * spread * median)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -171,5 +243,32 @@ mod tests {
         assert!(wide[0].points.iter().all(|v| (0.0..=1.0).contains(v)));
         assert!(add_to_draws(&[wide[0].clone()], &[], 1).is_err());
         assert!(add_to_draws(&[wide[0].clone()], &[vec![0.0; 3]], 1).is_err());
+    }
+
+    #[test]
+    fn temperature_widens_the_posterior_by_the_typical_shift() {
+        // Points with variance 1 per coordinate (two points at +-1/sqrt(2) spread: sample
+        // variance of (-a, a) is 2 a^2); shifts with second moment 4, 9 and 1e6: median 9.
+        let a = 0.5_f64.sqrt();
+        let points = vec![vec![-a, -a, -a], vec![a, a, a]];
+        let shifts = vec![vec![2.0, 3.0, 1e3], vec![-2.0, 3.0, -1e3]];
+        let t = temperature(&shifts, &points, 1.0, 1.0).unwrap();
+        assert!((t - 10.0).abs() < 1e-9, "{t}");
+        // Chains that ran at T_r = 5 were sqrt(5) times wider: the untempered variance is 1/5.
+        let t5 = temperature(&shifts, &points, 5.0, 1.0).unwrap();
+        assert!((t5 - 46.0).abs() < 1e-9, "{t5}");
+        // Points moved twice as far from their mean: their variance is 4 times the chains'.
+        let t2 = temperature(&shifts, &points, 1.0, 2.0).unwrap();
+        assert!((t2 - 37.0).abs() < 1e-9, "{t2}");
+        // No shift: no tempering.
+        let zero = vec![vec![0.0; 3]; 2];
+        assert_eq!(temperature(&zero, &points, 1.0, 1.0).unwrap(), 1.0);
+        // A coordinate without spread is left out; one point, or none with spread, is an error.
+        let flat = vec![vec![-a, 0.3, -a], vec![a, 0.3, a]];
+        let t = temperature(&shifts, &flat, 1.0, 1.0).unwrap();
+        assert!((t - (1.0 + 0.5 * (4.0 + 1e6))).abs() < 1e-6, "{t}");
+        assert!(temperature(&shifts[..1], &points[..1], 1.0, 1.0).is_err());
+        assert!(temperature(&shifts, &[vec![0.1; 3], vec![0.1; 3]], 1.0, 1.0).is_err());
+        assert!(temperature(&shifts, &points, 0.5, 1.0).is_err());
     }
 }
