@@ -565,7 +565,19 @@ impl Leased<'_> {
             states.extend(last_states);
             draws.extend(acc);
         }
-        Ok(Checkpoint { states, draws })
+        // The temperature the segments ran at (0 in jobs written before it existed: 1).
+        let temperature = groups
+            .iter()
+            .filter_map(|(_, segments)| segments.first())
+            .filter_map(segment_of)
+            .map(|c| c.temperature.max(1.0))
+            .next()
+            .unwrap_or(1.0);
+        Ok(Checkpoint {
+            states,
+            draws,
+            temperature,
+        })
     }
 }
 

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use bemcal_calibrate::project::Temperature;
 use bemcal_calibrate::{load_inputs, Project};
 
 /// Load a project and everything it names (model, priors, weather or measured weather, meters,
@@ -73,6 +74,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         m.ess_target,
         m.max_extensions
     );
+    match m.temperature {
+        Temperature::Fixed(1.0) => {}
+        Temperature::Fixed(t) => {
+            println!("  likelihood temperature {t}: the chains sample p(theta) L(theta)^(1/{t})")
+        }
+        Temperature::SurrogateError => println!(
+            "  likelihood temperature measured from the surrogate's error at each refinement \
+             round's points (the first round's chains at 1)"
+        ),
+    }
     println!(
         "  design {} points; refinement {} round(s) of {} draws",
         project.design.points, project.refine.rounds, project.refine.points

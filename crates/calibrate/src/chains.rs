@@ -108,7 +108,7 @@ impl Sampler<'_> {
     }
 
     /// Sets the likelihood's temperature of the chains to come (at least 1; the driver's
-    /// [`crate::sequence::temperature`] for the round).
+    /// [`crate::surrogate_error::chain_temperature`] for the round).
     pub fn set_temperature(&mut self, temperature: f64) {
         debug_assert!(temperature >= 1.0, "temperature {temperature}");
         self.temperature = temperature;
@@ -117,6 +117,11 @@ impl Sampler<'_> {
     /// The likelihood's temperature of the chains this sampler runs.
     pub fn temperature(&self) -> f64 {
         self.temperature
+    }
+
+    /// How far a refinement round's points are moved from the chains' mean (`refine.spread`).
+    pub fn spread(&self) -> f64 {
+        self.cal.project.refine.spread
     }
 
     /// The posterior over the unit space.
@@ -330,7 +335,20 @@ impl Sampler<'_> {
         let cal = self.cal;
         let inp = &cal.inputs;
         let d = inp.plan.calibrated.len();
-        let theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
+        let mut theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
+        // The estimate and its fallbacks are the draws best by the untempered posterior
+        // (`ln p + T (ln pi_T - ln p)`, prior p): the tempered one ranks a draw T times less by
+        // its fit and T times more by its prior.
+        let t = self.temperature;
+        if t != 1.0 {
+            let post = self.posterior();
+            for (td, dr) in theta_draws.iter_mut().zip(draws) {
+                for (i, ld) in td.log_density.iter_mut().enumerate() {
+                    let prior = post.ln_prior(dr.point(i));
+                    *ld = prior + t * (*ld - prior);
+                }
+            }
+        }
         let priors: Vec<Prior> = inp
             .plan
             .calibrated

@@ -196,12 +196,8 @@ pub fn drive(
     let finished = loop {
         let round = Round::after(&cal.project, refined.rounds.len() as u32);
         ready!(surrogate(cal, exec, &refined, log)?);
-        let temperature = chain_temperature(
-            cal.project.mcmc.temperature,
-            &cal.inputs.plan,
-            &refined,
-            cal.project.refine.spread,
-        )?;
+        let temperature =
+            chain_temperature(cal.project.mcmc.temperature, &cal.inputs.plan, &refined)?;
         let mut sampler = LazySampler::new(cal, temperature);
         let starts = refined
             .rounds
@@ -433,8 +429,11 @@ struct FinalChains {
 
 impl FinalChains {
     /// The record of the folder's final chains under the current settings, or a fresh one.
-    fn read(cal: &Calibration, rounds: usize) -> FinalChains {
-        let settings = format!("{:?} after {rounds} refinement rounds", cal.project.mcmc);
+    fn read(cal: &Calibration, rounds: usize, temperature: f64) -> FinalChains {
+        let settings = format!(
+            "{:?} after {rounds} refinement rounds at temperature {temperature:?}",
+            cal.project.mcmc
+        );
         std::fs::read(cal.out.chains_summary())
             .ok()
             .and_then(|b| serde_json::from_slice::<FinalChains>(&b).ok())
@@ -473,7 +472,7 @@ fn final_chains(
 ) -> Result<Ready<ChainSummary>, Error> {
     let m = &cal.project.mcmc;
     let round = Round::after(&cal.project, refined.rounds.len() as u32);
-    let mut state = FinalChains::read(cal, refined.rounds.len());
+    let mut state = FinalChains::read(cal, refined.rounds.len(), sampler.temperature().value);
     loop {
         exec.enter(Stage::Chains)?;
         let ck = ready!(exec.chains(cal, round, state.target, starts.as_deref(), sampler)?);

@@ -277,6 +277,14 @@ pub struct Checkpoint {
     pub states: Vec<Chain>,
     /// Each chain's post-burn-in draws so far (unit space) and their log densities.
     pub draws: Vec<Draws>,
+    /// The likelihood's temperature the chains ran at (1 in checkpoints written before it
+    /// existed): chains are resumed only at the same one.
+    #[serde(default = "untempered")]
+    pub temperature: f64,
+}
+
+fn untempered() -> f64 {
+    1.0
 }
 
 /// Runs the chains to `iterations`, checkpointing to `path` after every `segment` iterations;
@@ -300,9 +308,23 @@ pub fn run_chains(
             Checkpoint {
                 draws: states.iter().map(|s| Draws::new(s.dim())).collect(),
                 states,
+                temperature: post.temperature,
             }
         }
     };
+    if ck.temperature != post.temperature {
+        return Err(Error::Stage {
+            stage: "chains",
+            message: format!(
+                "{} holds chains that sampled the likelihood at temperature {}, this run's is {} \
+                 (mcmc.temperature or the refinement rounds changed): delete it and \
+                 chains_summary.json to start the chains again",
+                path.display(),
+                ck.temperature,
+                post.temperature
+            ),
+        });
+    }
     loop {
         let done = ck.states[0].iteration();
         progress(done, iterations);

@@ -412,8 +412,7 @@ pub struct McmcSettings {
 /// L(theta)^(1/T)`, `T` times wider than the likelihood alone makes it, with barriers between
 /// its modes `T` times lower (a coarsened posterior, Miller & Dunson 2019, JASA 114). In the
 /// project: a number, or `"surrogate_error"`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-#[serde(untagged)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Temperature {
     /// This `T` for every round's chains (1: the posterior itself, the default).
     Fixed(f64),
@@ -428,6 +427,16 @@ pub enum Temperature {
 impl Default for Temperature {
     fn default() -> Self {
         Temperature::Fixed(1.0)
+    }
+}
+
+/// As the project writes it: the number, or `"surrogate_error"`.
+impl Serialize for Temperature {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Temperature::Fixed(t) => s.serialize_f64(*t),
+            Temperature::SurrogateError => s.serialize_str("surrogate_error"),
+        }
     }
 }
 
@@ -648,10 +657,13 @@ impl Project {
         self.design.check()?;
         self.mcmc.check()?;
         self.refine.check()?;
-        if self.mcmc.temperature == Temperature::SurrogateError && self.refine.rounds == 0 {
+        if self.mcmc.temperature == Temperature::SurrogateError
+            && (self.refine.rounds == 0 || self.refine.points < 2)
+        {
             return Err(
-                "mcmc.temperature = \"surrogate_error\" needs refine.rounds >= 1: the \
-                        surrogate's error is measured at a refinement round's points"
+                "mcmc.temperature = \"surrogate_error\" needs refine.rounds >= 1 and \
+                        refine.points >= 2: the surrogate's error is measured at a refinement \
+                        round's points"
                     .into(),
             );
         }
@@ -1308,6 +1320,18 @@ mod tests {
         let e = project("[mcmc]\ntemperature = \"surrogate_error\"\n[refine]\nrounds = 0\n")
             .unwrap_err();
         assert!(e.contains("needs refine.rounds >= 1"), "{e}");
+        let e = project("[mcmc]\ntemperature = \"surrogate_error\"\n[refine]\npoints = 1\n")
+            .unwrap_err();
+        assert!(e.contains("refine.points >= 2"), "{e}");
+        // Written back as the project spells it.
+        for t in [Temperature::Fixed(2.5), Temperature::SurrogateError] {
+            let json = serde_json::to_string(&t).unwrap();
+            assert_eq!(
+                serde_json::from_str::<Temperature>(&json).unwrap(),
+                t,
+                "{json}"
+            );
+        }
     }
 
     #[test]

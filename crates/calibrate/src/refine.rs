@@ -61,6 +61,10 @@ pub struct RefineRound {
     /// existed; [`crate::surrogate_error::chain_temperature`]).
     #[serde(default = "untempered")]
     pub temperature: f64,
+    /// How far the round's points were moved from the chains' mean (`refine.spread` when it
+    /// ran; 1 in rounds recorded before it existed).
+    #[serde(default = "untempered")]
+    pub spread: f64,
 }
 
 fn untempered() -> f64 {
@@ -378,6 +382,7 @@ pub fn close_round(
         starts,
         restarted,
         temperature: sampler.temperature(),
+        spread: sampler.spread(),
     };
     Ok((round, outputs))
 }
@@ -518,6 +523,7 @@ mod tests {
             starts: vec![],
             restarted: vec![],
             temperature: 1.0,
+            spread: 1.0,
         };
         // Round 1 used keys 20..30 and the draw at 23 failed: round 2 starts at 30, not 29.
         let log = RefineLog {

@@ -151,8 +151,9 @@ impl ChainTemperature {
 
 /// The temperature of the chains that run after `log`'s rounds: the setting's number, or, with
 /// `"surrogate_error"`, [`bemcal_stats::surrogate_error::temperature`] of the last round that
-/// recorded its recoveries (its points moved `spread` times from the chains' mean, `refine.
-/// spread`; the highest-posterior one, never moved, counted as moved too), 1 before any.
+/// recorded the recoveries of at least two points (its points moved `refine.spread` times from
+/// the chains' mean, as recorded; the highest-posterior one, never moved, counted as moved
+/// too), 1 before any.
 ///
 /// # Errors
 /// If the round's points and recoveries do not fit the plan, or have no spread.
@@ -160,7 +161,6 @@ pub fn chain_temperature(
     setting: Temperature,
     plan: &Plan,
     log: &RefineLog,
-    spread: f64,
 ) -> Result<ChainTemperature, Error> {
     match setting {
         Temperature::Fixed(value) => Ok(ChainTemperature {
@@ -168,11 +168,16 @@ pub fn chain_temperature(
             measured_at_round: None,
         }),
         Temperature::SurrogateError => {
-            let Some(round) = last_recovered(log) else {
+            let Some(round) = log
+                .rounds
+                .iter()
+                .rev()
+                .find(|r| r.points.len() >= 2 && r.recovered.len() == r.points.len())
+            else {
                 return Ok(ChainTemperature::ONE);
             };
             let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;
-            let value = temperature(&unit_shifts, &points, round.temperature, spread)?;
+            let value = temperature(&unit_shifts, &points, round.temperature, round.spread)?;
             Ok(ChainTemperature {
                 value,
                 measured_at_round: Some(round.round),
@@ -220,6 +225,7 @@ mod tests {
             starts: vec![],
             restarted: vec![],
             temperature: 1.0,
+            spread: 1.0,
         }
     }
 
@@ -267,9 +273,9 @@ mod tests {
     fn the_temperature_is_measured_at_the_last_recorded_round() {
         let p = plan();
         let none = RefineLog::default();
-        let fixed = chain_temperature(Temperature::Fixed(3.0), &p, &none, 1.0).unwrap();
+        let fixed = chain_temperature(Temperature::Fixed(3.0), &p, &none).unwrap();
         assert_eq!((fixed.value, fixed.measured_at_round), (3.0, None));
-        let first = chain_temperature(Temperature::SurrogateError, &p, &none, 1.0).unwrap();
+        let first = chain_temperature(Temperature::SurrogateError, &p, &none).unwrap();
         assert_eq!(first, ChainTemperature::ONE);
         // Round 2: a recovered off by +-1 (unit 0.1; its points' unit variance 0.005: ratio
         // 2), b exactly (ratio 0): the median ratio 1, T = 1 + 1.
@@ -279,12 +285,22 @@ mod tests {
                 round(2, vec![vec![6.0, 2.0], vec![3.0, 2.5]]),
             ],
         };
-        let t = chain_temperature(Temperature::SurrogateError, &p, &log, 1.0).unwrap();
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
         assert!((t.value - 2.0).abs() < 1e-9, "{t:?}");
         assert_eq!(t.measured_at_round, Some(2));
         // The round's chains already ran at T = 4: their points were twice as wide.
         log.rounds[1].temperature = 4.0;
-        let t = chain_temperature(Temperature::SurrogateError, &p, &log, 1.0).unwrap();
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
         assert!((t.value - 5.0).abs() < 1e-9, "{t:?}");
+        // Points moved twice as far (`refine.spread = 2` when the round ran): 1 + 4 x 4 x 1.
+        log.rounds[1].spread = 2.0;
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
+        assert!((t.value - 17.0).abs() < 1e-9, "{t:?}");
+        // A round with one point recovered measures nothing: the last one with two does.
+        let mut one = round(3, vec![vec![5.0, 2.0]]);
+        one.points.truncate(1);
+        log.rounds.push(one);
+        let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
+        assert_eq!(t.measured_at_round, Some(2));
     }
 }
