@@ -18,6 +18,21 @@ pub mod proto {
     tonic::include_proto!("bemcal.v1");
 }
 
+impl proto::ChainSegmentJob {
+    /// The likelihood's temperature the job's chains run at: 0 (a job written before the field
+    /// existed) is 1.
+    ///
+    /// # Errors
+    /// Any other value below 1, or not finite.
+    pub fn likelihood_temperature(&self) -> Result<f64, String> {
+        match self.temperature {
+            0.0 => Ok(1.0),
+            t if t.is_finite() && t >= 1.0 => Ok(t),
+            t => Err(format!("chain job with temperature {t} (at least 1)")),
+        }
+    }
+}
+
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;
 

@@ -565,14 +565,15 @@ impl Leased<'_> {
             states.extend(last_states);
             draws.extend(acc);
         }
-        // The temperature the segments ran at (0 in jobs written before it existed: 1).
-        let temperature = groups
+        // The temperature the segments ran at.
+        let temperature = match groups
             .iter()
             .filter_map(|(_, segments)| segments.first())
-            .filter_map(segment_of)
-            .map(|c| c.temperature.max(1.0))
-            .next()
-            .unwrap_or(1.0);
+            .find_map(segment_of)
+        {
+            Some(c) => c.likelihood_temperature().map_err(Error::Executor)?,
+            None => 1.0,
+        };
         Ok(Checkpoint {
             states,
             draws,

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
+use bemcal_calibrate::surrogate_error::ChainTemperature;
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
@@ -75,15 +76,10 @@ fn train(cal: &Calibration, t: &proto::TrainJob, work: &Path) -> Result<Outputs,
 /// coordinator's starts, or prior draws); their states and draws.
 fn chains(cal: &Calibration, c: &proto::ChainSegmentJob, work: &Path) -> Result<Outputs, String> {
     let mut sampler = cal.sampler().map_err(err)?;
-    // 0 in a job written before the field existed: the posterior itself.
-    if c.temperature.is_finite() && c.temperature >= 1.0 {
-        sampler.set_temperature(c.temperature);
-    } else if c.temperature != 0.0 {
-        return Err(format!(
-            "chain job with temperature {} (at least 1)",
-            c.temperature
-        ));
-    }
+    sampler.set_temperature(ChainTemperature {
+        value: c.likelihood_temperature()?,
+        measured_at_round: None,
+    });
     let states_path = work.join(STATES_FILE);
     let mut states: Vec<Chain> = if states_path.is_file() {
         let bytes = std::fs::read(&states_path).map_err(err)?;

@@ -43,7 +43,7 @@ pub struct Sampler<'c> {
     pub held_out: serde_json::Value,
     /// The likelihood's temperature of the chains this sampler runs (1 until
     /// [`Sampler::set_temperature`]; [`crate::project::Temperature`]).
-    temperature: f64,
+    temperature: ChainTemperature,
 }
 
 impl Calibration {
@@ -96,7 +96,7 @@ impl Calibration {
             sigma_box: SigmaDeltaBox::new(&sd, &inp.fitted),
             sigma_eta,
             held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
-            temperature: 1.0,
+            temperature: ChainTemperature::ONE,
         })
     }
 }
@@ -109,14 +109,14 @@ impl Sampler<'_> {
 
     /// Sets the likelihood's temperature of the chains to come (at least 1; the driver's
     /// [`crate::surrogate_error::chain_temperature`] for the round).
-    pub fn set_temperature(&mut self, temperature: f64) {
-        debug_assert!(temperature >= 1.0, "temperature {temperature}");
+    pub fn set_temperature(&mut self, temperature: ChainTemperature) {
+        debug_assert!(temperature.value >= 1.0, "temperature {temperature:?}");
         self.temperature = temperature;
     }
 
     /// The likelihood's temperature of the chains this sampler runs.
     pub fn temperature(&self) -> f64 {
-        self.temperature
+        self.temperature.value
     }
 
     /// How far a refinement round's points are moved from the chains' mean (`refine.spread`).
@@ -134,7 +134,7 @@ impl Sampler<'_> {
                 .then_some(&self.sigma_box),
             marginal: self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Marginal,
             ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
-            temperature: self.temperature,
+            temperature: self.temperature.value,
         }
     }
 
@@ -218,7 +218,7 @@ impl Sampler<'_> {
             sigma_box: (mode == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
             marginal: mode == SigmaDeltaMode::Marginal,
             ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
-            temperature: self.temperature,
+            temperature: self.temperature.value,
         };
         (post, &mut self.evaluator)
     }
@@ -339,7 +339,7 @@ impl Sampler<'_> {
         // The estimate and its fallbacks are the draws best by the untempered posterior
         // (`ln p + T (ln pi_T - ln p)`, prior p): the tempered one ranks a draw T times less by
         // its fit and T times more by its prior.
-        let t = self.temperature;
+        let t = self.temperature.value;
         if t != 1.0 {
             let post = self.posterior();
             for (td, dr) in theta_draws.iter_mut().zip(draws) {
@@ -427,10 +427,7 @@ impl Sampler<'_> {
             convergence,
             surrogate_error,
             predictive,
-            temperature: ChainTemperature {
-                value: self.temperature,
-                measured_at_round: None,
-            },
+            temperature: self.temperature,
         })
     }
 }

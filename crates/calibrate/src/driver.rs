@@ -156,7 +156,7 @@ impl<'c> LazySampler<'c> {
     pub fn get(&mut self) -> Result<&mut Sampler<'c>, Error> {
         if self.sampler.is_none() {
             let mut sampler = self.cal.sampler()?;
-            sampler.set_temperature(self.temperature.value);
+            sampler.set_temperature(self.temperature);
             self.sampler = Some(sampler);
         }
         Ok(self.sampler.as_mut().expect("loaded above"))
@@ -483,7 +483,6 @@ fn final_chains(
                 exec.enter(Stage::Merge)?;
                 let mut c = sampler.get()?.summarize(&ck.states, &ck.draws, refined)?;
                 c.extensions = state.extensions;
-                c.temperature = sampler.temperature();
                 log_chains(&c, &ck, log);
                 state.summary = Some((last, c.clone()));
                 state.write(cal)?;

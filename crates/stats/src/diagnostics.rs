@@ -96,7 +96,7 @@ pub fn mean(x: &[f64]) -> f64 {
 }
 
 /// Sample variance with `ddof` degrees of freedom removed.
-fn var(x: &[f64], ddof: usize) -> f64 {
+pub fn var(x: &[f64], ddof: usize) -> f64 {
     let m = mean(x);
     x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (x.len() - ddof) as f64
 }

@@ -35,6 +35,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::diagnostics::{quantile_sorted, var};
 use crate::mcmc::Draws;
 use crate::{Result, StatsError};
 
@@ -154,9 +155,9 @@ pub fn temperature(
     let second_moment = rms(shifts);
     let mut ratios: Vec<f64> = (0..d)
         .filter_map(|j| {
-            let mean = points.iter().map(|p| p[j]).sum::<f64>() / m as f64;
-            let var = points.iter().map(|p| (p[j] - mean).powi(2)).sum::<f64>() / (m - 1) as f64;
-            (var > 0.0).then(|| second_moment[j].powi(2) / var)
+            let column: Vec<f64> = points.iter().map(|p| p[j]).collect();
+            let v = var(&column, 1);
+            (v > 0.0).then(|| second_moment[j].powi(2) / v)
         })
         .collect();
     if ratios.iter().any(|r| !r.is_finite()) {
@@ -168,12 +169,7 @@ pub fn temperature(
         ));
     }
     ratios.sort_by(f64::total_cmp);
-    let k = ratios.len();
-    let median = if k % 2 == 1 {
-        ratios[k / 2]
-    } else {
-        0.5 * (ratios[k / 2 - 1] + ratios[k / 2])
-    };
+    let median = quantile_sorted(&ratios, 0.5);
     Ok(1.0 + round_temperature * spread * spread * median)
 }
 
