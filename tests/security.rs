@@ -224,9 +224,31 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         let lease = |id: &str| LeaseRequest {
             worker_id: id.into(),
             free_slots: 1,
+            protocol: bemcal_client::PROTOCOL,
         };
         let e = c.lease(lease("w1")).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::PermissionDenied);
+        // A worker of another protocol revision (0: built before the field) gets no job, and
+        // is told why.
+        for old in [0, bemcal_client::PROTOCOL + 1] {
+            let e = w
+                .lease(LeaseRequest {
+                    protocol: old,
+                    ..lease("w0")
+                })
+                .await
+                .unwrap_err();
+            assert_eq!(e.code(), tonic::Code::FailedPrecondition);
+            let (theirs, ours) = (
+                format!("speaks protocol {old} "),
+                format!(") protocol {}:", bemcal_client::PROTOCOL),
+            );
+            assert!(
+                e.message().contains(&theirs) && e.message().contains(&ours),
+                "{}",
+                e.message()
+            );
+        }
         // The design's simulations are queued once the driver has laid out the run.
         let mut job = None;
         for _ in 0..120 {

@@ -33,6 +33,12 @@ impl proto::ChainSegmentJob {
     }
 }
 
+/// The revision of the coordinator/worker protocol this build speaks, sent with every lease
+/// request (`LeaseRequest::protocol`); a coordinator leases only to workers of its own revision.
+/// Raised whenever a job gains a field that changes what a worker computes:
+/// - 1: `ChainSegmentJob::temperature` (the likelihood's temperature, issue 20).
+pub const PROTOCOL: u32 = 1;
+
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;
 

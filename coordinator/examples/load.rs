@@ -128,6 +128,7 @@ fn main() -> anyhow::Result<()> {
                         .lease(LeaseRequest {
                             worker_id: id.clone(),
                             free_slots: 1,
+                            protocol: bemcal_client::PROTOCOL,
                         })
                         .await?
                         .into_inner()

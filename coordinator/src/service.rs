@@ -109,6 +109,26 @@ fn check_worker(id: &str) -> Result<(), Status> {
     Ok(())
 }
 
+/// A worker of another protocol revision gets no job (`FailedPrecondition`, naming both
+/// revisions and releases): what it would compute could differ from what this coordinator's
+/// jobs ask for.
+fn check_protocol(r: &LeaseRequest) -> Result<(), Status> {
+    if r.protocol == bemcal_client::PROTOCOL {
+        return Ok(());
+    }
+    Err(refuse(
+        Code::FailedPrecondition,
+        format!(
+            "worker {:?} speaks protocol {} and this coordinator (bemcal {}) protocol {}: \
+             run workers of the coordinator's release",
+            r.worker_id,
+            r.protocol,
+            env!("CARGO_PKG_VERSION"),
+            bemcal_client::PROTOCOL
+        ),
+    ))
+}
+
 impl Service {
     /// The lease's job when `worker` holds it; `PermissionDenied` when another worker does.
     /// An unknown lease is `None` (the store then ignores the call, as for a late duplicate).
@@ -249,6 +269,7 @@ impl Coordinator for Service {
         require(&req, Role::Worker)?;
         let r = req.into_inner();
         check_worker(&r.worker_id)?;
+        check_protocol(&r)?;
         if r.free_slots == 0 {
             return Ok(Response::new(LeaseReply { job: None }));
         }

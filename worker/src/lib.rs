@@ -109,12 +109,16 @@ pub async fn run(
             .lease(LeaseRequest {
                 worker_id: opts.worker_id.clone(),
                 free_slots: (slots.available_permits() + 1) as u32,
+                protocol: bemcal_client::PROTOCOL,
             })
             .await;
         let job = match reply {
             Ok(r) => r.into_inner().job,
             Err(e) if e.code() == tonic::Code::Unauthenticated => {
                 anyhow::bail!("the coordinator refused the token: {}", e.message())
+            }
+            Err(e) if e.code() == tonic::Code::FailedPrecondition => {
+                anyhow::bail!("the coordinator refused this worker: {}", e.message())
             }
             Err(e) => {
                 eprintln!("worker {}: lease: {}", opts.worker_id, e.message());
