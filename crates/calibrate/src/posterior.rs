@@ -317,7 +317,7 @@ pub fn run_chains(
             stage: "chains",
             message: format!(
                 "{} holds chains that sampled the likelihood at temperature {}, this run's is {} \
-                 (mcmc.temperature or the refinement rounds changed): delete it and \
+                 (mcmc.temperature, the refinement rounds or the rule that measures it changed): delete it and \
                  chains_summary.json to start the chains again",
                 path.display(),
                 ck.temperature,

@@ -417,8 +417,9 @@ pub enum Temperature {
     /// This `T` for every round's chains (1: the posterior itself, the default).
     Fixed(f64),
     /// Measured for each round's chains from the last refinement round's recoveries: the `T`
-    /// that makes the posterior as wide as the surrogate's error near it on the typical
-    /// parameter ([`bemcal_stats::surrogate_error::temperature`]); the first round's chains
+    /// at which the 90 % intervals are expected to hold the truth for 90 % of the parameters
+    /// when it lies one measured shift from the posterior
+    /// ([`bemcal_stats::surrogate_error::temperature`]); the first round's chains
     /// run at 1. The intervals then carry that error themselves: no shifts are added to the
     /// draws (`draws_with_surrogate_error.csv` is not written). Needs `refine.rounds >= 1`.
     SurrogateError,

@@ -149,11 +149,15 @@ impl ChainTemperature {
     }
 }
 
+/// The posterior intervals a measured temperature is chosen to make hold: the central 90 % that
+/// `summary.json` (`q5` to `q95`), the CLI and the report give for each parameter.
+pub const INTERVAL_LEVEL: f64 = 0.9;
+
 /// The temperature of the chains that run after `log`'s rounds: the setting's number, or, with
-/// `"surrogate_error"`, [`bemcal_stats::surrogate_error::temperature`] of the last round that
-/// recorded the recoveries of at least two points (its points moved `refine.spread` times from
-/// the chains' mean, as recorded; the highest-posterior one, never moved, counted as moved
-/// too), 1 before any.
+/// `"surrogate_error"`, [`bemcal_stats::surrogate_error::temperature`] at [`INTERVAL_LEVEL`]
+/// of the last round that recorded the recoveries of at least two points (its points moved
+/// `refine.spread` times from the chains' mean, as recorded; the highest-posterior one, never
+/// moved, counted as moved too), 1 before any.
 ///
 /// # Errors
 /// If the round's points and recoveries do not fit the plan, or have no spread.
@@ -177,7 +181,13 @@ pub fn chain_temperature(
                 return Ok(ChainTemperature::ONE);
             };
             let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;
-            let value = temperature(&unit_shifts, &points, round.temperature, round.spread)?;
+            let value = temperature(
+                &unit_shifts,
+                &points,
+                round.temperature,
+                round.spread,
+                INTERVAL_LEVEL,
+            )?;
             Ok(ChainTemperature {
                 value,
                 measured_at_round: Some(round.round),
@@ -278,24 +288,37 @@ mod tests {
         let first = chain_temperature(Temperature::SurrogateError, &p, &none).unwrap();
         assert_eq!(first, ChainTemperature::ONE);
         // Round 2: a recovered off by +-1 (unit 0.1; its points' unit variance 0.005: ratio
-        // 2), b exactly (ratio 0): the median ratio 1, T = 1 + 1.
+        // 2), b by +-0.5 (unit 0.25 against 0.03125: ratio 2): T = 1 + 2, where each interval
+        // holds the shifted truth as often as it says.
         let mut log = RefineLog {
             rounds: vec![
                 round(1, vec![]),
-                round(2, vec![vec![6.0, 2.0], vec![3.0, 2.5]]),
+                round(2, vec![vec![6.0, 2.5], vec![3.0, 2.0]]),
             ],
         };
         let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
-        assert!((t.value - 2.0).abs() < 1e-9, "{t:?}");
+        assert!((t.value - 3.0).abs() < 1e-6, "{t:?}");
         assert_eq!(t.measured_at_round, Some(2));
-        // The round's chains already ran at T = 4: their points were twice as wide.
+        // The round's chains already ran at T = 4: their points were twice as wide (ratios 8).
         log.rounds[1].temperature = 4.0;
         let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
-        assert!((t.value - 5.0).abs() < 1e-9, "{t:?}");
-        // Points moved twice as far (`refine.spread = 2` when the round ran): 1 + 4 x 4 x 1.
+        assert!((t.value - 9.0).abs() < 1e-6, "{t:?}");
+        // Points moved twice as far (`refine.spread = 2` when the round ran): 1 + 4 x 4 x 2.
         log.rounds[1].spread = 2.0;
         let t = chain_temperature(Temperature::SurrogateError, &p, &log).unwrap();
-        assert!((t.value - 17.0).abs() < 1e-9, "{t:?}");
+        assert!((t.value - 33.0).abs() < 1e-6, "{t:?}");
+        // b recovered exactly: its interval holds more than it must, so less tempering than
+        // for two shifted parameters, more than for none.
+        let exact_b = round(2, vec![vec![6.0, 2.0], vec![3.0, 2.5]]);
+        let t = chain_temperature(
+            Temperature::SurrogateError,
+            &p,
+            &RefineLog {
+                rounds: vec![exact_b],
+            },
+        )
+        .unwrap();
+        assert!(t.value > 1.0 && t.value < 3.0, "{t:?}");
         // A round with one point recovered measures nothing: the last one with two does.
         let mut one = round(3, vec![vec![5.0, 2.0]]);
         one.points.truncate(1);

@@ -867,8 +867,8 @@ fn parameters_table(s: &crate::io::Summary) -> String {
         let why = match t.measured_at_round {
             Some(r) => format!(
                 "measured from the surrogate's error at the EnergyPlus points of refinement \
-                 round {r}, so that the posterior is as wide as that error on the typical \
-                 parameter"
+                 round {r}, so that the 90 % intervals are expected to hold the truth for 90 % \
+                 of the parameters when it lies that error away"
             ),
             None => "set in the project (<code>mcmc.temperature</code>)".into(),
         };

@@ -1,4 +1,9 @@
-//! Standard normal quantile function (inverse CDF).
+//! The standard normal distribution: its CDF and quantile function (inverse CDF).
+
+/// Standard normal CDF, through `erfc` (no cancellation in the lower tail).
+pub(crate) fn norm_cdf(z: f64) -> f64 {
+    0.5 * libm::erfc(-z / std::f64::consts::SQRT_2)
+}
 
 /// Standard normal quantile, Wichura's algorithm AS 241 (PPND16, Applied Statistics 37, 1988),
 /// relative accuracy about 1e-16. Returns -inf / +inf at 0 / 1 and NaN outside [0, 1].

@@ -21,6 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::normal::norm_cdf;
 use crate::{Result, StatsError};
 
 /// How the noise scale of the predictive distribution is estimated from in-sample residuals.
@@ -126,11 +127,6 @@ fn level_scales(measured: &[f64], simulated: &[f64], fit: &[bool], constant: f64
         .collect()
 }
 
-/// Standard normal CDF.
-fn phi(z: f64) -> f64 {
-    0.5 * libm::erfc(-z / std::f64::consts::SQRT_2)
-}
-
 /// The `p` quantile of the equal-weight mixture of `N(c, sd²)` over `centers` (bisection on
 /// the mixture CDF to 1e-9 of the bracket). `sd <= 0` gives the centers' own quantile.
 pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
@@ -147,8 +143,9 @@ pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
     } else {
         1e-12 * (1.0 + hi.abs())
     };
-    let cdf =
-        |x: f64| centers.iter().map(|&c| phi((x - c) / sd)).sum::<f64>() / centers.len() as f64;
+    let cdf = |x: f64| {
+        centers.iter().map(|&c| norm_cdf((x - c) / sd)).sum::<f64>() / centers.len() as f64
+    };
     let (mut a, mut b) = (lo - 9.0 * sd, hi + 9.0 * sd);
     let tol = 1e-9 * (b - a);
     // At most 100 halvings (a bracket of any width reaches 1e-9 of itself in 30); stop early

@@ -26,7 +26,8 @@
 //! **Or in the likelihood** ([`temperature`]): the chains sample the power posterior
 //! `p(theta) L(theta)^(1/T)` (a coarsened posterior in the sense of Miller & Dunson 2019,
 //! "Robust Bayesian inference via coarsening", JASA 114, eq. 2.3), with `T` such that the
-//! posterior's variance is its own plus the shifts' on the typical parameter. A posterior `T`
+//! posterior's intervals, widened by it, hold the truth as often as they say when the truth lies
+//! one measured shift away (averaged over the parameters). A posterior `T`
 //! times wider than the likelihood alone allows is also one whose barriers between modes are
 //! `T` times lower: what lets gradient-based chains mix on a surrogate that is rugged at the
 //! scale of the untempered posterior.
@@ -35,8 +36,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::diagnostics::{quantile_sorted, var};
+use crate::diagnostics::var;
 use crate::mcmc::Draws;
+use crate::normal::{norm_cdf, norm_ppf};
 use crate::{Result, StatsError};
 
 /// The shifts `delta_i = recovered_i - true_i` (same space, one vector per point).
@@ -114,24 +116,35 @@ pub fn add_to_draws(chains: &[Draws], shifts: &[Vec<f64>], seed: u64) -> Result<
     Ok(out)
 }
 
-/// The likelihood's temperature that carries the surrogate's error: `T = 1 + T_r s^2 median_j
-/// (S_jj / V_j)`, with `S_jj` the shifts' second moment ([`rms`] squared), `V_j` the sample
-/// variance of the points they were measured at (posterior draws of chains that ran at
-/// temperature `T_r`, moved `s` = `spread` times farther from their mean), coordinates with no
-/// spread left out. Why: the points' variance is `s^2 T_r` times the untempered posterior's
-/// `V1`, and `T V1 = V1 + S` is the posterior variance with the shift added (law of total
-/// variance, as in the module docs); one `T` for every parameter, so the median over them (a
-/// few parameters whose shift is many posterior widths, where one temperature cannot be right
-/// for all, do not set it for the others). At least 1.
+/// The likelihood's temperature that carries the surrogate's error: the smallest `T >= 1` at
+/// which the posterior's central `level` intervals are expected to hold the truth for a fraction
+/// `level` of the parameters,
+///
+/// `(1/d) sum_j [2 Phi(z sqrt(T / (1 + r_j))) - 1] = level`, `z = Phi^-1((1 + level) / 2)`,
+///
+/// with `r_j = T_r s^2 S_jj / V_j`. `S_jj` is the shifts' second moment ([`rms`] squared) and
+/// `V_j` the sample variance of the points they were measured at: posterior draws of chains
+/// that ran at temperature `T_r`, moved `s` = `spread` times farther from their mean, so
+/// `V_j / (T_r s^2)` is the untempered posterior variance `v_j` and `r_j` the shift's variance in
+/// units of it. Why: the truth lies a shift `N(0, S_jj)` from where the untempered posterior
+/// centres, so `N(0, v_j (1 + r_j))` from its centre (law of total variance, as in the module
+/// docs), while the tempered posterior's interval is `+- z sqrt(T v_j)`: parameter `j`'s
+/// interval holds the truth with the probability in the sum. One `T` serves every parameter,
+/// so the sum averages over them (all `r_j` equal give `T = 1 + r`): a parameter whose shift
+/// is many posterior widths costs at most `1/d` of the coverage, so with `d (1 - level) > 1`
+/// (more than 10 parameters at 90 %) it does not set `T` alone; with fewer, the farthest
+/// shift sets it, since then every interval must hold.
+/// Coordinates with no spread are left out. At least 1 (no shift: 1).
 ///
 /// # Errors
 /// With fewer than two points, shifts and points of other shapes, a non-finite value, `T_r`
-/// below 1 or `spread` not positive, or no coordinate with any spread.
+/// below 1, `spread` not positive, `level` outside (0, 1), or no coordinate with any spread.
 pub fn temperature(
     shifts: &[Vec<f64>],
     points: &[Vec<f64>],
     round_temperature: f64,
     spread: f64,
+    level: f64,
 ) -> Result<f64> {
     let m = points.len();
     if m < 2 || shifts.len() != m {
@@ -146,18 +159,23 @@ pub fn temperature(
             "shifts and points of different lengths".into(),
         ));
     }
-    let valid = round_temperature.is_finite() && round_temperature >= 1.0 && spread > 0.0;
+    let valid = round_temperature.is_finite()
+        && round_temperature >= 1.0
+        && spread > 0.0
+        && level > 0.0
+        && level < 1.0;
     if !valid {
         return Err(StatsError::Invalid(format!(
-            "round temperature {round_temperature} (at least 1) and spread {spread} (positive)"
+            "round temperature {round_temperature} (at least 1), spread {spread} (positive) \
+             and level {level} (between 0 and 1)"
         )));
     }
     let second_moment = rms(shifts);
-    let mut ratios: Vec<f64> = (0..d)
+    let ratios: Vec<f64> = (0..d)
         .filter_map(|j| {
             let column: Vec<f64> = points.iter().map(|p| p[j]).collect();
             let v = var(&column, 1);
-            (v > 0.0).then(|| second_moment[j].powi(2) / v)
+            (v > 0.0).then(|| round_temperature * spread * spread * second_moment[j].powi(2) / v)
         })
         .collect();
     if ratios.iter().any(|r| !r.is_finite()) {
@@ -168,9 +186,42 @@ pub fn temperature(
             "the points have no spread".into(),
         ));
     }
-    ratios.sort_by(f64::total_cmp);
-    let median = quantile_sorted(&ratios, 0.5);
-    Ok(1.0 + round_temperature * spread * spread * median)
+    Ok(temperature_for_coverage(&ratios, level))
+}
+
+/// The expected coverage of central `level` intervals `T` times wider in variance than the
+/// posterior, averaged over parameters whose truths lie `N(0, (1 + r_j) v_j)` from the centre.
+fn expected_coverage(ratios: &[f64], level: f64, t: f64) -> f64 {
+    let z = norm_ppf(0.5 + level / 2.0);
+    let held: f64 = ratios
+        .iter()
+        .map(|r| 2.0 * norm_cdf(z * (t / (1.0 + r)).sqrt()) - 1.0)
+        .sum();
+    held / ratios.len() as f64
+}
+
+/// The smallest `T >= 1` with [`expected_coverage`] at least `level`. The coverage grows with
+/// `T`, and at `T = 1 + max_j r_j` every parameter's interval holds at least `level`, so
+/// bisection in `ln T` between 1 and that finds it (to a relative 1e-9).
+fn temperature_for_coverage(ratios: &[f64], level: f64) -> f64 {
+    // 1e-12 below: all ratios 0 give exactly `level` at T = 1, up to rounding.
+    let enough = |t: f64| expected_coverage(ratios, level, t) >= level - 1e-12;
+    let (mut lo, mut hi) = (
+        0.0_f64,
+        (1.0 + ratios.iter().fold(0.0_f64, |a, &r| a.max(r))).ln(),
+    );
+    if enough(1.0) {
+        return 1.0;
+    }
+    while hi - lo > 1e-9 {
+        let mid = 0.5 * (lo + hi);
+        if enough(mid.exp()) {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    hi.exp()
 }
 
 #[cfg(test)]
@@ -242,29 +293,44 @@ mod tests {
     }
 
     #[test]
-    fn temperature_widens_the_posterior_by_the_typical_shift() {
-        // Points with variance 1 per coordinate (two points at +-1/sqrt(2) spread: sample
-        // variance of (-a, a) is 2 a^2); shifts with second moment 4, 9 and 1e6: median 9.
+    fn temperature_makes_the_intervals_hold_the_shifted_truth() {
+        // Points with variance 1 per coordinate (two points at +-1/sqrt(2): sample variance of
+        // (-a, a) is 2 a^2); shifts with second moment 9 in every coordinate: T = 1 + 9 at any
+        // level, since each interval then holds N(0, 1 + 9) exactly as often as it says.
         let a = 0.5_f64.sqrt();
         let points = vec![vec![-a, -a, -a], vec![a, a, a]];
-        let shifts = vec![vec![2.0, 3.0, 1e3], vec![-2.0, 3.0, -1e3]];
-        let t = temperature(&shifts, &points, 1.0, 1.0).unwrap();
-        assert!((t - 10.0).abs() < 1e-9, "{t}");
+        let equal = vec![vec![3.0, 3.0, -3.0], vec![-3.0, 3.0, 3.0]];
+        for level in [0.5, 0.9] {
+            let t = temperature(&equal, &points, 1.0, 1.0, level).unwrap();
+            assert!((t - 10.0).abs() < 1e-6, "{t}");
+        }
         // Chains that ran at T_r = 5 were sqrt(5) times wider: the untempered variance is 1/5.
-        let t5 = temperature(&shifts, &points, 5.0, 1.0).unwrap();
-        assert!((t5 - 46.0).abs() < 1e-9, "{t5}");
+        let t5 = temperature(&equal, &points, 5.0, 1.0, 0.9).unwrap();
+        assert!((t5 - 46.0).abs() < 1e-6, "{t5}");
         // Points moved twice as far from their mean: their variance is 4 times the chains'.
-        let t2 = temperature(&shifts, &points, 1.0, 2.0).unwrap();
-        assert!((t2 - 37.0).abs() < 1e-9, "{t2}");
+        let t2 = temperature(&equal, &points, 1.0, 2.0, 0.9).unwrap();
+        assert!((t2 - 37.0).abs() < 1e-6, "{t2}");
+        // Unequal shifts (second moments 4, 9, 1e6): T makes the average coverage the level;
+        // at 60 % the far one holds almost nothing and does not set T, the others hold more.
+        let mixed = vec![vec![2.0, 3.0, 1e3], vec![-2.0, 3.0, -1e3]];
+        let t = temperature(&mixed, &points, 1.0, 1.0, 0.6).unwrap();
+        let ratios = [4.0, 9.0, 1e6];
+        assert!((expected_coverage(&ratios, 0.6, t) - 0.6).abs() < 1e-9);
+        assert!(t > 10.0 && t < 100.0, "{t}");
+        assert!(expected_coverage(&ratios[2..], 0.6, t) < 0.01);
         // No shift: no tempering.
         let zero = vec![vec![0.0; 3]; 2];
-        assert_eq!(temperature(&zero, &points, 1.0, 1.0).unwrap(), 1.0);
+        assert_eq!(temperature(&zero, &points, 1.0, 1.0, 0.9).unwrap(), 1.0);
         // A coordinate without spread is left out; one point, or none with spread, is an error.
         let flat = vec![vec![-a, 0.3, -a], vec![a, 0.3, a]];
-        let t = temperature(&shifts, &flat, 1.0, 1.0).unwrap();
-        assert!((t - (1.0 + 0.5 * (4.0 + 1e6))).abs() < 1e-6, "{t}");
-        assert!(temperature(&shifts[..1], &points[..1], 1.0, 1.0).is_err());
-        assert!(temperature(&shifts, &[vec![0.1; 3], vec![0.1; 3]], 1.0, 1.0).is_err());
-        assert!(temperature(&shifts, &points, 0.5, 1.0).is_err());
+        let t = temperature(&mixed, &flat, 1.0, 1.0, 0.9).unwrap();
+        assert!((expected_coverage(&[4.0, 1e6], 0.9, t) - 0.9).abs() < 1e-9);
+        assert!(temperature(&mixed[..1], &points[..1], 1.0, 1.0, 0.9).is_err());
+        assert!(temperature(&mixed, &[vec![0.1; 3], vec![0.1; 3]], 1.0, 1.0, 0.9).is_err());
+        assert!(temperature(&mixed, &points, 0.5, 1.0, 0.9).is_err());
+        assert!(temperature(&mixed, &points, 1.0, 1.0, 1.0).is_err());
+        // Ratios near the largest finite number still end, at a finite T.
+        let t = temperature_for_coverage(&[1e300, 0.0], 0.9);
+        assert!(t.is_finite() && t > 1e299, "{t}");
     }
 }
