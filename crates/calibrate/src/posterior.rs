@@ -283,7 +283,9 @@ pub struct Checkpoint {
     pub temperature: f64,
 }
 
-fn untempered() -> f64 {
+/// The likelihood's temperature of a record written before it had one: 1 (serde's default for
+/// [`Checkpoint::temperature`] and `RefineRound::temperature`).
+pub(crate) fn untempered() -> f64 {
     1.0
 }
 
@@ -317,8 +319,8 @@ pub fn run_chains(
             stage: "chains",
             message: format!(
                 "{} holds chains that sampled the likelihood at temperature {}, this run's is {} \
-                 (mcmc.temperature, the refinement rounds or the rule that measures it changed): delete it and \
-                 chains_summary.json to start the chains again",
+                 (mcmc.temperature, the refinement rounds or the rule that measures it \
+                 changed): delete it and chains_summary.json to start the chains again",
                 path.display(),
                 ck.temperature,
                 post.temperature

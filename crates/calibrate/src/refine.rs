@@ -59,15 +59,15 @@ pub struct RefineRound {
     pub restarted: Vec<(usize, f64)>,
     /// The likelihood's temperature the round's chains ran at (1 in rounds recorded before it
     /// existed; [`crate::surrogate_error::chain_temperature`]).
-    #[serde(default = "untempered")]
+    #[serde(default = "crate::posterior::untempered")]
     pub temperature: f64,
     /// How far the round's points were moved from the chains' mean (`refine.spread` when it
     /// ran; 1 in rounds recorded before it existed).
-    #[serde(default = "untempered")]
+    #[serde(default = "unmoved")]
     pub spread: f64,
 }
 
-fn untempered() -> f64 {
+fn unmoved() -> f64 {
     1.0
 }
 

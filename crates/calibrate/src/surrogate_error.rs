@@ -59,7 +59,7 @@ pub fn carry(
     log: &RefineLog,
     seed: u64,
 ) -> Result<Option<(SurrogateError, Vec<Draws>)>, Error> {
-    let Some(round) = last_recovered(log) else {
+    let Some(round) = last_recovered(log, 1) else {
         return Ok(None);
     };
     let (_, unit_shifts) = unit_points_and_shifts(plan, round)?;
@@ -97,12 +97,12 @@ pub fn carry(
     Ok(Some((report, shifted)))
 }
 
-/// The last round of `log` that recorded what its points recover.
-fn last_recovered(log: &RefineLog) -> Option<&RefineRound> {
+/// The last round of `log` that recorded what at least `points` of its points recover.
+fn last_recovered(log: &RefineLog, points: usize) -> Option<&RefineRound> {
     log.rounds
         .iter()
         .rev()
-        .find(|r| !r.points.is_empty() && r.recovered.len() == r.points.len())
+        .find(|r| r.points.len() >= points && r.recovered.len() == r.points.len())
 }
 
 /// Points (or shifts), one unit-space vector each.
@@ -172,12 +172,7 @@ pub fn chain_temperature(
             measured_at_round: None,
         }),
         Temperature::SurrogateError => {
-            let Some(round) = log
-                .rounds
-                .iter()
-                .rev()
-                .find(|r| r.points.len() >= 2 && r.recovered.len() == r.points.len())
-            else {
+            let Some(round) = last_recovered(log, 2) else {
                 return Ok(ChainTemperature::ONE);
             };
             let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;

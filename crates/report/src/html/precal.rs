@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 
 use super::{esc, figure, legend};
 use crate::analysis;
-use crate::io::PrecalData;
+use crate::io::{PrecalData, ScheduleHour};
 use crate::plots;
 use crate::ReportError;
 
@@ -122,6 +122,15 @@ fn profile_clusters(
     Ok(whiskers)
 }
 
+/// Pre-calibration's hourly schedule statistics of one day type.
+fn day_type_hours(p: &PrecalData, day_type: &str) -> Vec<ScheduleHour> {
+    p.schedule
+        .iter()
+        .filter(|s| s.day_type == day_type)
+        .cloned()
+        .collect()
+}
+
 /// Hourly schedule fractions per day type (the reference's Fig. 5): quartile boxes, medians and
 /// whiskers within 1.5 IQR.
 fn schedule_fractions(
@@ -132,12 +141,7 @@ fn schedule_fractions(
 ) -> Result<(), ReportError> {
     h.push_str("<h3>Hourly schedule fractions per day type</h3><p class=\"sub\">Box: quartiles over the day type's days; line: median; whiskers: range within 1.5 IQR. The quartiles become the triangular priors.</p><div class=\"grid\">");
     for (k, t) in types.iter().enumerate() {
-        let hours: Vec<_> = p
-            .schedule
-            .iter()
-            .filter(|s| &s.day_type == t)
-            .cloned()
-            .collect();
+        let hours = day_type_hours(p, t);
         let wh: Option<Vec<(f64, f64)>> = whiskers.get(t).map(|days| {
             hours
                 .iter()
@@ -178,12 +182,7 @@ fn schedule_fractions(
 fn merged_intervals(h: &mut String, p: &PrecalData, types: &[String]) -> Result<(), ReportError> {
     h.push_str("<h3>Merged schedule intervals</h3><p class=\"sub\">Adjacent hours with similar quartiles merge into one calibrated schedule value; shaded: its triangular prior min&ndash;max, thick line: mode; dots: hourly medians.</p><div class=\"grid\">");
     for (k, t) in types.iter().enumerate() {
-        let hours: Vec<_> = p
-            .schedule
-            .iter()
-            .filter(|s| &s.day_type == t)
-            .cloned()
-            .collect();
+        let hours = day_type_hours(p, t);
         let ivs: Vec<_> = p
             .intervals
             .iter()
