@@ -87,6 +87,20 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     for v in summary["validation"].as_array().unwrap() {
         assert!(v["pass"].as_bool().unwrap(), "G14 failed: {v}\n{log}");
     }
+    // The estimate is the draw EnergyPlus fits best by Guideline 14's hourly criteria of those
+    // validation simulates (the MAP draw and the 4 predictive draws);
+    // calibrated_model_reproduces_the_validation below checks that calibrated.csv, .toml and
+    // .idf are that draw's.
+    assert_eq!(summary["estimate"], "best_simulated");
+    let choice = &summary["estimate_choice"];
+    let fits = choice["candidates"].as_array().unwrap();
+    assert!((2..=5).contains(&fits.len()), "{choice}");
+    let ratio = |f: &serde_json::Value| f["limit_ratio"].as_f64().unwrap();
+    let best = fits
+        .iter()
+        .min_by(|a, b| ratio(a).total_cmp(&ratio(b)))
+        .unwrap();
+    assert_eq!(choice["chosen"], best["label"], "{choice}");
     for f in [
         "draws.csv",
         "posterior_predictive.csv",

@@ -53,7 +53,8 @@ class Calibration:
     #: and, where simulated, the predictive intervals from EnergyPlus at posterior draws with
     #: the error model's noise (``<output>_pi5 .. _pi95``; ``held_out`` marks held-out hours).
     predictions: pd.DataFrame
-    #: The calibrated parameters' values at the estimate (MAP or posterior mean).
+    #: The calibrated parameters' values at the estimate (``summary.json`` ``estimate``: by
+    #: default the posterior draw EnergyPlus fits best by Guideline 14's hourly criteria).
     estimate: Dict[str, float]
     #: The calibrated EnergyPlus model (every parameter at its calibrated or fixed value).
     model_path: Optional[Path]

@@ -199,6 +199,9 @@ fn print_guideline14(s: &bemcal_calibrate::Summary) {
             metrics_pair(sur)
         );
     }
+    if let Some(note) = &s.estimate_note {
+        println!("estimate: {note}");
+    }
     if !s.not_fitted.is_empty() {
         println!(
             "not fitted (fit = false), compared only: {}",

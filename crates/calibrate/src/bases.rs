@@ -34,6 +34,20 @@ impl Inputs {
             .collect()
     }
 
+    /// The likelihood's observations (the reference's y, Eq. 5), row-major `hours x outputs`:
+    /// each fitted meter's model share; NaN where it is missing or held out, and at every hour
+    /// of a meter with `fit = false` (the likelihood leaves it out).
+    pub fn likelihood_observations(&self) -> Vec<f64> {
+        let (n_h, n_out) = (self.features.len(), self.outputs.len());
+        let mut observed = vec![f64::NAN; n_h * n_out];
+        for k in (0..n_out).filter(|&k| self.fitted[k]) {
+            for (h, v) in self.model_share(k).iter().enumerate() {
+                observed[h * n_out + k] = *v;
+            }
+        }
+        observed
+    }
+
     /// True when output `k` has a base (`[[bases]]`).
     pub fn has_base(&self, k: usize) -> bool {
         self.base_reports

@@ -20,7 +20,7 @@ use crate::project::{
 use crate::refine::RefineLog;
 use crate::summary::{write_bands_csv, write_draws_csv};
 use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
-use crate::validation::{fallback_note, FALLBACKS};
+use crate::validation::{fallback_note, EstimateChoice, FALLBACKS};
 use crate::{Calibration, Error, OutputMetrics};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
@@ -65,17 +65,11 @@ impl Calibration {
             });
         }
         let sigma_eta = meta.sigma_eta_kwh();
-        let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
-        let mut observed = vec![f64::NAN; n_h * n_out];
-        // The surrogate predicts the model's share of each meter (the meter less its base);
-        // a meter with `fit = false` stays missing at every hour: the likelihood leaves it out.
-        let shares: Vec<Vec<f64>> = (0..n_out).map(|k| inp.model_share(k)).collect();
-        for (k, s) in shares.iter().enumerate().filter(|(k, _)| inp.fitted[*k]) {
-            for (h, v) in s.iter().enumerate() {
-                observed[h * n_out + k] = *v;
-            }
-        }
-        let stats: Vec<(f64, f64)> = shares.iter().map(|s| mean_sd(s)).collect();
+        // The surrogate predicts the model's share of each meter (the meter less its base).
+        let observed = inp.likelihood_observations();
+        let stats: Vec<(f64, f64)> = (0..inp.outputs.len())
+            .map(|k| mean_sd(&inp.model_share(k)))
+            .collect();
         let m = &self.project.mcmc;
         let noise: Vec<OutputNoise> = stats
             .iter()
@@ -395,11 +389,18 @@ impl Sampler<'_> {
             noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
         write_posterior_predictive(cal, &post, eval, &theta_draws)?;
         let estimate: Vec<f64> = match cal.project.validation.estimate {
-            Estimate::Map => posterior.map_point.clone(),
+            Estimate::Map | Estimate::BestSimulated => posterior.map_point.clone(),
             Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
             Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
         };
         let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
+        let surrogate_at_predictive = match cal.project.validation.estimate {
+            Estimate::BestSimulated => predictive
+                .iter()
+                .map(|x| surrogate_metrics_at(inp, eval, x))
+                .collect::<Result<_, _>>()?,
+            _ => vec![],
+        };
         let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
             .iter()
             .map(|u| post.theta(u))
@@ -415,6 +416,8 @@ impl Sampler<'_> {
             surrogate_at_estimate,
             fallbacks,
             estimate_note: None,
+            estimate_choice: None,
+            surrogate_at_predictive,
             moved_chains: moved_chains(states),
             independence_dropped: independence_dropped(states),
             acceptance: states
@@ -711,6 +714,14 @@ pub struct ChainSummary {
     /// Set when a fallback draw replaced the estimate (why; [`ChainSummary::settle_estimate`]).
     #[serde(default)]
     pub estimate_note: Option<String>,
+    /// With `estimate = "best_simulated"`: the draws EnergyPlus simulated and which became the
+    /// estimate ([`ChainSummary::adopt_best_simulated`]).
+    #[serde(default)]
+    pub estimate_choice: Option<EstimateChoice>,
+    /// Guideline 14 of the surrogate at each predictive draw (`predictive`'s order): what
+    /// `surrogate_at_estimate` becomes where one of them is adopted as the estimate.
+    #[serde(default)]
+    pub surrogate_at_predictive: Vec<Vec<OutputMetrics>>,
     /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
     #[serde(default)]
     pub moved_chains: Vec<MovedChain>,
@@ -753,6 +764,47 @@ impl ChainSummary {
             self.estimate = x.clone();
             self.estimate_note = Some(fallback_note(failures));
         }
+    }
+
+    /// Makes predictive draw `j` the estimate where `estimate = "best_simulated"` chose it
+    /// (`choice`), with the surrogate's metrics there; `None` keeps the MAP draw. Records the
+    /// choice either way.
+    /// `map_failure`: why EnergyPlus could not simulate the MAP draw, if it could not.
+    pub fn adopt_best_simulated(
+        &mut self,
+        j: Option<usize>,
+        choice: EstimateChoice,
+        map_failure: Option<&str>,
+    ) {
+        if let Some((x, sur)) = j.and_then(|j| {
+            let x = self.predictive.get(j)?.clone();
+            Some((x, self.surrogate_at_predictive.get(j).cloned()))
+        }) {
+            let than = match map_failure {
+                None => "better than the MAP draw".to_string(),
+                Some(e) => format!("best (EnergyPlus could not simulate the MAP draw: {e})"),
+            };
+            let ratio = |label: &str| {
+                (choice.candidates.iter())
+                    .find(|c| c.label == label)
+                    .map_or(String::new(), |c| format!("{:.2}", c.limit_ratio))
+            };
+            self.estimate_note = Some(format!(
+                "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \
+                 criteria (its worst meter at {} of the limits{}), of {} draws simulated: it is \
+                 the estimate",
+                choice.chosen,
+                ratio(&choice.chosen),
+                match map_failure {
+                    None => format!(", the MAP draw's at {}", ratio("calibrated")),
+                    Some(_) => String::new(),
+                },
+                choice.candidates.len()
+            ));
+            self.estimate = x;
+            self.surrogate_at_estimate = sur.unwrap_or_default();
+        }
+        self.estimate_choice = Some(choice);
     }
 }
 

@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::design::{read_outcome, saved_outputs};
 use crate::posterior::Checkpoint;
+use crate::project::Estimate;
 use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
 use crate::replacement::{Attempt, Outcome, Step};
 use crate::sequence::{
@@ -418,6 +419,10 @@ fn refine_round(
 struct FinalChains {
     /// The settings it holds for.
     settings: String,
+    /// The likelihood's temperature it holds for (the same up to
+    /// [`crate::surrogate_error::same_temperature`]).
+    #[serde(default = "crate::posterior::untempered")]
+    temperature: f64,
     /// Iterations per chain the final chains run to (raised by each extension).
     target: u64,
     /// Extensions so far.
@@ -430,16 +435,17 @@ struct FinalChains {
 impl FinalChains {
     /// The record of the folder's final chains under the current settings, or a fresh one.
     fn read(cal: &Calibration, rounds: usize, temperature: f64) -> FinalChains {
-        let settings = format!(
-            "{:?} after {rounds} refinement rounds at temperature {temperature:?}",
-            cal.project.mcmc
-        );
+        let settings = format!("{:?} after {rounds} refinement rounds", cal.project.mcmc);
         std::fs::read(cal.out.chains_summary())
             .ok()
             .and_then(|b| serde_json::from_slice::<FinalChains>(&b).ok())
-            .filter(|f| f.settings == settings)
+            .filter(|f| {
+                f.settings == settings
+                    && crate::surrogate_error::same_temperature(f.temperature, temperature)
+            })
             .unwrap_or(FinalChains {
                 settings,
+                temperature,
                 target: cal.project.mcmc.iterations,
                 extensions: 0,
                 summary: None,
@@ -522,9 +528,14 @@ fn validate(
     let runs = validation_runs(chains, initial_point);
     let results = ready!(exec.validate(cal, &runs)?);
     let (mut calibrated, mut initial, mut failures) = (None, vec![], vec![]);
+    // The MAP draw and the predictive draws EnergyPlus simulated, with their metrics.
+    let mut simulated: Vec<(&ValidationRun, Vec<OutputMetrics>)> = vec![];
     for (run, r) in runs.iter().zip(results) {
         match (run.role, r) {
-            (ValidationRole::Calibrated { .. }, Ok(m)) => calibrated = Some(m),
+            (ValidationRole::Calibrated { .. }, Ok(m)) => {
+                simulated.push((run, m.clone()));
+                calibrated = Some(m);
+            }
             (ValidationRole::Calibrated { .. }, Err(e)) => failures.push(e),
             (ValidationRole::Initial, Ok(m)) => initial = m,
             (ValidationRole::Initial, Err(message)) => {
@@ -533,10 +544,18 @@ fn validate(
                     message: format!("EnergyPlus at the initial model: {message}"),
                 })
             }
-            (ValidationRole::Predictive, Ok(_)) => {}
+            (ValidationRole::Predictive, Ok(m)) => simulated.push((run, m)),
             (ValidationRole::Predictive, Err(e)) => log(&format!(
                 "validation: a predictive draw failed in EnergyPlus: {e}"
             )),
+        }
+    }
+    if cal.project.validation.estimate == Estimate::BestSimulated {
+        if let Some(m) = adopt_best_simulated(cal, chains, &simulated, failures.first(), log)? {
+            return Ok(Ready::Done(Validated {
+                calibrated: m,
+                initial,
+            }));
         }
     }
     let validation = loop {
@@ -570,6 +589,61 @@ fn validate(
         calibrated: validation,
         initial,
     }))
+}
+
+/// `estimate = "best_simulated"`: of the draws EnergyPlus `simulated` (the MAP draw first, then
+/// the predictive draws), makes the one that fits the meters best by Guideline 14's hourly
+/// criteria the estimate
+/// ([`crate::best_simulated`]), its run `validation/calibrated.csv`; its metrics, or `None`
+/// when none ran (the fallbacks are tried then). `map_failure`: why EnergyPlus could not
+/// simulate the MAP draw, if it could not.
+fn adopt_best_simulated(
+    cal: &Calibration,
+    chains: &mut ChainSummary,
+    simulated: &[(&ValidationRun, Vec<OutputMetrics>)],
+    map_failure: Option<&String>,
+    log: Log<'_>,
+) -> Result<Option<Vec<OutputMetrics>>, Error> {
+    let ratios: Vec<f64> = (simulated.iter())
+        .map(|(_, m)| crate::limit_ratio(m, &cal.inputs.fitted))
+        .collect();
+    let Some(b) = crate::best_simulated(&ratios) else {
+        return Ok(None);
+    };
+    let (run, metrics) = &simulated[b];
+    let choice = crate::EstimateChoice {
+        chosen: run.label.clone(),
+        candidates: (simulated.iter().zip(&ratios))
+            .map(|((r, _), ratio)| crate::SimulatedFit {
+                label: r.label.clone(),
+                limit_ratio: *ratio,
+            })
+            .collect(),
+    };
+    let predictive =
+        (run.role == ValidationRole::Predictive).then(|| run.key - crate::predictive::FIRST_KEY);
+    if predictive.is_some() {
+        let vdir = cal.out.validation();
+        let values = cal.inputs.plan.values(&run.values);
+        let o = saved_outputs(&vdir, run.key, &values).ok_or_else(|| Error::Stage {
+            stage: "validation",
+            message: format!("the run of {} is not in {}", run.label, vdir.display()),
+        })?;
+        crate::write_outputs_csv(&vdir.join("calibrated.csv"), cal.inputs.year, &o)?;
+    }
+    log(&format!(
+        "validation: of {} posterior draws EnergyPlus simulated, {} fits the meters best by \
+         Guideline 14's hourly criteria (worst meter at {:.2} of the limits{})",
+        simulated.len(),
+        run.label,
+        ratios[b],
+        match (predictive, map_failure) {
+            (Some(_), None) => format!("; the MAP draw's at {:.2}", ratios[0]),
+            _ => String::new(),
+        }
+    ));
+    chains.adopt_best_simulated(predictive, choice, map_failure.map(String::as_str));
+    Ok(Some(metrics.clone()))
 }
 
 /// Logs what became of the design points EnergyPlus could not simulate.

@@ -54,7 +54,8 @@ pub use summary::{
     OutputMetrics, ParameterReport, PeriodMetrics, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
 };
 pub use validation::{
-    fallback_note, next_candidate, Candidate, ValidationStep, FALLBACKS, INITIAL_KEY,
+    best_simulated, fallback_note, limit_ratio, next_candidate, Candidate, EstimateChoice,
+    SimulatedFit, ValidationStep, FALLBACKS, INITIAL_KEY,
 };
 
 /// Errors of the pipeline, each naming the stage, file or setting concerned.

@@ -314,7 +314,7 @@ pub fn run_chains(
             }
         }
     };
-    if ck.temperature != post.temperature {
+    if !crate::surrogate_error::same_temperature(ck.temperature, post.temperature) {
         return Err(Error::Stage {
             stage: "chains",
             message: format!(

@@ -583,9 +583,15 @@ impl Default for RefineSettings {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Estimate {
-    /// The draw with the highest log posterior (default): a joint point, so it satisfies every
+    /// The draw with the highest log posterior: a joint point, so it satisfies every
     /// constraint, and it is what the reference marks at the posterior peak (its Fig. 10).
     Map,
+    /// Of the posterior draws EnergyPlus simulates anyway (the MAP draw and the predictive
+    /// draws, `predictive_draws`), the one whose worst meter is furthest inside Guideline 14's
+    /// hourly limits (default; [`crate::best_simulated`]): the MAP is the surrogate's best, and
+    /// where the surrogate is wrong near it, another draw of the posterior can fit the meters
+    /// better in EnergyPlus.
+    BestSimulated,
     /// Per-parameter posterior mean.
     Mean,
     /// Per-parameter posterior median.
@@ -596,8 +602,8 @@ pub enum Estimate {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ValidationSettings {
-    /// Which posterior statistic becomes the calibrated estimate: `map` (default), `mean` or
-    /// `median`.
+    /// Which posterior point becomes the calibrated estimate: `best_simulated` (default),
+    /// `map`, `mean` or `median`.
     pub estimate: Estimate,
     /// Also simulate the initial model (prior modes), as the reference's Table 5.
     pub initial: bool,
@@ -616,7 +622,7 @@ pub struct ValidationSettings {
 impl Default for ValidationSettings {
     fn default() -> Self {
         ValidationSettings {
-            estimate: Estimate::Map,
+            estimate: Estimate::BestSimulated,
             initial: true,
             holdout: None,
             predictive_draws: 8,

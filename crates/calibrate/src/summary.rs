@@ -146,11 +146,17 @@ pub struct Summary {
     /// `stats::mcmc::INDEPENDENCE_MIN_ACCEPTANCE`): their recorded draws are random-walk steps.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub independence_dropped: Vec<usize>,
-    /// Which posterior statistic the estimate is (`[validation] estimate`).
+    /// Which posterior point the estimate is (`[validation] estimate`).
     pub estimate: Estimate,
-    /// Set when EnergyPlus failed at the estimate and the next-best draw was validated instead.
+    /// Set when the estimate is not the statistic's own point: EnergyPlus failed there and the
+    /// next-best draw was validated instead, or (`best_simulated`) it fits a predictive draw
+    /// better.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate_note: Option<String>,
+    /// With `estimate = "best_simulated"`: each draw EnergyPlus simulated, its log posterior
+    /// with EnergyPlus in the likelihood, and the one chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate_choice: Option<crate::EstimateChoice>,
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
     #[serde(with = "crate::named")]
     pub calibrated_values: Vec<(String, f64)>,
@@ -384,6 +390,7 @@ pub fn write_summary(
         temperature: chains.temperature,
         estimate: cal.project.validation.estimate,
         estimate_note: chains.estimate_note.clone(),
+        estimate_choice: chains.estimate_choice.clone(),
         moved_chains: chains.moved_chains.clone(),
         independence_dropped: chains.independence_dropped.clone(),
         calibrated_values: inp

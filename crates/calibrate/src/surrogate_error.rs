@@ -149,6 +149,18 @@ impl ChainTemperature {
     }
 }
 
+/// Whether chains recorded at temperature `a` may go on at `b`: equal to [`SAME_TEMPERATURE`].
+/// A measured temperature is found by bisection to a relative 1e-9, so the same rounds give
+/// temperatures that differ in their last digits across builds (another summation order):
+/// exact equality refused a checkpoint a rebuilt binary measured 1.4e-10 apart.
+pub fn same_temperature(a: f64, b: f64) -> bool {
+    (a - b).abs() <= SAME_TEMPERATURE * a.abs().max(b.abs())
+}
+
+/// The relative difference below which two temperatures are the same ([`same_temperature`]):
+/// far above the bisection's 1e-9, far below what moves a chain (T is measured to per cents).
+pub const SAME_TEMPERATURE: f64 = 1e-6;
+
 /// The posterior intervals a measured temperature is chosen to make hold: the central 90 % that
 /// `summary.json` (`q5` to `q95`), the CLI and the report give for each parameter.
 pub const INTERVAL_LEVEL: f64 = 0.9;
@@ -232,6 +244,15 @@ mod tests {
             temperature: 1.0,
             spread: 1.0,
         }
+    }
+
+    #[test]
+    fn temperatures_apart_by_rounding_are_the_same_and_measurably_different_ones_are_not() {
+        // Two builds measured these from the same refinement rounds.
+        assert!(same_temperature(294.3081622329743, 294.30816227335754));
+        assert!(same_temperature(1.0, 1.0));
+        assert!(!same_temperature(294.3, 294.4));
+        assert!(!same_temperature(1.0, 141.0));
     }
 
     #[test]

@@ -4,6 +4,7 @@
 
 use bemcal_stats::metrics::{g14, g14_monthly};
 use bemcal_weather::period::months_of_hours;
+use serde::{Deserialize, Serialize};
 
 use crate::design::simulate_point;
 use crate::summary::write_outputs_csv;
@@ -79,6 +80,53 @@ pub fn fallback_note(failures: &[String]) -> String {
     )
 }
 
+/// One posterior draw EnergyPlus simulated in validation, and how near Guideline 14's hourly
+/// limits it is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimulatedFit {
+    /// Its validation label: `calibrated` (the MAP draw) or `predictive_NN`.
+    pub label: String,
+    /// [`limit_ratio`] of its run: at most 1 when every fitted meter passes hourly.
+    pub limit_ratio: f64,
+}
+
+/// How `estimate = "best_simulated"` chose the estimate, for `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EstimateChoice {
+    /// The label of the draw that became the estimate.
+    pub chosen: String,
+    /// Every draw EnergyPlus simulated, in validation's order (the MAP draw first).
+    pub candidates: Vec<SimulatedFit>,
+}
+
+/// How near one EnergyPlus run is to Guideline 14's hourly limits: its worst fitted meter's
+/// [`bemcal_stats::metrics::G14Metrics::hourly_limit_ratio`] over the calibration period
+/// (`fitted[k]`: output `k`'s meter is in the likelihood; infinite with none).
+pub fn limit_ratio(metrics: &[OutputMetrics], fitted: &[bool]) -> f64 {
+    let ratios = (metrics.iter().zip(fitted))
+        .filter(|(_, f)| **f)
+        .map(|(m, _)| m.metrics.hourly_limit_ratio());
+    ratios
+        .fold(None, |w: Option<f64>, r| Some(w.map_or(r, |w| w.max(r))))
+        .unwrap_or(f64::INFINITY)
+}
+
+/// The rule of `estimate = "best_simulated"`: of the posterior draws EnergyPlus simulated (the
+/// MAP draw first), the one whose worst meter is furthest inside Guideline 14's hourly limits
+/// (the smallest [`limit_ratio`]), the first on a tie so that the MAP draw stays the estimate
+/// unless a draw fits better; `None` when none is finite. Every candidate is a draw of the
+/// posterior; this picks among them the model a user can take away, by the criteria they
+/// judge it with. The calibration period only: a held-out period never chooses.
+pub fn best_simulated(limit_ratios: &[f64]) -> Option<usize> {
+    let mut best: Option<usize> = None;
+    for (i, r) in limit_ratios.iter().enumerate() {
+        if r.is_finite() && best.is_none_or(|b| *r < limit_ratios[b]) {
+            best = Some(i);
+        }
+    }
+    best
+}
+
 impl Calibration {
     /// One job per point: EnergyPlus at `values` (key `i` in `validation/`) against the
     /// meters, ASHRAE Guideline 14 per output.
@@ -147,6 +195,8 @@ pub(crate) mod tests {
             surrogate_at_estimate: vec![],
             fallbacks: (1..=fallbacks).map(|k| vec![k as f64]).collect(),
             estimate_note: None,
+            estimate_choice: None,
+            surrogate_at_predictive: vec![],
             moved_chains: vec![],
             independence_dropped: vec![],
             acceptance: vec![],
@@ -206,5 +256,92 @@ pub(crate) mod tests {
         c.settle_estimate(&["a".into(), "b".into()]);
         assert_eq!(c.estimate, vec![2.0]);
         assert!(c.estimate_note.unwrap().contains("2 failed: a | b"));
+    }
+
+    #[test]
+    fn the_best_simulated_is_the_smallest_finite_limit_ratio_the_map_draw_on_a_tie() {
+        assert_eq!(best_simulated(&[1.6, 0.7, 0.9]), Some(1));
+        // The MAP draw comes first and keeps a tie.
+        assert_eq!(best_simulated(&[0.7, 0.7]), Some(0));
+        // A run without metrics is never chosen.
+        assert_eq!(best_simulated(&[f64::INFINITY, f64::NAN, 2.0]), Some(2));
+        assert_eq!(best_simulated(&[f64::INFINITY, f64::NAN]), None);
+        assert_eq!(best_simulated(&[]), None);
+    }
+
+    #[test]
+    fn the_limit_ratio_is_the_worst_fitted_meters() {
+        let m = |nmbe: f64, cv: f64| metrics("heating", nmbe, cv);
+        let run = [m(5.0, 9.0), m(-2.0, 24.0), m(40.0, 90.0)];
+        assert_eq!(limit_ratio(&run, &[true, true, false]), 0.8);
+        assert_eq!(limit_ratio(&run, &[true, true, true]), 4.0);
+        assert_eq!(limit_ratio(&run, &[false; 3]), f64::INFINITY);
+    }
+
+    fn metrics(output: &str, nmbe: f64, cv_rmse: f64) -> OutputMetrics {
+        OutputMetrics {
+            output: output.into(),
+            metrics: bemcal_stats::metrics::G14Metrics {
+                n: 8760,
+                mean_measured: 1.0,
+                nmbe,
+                cv_rmse,
+                pass: nmbe.abs() <= 10.0 && cv_rmse <= 30.0,
+            },
+            monthly: None,
+            held_out: None,
+        }
+    }
+
+    fn choice(chosen: &str) -> EstimateChoice {
+        EstimateChoice {
+            chosen: chosen.into(),
+            candidates: [
+                ("calibrated", 1.6),
+                ("predictive_00", 0.9),
+                ("predictive_01", 0.7),
+            ]
+            .iter()
+            .map(|(l, r)| SimulatedFit {
+                label: l.to_string(),
+                limit_ratio: *r,
+            })
+            .collect(),
+        }
+    }
+
+    #[test]
+    fn a_predictive_draw_fitted_best_becomes_the_estimate_with_its_surrogate_metrics() {
+        let metrics = |nmbe: f64| vec![metrics("heating", nmbe, 10.0)];
+        let mut c = chains(1);
+        c.predictive = vec![vec![5.0], vec![6.0]];
+        c.surrogate_at_estimate = metrics(0.0);
+        c.surrogate_at_predictive = vec![metrics(5.0), metrics(6.0)];
+
+        let mut kept = c.clone();
+        kept.adopt_best_simulated(None, choice("calibrated"), None);
+        assert_eq!(kept.estimate, vec![0.0]);
+        assert!(kept.estimate_note.is_none());
+        assert_eq!(kept.estimate_choice.unwrap().chosen, "calibrated");
+
+        c.adopt_best_simulated(Some(1), choice("predictive_01"), None);
+        assert_eq!(c.estimate, vec![6.0]);
+        assert_eq!(c.surrogate_at_estimate[0].metrics.nmbe, 6.0);
+        let note = c.estimate_note.clone().unwrap();
+        assert!(
+            note.contains("predictive_01 fits the meters better than the MAP draw")
+                && note.contains("worst meter at 0.70 of the limits, the MAP draw's at 1.60")
+                && note.contains("of 3 draws"),
+            "{note}"
+        );
+
+        let mut failed = chains(1);
+        failed.predictive = vec![vec![5.0]];
+        failed.adopt_best_simulated(Some(0), choice("predictive_00"), Some("Fatal: no"));
+        assert_eq!(failed.estimate, vec![5.0]);
+        assert!(failed
+            .estimate_note
+            .unwrap()
+            .contains("could not simulate the MAP draw: Fatal: no"));
     }
 }

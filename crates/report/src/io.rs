@@ -437,6 +437,25 @@ pub struct Temperature {
     pub measured_at_round: Option<u32>,
 }
 
+/// How `estimate = "best_simulated"` chose the estimate.
+#[derive(Debug, Clone, Deserialize)]
+pub struct EstimateChoice {
+    /// The label of the draw chosen (`calibrated`: the MAP draw; `predictive_NN`).
+    pub chosen: String,
+    /// Every draw simulated, with its ratio to the limits.
+    #[serde(default)]
+    pub candidates: Vec<SimulatedFit>,
+}
+
+/// One draw EnergyPlus simulated in validation.
+#[derive(Debug, Clone, Deserialize)]
+pub struct SimulatedFit {
+    /// Its validation label.
+    pub label: String,
+    /// Its worst fitted meter's ratio to Guideline 14's hourly limits.
+    pub limit_ratio: f64,
+}
+
 /// `summary.json` as written by `bemcal calibrate`.
 #[derive(Debug, Clone, Deserialize)]
 pub struct Summary {
@@ -461,9 +480,15 @@ pub struct Summary {
     /// Acceptance rate per chain.
     #[serde(default)]
     pub acceptance_rate: Vec<f64>,
-    /// Which point estimate was validated (`map`, `mean`, `median`).
+    /// Which point estimate was validated (`best_simulated`, `map`, `mean`, `median`).
     #[serde(default)]
     pub estimate: serde_json::Value,
+    /// Why the estimate is not the statistic's own point, if it is not.
+    #[serde(default)]
+    pub estimate_note: Option<String>,
+    /// With `best_simulated`: the draw chosen (`estimate_choice.chosen`) among those simulated.
+    #[serde(default)]
+    pub estimate_choice: Option<EstimateChoice>,
     /// The calibrated parameter values.
     #[serde(default, deserialize_with = "bemcal_named::deserialize")]
     pub calibrated_values: Vec<(String, f64)>,

@@ -39,6 +39,22 @@ pub struct G14Metrics {
     pub pass: bool,
 }
 
+impl G14Metrics {
+    /// How near the hourly criteria these metrics are: the larger of `|NMBE| / 10 %` and
+    /// `CV-RMSE / 30 %`, so at most 1 exactly when both hourly criteria are met; infinite
+    /// when either is not a number.
+    pub fn hourly_limit_ratio(&self) -> f64 {
+        let r = (
+            self.nmbe.abs() / HOURLY_NMBE_LIMIT,
+            self.cv_rmse / HOURLY_CV_RMSE_LIMIT,
+        );
+        if r.0.is_nan() || r.1.is_nan() {
+            return f64::INFINITY;
+        }
+        r.0.max(r.1)
+    }
+}
+
 /// NMBE and CV-RMSE of simulated against measured hourly values; NaN marks a missing hour.
 /// Errors if the lengths differ, fewer than `p + 1` hours are usable, or the measured mean
 /// is zero.
@@ -251,5 +267,23 @@ mod tests {
         assert!((totals.cv_rmse - monthly.cv_rmse).abs() < 1e-9);
         assert_eq!(totals.pass, monthly.pass);
         assert!(g14_pooled(&[]).is_err());
+    }
+
+    #[test]
+    fn the_hourly_limit_ratio_is_the_nearer_criterion_and_one_at_the_limit() {
+        let m = |nmbe: f64, cv_rmse: f64| G14Metrics {
+            n: 8760,
+            mean_measured: 1.0,
+            nmbe,
+            cv_rmse,
+            pass: nmbe.abs() <= HOURLY_NMBE_LIMIT && cv_rmse <= HOURLY_CV_RMSE_LIMIT,
+        };
+        assert_eq!(m(-5.0, 9.0).hourly_limit_ratio(), 0.5);
+        assert_eq!(m(2.0, 15.0).hourly_limit_ratio(), 0.5);
+        assert_eq!(m(10.0, 30.0).hourly_limit_ratio(), 1.0);
+        for (nmbe, cv) in [(-12.0, 20.0), (3.0, 31.0), (0.0, 50.0)] {
+            assert!(m(nmbe, cv).hourly_limit_ratio() > 1.0 && !m(nmbe, cv).pass);
+        }
+        assert_eq!(m(f64::NAN, 1.0).hourly_limit_ratio(), f64::INFINITY);
     }
 }

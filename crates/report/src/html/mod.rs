@@ -6,7 +6,7 @@
 
 use std::fmt::Write as _;
 
-use crate::io::{CalibrationData, PrecalData};
+use crate::io::{CalibrationData, PrecalData, Summary};
 use crate::ReportError;
 
 mod first_screen;
@@ -216,13 +216,31 @@ fn header(cal: &CalibrationData) -> String {
         n_chains,
         n_draws,
         s.design_points,
-        esc(&match &s.estimate {
-            serde_json::Value::String(x) => x.clone(),
-            serde_json::Value::Null => "?".into(),
-            v => v.to_string(),
-        })
+        esc(&estimate_label(s))
     );
     h
+}
+
+/// Which point the estimate is: the setting, and with `best_simulated` the draw EnergyPlus
+/// fitted best.
+fn estimate_label(s: &Summary) -> String {
+    let setting = match &s.estimate {
+        serde_json::Value::String(x) => x.clone(),
+        serde_json::Value::Null => "?".into(),
+        v => v.to_string(),
+    };
+    match &s.estimate_choice {
+        Some(c) if c.chosen == "calibrated" => format!(
+            "{setting} (the MAP draw: EnergyPlus fits it best of {} draws)",
+            c.candidates.len()
+        ),
+        Some(c) => format!(
+            "{setting} ({}: EnergyPlus fits it best of {} draws, the MAP draw included)",
+            c.chosen,
+            c.candidates.len()
+        ),
+        None => setting,
+    }
 }
 
 /// The navigation bar: a link to each section (the pre-calibration's where there is one).
