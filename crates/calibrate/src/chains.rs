@@ -394,13 +394,9 @@ impl Sampler<'_> {
             Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
         };
         let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
-        let surrogate_at_predictive = match cal.project.validation.estimate {
-            Estimate::BestSimulated => predictive
-                .iter()
-                .map(|x| surrogate_metrics_at(inp, eval, x))
-                .collect::<Result<_, _>>()?,
-            _ => vec![],
-        };
+        let surrogate_at_predictive = (predictive.iter())
+            .map(|x| surrogate_metrics_at(inp, eval, x))
+            .collect::<Result<_, _>>()?;
         let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
             .iter()
             .map(|u| post.theta(u))
@@ -711,7 +707,8 @@ pub struct ChainSummary {
     /// the next distinct draws by log posterior (physical units).
     #[serde(default)]
     pub fallbacks: Vec<Vec<f64>>,
-    /// Set when a fallback draw replaced the estimate (why; [`ChainSummary::settle_estimate`]).
+    /// Set when a fallback draw ([`ChainSummary::settle_estimate`]) or a predictive draw
+    /// ([`ChainSummary::adopt_best_simulated`]) replaced the estimate: why.
     #[serde(default)]
     pub estimate_note: Option<String>,
     /// With `estimate = "best_simulated"`: the draws EnergyPlus simulated and which became the
@@ -781,13 +778,14 @@ impl ChainSummary {
             Some((x, self.surrogate_at_predictive.get(j).cloned()))
         }) {
             let than = match map_failure {
-                None => "better than the MAP draw".to_string(),
+                None => "better than the MAP draw, which fails there".to_string(),
                 Some(e) => format!("best (EnergyPlus could not simulate the MAP draw: {e})"),
             };
             let ratio = |label: &str| {
                 (choice.candidates.iter())
                     .find(|c| c.label == label)
-                    .map_or(String::new(), |c| format!("{:.2}", c.limit_ratio))
+                    .and_then(|c| c.limit_ratio)
+                    .map_or("?".to_string(), |r| format!("{r:.2}"))
             };
             self.estimate_note = Some(format!(
                 "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \

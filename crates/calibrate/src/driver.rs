@@ -15,7 +15,8 @@
 //! design (waves until replacement::next_step settles it) -> training set -> surrogate
 //!   -> chains of Round::Preliminary(r) -> EnergyPlus at its draws -> close_round  (refine.rounds times)
 //!   -> chains of Round::Final -> summarised -> extended while short of the targets
-//!   -> validation_runs (the estimate; next_validation while EnergyPlus fails) -> summary
+//!   -> validation_runs (the estimate, the predictive draws) -> best_simulated (which becomes
+//!      the estimate) or next_validation while EnergyPlus fails at every one -> summary
 //! ```
 
 use std::path::Path;
@@ -411,10 +412,10 @@ fn refine_round(
 
 /// The final chains' target and their summary at it (`chains_summary.json`): the state of
 /// the extensions, so that a later call neither summarises the same chains again nor loses
-/// an extension. It holds only for the settings it was written under (`mcmc`, and the
-/// refinement rounds before the chains), and a summary only for the chains it summarised
-/// (each chain's last position): a rerun with other settings, or after `chains.json` was
-/// deleted and the chains ran again differently, starts it afresh.
+/// an extension. It holds only for the settings it was written under (`mcmc`, the refinement
+/// rounds before the chains, `validation.estimate`, the temperature), and a summary only for
+/// the chains it summarised (each chain's last position): a rerun with other settings, or
+/// after `chains.json` was deleted and the chains ran again differently, starts it afresh.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct FinalChains {
     /// The settings it holds for.
@@ -435,14 +436,13 @@ struct FinalChains {
 impl FinalChains {
     /// The record of the folder's final chains under the current settings, or a fresh one.
     fn read(cal: &Calibration, rounds: usize, temperature: f64) -> FinalChains {
-        let settings = format!("{:?} after {rounds} refinement rounds", cal.project.mcmc);
+        let (mcmc, estimate) = (&cal.project.mcmc, cal.project.validation.estimate);
+        let settings = format!("{mcmc:?} after {rounds} refinement rounds, estimate {estimate:?}");
+        let legacy = format!("{mcmc:?} after {rounds} refinement rounds at temperature ");
         std::fs::read(cal.out.chains_summary())
             .ok()
             .and_then(|b| serde_json::from_slice::<FinalChains>(&b).ok())
-            .filter(|f| {
-                f.settings == settings
-                    && crate::surrogate_error::same_temperature(f.temperature, temperature)
-            })
+            .filter(|f| f.holds_for(&settings, &legacy, temperature))
             .unwrap_or(FinalChains {
                 settings,
                 temperature,
@@ -450,6 +450,21 @@ impl FinalChains {
                 extensions: 0,
                 summary: None,
             })
+    }
+
+    /// Whether this record holds for `settings` at `temperature` (the same up to
+    /// [`crate::surrogate_error::same_temperature`]). A record written before the temperature
+    /// had its own field ended its settings with `legacy` and the temperature, and said nothing
+    /// of the estimate: it holds at the same temperature, so that chains extended before an
+    /// upgrade keep their extensions.
+    fn holds_for(&self, settings: &str, legacy: &str, temperature: f64) -> bool {
+        use crate::surrogate_error::same_temperature;
+        if self.settings == settings {
+            return same_temperature(self.temperature, temperature);
+        }
+        (self.settings.strip_prefix(legacy))
+            .and_then(|t| t.parse::<f64>().ok())
+            .is_some_and(|t| same_temperature(t, temperature))
     }
 
     /// The summary of chains that ended at `last`, if it is theirs.
@@ -516,7 +531,9 @@ fn final_chains(
 /// The validation runs of the sequence ([`validation_runs`]): EnergyPlus at the estimate, the
 /// initial model and the predictive draws; while EnergyPlus fails at the calibrated model, at
 /// the next-best draw ([`next_validation`]), the estimate then settled on the draw that ran.
-/// A predictive draw EnergyPlus cannot simulate is left out of the intervals.
+/// With `estimate = "best_simulated"` the MAP draw or a predictive draw that ran is chosen
+/// first ([`adopt_best_simulated`]); the next-best draws only where none ran. A predictive
+/// draw EnergyPlus cannot simulate is left out of the intervals.
 fn validate(
     cal: &Calibration,
     exec: &mut dyn Executor,
@@ -607,7 +624,10 @@ fn adopt_best_simulated(
     let ratios: Vec<f64> = (simulated.iter())
         .map(|(_, m)| crate::limit_ratio(m, &cal.inputs.fitted))
         .collect();
-    let Some(b) = crate::best_simulated(&ratios) else {
+    let map_ran = simulated
+        .first()
+        .is_some_and(|(r, _)| r.role != ValidationRole::Predictive);
+    let Some(b) = crate::best_simulated(&ratios, map_ran) else {
         return Ok(None);
     };
     let (run, metrics) = &simulated[b];
@@ -616,7 +636,7 @@ fn adopt_best_simulated(
         candidates: (simulated.iter().zip(&ratios))
             .map(|((r, _), ratio)| crate::SimulatedFit {
                 label: r.label.clone(),
-                limit_ratio: *ratio,
+                limit_ratio: ratio.is_finite().then_some(*ratio),
             })
             .collect(),
     };
@@ -631,17 +651,25 @@ fn adopt_best_simulated(
         })?;
         crate::write_outputs_csv(&vdir.join("calibrated.csv"), cal.inputs.year, &o)?;
     }
-    log(&format!(
-        "validation: of {} posterior draws EnergyPlus simulated, {} fits the meters best by \
-         Guideline 14's hourly criteria (worst meter at {:.2} of the limits{})",
-        simulated.len(),
-        run.label,
-        ratios[b],
-        match (predictive, map_failure) {
-            (Some(_), None) => format!("; the MAP draw's at {:.2}", ratios[0]),
-            _ => String::new(),
-        }
-    ));
+    log(&if map_ran && b == 0 && ratios[0] <= 1.0 {
+        format!(
+            "validation: EnergyPlus passes Guideline 14 hourly at the MAP draw (worst meter at \
+             {:.2} of the limits): it is the estimate",
+            ratios[0]
+        )
+    } else {
+        format!(
+            "validation: of {} posterior draws EnergyPlus simulated, {} fits the meters best by \
+             Guideline 14's hourly criteria (worst meter at {:.2} of the limits{})",
+            simulated.len(),
+            run.label,
+            ratios[b],
+            match (predictive, map_ran) {
+                (Some(_), true) => format!("; the MAP draw's at {:.2}", ratios[0]),
+                _ => String::new(),
+            }
+        )
+    });
     chains.adopt_best_simulated(predictive, choice, map_failure.map(String::as_str));
     Ok(Some(metrics.clone()))
 }
@@ -746,4 +774,47 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
         ));
     }
     log(&format!("posterior: {}", chains.convergence));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(settings: &str, temperature: f64) -> FinalChains {
+        FinalChains {
+            settings: settings.into(),
+            temperature,
+            target: 350,
+            extensions: 1,
+            summary: None,
+        }
+    }
+
+    #[test]
+    fn a_final_chains_record_holds_at_its_settings_and_temperature_and_reads_the_old_form() {
+        let (now, legacy) = (
+            "M after 2 refinement rounds, estimate BestSimulated",
+            "M after 2 refinement rounds at temperature ",
+        );
+        let r = record(now, 294.3081622329743);
+        assert!(r.holds_for(now, legacy, 294.30816227335754));
+        assert!(!r.holds_for(now, legacy, 141.0));
+        assert!(!r.holds_for(
+            "M after 2 refinement rounds, estimate Median",
+            legacy,
+            294.3
+        ));
+        // Written before the temperature had its own field (serde's default, 1, in `temperature`).
+        let old = record(
+            "M after 2 refinement rounds at temperature 294.3081622329743",
+            1.0,
+        );
+        assert!(old.holds_for(now, legacy, 294.30816227335754));
+        assert!(!old.holds_for(now, legacy, 1.0));
+        assert!(!old.holds_for(
+            now,
+            "M after 1 refinement rounds at temperature ",
+            294.3081622329743
+        ));
+    }
 }

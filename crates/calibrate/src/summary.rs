@@ -153,8 +153,8 @@ pub struct Summary {
     /// better.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate_note: Option<String>,
-    /// With `estimate = "best_simulated"`: each draw EnergyPlus simulated, its log posterior
-    /// with EnergyPlus in the likelihood, and the one chosen.
+    /// With `estimate = "best_simulated"`: each draw EnergyPlus simulated, its worst fitted
+    /// meter's ratio to Guideline 14's hourly limits, and the one chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate_choice: Option<crate::EstimateChoice>,
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
@@ -443,7 +443,10 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
          # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\
          # or run EnergyPlus on calibrated.idf (HVAC templates expanded) with that weather file.\n",
         cal.project.name,
-        format!("{:?}", cal.project.validation.estimate).to_lowercase(),
+        serde_json::to_value(cal.project.validation.estimate)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default(),
         inp.model.path.display(),
         inp.weather_path.display()
     );

@@ -452,8 +452,9 @@ pub struct EstimateChoice {
 pub struct SimulatedFit {
     /// Its validation label.
     pub label: String,
-    /// Its worst fitted meter's ratio to Guideline 14's hourly limits.
-    pub limit_ratio: f64,
+    /// Its worst fitted meter's ratio to Guideline 14's hourly limits (`None`: no metrics).
+    #[serde(default)]
+    pub limit_ratio: Option<f64>,
 }
 
 /// `summary.json` as written by `bemcal calibrate`.

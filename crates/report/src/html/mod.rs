@@ -221,26 +221,37 @@ fn header(cal: &CalibrationData) -> String {
     h
 }
 
-/// Which point the estimate is: the setting, and with `best_simulated` the draw EnergyPlus
-/// fitted best.
+/// Which point the estimate is: the setting, and with `best_simulated` which draw and why.
 fn estimate_label(s: &Summary) -> String {
     let setting = match &s.estimate {
         serde_json::Value::String(x) => x.clone(),
         serde_json::Value::Null => "?".into(),
         v => v.to_string(),
     };
-    match &s.estimate_choice {
-        Some(c) if c.chosen == "calibrated" => format!(
-            "{setting} (the MAP draw: EnergyPlus fits it best of {} draws)",
-            c.candidates.len()
+    let Some(c) = &s.estimate_choice else {
+        return setting;
+    };
+    let n = c.candidates.len();
+    let map = c.candidates.first().filter(|f| f.label == "calibrated");
+    let map_passes = map.and_then(|f| f.limit_ratio).is_some_and(|r| r <= 1.0);
+    let why = match (c.chosen == "calibrated", map, map_passes) {
+        (true, _, true) => "the MAP draw: EnergyPlus passes Guideline 14 hourly there".to_string(),
+        (true, _, false) => format!(
+            "the MAP draw: it fails Guideline 14 hourly, and no other of the {n} draws \
+             EnergyPlus simulated fits better"
         ),
-        Some(c) => format!(
-            "{setting} ({}: EnergyPlus fits it best of {} draws, the MAP draw included)",
-            c.chosen,
-            c.candidates.len()
+        (false, Some(_), _) => format!(
+            "{}: EnergyPlus fails Guideline 14 hourly at the MAP draw and fits this one best of \
+             {n} draws",
+            c.chosen
         ),
-        None => setting,
-    }
+        (false, None, _) => format!(
+            "{}: EnergyPlus could not simulate the MAP draw and fits this one best of the {n} \
+             draws it simulated",
+            c.chosen
+        ),
+    };
+    format!("{setting} ({why})")
 }
 
 /// The navigation bar: a link to each section (the pre-calibration's where there is one).
