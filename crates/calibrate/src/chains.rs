@@ -777,28 +777,7 @@ impl ChainSummary {
             let x = self.predictive.get(j)?.clone();
             Some((x, self.surrogate_at_predictive.get(j).cloned()))
         }) {
-            let than = match map_failure {
-                None => "better than the MAP draw, which fails there".to_string(),
-                Some(e) => format!("best (EnergyPlus could not simulate the MAP draw: {e})"),
-            };
-            let ratio = |label: &str| {
-                (choice.candidates.iter())
-                    .find(|c| c.label == label)
-                    .and_then(|c| c.limit_ratio)
-                    .map_or("?".to_string(), |r| format!("{r:.2}"))
-            };
-            self.estimate_note = Some(format!(
-                "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \
-                 criteria (its worst meter at {} of the limits{}), of {} draws simulated: it is \
-                 the estimate",
-                choice.chosen,
-                ratio(&choice.chosen),
-                match map_failure {
-                    None => format!(", the MAP draw's at {}", ratio("calibrated")),
-                    Some(_) => String::new(),
-                },
-                choice.candidates.len()
-            ));
+            self.estimate_note = Some(choice.describe(map_failure));
             self.estimate = x;
             self.surrogate_at_estimate = sur.unwrap_or_default();
         }

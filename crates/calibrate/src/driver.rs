@@ -640,8 +640,9 @@ fn adopt_best_simulated(
             })
             .collect(),
     };
-    let predictive =
-        (run.role == ValidationRole::Predictive).then(|| run.key - crate::predictive::FIRST_KEY);
+    let predictive = (run.role == ValidationRole::Predictive)
+        .then(|| crate::predictive::draw_of_key(run.key))
+        .flatten();
     if predictive.is_some() {
         let vdir = cal.out.validation();
         let values = cal.inputs.plan.values(&run.values);
@@ -651,26 +652,9 @@ fn adopt_best_simulated(
         })?;
         crate::write_outputs_csv(&vdir.join("calibrated.csv"), cal.inputs.year, &o)?;
     }
-    log(&if map_ran && b == 0 && ratios[0] <= 1.0 {
-        format!(
-            "validation: EnergyPlus passes Guideline 14 hourly at the MAP draw (worst meter at \
-             {:.2} of the limits): it is the estimate",
-            ratios[0]
-        )
-    } else {
-        format!(
-            "validation: of {} posterior draws EnergyPlus simulated, {} fits the meters best by \
-             Guideline 14's hourly criteria (worst meter at {:.2} of the limits{})",
-            simulated.len(),
-            run.label,
-            ratios[b],
-            match (predictive, map_ran) {
-                (Some(_), true) => format!("; the MAP draw's at {:.2}", ratios[0]),
-                _ => String::new(),
-            }
-        )
-    });
-    chains.adopt_best_simulated(predictive, choice, map_failure.map(String::as_str));
+    let map_failure = map_failure.map(String::as_str);
+    log(&format!("validation: {}", choice.describe(map_failure)));
+    chains.adopt_best_simulated(predictive, choice, map_failure);
     Ok(Some(metrics.clone()))
 }
 

@@ -43,6 +43,13 @@ pub fn label(j: usize) -> String {
     format!("predictive_{j:02}")
 }
 
+/// The predictive draw (index into `ChainSummary::predictive`) whose run is under `key` in
+/// `validation/`, if it is one's ([`ChainSummary::predictive_candidates`] gives draw `j` the
+/// key `FIRST_KEY + j`).
+pub fn draw_of_key(key: usize) -> Option<usize> {
+    key.checked_sub(FIRST_KEY)
+}
+
 /// Whether a validation label is a predictive draw's.
 pub fn is_predictive(label: &str) -> bool {
     label.starts_with("predictive_")

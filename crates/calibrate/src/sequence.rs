@@ -241,6 +241,10 @@ pub fn validation_runs(chains: &ChainSummary, initial: Option<Vec<f64>>) -> Vec<
     runs
 }
 
+/// The label of the calibrated model's validation run (`validation/calibrated.csv`): the
+/// estimate, or the fallback that replaced it.
+pub const CALIBRATED_LABEL: &str = "calibrated";
+
 /// The calibrated model's run after EnergyPlus failed at the first `failures.len()`
 /// candidates (the rule [`next_candidate`]), or the message that every candidate failed.
 pub fn next_validation(
@@ -251,7 +255,7 @@ pub fn next_validation(
         ValidationStep::Validate(c) => Ok(ValidationRun {
             role: ValidationRole::Calibrated { rank: c.rank },
             key: c.key,
-            label: "calibrated".into(),
+            label: CALIBRATED_LABEL.into(),
             values: c.values,
         }),
         ValidationStep::Exhausted(message) => Err(message),

@@ -8,6 +8,7 @@ use bemcal_weather::period::months_of_hours;
 use serde::{Deserialize, Serialize};
 
 use crate::design::simulate_point;
+use crate::sequence::CALIBRATED_LABEL;
 use crate::summary::write_outputs_csv;
 use crate::summary::PeriodMetrics;
 use crate::{Calibration, ChainSummary, Error, Inputs, OutputMetrics};
@@ -101,15 +102,61 @@ pub struct EstimateChoice {
     pub candidates: Vec<SimulatedFit>,
 }
 
+impl EstimateChoice {
+    /// The choice in a sentence, for the log and (where a predictive draw became the
+    /// estimate) `estimate_note`. `map_failure`: why EnergyPlus could not simulate the MAP
+    /// draw, if it could not.
+    pub fn describe(&self, map_failure: Option<&str>) -> String {
+        let ratio = |label: &str| {
+            (self.candidates.iter())
+                .find(|c| c.label == label)
+                .and_then(|c| c.limit_ratio)
+        };
+        let shown = |r: Option<f64>| r.map_or("?".to_string(), |r| format!("{r:.2}"));
+        let map = shown(ratio(CALIBRATED_LABEL));
+        let n = self.candidates.len();
+        if self.chosen == CALIBRATED_LABEL {
+            return if ratio(CALIBRATED_LABEL).is_some_and(|r| r <= 1.0) {
+                format!(
+                    "EnergyPlus passes Guideline 14 hourly at the MAP draw (worst meter at {map} \
+                     of the limits): it is the estimate"
+                )
+            } else {
+                format!(
+                    "EnergyPlus fails Guideline 14 hourly at the MAP draw (worst meter at {map} of \
+                     the limits), and no other of the {n} draws it simulated fits better: it is \
+                     the estimate"
+                )
+            };
+        }
+        let (than, map_ratio) = match map_failure {
+            None => (
+                "better than the MAP draw, which fails there".to_string(),
+                format!(", the MAP draw's at {map}"),
+            ),
+            Some(e) => (
+                format!("best (EnergyPlus could not simulate the MAP draw: {e})"),
+                String::new(),
+            ),
+        };
+        format!(
+            "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \
+             criteria (its worst meter at {} of the limits{map_ratio}), of {n} draws simulated: \
+             it is the estimate",
+            self.chosen,
+            shown(ratio(&self.chosen)),
+        )
+    }
+}
+
 /// How near one EnergyPlus run is to Guideline 14's hourly limits: its worst fitted meter's
 /// [`bemcal_stats::metrics::G14Metrics::hourly_limit_ratio`] over the calibration period
 /// (`fitted[k]`: output `k`'s meter is in the likelihood; infinite with none).
 pub fn limit_ratio(metrics: &[OutputMetrics], fitted: &[bool]) -> f64 {
-    let ratios = (metrics.iter().zip(fitted))
+    (metrics.iter().zip(fitted))
         .filter(|(_, f)| **f)
-        .map(|(m, _)| m.metrics.hourly_limit_ratio());
-    ratios
-        .fold(None, |w: Option<f64>, r| Some(w.map_or(r, |w| w.max(r))))
+        .map(|(m, _)| m.metrics.hourly_limit_ratio())
+        .reduce(f64::max)
         .unwrap_or(f64::INFINITY)
 }
 
@@ -337,6 +384,15 @@ pub(crate) mod tests {
         c.predictive = vec![vec![5.0], vec![6.0]];
         c.surrogate_at_estimate = metrics(0.0);
         c.surrogate_at_predictive = vec![metrics(5.0), metrics(6.0)];
+
+        let mut passing = choice("calibrated");
+        passing.candidates[0].limit_ratio = Some(0.5);
+        assert!(passing
+            .describe(None)
+            .contains("passes Guideline 14 hourly at the MAP draw (worst meter at 0.50"));
+        assert!(choice("calibrated")
+            .describe(None)
+            .contains("fails Guideline 14 hourly at the MAP draw (worst meter at 1.60"));
 
         let mut kept = c.clone();
         kept.adopt_best_simulated(None, choice("calibrated"), None);
