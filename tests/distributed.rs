@@ -9,7 +9,9 @@
 //!   Design, simulations, draws (chains run as checkpointed segments on workers) and the
 //!   posterior must then be identical to the single-process ones. The project asks for an
 //!   R-hat no chains reach (`mcmc.rhat_target = 0.5`, one extension): the one driver extends the
-//!   final chains once, by the same rule, to the same draws, and both report the run as not
+//!   final (HMC) chains once, by the same rule, re-adapted from their draws on both paths (the
+//!   local one in `run_chains`, the coordinator before the extension's first segment), to the
+//!   same draws, and both report the run as not
 //!   converged (exit status 3, `summary.json` `convergence`, the report's banner). The chains
 //!   sample a tempered likelihood (`mcmc.temperature = 3`), which the chain jobs carry.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
@@ -172,7 +174,12 @@ fn distributed_matches_single_process() {
     // step of iterations - burn_in).
     // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
     // (validation jobs of their own on the distributed path).
+    // HMC, so that the extension re-adapts the chains from their draws on both paths.
     let text = project_text()
+        .replace(
+            "kernel = \"mh\"\nstart = \"prior\"\n",
+            "kernel = \"hmc\"\nstart = \"optimised\"\n",
+        )
         .replace(
             "max_extensions = 0\n",
             "max_extensions = 1\nrhat_target = 0.5\ness_target = 0\ntemperature = 3\n",
@@ -181,12 +188,12 @@ fn distributed_matches_single_process() {
             "predictive_draws = 0\n",
             "predictive_draws = 3\nholdout = \"dec\"\n",
         );
-    assert!(text.contains("holdout"));
+    assert!(text.contains("holdout") && text.contains("kernel = \"hmc\""));
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
     let (status, local_log) = calibrate_status(&pf, &local, None);
     assert!(
-        local_log.contains("extending to 500 iterations (extension 1 of at most 1)"),
+        local_log.contains("extending to 550 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
     // Same surrogate for both (see the module docs), then the distributed path.
@@ -194,7 +201,7 @@ fn distributed_matches_single_process() {
     let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")));
     // The one driver says the same through the coordinator (its messages in the run's status).
     assert!(
-        log.contains("extending to 500 iterations (extension 1 of at most 1)"),
+        log.contains("extending to 550 iterations (extension 1 of at most 1)"),
         "{log}"
     );
 
@@ -267,7 +274,18 @@ fn distributed_matches_single_process() {
             .unwrap()
             > 700
     );
-    // One extension of 300 - 100 iterations: 2 chains x 400 draws after burn-in.
+    // One extension of 300 - 100 draws after a re-adaptation window of 50 iterations that are
+    // not drawn: 2 chains x 400 draws after burn-in.
+    let ck: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(local.join("chains.json")).unwrap()).unwrap();
+    for s in ck["states"].as_array().unwrap() {
+        assert_eq!(
+            s["window_end"], 350,
+            "re-adapted at the extension: {}",
+            s["window_end"]
+        );
+        assert_eq!(s["readapted"], 50);
+    }
     assert_eq!(sa["chain_extensions"], 1);
     assert_eq!(sa["converged"], false);
     let c = &sa["convergence"];

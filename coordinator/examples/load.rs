@@ -76,6 +76,7 @@ fn main() -> anyhow::Result<()> {
                         segment: i as u32,
                         round: 0,
                         temperature: 1.0,
+                        target: 100,
                     })),
                     ..Default::default()
                 },

@@ -485,6 +485,7 @@ impl Leased<'_> {
         target: u64,
         starts: Option<&[Vec<f64>]>,
         temperature: f64,
+        readapted: Option<&[u8]>,
     ) -> std::result::Result<NewJob, Error> {
         let reached: u64 = done
             .iter()
@@ -495,7 +496,9 @@ impl Leased<'_> {
         if let Some(f) = self.settled_design_file(cal)? {
             inputs.push(f);
         }
-        if let Some(last) = done.last() {
+        if let Some(states) = readapted {
+            inputs.push(self.artifact(STATES_FILE.into(), states)?);
+        } else if let Some(last) = done.last() {
             let states = last
                 .outputs
                 .iter()
@@ -520,6 +523,7 @@ impl Leased<'_> {
                     segment: seg,
                     round: round.index(),
                     temperature,
+                    target,
                 })),
                 ..Default::default()
             },
@@ -578,7 +582,60 @@ impl Leased<'_> {
             states,
             draws,
             temperature,
+            target,
         })
+    }
+
+    /// The states an extension's first segments start from, as each group's `states.json`:
+    /// when every group's chains reached the target they were last asked for and `iterations`
+    /// is higher, the merged chains re-adapted from all their draws
+    /// ([`bemcal_stats::chain::readapt`], as the local executor's `run_chains` does); `None`
+    /// otherwise, or where the draws give no metric (each group then goes on from its own).
+    fn readapted_states(
+        &self,
+        groups: &[(usize, Vec<JobRow>)],
+        iterations: u64,
+    ) -> std::result::Result<Option<Vec<Vec<u8>>>, Error> {
+        let mut reached = None;
+        for (_, done) in groups {
+            let Some(last) = done.last().and_then(segment_of) else {
+                return Ok(None);
+            };
+            if done.iter().any(|j| j.state != JobState::Done) {
+                return Ok(None);
+            }
+            let r: u64 = done
+                .iter()
+                .filter_map(segment_of)
+                .map(|c| c.iterations)
+                .sum();
+            if last.target == 0 || r != last.target || r >= iterations {
+                return Ok(None);
+            }
+            if reached.is_some_and(|x| x != r) {
+                return Ok(None);
+            }
+            reached = Some(r);
+        }
+        let Some(reached) = reached else {
+            return Ok(None);
+        };
+        let mut ck = self.merged(groups, reached)?;
+        if !bemcal_stats::chain::readapt(&mut ck.states, &ck.draws) {
+            return Ok(None);
+        }
+        let mut out = vec![];
+        let mut states = ck.states.as_slice();
+        for (_, done) in groups {
+            let count = done
+                .last()
+                .and_then(segment_of)
+                .map_or(0, |c| c.chains as usize);
+            let (mine, rest) = states.split_at(count.min(states.len()));
+            out.push(serde_json::to_vec(mine).map_err(ex)?);
+            states = rest;
+        }
+        Ok(Some(out))
     }
 }
 
@@ -696,7 +753,12 @@ impl Executor for Leased<'_> {
         let per = self.chains_per_group(n);
         let mut next = vec![];
         let mut short = false;
-        for (first, done) in &groups {
+        let readapted = if round.is_final() {
+            self.readapted_states(&groups, iterations)?
+        } else {
+            None
+        };
+        for (g, (first, done)) in groups.iter().enumerate() {
             if done.iter().any(|j| j.state != JobState::Done) {
                 short = true;
                 continue;
@@ -717,6 +779,7 @@ impl Executor for Leased<'_> {
                     iterations,
                     starts,
                     sampler.temperature().value,
+                    readapted.as_ref().map(|r| r[g].as_slice()),
                 )?);
             }
         }

@@ -281,6 +281,11 @@ pub struct Checkpoint {
     /// existed): chains are resumed only at the same one.
     #[serde(default = "untempered")]
     pub temperature: f64,
+    /// The iterations per chain the chains were last asked to run to; 0 in checkpoints written
+    /// before it was kept. Asked for more once there, they are extended: re-adapted first
+    /// ([`bemcal_stats::chain::readapt`]).
+    #[serde(default)]
+    pub target: u64,
 }
 
 /// The likelihood's temperature of a record written before it had one: 1 (serde's default for
@@ -290,7 +295,10 @@ pub(crate) fn untempered() -> f64 {
 }
 
 /// Runs the chains to `iterations`, checkpointing to `path` after every `segment` iterations;
-/// resumes from `path` when it exists, else starts from the states `initial` builds.
+/// resumes from `path` when it exists, else starts from the states `initial` builds. Chains
+/// that reached the target they were last asked for and are asked for more (an extension)
+/// are re-adapted first: HMC chains take the metric their draws give and adapt their step
+/// size again over a window that is not drawn ([`bemcal_stats::chain::readapt`]).
 pub fn run_chains(
     post: &Posterior<'_>,
     eval: &mut Evaluator,
@@ -311,6 +319,7 @@ pub fn run_chains(
                 draws: states.iter().map(|s| Draws::new(s.dim())).collect(),
                 states,
                 temperature: post.temperature,
+                target: iterations,
             }
         }
     };
@@ -327,6 +336,12 @@ pub fn run_chains(
             ),
         });
     }
+    let done = ck.states[0].iteration();
+    if ck.target > 0 && done >= ck.target && iterations > ck.target {
+        // An extension (not a resumed run): the metric from the draws so far.
+        bemcal_stats::chain::readapt(&mut ck.states, &ck.draws);
+    }
+    ck.target = ck.target.max(iterations);
     loop {
         let done = ck.states[0].iteration();
         progress(done, iterations);

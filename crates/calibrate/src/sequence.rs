@@ -304,14 +304,15 @@ mod tests {
     fn final_chains_are_extended_while_short_and_allowed_then_validated() {
         let p = project("[mcmc]\niterations = 500\nburn_in = 100\nmax_extensions = 1\n");
         let mut c = chains(0);
-        // Not converged (the default verdict), no extension yet: one step of 400 more.
+        // Not converged (the default verdict), no extension yet: one step of 400 draws more,
+        // after the HMC chains' re-adaptation window of 50.
         assert_eq!(
             after_final_chains(&p.mcmc, &c, 500),
-            AfterFinalChains::Extend { iterations: 900 }
+            AfterFinalChains::Extend { iterations: 950 }
         );
         c.extensions = 1;
         assert_eq!(
-            after_final_chains(&p.mcmc, &c, 900),
+            after_final_chains(&p.mcmc, &c, 950),
             AfterFinalChains::Validate
         );
         c.extensions = 0;

@@ -9,7 +9,7 @@
 use serde::{Deserialize, Deserializer, Serialize};
 
 use crate::hmc::HmcState;
-use crate::mcmc::ChainState;
+use crate::mcmc::{ChainState, Draws};
 
 /// A chain's complete state.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -78,6 +78,33 @@ impl Chain {
             Chain::Hmc(s) => s.divergent().1,
         }
     }
+}
+
+/// Re-adapts the HMC chains of `states` before they are run on past their target
+/// ([`HmcState::readapt`]): the metric from `draws`, their draws so far
+/// ([`crate::hmc::within_chain_covariance_z`]), a window of
+/// [`crate::hmc::readapt_window`] of their burn-in. Metropolis-Hastings chains are left as
+/// they are. All chains or none: where the draws give no positive-definite metric (too few, a
+/// coordinate that never moved) or a chain is still in burn-in, every chain keeps its own.
+/// Returns whether the chains were re-adapted.
+pub fn readapt(states: &mut [Chain], draws: &[Draws]) -> bool {
+    let Some(cov) = crate::hmc::within_chain_covariance_z(draws) else {
+        return false;
+    };
+    let mut next = states.to_vec();
+    for c in &mut next {
+        match c {
+            Chain::Hmc(s) => {
+                let window = crate::hmc::readapt_window(s.config().burn_in);
+                if s.readapt(&cov, window).is_err() {
+                    return false;
+                }
+            }
+            Chain::Mh(_) => return false,
+        }
+    }
+    states.clone_from_slice(&next);
+    true
 }
 
 impl<'de> Deserialize<'de> for Chain {

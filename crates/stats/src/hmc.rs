@@ -20,6 +20,12 @@
 //!   of the middle half of burn-in give a new metric at 3/4 of it (their covariance shrunk
 //!   towards the initial metric with weight `d / (n + d)`) and the step size adaptation
 //!   restarts. After burn-in `eps = exp(ln eps_bar)` and the metric are frozen.
+//! - Re-adaptation ([`HmcState::readapt`]): when chains are run on past their first target, a
+//!   metric estimated from the draws of all chains ([`within_chain_covariance_z`]: hundreds of
+//!   states against burn-in's few dozen) replaces each chain's own, and the step size adapts
+//!   again over a window of [`readapt_window`] iterations that are not drawn (the windowed
+//!   adaptation of Stan, Stan Reference Manual, "HMC algorithm parameters": each window's
+//!   covariance sets the next window's metric). Adaptation stays out of the draws.
 //! - Randomness per iteration, in this order: two uniforms (step and length jitter), `d`
 //!   standard normals (the momentum), one uniform (acceptance): the draws do not depend on how chains are batched or
 //!   checkpointed.
@@ -183,6 +189,13 @@ pub struct HmcState {
     /// As [`crate::mcmc::ChainState::moved_from_mode`].
     #[serde(default)]
     moved_from_mode: Option<f64>,
+    /// The iteration at which the last re-adaptation window ends ([`HmcState::readapt`]); 0
+    /// when none was opened.
+    #[serde(default)]
+    window_end: u64,
+    /// Iterations spent in re-adaptation windows (after burn-in, not drawn).
+    #[serde(default)]
+    readapted: u64,
     rng: ChaCha8Rng,
 }
 
@@ -343,6 +356,8 @@ impl HmcState {
             leapfrog_steps: 0,
             accept_stat_post_burn_in: 0.0,
             moved_from_mode: None,
+            window_end: 0,
+            readapted: 0,
             rng,
         })
     }
@@ -373,7 +388,7 @@ impl HmcState {
     }
     /// Acceptance rate after burn-in (0 before).
     pub fn acceptance_rate_post_burn_in(&self) -> f64 {
-        let n = self.iteration.saturating_sub(self.config.burn_in);
+        let n = self.drawn();
         if n == 0 {
             0.0
         } else {
@@ -382,13 +397,50 @@ impl HmcState {
     }
     /// Mean acceptance statistic `min(1, exp(H_0 - H_1))` after burn-in.
     pub fn mean_accept_stat(&self) -> f64 {
-        let n = self.iteration.saturating_sub(self.config.burn_in);
+        let n = self.drawn();
         if n == 0 {
             0.0
         } else {
             self.accept_stat_post_burn_in / n as f64
         }
     }
+    /// Iterations that were drawn: after burn-in and outside re-adaptation windows.
+    pub fn drawn(&self) -> u64 {
+        self.iteration
+            .saturating_sub(self.config.burn_in)
+            .saturating_sub(self.readapted)
+    }
+
+    /// Opens a re-adaptation window (module doc): `covariance_z` (row-major `d x d`, in `z =
+    /// logit(u)`, e.g. [`within_chain_covariance_z`]) becomes the metric, and the step size
+    /// adapts again by dual averaging from the current one over the next `window` iterations,
+    /// which are not drawn; then it is frozen at the window's average.
+    ///
+    /// # Errors
+    /// A covariance of the wrong size or not positive definite, or a chain still in burn-in
+    /// (whose own adaptation is not finished); the chain is left as it was.
+    pub fn readapt(&mut self, covariance_z: &[f64], window: u64) -> Result<()> {
+        let d = self.dim();
+        if covariance_z.len() != d * d {
+            return Err(StatsError::Shape(format!(
+                "metric covariance of {} values for {d} dimensions",
+                covariance_z.len()
+            )));
+        }
+        if self.iteration < self.config.burn_in {
+            return Err(StatsError::Invalid(format!(
+                "a chain in burn-in (iteration {} of {}) cannot be re-adapted",
+                self.iteration, self.config.burn_in
+            )));
+        }
+        self.chol = cholesky(covariance_z, d).ok_or_else(|| {
+            StatsError::Invalid("the re-adapted metric is not positive definite".into())
+        })?;
+        self.dual = DualAveraging::new(self.ln_eps.exp());
+        self.window_end = self.iteration + window;
+        Ok(())
+    }
+
     /// Divergent (stopped and rejected) trajectories, all and after burn-in.
     pub fn divergent(&self) -> (u64, u64) {
         (self.divergent, self.divergent_post_burn_in)
@@ -436,7 +488,8 @@ impl HmcState {
 
     /// Accepts or rejects the finished trajectory and adapts.
     fn finish(&mut self, tr: Trajectory, draws: &mut Draws) {
-        let post_burn_in = self.iteration >= self.config.burn_in;
+        let readapting = self.iteration >= self.config.burn_in && self.iteration < self.window_end;
+        let post_burn_in = self.iteration >= self.config.burn_in && !readapting;
         self.leapfrog_steps += u64::from(tr.done);
         let (eps, steps, divergent) = (tr.eps, tr.done, tr.stopped || tr.last.is_none());
         let mut alpha = 0.0;
@@ -474,11 +527,14 @@ impl HmcState {
             draws.push(&self.position(), self.log_density, stats);
             return;
         }
+        if readapting {
+            self.readapted += 1;
+        }
         self.ln_eps = self
             .dual
             .update(alpha, self.config.target_acceptance)
             .clamp(-20.0, 5.0);
-        if self.config.adapt_metric {
+        if self.config.adapt_metric && !readapting {
             if t > burn / 4 && t <= 3 * burn / 4 {
                 self.adapt_update();
             }
@@ -487,7 +543,7 @@ impl HmcState {
                 self.dual = DualAveraging::new(self.ln_eps.exp());
             }
         }
-        if t == burn {
+        if t == burn || (readapting && t == self.window_end) {
             self.ln_eps = self.dual.ln_eps_bar;
         }
     }
@@ -526,6 +582,53 @@ impl HmcState {
             self.chol = l;
         }
     }
+}
+
+/// Iterations of the re-adaptation window ([`HmcState::readapt`]) of chains with `burn_in`
+/// iterations of burn-in: half of it, the length of its step-size adaptation after the metric
+/// is set (at 3/4 of burn-in the step size restarts for the last quarter; twice that here, for
+/// a metric that can change more).
+pub fn readapt_window(burn_in: u64) -> u64 {
+    (burn_in / 2).max(1)
+}
+
+/// The metric for re-adapted chains: the mean of the chains' own covariances of `z = logit(u)`
+/// over their draws (the within-chain variance `W` of R-hat, Gelman et al. 2013, BDA3
+/// eq. 11.3, so that chains in different modes do not widen it), shrunk towards its
+/// diagonal with weight `d / (n + d)`, `n` the draws of all chains (as burn-in's metric is
+/// shrunk). Row-major `d x d`; `None` when a chain has fewer than two draws or the chains
+/// differ in dimension.
+pub fn within_chain_covariance_z(draws: &[Draws]) -> Option<Vec<f64>> {
+    let d = draws.first()?.dim;
+    if draws.iter().any(|c| c.dim != d || c.len() < 2) {
+        return None;
+    }
+    let mut w = vec![0.0; d * d];
+    for chain in draws {
+        let (mut n, mut mean, mut m2) = (0, vec![0.0; d], vec![0.0; d * d]);
+        for i in 0..chain.len() {
+            let z: Vec<f64> = chain.point(i).iter().map(|&u| logit(u)).collect();
+            crate::mcmc::welford_update(&mut n, &mut mean, &mut m2, &z);
+        }
+        for (acc, v) in w.iter_mut().zip(&m2) {
+            *acc += v / (n as f64 - 1.0) / draws.len() as f64;
+        }
+    }
+    let n: f64 = draws.iter().map(|c| c.len() as f64).sum();
+    let shrink = d as f64 / (n + d as f64);
+    Some(
+        (0..d * d)
+            .map(|k| {
+                let (i, j) = (k / d, k % d);
+                let sym = 0.5 * (w[k] + w[j * d + i]);
+                if i == j {
+                    sym
+                } else {
+                    (1.0 - shrink) * sym
+                }
+            })
+            .collect(),
+    )
 }
 
 /// One chain's trajectory in progress.
@@ -788,6 +891,95 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn readaptation_from_the_draws_repairs_a_wrong_metric_and_stays_out_of_the_draws() {
+        // 4-D, sd 0.01 each; the metric's first coordinate 10x too wide and burn-in left
+        // unable to fix it (adapt_metric off): the step size must shrink for that direction.
+        let d = 4;
+        let mean = vec![0.5, 0.4, 0.6, 0.5];
+        let prec: Vec<f64> = (0..d * d)
+            .map(|k| if k / d == k % d { 1e4 } else { 0.0 })
+            .collect();
+        let mut target = gaussian(mean.clone(), prec);
+        let mut metric: Vec<f64> = (0..d * d)
+            .map(|k| if k / d == k % d { 1e-4 } else { 0.0 })
+            .collect();
+        metric[0] = 1e-2;
+        let cfg = HmcConfig {
+            burn_in: 100,
+            adapt_metric: false,
+            ..HmcConfig::default()
+        };
+        let mut states: Vec<HmcState> = (0..4)
+            .map(|c| {
+                let (lp, g) = target(std::slice::from_ref(&mean)).remove(0);
+                HmcState::new(cfg.clone(), &mean, Some(&metric), lp, &g, 3, c).unwrap()
+            })
+            .collect();
+        let before = run_segment_batch(&mut states, 500, &mut target).unwrap();
+        let (eps0, steps0) = (states[0].step_size(), states[0].leapfrog_steps());
+        let cov = within_chain_covariance_z(&before).expect("a metric from 400 draws a chain");
+        let window = readapt_window(cfg.burn_in);
+        for s in &mut states {
+            s.readapt(&cov, window).unwrap();
+        }
+        let after = run_segment_batch(&mut states, window + 400, &mut target).unwrap();
+        for (c, s) in states.iter().enumerate() {
+            assert_eq!(
+                after[c].len(),
+                400,
+                "the window's {window} iterations are not drawn"
+            );
+            assert_eq!(after[c].stats().unwrap().len(), 400);
+            assert_eq!(s.drawn(), 800);
+        }
+        let eps1 = states[0].step_size();
+        let steps1 = states[0].leapfrog_steps() - steps0;
+        assert!(eps1 > 3.0 * eps0, "step size {eps0} -> {eps1}");
+        assert!(
+            (steps1 as f64) < 0.5 * steps0 as f64 * (window + 400) as f64 / 500.0,
+            "leapfrog steps {steps0} in 500 iterations, {steps1} in {}",
+            window + 400
+        );
+        // Still the target: means and sds of the draws after re-adaptation.
+        for (i, mu) in mean.iter().enumerate() {
+            let x: Vec<f64> = after.iter().flat_map(|a| a.column(i)).collect();
+            let n = x.len() as f64;
+            let m = x.iter().sum::<f64>() / n;
+            let sd = (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+            assert!((m - mu).abs() < 0.1 * 0.01, "mean {i}: {m}");
+            assert!((sd / 0.01 - 1.0).abs() < 0.15, "sd {i}: {sd}");
+        }
+        // A chain still in burn-in is not re-adapted.
+        let (lp, g) = target(std::slice::from_ref(&mean)).remove(0);
+        let mut fresh = HmcState::new(cfg, &mean, Some(&metric), lp, &g, 3, 9).unwrap();
+        assert!(fresh.readapt(&cov, window).is_err());
+    }
+
+    #[test]
+    fn the_readapted_metric_is_the_within_chain_covariance() {
+        // Two chains far apart, each with z-variance 1 around its own mean: the pooled
+        // metric is ~1 (W), not inflated by the chains' distance (which B would add).
+        let sig = |z: f64| 1.0 / (1.0 + (-z).exp());
+        let stats = DrawStats {
+            accept_stat: 1.0,
+            step_size: 0.0,
+            n_leapfrog: 0,
+            divergent: false,
+        };
+        let mut a = Draws::new(1);
+        let mut b = Draws::new(1);
+        for k in 0..1000 {
+            let z = if k % 2 == 0 { -1.0 } else { 1.0 };
+            a.push(&[sig(z - 2.0)], 0.0, stats);
+            b.push(&[sig(z + 2.0)], 0.0, stats);
+        }
+        let w = within_chain_covariance_z(&[a.clone(), b]).unwrap();
+        // Each chain: 1,000 values of +-1, sample variance 1000 / 999.
+        assert!((w[0] - 1000.0 / 999.0).abs() < 1e-9, "{w:?}");
+        assert!(within_chain_covariance_z(&[a, Draws::new(1)]).is_none());
     }
 
     #[test]
