@@ -37,7 +37,9 @@ impl proto::ChainSegmentJob {
 /// request (`LeaseRequest::protocol`); a coordinator leases only to workers of its own revision.
 /// Raised whenever a job gains a field that changes what a worker computes:
 /// - 1: `ChainSegmentJob::temperature` (the likelihood's temperature, issue 20).
-pub const PROTOCOL: u32 = 1;
+/// - 2: HMC states re-adapted at an extension (`window_end`, `readapted`: an older worker would
+///   drop them and draw the adaptation window).
+pub const PROTOCOL: u32 = 2;
 
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;

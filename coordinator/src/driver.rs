@@ -753,11 +753,8 @@ impl Executor for Leased<'_> {
         let per = self.chains_per_group(n);
         let mut next = vec![];
         let mut short = false;
-        let readapted = if round.is_final() {
-            self.readapted_states(&groups, iterations)?
-        } else {
-            None
-        };
+        // As run_chains does locally, in any round (in practice the final one's extensions).
+        let readapted = self.readapted_states(&groups, iterations)?;
         for (g, (first, done)) in groups.iter().enumerate() {
             if done.iter().any(|j| j.state != JobState::Done) {
                 short = true;

@@ -825,7 +825,10 @@ pub fn extended_target(
         Kernel::Mh => 0,
     };
     let step = m.iterations - m.burn_in;
-    let draws = target - m.burn_in - u64::from(extensions) * window;
+    // Draws per chain so far (saturating: a record from before the windows spent none).
+    let draws = target
+        .saturating_sub(m.burn_in + u64::from(extensions) * window)
+        .max(1);
     let min_ess = convergence.min_ess_bulk.min(convergence.min_ess_tail);
     let for_ess = match (m.kernel, extensions) {
         (Kernel::Hmc, 0) => step,

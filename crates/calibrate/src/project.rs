@@ -344,7 +344,9 @@ pub struct McmcSettings {
     /// Iterations per chain including burn-in (default 500, for HMC; the reference's
     /// random walk: 10,000).
     pub iterations: u64,
-    /// Burn-in (reference: 2,000); the proposal adapts only during burn-in.
+    /// Burn-in (reference: 2,000); the proposal adapts only during burn-in, and HMC chains
+    /// again in an undrawn window when the final chains are extended
+    /// ([`bemcal_stats::chain::readapt`]).
     pub burn_in: u64,
     /// Seed of the chains' starts and random streams (each refinement round derives its own).
     pub seed: u64,
@@ -401,7 +403,9 @@ pub struct McmcSettings {
     pub ess_target: f64,
     /// At most this many extensions of the final chains while a target is missed (0: judge
     /// and report only). Each adds at least `iterations - burn_in` draws per chain, more when
-    /// the ESS shortfall asks for it (at most 4x that).
+    /// the ESS shortfall asks for it (at most 4x that), except HMC's first, which adds that
+    /// step: it re-adapts the chains, whose ESS per draw then changes. HMC chains run an
+    /// undrawn re-adaptation window on top ([`crate::extended_target`]).
     pub max_extensions: u32,
     /// The likelihood's temperature `T`: the chains sample `p(theta) L(theta)^(1/T)`
     /// ([`Temperature`]; default 1, the posterior itself).

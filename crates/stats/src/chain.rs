@@ -83,11 +83,15 @@ impl Chain {
 /// Re-adapts the HMC chains of `states` before they are run on past their target
 /// ([`HmcState::readapt`]): the metric from `draws`, their draws so far
 /// ([`crate::hmc::within_chain_covariance_z`]), a window of
-/// [`crate::hmc::readapt_window`] of their burn-in. Metropolis-Hastings chains are left as
-/// they are. All chains or none: where the draws give no positive-definite metric (too few, a
-/// coordinate that never moved) or a chain is still in burn-in, every chain keeps its own.
-/// Returns whether the chains were re-adapted.
+/// [`crate::hmc::readapt_window`] of their burn-in. Metropolis-Hastings chains, and chains
+/// without burn-in, are left as they are. All chains or none: where the draws give no
+/// positive-definite metric (too few, a coordinate that never moved) or a chain is still in
+/// burn-in, every chain keeps its own. Returns whether the chains were re-adapted.
 pub fn readapt(states: &mut [Chain], draws: &[Draws]) -> bool {
+    let hmc_with_burn_in = |c: &Chain| matches!(c, Chain::Hmc(s) if crate::hmc::readapt_window(s.config().burn_in) > 0);
+    if states.is_empty() || !states.iter().all(hmc_with_burn_in) {
+        return false;
+    }
     let Some(cov) = crate::hmc::within_chain_covariance_z(draws) else {
         return false;
     };

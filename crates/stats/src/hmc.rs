@@ -19,7 +19,8 @@
 //!   `gamma = 0.05`, `t_0 = 10`, `kappa = 0.75`); with `adapt_metric`, the chain's own states
 //!   of the middle half of burn-in give a new metric at 3/4 of it (their covariance shrunk
 //!   towards the initial metric with weight `d / (n + d)`) and the step size adaptation
-//!   restarts. After burn-in `eps = exp(ln eps_bar)` and the metric are frozen.
+//!   restarts. After burn-in `eps = exp(ln eps_bar)` and the metric are frozen (until a
+//!   re-adaptation, below).
 //! - Re-adaptation ([`HmcState::readapt`]): when chains are run on past their first target, a
 //!   metric estimated from the draws of all chains ([`within_chain_covariance_z`]: hundreds of
 //!   states against burn-in's few dozen) replaces each chain's own, and the step size adapts
@@ -48,7 +49,8 @@ pub const DIVERGENCE: f64 = 1000.0;
 /// Settings of one HMC chain; stored in its [`HmcState`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HmcConfig {
-    /// Iterations discarded as burn-in (adaptation happens only in these).
+    /// Iterations discarded as burn-in (adaptation happens in these, and in re-adaptation
+    /// windows: [`HmcState::readapt`]).
     pub burn_in: u64,
     /// Target mean acceptance probability of the step-size adaptation.
     pub target_acceptance: f64,
@@ -382,7 +384,8 @@ impl HmcState {
     pub fn config(&self) -> &HmcConfig {
         &self.config
     }
-    /// Current step size (after burn-in: the frozen, averaged one).
+    /// Current step size (after burn-in and outside a re-adaptation window: the frozen,
+    /// averaged one).
     pub fn step_size(&self) -> f64 {
         self.ln_eps.exp()
     }
@@ -587,10 +590,19 @@ impl HmcState {
 /// Iterations of the re-adaptation window ([`HmcState::readapt`]) of chains with `burn_in`
 /// iterations of burn-in: half of it, the length of its step-size adaptation after the metric
 /// is set (at 3/4 of burn-in the step size restarts for the last quarter; twice that here, for
-/// a metric that can change more).
+/// a metric that can change more), and at least [`MIN_READAPT_WINDOW`] (dual averaging's first
+/// updates overshoot: one update alone leaves the step 3-17 times as large). 0, no
+/// re-adaptation, for chains without burn-in (no adaptation asked for).
 pub fn readapt_window(burn_in: u64) -> u64 {
-    (burn_in / 2).max(1)
+    if burn_in == 0 {
+        0
+    } else {
+        (burn_in / 2).max(MIN_READAPT_WINDOW)
+    }
 }
+
+/// The shortest re-adaptation window ([`readapt_window`]).
+pub const MIN_READAPT_WINDOW: u64 = 25;
 
 /// The metric for re-adapted chains: the mean of the chains' own covariances of `z = logit(u)`
 /// over their draws (the within-chain variance `W` of R-hat, Gelman et al. 2013, BDA3
@@ -952,6 +964,11 @@ mod tests {
             assert!((m - mu).abs() < 0.1 * 0.01, "mean {i}: {m}");
             assert!((sd / 0.01 - 1.0).abs() < 0.15, "sd {i}: {sd}");
         }
+        // Half of burn-in, at least 25; none without burn-in.
+        assert_eq!(
+            (readapt_window(0), readapt_window(4), readapt_window(400)),
+            (0, MIN_READAPT_WINDOW, 200)
+        );
         // A chain still in burn-in is not re-adapted.
         let (lp, g) = target(std::slice::from_ref(&mean)).remove(0);
         let mut fresh = HmcState::new(cfg, &mean, Some(&metric), lp, &g, 3, 9).unwrap();
