@@ -487,11 +487,7 @@ impl Leased<'_> {
         temperature: f64,
         readapted: Option<&[u8]>,
     ) -> std::result::Result<NewJob, Error> {
-        let reached: u64 = done
-            .iter()
-            .filter_map(segment_of)
-            .map(|c| c.iterations)
-            .sum();
+        let reached = segments_reached(done);
         let mut inputs = crate::client::refs(&self.surrogate_files()?);
         if let Some(f) = self.settled_design_file(cal)? {
             inputs.push(f);
@@ -604,11 +600,7 @@ impl Leased<'_> {
             if done.iter().any(|j| j.state != JobState::Done) {
                 return Ok(None);
             }
-            let r: u64 = done
-                .iter()
-                .filter_map(segment_of)
-                .map(|c| c.iterations)
-                .sum();
+            let r = segments_reached(done);
             if last.target == 0 || r != last.target || r >= iterations {
                 return Ok(None);
             }
@@ -637,6 +629,14 @@ impl Leased<'_> {
         }
         Ok(Some(out))
     }
+}
+
+/// Iterations per chain a group's segments `done` have run.
+fn segments_reached(done: &[JobRow]) -> u64 {
+    done.iter()
+        .filter_map(segment_of)
+        .map(|c| c.iterations)
+        .sum()
 }
 
 /// A chain job's segment.
@@ -760,12 +760,7 @@ impl Executor for Leased<'_> {
                 short = true;
                 continue;
             }
-            let reached: u64 = done
-                .iter()
-                .filter_map(segment_of)
-                .map(|c| c.iterations)
-                .sum();
-            if reached < iterations {
+            if segments_reached(done) < iterations {
                 short = true;
                 let count = per.min(n - first);
                 next.push(self.segment_job(

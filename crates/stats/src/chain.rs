@@ -88,23 +88,25 @@ impl Chain {
 /// positive-definite metric (too few, a coordinate that never moved) or a chain is still in
 /// burn-in, every chain keeps its own. Returns whether the chains were re-adapted.
 pub fn readapt(states: &mut [Chain], draws: &[Draws]) -> bool {
-    let hmc_with_burn_in = |c: &Chain| matches!(c, Chain::Hmc(s) if crate::hmc::readapt_window(s.config().burn_in) > 0);
-    if states.is_empty() || !states.iter().all(hmc_with_burn_in) {
+    let window = |c: &Chain| match c {
+        Chain::Hmc(s) => Some(crate::hmc::readapt_window(s.config().burn_in)).filter(|&w| w > 0),
+        Chain::Mh(_) => None,
+    };
+    let Some(windows) = states.iter().map(window).collect::<Option<Vec<u64>>>() else {
+        return false;
+    };
+    if windows.is_empty() {
         return false;
     }
     let Some(cov) = crate::hmc::within_chain_covariance_z(draws) else {
         return false;
     };
     let mut next = states.to_vec();
-    for c in &mut next {
-        match c {
-            Chain::Hmc(s) => {
-                let window = crate::hmc::readapt_window(s.config().burn_in);
-                if s.readapt(&cov, window).is_err() {
-                    return false;
-                }
+    for (c, w) in next.iter_mut().zip(windows) {
+        if let Chain::Hmc(s) = c {
+            if s.readapt(&cov, w).is_err() {
+                return false;
             }
-            Chain::Mh(_) => return false,
         }
     }
     states.clone_from_slice(&next);
