@@ -265,50 +265,86 @@ impl Sampler<'_> {
     ) -> Result<Vec<Vec<f64>>, Error> {
         let names = self.outputs().to_vec();
         let n_h = self.cal.inputs.features.len();
+        let mut recovered = vec![];
+        for (i, (x, o)) in points.iter().zip(outputs).enumerate() {
+            let mut observed = vec![f64::NAN; n_h * names.len()];
+            for (k, name) in names.iter().enumerate() {
+                let series = hourly_output(o, name, n_h).ok_or_else(|| Error::Stage {
+                    stage: "refinement",
+                    message: format!("point {i}: no {n_h}-hour output {name}"),
+                })?;
+                for (h, v) in series.iter().enumerate() {
+                    observed[h * names.len() + k] = *v;
+                }
+            }
+            recovered.push(self.untempered_mode(&observed, x)?);
+        }
+        Ok(recovered)
+    }
+
+    /// One step of output space mapping (Bandler et al., "Space mapping: the state of the
+    /// art", IEEE Trans. Microwave Theory Tech. 52 (2004), section on output space mapping;
+    /// the zeroth-order correction of Alexandrov et al. 1998): the surrogate is corrected by
+    /// EnergyPlus's hourly difference from it at `anchor` (physical calibrated values),
+    /// `E(anchor) - S(anchor)`, which is the same as calibrating the surrogate against the
+    /// meters less that difference; returns that calibration's untempered posterior mode, by
+    /// BFGS from the anchor. `eplus`: EnergyPlus's outputs at the anchor (the model's share,
+    /// without bases, as the surrogate predicts it). At the anchor the corrected surrogate
+    /// agrees with EnergyPlus, and near it as far as the surrogate's error changes slowly;
+    /// far from it, not: the driver simulates points on the line to the mode, not only the
+    /// mode.
+    pub fn mapped_mode(
+        &mut self,
+        anchor: &[f64],
+        eplus: &HourlyOutputs,
+    ) -> Result<Vec<f64>, Error> {
+        let names = self.outputs().to_vec();
+        let n_h = self.cal.inputs.features.len();
+        let surrogate = self.predict(&[anchor.to_vec()])?.remove(0);
+        let mut observed = self.cal.inputs.likelihood_observations();
+        for (k, name) in names.iter().enumerate() {
+            let e = hourly_output(eplus, name, n_h).ok_or_else(|| Error::Stage {
+                stage: "validation",
+                message: format!("the anchor's run has no {n_h}-hour output {name}"),
+            })?;
+            for h in 0..n_h {
+                observed[h * names.len() + k] -= e[h] - surrogate[k][h];
+            }
+        }
+        self.untempered_mode(&observed, anchor)
+    }
+
+    /// The posterior's mode at temperature 1 with `observed` (hours x outputs, row-major) in
+    /// place of the meters (the same missing hours and error model), by BFGS from `start`
+    /// (physical calibrated values).
+    fn untempered_mode(&mut self, observed: &[f64], start: &[f64]) -> Result<Vec<f64>, Error> {
         let cfg = BfgsConfig {
             max_iterations: self.cal.project.mcmc.optimiser_iterations,
             hessian: false,
             ..BfgsConfig::default()
         };
-        let mut recovered = vec![];
-        for (i, (x, o)) in points.iter().zip(outputs).enumerate() {
-            let mut observed = vec![f64::NAN; n_h * names.len()];
-            for (k, name) in names.iter().enumerate() {
-                let series =
-                    o.get(name)
-                        .filter(|s| s.len() == n_h)
-                        .ok_or_else(|| Error::Stage {
-                            stage: "refinement",
-                            message: format!("point {i}: no {n_h}-hour output {name}"),
-                        })?;
-                for (h, v) in series.iter().enumerate() {
-                    observed[h * names.len() + k] = *v;
-                }
-            }
-            let likelihood = self.likelihood.with_observed(&observed)?;
-            let (post, eval) = self.split();
-            // The surrogate's error alone: the untempered posterior's mode.
-            let post = Posterior {
-                likelihood: &likelihood,
-                temperature: 1.0,
-                ..post
-            };
-            let mut start: Vec<f64> = post
-                .plan
-                .priors
-                .iter()
-                .zip(x)
-                .map(|(p, v)| p.to_unit(*v))
-                .collect();
-            if let Some(b) = post.sigma_box {
-                start.extend(std::iter::repeat_n(0.6, b.len()));
-            }
-            let starts = [start];
-            let lps = post.ln_posterior_batch(eval, &starts);
-            let best = optimise(&post, eval, &starts, &lps, &cfg)?;
-            recovered.push(post.theta(&best[0].point));
+        let likelihood = self.likelihood.with_observed(observed)?;
+        let (post, eval) = self.split();
+        let post = Posterior {
+            likelihood: &likelihood,
+            temperature: 1.0,
+            ..post
+        };
+        let mut u: Vec<f64> = (post.plan.priors.iter().zip(start))
+            .map(|(p, v)| p.to_unit(*v))
+            .collect();
+        if let Some(b) = post.sigma_box {
+            u.extend(std::iter::repeat_n(0.6, b.len()));
         }
-        Ok(recovered)
+        let starts = [u];
+        let lps = post.ln_posterior_batch(eval, &starts);
+        let best = optimise(&post, eval, &starts, &lps, &cfg)?;
+        Ok(post.theta(&best[0].point))
+    }
+
+    /// Guideline 14 of the surrogate against the meters at `x` (physical calibrated values).
+    pub fn surrogate_metrics(&mut self, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
+        surrogate_metrics_at(&self.cal.inputs, &mut self.evaluator, x)
     }
 
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
@@ -562,6 +598,11 @@ fn surrogate_metrics_at(
     Ok(metrics)
 }
 
+/// Output `name` of `o` when it has `n_h` hours.
+fn hourly_output<'o>(o: &'o HourlyOutputs, name: &str, n_h: usize) -> Option<&'o [f64]> {
+    o.get(name).filter(|s| s.len() == n_h)
+}
+
 /// Chain states at `starts` (chain `c` gets random stream `first_chain + c`): optimised first
 /// with `start = "optimised"` (see [`ChainStart`]); Metropolis-Hastings or HMC by `m.kernel`.
 pub fn chains_at(
@@ -763,25 +804,44 @@ impl ChainSummary {
         }
     }
 
-    /// Makes predictive draw `j` the estimate where `estimate = "best_simulated"` chose it
-    /// (`choice`), with the surrogate's metrics there; `None` keeps the MAP draw. Records the
-    /// choice either way.
-    /// `map_failure`: why EnergyPlus could not simulate the MAP draw, if it could not.
+    /// Makes `adopted` (its values and the surrogate's metrics there) the estimate where
+    /// `estimate = "best_simulated"` chose a point other than the MAP draw (`choice`); `None`
+    /// keeps the MAP draw. Records the choice either way. `map_failure`: why EnergyPlus could
+    /// not simulate the MAP draw, if it could not.
     pub fn adopt_best_simulated(
         &mut self,
-        j: Option<usize>,
+        adopted: Option<(Vec<f64>, Vec<OutputMetrics>)>,
         choice: EstimateChoice,
         map_failure: Option<&str>,
     ) {
-        if let Some((x, sur)) = j.and_then(|j| {
-            let x = self.predictive.get(j)?.clone();
-            Some((x, self.surrogate_at_predictive.get(j).cloned()))
-        }) {
+        if let Some((x, surrogate)) = adopted {
             self.estimate_note = Some(choice.describe(map_failure));
             self.estimate = x;
-            self.surrogate_at_estimate = sur.unwrap_or_default();
+            self.surrogate_at_estimate = surrogate;
         }
         self.estimate_choice = Some(choice);
+    }
+
+    /// Predictive draw `j` and the surrogate's metrics there, as
+    /// [`Self::adopt_best_simulated`] takes them.
+    pub fn predictive_point(&self, j: usize) -> Option<(Vec<f64>, Vec<OutputMetrics>)> {
+        let x = self.predictive.get(j)?.clone();
+        Some((
+            x,
+            self.surrogate_at_predictive
+                .get(j)
+                .cloned()
+                .unwrap_or_default(),
+        ))
+    }
+
+    /// The calibrated parameters whose value in `x` lies outside the posterior's 90 %
+    /// interval.
+    pub fn outside_interval(&self, x: &[f64]) -> Vec<String> {
+        (self.posterior.parameters.iter().zip(x))
+            .filter(|(p, v)| **v < p.q5 || **v > p.q95)
+            .map(|(p, _)| p.name.clone())
+            .collect()
     }
 }
 

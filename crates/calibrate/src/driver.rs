@@ -25,6 +25,7 @@ use bemcal_energyplus::HourlyOutputs;
 use serde::{Deserialize, Serialize};
 
 use crate::design::{read_outcome, saved_outputs};
+use crate::mapping::{self, MappingStep};
 use crate::posterior::Checkpoint;
 use crate::project::Estimate;
 use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
@@ -546,11 +547,11 @@ fn validate(
     let results = ready!(exec.validate(cal, &runs)?);
     let (mut calibrated, mut initial, mut failures) = (None, vec![], vec![]);
     // The MAP draw and the predictive draws EnergyPlus simulated, with their metrics.
-    let mut simulated: Vec<(&ValidationRun, Vec<OutputMetrics>)> = vec![];
+    let mut simulated: Vec<(ValidationRun, Vec<OutputMetrics>)> = vec![];
     for (run, r) in runs.iter().zip(results) {
         match (run.role, r) {
             (ValidationRole::Calibrated { .. }, Ok(m)) => {
-                simulated.push((run, m.clone()));
+                simulated.push((run.clone(), m.clone()));
                 calibrated = Some(m);
             }
             (ValidationRole::Calibrated { .. }, Err(e)) => failures.push(e),
@@ -561,14 +562,20 @@ fn validate(
                     message: format!("EnergyPlus at the initial model: {message}"),
                 })
             }
-            (ValidationRole::Predictive, Ok(m)) => simulated.push((run, m)),
-            (ValidationRole::Predictive, Err(e)) => log(&format!(
-                "validation: a predictive draw failed in EnergyPlus: {e}"
+            (ValidationRole::Predictive | ValidationRole::Mapped, Ok(m)) => {
+                simulated.push((run.clone(), m))
+            }
+            (ValidationRole::Predictive | ValidationRole::Mapped, Err(e)) => log(&format!(
+                "validation: EnergyPlus failed at {}, left out: {e}",
+                run.label
             )),
         }
     }
     if cal.project.validation.estimate == Estimate::BestSimulated {
-        if let Some(m) = adopt_best_simulated(cal, chains, &simulated, failures.first(), log)? {
+        let steps = ready!(map_estimate(cal, exec, &mut simulated, log)?);
+        if let Some(m) =
+            adopt_best_simulated(cal, chains, &simulated, steps, failures.first(), log)?
+        {
             return Ok(Ready::Done(Validated {
                 calibrated: m,
                 initial,
@@ -608,16 +615,124 @@ fn validate(
     }))
 }
 
-/// `estimate = "best_simulated"`: of the draws EnergyPlus `simulated` (the MAP draw first, then
-/// the predictive draws), makes the one that fits the meters best by Guideline 14's hourly
-/// criteria the estimate
-/// ([`crate::best_simulated`]), its run `validation/calibrated.csv`; its metrics, or `None`
+/// `estimate = "best_simulated"`, where EnergyPlus fits none of the points it `simulated`
+/// (the MAP draw and the predictive draws; appended to as it goes): output space mapping
+/// ([`crate::mapping`]), at most `validation.mapping_steps` steps while no point passes
+/// Guideline 14 hourly, each from the best point so far ([`mapping::next_step`]), its points
+/// simulated as one validation wave. The steps are recorded in `validation/mapping.json`, so
+/// that a later call of the driver asks for the same points (and says so only when it computes
+/// a step); a step's mapped points EnergyPlus cannot simulate, or that the model's
+/// constraints or the region where EnergyPlus failed refuse, are left out.
+fn map_estimate(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    simulated: &mut Vec<(ValidationRun, Vec<OutputMetrics>)>,
+    log: Log<'_>,
+) -> Result<Ready<Vec<MappingStep>>, Error> {
+    let (inp, vdir) = (&cal.inputs, cal.out.validation());
+    let mut record = mapping::read(&vdir);
+    let (mut steps, mut anchors) = (vec![], vec![]);
+    let mut sampler: Option<Sampler<'_>> = None;
+    loop {
+        let ratios: Vec<f64> = (simulated.iter())
+            .map(|(_, m)| crate::limit_ratio(m, &inp.fitted))
+            .collect();
+        let max = cal.project.validation.mapping_steps;
+        let Some((a, fractions)) = mapping::next_step(&ratios, &anchors, max) else {
+            break;
+        };
+        anchors.push(a);
+        let anchor = simulated[a].0.clone();
+        let first = 1 + steps
+            .iter()
+            .map(|s: &MappingStep| s.points.len())
+            .sum::<usize>();
+        let step = match record.get(steps.len()) {
+            Some(s) if s.starts_at(&anchor.label, &anchor.values) && s.at(&fractions) => s.clone(),
+            _ => {
+                // An anchor used before has the same correction and so the same mode.
+                let earlier = (steps.iter()).find(|s| s.starts_at(&anchor.label, &anchor.values));
+                let mode = match earlier {
+                    Some(s) => s.mode.clone(),
+                    None => {
+                        let values = inp.plan.values(&anchor.values);
+                        let eplus = saved_outputs(&vdir, anchor.key, &values).ok_or_else(|| {
+                            Error::Stage {
+                                stage: "validation",
+                                message: format!(
+                                    "the run of {} is not in {}",
+                                    anchor.label,
+                                    vdir.display()
+                                ),
+                            }
+                        })?;
+                        let sampler = match &mut sampler {
+                            Some(s) => s,
+                            None => sampler.insert(cal.sampler()?),
+                        };
+                        sampler.mapped_mode(&anchor.values, &eplus)?
+                    }
+                };
+                let label = (&anchor.label[..], &anchor.values[..]);
+                let step = MappingStep::new(label, mode, &fractions, first);
+                record.truncate(steps.len());
+                record.push(step.clone());
+                mapping::write(&vdir, &record)?;
+                log(&format!(
+                    "validation: EnergyPlus fits none of the {} points simulated (the best, {}, \
+                     at {:.2} of Guideline 14's hourly limits): output space mapping step {} \
+                     from it, EnergyPlus at {} of the way to the corrected surrogate's mode",
+                    simulated.len(),
+                    anchor.label,
+                    ratios[a],
+                    steps.len() + 1,
+                    (fractions.iter().map(|f| format!("{f:.3}")))
+                        .collect::<Vec<_>>()
+                        .join(" and ")
+                ));
+                step
+            }
+        };
+        let runs: Vec<ValidationRun> = (step.points.iter())
+            .filter(|p| {
+                inp.plan.feasible(&inp.model, &p.values) && inp.plan.refused(&p.values).is_none()
+            })
+            .map(|p| ValidationRun {
+                role: ValidationRole::Mapped,
+                key: p.key,
+                label: p.label.clone(),
+                values: p.values.clone(),
+            })
+            .collect();
+        let results = ready!(exec.validate(cal, &runs)?);
+        for (run, r) in runs.into_iter().zip(results) {
+            match r {
+                Ok(m) => simulated.push((run, m)),
+                Err(e) => log(&format!(
+                    "validation: EnergyPlus failed at {}, left out: {e}",
+                    run.label
+                )),
+            }
+        }
+        steps.push(step);
+    }
+    // Steps of an earlier, longer search (other settings) are not this one's.
+    if record.len() > steps.len() {
+        mapping::write(&vdir, &steps)?;
+    }
+    Ok(Ready::Done(steps))
+}
+
+/// `estimate = "best_simulated"`: of the points EnergyPlus `simulated` (the MAP draw first,
+/// then the predictive draws and the `steps` of output space mapping), makes the one the rule
+/// [`crate::best_simulated`] chooses by Guideline 14's hourly criteria the estimate, its run `validation/calibrated.csv`; its metrics, or `None`
 /// when none ran (the fallbacks are tried then). `map_failure`: why EnergyPlus could not
 /// simulate the MAP draw, if it could not.
 fn adopt_best_simulated(
     cal: &Calibration,
     chains: &mut ChainSummary,
-    simulated: &[(&ValidationRun, Vec<OutputMetrics>)],
+    simulated: &[(ValidationRun, Vec<OutputMetrics>)],
+    steps: Vec<MappingStep>,
     map_failure: Option<&String>,
     log: Log<'_>,
 ) -> Result<Option<Vec<OutputMetrics>>, Error> {
@@ -626,11 +741,24 @@ fn adopt_best_simulated(
         .collect();
     let map_ran = simulated
         .first()
-        .is_some_and(|(r, _)| r.role != ValidationRole::Predictive);
-    let Some(b) = crate::best_simulated(&ratios, map_ran) else {
+        .is_some_and(|(r, _)| matches!(r.role, ValidationRole::Calibrated { .. }));
+    let first_mapped = (simulated.iter())
+        .position(|(r, _)| r.role == ValidationRole::Mapped)
+        .unwrap_or(simulated.len());
+    let Some(b) = crate::best_simulated(&ratios, map_ran, first_mapped) else {
         return Ok(None);
     };
     let (run, metrics) = &simulated[b];
+    let adopted = match run.role {
+        ValidationRole::Predictive => {
+            crate::predictive::draw_of_key(run.key).and_then(|j| chains.predictive_point(j))
+        }
+        ValidationRole::Mapped => {
+            let surrogate = cal.sampler()?.surrogate_metrics(&run.values)?;
+            Some((run.values.clone(), surrogate))
+        }
+        ValidationRole::Calibrated { .. } | ValidationRole::Initial => None,
+    };
     let choice = crate::EstimateChoice {
         chosen: run.label.clone(),
         candidates: (simulated.iter().zip(&ratios))
@@ -639,11 +767,13 @@ fn adopt_best_simulated(
                 limit_ratio: ratio.is_finite().then_some(*ratio),
             })
             .collect(),
+        outside_interval: match run.role {
+            ValidationRole::Mapped => chains.outside_interval(&run.values),
+            _ => vec![],
+        },
+        mapping: steps,
     };
-    let predictive = (run.role == ValidationRole::Predictive)
-        .then(|| crate::predictive::draw_of_key(run.key))
-        .flatten();
-    if predictive.is_some() {
+    if adopted.is_some() {
         let vdir = cal.out.validation();
         let values = cal.inputs.plan.values(&run.values);
         let o = saved_outputs(&vdir, run.key, &values).ok_or_else(|| Error::Stage {
@@ -654,7 +784,7 @@ fn adopt_best_simulated(
     }
     let map_failure = map_failure.map(String::as_str);
     log(&format!("validation: {}", choice.describe(map_failure)));
-    chains.adopt_best_simulated(predictive, choice, map_failure);
+    chains.adopt_best_simulated(adopted, choice, map_failure);
     Ok(Some(metrics.clone()))
 }
 

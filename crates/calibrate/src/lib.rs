@@ -20,6 +20,7 @@ pub mod driver;
 pub mod examples;
 mod inputs;
 mod local;
+pub mod mapping;
 pub mod model_form;
 pub use bemcal_named as named;
 pub mod output;

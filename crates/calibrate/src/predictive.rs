@@ -207,8 +207,9 @@ pub fn draw_runs(cal: &Calibration, chains: &ChainSummary) -> Vec<HourlyOutputs>
 }
 
 /// EnergyPlus at the estimate, as validation saved it. The estimate was settled on one of the
-/// validation candidates (a fallback where EnergyPlus failed at the MAP, a predictive draw
-/// where `estimate = "best_simulated"` chose one): the run whose values are the estimate's.
+/// validation candidates (a fallback where EnergyPlus failed at the MAP, a predictive draw or
+/// a mapped point where `estimate = "best_simulated"` chose one): the run whose values are
+/// the estimate's.
 pub fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Option<HourlyOutputs> {
     let vdir = cal.out.validation();
     let values = cal.inputs.plan.values(&chains.estimate);
@@ -216,9 +217,14 @@ pub fn run_at_estimate(cal: &Calibration, chains: &ChainSummary) -> Option<Hourl
         .predictive_candidates()
         .into_iter()
         .map(|(c, _)| c.key);
+    let mapped = (chains.estimate_choice.iter())
+        .flat_map(|c| &c.mapping)
+        .flat_map(|s| s.points.iter().map(|p| p.key))
+        .collect::<Vec<_>>();
     (0..=FALLBACKS)
         .map(candidate_key)
         .chain(predictive)
+        .chain(mapped)
         .find_map(|key| saved_outputs(&vdir, key, &values))
 }
 

@@ -187,6 +187,9 @@ pub enum ValidationRole {
     Initial,
     /// A posterior draw of the predictive intervals (`validation.predictive_draws`).
     Predictive,
+    /// A point of the output space mapping where EnergyPlus fitted no posterior draw
+    /// ([`crate::mapping`]).
+    Mapped,
 }
 
 /// One EnergyPlus run of the validation stage, saved as `validation/<label>.csv` under `key`.
@@ -196,7 +199,7 @@ pub struct ValidationRun {
     pub role: ValidationRole,
     /// Its key in `validation/`.
     pub key: usize,
-    /// `calibrated`, `initial` or `predictive_NN`.
+    /// `calibrated`, `initial`, `predictive_NN` or `mapped_NN`.
     pub label: String,
     /// Parameter values (the calibrated ones, in the plan's order).
     pub values: Vec<f64>,
@@ -205,7 +208,8 @@ pub struct ValidationRun {
 impl ValidationRun {
     /// Whether an EnergyPlus failure here leaves the calibration going: at the calibrated model
     /// the next-best draw is validated instead ([`next_validation`]), a predictive draw is left
-    /// out of the intervals; the initial model's failure fails the validation.
+    /// out of the intervals, a mapped point out of the search; the initial model's failure
+    /// fails the validation.
     pub fn tolerates_failure(&self) -> bool {
         self.role != ValidationRole::Initial
     }

@@ -98,8 +98,17 @@ pub struct SimulatedFit {
 pub struct EstimateChoice {
     /// The label of the draw that became the estimate.
     pub chosen: String,
-    /// Every draw EnergyPlus simulated, in validation's order (the MAP draw first).
+    /// Every draw EnergyPlus simulated, in validation's order (the MAP draw first), then
+    /// the points of the output space mapping, if any.
     pub candidates: Vec<SimulatedFit>,
+    /// The steps of output space mapping ([`crate::mapping`]) where EnergyPlus fitted none of
+    /// the posterior draws.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mapping: Vec<crate::mapping::MappingStep>,
+    /// Where a mapped point became the estimate (it is not a posterior draw): the parameters
+    /// whose value there lies outside the posterior's 90 % interval.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outside_interval: Vec<String>,
 }
 
 impl EstimateChoice {
@@ -124,10 +133,13 @@ impl EstimateChoice {
             } else {
                 format!(
                     "EnergyPlus fails Guideline 14 hourly at the MAP draw (worst meter at {map} of \
-                     the limits), and no other of the {n} draws it simulated fits better: it is \
+                     the limits), and no other of the {n} points it simulated fits better: it is \
                      the estimate"
                 )
             };
+        }
+        if crate::mapping::is_mapped(&self.chosen) {
+            return self.describe_mapped(map_failure, &map);
         }
         let (than, map_ratio) = match map_failure {
             None => (
@@ -141,10 +153,57 @@ impl EstimateChoice {
         };
         format!(
             "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \
-             criteria (its worst meter at {} of the limits{map_ratio}), of {n} draws simulated: \
+             criteria (its worst meter at {} of the limits{map_ratio}), of {n} points simulated: \
              it is the estimate",
             self.chosen,
             shown(ratio(&self.chosen)),
+        )
+    }
+
+    /// [`Self::describe`] where a point of the output space mapping became the estimate.
+    fn describe_mapped(&self, map_failure: Option<&str>, map: &str) -> String {
+        let ratio = |label: &str| {
+            (self.candidates.iter())
+                .find(|c| c.label == label)
+                .and_then(|c| c.limit_ratio)
+                .map_or("?".to_string(), |r| format!("{r:.2}"))
+        };
+        let drawn = (self.candidates.iter())
+            .filter(|c| !crate::mapping::is_mapped(&c.label))
+            .count();
+        let best_draw = (self.candidates.iter())
+            .filter(|c| !crate::mapping::is_mapped(&c.label))
+            .filter_map(|c| c.limit_ratio)
+            .reduce(f64::min)
+            .map_or("?".to_string(), |r| format!("{r:.2}"));
+        let (step, point) = (self.mapping.iter())
+            .find_map(|s| Some((s, s.points.iter().find(|p| p.label == self.chosen)?)))
+            .map_or(("?".to_string(), 1.0), |(s, p)| {
+                (s.anchor.clone(), p.fraction)
+            });
+        let map = match map_failure {
+            None => format!("the MAP draw at {map}"),
+            Some(e) => format!("EnergyPlus could not simulate the MAP draw: {e}"),
+        };
+        let d = self.outside_interval.len();
+        let outside = if d == 0 {
+            "every parameter lies inside the posterior's 90 % interval".to_string()
+        } else {
+            format!(
+                "{d} parameter(s) lie outside the posterior's 90 % interval ({})",
+                self.outside_interval.join(", ")
+            )
+        };
+        format!(
+            "EnergyPlus fails Guideline 14 hourly at every one of the {drawn} posterior draws it \
+             simulated (the best at {best_draw} of the limits; {map}); output space mapping \
+             from {step} (the surrogate corrected by EnergyPlus's hourly difference there) \
+             found {}, {:.2} of the way to the corrected surrogate's mode, where EnergyPlus's \
+             worst meter is at {} of the limits: it is the estimate. It is not a posterior \
+             draw: {outside}",
+            self.chosen,
+            point,
+            ratio(&self.chosen),
         )
     }
 }
@@ -160,20 +219,29 @@ pub fn limit_ratio(metrics: &[OutputMetrics], fitted: &[bool]) -> f64 {
         .unwrap_or(f64::INFINITY)
 }
 
-/// The rule of `estimate = "best_simulated"`, over the [`limit_ratio`]s of the posterior draws
-/// EnergyPlus simulated, the MAP draw's first where it ran (`map_ran`): the MAP draw while
-/// EnergyPlus passes Guideline 14 hourly there (ratio <= 1), since it is the posterior's best
-/// point and a draw a little nearer the limits' centre is no better an estimate (on the quick
-/// example one was, by 0.328 against 0.323, and lay outside the chains' 90 % interval); where it
-/// fails, the draw whose worst meter is nearest inside the limits (the smallest ratio, the
-/// first on a tie). `None` when none is finite. Every candidate is a draw of the posterior the
-/// calibration reports (with the surrogate's error carried where it is, as the predictive
-/// draws are: `ChainSummary::predictive`): where the surrogate misled the MAP, this takes the
-/// model a user can take away by the criteria they judge it with. The calibration period
-/// only: a held-out period never chooses.
-pub fn best_simulated(limit_ratios: &[f64], map_ran: bool) -> Option<usize> {
+/// The rule of `estimate = "best_simulated"`, over the [`limit_ratio`]s of the points
+/// EnergyPlus simulated: the posterior draws first (the MAP draw's first where it ran,
+/// `map_ran`), then, from index `first_mapped` on, the points of the output space mapping in
+/// the order the search ran them ([`crate::mapping`]). The MAP draw while EnergyPlus passes
+/// Guideline 14 hourly there (ratio <= 1), since it is the posterior's best point and a draw a
+/// little nearer the limits' centre is no better an estimate (on the quick example one was, by
+/// 0.328 against 0.323, and lay outside the chains' 90 % interval); where it fails, the first
+/// mapped point that passes (the search runs only where no draw passes, and its earlier
+/// points lie nearer the posterior); else the point whose worst meter is nearest inside the
+/// limits (the smallest ratio, the first on a tie). `None` when none is finite. Every draw is
+/// one of the posterior the calibration reports (with the surrogate's error carried where it
+/// is, as the predictive draws are: `ChainSummary::predictive`): where the surrogate misled
+/// the MAP, this takes the model a user can take away by the criteria they judge it with. The
+/// calibration period only: a held-out period never chooses.
+pub fn best_simulated(limit_ratios: &[f64], map_ran: bool, first_mapped: usize) -> Option<usize> {
     if map_ran && limit_ratios.first().is_some_and(|r| *r <= 1.0) {
         return Some(0);
+    }
+    if let Some(m) = (limit_ratios.iter().enumerate())
+        .skip(first_mapped)
+        .find(|(_, r)| **r <= 1.0)
+    {
+        return Some(m.0);
     }
     let mut best: Option<usize> = None;
     for (i, r) in limit_ratios.iter().enumerate() {
@@ -318,22 +386,31 @@ pub(crate) mod tests {
     #[test]
     fn the_map_draw_while_it_passes_else_the_smallest_finite_limit_ratio() {
         // The MAP draw passes: it stays, however much nearer the centre another draw is.
-        assert_eq!(best_simulated(&[0.9, 0.3, 0.5], true), Some(0));
-        assert_eq!(best_simulated(&[1.0, 0.3], true), Some(0));
+        let draws = |r: &[f64], map_ran: bool| best_simulated(r, map_ran, r.len());
+        assert_eq!(draws(&[0.9, 0.3, 0.5], true), Some(0));
+        assert_eq!(draws(&[1.0, 0.3], true), Some(0));
         // It fails: the draw nearest inside, passing or not; the first on a tie.
-        assert_eq!(best_simulated(&[1.6, 0.7, 0.9], true), Some(1));
-        assert_eq!(best_simulated(&[2.3, 1.2, 1.1], true), Some(2));
-        assert_eq!(best_simulated(&[1.6, 0.7, 0.7], true), Some(1));
-        assert_eq!(best_simulated(&[1.6, 1.9], true), Some(0));
+        assert_eq!(draws(&[1.6, 0.7, 0.9], true), Some(1));
+        assert_eq!(draws(&[2.3, 1.2, 1.1], true), Some(2));
+        assert_eq!(draws(&[1.6, 0.7, 0.7], true), Some(1));
+        assert_eq!(draws(&[1.6, 1.9], true), Some(0));
         // EnergyPlus could not simulate the MAP draw: the first ratio is a predictive draw's.
-        assert_eq!(best_simulated(&[0.9, 0.3], false), Some(1));
+        assert_eq!(draws(&[0.9, 0.3], false), Some(1));
         // A run without metrics is never chosen.
+        assert_eq!(draws(&[f64::INFINITY, f64::NAN, 2.0], true), Some(2));
+        assert_eq!(draws(&[f64::INFINITY, f64::NAN], true), None);
+        assert_eq!(draws(&[], false), None);
+        // Mapped points (from index 3): the first that passes, though a later one fits
+        // better; none passes: the smallest ratio of all.
         assert_eq!(
-            best_simulated(&[f64::INFINITY, f64::NAN, 2.0], true),
-            Some(2)
+            best_simulated(&[2.8, 1.9, 2.4, 0.98, 0.6], true, 3),
+            Some(3)
         );
-        assert_eq!(best_simulated(&[f64::INFINITY, f64::NAN], true), None);
-        assert_eq!(best_simulated(&[], false), None);
+        assert_eq!(
+            best_simulated(&[2.8, 1.9, 2.4, 1.35, 0.94], true, 3),
+            Some(4)
+        );
+        assert_eq!(best_simulated(&[2.8, 1.9, 2.4, 2.2, 2.5], true, 3), Some(1));
     }
 
     #[test]
@@ -374,6 +451,8 @@ pub(crate) mod tests {
                 limit_ratio: Some(*r),
             })
             .collect(),
+            mapping: vec![],
+            outside_interval: vec![],
         }
     }
 
@@ -400,24 +479,60 @@ pub(crate) mod tests {
         assert!(kept.estimate_note.is_none());
         assert_eq!(kept.estimate_choice.unwrap().chosen, "calibrated");
 
-        c.adopt_best_simulated(Some(1), choice("predictive_01"), None);
+        c.adopt_best_simulated(c.predictive_point(1), choice("predictive_01"), None);
         assert_eq!(c.estimate, vec![6.0]);
         assert_eq!(c.surrogate_at_estimate[0].metrics.nmbe, 6.0);
         let note = c.estimate_note.clone().unwrap();
         assert!(
             note.contains("predictive_01 fits the meters better than the MAP draw, which fails")
                 && note.contains("worst meter at 0.70 of the limits, the MAP draw's at 1.60")
-                && note.contains("of 3 draws"),
+                && note.contains("of 3 points"),
             "{note}"
         );
 
         let mut failed = chains(1);
         failed.predictive = vec![vec![5.0]];
-        failed.adopt_best_simulated(Some(0), choice("predictive_00"), Some("Fatal: no"));
+        failed.adopt_best_simulated(
+            failed.predictive_point(0),
+            choice("predictive_00"),
+            Some("Fatal: no"),
+        );
         assert_eq!(failed.estimate, vec![5.0]);
         assert!(failed
             .estimate_note
             .unwrap()
             .contains("could not simulate the MAP draw: Fatal: no"));
+    }
+
+    #[test]
+    fn a_mapped_point_that_fits_best_is_described_as_no_posterior_draw() {
+        let mut c = choice("mapped_02");
+        c.candidates[1].limit_ratio = Some(1.9);
+        c.candidates[2].limit_ratio = Some(2.1);
+        c.candidates.push(SimulatedFit {
+            label: "mapped_01".into(),
+            limit_ratio: Some(1.3),
+        });
+        c.candidates.push(SimulatedFit {
+            label: "mapped_02".into(),
+            limit_ratio: Some(0.85),
+        });
+        c.mapping = vec![crate::mapping::MappingStep::new(
+            ("predictive_00", &[1.0]),
+            vec![2.0],
+            &[0.5, 1.0],
+            1,
+        )];
+        c.outside_interval = vec!["shgc".into()];
+        let text = c.describe(None);
+        assert!(
+            text.contains("at every one of the 3 posterior draws it simulated (the best at 1.60")
+                && text.contains("the MAP draw at 1.60")
+                && text.contains("from predictive_00")
+                && text.contains("found mapped_02, 1.00 of the way")
+                && text.contains("worst meter is at 0.85 of the limits")
+                && text.contains("1 parameter(s) lie outside the posterior's 90 % interval (shgc)"),
+            "{text}"
+        );
     }
 }

@@ -440,7 +440,8 @@ pub struct Temperature {
 /// How `estimate = "best_simulated"` chose the estimate.
 #[derive(Debug, Clone, Deserialize)]
 pub struct EstimateChoice {
-    /// The label of the draw chosen (`calibrated`: the MAP draw; `predictive_NN`).
+    /// The label of the point chosen (`calibrated`: the MAP draw; `predictive_NN`; `mapped_NN`,
+    /// a point of the output space mapping).
     pub chosen: String,
     /// Every draw simulated, with its ratio to the limits.
     #[serde(default)]

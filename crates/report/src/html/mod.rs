@@ -235,9 +235,15 @@ fn estimate_label(s: &Summary) -> String {
     let map = c.candidates.first().filter(|f| f.label == "calibrated");
     let map_passes = map.and_then(|f| f.limit_ratio).is_some_and(|r| r <= 1.0);
     let why = match (c.chosen == "calibrated", map, map_passes) {
+        _ if c.chosen.starts_with("mapped_") => format!(
+            "{}: a point found by output space mapping, not a posterior draw: EnergyPlus fails \
+             Guideline 14 hourly at every posterior draw it simulated and passes at this one \
+             ({n} points simulated)",
+            c.chosen
+        ),
         (true, _, true) => "the MAP draw: EnergyPlus passes Guideline 14 hourly there".to_string(),
         (true, _, false) => format!(
-            "the MAP draw: it fails Guideline 14 hourly, and no other of the {n} draws \
+            "the MAP draw: it fails Guideline 14 hourly, and no other of the {n} points \
              EnergyPlus simulated fits better"
         ),
         (false, Some(_), _) => format!(
