@@ -144,6 +144,9 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
             ));
         }
     }
+    if let Some(note) = mapped_estimate_note(s) {
+        warn.push(esc(note));
+    }
     let d = &s.design;
     if !d.failed.is_empty() {
         warn.push(format!(
@@ -165,6 +168,14 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
         h.push_str("</ul>");
     }
     h
+}
+
+/// Where a point of the output space mapping became the estimate (not a posterior draw), the
+/// note that says so and which parameters lie outside the posterior's intervals there.
+fn mapped_estimate_note(s: &crate::io::Summary) -> Option<&str> {
+    let chosen = &s.estimate_choice.as_ref()?.chosen;
+    chosen.starts_with("mapped_").then_some(())?;
+    s.estimate_note.as_deref()
 }
 
 /// The design points EnergyPlus could not simulate (where the model is not valid), the
@@ -222,4 +233,36 @@ calibration order.</p>",
         h.push_str("</ul>");
     }
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(chosen: &str) -> crate::io::Summary {
+        serde_json::from_value(serde_json::json!({
+            "outputs": ["heating_kwh"],
+            "parameters": [],
+            "posterior": {"parameters": [], "correlated_pairs": []},
+            "acceptance_rate": [],
+            "validation": [],
+            "converged": true,
+            "design_points": 20,
+            "estimate": "best_simulated",
+            "estimate_note": "output space mapping from predictive_04 found mapped_02 ... It is not a posterior draw: 12 parameter(s) lie outside",
+            "estimate_choice": {"chosen": chosen, "candidates": []},
+        }))
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn a_mapped_estimate_is_a_warning_and_a_posterior_draw_is_not() {
+        let w = warnings(&summary("mapped_02"));
+        assert!(
+            w.contains("It is not a posterior draw: 12 parameter(s)"),
+            "{w}"
+        );
+        let w = warnings(&summary("predictive_04"));
+        assert!(!w.contains("not a posterior draw"), "{w}");
+    }
 }
