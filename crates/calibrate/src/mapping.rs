@@ -13,6 +13,10 @@
 //! the mode alone (measured by hand on the demo: the mode itself overshot, heating NMBE
 //! +18.0 -> -22.2 %, and the midpoint passed all three meters at 0.85 of the limits).
 //!
+//! A mapped point becomes the estimate only where EnergyPlus passes there
+//! ([`crate::best_simulated`]); where none does (a meter the model cannot reach), the estimate
+//! stays the best posterior draw.
+//!
 //! This module holds the rule ([`next_step`], [`line`]) and the record
 //! (`validation/mapping.json`, which makes the search re-entrant: the coordinator's driver
 //! runs again after every job and must ask for the same points); the driver runs it.
