@@ -92,13 +92,7 @@ pub fn next_step(
     if anchors.len() >= max_steps || limit_ratios.iter().any(|r| *r <= 1.0) {
         return None;
     }
-    let mut best: Option<usize> = None;
-    for (i, r) in limit_ratios.iter().enumerate() {
-        if r.is_finite() && best.is_none_or(|b| *r < limit_ratios[b]) {
-            best = Some(i);
-        }
-    }
-    let a = best?;
+    let a = crate::validation::smallest_finite(limit_ratios)?;
     let used = anchors.iter().filter(|&&b| b == a).count();
     let fractions = match used {
         0 => FRACTIONS.to_vec(),

@@ -245,8 +245,13 @@ pub fn best_simulated(limit_ratios: &[f64], map_ran: bool, first_mapped: usize) 
     {
         return Some(m.0);
     }
+    smallest_finite(&limit_ratios[..first_mapped.min(limit_ratios.len())])
+}
+
+/// The index of the smallest finite ratio, the first on a tie; `None` when none is finite.
+pub fn smallest_finite(limit_ratios: &[f64]) -> Option<usize> {
     let mut best: Option<usize> = None;
-    for (i, r) in limit_ratios.iter().enumerate().take(first_mapped) {
+    for (i, r) in limit_ratios.iter().enumerate() {
         if r.is_finite() && best.is_none_or(|b| *r < limit_ratios[b]) {
             best = Some(i);
         }
