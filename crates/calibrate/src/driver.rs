@@ -572,10 +572,20 @@ fn validate(
         }
     }
     if cal.project.validation.estimate == Estimate::BestSimulated {
-        let steps = ready!(map_estimate(cal, exec, &mut simulated, log)?);
-        if let Some(m) =
-            adopt_best_simulated(cal, chains, &simulated, steps, failures.first(), log)?
-        {
+        // One surrogate for the mapping's optimisations and the chosen point's metrics,
+        // loaded only if either needs it.
+        let mut sampler = LazySampler::new(cal, ChainTemperature::ONE);
+        let steps = ready!(map_estimate(cal, exec, &mut sampler, &mut simulated, log)?);
+        let map_failure = failures.first();
+        if let Some(m) = adopt_best_simulated(
+            cal,
+            chains,
+            &mut sampler,
+            &simulated,
+            steps,
+            map_failure,
+            log,
+        )? {
             return Ok(Ready::Done(Validated {
                 calibrated: m,
                 initial,
@@ -626,13 +636,13 @@ fn validate(
 fn map_estimate(
     cal: &Calibration,
     exec: &mut dyn Executor,
+    sampler: &mut LazySampler<'_>,
     simulated: &mut Vec<(ValidationRun, Vec<OutputMetrics>)>,
     log: Log<'_>,
 ) -> Result<Ready<Vec<MappingStep>>, Error> {
     let (inp, vdir) = (&cal.inputs, cal.out.validation());
     let mut record = mapping::read(&vdir);
     let (mut steps, mut anchors) = (vec![], vec![]);
-    let mut sampler: Option<Sampler<'_>> = None;
     loop {
         let ratios: Vec<f64> = (simulated.iter())
             .map(|(_, m)| crate::limit_ratio(m, &inp.fitted))
@@ -655,22 +665,8 @@ fn map_estimate(
                 let mode = match earlier {
                     Some(s) => s.mode.clone(),
                     None => {
-                        let values = inp.plan.values(&anchor.values);
-                        let eplus = saved_outputs(&vdir, anchor.key, &values).ok_or_else(|| {
-                            Error::Stage {
-                                stage: "validation",
-                                message: format!(
-                                    "the run of {} is not in {}",
-                                    anchor.label,
-                                    vdir.display()
-                                ),
-                            }
-                        })?;
-                        let sampler = match &mut sampler {
-                            Some(s) => s,
-                            None => sampler.insert(cal.sampler()?),
-                        };
-                        sampler.mapped_mode(&anchor.values, &eplus)?
+                        let eplus = saved_run(cal, &anchor)?;
+                        sampler.get()?.mapped_mode(&anchor.values, &eplus)?
                     }
                 };
                 let label = (&anchor.label[..], &anchor.values[..]);
@@ -731,6 +727,7 @@ fn map_estimate(
 fn adopt_best_simulated(
     cal: &Calibration,
     chains: &mut ChainSummary,
+    sampler: &mut LazySampler<'_>,
     simulated: &[(ValidationRun, Vec<OutputMetrics>)],
     steps: Vec<MappingStep>,
     map_failure: Option<&String>,
@@ -754,7 +751,7 @@ fn adopt_best_simulated(
             crate::predictive::draw_of_key(run.key).and_then(|j| chains.predictive_point(j))
         }
         ValidationRole::Mapped => {
-            let surrogate = cal.sampler()?.surrogate_metrics(&run.values)?;
+            let surrogate = sampler.get()?.surrogate_metrics(&run.values)?;
             Some((run.values.clone(), surrogate))
         }
         ValidationRole::Calibrated { .. } | ValidationRole::Initial => None,
@@ -774,18 +771,25 @@ fn adopt_best_simulated(
         mapping: steps,
     };
     if adopted.is_some() {
-        let vdir = cal.out.validation();
-        let values = cal.inputs.plan.values(&run.values);
-        let o = saved_outputs(&vdir, run.key, &values).ok_or_else(|| Error::Stage {
-            stage: "validation",
-            message: format!("the run of {} is not in {}", run.label, vdir.display()),
-        })?;
-        crate::write_outputs_csv(&vdir.join("calibrated.csv"), cal.inputs.year, &o)?;
+        let o = saved_run(cal, run)?;
+        let calibrated = cal.out.validation().join("calibrated.csv");
+        crate::write_outputs_csv(&calibrated, cal.inputs.year, &o)?;
     }
     let map_failure = map_failure.map(String::as_str);
     log(&format!("validation: {}", choice.describe(map_failure)));
     chains.adopt_best_simulated(adopted, choice, map_failure);
     Ok(Some(metrics.clone()))
+}
+
+/// EnergyPlus's outputs of validation run `run`, as `validation/` saved them.
+fn saved_run(cal: &Calibration, run: &ValidationRun) -> Result<HourlyOutputs, Error> {
+    let vdir = cal.out.validation();
+    saved_outputs(&vdir, run.key, &cal.inputs.plan.values(&run.values)).ok_or_else(|| {
+        Error::Stage {
+            stage: "validation",
+            message: format!("the run of {} is not in {}", run.label, vdir.display()),
+        }
+    })
 }
 
 /// Logs what became of the design points EnergyPlus could not simulate.

@@ -116,12 +116,7 @@ impl EstimateChoice {
     /// estimate) `estimate_note`. `map_failure`: why EnergyPlus could not simulate the MAP
     /// draw, if it could not.
     pub fn describe(&self, map_failure: Option<&str>) -> String {
-        let ratio = |label: &str| {
-            (self.candidates.iter())
-                .find(|c| c.label == label)
-                .and_then(|c| c.limit_ratio)
-        };
-        let shown = |r: Option<f64>| r.map_or("?".to_string(), |r| format!("{r:.2}"));
+        let ratio = |label: &str| self.ratio_of(label);
         let map = shown(ratio(CALIBRATED_LABEL));
         let n = self.candidates.len();
         if self.chosen == CALIBRATED_LABEL {
@@ -162,20 +157,15 @@ impl EstimateChoice {
 
     /// [`Self::describe`] where a point of the output space mapping became the estimate.
     fn describe_mapped(&self, map_failure: Option<&str>, map: &str) -> String {
-        let ratio = |label: &str| {
-            (self.candidates.iter())
-                .find(|c| c.label == label)
-                .and_then(|c| c.limit_ratio)
-                .map_or("?".to_string(), |r| format!("{r:.2}"))
-        };
         let drawn = (self.candidates.iter())
             .filter(|c| !crate::mapping::is_mapped(&c.label))
             .count();
-        let best_draw = (self.candidates.iter())
-            .filter(|c| !crate::mapping::is_mapped(&c.label))
-            .filter_map(|c| c.limit_ratio)
-            .reduce(f64::min)
-            .map_or("?".to_string(), |r| format!("{r:.2}"));
+        let best_draw = shown(
+            (self.candidates.iter())
+                .filter(|c| !crate::mapping::is_mapped(&c.label))
+                .filter_map(|c| c.limit_ratio)
+                .reduce(f64::min),
+        );
         let (step, point) = (self.mapping.iter())
             .find_map(|s| Some((s, s.points.iter().find(|p| p.label == self.chosen)?)))
             .map_or(("?".to_string(), 1.0), |(s, p)| {
@@ -203,9 +193,21 @@ impl EstimateChoice {
              draw: {outside}",
             self.chosen,
             point,
-            ratio(&self.chosen),
+            shown(self.ratio_of(&self.chosen)),
         )
     }
+
+    /// The limit ratio of the candidate labelled `label`, if it ran with metrics.
+    fn ratio_of(&self, label: &str) -> Option<f64> {
+        (self.candidates.iter())
+            .find(|c| c.label == label)
+            .and_then(|c| c.limit_ratio)
+    }
+}
+
+/// A limit ratio as the sentences show it: two decimals, `?` where there is none.
+fn shown(r: Option<f64>) -> String {
+    r.map_or("?".to_string(), |r| format!("{r:.2}"))
 }
 
 /// How near one EnergyPlus run is to Guideline 14's hourly limits: its worst fitted meter's

@@ -448,6 +448,14 @@ pub struct EstimateChoice {
     pub candidates: Vec<SimulatedFit>,
 }
 
+impl EstimateChoice {
+    /// Whether the point chosen is one of the output space mapping's (`mapped_NN`), not a
+    /// posterior draw.
+    pub fn chose_mapped(&self) -> bool {
+        self.chosen.starts_with("mapped_")
+    }
+}
+
 /// One draw EnergyPlus simulated in validation.
 #[derive(Debug, Clone, Deserialize)]
 pub struct SimulatedFit {

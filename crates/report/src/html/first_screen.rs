@@ -173,8 +173,7 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
 /// Where a point of the output space mapping became the estimate (not a posterior draw), the
 /// note that says so and which parameters lie outside the posterior's intervals there.
 fn mapped_estimate_note(s: &crate::io::Summary) -> Option<&str> {
-    let chosen = &s.estimate_choice.as_ref()?.chosen;
-    chosen.starts_with("mapped_").then_some(())?;
+    s.estimate_choice.as_ref()?.chose_mapped().then_some(())?;
     s.estimate_note.as_deref()
 }
 

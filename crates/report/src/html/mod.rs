@@ -235,7 +235,7 @@ fn estimate_label(s: &Summary) -> String {
     let map = c.candidates.first().filter(|f| f.label == "calibrated");
     let map_passes = map.and_then(|f| f.limit_ratio).is_some_and(|r| r <= 1.0);
     let why = match (c.chosen == "calibrated", map, map_passes) {
-        _ if c.chosen.starts_with("mapped_") => format!(
+        _ if c.chose_mapped() => format!(
             "{}: a point found by output space mapping, not a posterior draw: EnergyPlus fails \
              Guideline 14 hourly at every posterior draw it simulated and passes at this one \
              ({n} points simulated)",
