@@ -13,7 +13,9 @@
 //!   local one in `run_chains`, the coordinator before the extension's first segment), to the
 //!   same draws, and both report the run as not
 //!   converged (exit status 3, `summary.json` `convergence`, the report's banner). The chains
-//!   sample a tempered likelihood (`mcmc.temperature = 3`), which the chain jobs carry.
+//!   sample a tempered likelihood (`mcmc.temperature = 3`), which the chain jobs carry. Then
+//!   once more with one chain per job (`--chains-per-job 1`): the extension re-adapts the
+//!   chains of both jobs together, to the same draws.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -137,7 +139,7 @@ fn wait_for(
 /// [`finished`]): on this process without `surrogate`; with it, through 2 local workers, given
 /// that surrogate (copied into `out/surrogate`). Returns its log.
 fn calibrate(pf: &Path, out: &Path, surrogate: Option<&Path>) -> String {
-    let (status, log) = calibrate_status(pf, out, surrogate);
+    let (status, log) = calibrate_status(pf, out, surrogate, &[]);
     assert!(finished(status), "{}: {log}", out.display());
     log
 }
@@ -147,9 +149,10 @@ fn calibrate_status(
     pf: &Path,
     out: &Path,
     surrogate: Option<&Path>,
+    args: &[&str],
 ) -> (std::process::ExitStatus, String) {
     let mut c = bemcal();
-    c.arg("calibrate").arg(pf);
+    c.arg("calibrate").arg(pf).args(args);
     if let Some(from) = surrogate {
         std::fs::create_dir_all(out.join("surrogate")).unwrap();
         for e in std::fs::read_dir(from).unwrap() {
@@ -191,14 +194,14 @@ fn distributed_matches_single_process() {
     assert!(text.contains("holdout") && text.contains("kernel = \"hmc\""));
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
-    let (status, local_log) = calibrate_status(&pf, &local, None);
+    let (status, local_log) = calibrate_status(&pf, &local, None, &[]);
     assert!(
         local_log.contains("extending to 550 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
-    let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")));
+    let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")), &[]);
     // The one driver says the same through the coordinator (its messages in the run's status).
     assert!(
         log.contains("extending to 550 iterations (extension 1 of at most 1)"),
@@ -299,6 +302,45 @@ fn distributed_matches_single_process() {
     assert_eq!(sa["convergence"], sb["convergence"]);
     let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
     assert_eq!(draws.lines().count(), 1 + 2 * 400);
+
+    // The chains split into one job per chain (`--chains-per-job 1`, as a cluster spreads them
+    // over its workers): each job runs its chain's segments on its own, and the extension
+    // re-adapts the chains of both jobs together from all their draws (one metric for both).
+    // The surrogate evaluates every proposal on its own (its graphs take `p` as `[1,
+    // n_params]`), so a chain alone runs as it does beside another: the draws are the
+    // single-process run's, bit for bit.
+    let grouped = tmp.path().join("grouped");
+    let (status, log) = calibrate_status(
+        &pf,
+        &grouped,
+        Some(&local.join("surrogate")),
+        &["--chains-per-job", "1"],
+    );
+    assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
+    assert!(
+        log.contains("extending to 550 iterations (extension 1 of at most 1)"),
+        "{log}"
+    );
+    let cg: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(grouped.join("chains.json")).unwrap()).unwrap();
+    let states = cg["states"].as_array().unwrap();
+    assert_eq!(states.len(), 2);
+    assert_eq!(
+        states[0]["chol"], states[1]["chol"],
+        "one re-adapted metric for the chains of both jobs"
+    );
+    for s in states {
+        assert_eq!(s["window_end"], 350, "{}", s["window_end"]);
+        assert_eq!(s["readapted"], 50);
+    }
+    assert_eq!(
+        cg, ck,
+        "chains.json: one job per chain against the single process"
+    );
+    assert!(
+        std::fs::read_to_string(grouped.join("draws.csv")).unwrap() == draws,
+        "draws.csv: one job per chain against the single process"
+    );
 }
 
 #[test]

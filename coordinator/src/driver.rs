@@ -41,8 +41,9 @@ pub struct Config {
     pub lease_ttl_ms: u64,
     /// Failed attempts after which a job (and its run) fails.
     pub max_failures: u32,
-    /// Chains per chain-segment job; 0 = all chains in one job (the same batches as the
-    /// single-process path, so the draws are bit-identical to it).
+    /// Chains per chain-segment job; 0 = all chains in one job. The surrogate evaluates each
+    /// chain's proposal on its own (`p` is `[1, n_params]`), so the draws are the
+    /// single-process path's, bit for bit, however the chains are split (tests/distributed.rs).
     pub chains_per_job: usize,
     /// Artifacts that nothing refers to are removed once they are this old (ms): an upload
     /// whose submit or completion never came gets this long to be used.

@@ -19,6 +19,11 @@ pub struct Args {
     /// Run through a coordinator and this many worker processes on loopback instead.
     #[arg(long)]
     pub local_workers: Option<usize>,
+    /// With --local-workers: chains per chain job, so that the workers run the chains side by
+    /// side (0: all chains in one job). The draws are the single-process path's either way; an
+    /// extension re-adapts all chains together.
+    #[arg(long, default_value_t = 0, requires = "local_workers")]
+    pub chains_per_job: usize,
     /// Hours that check the calibration and never fit it, as `[validation] holdout`
     /// (overrides the project): `last 3 months`, `oct,nov,dec`, `2017-06-01..2017-08-31`.
     #[arg(long)]
@@ -66,7 +71,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let t0 = std::time::Instant::now();
     let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
     let s = match a.local_workers {
-        Some(n) => super::coordinator::calibrate_local(&a.project, &a.out, n.max(1))?,
+        Some(n) => {
+            super::coordinator::calibrate_local(&a.project, &a.out, n.max(1), a.chains_per_job)?
+        }
         None => calibrate(&project, &a.out, &log)?,
     };
     if a.json {

@@ -44,7 +44,8 @@ pub struct Args {
     /// Failed attempts after which a job fails its run.
     #[arg(long, default_value_t = 3)]
     pub max_failures: u32,
-    /// Chains per chain-segment job (0: all in one job, bit-identical to the local path).
+    /// Chains per chain-segment job (0: all in one job); the draws are the local path's either
+    /// way.
     #[arg(long, default_value_t = 0)]
     pub chains_per_job: usize,
     /// Hours an artifact that no run, job or cached simulation refers to is kept before it is
@@ -161,11 +162,13 @@ impl Drop for Children {
     }
 }
 
-/// Starts a coordinator (state in `out/.distributed/coordinator`) and `workers` worker processes
-/// on loopback; they stop when the returned guard is dropped.
+/// Starts a coordinator (state in `out/.distributed/coordinator`, `chains_per_job` as its
+/// `--chains-per-job`) and `workers` worker processes on loopback; they stop when the returned
+/// guard is dropped.
 pub(crate) fn start_local(
     out: &Path,
     workers: usize,
+    chains_per_job: usize,
     log: &dyn Fn(&str),
 ) -> anyhow::Result<(impl Drop, Connect)> {
     let exe = std::env::current_exe().context("locating the bemcal binary")?;
@@ -175,6 +178,8 @@ pub(crate) fn start_local(
     let mut coord = bemcal_pyenv::child_command(&exe)
         .args(["coordinator", "--listen", "127.0.0.1:0", "--data"])
         .arg(base.join("coordinator"))
+        .arg("--chains-per-job")
+        .arg(chains_per_job.to_string())
         .env(TOKEN_ENV, &token)
         .stdout(Stdio::piped())
         .spawn()
@@ -223,11 +228,17 @@ pub(crate) fn start_local(
 
 /// `bemcal calibrate --local-workers N`: a coordinator and N worker processes on loopback run
 /// the calibration; the results land in `out` as with the single-process path. A surrogate
-/// already in `out/surrogate` is reused (as the local path does).
-pub fn calibrate_local(project: &Path, out: &Path, workers: usize) -> anyhow::Result<Summary> {
+/// already in `out/surrogate` is reused (as the local path does). `chains_per_job` splits the
+/// chains into jobs of that many (0: all in one job, bit-identical to the local path).
+pub fn calibrate_local(
+    project: &Path,
+    out: &Path,
+    workers: usize,
+    chains_per_job: usize,
+) -> anyhow::Result<Summary> {
     let t0 = std::time::Instant::now();
     let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
-    let (children, connect) = start_local(out, workers, &log)?;
+    let (children, connect) = start_local(out, workers, chains_per_job, &log)?;
     let surrogate = bemcal_calibrate::OutputDir::new(out).surrogate();
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
     let rt = bemcal_client::runtime()?;

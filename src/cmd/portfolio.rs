@@ -147,7 +147,7 @@ fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Resul
     let t0 = std::time::Instant::now();
     let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
     std::fs::create_dir_all(out)?;
-    let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), &log)?;
+    let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), 0, &log)?;
     let id = portfolio::new_id();
     let (runs, local_failures) = rt.block_on(async {
         let mut c: Client = connect.client()?;
