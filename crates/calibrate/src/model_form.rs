@@ -12,8 +12,8 @@
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::metrics::{g14, G14Metrics};
 use bemcal_stats::model_form::{
-    additive_discrepancy, pattern, piled_at_bound, quantile_bands, reach, slope, Bound,
-    FactorGroups, Pattern, Reach, Verdict,
+    additive_discrepancy, partial_fit, pattern, piled_at_bound, quantile_bands, reach, slope,
+    Bound, FactorGroups, PartialFit, Pattern, Reach, Verdict,
 };
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
@@ -31,6 +31,16 @@ pub const PATTERN_ETA2: f64 = 0.10;
 /// A level miss is called a constant offset when the residuals' mean carries at least this
 /// share of their mean square.
 pub const OFFSET_SHARE: f64 = 0.5;
+
+/// The model is said to follow the weather when the outdoor temperature explains at least
+/// this share of its hourly variation beyond the calendar ([`WeatherShare`]) ...
+pub const WEATHER_SHARE_MODEL: f64 = 0.2;
+
+/// ... and the meter hardly to, when both the share the temperature explains of the meter and
+/// the size of what it explains, relative to the meter's mean, are below this fraction of the
+/// model's. The share alone would count a meter's noise against it, the size alone the
+/// model's level (a model at three times the meter's level varies three times as much).
+pub const WEATHER_FRACTION: f64 = 0.5;
 
 const MONTHS: [&str; 12] = [
     "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
@@ -77,8 +87,66 @@ pub struct MeterForm {
     pub temperature_slope_kwh_per_k: f64,
     /// The additive discrepancy fitted to the residuals at the estimate.
     pub discrepancy: Discrepancy,
+    /// How closely the meter and the model follow the weather file's outdoor temperature
+    /// (absent in summaries written before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weather: Option<WeatherShare>,
     /// In words: whether the model reaches the meter, and what to look at if not.
     pub findings: Vec<String>,
+}
+
+/// The share of the hourly variation beyond the calendar (hour of day by day kind, month) that
+/// the outdoor temperature of the weather the model ran with explains
+/// ([`bemcal_stats::model_form::partial_fit`], over the meter's calibration hours), for the
+/// meter and for the model at the estimate. A model that follows the weather where the meter
+/// does not ([`WeatherShare::unlike_the_meters`]) suggests that the weather is not the metered
+/// period's (a typical year cannot match actual meters hour by hour, however the parameters
+/// are set), or that the meter lacks the model's response to it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WeatherShare {
+    /// What the outdoor temperature explains of the meter.
+    pub meter: PartialFit,
+    /// What it explains of the model at the estimate.
+    pub model: PartialFit,
+    /// Whether the weather was built from measured observations (`[measured_weather]`).
+    pub measured_weather: bool,
+}
+
+impl WeatherShare {
+    /// The rule: the model follows the weather ([`WEATHER_SHARE_MODEL`]), the meter varies
+    /// beyond the calendar at all (a flat or dead meter is another finding), and the weather
+    /// explains less than [`WEATHER_FRACTION`] of the model's share and relative size of the
+    /// meter.
+    pub fn unlike_the_meters(&self) -> bool {
+        let (meter, model) = (&self.meter, &self.model);
+        model.share >= WEATHER_SHARE_MODEL
+            && meter.base_rms > 0.01 * meter.mean
+            && meter.share < WEATHER_FRACTION * model.share
+            && meter.relative_explained() < WEATHER_FRACTION * model.relative_explained()
+    }
+
+    /// In words, with what to change.
+    pub fn finding(&self) -> String {
+        let weather = if self.measured_weather {
+            "the measured weather's station (its distance and elevation, its time zone, its \
+             filled gaps)"
+        } else {
+            "the weather file, if it is not the metered period's (a typical year cannot match \
+             actual meters hour by hour: calibrate with the metered year's weather, \
+             [measured_weather] or `bemcal weather`)"
+        };
+        format!(
+            "the model follows the weather's outdoor temperature ({:.0} % of its hourly \
+             variation beyond the hour of the day, the day kind and the month: {:.1} kWh/h \
+             RMS), the meter hardly does ({:.0} %: {:.1} kWh/h): {weather}, or a meter that \
+             does not respond to the outdoor temperature as the model does (a system or \
+             control the model lacks)",
+            100.0 * self.model.share,
+            self.model.explained_rms,
+            100.0 * self.meter.share,
+            self.meter.explained_rms
+        )
+    }
 }
 
 /// The residuals grouped by one factor.
@@ -200,6 +268,23 @@ impl Groups {
         }
     }
 
+    /// The calendar's terms: hour of day x day kind, month.
+    fn calendar_terms(&self) -> [FactorGroups<'_>; 2] {
+        let [_, _, month, _] = &self.factors;
+        [
+            FactorGroups {
+                group: &self.hour_by_kind,
+                levels: 48,
+            },
+            month.groups(),
+        ]
+    }
+
+    /// The weather's term: the outdoor temperature band.
+    fn weather_terms(&self) -> [FactorGroups<'_>; 1] {
+        [self.factors[3].groups()]
+    }
+
     /// The discrepancy's terms: hour of day x day kind, month, outdoor temperature band.
     fn discrepancy_terms(&self) -> [FactorGroups<'_>; 3] {
         let [_, _, month, temperature] = &self.factors;
@@ -295,12 +380,25 @@ fn meter_form(
             .as_ref()
             .and_then(|h| g14(&h.measured[k], &corrected).ok()),
     };
+    // The model over the meter's hours only, so that both shares are of the same hours.
+    let model_at_meter: Vec<f64> = measured
+        .iter()
+        .zip(model)
+        .map(|(y, s)| if y.is_finite() { *s } else { f64::NAN })
+        .collect();
+    let share = |y: &[f64]| partial_fit(y, &groups.calendar_terms(), &groups.weather_terms());
+    let weather = Some(WeatherShare {
+        meter: share(measured)?,
+        model: share(&model_at_meter)?,
+        measured_weather: inp.measured_weather.is_some(),
+    });
     let mut form = MeterForm {
         output: inp.outputs[k].clone(),
         reach,
         patterns,
         temperature_slope_kwh_per_k,
         discrepancy,
+        weather,
         findings: vec![],
     };
     form.findings = findings(&form, draws.len());
@@ -328,8 +426,9 @@ fn piled_parameters(cal: &Calibration, posterior: &PosteriorSummary) -> Vec<Pile
 }
 
 /// The rule that turns a meter's figures into words: the verdict, then (for a meter not
-/// reached) a constant offset, the strongest residual pattern with the part of the model it
-/// points to, and what the discrepancy removes.
+/// reached) a constant offset, a weather file unlike the meter's period, the strongest
+/// residual pattern with the part of the model it points to, and what the discrepancy
+/// removes.
 pub fn findings(form: &MeterForm, draws: usize) -> Vec<String> {
     let r = &form.reach;
     let mwh = |x: f64| x / 1000.0;
@@ -380,6 +479,9 @@ pub fn findings(form: &MeterForm, draws: usize) -> Vec<String> {
             side(mean),
             mean.abs()
         ));
+    }
+    if let Some(w) = form.weather.filter(WeatherShare::unlike_the_meters) {
+        out.push(w.finding());
     }
     let strongest = form
         .patterns
@@ -476,6 +578,16 @@ mod tests {
     use super::*;
     use bemcal_stats::model_form::Group;
 
+    /// A fit of a series of mean `mean` whose calendar leaves `base_rms`.
+    fn fit(share: f64, explained_rms: f64, base_rms: f64, mean: f64) -> PartialFit {
+        PartialFit {
+            share,
+            explained_rms,
+            base_rms,
+            mean,
+        }
+    }
+
     fn form(verdict: Verdict, nmbe: f64, within: bool, patterns: Vec<FactorPattern>) -> MeterForm {
         MeterForm {
             output: "heating_kwh".into(),
@@ -496,6 +608,7 @@ mod tests {
                 corrected: g14(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]).unwrap(),
                 held_out: None,
             },
+            weather: None,
             findings: vec![],
         }
     }
@@ -554,6 +667,77 @@ mod tests {
             line.contains("wall_insulation_k") && line.contains("lower bound"),
             "{line}"
         );
+    }
+
+    #[test]
+    fn a_model_that_follows_the_weather_where_the_meter_does_not_blames_the_weather_file() {
+        // Measured (summary.json `model_form.meters[].weather`): share, explained RMS, the
+        // calendar's leftover RMS and the mean, kWh/h. The RSF's 2011 heating meter calibrated
+        // with the Golden TMY3: named, with the fix.
+        let rsf_heating = WeatherShare {
+            meter: fit(0.028, 22.3, 134.2, 89.6),
+            model: fit(0.774, 66.1, 75.1, 97.6),
+            measured_weather: false,
+        };
+        let mut f = form(Verdict::Shape, -8.9, true, vec![]);
+        f.weather = Some(rsf_heating);
+        let lines = findings(&f, 8);
+        assert!(
+            lines[1].contains("77 %") && lines[1].contains("(3 %: 22.3 kWh/h)"),
+            "{lines:?}"
+        );
+        assert!(
+            lines[1].contains("not the metered period's")
+                && lines[1].contains("[measured_weather]"),
+            "{lines:?}"
+        );
+        // With measured weather, the station is what to check.
+        f.weather = Some(WeatherShare {
+            measured_weather: true,
+            ..rsf_heating
+        });
+        assert!(findings(&f, 8)[1].contains("station"));
+        // `make actual-weather`: meters EnergyPlus made with 2017's weather, calibrated with
+        // the station's TMY3 (heating, cooling): named.
+        for (meter, model) in [
+            (fit(0.004, 0.26, 4.0, 8.3), fit(0.617, 2.62, 3.34, 8.6)),
+            (fit(0.055, 0.63, 2.68, 2.5), fit(0.687, 2.18, 2.64, 2.3)),
+        ] {
+            let w = WeatherShare {
+                meter,
+                model,
+                measured_weather: false,
+            };
+            assert!(w.unlike_the_meters(), "{w:?}");
+        }
+        // Not named:
+        for (meter, model) in [
+            // the same meters calibrated with 2017's weather (heating);
+            (fit(0.628, 3.17, 4.0, 8.3), fit(0.640, 3.19, 3.99, 8.3)),
+            // the demo's electricity, made with the weather it is calibrated with, whose 5 %
+            // noise leaves the meter a small share of a variation as large as the model's;
+            (fit(0.057, 2.84, 11.9, 180.4), fit(0.284, 2.09, 3.93, 174.1)),
+            // the RSF's cooling, where the model runs at 16 times the meter's level: the
+            // meter's variation with the temperature is, relative to its level, over half the
+            // model's;
+            (fit(0.118, 1.71, 4.92, 3.8), fit(0.671, 50.9, 62.1, 61.8)),
+            // a dead meter, all zeros;
+            (fit(0.0, 0.0, 0.0, 0.0), fit(0.774, 66.1, 75.2, 97.6)),
+            // and a model that hardly follows the weather.
+            (fit(0.01, 0.1, 20.0, 50.0), fit(0.1, 5.0, 15.0, 50.0)),
+        ] {
+            f.weather = Some(WeatherShare {
+                meter,
+                model,
+                measured_weather: false,
+            });
+            assert!(
+                !findings(&f, 8)
+                    .iter()
+                    .any(|l| l.contains("follows the weather's")),
+                "{meter:?} / {model:?}"
+            );
+        }
     }
 
     #[test]
