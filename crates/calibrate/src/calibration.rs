@@ -243,7 +243,7 @@ impl Calibration {
 
 /// What a folder's chains were fitted to, as `holdout.txt` records it in three lines: the
 /// held-out period (`none`), `not fitted:` and the meters that say `fit = false` (`none`),
-/// and `fitted readings:` with [`readings_fingerprint`].
+/// and `fitted readings:` with a fingerprint of the fitted readings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FittedData {
     /// The held-out period and its hour count, or `none`.

@@ -1,26 +1,24 @@
-//! Stages 5 and 6, the chains: the likelihood bound to the surrogate ([`Sampler`]), chain
-//! starts, segments, and the merged chains' summary.
+//! Stage 5, the chains: the likelihood bound to the surrogate ([`Sampler`]), chain starts,
+//! segments and the rule that extends them; stage 6, the merged chains' summary, in
+//! [`summary`].
+
+mod summary;
+
+pub use summary::ChainSummary;
 
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
-use bemcal_stats::convergence::{assess, draws_for_ess, Convergence};
+use bemcal_stats::convergence::{draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
 use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig, Optimum};
-use bemcal_stats::prior::Prior;
-use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
 use bemcal_surrogate::{Evaluator, Surrogate};
 use serde::{Deserialize, Serialize};
 
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
-use crate::project::{
-    ChainStart, Estimate, Kernel, McmcSettings, Residuals, SigmaDeltaMode, Temperature,
-};
-use crate::refine::RefineLog;
-use crate::summary::{write_bands_csv, write_draws_csv};
-use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
-use crate::validation::{fallback_note, EstimateChoice, FALLBACKS};
+use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::surrogate_error::ChainTemperature;
 use crate::{Calibration, Error, OutputMetrics};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
@@ -344,7 +342,7 @@ impl Sampler<'_> {
 
     /// Guideline 14 of the surrogate against the meters at `x` (physical calibrated values).
     pub fn surrogate_metrics(&mut self, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
-        surrogate_metrics_at(&self.cal.inputs, &mut self.evaluator, x)
+        summary::surrogate_metrics_at(&self.cal.inputs, &mut self.evaluator, x)
     }
 
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
@@ -352,250 +350,6 @@ impl Sampler<'_> {
         let (post, eval) = self.split();
         advance_chains(&post, eval, states, n)
     }
-
-    /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
-    /// and posterior predictive bands; with the surrogate error `refined`'s last round measured,
-    /// the intervals that carry it ([`crate::surrogate_error`]).
-    pub fn summarize(
-        &mut self,
-        states: &[Chain],
-        draws: &[Draws],
-        refined: &RefineLog,
-    ) -> Result<ChainSummary, Error> {
-        let cal = self.cal;
-        let inp = &cal.inputs;
-        let d = inp.plan.calibrated.len();
-        let mut theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
-        // The estimate and its fallbacks are the draws best by the untempered posterior
-        // (`ln p + T (ln pi_T - ln p)`, prior p): the tempered one ranks a draw T times less by
-        // its fit and T times more by its prior.
-        let t = self.temperature.value;
-        if t != 1.0 {
-            let post = self.posterior();
-            for (td, dr) in theta_draws.iter_mut().zip(draws) {
-                for (i, ld) in td.log_density.iter_mut().enumerate() {
-                    let prior = post.ln_prior(dr.point(i));
-                    *ld = prior + t * (*ld - prior);
-                }
-            }
-        }
-        let priors: Vec<Prior> = inp
-            .plan
-            .calibrated
-            .iter()
-            .zip(&inp.plan.priors)
-            .zip(&inp.plan.units)
-            .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
-            .collect();
-        let posterior = summarize(&priors, &theta_draws)?;
-        let sbox = self.sigma_box.clone();
-        let noise = self.noise.clone();
-        let (post, eval) = self.split();
-        write_draws_csv(
-            &cal.out.draws_csv(),
-            &post,
-            &inp.outputs,
-            draws,
-            &sbox,
-            true,
-        )?;
-        // Seeded apart from the chains' streams.
-        let seed = cal.project.mcmc.seed ^ 0x5EED_5EED_0E44_0420;
-        let k = cal.project.validation.predictive_draws;
-        // With the temperature measured from the surrogate's error, the chains carry it already.
-        let carried = match cal.project.mcmc.temperature {
-            Temperature::SurrogateError => None,
-            Temperature::Fixed(_) => carry(post.plan, draws, refined, seed)?,
-        };
-        let (surrogate_error, predictive) = match carried {
-            Some((report, shifted)) => {
-                let path = cal.out.draws_with_surrogate_error_csv();
-                write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
-                (
-                    Some(report),
-                    crate::predictive::pick(post.plan, &inp.model, &shifted, k),
-                )
-            }
-            None => (
-                None,
-                crate::predictive::pick(post.plan, &inp.model, draws, k),
-            ),
-        };
-        let (sigma_delta_kwh, residual_ar1) =
-            noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
-        write_posterior_predictive(cal, &post, eval, &theta_draws)?;
-        let estimate: Vec<f64> = match cal.project.validation.estimate {
-            Estimate::Map | Estimate::BestSimulated => posterior.map_point.clone(),
-            Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
-            Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
-        };
-        let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
-        let surrogate_at_predictive = (predictive.iter())
-            .map(|x| surrogate_metrics_at(inp, eval, x))
-            .collect::<Result<_, _>>()?;
-        let fallbacks: Vec<Vec<f64>> = best_draws(&theta_draws, FALLBACKS + 1)
-            .iter()
-            .map(|u| post.theta(u))
-            .filter(|x| x != &estimate)
-            .take(FALLBACKS)
-            .collect();
-        let convergence = assess(&posterior, &cal.project.mcmc.targets());
-        Ok(ChainSummary {
-            posterior,
-            sigma_delta_kwh,
-            residual_ar1,
-            estimate,
-            surrogate_at_estimate,
-            fallbacks,
-            estimate_note: None,
-            estimate_choice: None,
-            surrogate_at_predictive,
-            moved_chains: moved_chains(states),
-            independence_dropped: independence_dropped(states),
-            acceptance: states
-                .iter()
-                .map(|s| s.acceptance_rate_post_burn_in())
-                .collect(),
-            sigma_eta: self.sigma_eta.clone(),
-            held_out: self.held_out.clone(),
-            extensions: 0,
-            convergence,
-            surrogate_error,
-            predictive,
-            temperature: self.temperature,
-        })
-    }
-}
-
-/// One value per output, named.
-type PerOutput = Vec<(String, f64)>;
-
-/// The noise the summary reports: sigma_delta per output in kWh (the median of the sampled
-/// ones; with the variance integrated out, the posterior mean of sigma^2 at the MAP point,
-/// SSR / (n - 2), less sigma_y^2 and sigma_eta^2; else the fixed value) and, with AR(1)
-/// residuals, each output's profile phi at the MAP point; the fitted outputs only.
-fn noise_summary(
-    post: &Posterior<'_>,
-    eval: &mut Evaluator,
-    inp: &crate::Inputs,
-    noise: &[OutputNoise],
-    draws: &[Draws],
-    map_point: &[f64],
-) -> Result<(PerOutput, PerOutput), Error> {
-    let d = inp.plan.calibrated.len();
-    let mut residual_ar1: Vec<(String, f64)> = vec![];
-    let sigma_delta_kwh: Vec<(String, f64)> = match post.sigma_box {
-        Some(b) => (b.outputs.iter().enumerate())
-            .map(|(j, &k)| {
-                let mut v: Vec<f64> = draws
-                    .iter()
-                    .flat_map(|dr| dr.column(d + j))
-                    .map(|u| b.sigma(j, u))
-                    .collect();
-                v.sort_by(f64::total_cmp);
-                (inp.outputs[k].clone(), v[v.len() / 2])
-            })
-            .collect(),
-        None if post.marginal => {
-            // Posterior mean of sigma_k^2 given the MAP parameters, InvGamma(n/2, SSR/2):
-            // SSR / (n - 2); sigma_delta is what is left after sigma_y and sigma_eta.
-            let y = eval.evaluate(map_point)?;
-            let flat = y.as_slice().expect("contiguous prediction");
-            let ssr = post.likelihood.residual_sum_of_squares(flat);
-            if post.ar1 {
-                residual_ar1 = inp
-                    .outputs
-                    .iter()
-                    .cloned()
-                    .zip(post.likelihood.ar1_coefficients(flat))
-                    .collect();
-            }
-            let n_obs = post.likelihood.n_observed();
-            inp.outputs
-                .iter()
-                .enumerate()
-                .map(|(k, name)| {
-                    let total = ssr[k] / (n_obs[k] as f64 - 2.0).max(1.0);
-                    let z = &noise[k];
-                    let rest = total - z.sigma_y * z.sigma_y - z.sigma_eta * z.sigma_eta;
-                    (name.clone(), rest.max(0.0).sqrt())
-                })
-                .collect()
-        }
-        None => inp
-            .outputs
-            .iter()
-            .zip(noise)
-            .map(|(n, z)| (n.clone(), z.sigma_delta))
-            .collect(),
-    };
-    // A meter the likelihood leaves out (`fit = false`) has no noise estimate.
-    let not_fitted = inp.not_fitted();
-    let fitted = |v: PerOutput| -> PerOutput {
-        v.into_iter()
-            .filter(|(o, _)| !not_fitted.contains(o))
-            .collect()
-    };
-    Ok((fitted(sigma_delta_kwh), fitted(residual_ar1)))
-}
-
-/// `posterior_predictive.csv`: the surrogate's 5 / 50 / 95 % bands (plus the bases) from
-/// `mcmc.predictive_draws` draws spread over all chains, beside the meters.
-fn write_posterior_predictive(
-    cal: &Calibration,
-    post: &Posterior<'_>,
-    eval: &mut Evaluator,
-    theta_draws: &[Draws],
-) -> Result<(), Error> {
-    let inp = &cal.inputs;
-    let (n_h, n_out) = (inp.features.len(), inp.outputs.len());
-    let all: Vec<Vec<f64>> = theta_draws
-        .iter()
-        .flat_map(|dr| (0..dr.len()).map(move |i| dr.point(i).to_vec()))
-        .collect();
-    let want = cal.project.mcmc.predictive_draws.max(1);
-    let step = (all.len() / want).max(1);
-    let picks: Vec<Vec<f64>> = all.iter().step_by(step).map(|u| post.theta(u)).collect();
-    let mut pred = vec![Vec::<f32>::with_capacity(picks.len() * n_h); n_out];
-    for chunk in picks.chunks(8) {
-        let y = eval.evaluate_batch(chunk)?;
-        for b in 0..chunk.len() {
-            for (k, p) in pred.iter_mut().enumerate() {
-                p.extend((0..n_h).map(|h| y[[b, h, k]]));
-            }
-        }
-    }
-    let mut bands = vec![];
-    for (k, p) in pred.iter().enumerate() {
-        let mut b = predictive_bands(p, picks.len(), n_h)?;
-        for q in [&mut b.q5, &mut b.q50, &mut b.q95] {
-            *q = inp.with_base(k, q);
-        }
-        bands.push(b);
-    }
-    write_bands_csv(
-        &cal.out.posterior_predictive_csv(),
-        inp.year,
-        &inp.outputs,
-        &(0..n_out).map(|k| inp.meter(k)).collect::<Vec<_>>(),
-        &bands,
-    )
-}
-
-/// Guideline 14 of the surrogate at `estimate` against the meters, per output.
-fn surrogate_metrics_at(
-    inp: &crate::Inputs,
-    eval: &mut Evaluator,
-    estimate: &[f64],
-) -> Result<Vec<OutputMetrics>, Error> {
-    let n_h = inp.features.len();
-    let y = eval.evaluate(estimate)?;
-    let mut metrics = vec![];
-    for (k, name) in inp.outputs.iter().enumerate() {
-        let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
-        metrics.push(inp.metrics(k, name, &pred)?);
-    }
-    Ok(metrics)
 }
 
 /// Output `name` of `o` when it has `n_h` hours.
@@ -720,131 +474,6 @@ fn optimise(
     }
 }
 
-/// The merged chains, summarised ([`Sampler::summarize`]): what validation and `summary.json`
-/// are built from. Both drivers keep it between those stages (the coordinator in its database),
-/// so every field is serialisable.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ChainSummary {
-    /// Posterior draws (physical units) EnergyPlus simulates for the predictive intervals
-    /// ([`crate::predictive`]).
-    #[serde(default)]
-    pub predictive: Vec<Vec<f64>>,
-    /// The calibrated parameters' posterior (physical units): per-parameter statistics, the
-    /// MAP draw, correlated pairs, R-hat and ESS.
-    pub posterior: PosteriorSummary,
-    /// Model inadequacy sigma_delta per output, kWh: the sampled ones' median; with the variance
-    /// integrated out, what the MAP's residual variance leaves after sigma_y and sigma_eta;
-    /// else the fixed value.
-    pub sigma_delta_kwh: Vec<(String, f64)>,
-    /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
-    #[serde(default)]
-    pub residual_ar1: Vec<(String, f64)>,
-    /// The calibrated estimate (calibrated parameters, physical units).
-    pub estimate: Vec<f64>,
-    /// Guideline 14 of the surrogate at the estimate against the meters.
-    #[serde(default)]
-    pub surrogate_at_estimate: Vec<OutputMetrics>,
-    /// Where EnergyPlus cannot simulate the estimate, the draws validated instead, best first:
-    /// the next distinct draws by log posterior (physical units).
-    #[serde(default)]
-    pub fallbacks: Vec<Vec<f64>>,
-    /// Set when a fallback draw ([`ChainSummary::settle_estimate`]) or a predictive draw
-    /// ([`ChainSummary::adopt_best_simulated`]) replaced the estimate: why.
-    #[serde(default)]
-    pub estimate_note: Option<String>,
-    /// With `estimate = "best_simulated"`: the draws EnergyPlus simulated and which became the
-    /// estimate ([`ChainSummary::adopt_best_simulated`]).
-    #[serde(default)]
-    pub estimate_choice: Option<EstimateChoice>,
-    /// Guideline 14 of the surrogate at each predictive draw (`predictive`'s order): what
-    /// `surrogate_at_estimate` becomes where one of them is adopted as the estimate.
-    #[serde(default)]
-    pub surrogate_at_predictive: Vec<Vec<OutputMetrics>>,
-    /// Chains started in the best optimum's mode ([`moved_chains`] of the states).
-    #[serde(default)]
-    pub moved_chains: Vec<MovedChain>,
-    /// Chains whose independence kernel was switched off after burn-in
-    /// ([`independence_dropped`] of the states).
-    #[serde(default)]
-    pub independence_dropped: Vec<usize>,
-    /// Acceptance rate after burn-in, per chain.
-    pub acceptance: Vec<f64>,
-    /// The surrogate's held-out RMSE per output, kWh (its part of the likelihood's noise).
-    pub sigma_eta: Vec<f64>,
-    /// The surrogate's held-out metrics.
-    pub held_out: serde_json::Value,
-    /// Times the final chains were extended because a convergence target was missed.
-    #[serde(default)]
-    pub extensions: u32,
-    /// The verdict on these chains against `mcmc.rhat_target` and `mcmc.ess_target`.
-    #[serde(default)]
-    pub convergence: Convergence,
-    /// The intervals with the surrogate's error ([`crate::surrogate_error`]); `None` without a
-    /// refinement round that measured it, and with `mcmc.temperature = "surrogate_error"`
-    /// (the chains' own intervals carry it then).
-    #[serde(default)]
-    pub surrogate_error: Option<SurrogateError>,
-    /// The likelihood's temperature the chains ran at.
-    #[serde(default = "ChainTemperature::one")]
-    pub temperature: ChainTemperature,
-}
-
-impl ChainSummary {
-    /// Makes the validated candidate the estimate: after `failures` (EnergyPlus failed at the
-    /// estimate and at the fallbacks before the one that ran, in [`crate::next_candidate`]'s
-    /// order), that fallback's values, with a note saying why.
-    pub fn settle_estimate(&mut self, failures: &[String]) {
-        if let Some(x) = failures
-            .len()
-            .checked_sub(1)
-            .and_then(|k| self.fallbacks.get(k))
-        {
-            self.estimate = x.clone();
-            self.estimate_note = Some(fallback_note(failures));
-        }
-    }
-
-    /// Makes `adopted` (its values and the surrogate's metrics there) the estimate where
-    /// `estimate = "best_simulated"` chose a point other than the MAP draw (`choice`); `None`
-    /// keeps the MAP draw. Records the choice either way. `map_failure`: why EnergyPlus could
-    /// not simulate the MAP draw, if it could not.
-    pub fn adopt_best_simulated(
-        &mut self,
-        adopted: Option<(Vec<f64>, Vec<OutputMetrics>)>,
-        choice: EstimateChoice,
-        map_failure: Option<&str>,
-    ) {
-        if let Some((x, surrogate)) = adopted {
-            self.estimate_note = Some(choice.describe(map_failure));
-            self.estimate = x;
-            self.surrogate_at_estimate = surrogate;
-        }
-        self.estimate_choice = Some(choice);
-    }
-
-    /// Predictive draw `j` and the surrogate's metrics there, as
-    /// [`Self::adopt_best_simulated`] takes them.
-    pub fn predictive_point(&self, j: usize) -> Option<(Vec<f64>, Vec<OutputMetrics>)> {
-        let x = self.predictive.get(j)?.clone();
-        Some((
-            x,
-            self.surrogate_at_predictive
-                .get(j)
-                .cloned()
-                .unwrap_or_default(),
-        ))
-    }
-
-    /// The calibrated parameters whose value in `x` lies outside the posterior's 90 %
-    /// interval.
-    pub fn outside_interval(&self, x: &[f64]) -> Vec<String> {
-        (self.posterior.parameters.iter().zip(x))
-            .filter(|(p, v)| **v < p.q5 || **v > p.q95)
-            .map(|(p, _)| p.name.clone())
-            .collect()
-    }
-}
-
 /// [`Sampler::settings_for`]: the project's `[mcmc]` for round `round`, with the round's own
 /// random stream and, in a preliminary round, `refine.kernel` when set.
 fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
@@ -927,41 +556,12 @@ pub fn independence_dropped(states: &[Chain]) -> Vec<usize> {
         .collect()
 }
 
-/// Up to `k` distinct draws (unit space) in decreasing log posterior.
-fn best_draws(draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
-    let mut all: Vec<(f64, &[f64])> = draws
-        .iter()
-        .flat_map(|d| (0..d.len()).map(move |i| (d.log_density[i], d.point(i))))
-        .collect();
-    all.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut out: Vec<Vec<f64>> = vec![];
-    for (_, p) in all {
-        if out.len() >= k {
-            break;
-        }
-        if !out.iter().any(|q| q.as_slice() == p) {
-            out.push(p.to_vec());
-        }
-    }
-    out
-}
-
 fn mean_sd(s: &[f64]) -> (f64, f64) {
     let v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
     let n = v.len().max(1) as f64;
     let m = v.iter().sum::<f64>() / n;
     let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0).max(1.0);
     (m, var.sqrt())
-}
-
-fn sub_draws(d: &Draws, dim: usize) -> Draws {
-    let mut out = Draws::new(dim);
-    for i in 0..d.len() {
-        out.points.extend_from_slice(&d.point(i)[..dim]);
-    }
-    out.log_density = d.log_density.clone();
-    out.stats = d.stats.clone();
-    out
 }
 
 #[cfg(test)]

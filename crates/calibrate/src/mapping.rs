@@ -17,7 +17,7 @@
 //! ([`crate::best_simulated`]); where none does (a meter the model cannot reach), the estimate
 //! stays the best posterior draw.
 //!
-//! This module holds the rule ([`next_step`], [`line`]) and the record
+//! This module holds the rule ([`next_step`], [`line()`]) and the record
 //! (`validation/mapping.json`, which makes the search re-entrant: the coordinator's driver
 //! runs again after every job and must ask for the same points); the driver runs it.
 
@@ -79,7 +79,7 @@ pub fn is_mapped(label: &str) -> bool {
 /// The next step of the search over the points simulated so far (`limit_ratios`: each one's
 /// [`crate::limit_ratio`], in the order they ran), after the steps anchored at `anchors`
 /// (indices into the same list), at most `max_steps` in all: its anchor (the smallest finite
-/// ratio, the first on a tie) and the fractions of [`line`] ([`FRACTIONS`] for a new anchor;
+/// ratio, the first on a tie) and the fractions of [`line()`] ([`FRACTIONS`] for a new anchor;
 /// for one used `k` times before, the one fraction `0.5^(k+1)`, which no step from it ran
 /// yet). `None` when a point passes
 /// Guideline 14 hourly (ratio <= 1: the search is for a fit, not for the best fit), when none
