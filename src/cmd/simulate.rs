@@ -17,10 +17,15 @@ pub struct Args {
     /// (e.g. `bundled:USA_CO_Golden-NREL.724666_TMY3.epw`).
     #[arg(long)]
     pub weather: String,
-    /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines) or
-    /// its `summary.json` (its calibrated values); --set overrides them.
+    /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines),
+    /// its `summary.json` (its calibrated values), or its `draws.csv` with --draw (any
+    /// posterior draw); --set overrides them.
     #[arg(long)]
     pub values: Option<PathBuf>,
+    /// With --values draws.csv: the posterior draw, CHAIN:DRAW as draws.csv numbers them
+    /// (e.g. 2:417).
+    #[arg(long, value_name = "CHAIN:DRAW", requires = "values")]
+    pub draw: Option<String>,
     /// Parameter value, NAME=VALUE (repeatable); others stay at their prior mode.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
@@ -38,7 +43,7 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let (model, runner) = common::load_model(&a.model)?;
     let mut given = match &a.values {
-        Some(p) => read_values(p)?,
+        Some(p) => read_values(p, a.draw.as_deref())?,
         None => Default::default(),
     };
     given.extend(parse_assignments(&a.set)?);
@@ -71,12 +76,30 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Parameter values from `calibrated.toml` (name = value) or `summary.json` (calibrated_values).
+/// Parameter values from `calibrated.toml` (name = value), `summary.json` (calibrated_values)
+/// or `draws.csv` (the draw `draw` names).
 fn read_values(
     path: &std::path::Path,
+    draw: Option<&str>,
 ) -> anyhow::Result<bemcal_energyplus::params::ParameterValues> {
+    let is_csv = path.extension().is_some_and(|e| e == "csv");
+    anyhow::ensure!(
+        draw.is_none() || is_csv,
+        "--draw picks a row of a calibration's draws.csv, not of {}",
+        path.display()
+    );
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    if is_csv {
+        let draw = draw.with_context(|| {
+            format!(
+                "{}: a draws file needs --draw CHAIN:DRAW (which posterior draw)",
+                path.display()
+            )
+        })?;
+        let values = draw_values(&text, draw).with_context(|| path.display().to_string())?;
+        return Ok(values.into_iter().collect());
+    }
     if path.extension().is_some_and(|e| e == "json") {
         #[derive(serde::Deserialize)]
         struct Calibrated {
@@ -99,4 +122,103 @@ fn read_values(
             )
         })?;
     Ok(table.into_iter().collect())
+}
+
+/// The calibrated parameters' values of draw `which` (`CHAIN:DRAW`) of a calibration's
+/// `draws.csv`: the columns after `chain` and `draw` up to the noise (`sigma_delta_*`), the log
+/// posterior and the sampler's statistics (`*__`).
+fn draw_values(text: &str, which: &str) -> anyhow::Result<Vec<(String, f64)>> {
+    let (chain, draw) = which
+        .split_once(':')
+        .and_then(|(c, d)| Some((c.trim().parse::<u64>().ok()?, d.trim().parse::<u64>().ok()?)))
+        .with_context(|| {
+            format!(
+                "--draw {}: expected CHAIN:DRAW, two whole numbers such as 0:250",
+                bemcal_excerpt::excerpt(which, 40)
+            )
+        })?;
+    let mut r = csv::Reader::from_reader(text.as_bytes());
+    let header = r.headers().context("reading the header")?.clone();
+    anyhow::ensure!(
+        header.get(0) == Some("chain") && header.get(1) == Some("draw"),
+        "expected a calibration's draws.csv (chain,draw,parameters...), found the header {}",
+        bemcal_excerpt::excerpt(&header.iter().collect::<Vec<_>>().join(","), 120)
+    );
+    let names: Vec<&str> = header
+        .iter()
+        .skip(2)
+        .take_while(|n| {
+            !n.starts_with("sigma_delta_") && *n != "log_posterior" && !n.ends_with("__")
+        })
+        .collect();
+    let (mut chains, mut draws) = (0u64, 0u64);
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.with_context(|| format!("line {}", i + 2))?;
+        let field = |k: usize| -> anyhow::Result<f64> {
+            let v = rec.get(k).unwrap_or_default();
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .with_context(|| {
+                    format!(
+                        "line {}, column {}: expected a number, found {:?}",
+                        i + 2,
+                        header.get(k).unwrap_or_default(),
+                        bemcal_excerpt::excerpt(v, 40)
+                    )
+                })
+        };
+        let (c, d) = (field(0)? as u64, field(1)? as u64);
+        chains = chains.max(c + 1);
+        draws = draws.max(d + 1);
+        if (c, d) == (chain, draw) {
+            return names
+                .iter()
+                .enumerate()
+                .map(|(j, n)| Ok((n.to_string(), field(j + 2)?)))
+                .collect();
+        }
+    }
+    anyhow::bail!(
+        "no draw {chain}:{draw}: the file has chains 0 to {} and draws 0 to {} per chain",
+        chains.saturating_sub(1),
+        draws.saturating_sub(1)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DRAWS: &str = "chain,draw,lighting_power_density,cooling_setpoint_occupied,\
+sigma_delta_heating_kwh,log_posterior,accept_stat__,stepsize__,n_leapfrog__,divergent__
+0,0,12.0,25.2,3.1,-8554.7,1,1.09,3,0
+0,1,12.5,24.4,3.0,-8554.8,1,1.19,3,0
+1,0,13.0,23.0,2.9,-8555.0,0.9,1.1,7,0
+1,1,13.5,22.5,2.8,-8556.0,0.8,1.1,7,0
+";
+
+    #[test]
+    fn a_draw_of_draws_csv_gives_its_parameters_only() {
+        assert_eq!(
+            draw_values(DRAWS, "1:0").unwrap(),
+            vec![
+                ("lighting_power_density".to_string(), 13.0),
+                ("cooling_setpoint_occupied".to_string(), 23.0)
+            ]
+        );
+        let e = draw_values(DRAWS, "2:0").unwrap_err().to_string();
+        assert!(e.contains("chains 0 to 1 and draws 0 to 1"), "{e}");
+        let e = draw_values(DRAWS, "first").unwrap_err().to_string();
+        assert!(e.contains("CHAIN:DRAW"), "{e}");
+        let bad = DRAWS.replace("13.0,23.0", "13.0,inf");
+        let e = format!("{:#}", draw_values(&bad, "1:0").unwrap_err());
+        assert!(
+            e.contains("line 4, column cooling_setpoint_occupied"),
+            "{e}"
+        );
+        let e = draw_values("a,b\n1,2\n", "0:0").unwrap_err().to_string();
+        assert!(e.contains("expected a calibration's draws.csv"), "{e}");
+    }
 }
