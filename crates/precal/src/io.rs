@@ -194,6 +194,25 @@ fn write_bases(s: &mut String, r: &Precalibration) {
     for d in &r.disaggregation.series {
         let _ = writeln!(s, "  series {}: {}", d.name, d.method);
     }
+    let suggested = r.suggested_bases();
+    if suggested.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\nSuggested [[bases]] (loads in the meters that a model usually lacks; add them to the \
+         project file where yours lacks them, with the output your [outputs] maps to that meter):"
+    );
+    for b in &suggested {
+        let _ = writeln!(s, "  # {}", b.why);
+        let _ = writeln!(s, "  [[bases]]\n  output = \"{}\"", b.output);
+        if let Some(sub) = &b.submeter {
+            let _ = writeln!(s, "  submeter = \"{sub}\"");
+        }
+        if let Some(k) = b.kwh_per_hour {
+            let _ = writeln!(s, "  kwh_per_hour = {k:.3}");
+        }
+    }
 }
 
 /// The day-type clustering: series, band, k and silhouettes, clusters, outlier days.

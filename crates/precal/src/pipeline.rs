@@ -87,7 +87,73 @@ pub struct Precalibration {
     pub notes: Vec<String>,
 }
 
+/// A `[[bases]]` entry of the project file that pre-calibration suggests: a load in a meter
+/// that a building model usually lacks ([`Precalibration::suggested_bases`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SuggestedBase {
+    /// The model output whose meter holds the load (the default output name of the meter's
+    /// role: `electricity_kwh`, `cooling_kwh`).
+    pub output: String,
+    /// The sub-meter that measures the load hour by hour, if one does.
+    pub submeter: Option<String>,
+    /// Else a constant load, kWh per hour.
+    pub kwh_per_hour: Option<f64>,
+    /// Why, in words.
+    pub why: String,
+}
+
+/// A cooling base is suggested when it is at least this share of the cooling meter's mean:
+/// smaller, it is the meter's noise floor, not a load.
+pub const COOLING_BASE_SHARE: f64 = 0.05;
+
 impl Precalibration {
+    /// The `[[bases]]` this pre-calibration suggests (reference section 2.2.1's bases, where a
+    /// model usually lacks them): a data-center sub-meter, hour by hour, on the electricity
+    /// meter; a cooling base through the heating season (server rooms, labs, process cooling) of
+    /// at least [`COOLING_BASE_SHARE`] of the cooling meter's mean. Not the night electricity
+    /// base (the building's own unoccupied load, which the model has) nor the heating base (hot
+    /// water, which the model's `hot_water_peak_flow` prior carries).
+    pub fn suggested_bases(&self) -> Vec<SuggestedBase> {
+        let mut out = vec![];
+        if let Some(dc) = self.meters.submeter("data_center") {
+            let median = self
+                .disaggregation
+                .estimate("electricity_base_kw")
+                .map_or(f64::NAN, |e| e.value);
+            out.push(SuggestedBase {
+                output: "electricity_kwh".into(),
+                submeter: Some(dc.role.name().to_string()),
+                kwh_per_hour: None,
+                why: format!(
+                    "the data_center sub-meter, hour by hour (median {median:.1} kW), if the \
+                     electricity meter includes it and the model has no data center"
+                ),
+            });
+        }
+        let cooling_mean = self
+            .quality
+            .iter()
+            .find(|q| q.meter == MeterRole::Cooling.name())
+            .map(|q| q.mean_kwh);
+        let base = self.disaggregation.estimate("cooling_base_kw");
+        if let (Some(mean), Some(base)) = (cooling_mean, base) {
+            if base.value > 0.0 && base.value >= COOLING_BASE_SHARE * mean {
+                out.push(SuggestedBase {
+                    output: "cooling_kwh".into(),
+                    submeter: None,
+                    kwh_per_hour: Some(base.value),
+                    why: format!(
+                        "cooling all through the heating season ({:.0} % of the meter's mean; \
+                         {}): server rooms, labs or process cooling, if the model has none",
+                        100.0 * base.value / mean,
+                        base.method
+                    ),
+                });
+            }
+        }
+        out
+    }
+
     /// The weekday or weekend schedule.
     pub fn schedule(&self, label: DayLabel) -> &DayTypeSchedule {
         self.schedules

@@ -132,7 +132,21 @@ fn rsf_precalibration_finds_bases_day_types_and_intervals() {
         .filter(|p| p.name.starts_with("schedule_"))
         .count();
     assert_eq!(n_sched, after);
-    eprintln!("{}", bemcal_precal::io::summary_text(&r));
+    // The data center is suggested as a base of the electricity meter, hour by hour from its
+    // sub-meter; the night electricity base (the building's own) is not.
+    let suggested = r.suggested_bases();
+    assert!(
+        suggested
+            .iter()
+            .any(|b| b.output == "electricity_kwh" && b.submeter.as_deref() == Some("data_center")),
+        "{suggested:?}"
+    );
+    let text = bemcal_precal::io::summary_text(&r);
+    assert!(
+        text.contains("[[bases]]\n  output = \"electricity_kwh\"\n  submeter = \"data_center\""),
+        "{text}"
+    );
+    eprintln!("{text}");
 }
 
 #[test]
