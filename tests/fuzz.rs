@@ -7,7 +7,9 @@
 //!
 //! `make test` runs a few hundred mutations per parser; `make fuzz` runs many more
 //! (`BEMCAL_FUZZ_ITERATIONS`, `BEMCAL_FUZZ_SEED`). A crashing input is written to
-//! `target/fuzz-crashes/` to be kept as a regression case.
+//! `target/fuzz-crashes/`, named `PARSER-SEED-MUTATION`; copied into `tests/fuzz-regressions/`
+//! it is a regression case, replayed by every `make test` (`regression_cases`) through the
+//! parser its name starts with, with the reproductions of issue 21's bad inputs.
 
 mod common;
 
@@ -147,6 +149,112 @@ fn fuzz(name: &str, seed_input: &[u8], parse: impl Fn(&[u8]) -> Result<(), Strin
     eprintln!("{name}: {accepted} accepted, {refused} refused");
 }
 
+/// A parser under test: the input's bytes -> accepted, or refused with a message.
+type Parse = Box<dyn Fn(&[u8]) -> Result<(), String>>;
+
+/// The parser called `name` (the prefix of a regression case's file name); `None` for an
+/// unknown name.
+fn parser(name: &str) -> Option<Parse> {
+    Some(match name {
+        "meters" => {
+            let project =
+                bemcal_calibrate::Project::load(&common::repo().join("examples/rsf/project.toml"))
+                    .unwrap();
+            let spec = project.meters.clone();
+            Box::new(move |b| {
+                bemcal_precal::meters::parse_meters(
+                    &text(b),
+                    Path::new("meters.csv"),
+                    &spec,
+                    Some(2011.into()),
+                    Some(-7.0),
+                )
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+            })
+        }
+        "epw" => Box::new(|b| {
+            bemcal_weather::Epw::parse(&text(b), Path::new("weather.epw"))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        "isd_lite" => Box::new(|b| {
+            bemcal_weather::station::parse_isd_lite(&text(b), Path::new("station.txt"), 256.0)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        "idf" => Box::new(|b| {
+            bemcal_energyplus::idf::Idf::parse(&text(b), Path::new("model.idf"))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        "project" => Box::new(|b| {
+            let p: bemcal_calibrate::Project =
+                bemcal_energyplus::parse_toml(&text(b), Path::new("project.toml"))
+                    .map_err(|e| e.to_string())?;
+            p.validate()
+        }),
+        "model" => Box::new(|b| {
+            bemcal_energyplus::BuildingSpec::from_toml(&text(b), Path::new("model.toml"))
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        "priors" => Box::new(|b| {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("priors.toml");
+            std::fs::write(&path, b).unwrap();
+            bemcal_precal::io::read_priors(&path)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        "draws" => Box::new(|b| {
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("draws.csv");
+            std::fs::write(&path, b).unwrap();
+            bemcal_report::io::read_draws(&path)
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        }),
+        _ => return None,
+    })
+}
+
+/// Every file of `tests/fuzz-regressions/` through the parser its name starts with
+/// (`PARSER-...`): no panic, and a refusal's message stays short; a case named
+/// `PARSER-refused-...` must be refused.
+#[test]
+fn regression_cases() {
+    let dir = common::repo().join("tests/fuzz-regressions");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file() && p.extension().is_none_or(|e| e != "md"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 8, "{} regression cases", files.len());
+    for f in &files {
+        let name = f.file_name().unwrap().to_string_lossy().into_owned();
+        let kind = name.split('-').next().unwrap();
+        let parse = parser(kind).unwrap_or_else(|| panic!("{name}: no parser called {kind}"));
+        let input = std::fs::read(f).unwrap();
+        match catch_unwind(AssertUnwindSafe(|| parse(&input))) {
+            Ok(Ok(())) => {
+                assert!(!name.contains("-refused-"), "{name}: accepted");
+                eprintln!("{name}: accepted");
+            }
+            Ok(Err(message)) => {
+                assert!(
+                    message.len() <= MAX_MESSAGE,
+                    "{name}: an error of {} bytes",
+                    message.len()
+                );
+                eprintln!("{name}: refused: {message}");
+            }
+            Err(_) => panic!("{name} panicked in the {kind} parser"),
+        }
+    }
+}
+
 fn keep(name: &str, i: usize, input: &[u8]) {
     let dir = common::repo().join("target/fuzz-crashes");
     let _ = std::fs::create_dir_all(&dir);
@@ -163,21 +271,8 @@ fn meters_csv() {
         eprintln!("skipped: ../shared/data is not here");
         return;
     };
-    let project =
-        bemcal_calibrate::Project::load(&common::repo().join("examples/rsf/project.toml")).unwrap();
-    let spec = project.meters.clone();
     let seed_input = std::fs::read(&path).unwrap();
-    fuzz("meters", &seed_input, |b| {
-        bemcal_precal::meters::parse_meters(
-            &text(b),
-            Path::new("meters.csv"),
-            &spec,
-            Some(2011.into()),
-            Some(-7.0),
-        )
-        .map(|_| ())
-        .map_err(|e| e.to_string())
-    });
+    fuzz("meters", &seed_input, parser("meters").unwrap());
 }
 
 #[test]
@@ -187,11 +282,7 @@ fn epw() {
         return;
     };
     let seed_input = std::fs::read(&path).unwrap();
-    fuzz("epw", &seed_input, |b| {
-        bemcal_weather::Epw::parse(&text(b), Path::new("weather.epw"))
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("epw", &seed_input, parser("epw").unwrap());
 }
 
 #[test]
@@ -203,57 +294,33 @@ fn isd_lite() {
     let seed_input = bemcal_weather::station::read_text(&path)
         .unwrap()
         .into_bytes();
-    fuzz("isd_lite", &seed_input, |b| {
-        bemcal_weather::station::parse_isd_lite(&text(b), Path::new("station.txt"), 256.0)
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("isd_lite", &seed_input, parser("isd_lite").unwrap());
 }
 
 #[test]
 fn idf() {
     let seed_input = b"! A small model\nVersion, 25.2;\nBuilding,\n  Office,  !- Name\n  0,       !- North Axis\n  City,    !- Terrain\n  0.04, 0.4, FullExterior, 25, 6;\nLights,\n  L1, Zone1, Sched, Watts/Area, , 10.0, , 0, 0.42, 0.18, 1;\nSchedule:Compact,\n  Sched, Fraction, Through: 12/31, For: AllDays, Until: 24:00, 1.0;\n";
-    fuzz("idf", seed_input, |b| {
-        bemcal_energyplus::idf::Idf::parse(&text(b), Path::new("model.idf"))
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("idf", seed_input, parser("idf").unwrap());
 }
 
 #[test]
 fn project_and_model_toml() {
     let dir = common::repo().join("examples/office");
     let project = std::fs::read(dir.join("project.toml")).unwrap();
-    fuzz("project", &project, |b| {
-        let p: bemcal_calibrate::Project =
-            bemcal_energyplus::parse_toml(&text(b), Path::new("project.toml"))
-                .map_err(|e| e.to_string())?;
-        p.validate()
-    });
+    fuzz("project", &project, parser("project").unwrap());
     let model = std::fs::read(dir.join("model.toml")).unwrap();
-    fuzz("model", &model, |b| {
-        bemcal_energyplus::BuildingSpec::from_toml(&text(b), Path::new("model.toml"))
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("model", &model, parser("model").unwrap());
 }
 
 #[test]
 fn priors_toml() {
     let seed_input = b"[schedule]\nweekday_boundaries = [7, 18]\nweekend_boundaries = [9, 16]\n\n[priors.lighting_power_density]\ndistribution = \"triangular\"\nmin = 5.0\nmode = 10.0\nmax = 15.0\n";
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("priors.toml");
-    std::fs::write(&path, seed_input).unwrap();
-    if bemcal_precal::io::read_priors(&path).is_err() {
+    let parse = parser("priors").unwrap();
+    if parse(seed_input).is_err() {
         eprintln!("skipped: the priors example does not match the format");
         return;
     }
-    fuzz("priors", seed_input, |b| {
-        std::fs::write(&path, b).unwrap();
-        bemcal_precal::io::read_priors(&path)
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("priors", seed_input, parse);
 }
 
 #[test]
@@ -264,14 +331,7 @@ fn draws_csv() {
             seed_input.push_str(&format!("{c},{d},{},{},-{}.5\n", d as f64 * 0.01, c, d));
         }
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("draws.csv");
-    fuzz("draws", seed_input.as_bytes(), |b| {
-        std::fs::write(&path, b).unwrap();
-        bemcal_report::io::read_draws(&path)
-            .map(|_| ())
-            .map_err(|e| e.to_string())
-    });
+    fuzz("draws", seed_input.as_bytes(), parser("draws").unwrap());
 }
 
 #[test]
