@@ -1,5 +1,6 @@
 //! Mutation fuzzing of every parser a user or a client feeds: meters CSV, EPW, ISD-lite, IDF,
-//! project and model TOML, priors.toml, draws.csv and the protocol's messages. Each starts from
+//! project and model TOML, priors.toml, draws.csv and the protocol's messages (decoded, and
+//! those that decode sent through a coordinator's handlers). Each starts from
 //! a real input (the NREL RSF 2011 meters, a TMY3 file, the 2017 ISD-lite data, the bundled
 //! examples) and applies seeded random mutations (bytes flipped, ranges cut or repeated, huge
 //! cells, unbalanced quotes, `inf`/`NaN`/`1e999`, truncation). The property: no panic, and a
@@ -377,4 +378,154 @@ fn protocol_messages() {
             .map(|_| ())
             .map_err(|e| e.to_string())
     });
+}
+
+/// Mutated protocol messages through a coordinator's handlers, not only decoded: every
+/// mutation that still decodes is sent (the clients' calls with the client token, the workers'
+/// with the worker token). The coordinator answers each, every error stays short, and it is
+/// still up and healthy at the end.
+#[test]
+fn protocol_messages_through_the_coordinator() {
+    use bemcal_client::client::Connect;
+    use bemcal_client::proto::{
+        CompleteRequest, FailRequest, FileRef, HealthRequest, HeartbeatRequest, LeaseRequest,
+        RunRequest, SubmitRequest,
+    };
+    use prost::Message;
+    const CLIENT: &str = "fuzz-client-token-0123456789";
+    const WORKER: &str = "fuzz-worker-token-0123456789";
+    let dir = tempfile::tempdir().unwrap();
+    let wt = dir.path().join("worker.token");
+    std::fs::write(&wt, WORKER).unwrap();
+    let (mut proc, url) = common::coordinator(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        CLIENT,
+        &["--worker-token-file", wt.to_str().unwrap()],
+    );
+    let file = FileRef {
+        path: "project.toml".into(),
+        sha256: "ab".repeat(32),
+        size: 10,
+    };
+    let seeds: Vec<(&str, Vec<u8>)> = vec![
+        (
+            "submit",
+            SubmitRequest {
+                bundle: vec![file.clone(); 2],
+                surrogate: vec![file.clone()],
+                portfolio: "campus".into(),
+                building: "b1".into(),
+            }
+            .encode_to_vec(),
+        ),
+        (
+            "lease",
+            LeaseRequest {
+                worker_id: "w1".into(),
+                free_slots: 1,
+                protocol: bemcal_client::PROTOCOL,
+            }
+            .encode_to_vec(),
+        ),
+        (
+            "heartbeat",
+            HeartbeatRequest {
+                worker_id: "w1".into(),
+                lease_id: 3,
+            }
+            .encode_to_vec(),
+        ),
+        (
+            "complete",
+            CompleteRequest {
+                worker_id: "w1".into(),
+                lease_id: 3,
+                outputs: vec![file.clone()],
+                result_json: "{\"seconds\": 1.0}".into(),
+            }
+            .encode_to_vec(),
+        ),
+        (
+            "fail",
+            FailRequest {
+                worker_id: "w1".into(),
+                lease_id: 3,
+                error: "EnergyPlus failed".into(),
+                requeue: false,
+            }
+            .encode_to_vec(),
+        ),
+        (
+            "run",
+            RunRequest {
+                run_id: "r0123456789".into(),
+            }
+            .encode_to_vec(),
+        ),
+    ];
+    let connect = |token: &str| {
+        Connect {
+            url: url.clone(),
+            token: token.into(),
+            tls_ca: None,
+        }
+        .client()
+        .unwrap()
+    };
+    let rt = bemcal_client::runtime().unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed() ^ 0xC0FF);
+    let (mut sent, mut refused) = (0, 0);
+    rt.block_on(async {
+        let (mut c, mut w) = (connect(CLIENT), connect(WORKER));
+        for i in 0..iterations() {
+            for (name, seed_input) in &seeds {
+                let mut input = seed_input.clone();
+                for _ in 0..rng.random_range(1..3) {
+                    input = mutate(&mut rng, &input);
+                }
+                let b = input.as_slice();
+                let status = match *name {
+                    "submit" => match SubmitRequest::decode(b) {
+                        Ok(m) => c.submit(m).await.err(),
+                        Err(_) => continue,
+                    },
+                    "lease" => match LeaseRequest::decode(b) {
+                        Ok(m) => w.lease(m).await.err(),
+                        Err(_) => continue,
+                    },
+                    "heartbeat" => match HeartbeatRequest::decode(b) {
+                        Ok(m) => w.heartbeat(m).await.err(),
+                        Err(_) => continue,
+                    },
+                    "complete" => match CompleteRequest::decode(b) {
+                        Ok(m) => w.complete(m).await.err(),
+                        Err(_) => continue,
+                    },
+                    "fail" => match FailRequest::decode(b) {
+                        Ok(m) => w.fail(m).await.err(),
+                        Err(_) => continue,
+                    },
+                    _ => match RunRequest::decode(b) {
+                        Ok(m) => c.get_run(m.clone()).await.err().or(c.cancel(m).await.err()),
+                        Err(_) => continue,
+                    },
+                };
+                sent += 1;
+                if let Some(s) = status {
+                    refused += 1;
+                    assert!(
+                        s.message().len() <= MAX_MESSAGE,
+                        "{name} {i}: an error of {} bytes: {}...",
+                        s.message().len(),
+                        &s.message()[..s.message().floor_char_boundary(300)]
+                    );
+                }
+            }
+        }
+        let h = c.health(HealthRequest {}).await.unwrap().into_inner();
+        eprintln!("{sent} messages sent, {refused} refused; health: {h:?}");
+    });
+    assert!(sent > 100, "only {sent} mutated messages decoded");
+    assert!(proc.0.try_wait().unwrap().is_none(), "the coordinator died");
 }
