@@ -271,6 +271,16 @@ fn distributed_matches_single_process() {
     assert_eq!(sa["model_form"]["meters"].as_array().map(Vec::len), Some(3));
     assert_eq!(sa["holdout"]["hours"], 31 * 24);
     assert_eq!(sa["predictive"]["draws"], 3, "{}", sa["predictive"]);
+    // Each meter says which error model its held-out hours favour.
+    for o in sa["predictive"]["outputs"].as_array().unwrap() {
+        let f = &o["held_out_favours"];
+        assert!(f["error_model"].is_string(), "{o}");
+        assert!(
+            f["miss_points"].as_f64().unwrap()
+                <= f["configured_miss_points"].as_f64().unwrap() + 2.0,
+            "{o}"
+        );
+    }
     assert!(
         sa["validation"][0]["held_out"]["hourly"]["n"]
             .as_u64()

@@ -344,9 +344,37 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
                 if !c.held_out.is_empty() {
                     println!("{:<18} held out   {}", "", cov(&c.held_out));
                 }
+                if let Some(f) = &o.held_out_favours {
+                    println!("{:<18} {}", "", held_out_choice(f, p.error_model));
+                }
             }
         }
         print_totals(p, &cov);
+    }
+}
+
+/// The error model the held-out hours favour, in words.
+fn held_out_choice(
+    f: &bemcal_calibrate::predictive::HeldOutChoice,
+    configured: bemcal_stats::predictive::ErrorModel,
+) -> String {
+    let name = |m| serde_json::to_string(&m).unwrap_or_default();
+    if f.error_model == configured {
+        format!(
+            "the held-out hours favour the configured error model ({}: {:.1} points from \
+             nominal)",
+            name(configured),
+            f.miss_points
+        )
+    } else {
+        format!(
+            "the held-out hours favour error_model = {} ({:.1} points from nominal, against \
+             {:.1} for {}): set it under [validation] for this building",
+            name(f.error_model),
+            f.miss_points,
+            f.configured_miss_points,
+            name(configured)
+        )
     }
 }
 

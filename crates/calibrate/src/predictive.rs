@@ -19,8 +19,8 @@ use bemcal_stats::mcmc::Draws;
 use std::ops::Range;
 
 use bemcal_stats::predictive::{
-    coverage, intervals, lag1_autocorrelation, period_totals, total_intervals, Coverage,
-    ErrorModel, Intervals,
+    coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_totals,
+    total_intervals, Coverage, ErrorModel, Intervals,
 };
 use serde::{Deserialize, Serialize};
 
@@ -138,6 +138,28 @@ pub struct OutputPredictive {
     /// noise of a sum and as if hours were independent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub totals: Vec<TotalsCoverage>,
+    /// With a held-out period: the error model its hours favour ([`HeldOutChoice`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_favours: Option<HeldOutChoice>,
+}
+
+/// Two error models whose held-out coverage is within this many percentage points of each
+/// other (summed over the 50 % and 90 % levels) count as equal: the narrower one is favoured.
+pub const TIE_POINTS: f64 = 2.0;
+
+/// The error model whose hourly intervals hold best on the held-out hours: the one whose 50 %
+/// and 90 % coverage there is nearest nominal, the narrower of those within [`TIE_POINTS`]
+/// ([`bemcal_stats::predictive::nearest_nominal`]). What to set as `[validation] error_model`
+/// for this meter; chosen on the held-out hours, so that their coverage under it is no longer
+/// an independent check (three candidates on thousands of hours: a small bias).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutChoice {
+    /// The favoured error model.
+    pub error_model: ErrorModel,
+    /// Its held-out coverage's distance from nominal, percentage points over both levels.
+    pub miss_points: f64,
+    /// The same for the configured error model (`validation/predictive_intervals.csv`'s).
+    pub configured_miss_points: f64,
 }
 
 /// What a total is taken over.
@@ -311,12 +333,21 @@ pub fn assess(
                 })
             })
             .collect::<Result<Vec<_>, Error>>()?;
+        let held: Vec<&[Coverage]> = (by_error_model.iter())
+            .map(|m| m.coverage.held_out.as_slice())
+            .collect();
+        let held_out_favours = nearest_nominal(&held, TIE_POINTS).map(|i| HeldOutChoice {
+            error_model: by_error_model[i].error_model,
+            miss_points: coverage_miss(held[i]),
+            configured_miss_points: coverage_miss(held[0]),
+        });
         outputs.push(OutputPredictive {
             output: name.clone(),
             noise_kwh,
             by_error_model,
             residual_phi,
             totals,
+            held_out_favours,
         });
     }
     write_intervals_csv(cal, &fit, &columns)?;

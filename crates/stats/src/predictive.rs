@@ -313,6 +313,36 @@ pub fn period_totals(
         .unzip()
 }
 
+/// How far a set of intervals' coverage is from nominal: the sum over its levels of
+/// `|fraction - nominal|`, in percentage points (NaN with no level judged). The calibration of
+/// intervals in the sense of Gneiting, Balabdaoui & Raftery (2007, JRSS B 69), "calibration
+/// subject to sharpness": the first thing to ask of them.
+pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
+    if coverage.is_empty() || coverage.iter().any(|c| c.hours == 0) {
+        return f64::NAN;
+    }
+    coverage
+        .iter()
+        .map(|c| 100.0 * (c.fraction - c.nominal).abs())
+        .sum()
+}
+
+/// Of several candidates' coverages (on the same hours), the index of the one nearest nominal
+/// ([`coverage_miss`]); among those within `tie_points` of it, the sharpest (the smallest mean
+/// width over the levels), as Gneiting et al. 2007 ask. `None` where no candidate was judged.
+pub fn nearest_nominal(candidates: &[&[Coverage]], tie_points: f64) -> Option<usize> {
+    let misses: Vec<f64> = candidates.iter().map(|c| coverage_miss(c)).collect();
+    let best = misses
+        .iter()
+        .copied()
+        .filter(|m| m.is_finite())
+        .min_by(f64::total_cmp)?;
+    let width = |c: &[Coverage]| c.iter().map(|c| c.mean_width).sum::<f64>();
+    (0..candidates.len())
+        .filter(|&i| misses[i].is_finite() && misses[i] <= best + tie_points)
+        .min_by(|&a, &b| width(candidates[a]).total_cmp(&width(candidates[b])))
+}
+
 /// How often one interval level held on a set of hours.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Coverage {
@@ -392,6 +422,44 @@ pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_candidate_nearest_nominal_wins_and_a_tie_goes_to_the_sharper() {
+        let cov = |f50: f64, f90: f64, w: f64| {
+            vec![
+                Coverage {
+                    nominal: 0.5,
+                    hours: 2000,
+                    fraction: f50,
+                    mean_width: w,
+                    relative_width: None,
+                },
+                Coverage {
+                    nominal: 0.9,
+                    hours: 2000,
+                    fraction: f90,
+                    mean_width: 2.0 * w,
+                    relative_width: None,
+                },
+            ]
+        };
+        // The RSF's heating held out (level, constant, hour of day): 18.4, 9.7, 5.0 points.
+        let (level, constant, hour) = (
+            cov(0.602, 0.982, 248.0),
+            cov(0.587, 0.912, 197.0),
+            cov(0.547, 0.903, 191.0),
+        );
+        assert!((coverage_miss(&level) - 18.4).abs() < 1e-9);
+        assert_eq!(nearest_nominal(&[&level, &constant, &hour], 1.0), Some(2));
+        // Within the tie margin, the narrower intervals.
+        let wide = cov(0.50, 0.90, 300.0);
+        let narrow = cov(0.505, 0.905, 100.0);
+        assert_eq!(nearest_nominal(&[&wide, &narrow], 0.5), Some(0));
+        assert_eq!(nearest_nominal(&[&wide, &narrow], 1.5), Some(1));
+        // Nothing judged.
+        assert_eq!(nearest_nominal(&[&[][..]], 1.0), None);
+        assert!(coverage_miss(&[]).is_nan());
+    }
+
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
