@@ -16,6 +16,7 @@ mod common;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -220,9 +221,31 @@ fn parser(name: &str) -> Option<Parse> {
     })
 }
 
+/// Why each `PARSER-refused-...` case must be refused: a part of the parser's message, so that
+/// a case keeps testing its own check (not a later one that would refuse it too).
+const REFUSED_FOR: &[(&str, &str)] = &[
+    ("draws-refused-short-rows", "found record with 3 fields"),
+    ("epw-refused-duplicated-hour", "a duplicated hour"),
+    ("epw-refused-time-zone-99", "time zone 99"),
+    ("idf-refused-unterminated-object", "not terminated by ';'"),
+    ("meters-refused-duplicated-stamp", "duplicate hour"),
+    ("meters-refused-empty", "empty file"),
+    ("meters-refused-header-only", "no data rows"),
+    (
+        "meters-refused-non-finite-and-short-rows",
+        "not a finite number",
+    ),
+    ("meters-refused-unbalanced-quote", "is neither ISO 8601"),
+    (
+        "model-refused-infinite-footprint",
+        "expected two finite lengths",
+    ),
+    ("project-refused-non-integer-iterations", "expected u64"),
+];
+
 /// Every file of `tests/fuzz-regressions/` through the parser its name starts with
 /// (`PARSER-...`): no panic, and a refusal's message stays short; a case named
-/// `PARSER-refused-...` must be refused.
+/// `PARSER-refused-...` must be refused, for the reason [`REFUSED_FOR`] gives.
 #[test]
 fn regression_cases() {
     let dir = common::repo().join("tests/fuzz-regressions");
@@ -249,6 +272,17 @@ fn regression_cases() {
                     "{name}: an error of {} bytes",
                     message.len()
                 );
+                if name.contains("-refused-") {
+                    let why = REFUSED_FOR
+                        .iter()
+                        .find(|(n, _)| *n == name)
+                        .unwrap_or_else(|| panic!("{name}: add its reason to REFUSED_FOR"))
+                        .1;
+                    assert!(
+                        message.contains(why),
+                        "{name}: refused for another reason: {message}"
+                    );
+                }
                 eprintln!("{name}: refused: {message}");
             }
             Err(_) => panic!("{name} panicked in the {kind} parser"),
@@ -485,47 +519,72 @@ fn protocol_messages_through_the_coordinator() {
                     input = mutate(&mut rng, &input);
                 }
                 let b = input.as_slice();
+                // Every call gets a deadline: a handler that hangs fails the test, not the suite.
+                let deadline = Duration::from_secs(20);
                 let status = match *name {
                     "submit" => match SubmitRequest::decode(b) {
-                        Ok(m) => c.submit(m).await.err(),
+                        Ok(m) => within(deadline, c.submit(m)).await,
                         Err(_) => continue,
                     },
                     "lease" => match LeaseRequest::decode(b) {
-                        Ok(m) => w.lease(m).await.err(),
+                        Ok(m) => within(deadline, w.lease(m)).await,
                         Err(_) => continue,
                     },
                     "heartbeat" => match HeartbeatRequest::decode(b) {
-                        Ok(m) => w.heartbeat(m).await.err(),
+                        Ok(m) => within(deadline, w.heartbeat(m)).await,
                         Err(_) => continue,
                     },
                     "complete" => match CompleteRequest::decode(b) {
-                        Ok(m) => w.complete(m).await.err(),
+                        Ok(m) => within(deadline, w.complete(m)).await,
                         Err(_) => continue,
                     },
                     "fail" => match FailRequest::decode(b) {
-                        Ok(m) => w.fail(m).await.err(),
+                        Ok(m) => within(deadline, w.fail(m)).await,
                         Err(_) => continue,
                     },
                     _ => match RunRequest::decode(b) {
-                        Ok(m) => c.get_run(m.clone()).await.err().or(c.cancel(m).await.err()),
+                        Ok(m) => {
+                            let got = within(deadline, c.get_run(m.clone())).await;
+                            check(name, i, got.as_ref());
+                            within(deadline, c.cancel(m)).await
+                        }
                         Err(_) => continue,
                     },
                 };
                 sent += 1;
-                if let Some(s) = status {
-                    refused += 1;
-                    assert!(
-                        s.message().len() <= MAX_MESSAGE,
-                        "{name} {i}: an error of {} bytes: {}...",
-                        s.message().len(),
-                        &s.message()[..s.message().floor_char_boundary(300)]
-                    );
-                }
+                refused += usize::from(status.is_some());
+                check(name, i, status.as_ref());
             }
         }
         let h = c.health(HealthRequest {}).await.unwrap().into_inner();
         eprintln!("{sent} messages sent, {refused} refused; health: {h:?}");
     });
-    assert!(sent > 100, "only {sent} mutated messages decoded");
+    assert!(
+        sent > iterations() / 2,
+        "only {sent} mutated messages decoded"
+    );
     assert!(proc.0.try_wait().unwrap().is_none(), "the coordinator died");
+}
+
+/// A call's error, or `None`; panics if it does not answer within `deadline`.
+async fn within<T>(
+    deadline: Duration,
+    call: impl std::future::Future<Output = Result<tonic::Response<T>, tonic::Status>>,
+) -> Option<tonic::Status> {
+    tokio::time::timeout(deadline, call)
+        .await
+        .expect("the coordinator did not answer within the deadline")
+        .err()
+}
+
+/// An error's message stays short.
+fn check(name: &str, i: usize, status: Option<&tonic::Status>) {
+    if let Some(s) = status {
+        assert!(
+            s.message().len() <= MAX_MESSAGE,
+            "{name} {i}: an error of {} bytes: {}...",
+            s.message().len(),
+            &s.message()[..s.message().floor_char_boundary(300)]
+        );
+    }
 }

@@ -353,26 +353,29 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
     }
 }
 
-/// The error model the held-out hours favour, in words.
+/// The error model a meter's held-out hours favour, in words (`error_model` is one setting
+/// for the whole project: the meters may favour different ones).
 fn held_out_choice(
     f: &bemcal_calibrate::predictive::HeldOutChoice,
     configured: bemcal_stats::predictive::ErrorModel,
 ) -> String {
     let name = |m| serde_json::to_string(&m).unwrap_or_default();
+    let configured_miss = f
+        .configured_miss_points
+        .map_or("-".to_string(), |m| format!("{m:.1}"));
     if f.error_model == configured {
         format!(
-            "the held-out hours favour the configured error model ({}: {:.1} points from \
-             nominal)",
+            "this meter's held-out hours favour the configured error model ({}: {:.1} points \
+             from nominal)",
             name(configured),
             f.miss_points
         )
     } else {
         format!(
-            "the held-out hours favour error_model = {} ({:.1} points from nominal, against \
-             {:.1} for {}): set it under [validation] for this building",
+            "this meter's held-out hours favour error_model = {} ({:.1} points from nominal \
+             against {configured_miss} for {}; within 2 points the narrower intervals win)",
             name(f.error_model),
             f.miss_points,
-            f.configured_miss_points,
             name(configured)
         )
     }

@@ -19,7 +19,8 @@ pub struct Args {
     pub weather: String,
     /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines),
     /// its `summary.json` (its calibrated values), or its `draws.csv` with --draw (any
-    /// posterior draw); --set overrides them.
+    /// posterior draw, over the `calibrated.toml` beside it for the parameters not sampled);
+    /// --set overrides them.
     #[arg(long)]
     pub values: Option<PathBuf>,
     /// With --values draws.csv: the posterior draw, CHAIN:DRAW as draws.csv numbers them
@@ -98,7 +99,21 @@ fn read_values(
             )
         })?;
         let values = draw_values(&text, draw).with_context(|| path.display().to_string())?;
-        return Ok(values.into_iter().collect());
+        // draws.csv holds the calibrated parameters only: the fixed ones (and those a
+        // `calibrate = [...]` subset or priors.toml set) come from calibrated.toml beside it.
+        let beside = path.with_file_name("calibrated.toml");
+        let mut all = if beside.is_file() {
+            read_values(&beside, None)?
+        } else {
+            eprintln!(
+                "note: no calibrated.toml beside {}: the parameters the calibration did not \
+                 sample stay at their prior modes here (set them with --set)",
+                path.display()
+            );
+            Default::default()
+        };
+        all.extend(values);
+        return Ok(all);
     }
     if path.extension().is_some_and(|e| e == "json") {
         #[derive(serde::Deserialize)]
@@ -180,9 +195,10 @@ fn draw_values(text: &str, which: &str) -> anyhow::Result<Vec<(String, f64)>> {
                 .collect();
         }
     }
+    anyhow::ensure!(chains > 0, "no draws: the file has a header only");
     anyhow::bail!(
         "no draw {chain}:{draw}: the file has chains 0 to {} and draws 0 to {} per chain",
-        chains.saturating_sub(1),
+        chains - 1,
         draws.saturating_sub(1)
     )
 }

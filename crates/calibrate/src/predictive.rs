@@ -147,19 +147,21 @@ pub struct OutputPredictive {
 /// other (summed over the 50 % and 90 % levels) count as equal: the narrower one is favoured.
 pub const TIE_POINTS: f64 = 2.0;
 
-/// The error model whose hourly intervals hold best on the held-out hours: the one whose 50 %
-/// and 90 % coverage there is nearest nominal, the narrower of those within [`TIE_POINTS`]
-/// ([`bemcal_stats::predictive::nearest_nominal`]). What to set as `[validation] error_model`
-/// for this meter; chosen on the held-out hours, so that their coverage under it is no longer
-/// an independent check (three candidates on thousands of hours: a small bias).
+/// The error model whose hourly intervals hold best on a meter's held-out hours: the one whose
+/// 50 % and 90 % coverage there is nearest nominal, the narrower of those within [`TIE_POINTS`]
+/// ([`bemcal_stats::predictive::nearest_nominal`]). A guide to `[validation] error_model` (one
+/// setting for the project: the meters may favour different ones); chosen on the held-out
+/// hours, so that their coverage under it is no longer an independent check (three candidates
+/// on thousands of hours: a small bias).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HeldOutChoice {
     /// The favoured error model.
     pub error_model: ErrorModel,
     /// Its held-out coverage's distance from nominal, percentage points over both levels.
     pub miss_points: f64,
-    /// The same for the configured error model (`validation/predictive_intervals.csv`'s).
-    pub configured_miss_points: f64,
+    /// The same for the configured error model (`validation/predictive_intervals.csv`'s);
+    /// `None` where its held-out coverage was not judged.
+    pub configured_miss_points: Option<f64>,
 }
 
 /// What a total is taken over.
@@ -339,7 +341,7 @@ pub fn assess(
         let held_out_favours = nearest_nominal(&held, TIE_POINTS).map(|i| HeldOutChoice {
             error_model: by_error_model[i].error_model,
             miss_points: coverage_miss(held[i]),
-            configured_miss_points: coverage_miss(held[0]),
+            configured_miss_points: Some(coverage_miss(held[0])).filter(|m| m.is_finite()),
         });
         outputs.push(OutputPredictive {
             output: name.clone(),

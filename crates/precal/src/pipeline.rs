@@ -115,7 +115,8 @@ impl Precalibration {
     /// water, which the model's `hot_water_peak_flow` prior carries).
     pub fn suggested_bases(&self) -> Vec<SuggestedBase> {
         let mut out = vec![];
-        if let Some(dc) = self.meters.submeter("data_center") {
+        let electricity = self.meters.get(&MeterRole::Electricity).is_some();
+        if let Some(dc) = self.meters.submeter("data_center").filter(|_| electricity) {
             let median = self
                 .disaggregation
                 .estimate("electricity_base_kw")

@@ -314,9 +314,9 @@ pub fn period_totals(
 }
 
 /// How far a set of intervals' coverage is from nominal: the sum over its levels of
-/// `|fraction - nominal|`, in percentage points (NaN with no level judged). The calibration of
-/// intervals in the sense of Gneiting, Balabdaoui & Raftery (2007, JRSS B 69), "calibration
-/// subject to sharpness": the first thing to ask of them.
+/// `|fraction - nominal|`, in percentage points (NaN with no level judged): how far from
+/// calibrated the intervals are, in the sense of Gneiting, Balabdaoui & Raftery (2007, JRSS B
+/// 69), who ask for sharpness subject to calibration.
 pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
     if coverage.is_empty() || coverage.iter().any(|c| c.hours == 0) {
         return f64::NAN;
@@ -329,7 +329,8 @@ pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
 
 /// Of several candidates' coverages (on the same hours), the index of the one nearest nominal
 /// ([`coverage_miss`]); among those within `tie_points` of it, the sharpest (the smallest mean
-/// width over the levels), as Gneiting et al. 2007 ask. `None` where no candidate was judged.
+/// width over the levels): sharpness subject to calibration (Gneiting et al. 2007). `None`
+/// where no candidate was judged.
 pub fn nearest_nominal(candidates: &[&[Coverage]], tie_points: f64) -> Option<usize> {
     let misses: Vec<f64> = candidates.iter().map(|c| coverage_miss(c)).collect();
     let best = misses
@@ -442,7 +443,7 @@ mod tests {
                 },
             ]
         };
-        // The RSF's heating held out (level, constant, hour of day): 18.4, 9.7, 5.0 points.
+        // The RSF's heating held out (level, constant, hour of day): 18.4, 9.9, 5.0 points.
         let (level, constant, hour) = (
             cov(0.602, 0.982, 248.0),
             cov(0.587, 0.912, 197.0),
