@@ -5,13 +5,11 @@
 //! and all chains must have the same number of draws. Columns ending in `__` (the sampler's
 //! statistics, as CmdStan names them) are skipped.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
+use bemcal_report::io::Draws;
 use bemcal_stats::diagnostics::{self, ParameterDiagnostics};
-
-use super::metrics::{excerpt, Table};
 
 /// Arguments of `bemcal diagnose`.
 #[derive(Debug, clap::Args)]
@@ -33,76 +31,31 @@ struct Row<'a> {
 
 /// Run `bemcal diagnose`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let t = Table::read(&args.draws)?;
-    let (ci, di) = (t.column("chain")?, t.column("draw")?);
-    // Columns ending in `__` are the sampler's statistics per draw (CmdStan's convention:
-    // accept_stat__, stepsize__, ...), not quantities to diagnose.
-    let params: Vec<usize> = (0..t.header.len())
-        .filter(|&k| k != ci && k != di && !t.header[k].ends_with("__"))
-        .collect();
-    if params.is_empty() {
-        bail!(
-            "{}:1: no parameter columns besides chain and draw",
-            t.path.display()
-        );
-    }
-    // chain -> [(draw, values)]
-    let mut chains: BTreeMap<String, Vec<(i64, Vec<f64>)>> = BTreeMap::new();
-    for (line, f) in &t.rows {
-        let draw: i64 = f[di].parse().map_err(|_| {
-            anyhow::anyhow!(
-                "{}:{line}: column `draw`: `{}` is not an integer",
-                t.path.display(),
-                excerpt(&f[di])
-            )
-        })?;
-        let mut vals = Vec::with_capacity(params.len());
-        for &k in &params {
-            // `number` refuses an infinite draw (`inf`, `1e999`): its mean would print as `inf`
-            // beside an R-hat computed from ranks as if nothing were wrong.
-            let v = t.number(*line, k, &f[k])?;
-            if v.is_nan() {
-                bail!(
-                    "{}:{line}: column `{}`: missing value",
-                    t.path.display(),
-                    t.header[k]
-                );
-            }
-            vals.push(v);
-        }
-        chains.entry(f[ci].clone()).or_default().push((draw, vals));
-    }
-    if chains.is_empty() {
-        bail!("{}: no draws", t.path.display());
-    }
-    let len = chains.values().next().map_or(0, |c| c.len());
-    for (name, c) in chains.iter_mut() {
-        if c.len() != len {
-            bail!(
-                "{}: chain `{name}` has {} draws, others {len}; chains must be equally long",
-                t.path.display(),
-                c.len()
-            );
-        }
-        c.sort_by_key(|(d, _)| *d);
-    }
+    // One reader of draws files for diagnose, simulate --draw and the report: strict about
+    // missing and infinite draws, chain numbering and equal lengths.
+    let draws = bemcal_report::io::read_draws(&args.draws)?;
+    let len = draws.len();
     let mut rows = Vec::new();
-    for (p, &k) in params.iter().enumerate() {
-        let per_chain: Vec<Vec<f64>> = chains
-            .values()
-            .map(|c| c.iter().map(|(_, v)| v[p]).collect())
-            .collect();
-        let d = diagnostics::diagnose(&per_chain)
-            .with_context(|| format!("parameter `{}`", t.header[k]))?;
-        rows.push(Row {
-            parameter: &t.header[k],
-            d,
-        });
+    for (k, name) in draws.columns.iter().enumerate() {
+        // Columns ending in `__` are the sampler's statistics per draw (CmdStan's convention:
+        // accept_stat__, stepsize__, ...), not quantities to diagnose.
+        if Draws::is_sampler_statistic(name) {
+            continue;
+        }
+        let per_chain: Vec<Vec<f64>> = draws.chains.iter().map(|c| c[k].clone()).collect();
+        let d = diagnostics::diagnose(&per_chain).with_context(|| format!("parameter `{name}`"))?;
+        rows.push(Row { parameter: name, d });
+    }
+    if rows.is_empty() {
+        bail!(
+            "{}: no parameter columns besides chain, draw and the sampler's statistics",
+            args.draws.display()
+        );
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        println!("{} chains x {len} draws", chains.len());
+        println!("{} chains x {len} draws", draws.chains.len());
         println!(
             "{:<28} {:>12} {:>12} {:>12} {:>12} {:>12} {:>7} {:>9} {:>9}",
             "parameter", "mean", "sd", "q5", "q50", "q95", "rhat", "ess_bulk", "ess_tail"
@@ -157,16 +110,24 @@ mod tests {
         for cell in ["inf", "-inf", "1e999"] {
             assert_eq!(
                 diagnose(&with_shgc(cell)).unwrap_err(),
-                format!("DIR/draws.csv:4: column `shgc`: `{cell}` is not a finite number")
+                format!(
+                    "DIR/draws.csv: line 4, column 'shgc': an infinite value ({cell:?}); \
+                     every draw must be a finite number"
+                )
             );
         }
-        assert_eq!(
-            diagnose(&with_shgc("NaN")).unwrap_err(),
-            "DIR/draws.csv:4: column `shgc`: missing value"
-        );
+        for cell in ["NaN", ""] {
+            assert_eq!(
+                diagnose(&with_shgc(cell)).unwrap_err(),
+                format!(
+                    "DIR/draws.csv: line 4, column 'shgc': a missing value ({cell:?}); \
+                     every draw must be a finite number"
+                )
+            );
+        }
         let e = diagnose(&with_shgc(&("9".repeat(400) + "x"))).unwrap_err();
         assert!(
-            e.starts_with("DIR/draws.csv:4: column `shgc`: `9999"),
+            e.starts_with("DIR/draws.csv: line 4, column 'shgc': not a number: \"9999"),
             "{e}"
         );
         assert!(e.len() < 120, "the message quotes an excerpt: {e}");

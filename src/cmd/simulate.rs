@@ -89,8 +89,6 @@ fn read_values(
         "--draw picks a row of a calibration's draws.csv, not of {}",
         path.display()
     );
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     if is_csv {
         let draw = draw.with_context(|| {
             format!(
@@ -98,7 +96,8 @@ fn read_values(
                 path.display()
             )
         })?;
-        let values = draw_values(&text, draw).with_context(|| path.display().to_string())?;
+        let draws = bemcal_report::io::read_draws(path)?;
+        let values = draw_values(&draws, draw).with_context(|| path.display().to_string())?;
         // draws.csv holds the calibrated parameters only: the fixed ones (and those a
         // `calibrate = [...]` subset or priors.toml set) come from calibrated.toml beside it.
         let beside = path.with_file_name("calibrated.toml");
@@ -115,6 +114,8 @@ fn read_values(
         all.extend(values);
         return Ok(all);
     }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     if path.extension().is_some_and(|e| e == "json") {
         #[derive(serde::Deserialize)]
         struct Calibrated {
@@ -139,68 +140,34 @@ fn read_values(
     Ok(table.into_iter().collect())
 }
 
-/// The calibrated parameters' values of draw `which` (`CHAIN:DRAW`) of a calibration's
-/// `draws.csv`: the columns after `chain` and `draw` up to the noise (`sigma_delta_*`), the log
-/// posterior and the sampler's statistics (`*__`).
-fn draw_values(text: &str, which: &str) -> anyhow::Result<Vec<(String, f64)>> {
+/// The calibrated parameters' values of draw `which` (`CHAIN:DRAW`, as `draws.csv` numbers
+/// them) of a calibration's draws.
+fn draw_values(
+    draws: &bemcal_report::io::Draws,
+    which: &str,
+) -> anyhow::Result<Vec<(String, f64)>> {
     let (chain, draw) = which
         .split_once(':')
-        .and_then(|(c, d)| Some((c.trim().parse::<u64>().ok()?, d.trim().parse::<u64>().ok()?)))
+        .and_then(|(c, d)| {
+            Some((
+                c.trim().parse::<usize>().ok()?,
+                d.trim().parse::<u64>().ok()?,
+            ))
+        })
         .with_context(|| {
             format!(
                 "--draw {}: expected CHAIN:DRAW, two whole numbers such as 0:250",
                 bemcal_excerpt::excerpt(which, 40)
             )
         })?;
-    let mut r = csv::Reader::from_reader(text.as_bytes());
-    let header = r.headers().context("reading the header")?.clone();
-    anyhow::ensure!(
-        header.get(0) == Some("chain") && header.get(1) == Some("draw"),
-        "expected a calibration's draws.csv (chain,draw,parameters...), found the header {}",
-        bemcal_excerpt::excerpt(&header.iter().collect::<Vec<_>>().join(","), 120)
-    );
-    let names: Vec<&str> = header
-        .iter()
-        .skip(2)
-        .take_while(|n| {
-            !n.starts_with("sigma_delta_") && *n != "log_posterior" && !n.ends_with("__")
-        })
-        .collect();
-    let (mut chains, mut draws) = (0u64, 0u64);
-    for (i, rec) in r.records().enumerate() {
-        let rec = rec.with_context(|| format!("line {}", i + 2))?;
-        let field = |k: usize| -> anyhow::Result<f64> {
-            let v = rec.get(k).unwrap_or_default();
-            v.trim()
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .with_context(|| {
-                    format!(
-                        "line {}, column {}: expected a number, found {:?}",
-                        i + 2,
-                        header.get(k).unwrap_or_default(),
-                        bemcal_excerpt::excerpt(v, 40)
-                    )
-                })
-        };
-        let (c, d) = (field(0)? as u64, field(1)? as u64);
-        chains = chains.max(c + 1);
-        draws = draws.max(d + 1);
-        if (c, d) == (chain, draw) {
-            return names
-                .iter()
-                .enumerate()
-                .map(|(j, n)| Ok((n.to_string(), field(j + 2)?)))
-                .collect();
-        }
-    }
-    anyhow::ensure!(chains > 0, "no draws: the file has a header only");
-    anyhow::bail!(
-        "no draw {chain}:{draw}: the file has chains 0 to {} and draws 0 to {} per chain",
-        chains - 1,
-        draws.saturating_sub(1)
-    )
+    draws.parameters_at(chain, draw).with_context(|| {
+        let first = draws.numbers[0].first().copied().unwrap_or_default();
+        let last = draws.numbers[0].last().copied().unwrap_or_default();
+        format!(
+            "no draw {chain}:{draw}: the file has chains 0 to {} and draws {first} to {last} per chain",
+            draws.chains.len() - 1
+        )
+    })
 }
 
 #[cfg(test)]
@@ -215,26 +182,41 @@ sigma_delta_heating_kwh,log_posterior,accept_stat__,stepsize__,n_leapfrog__,dive
 1,1,13.5,22.5,2.8,-8556.0,0.8,1.1,7,0
 ";
 
+    /// `draw_values` of a draws file's text; an error with the folder written as `DIR`.
+    fn draw_of(text: &str, which: &str) -> Result<Vec<(String, f64)>, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("draws.csv");
+        std::fs::write(&p, text).unwrap();
+        let shown =
+            |e: anyhow::Error| format!("{e:#}").replace(&dir.path().display().to_string(), "DIR");
+        let draws = bemcal_report::io::read_draws(&p).map_err(|e| shown(e.into()))?;
+        draw_values(&draws, which).map_err(shown)
+    }
+
     #[test]
     fn a_draw_of_draws_csv_gives_its_parameters_only() {
         assert_eq!(
-            draw_values(DRAWS, "1:0").unwrap(),
+            draw_of(DRAWS, "1:0").unwrap(),
             vec![
                 ("lighting_power_density".to_string(), 13.0),
                 ("cooling_setpoint_occupied".to_string(), 23.0)
             ]
         );
-        let e = draw_values(DRAWS, "2:0").unwrap_err().to_string();
+        let e = draw_of(DRAWS, "2:0").unwrap_err();
         assert!(e.contains("chains 0 to 1 and draws 0 to 1"), "{e}");
-        let e = draw_values(DRAWS, "first").unwrap_err().to_string();
+        let e = draw_of(DRAWS, "first").unwrap_err();
         assert!(e.contains("CHAIN:DRAW"), "{e}");
         let bad = DRAWS.replace("13.0,23.0", "13.0,inf");
-        let e = format!("{:#}", draw_values(&bad, "1:0").unwrap_err());
+        let e = draw_of(&bad, "1:0").unwrap_err();
         assert!(
-            e.contains("line 4, column cooling_setpoint_occupied"),
+            e.contains(
+                "DIR/draws.csv: line 4, column 'cooling_setpoint_occupied': an infinite value"
+            ),
             "{e}"
         );
-        let e = draw_values("a,b\n1,2\n", "0:0").unwrap_err().to_string();
-        assert!(e.contains("expected a calibration's draws.csv"), "{e}");
+        let e = draw_of("a,b\n1,2\n", "0:0").unwrap_err();
+        assert!(e.contains("missing column 'chain'"), "{e}");
+        let e = draw_of("chain,draw,a\n", "0:0").unwrap_err();
+        assert!(e.contains("header only"), "{e}");
     }
 }

@@ -587,13 +587,19 @@ pub struct RefineRound {
     pub surrogate_error: Vec<OutputMetrics>,
 }
 
-/// `draws.csv`: `chain,draw,<columns>...`, grouped by chain.
+/// `draws.csv`: `chain,draw,<columns>...`, grouped by chain, each chain in draw order.
+///
+/// The columns after `chain,draw` are, as `bemcal calibrate` writes them, the calibrated
+/// parameters, then the noise (`sigma_delta_*`), the log posterior and the sampler's statistics
+/// per draw (named as CmdStan names them, ending in `__`).
 #[derive(Debug, Clone)]
 pub struct Draws {
-    /// Column names after `chain,draw` (parameters, `sigma_delta_*`, `log_posterior`).
+    /// Column names after `chain,draw`.
     pub columns: Vec<String>,
     /// `chains[c][k]` = the draws of column `k` in chain `c`, in draw order.
     pub chains: Vec<Vec<Vec<f64>>>,
+    /// `numbers[c][i]` = the `draw` number of chain `c`'s `i`-th draw (increasing).
+    pub numbers: Vec<Vec<u64>>,
 }
 
 impl Draws {
@@ -601,6 +607,49 @@ impl Draws {
     pub fn column(&self, name: &str) -> Option<Vec<&[f64]>> {
         let k = self.columns.iter().position(|c| c == name)?;
         Some(self.chains.iter().map(|c| c[k].as_slice()).collect())
+    }
+
+    /// Whether a column is one of the sampler's statistics per draw (`accept_stat__`, ...).
+    pub fn is_sampler_statistic(name: &str) -> bool {
+        name.ends_with("__")
+    }
+
+    /// The calibrated parameters' columns: those before the noise, the log posterior and the
+    /// sampler's statistics.
+    pub fn parameters(&self) -> &[String] {
+        let n = self
+            .columns
+            .iter()
+            .position(|c| {
+                c.starts_with("sigma_delta_")
+                    || c == "log_posterior"
+                    || Self::is_sampler_statistic(c)
+            })
+            .unwrap_or(self.columns.len());
+        &self.columns[..n]
+    }
+
+    /// Draws per chain (every chain has as many).
+    pub fn len(&self) -> usize {
+        self.numbers.first().map_or(0, Vec::len)
+    }
+
+    /// Whether there are no draws (never, for a file [`read_draws`] accepted).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The calibrated parameters' values (name, value) of draw number `draw` of chain `chain`,
+    /// as the file numbers them; `None` if the file has no such draw.
+    pub fn parameters_at(&self, chain: usize, draw: u64) -> Option<Vec<(String, f64)>> {
+        let i = self.numbers.get(chain)?.binary_search(&draw).ok()?;
+        Some(
+            self.parameters()
+                .iter()
+                .enumerate()
+                .map(|(k, name)| (name.clone(), self.chains[chain][k][i]))
+                .collect(),
+        )
     }
 }
 
@@ -744,7 +793,10 @@ fn num(path: &Path, line: usize, col: &str, s: &str) -> Result<f64, ReportError>
     s.parse::<f64>().map_err(|_| {
         parse_err(
             path,
-            format!("line {line}, column '{col}': not a number: {s:?}"),
+            format!(
+                "line {line}, column '{col}': not a number: {:?}",
+                bemcal_excerpt::excerpt(s, 40)
+            ),
         )
     })
 }
@@ -783,7 +835,10 @@ pub fn read_summary(path: &Path) -> Result<Summary, ReportError> {
     serde_json::from_str(&text).map_err(|e| parse_err(path, e.to_string()))
 }
 
-/// Reads `draws.csv`.
+/// Reads `draws.csv` (or any draws file with `chain,draw,<column>...`), strictly: chains are
+/// numbered 0, 1, ... and equally long, each chain's draw numbers appear once, and every value is
+/// a finite number (a missing or infinite draw would print as a mean beside an R-hat computed from
+/// ranks as if nothing were wrong). Errors name the line and column and quote an excerpt.
 pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
     require(path, "the MCMC draws written by `bemcal calibrate`")?;
     let mut r = csv_reader(path)?;
@@ -791,29 +846,98 @@ pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
     let ci = col_index(path, &h, "chain")?;
     let di = col_index(path, &h, "draw")?;
     let cols: Vec<usize> = (0..h.len()).filter(|&k| k != ci && k != di).collect();
-    let columns: Vec<String> = cols.iter().map(|&k| h[k].clone()).collect();
-    let mut chains: Vec<Vec<Vec<f64>>> = Vec::new();
+    if cols.is_empty() {
+        return Err(parse_err(path, "no columns besides chain and draw"));
+    }
+    // chain -> (draw number, values by column)
+    let mut rows: Vec<Vec<(u64, Vec<f64>)>> = Vec::new();
     for (i, rec) in r.records().enumerate() {
         let line = i + 2;
         let rec = rec.map_err(|e| parse_err(path, e.to_string()))?;
-        let c = rec[ci].trim().parse::<usize>().map_err(|_| {
-            parse_err(
+        let index = |k: usize| {
+            rec[k].trim().parse::<u64>().map_err(|_| {
+                parse_err(
+                    path,
+                    format!(
+                        "line {line}, column '{}': expected a whole number, found {:?}",
+                        h[k],
+                        bemcal_excerpt::excerpt(rec[k].trim(), 40)
+                    ),
+                )
+            })
+        };
+        let (c, d) = (index(ci)?, index(di)?);
+        let c = usize::try_from(c)
+            .ok()
+            .filter(|&c| c < 1 << 16)
+            .ok_or_else(|| {
+                parse_err(
+                    path,
+                    format!("line {line}: chain {c} is not a chain number"),
+                )
+            })?;
+        let mut values = Vec::with_capacity(cols.len());
+        for &k in &cols {
+            let v = num(path, line, &h[k], &rec[k])?;
+            if !v.is_finite() {
+                let cell = rec[k].trim();
+                let what = if v.is_nan() {
+                    "a missing value"
+                } else {
+                    "an infinite value"
+                };
+                return Err(parse_err(
+                    path,
+                    format!(
+                        "line {line}, column '{}': {what} ({:?}); every draw must be a finite number",
+                        h[k],
+                        bemcal_excerpt::excerpt(cell, 40)
+                    ),
+                ));
+            }
+            values.push(v);
+        }
+        if rows.len() <= c {
+            rows.resize_with(c + 1, Vec::new);
+        }
+        rows[c].push((d, values));
+    }
+    if rows.is_empty() {
+        return Err(parse_err(path, "no draws: the file has a header only"));
+    }
+    let len = rows.iter().map(Vec::len).max().unwrap_or(0);
+    let mut chains = Vec::with_capacity(rows.len());
+    let mut numbers = Vec::with_capacity(rows.len());
+    for (c, mut chain) in rows.into_iter().enumerate() {
+        if chain.len() != len {
+            return Err(parse_err(
                 path,
-                format!("line {line}: chain {:?} is not an index", &rec[ci]),
-            )
-        })?;
-        while chains.len() <= c {
-            chains.push(vec![Vec::new(); cols.len()]);
+                format!(
+                    "chain {c} has {} draws, another {len}; chains must be numbered 0, 1, ... \
+                     and equally long",
+                    chain.len()
+                ),
+            ));
         }
-        for (j, &k) in cols.iter().enumerate() {
-            chains[c][j].push(num(path, line, &h[k], &rec[k])?);
+        chain.sort_by_key(|(d, _)| *d);
+        if let Some(w) = chain.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(parse_err(
+                path,
+                format!("chain {c} has draw {} twice", w[0].0),
+            ));
         }
+        numbers.push(chain.iter().map(|(d, _)| *d).collect());
+        chains.push(
+            (0..cols.len())
+                .map(|k| chain.iter().map(|(_, v)| v[k]).collect())
+                .collect(),
+        );
     }
-    chains.retain(|c| c.first().is_some_and(|v| !v.is_empty()));
-    if chains.is_empty() {
-        return Err(parse_err(path, "no draws"));
-    }
-    Ok(Draws { columns, chains })
+    Ok(Draws {
+        columns: cols.iter().map(|&k| h[k].clone()).collect(),
+        chains,
+        numbers,
+    })
 }
 
 /// Reads an hourly table `timestamp,<column>...`.
@@ -1068,5 +1192,72 @@ mod bases_tests {
         assert_eq!(run.values[0], vec![1.0, 2.0]);
         assert_eq!(run.values[1][0], 13.0);
         assert!(run.values[1][1].is_nan(), "a missing base hour is missing");
+    }
+}
+
+#[cfg(test)]
+mod draws_tests {
+    use super::*;
+
+    /// `read_draws` of a file's text; an error with the folder written as `DIR`.
+    fn read(text: &str) -> Result<Draws, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("draws.csv");
+        std::fs::write(&p, text).unwrap();
+        read_draws(&p).map_err(|e| {
+            e.to_string()
+                .replace(&dir.path().display().to_string(), "DIR")
+        })
+    }
+
+    #[test]
+    fn draws_are_grouped_by_chain_in_draw_order_and_columns_classified() {
+        let d = read(
+            "chain,draw,shgc,sigma_delta_heating_kwh,log_posterior,accept_stat__\n\
+             1,1,0.4,2.0,-10.0,0.9\n0,1,0.2,2.0,-10.0,0.9\n0,0,0.1,2.0,-10.0,0.9\n\
+             1,0,0.3,2.0,-10.0,0.9\n",
+        )
+        .unwrap();
+        assert_eq!(d.chains[0][0], vec![0.1, 0.2]);
+        assert_eq!(d.chains[1][0], vec![0.3, 0.4]);
+        assert_eq!(d.numbers, vec![vec![0, 1], vec![0, 1]]);
+        assert_eq!(d.len(), 2);
+        assert_eq!(d.parameters(), ["shgc"]);
+        assert_eq!(d.parameters_at(1, 1), Some(vec![("shgc".to_string(), 0.4)]));
+        assert_eq!(d.parameters_at(2, 0), None);
+        assert!(Draws::is_sampler_statistic("accept_stat__"));
+    }
+
+    #[test]
+    fn draws_files_that_would_mislead_a_diagnosis_are_refused() {
+        let refused = |text: &str, want: &str| {
+            let e = read(text).unwrap_err();
+            assert!(e.contains(want), "{text:?}: {e}");
+            assert!(e.len() < 300, "{e}");
+        };
+        refused(
+            "chain,draw,a\n0,0,1\n0,1,2\n2,0,3\n2,1,4\n",
+            "chain 1 has 0 draws, another 2",
+        );
+        refused("chain,draw,a\n0,0,1\n0,1,2\n1,0,3\n", "chain 1 has 1 draws");
+        refused("chain,draw,a\n0,0,1\n0,0,2\n", "chain 0 has draw 0 twice");
+        refused(
+            "chain,draw,a\n0,0,1\n0,1,\n",
+            "line 3, column 'a': a missing value",
+        );
+        refused(
+            "chain,draw,a\n0,0,1\n0,1,1e999\n",
+            "line 3, column 'a': an infinite value",
+        );
+        refused(
+            &format!("chain,draw,a\n0,0,{}\n", "7".repeat(5000) + "x"),
+            "line 2, column 'a': not a number",
+        );
+        refused(
+            "chain,draw,a\n-1,0,1\n",
+            "line 2, column 'chain': expected a whole number",
+        );
+        refused("chain,draw,a\n", "no draws: the file has a header only");
+        refused("chain,draw\n0,0\n", "no columns besides chain and draw");
     }
 }
