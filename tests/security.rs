@@ -365,3 +365,92 @@ fn the_artifact_store_keeps_to_its_limit() {
     });
     assert!(alive(&mut proc));
 }
+
+#[test]
+fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
+    if !have_engine() {
+        eprintln!("skipped: run `make setup` first");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let wt = dir.path().join("worker.token");
+    std::fs::write(&wt, WORKER_TOKEN).unwrap();
+    // 1,500 bytes a run.
+    let (mut proc, url) = coordinator(
+        &dir.path().join("data"),
+        "127.0.0.1:0",
+        TOKEN,
+        &[
+            "--worker-token-file",
+            wt.to_str().unwrap(),
+            "--max-run-gb",
+            "0.0000015",
+        ],
+    );
+    let p = small(&dir.path().join("project"), &flat_meters());
+    let rt = bemcal_client::runtime().unwrap();
+    rt.block_on(async {
+        let mut c = client(&url, TOKEN);
+        let mut w = client(&url, WORKER_TOKEN);
+        let run = submit_project(&mut c, &p, None).await.unwrap().run_id;
+        let lease = LeaseRequest {
+            worker_id: "w1".into(),
+            free_slots: 1,
+            protocol: bemcal_client::PROTOCOL,
+        };
+        // A simulated point of a day (537 bytes): two fit, the third does not.
+        let mut completed = 0;
+        for _ in 0..240 {
+            let Some(job) = w.lease(lease.clone()).await.unwrap().into_inner().job else {
+                tokio::time::sleep(Duration::from_millis(250)).await;
+                continue;
+            };
+            let Some(bemcal_client::proto::job::Kind::Simulate(s)) = &job.kind else {
+                panic!("the design's simulations come first");
+            };
+            let series: Vec<String> = (0..24).map(|h| format!("{}.{h:02}", s.point)).collect();
+            let point = format!(
+                "{{\"values\": {{}}, \"outputs\": {{\"names\": [\"heating_kwh\", \"cooling_kwh\", \
+                 \"electricity_kwh\"], \"series\": [[{0}], [{0}], [{0}]]}}}}",
+                series.join(", ")
+            );
+            let sha = upload(&mut w, point.as_bytes().to_vec()).await.unwrap();
+            w.complete(CompleteRequest {
+                worker_id: "w1".into(),
+                lease_id: job.lease_id,
+                outputs: vec![FileRef {
+                    path: format!("simulations/point_{:03}.json", s.point),
+                    sha256: sha,
+                    size: point.len() as u64,
+                }],
+                result_json: "{\"seconds\": 1.0}".into(),
+            })
+            .await
+            .unwrap();
+            completed += 1;
+            if completed == 3 {
+                break;
+            }
+        }
+        assert_eq!(completed, 3, "three simulations were leased");
+        let st = c
+            .get_run(RunRequest {
+                run_id: run.clone(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(st.state, "failed", "{st:?}");
+        assert!(
+            st.error
+                .contains("per-run quota of 1500 bytes (--max-run-gb)"),
+            "{}",
+            st.error
+        );
+        let done = st.jobs.iter().filter(|j| j.state == "done").count();
+        assert_eq!(done, 2, "the third point's outputs are not recorded");
+        // Nothing more is handed out for it.
+        assert!(w.lease(lease).await.unwrap().into_inner().job.is_none());
+    });
+    assert!(alive(&mut proc));
+}

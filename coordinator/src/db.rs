@@ -127,7 +127,8 @@ pub struct MetricsSnapshot {
     pub jobs: Vec<(String, String, u64)>,
     /// (state, runs).
     pub runs: Vec<(String, u64)>,
-    /// (kind, outcome, attempts); outcomes: done, failed, lost, returned, stale.
+    /// (kind, outcome, attempts); outcomes: done, failed, lost, returned, stale, refused (the
+    /// outputs would have taken the run past its quota).
     pub attempts: Vec<(String, String, u64)>,
     /// (kind, seconds) of every attempt that finished its job.
     pub durations: Vec<(String, f64)>,
@@ -235,11 +236,76 @@ pub enum Outcome {
     Recorded(String),
     /// Nothing changed (late duplicate, unknown lease, run no longer running).
     Ignored,
+    /// The outputs were refused and the run failed: with them its jobs' outputs would have
+    /// held this many bytes, over its quota ([`Store::complete_within`]).
+    OverQuota {
+        /// The run.
+        run: String,
+        /// Its outputs' bytes with the refused ones.
+        bytes: u64,
+    },
 }
 
 /// The SQLite store (one connection; every call is short).
 pub struct Store {
     conn: Mutex<Connection>,
+}
+
+/// [`Store::end_run`] inside a transaction.
+fn end_run_in(
+    tx: &rusqlite::Transaction<'_>,
+    run: &str,
+    state: RunState,
+    error: Option<&str>,
+) -> Result<bool> {
+    // A stored message is never longer than a reply may be.
+    let error = error.map(|e| crate::excerpt(e, crate::MAX_ERROR_BYTES));
+    let now = now_ms() as i64;
+    let n = tx.execute(
+        "UPDATE runs SET state = ?2, error = COALESCE(?3, error), finished_ms = ?4
+         WHERE id = ?1 AND state = 'running'",
+        params![run, state, error, now],
+    )?;
+    if n > 0 {
+        tx.execute(
+            "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
+            params![run, now],
+        )?;
+        tx.execute(
+            "UPDATE jobs SET state = 'cancelled' WHERE run_id = ?1 AND state IN ('queued', 'leased')",
+            [run],
+        )?;
+        tx.execute(
+            "UPDATE leases SET active = 0 WHERE active = 1 AND job_id IN (SELECT id FROM jobs WHERE run_id = ?1)",
+            [run],
+        )?;
+        if state == RunState::Done {
+            tx.execute(
+                "UPDATE runs SET stage = ?2 WHERE id = ?1",
+                params![run, Stage::Done.as_str()],
+            )?;
+        }
+    }
+    Ok(n > 0)
+}
+
+/// Bytes of the distinct files a run's jobs produced (answers from the simulation cache cost
+/// it nothing), with `more` added: what [`Store::complete_within`] holds to a run's quota.
+fn run_output_bytes(tx: &rusqlite::Transaction<'_>, run: &str, more: &[File]) -> Result<u64> {
+    let mut st =
+        tx.prepare("SELECT outputs FROM jobs WHERE run_id = ?1 AND state = 'done' AND cached = 0")?;
+    let done = st
+        .query_map([run], |r| r.get::<_, Option<String>>(0))?
+        .collect::<rusqlite::Result<Vec<_>>>()?;
+    let mut sizes = std::collections::HashMap::new();
+    for f in done
+        .into_iter()
+        .flat_map(parse_files)
+        .chain(more.iter().cloned())
+    {
+        sizes.insert(f.sha256, f.size);
+    }
+    Ok(sizes.values().fold(0u64, |a, &b| a.saturating_add(b)))
 }
 
 fn files_json(f: &[File]) -> String {
@@ -505,38 +571,11 @@ impl Store {
 
     /// Ends a run: `done`, `failed` (with the reason) or `cancelled`. Open jobs are cancelled.
     pub fn end_run(&self, run: &str, state: RunState, error: Option<&str>) -> Result<bool> {
-        // A stored message is never longer than a reply may be.
-        let error = error.map(|e| crate::excerpt(e, crate::MAX_ERROR_BYTES));
         self.with(|c| {
-            let now = now_ms() as i64;
             let tx = c.transaction()?;
-            let n = tx.execute(
-                "UPDATE runs SET state = ?2, error = COALESCE(?3, error), finished_ms = ?4
-                 WHERE id = ?1 AND state = 'running'",
-                params![run, state, error, now],
-            )?;
-            if n > 0 {
-                tx.execute(
-                    "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
-                    params![run, now],
-                )?;
-                tx.execute(
-                    "UPDATE jobs SET state = 'cancelled' WHERE run_id = ?1 AND state IN ('queued', 'leased')",
-                    [run],
-                )?;
-                tx.execute(
-                    "UPDATE leases SET active = 0 WHERE active = 1 AND job_id IN (SELECT id FROM jobs WHERE run_id = ?1)",
-                    [run],
-                )?;
-                if state == RunState::Done {
-                    tx.execute(
-                        "UPDATE runs SET stage = ?2 WHERE id = ?1",
-                        params![run, Stage::Done.as_str()],
-                    )?;
-                }
-            }
+            let ended = end_run_in(&tx, run, state, error)?;
             tx.commit()?;
-            Ok(n > 0)
+            Ok(ended)
         })
     }
 
@@ -830,6 +869,20 @@ impl Store {
         outputs: &[File],
         result: &str,
     ) -> Result<(Outcome, Vec<String>)> {
+        self.complete_within(lease, outputs, result, 0)
+    }
+
+    /// [`Store::complete`], holding the run to `max_run_bytes` (0: no limit): where the
+    /// outputs would take the distinct files its jobs produced past it, they are not recorded
+    /// and the run fails, saying so ([`Outcome::OverQuota`]). Checked and decided in one
+    /// transaction, so that two completions at once cannot both slip under the quota.
+    pub fn complete_within(
+        &self,
+        lease: u64,
+        outputs: &[File],
+        result: &str,
+        max_run_bytes: u64,
+    ) -> Result<(Outcome, Vec<String>)> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
@@ -845,14 +898,34 @@ impl Store {
                 return Ok((Outcome::Ignored, vec![]));
             };
             let fresh = (state == "queued" || state == "leased") && run_state == "running";
+            let bytes = match fresh && max_run_bytes > 0 {
+                true => run_output_bytes(&tx, &run, outputs)?,
+                false => 0,
+            };
+            let over = bytes > max_run_bytes && max_run_bytes > 0;
+            let outcome = match (fresh, over) {
+                (false, _) => "stale",
+                (true, true) => "refused",
+                (true, false) => "done",
+            };
             tx.execute(
                 "UPDATE attempts SET ended_ms = ?2, outcome = ?3 WHERE lease_id = ?1",
-                params![lease as i64, now, if fresh { "done" } else { "stale" }],
+                params![lease as i64, now, outcome],
             )?;
             tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
             if !fresh {
                 tx.commit()?;
                 return Ok((Outcome::Ignored, vec![]));
+            }
+            if over {
+                let msg = format!(
+                    "stopped: with the outputs of job {job} the run's files would take {bytes} \
+                     bytes, over the coordinator's per-run quota of {max_run_bytes} bytes \
+                     (--max-run-gb)"
+                );
+                end_run_in(&tx, &run, RunState::Failed, Some(&msg))?;
+                tx.commit()?;
+                return Ok((Outcome::OverQuota { run, bytes }, vec![]));
             }
             tx.execute(
                 "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, finished_ms = ?4, lease_id = NULL WHERE id = ?1",
@@ -1277,6 +1350,71 @@ mod tests {
             assert!(j.iter().all(|j| j.outputs[0].path == "point.json"));
         }
         assert_eq!(s.attempts("A").unwrap() + s.attempts("B").unwrap(), 2);
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    #[test]
+    fn a_run_is_held_to_its_quota_of_output_bytes() {
+        let (s, dir) = store("quota");
+        s.create_run("A", "a", &[], &[]).unwrap();
+        s.create_run("B", "b", &[], &[]).unwrap();
+        s.set_stage("A", Stage::Simulate, jobs(4, |_| None))
+            .unwrap();
+        s.set_stage("B", Stage::Simulate, jobs(1, |_| None))
+            .unwrap();
+        let file = |c: char, size: u64| File {
+            path: format!("{c}.json"),
+            sha256: c.to_string().repeat(64),
+            size,
+        };
+        let lease = |run: &str| loop {
+            let j = s.lease("w", 60_000).unwrap().unwrap();
+            if j.run_id == run {
+                break j.lease_id;
+            }
+            s.complete(j.lease_id, &[file('b', 900)], "{}").unwrap();
+        };
+        // A quota of 1,000 bytes: 600 + the same 600-byte file again (counted once) + 300.
+        let (o, _) = s
+            .complete_within(lease("A"), &[file('x', 600)], "{}", 1_000)
+            .unwrap();
+        assert_eq!(o, Outcome::Recorded("A".into()));
+        let (o, _) = s
+            .complete_within(lease("A"), &[file('x', 600)], "{}", 1_000)
+            .unwrap();
+        assert_eq!(o, Outcome::Recorded("A".into()));
+        let (o, _) = s
+            .complete_within(lease("A"), &[file('y', 300)], "{}", 1_000)
+            .unwrap();
+        assert_eq!(o, Outcome::Recorded("A".into()));
+        // The next 200 bytes would make 1,100: refused, and the run fails saying why. B's
+        // 900 bytes were never A's.
+        let (o, _) = s
+            .complete_within(lease("A"), &[file('z', 200)], "{}", 1_000)
+            .unwrap();
+        assert_eq!(
+            o,
+            Outcome::OverQuota {
+                run: "A".into(),
+                bytes: 1_100
+            }
+        );
+        let a = s.run("A").unwrap().unwrap();
+        assert_eq!(a.state, RunState::Failed);
+        let e = a.error.unwrap();
+        assert!(
+            e.contains("1100 bytes") && e.contains("--max-run-gb"),
+            "{e}"
+        );
+        let done: Vec<_> = s.jobs("A", None).unwrap();
+        assert_eq!(
+            done.iter().filter(|j| j.state == JobState::Done).count(),
+            3,
+            "the refused outputs are not recorded: {done:?}"
+        );
+        assert!(done
+            .iter()
+            .all(|j| j.outputs.iter().all(|f| f.sha256 != file('z', 0).sha256)));
         std::fs::remove_dir_all(dir).ok();
     }
 }

@@ -52,6 +52,9 @@ pub struct Config {
     pub max_store_bytes: u64,
     /// Uploads received at once; more wait their turn.
     pub max_uploads: usize,
+    /// Most bytes the distinct files one run's jobs produce may take (bytes); the completion
+    /// that would pass it is refused and the run fails, saying so. 0: no limit.
+    pub max_run_bytes: u64,
 }
 
 impl Default for Config {
@@ -63,6 +66,7 @@ impl Default for Config {
             artifact_grace_ms: 24 * 3600 * 1000,
             max_store_bytes: 0,
             max_uploads: 16,
+            max_run_bytes: 0,
         }
     }
 }

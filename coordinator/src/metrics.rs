@@ -115,7 +115,8 @@ fn register_attempts(registry: &mut Registry, s: &MetricsSnapshot) {
     registry.register(
         "job_attempts",
         "Leases that ended, by job kind and outcome (done; failed: the worker reported an error; \
-         lost: the lease expired without heartbeats; returned: given back; stale: a late duplicate)",
+         lost: the lease expired without heartbeats; returned: given back; stale: a late duplicate; \
+         refused: outputs past the run's quota)",
         attempts,
     );
 

@@ -144,8 +144,12 @@ impl Service {
     }
 
     fn kick(&self, o: Outcome) {
-        if let Outcome::Recorded(run) = o {
-            let _ = self.st.kick.send(run);
+        match o {
+            // A run over its quota has ended (its error says why): the driver is told too.
+            Outcome::Recorded(run) | Outcome::OverQuota { run, .. } => {
+                let _ = self.st.kick.send(run);
+            }
+            Outcome::Ignored => {}
         }
     }
 
@@ -321,7 +325,12 @@ impl Coordinator for Service {
         let (o, shared) = self
             .st
             .store
-            .complete(r.lease_id, &outputs, &r.result_json)
+            .complete_within(
+                r.lease_id,
+                &outputs,
+                &r.result_json,
+                self.st.config.max_run_bytes,
+            )
             .map_err(internal)?;
         self.kick(o);
         for run in shared {

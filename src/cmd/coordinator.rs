@@ -58,6 +58,10 @@ pub struct Args {
     /// Uploads received at once; more wait their turn.
     #[arg(long, default_value_t = 16)]
     pub max_uploads: usize,
+    /// Most one run's job outputs may take, GB (0: no limit): the completion that would pass
+    /// it is refused and the run fails, saying so.
+    #[arg(long, default_value_t = 0.0)]
+    pub max_run_gb: f64,
     /// Serve Prometheus metrics (`GET /metrics`, plain HTTP, no token) on this address, e.g.
     /// 0.0.0.0:9464 (port 0: any free port; the bound address is printed).
     #[arg(long, env = "BEMCAL_METRICS_LISTEN")]
@@ -104,6 +108,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if !a.max_store_gb.is_finite() || a.max_store_gb < 0.0 {
         anyhow::bail!("--max-store-gb must be a number of GB, 0 for no limit");
     }
+    if !a.max_run_gb.is_finite() || a.max_run_gb < 0.0 {
+        anyhow::bail!("--max-run-gb must be a number of GB, 0 for no limit");
+    }
     if a.lease_ttl.is_nan() || a.lease_ttl < 1.0 {
         anyhow::bail!("--lease-ttl must be at least 1 s");
     }
@@ -121,6 +128,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             artifact_grace_ms: (a.artifact_grace_hours * 3.6e6) as u64,
             max_store_bytes: (a.max_store_gb * 1e9) as u64,
             max_uploads: a.max_uploads.max(1),
+            max_run_bytes: (a.max_run_gb * 1e9) as u64,
         },
     };
     let rt = bemcal_client::runtime()?;
