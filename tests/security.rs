@@ -415,6 +415,26 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
                 series.join(", ")
             );
             let sha = upload(&mut w, point.as_bytes().to_vec()).await.unwrap();
+            // The size a worker claims is checked against the file's: a quota counts bytes.
+            let e = w
+                .complete(CompleteRequest {
+                    worker_id: "w1".into(),
+                    lease_id: job.lease_id,
+                    outputs: vec![FileRef {
+                        path: format!("simulations/point_{:03}.json", s.point),
+                        sha256: sha.clone(),
+                        size: 1,
+                    }],
+                    result_json: "{\"seconds\": 1.0}".into(),
+                })
+                .await
+                .unwrap_err();
+            assert!(
+                e.message()
+                    .contains(&format!("holds {} bytes, not 1", point.len())),
+                "{}",
+                e.message()
+            );
             w.complete(CompleteRequest {
                 worker_id: "w1".into(),
                 lease_id: job.lease_id,

@@ -251,6 +251,14 @@ pub struct Store {
     conn: Mutex<Connection>,
 }
 
+/// Whether `run` is running (a run that has ended takes no more stages, jobs or results).
+fn running_in(tx: &rusqlite::Transaction<'_>, run: &str) -> Result<bool> {
+    let state: Option<String> = tx
+        .query_row("SELECT state FROM runs WHERE id = ?1", [run], |r| r.get(0))
+        .optional()?;
+    Ok(state.as_deref() == Some(RunState::Running.as_str()))
+}
+
 /// [`Store::end_run`] inside a transaction.
 fn end_run_in(
     tx: &rusqlite::Transaction<'_>,
@@ -510,10 +518,15 @@ impl Store {
     /// Moves a run to `stage`, closing the previous stage and opening the new one; jobs given
     /// are added in the same transaction. A stage visited again (chains of a later refinement
     /// round, an extension) keeps the seconds of its earlier visits.
+    /// A run that has ended (cancelled, failed, over its quota) while its driver worked is
+    /// left as it is.
     pub fn set_stage(&self, run: &str, stage: Stage, jobs: Vec<NewJob>) -> Result<()> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
+            if !running_in(&tx, run)? {
+                return Ok(());
+            }
             tx.execute(
                 "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
                 params![run, now],
@@ -538,10 +551,13 @@ impl Store {
         })
     }
 
-    /// Adds jobs to a run without changing its stage.
+    /// Adds jobs to a run without changing its stage (none to a run that has ended).
     pub fn add_jobs(&self, run: &str, jobs: Vec<NewJob>) -> Result<()> {
         self.with(|c| {
             let tx = c.transaction()?;
+            if !running_in(&tx, run)? {
+                return Ok(());
+            }
             for j in jobs {
                 insert_job(&tx, run, j)?;
             }
@@ -583,6 +599,10 @@ impl Store {
     pub fn finish_run(&self, run: &str, files: &[File], summary: &str) -> Result<()> {
         self.with(|c| {
             let tx = c.transaction()?;
+            // A run that ended while its summary was written keeps its end.
+            if !running_in(&tx, run)? {
+                return Ok(());
+            }
             tx.execute("DELETE FROM results WHERE run_id = ?1", [run])?;
             for f in files {
                 tx.execute(
@@ -594,11 +614,10 @@ impl Store {
                 "UPDATE runs SET summary = ?2 WHERE id = ?1",
                 params![run, summary],
             )?;
+            end_run_in(&tx, run, RunState::Done, None)?;
             tx.commit()?;
             Ok(())
-        })?;
-        self.end_run(run, RunState::Done, None)?;
-        Ok(())
+        })
     }
 
     /// The result files of a finished run, by path.
@@ -898,18 +917,25 @@ impl Store {
                 return Ok((Outcome::Ignored, vec![]));
             };
             let fresh = (state == "queued" || state == "leased") && run_state == "running";
-            let bytes = match fresh && max_run_bytes > 0 {
-                true => run_output_bytes(&tx, &run, outputs)?,
-                false => 0,
+            // Over the quota only by what these outputs add: a completion that adds nothing
+            // (a simulation reporting EnergyPlus's failure, a file the run already has) is
+            // recorded even where a lowered quota is already passed.
+            let (before, bytes) = match fresh && max_run_bytes > 0 {
+                true => (
+                    run_output_bytes(&tx, &run, &[])?,
+                    run_output_bytes(&tx, &run, outputs)?,
+                ),
+                false => (0, 0),
             };
-            let over = bytes > max_run_bytes && max_run_bytes > 0;
+            let over = max_run_bytes > 0 && bytes > max_run_bytes && bytes > before;
             let outcome = match (fresh, over) {
                 (false, _) => "stale",
                 (true, true) => "refused",
                 (true, false) => "done",
             };
+            // A repeated completion (a retry after a lost reply) leaves the first one's outcome.
             tx.execute(
-                "UPDATE attempts SET ended_ms = ?2, outcome = ?3 WHERE lease_id = ?1",
+                "UPDATE attempts SET ended_ms = ?2, outcome = ?3 WHERE lease_id = ?1 AND ended_ms IS NULL",
                 params![lease as i64, now, outcome],
             )?;
             tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
@@ -1194,18 +1220,7 @@ fn fail_in(
             params![job, failures, error, now],
         )?;
         let reason = format!("{label} failed {failures} times; last error: {error}");
-        tx.execute(
-            "UPDATE runs SET state = 'failed', error = ?2, finished_ms = ?3 WHERE id = ?1 AND state = 'running'",
-            params![run, reason, now],
-        )?;
-        tx.execute(
-            "UPDATE jobs SET state = 'cancelled' WHERE run_id = ?1 AND state IN ('queued', 'leased')",
-            [&run],
-        )?;
-        tx.execute(
-            "UPDATE stages SET finished_ms = ?2 WHERE run_id = ?1 AND finished_ms IS NULL",
-            params![run, now],
-        )?;
+        end_run_in(tx, &run, RunState::Failed, Some(&reason))?;
     } else {
         tx.execute(
             "UPDATE jobs SET state = 'queued', failures = ?2, error = ?3, lease_id = NULL WHERE id = ?1",
@@ -1358,7 +1373,7 @@ mod tests {
         let (s, dir) = store("quota");
         s.create_run("A", "a", &[], &[]).unwrap();
         s.create_run("B", "b", &[], &[]).unwrap();
-        s.set_stage("A", Stage::Simulate, jobs(4, |_| None))
+        s.set_stage("A", Stage::Simulate, jobs(5, |_| None))
             .unwrap();
         s.set_stage("B", Stage::Simulate, jobs(1, |_| None))
             .unwrap();
@@ -1387,6 +1402,12 @@ mod tests {
             .complete_within(lease("A"), &[file('y', 300)], "{}", 1_000)
             .unwrap();
         assert_eq!(o, Outcome::Recorded("A".into()));
+        // A quota lowered below what the run holds (a restart with a smaller --max-run-gb):
+        // a completion that adds nothing is still recorded.
+        let (o, _) = s
+            .complete_within(lease("A"), &[file('x', 600)], "{}", 500)
+            .unwrap();
+        assert_eq!(o, Outcome::Recorded("A".into()));
         // The next 200 bytes would make 1,100: refused, and the run fails saying why. B's
         // 900 bytes were never A's.
         let (o, _) = s
@@ -1409,12 +1430,18 @@ mod tests {
         let done: Vec<_> = s.jobs("A", None).unwrap();
         assert_eq!(
             done.iter().filter(|j| j.state == JobState::Done).count(),
-            3,
+            4,
             "the refused outputs are not recorded: {done:?}"
         );
         assert!(done
             .iter()
             .all(|j| j.outputs.iter().all(|f| f.sha256 != file('z', 0).sha256)));
+        // A run that has ended takes no more stages or jobs (its driver may still be working).
+        s.set_stage("A", Stage::Train, jobs(1, |_| None)).unwrap();
+        s.add_jobs("A", jobs(1, |_| None)).unwrap();
+        let after = s.run("A").unwrap().unwrap();
+        assert_eq!((after.state, after.stage), (RunState::Failed, a.stage));
+        assert_eq!(s.jobs("A", None).unwrap().len(), 5);
         std::fs::remove_dir_all(dir).ok();
     }
 }

@@ -97,7 +97,7 @@ fn register_runs(registry: &mut Registry, s: &MetricsSnapshot) {
 fn register_attempts(registry: &mut Registry, s: &MetricsSnapshot) {
     let attempts = Family::<KindOutcome, Counter>::default();
     for kind in JobKind::ALL {
-        for outcome in ["done", "failed", "lost", "returned"] {
+        for outcome in ["done", "failed", "lost", "returned", "stale", "refused"] {
             let _ = attempts.get_or_create(&KindOutcome {
                 kind: kind.as_str().into(),
                 outcome: outcome.into(),

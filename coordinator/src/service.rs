@@ -66,6 +66,17 @@ fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
                     format!("{}: artifact {:?} was not uploaded", f.path, f.sha256),
                 ));
             }
+            // The size recorded is the file's, not the one claimed: quotas count it.
+            let stored = std::fs::metadata(st.artifacts.path(&f.sha256)).map_err(internal)?;
+            if stored.len() != f.size {
+                return Err(invalid(format!(
+                    "{}: artifact {} holds {} bytes, not {}",
+                    f.path,
+                    excerpt(&f.sha256, 16),
+                    stored.len(),
+                    f.size
+                )));
+            }
             Ok(File::from(f))
         })
         .collect()

@@ -128,7 +128,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             artifact_grace_ms: (a.artifact_grace_hours * 3.6e6) as u64,
             max_store_bytes: (a.max_store_gb * 1e9) as u64,
             max_uploads: a.max_uploads.max(1),
-            max_run_bytes: (a.max_run_gb * 1e9) as u64,
+            // Any quota above 0 is at least a byte (0 is no limit).
+            max_run_bytes: ((a.max_run_gb * 1e9).round() as u64).max(u64::from(a.max_run_gb > 0.0)),
         },
     };
     let rt = bemcal_client::runtime()?;
