@@ -33,7 +33,8 @@ fn write_project(dir: &Path) {
     );
     project.push_str(
         "[design]\npoints = 10\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\nhidden = 64\n[mcmc]\nchains = 2\niterations = 1500\nburn_in = 500\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n\
-         [validation]\nholdout = \"last 2 months\"\npredictive_draws = 4\n",
+         [validation]\nholdout = \"last 2 months\"\npredictive_draws = 4\n\
+         error_model = { heating_kwh = \"hour_of_day\" }\n",
     );
     std::fs::write(dir.join("project.toml"), project).unwrap();
 }
@@ -365,7 +366,17 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
     // (its meters are EnergyPlus plus noise: the error model is right by construction).
     let p = &summary["predictive"];
     assert_eq!(p["draws"].as_u64(), Some(4), "{p}");
+    // The heating's intervals take its own error model (`error_model = { heating_kwh = ... }`),
+    // the other meters the default.
+    assert_eq!(p["error_model"], "level", "{p}");
     for o in p["outputs"].as_array().unwrap() {
+        let own = if o["output"] == "heating_kwh" {
+            "hour_of_day"
+        } else {
+            "level"
+        };
+        assert_eq!(o["error_model"], own, "{o}");
+        assert_eq!(o["by_error_model"][0]["error_model"], own, "{o}");
         for m in o["by_error_model"].as_array().unwrap() {
             for c in m["in_sample"]
                 .as_array()

@@ -62,6 +62,9 @@ class Calibration:
     converged: bool
     #: The calibrated parameters, in the draws' order.
     parameters: List[str] = field(default_factory=list)
+    #: The sampled noise scales (``sigma_delta_<output>``), where the calibration sampled them;
+    #: in the ``posterior`` group beside the parameters.
+    noise: List[str] = field(default_factory=list)
 
     def __repr__(self) -> str:
         return (
@@ -81,19 +84,24 @@ def load(out_dir: Union[str, Path]) -> Calibration:
         )
     summary = json.loads(summary_file.read_text())
     draws = pd.read_csv(out / "draws.csv")
-    parameters = [c for c in draws.columns if c not in ("chain", "draw") and c not in SAMPLER_STATS]
+    # Columns as bemcal writes them (bemcal_report::io::Draws): chain, draw, the calibrated
+    # parameters, the noise, the log posterior and the sampler's statistics.
+    sampled = [c for c in draws.columns if c not in ("chain", "draw") and c not in SAMPLER_STATS]
+    noise = [c for c in sampled if c.startswith("sigma_delta_")]
+    parameters = [c for c in sampled if c not in noise]
     model = out / "calibrated.idf"
     return Calibration(
         out_dir=out,
         summary=summary,
         draws=draws,
-        posterior=inference_data(out, summary, draws, parameters),
+        posterior=inference_data(out, summary, draws, parameters, noise),
         metrics=metrics_frame(summary),
         predictions=predictions_frame(out),
         estimate=named(summary.get("calibrated_values", {})),
         model_path=model if model.is_file() else None,
         converged=bool(summary.get("converged", False)),
         parameters=parameters,
+        noise=noise,
     )
 
 
@@ -111,11 +119,14 @@ def by_chain(draws: pd.DataFrame, column: str) -> np.ndarray:
     return table.sort_index().sort_index(axis=1).to_numpy()
 
 
-def inference_data(out: Path, summary: dict, draws: pd.DataFrame, parameters: List[str]):
-    """The ArviZ InferenceData of a calibration."""
+def inference_data(
+    out: Path, summary: dict, draws: pd.DataFrame, parameters: List[str], noise: List[str] = ()
+):
+    """The ArviZ InferenceData of a calibration: the parameters and the sampled noise in its
+    ``posterior`` group, the parameters' priors in ``prior``."""
     az = arviz()
 
-    posterior = {p: by_chain(draws, p) for p in parameters}
+    posterior = {p: by_chain(draws, p) for p in [*parameters, *noise]}
     sample_stats = {
         name: by_chain(draws, column)
         for column, name in SAMPLER_STATS.items()

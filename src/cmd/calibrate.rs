@@ -317,12 +317,12 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
     }
     if let Some(p) = &s.predictive {
         println!(
-            "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + {:?} noise): \
-             share of measured hours inside, mean width",
+            "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + the noise \
+             of each meter's error model, by default {}): share of measured hours inside, mean width",
             p.draws,
             if p.with_surrogate_error { " with the surrogate's error" } else { "" },
             p.failed,
-            p.error_model
+            model_name(p.error_model)
         );
         let cov = |c: &[bemcal_stats::predictive::Coverage]| {
             c.iter()
@@ -337,46 +337,90 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        // The error model each meter's held-out hours favour, as one `error_model` setting.
+        let mut favoured = std::collections::BTreeMap::new();
         for o in &p.outputs {
             if let Some(m) = o.by_error_model.first() {
                 let c = &m.coverage;
                 println!("{:<18} in-sample  {}", o.output, cov(&c.in_sample));
+                if m.error_model != p.error_model {
+                    println!(
+                        "{:<18} (its own error model: {})",
+                        "",
+                        model_name(m.error_model)
+                    );
+                }
                 if !c.held_out.is_empty() {
                     println!("{:<18} held out   {}", "", cov(&c.held_out));
                 }
-                if let Some(f) = &o.held_out_favours {
-                    println!("{:<18} {}", "", held_out_choice(f, p.error_model));
+                let model = match &o.held_out_favours {
+                    Some(f) => {
+                        println!("{:<18} {}", "", held_out_choice(f, m.error_model));
+                        f.error_model
+                    }
+                    None => m.error_model,
+                };
+                if model != p.error_model {
+                    favoured.insert(o.output.as_str(), model);
                 }
             }
+        }
+        let configured = p.outputs.iter().filter_map(|o| {
+            let m = o.by_error_model.first()?.error_model;
+            (m != p.error_model).then_some((o.output.as_str(), m))
+        });
+        if favoured != configured.collect() {
+            let entries: Vec<String> = std::iter::once(("default", p.error_model))
+                .chain(favoured)
+                .map(|(k, m)| format!("{} = {}", toml_key(k), model_name(m)))
+                .collect();
+            println!(
+                "to use the error models the held-out hours favour (chosen on them: judge the \
+                 choice on another period): [validation] error_model = {{ {} }}",
+                entries.join(", ")
+            );
         }
         print_totals(p, &cov);
     }
 }
 
-/// The error model a meter's held-out hours favour, in words (`error_model` is one setting
-/// for the whole project: the meters may favour different ones).
+/// An error model as the project file spells it (`"hour_of_day"`).
+fn model_name(m: bemcal_stats::predictive::ErrorModel) -> String {
+    serde_json::to_string(&m).unwrap_or_default()
+}
+
+/// A TOML key: bare where it may be, quoted otherwise.
+fn toml_key(k: &str) -> String {
+    let bare = !k.is_empty()
+        && k.chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    match bare {
+        true => k.to_string(),
+        false => serde_json::to_string(k).unwrap_or_default(),
+    }
+}
+
+/// The error model a meter's held-out hours favour, in words.
 fn held_out_choice(
     f: &bemcal_calibrate::predictive::HeldOutChoice,
     configured: bemcal_stats::predictive::ErrorModel,
 ) -> String {
-    let name = |m| serde_json::to_string(&m).unwrap_or_default();
     let configured_miss = f
         .configured_miss_points
         .map_or("-".to_string(), |m| format!("{m:.1}"));
     if f.error_model == configured {
         format!(
-            "this meter's held-out hours favour the configured error model ({}: {:.1} points \
-             from nominal)",
-            name(configured),
+            "this meter's held-out hours favour its error model ({}: {:.1} points from nominal)",
+            model_name(configured),
             f.miss_points
         )
     } else {
         format!(
-            "this meter's held-out hours favour error_model = {} ({:.1} points from nominal \
-             against {configured_miss} for {}; within 2 points the narrower intervals win)",
-            name(f.error_model),
+            "this meter's held-out hours favour {} ({:.1} points from nominal against \
+             {configured_miss} for {}; within 2 points the narrower intervals win)",
+            model_name(f.error_model),
             f.miss_points,
-            name(configured)
+            model_name(configured),
         )
     }
 }

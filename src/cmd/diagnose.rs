@@ -1,8 +1,9 @@
 //! `bemcal diagnose`: convergence diagnostics of MCMC draws (rank-normalised split R-hat, bulk
 //! and tail ESS as ArviZ computes them) and summary statistics per parameter.
 //!
-//! DRAWS.csv has columns `chain,draw,<parameter>...`; each chain's rows are ordered by `draw`
-//! and all chains must have the same number of draws. Columns ending in `__` (the sampler's
+//! DRAWS.csv has columns `chain,draw,<parameter>...`, read by the one reader of draws files
+//! ([`bemcal_report::io::read_draws`]): chains numbered from 0 and equally long, each draw number
+//! once (rows in any order), every value a finite number. Columns ending in `__` (the sampler's
 //! statistics, as CmdStan names them) are skipped.
 
 use std::path::PathBuf;
@@ -14,7 +15,8 @@ use bemcal_stats::diagnostics::{self, ParameterDiagnostics};
 /// Arguments of `bemcal diagnose`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Draws CSV with columns `chain,draw,<parameter>...`.
+    /// Draws CSV with columns `chain,draw,<parameter>...` (chains numbered from 0, equally long;
+    /// finite values).
     #[arg(long)]
     pub draws: PathBuf,
     /// Print JSON instead of a table.

@@ -96,8 +96,9 @@ fn read_values(
                 path.display()
             )
         })?;
+        let which = parse_draw(draw)?;
         let draws = bemcal_report::io::read_draws(path)?;
-        let values = draw_values(&draws, draw).with_context(|| path.display().to_string())?;
+        let values = draw_values(&draws, which).with_context(|| path.display().to_string())?;
         // draws.csv holds the calibrated parameters only: the fixed ones (and those a
         // `calibrate = [...]` subset or priors.toml set) come from calibrated.toml beside it.
         let beside = path.with_file_name("calibrated.toml");
@@ -140,13 +141,9 @@ fn read_values(
     Ok(table.into_iter().collect())
 }
 
-/// The calibrated parameters' values of draw `which` (`CHAIN:DRAW`, as `draws.csv` numbers
-/// them) of a calibration's draws.
-fn draw_values(
-    draws: &bemcal_report::io::Draws,
-    which: &str,
-) -> anyhow::Result<Vec<(String, f64)>> {
-    let (chain, draw) = which
+/// `--draw CHAIN:DRAW`.
+fn parse_draw(which: &str) -> anyhow::Result<(usize, u64)> {
+    which
         .split_once(':')
         .and_then(|(c, d)| {
             Some((
@@ -159,13 +156,24 @@ fn draw_values(
                 "--draw {}: expected CHAIN:DRAW, two whole numbers such as 0:250",
                 bemcal_excerpt::excerpt(which, 40)
             )
-        })?;
+        })
+}
+
+/// The calibrated parameters' values of draw `(chain, draw)` (as `draws.csv` numbers them) of
+/// a calibration's draws.
+fn draw_values(
+    draws: &bemcal_report::io::Draws,
+    (chain, draw): (usize, u64),
+) -> anyhow::Result<Vec<(String, f64)>> {
     draws.parameters_at(chain, draw).with_context(|| {
-        let first = draws.numbers[0].first().copied().unwrap_or_default();
-        let last = draws.numbers[0].last().copied().unwrap_or_default();
+        let numbers = draws.numbers.get(chain).unwrap_or(&draws.numbers[0]);
+        let first = numbers.first().copied().unwrap_or_default();
+        let last = numbers.last().copied().unwrap_or_default();
         format!(
-            "no draw {chain}:{draw}: the file has chains 0 to {} and draws {first} to {last} per chain",
-            draws.chains.len() - 1
+            "no draw {chain}:{draw}: the file has chains 0 to {} and draws {first} to {last} per \
+             chain ({} each)",
+            draws.chains.len() - 1,
+            draws.len()
         )
     })
 }
@@ -189,6 +197,7 @@ sigma_delta_heating_kwh,log_posterior,accept_stat__,stepsize__,n_leapfrog__,dive
         std::fs::write(&p, text).unwrap();
         let shown =
             |e: anyhow::Error| format!("{e:#}").replace(&dir.path().display().to_string(), "DIR");
+        let which = parse_draw(which).map_err(shown)?;
         let draws = bemcal_report::io::read_draws(&p).map_err(|e| shown(e.into()))?;
         draw_values(&draws, which).map_err(shown)
     }

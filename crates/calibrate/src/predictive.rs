@@ -112,7 +112,8 @@ pub struct PredictiveReport {
     pub failed: usize,
     /// Whether the draws carry the surrogate's error (`draws_with_surrogate_error.csv`).
     pub with_surrogate_error: bool,
-    /// The error model of `validation/predictive_intervals.csv` (`[validation] error_model`).
+    /// The error model of `validation/predictive_intervals.csv` for the meters
+    /// `[validation] error_model` does not name (each meter's: its `error_model`).
     pub error_model: ErrorModel,
     /// The held-out period, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -126,6 +127,11 @@ pub struct PredictiveReport {
 pub struct OutputPredictive {
     /// The calibrated output (and its meter).
     pub output: String,
+    /// The error model of its intervals in `validation/predictive_intervals.csv`
+    /// (`[validation] error_model`; `by_error_model`'s first). Absent from a summary written
+    /// before error models per meter: the report's `error_model` then.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_model: Option<ErrorModel>,
     /// Root mean square residual of EnergyPlus at the estimate over the calibration hours (kWh).
     pub noise_kwh: f64,
     /// Coverage under each error model (the configured one first).
@@ -149,8 +155,8 @@ pub const TIE_POINTS: f64 = 2.0;
 
 /// The error model whose hourly intervals hold best on a meter's held-out hours: the one whose
 /// 50 % and 90 % coverage there is nearest nominal, the narrower of those within [`TIE_POINTS`]
-/// ([`bemcal_stats::predictive::nearest_nominal`]). A guide to `[validation] error_model` (one
-/// setting for the project: the meters may favour different ones); chosen on the held-out
+/// ([`bemcal_stats::predictive::nearest_nominal`]). A guide to `[validation] error_model` (set
+/// per meter where the meters favour different ones); chosen on the held-out
 /// hours, so that their coverage under it is no longer an independent check (three candidates
 /// on thousands of hours: a small bias).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -270,10 +276,11 @@ pub fn assess(
     let fit = inp.calibration_hours();
     let mut outputs = vec![];
     let mut columns: Vec<(String, Vec<f64>)> = vec![];
-    let configured = cal.project.validation.error_model;
-    let mut models = vec![configured];
-    models.extend(ErrorModel::ALL.iter().filter(|m| **m != configured));
+    let error_models = &cal.project.validation.error_model;
     for (k, name) in inp.outputs.iter().enumerate() {
+        let configured = error_models.of(name);
+        let mut models = vec![configured];
+        models.extend(ErrorModel::ALL.iter().filter(|m| **m != configured));
         let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
         let estimate = series(at_estimate);
@@ -345,6 +352,7 @@ pub fn assess(
         });
         outputs.push(OutputPredictive {
             output: name.clone(),
+            error_model: Some(configured),
             noise_kwh,
             by_error_model,
             residual_phi,
@@ -357,7 +365,7 @@ pub fn assess(
         draws: runs.len(),
         failed: candidates.len() - runs.len(),
         with_surrogate_error: chains.surrogate_error.is_some(),
-        error_model: configured,
+        error_model: error_models.default,
         held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
         outputs,
     }))

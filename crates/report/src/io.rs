@@ -158,7 +158,8 @@ pub struct PredictiveBlock {
     /// Whether the draws carry the surrogate's error.
     #[serde(default)]
     pub with_surrogate_error: bool,
-    /// The error model of the intervals file.
+    /// The error model of the intervals file for the meters `[validation] error_model` does
+    /// not name (each meter's is its `by_error_model`'s first).
     pub error_model: String,
     /// Per meter.
     pub outputs: Vec<OutputPredictiveBlock>,
@@ -905,6 +906,12 @@ pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
     if rows.is_empty() {
         return Err(parse_err(path, "no draws: the file has a header only"));
     }
+    if rows[0].is_empty() {
+        return Err(parse_err(
+            path,
+            "chain 0 has no draws: chains are numbered from 0 (as bemcal and ArviZ number them)",
+        ));
+    }
     let len = rows.iter().map(Vec::len).max().unwrap_or(0);
     let mut chains = Vec::with_capacity(rows.len());
     let mut numbers = Vec::with_capacity(rows.len());
@@ -1256,6 +1263,10 @@ mod draws_tests {
         refused(
             "chain,draw,a\n-1,0,1\n",
             "line 2, column 'chain': expected a whole number",
+        );
+        refused(
+            "chain,draw,a\n1,0,1\n2,0,1\n",
+            "chain 0 has no draws: chains are numbered from 0",
         );
         refused("chain,draw,a\n", "no draws: the file has a header only");
         refused("chain,draw\n0,0\n", "no columns besides chain and draw");
