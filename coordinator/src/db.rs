@@ -298,22 +298,30 @@ fn end_run_in(
 }
 
 /// Bytes of the distinct files a run's jobs produced (answers from the simulation cache cost
-/// it nothing), with `more` added: what [`Store::complete_within`] holds to a run's quota.
-fn run_output_bytes(tx: &rusqlite::Transaction<'_>, run: &str, more: &[File]) -> Result<u64> {
+/// it nothing), before and after `more` is added: what [`Store::complete_within`] holds to a
+/// run's quota.
+fn run_output_bytes(
+    tx: &rusqlite::Transaction<'_>,
+    run: &str,
+    more: &[File],
+) -> Result<(u64, u64)> {
     let mut st =
         tx.prepare("SELECT outputs FROM jobs WHERE run_id = ?1 AND state = 'done' AND cached = 0")?;
     let done = st
         .query_map([run], |r| r.get::<_, Option<String>>(0))?
         .collect::<rusqlite::Result<Vec<_>>>()?;
     let mut sizes = std::collections::HashMap::new();
-    for f in done
-        .into_iter()
-        .flat_map(parse_files)
-        .chain(more.iter().cloned())
-    {
+    for f in done.into_iter().flat_map(parse_files) {
         sizes.insert(f.sha256, f.size);
     }
-    Ok(sizes.values().fold(0u64, |a, &b| a.saturating_add(b)))
+    let total = |sizes: &std::collections::HashMap<String, u64>| {
+        sizes.values().fold(0u64, |a, &b| a.saturating_add(b))
+    };
+    let before = total(&sizes);
+    for f in more {
+        sizes.insert(f.sha256.clone(), f.size);
+    }
+    Ok((before, total(&sizes)))
 }
 
 fn files_json(f: &[File]) -> String {
@@ -921,10 +929,7 @@ impl Store {
             // (a simulation reporting EnergyPlus's failure, a file the run already has) is
             // recorded even where a lowered quota is already passed.
             let (before, bytes) = match fresh && max_run_bytes > 0 {
-                true => (
-                    run_output_bytes(&tx, &run, &[])?,
-                    run_output_bytes(&tx, &run, outputs)?,
-                ),
+                true => run_output_bytes(&tx, &run, outputs)?,
                 false => (0, 0),
             };
             let over = max_run_bytes > 0 && bytes > max_run_bytes && bytes > before;
