@@ -588,6 +588,9 @@ pub struct RefineRound {
     pub surrogate_error: Vec<OutputMetrics>,
 }
 
+/// The prefix of the noise scales' columns in `draws.csv` (`sigma_delta_<output>`).
+const NOISE_PREFIX: &str = "sigma_delta_";
+
 /// `draws.csv`: `chain,draw,<columns>...`, grouped by chain, each chain in draw order.
 ///
 /// The columns after `chain,draw` are, as `bemcal calibrate` writes them, the calibrated
@@ -610,6 +613,11 @@ impl Draws {
         Some(self.chains.iter().map(|c| c[k].as_slice()).collect())
     }
 
+    /// The noise scales' columns (`sigma_delta_<output>`), where the calibration sampled them.
+    pub fn noise(&self) -> impl Iterator<Item = &String> {
+        self.columns.iter().filter(|c| c.starts_with(NOISE_PREFIX))
+    }
+
     /// Whether a column is one of the sampler's statistics per draw (`accept_stat__`, ...).
     pub fn is_sampler_statistic(name: &str) -> bool {
         name.ends_with("__")
@@ -622,9 +630,7 @@ impl Draws {
             .columns
             .iter()
             .position(|c| {
-                c.starts_with("sigma_delta_")
-                    || c == "log_posterior"
-                    || Self::is_sampler_statistic(c)
+                c.starts_with(NOISE_PREFIX) || c == "log_posterior" || Self::is_sampler_statistic(c)
             })
             .unwrap_or(self.columns.len());
         &self.columns[..n]

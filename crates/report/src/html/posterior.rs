@@ -246,12 +246,11 @@ pub(super) fn chain_plots(cal: &CalibrationData) -> Result<String, ReportError> 
             (p.name.clone(), p.unit.clone(), r)
         })
         .collect();
-    for c in &cal.draws.columns {
-        if c.starts_with("sigma_delta_") {
-            trace_cols.push((c.clone(), "kWh".into(), f64::NAN));
-        } else if c == "log_posterior" {
-            trace_cols.push((c.clone(), String::new(), f64::NAN));
-        }
+    for c in cal.draws.noise() {
+        trace_cols.push((c.clone(), "kWh".into(), f64::NAN));
+    }
+    if cal.draws.columns.iter().any(|c| c == "log_posterior") {
+        trace_cols.push(("log_posterior".into(), String::new(), f64::NAN));
     }
     for (name, unit, rhat) in &trace_cols {
         let Some(chains) = cal.draws.column(name) else {
