@@ -177,11 +177,17 @@ fn distributed_matches_single_process() {
     // step of iterations - burn_in).
     // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
     // (validation jobs of their own on the distributed path).
-    // HMC, so that the extension re-adapts the chains from their draws on both paths.
+    // HMC, so that the extension re-adapts the chains from their draws on both paths; short
+    // chains and trajectories (150 iterations, 50 of them burn-in, integration time 1): the
+    // test compares the paths, and HMC's gradients were most of its time.
     let text = project_text()
         .replace(
+            "iterations = 300\nburn_in = 100\n",
+            "iterations = 150\nburn_in = 50\n",
+        )
+        .replace(
             "kernel = \"mh\"\nstart = \"prior\"\n",
-            "kernel = \"hmc\"\nstart = \"optimised\"\n",
+            "kernel = \"hmc\"\nstart = \"optimised\"\nhmc_integration_time = 1.0\n",
         )
         .replace(
             "max_extensions = 0\n",
@@ -191,12 +197,16 @@ fn distributed_matches_single_process() {
             "predictive_draws = 0\n",
             "predictive_draws = 3\nholdout = \"dec\"\n",
         );
-    assert!(text.contains("holdout") && text.contains("kernel = \"hmc\""));
+    assert!(
+        text.contains("holdout")
+            && text.contains("kernel = \"hmc\"")
+            && text.contains("burn_in = 50\n")
+    );
     std::fs::write(&pf, text).unwrap();
     let local = tmp.path().join("local");
     let (status, local_log) = calibrate_status(&pf, &local, None, &[]);
     assert!(
-        local_log.contains("extending to 550 iterations (extension 1 of at most 1)"),
+        local_log.contains("extending to 275 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
     // Same surrogate for both (see the module docs), then the distributed path.
@@ -204,7 +214,7 @@ fn distributed_matches_single_process() {
     let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")), &[]);
     // The one driver says the same through the coordinator (its messages in the run's status).
     assert!(
-        log.contains("extending to 550 iterations (extension 1 of at most 1)"),
+        log.contains("extending to 275 iterations (extension 1 of at most 1)"),
         "{log}"
     );
 
@@ -284,17 +294,17 @@ fn distributed_matches_single_process() {
             .unwrap()
             > 700
     );
-    // One extension of 300 - 100 draws after a re-adaptation window of 50 iterations that are
-    // not drawn: 2 chains x 400 draws after burn-in.
+    // One extension of 150 - 50 draws after a re-adaptation window of 25 iterations (half the
+    // burn-in, at least 25) that are not drawn: 2 chains x 200 draws after burn-in.
     let ck: serde_json::Value =
         serde_json::from_slice(&std::fs::read(local.join("chains.json")).unwrap()).unwrap();
     for s in ck["states"].as_array().unwrap() {
         assert_eq!(
-            s["window_end"], 350,
+            s["window_end"], 175,
             "re-adapted at the extension: {}",
             s["window_end"]
         );
-        assert_eq!(s["readapted"], 50);
+        assert_eq!(s["readapted"], 25);
     }
     assert_eq!(sa["chain_extensions"], 1);
     assert_eq!(sa["converged"], false);
@@ -308,7 +318,7 @@ fn distributed_matches_single_process() {
     assert_eq!(c["max_rhat"], short[0]["rhat"]);
     assert_eq!(sa["convergence"], sb["convergence"]);
     let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
-    assert_eq!(draws.lines().count(), 1 + 2 * 400);
+    assert_eq!(draws.lines().count(), 1 + 2 * 200);
 
     // The chains split into one job per chain (`--chains-per-job 1`, as a cluster spreads them
     // over its workers): each job runs its chain's segments on its own, and the extension
@@ -325,7 +335,7 @@ fn distributed_matches_single_process() {
     );
     assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
     assert!(
-        log.contains("extending to 550 iterations (extension 1 of at most 1)"),
+        log.contains("extending to 275 iterations (extension 1 of at most 1)"),
         "{log}"
     );
     let cg: serde_json::Value =
@@ -337,8 +347,8 @@ fn distributed_matches_single_process() {
         "one re-adapted metric for the chains of both jobs"
     );
     for s in states {
-        assert_eq!(s["window_end"], 350, "{}", s["window_end"]);
-        assert_eq!(s["readapted"], 50);
+        assert_eq!(s["window_end"], 175, "{}", s["window_end"]);
+        assert_eq!(s["readapted"], 25);
     }
     assert_eq!(
         cg, ck,

@@ -71,7 +71,8 @@ pub fn golden_epw() -> PathBuf {
 /// hidden units instead of the reference's 128: a quarter of the test's time, chains 7x faster)
 /// and short chains: the end-to-end tests' common case (they check the pipeline, not accuracy). The reference's random walk from prior draws (cheaper
 /// per iteration than the default HMC for a pipeline test), no extension of the chains, no
-/// refinement round.
+/// refinement round, no output space mapping (three EnergyPlus runs a calibration; tests/calibrate.rs
+/// tests it).
 pub fn small_project(name: &str, points: usize) -> String {
     format!(
         r#"name = "{name}"
@@ -114,6 +115,7 @@ max_extensions = 0
 rounds = 0
 [validation]
 predictive_draws = 0
+mapping_steps = 0
 "#
     )
 }
