@@ -69,10 +69,11 @@ pub fn golden_epw() -> PathBuf {
 /// Project text of the small two-parameter calibration (lighting density and cooling set-point
 /// of `examples/office/small.toml` against `meters.csv`), with a tiny surrogate (3 epochs, 32
 /// hidden units instead of the reference's 128: a quarter of the test's time, chains 7x faster)
-/// and short chains: the end-to-end tests' common case (they check the pipeline, not accuracy). The reference's random walk from prior draws (cheaper
-/// per iteration than the default HMC for a pipeline test), no extension of the chains, no
-/// refinement round, no output space mapping (three EnergyPlus runs a calibration; tests/calibrate.rs
-/// tests it).
+/// and short chains: the end-to-end tests' common case (they check the pipeline, not
+/// accuracy). The reference's random walk from prior draws (cheaper per iteration than the
+/// default HMC for a pipeline test), no extension of the chains, no refinement round, and no
+/// output space mapping (up to three EnergyPlus runs per calibration; tests/calibrate.rs tests
+/// it).
 pub fn small_project(name: &str, points: usize) -> String {
     format!(
         r#"name = "{name}"
