@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from . import FORMAT, FORMAT_VERSION, LOOKBACK
+from .adam import Adam
 from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
                    weather_stats, window_index)
 from .export import export_all, run_onnx, vjp_check
@@ -136,7 +137,7 @@ def train(args):
     init = getattr(args, "init", None)
     if init:
         warm_start(model, init, scale, n_features, names)
-    opt = torch.optim.Adam(model.parameters(), lr=args.lr)
+    opt = Adam(model.parameters(), lr=args.lr)
     T = hourly.shape[0]
     tr_point = torch.as_tensor(np.repeat(train_pts, T), device=device)
     tr_hour = torch.as_tensor(np.tile(np.arange(T), len(train_pts)), device=device)

@@ -14,7 +14,7 @@ use crate::surrogate::{Surrogate, SurrogateError, SurrogateMeta};
 pub const PYTHON_VAR: &str = "BEMCAL_PYTHON";
 
 /// The trainer package, `(relative path, contents)`.
-pub const TRAINER_FILES: [(&str, &str); 7] = [
+pub const TRAINER_FILES: [(&str, &str); 8] = [
     (
         "bemcal_train/__init__.py",
         include_str!("../../../python/bemcal_train/__init__.py"),
@@ -22,6 +22,10 @@ pub const TRAINER_FILES: [(&str, &str); 7] = [
     (
         "bemcal_train/__main__.py",
         include_str!("../../../python/bemcal_train/__main__.py"),
+    ),
+    (
+        "bemcal_train/adam.py",
+        include_str!("../../../python/bemcal_train/adam.py"),
     ),
     (
         "bemcal_train/data.py",
@@ -258,4 +262,26 @@ pub fn train(
         meta,
         seconds,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::TRAINER_FILES;
+
+    /// A module added to `python/bemcal_train` and not to `TRAINER_FILES` imports in a checkout
+    /// and fails in every training the binary runs.
+    #[test]
+    fn every_module_of_the_trainer_is_embedded() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/bemcal_train");
+        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".py"))
+            .map(|n| format!("bemcal_train/{n}"))
+            .collect();
+        on_disk.sort();
+        let mut embedded: Vec<String> = TRAINER_FILES.iter().map(|(p, _)| p.to_string()).collect();
+        embedded.sort();
+        assert_eq!(on_disk, embedded);
+    }
 }
