@@ -18,11 +18,7 @@ const TRUTH: [(&str, f64); 2] = [
 ];
 
 fn write_project(dir: &Path) {
-    std::fs::copy(
-        repo().join("examples/office/small.toml"),
-        dir.join("model.toml"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     let mut project = std::fs::read_to_string(repo().join("examples/office/project.toml")).unwrap();
     // Small settings for CI: two parameters, ten design points, short chains.
     let cut = project.find("[design]").unwrap();
@@ -794,8 +790,7 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
         d = d.succ_opt().unwrap();
     }
     std::fs::write(dir.join("true_calendar.csv"), calendar).unwrap();
-    let small = std::fs::read_to_string(repo().join("examples/office/small.toml")).unwrap()
-        + "\nyear = \"2021-04\"\n";
+    let small = common::small_model() + "\nyear = \"2021-04\"\n";
     std::fs::write(
         dir.join("truth.toml"),
         format!("{small}\nday_types_file = \"true_calendar.csv\"\n"),

@@ -46,11 +46,7 @@ fn project_text() -> String {
 
 /// A project folder with synthetic meters.
 fn project(dir: &Path) -> PathBuf {
-    std::fs::copy(
-        repo().join("examples/office/small.toml"),
-        dir.join("model.toml"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     std::fs::write(dir.join("project.toml"), project_text()).unwrap();
     let s = bemcal()
         .args(["synthesize", "--model"])
@@ -866,11 +862,7 @@ fn token_and_input_validation() {
         return;
     }
     let dir = tmp.path();
-    std::fs::copy(
-        repo().join("examples/office/small.toml"),
-        dir.join("model.toml"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     std::fs::write(
         dir.join("meters.csv"),
         "timestamp,heating_kwh\n2021-01-01T00:00,1\n",

@@ -14,7 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 
 mod common;
-use common::{bemcal, golden_epw, have_engine, repo, small_project};
+use common::{bemcal, golden_epw, have_engine, small_project};
 
 const POINTS: u64 = 5;
 
@@ -22,7 +22,7 @@ const POINTS: u64 = 5;
 /// window-to-wall ratio), project and synthetic meters at `truth`.
 fn building(dir: &Path, name: &str, model_extra: &str, truth: (f64, f64)) {
     std::fs::create_dir_all(dir).unwrap();
-    let mut model = std::fs::read_to_string(repo().join("examples/office/small.toml")).unwrap();
+    let mut model = common::small_model();
     if !model_extra.is_empty() {
         model = model.replace("footprint_m = [20.0, 15.0]\n", "");
         model.push_str(model_extra);

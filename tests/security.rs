@@ -55,11 +55,7 @@ fn flat_meters() -> String {
 /// The small project in `dir` with `meters` as its meters file.
 fn small(dir: &Path, meters: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(dir).unwrap();
-    std::fs::copy(
-        repo().join("examples/office/small.toml"),
-        dir.join("model.toml"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     std::fs::write(dir.join("meters.csv"), meters).unwrap();
     let p = dir.join("project.toml");
     std::fs::write(&p, small_project("attacked", 4)).unwrap();
@@ -154,7 +150,7 @@ fn a_submitted_project_reads_only_its_own_files() {
     }
     let dir = tempfile::tempdir().unwrap();
     let (mut proc, url) = start(dir.path());
-    let model = std::fs::read_to_string(repo().join("examples/office/small.toml")).unwrap();
+    let model = common::small_model();
     let project = small_project("attacked", 4);
     let rt = bemcal_client::runtime().unwrap();
     rt.block_on(async {
