@@ -384,9 +384,9 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
     }
 }
 
-/// An error model as the project file spells it (`"hour_of_day"`).
+/// An error model as the project file spells it, quoted (`"hour_of_day"`).
 fn model_name(m: bemcal_stats::predictive::ErrorModel) -> String {
-    serde_json::to_string(&m).unwrap_or_default()
+    format!("\"{}\"", m.as_str())
 }
 
 /// A TOML key: bare where it may be, quoted otherwise.

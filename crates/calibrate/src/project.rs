@@ -684,9 +684,14 @@ impl<'de> Deserialize<'de> for ErrorModels {
         impl<'de> serde::de::Visitor<'de> for Visitor {
             type Value = ErrorModels;
             fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str(
-                    "an error model (\"constant\", \"hour_of_day\" or \"level\"), or a table of \
-                     them by output with an optional default",
+                let names: Vec<String> = bemcal_stats::predictive::ErrorModel::ALL
+                    .iter()
+                    .map(|m| format!("\"{}\"", m.as_str()))
+                    .collect();
+                write!(
+                    f,
+                    "an error model ({}), or a table of them by output with an optional default",
+                    names.join(", ")
                 )
             }
             fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ErrorModels, E> {

@@ -50,6 +50,15 @@ impl ErrorModel {
         ErrorModel::Level,
     ];
 
+    /// The name a project file gives it (`hour_of_day`), the one serde reads and writes.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorModel::Constant => "constant",
+            ErrorModel::HourOfDay => "hour_of_day",
+            ErrorModel::Level => "level",
+        }
+    }
+
     /// The noise scale of each hour: the root mean square of `measured - simulated` over the
     /// hours where `fit[h]` is true and both are present (per hour of the day for
     /// [`ErrorModel::HourOfDay`], falling back to the constant scale for an hour of the day
@@ -423,6 +432,15 @@ pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn each_error_model_is_named_as_serde_names_it() {
+        for m in ErrorModel::ALL {
+            let json = serde_json::to_string(&m).unwrap();
+            assert_eq!(json, format!("\"{}\"", m.as_str()));
+            assert_eq!(serde_json::from_str::<ErrorModel>(&json).unwrap(), m);
+        }
+    }
+
     #[test]
     fn the_candidate_nearest_nominal_wins_and_a_tie_goes_to_the_sharper() {
         let cov = |f50: f64, f90: f64, w: f64| {
