@@ -21,7 +21,7 @@ venv: $(STAMP)
 $(STAMP): python/requirements.txt
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	@# --no-compile, then the bytecode of only the packages a surrogate training imports
-	@# (compileall on both cores: about 30 s against pip's 3 min for everything). Python
+	@# (compileall on both cores: about 30 s; the whole environment took 96 s). Python
 	@# does not write bytecode on first import where PYTHONDONTWRITEBYTECODE is set, as the
 	@# trainer sets it and many CI images do: without this, every training compiled torch's
 	@# 2,500 modules again, 10-12 s of each import against 5 s (2-core machine).
