@@ -28,8 +28,8 @@ $(STAMP): python/requirements.txt
 	$(PY) -m pip install -q --no-compile --disable-pip-version-check -r python/requirements.txt
 	@# (torch/testing/_internal holds Python 3.12-only test helpers that never load here.)
 	$(PY) -m compileall -q -j 0 -x 'torch/testing/_internal' $$($(PY) -c "import sysconfig, os; p = sysconfig.get_paths()['purelib']; \
-	  print(' '.join(os.path.join(p, d) for d in ('torch', 'torchgen', 'numpy', 'onnx', 'onnxruntime', \
-	  'google', 'ml_dtypes', 'cuda', 'typing_extensions.py')))") > /dev/null
+	  print(' '.join(x for x in (os.path.join(p, d) for d in ('torch', 'torchgen', 'numpy', 'onnx', 'onnxruntime', \
+	  'google', 'ml_dtypes', 'cuda', 'typing_extensions.py')) if os.path.exists(x)))") > /dev/null
 	@touch $(STAMP)
 
 build:
