@@ -155,6 +155,30 @@ pub fn write_package(dir: &Path, files: &[(&str, &str)]) -> std::io::Result<()> 
     Ok(())
 }
 
+/// Checks an embedded package against its folder in a checkout: `files` (as [`write_package`]
+/// takes them) must be exactly the `.py` files of `dir`, named `package/NAME.py`. A module added
+/// to the folder and not embedded imports in a checkout and fails in the binary; each crate that
+/// embeds a package tests it with this. The error lists both sides.
+pub fn check_embedded(dir: &Path, package: &str, files: &[(&str, &str)]) -> Result<(), String> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut on_disk: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".py"))
+        .map(|n| format!("{package}/{n}"))
+        .collect();
+    on_disk.sort();
+    let mut embedded: Vec<String> = files.iter().map(|(p, _)| p.to_string()).collect();
+    embedded.sort();
+    match on_disk == embedded {
+        true => Ok(()),
+        false => Err(format!(
+            "{} holds {on_disk:?}, the binary embeds {embedded:?}",
+            dir.display()
+        )),
+    }
+}
+
 /// Runs `python -m bemcal ARGS` in the environment's interpreter with the module of
 /// [`MODULE_FILES`] (written to a temporary folder first on `PYTHONPATH`); `BEMCAL_BIN` is set
 /// to the running executable so that the module calls back into this binary. Returns the exit
@@ -182,23 +206,11 @@ pub fn run_module(venv: &Path, args: &[&std::ffi::OsStr]) -> std::io::Result<i32
 mod tests {
     use super::*;
 
+    /// A module file the binary does not carry breaks `bemcal export` on an import.
     #[test]
     fn every_file_of_the_python_module_is_embedded() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../python/bemcal");
-        let mut files: Vec<String> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
-            .filter(|n| n.ends_with(".py"))
-            .map(|n| format!("bemcal/{n}"))
-            .collect();
-        files.sort();
-        let mut embedded: Vec<String> = MODULE_FILES.iter().map(|(p, _)| p.to_string()).collect();
-        embedded.sort();
-        assert_eq!(
-            files, embedded,
-            "python/bemcal and pyenv::MODULE_FILES differ: a module file the binary does not carry \
-             breaks `bemcal export` on an import"
-        );
+        check_embedded(&dir, "bemcal", &MODULE_FILES).unwrap();
     }
 
     #[test]

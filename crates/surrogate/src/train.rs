@@ -273,15 +273,7 @@ mod tests {
     #[test]
     fn every_module_of_the_trainer_is_embedded() {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/bemcal_train");
-        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| n.ends_with(".py"))
-            .map(|n| format!("bemcal_train/{n}"))
-            .collect();
-        on_disk.sort();
-        let mut embedded: Vec<String> = TRAINER_FILES.iter().map(|(p, _)| p.to_string()).collect();
-        embedded.sort();
-        assert_eq!(on_disk, embedded);
+        bemcal_pyenv::check_embedded(std::path::Path::new(dir), "bemcal_train", &TRAINER_FILES)
+            .unwrap();
     }
 }
