@@ -47,8 +47,14 @@ test-deps:
 	  (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || \
 	  echo "note: chromium not installed; the report rendering test will be skipped"; }
 
+# With cargo-nextest where the machine has it (.config/nextest.toml: tests of different
+# binaries side by side), else with `cargo test`.
 test: setup test-deps
-	$(CARGO) test --release --workspace
+	@if $(CARGO) nextest --version > /dev/null 2>&1; then \
+	  echo "$(CARGO) nextest run --release --workspace"; $(CARGO) nextest run --release --workspace; \
+	else \
+	  echo "$(CARGO) test --release --workspace"; $(CARGO) test --release --workspace; \
+	fi
 
 # Mutation fuzzing of every parser a user or client feeds (tests/fuzz.rs), longer than in
 # `make test` (150 mutations each): no panic, every rejection a short clear error.

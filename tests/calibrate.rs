@@ -999,13 +999,13 @@ fn cross_validation_by_month(dir: &Path, out: &Path) {
         .replace("holdout = \"last 2 months\"\n", "")
         .replace(
             "iterations = 1500\nburn_in = 500\n",
-            "iterations = 600\nburn_in = 200\n",
+            "iterations = 300\nburn_in = 100\n",
         )
         .replace(
             "predictive_draws = 4\n",
             "predictive_draws = 2\nmapping_steps = 0\n",
         );
-    assert!(project.contains("iterations = 600") && project.contains("mapping_steps = 0"));
+    assert!(project.contains("iterations = 300") && project.contains("mapping_steps = 0"));
     std::fs::write(dir.join("project_cv.toml"), project).unwrap();
     let cv = dir.join("cv");
     let all = cv.join("all");

@@ -34,13 +34,25 @@ fn run_in(cwd: &Path, cmd: &mut Command) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// The Cargo profile this test was built with (`target/debug` is the `dev` profile's folder),
+/// so that maturin reuses the build `make test` made instead of compiling the workspace again
+/// in another profile.
+fn cargo_profile() -> String {
+    let bin = Path::new(env!("CARGO_BIN_EXE_bemcal"));
+    let dir = bin.parent().and_then(Path::file_name).unwrap();
+    match dir.to_str().unwrap() {
+        "debug" => "dev".to_string(),
+        other => other.to_string(),
+    }
+}
+
 /// Builds the wheel with the repository environment's maturin; returns its path.
 fn build_wheel(into: &Path) -> PathBuf {
     let maturin = repo().join(".venv/bin/maturin");
     run_in(
         &repo(),
         Command::new(maturin)
-            .args(["build", "--release", "--out"])
+            .args(["build", "--profile", &cargo_profile(), "--out"])
             .arg(into),
     );
     let wheels: Vec<PathBuf> = std::fs::read_dir(into)

@@ -47,7 +47,9 @@ pub fn have_engine() -> bool {
 /// oversubscribe them (measured on 2 cores: `tests/calibrate.rs` took 790-852 s with its two
 /// calibrations at once, 502 s one after the other). Light tests of the same binary still run
 /// beside it. The coordinator tests (`tests/distributed.rs`) do not take it: they wait on leases
-/// and heartbeats and overlap well (573-751 s side by side, 911 s one after the other).
+/// and heartbeats and overlap well (573-751 s side by side, 911 s one after the other). Under
+/// cargo-nextest (`make test`) each test is a process of its own and this lock holds nothing
+/// apart: the `whole-machine` test group of `.config/nextest.toml` does, for the same tests.
 pub fn whole_machine() -> std::sync::MutexGuard<'static, ()> {
     static MACHINE: std::sync::Mutex<()> = std::sync::Mutex::new(());
     // A test that failed while holding it leaves it poisoned; the next one may still run.
