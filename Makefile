@@ -49,12 +49,9 @@ test-deps:
 
 # With cargo-nextest where the machine has it (.config/nextest.toml: tests of different
 # binaries side by side), else with `cargo test`.
+TEST_RUNNER = $(if $(shell $(CARGO) nextest --version 2> /dev/null),nextest run,test)
 test: setup test-deps
-	@if $(CARGO) nextest --version > /dev/null 2>&1; then \
-	  echo "$(CARGO) nextest run --release --workspace"; $(CARGO) nextest run --release --workspace; \
-	else \
-	  echo "$(CARGO) test --release --workspace"; $(CARGO) test --release --workspace; \
-	fi
+	$(CARGO) $(TEST_RUNNER) --release --workspace
 
 # Mutation fuzzing of every parser a user or client feeds (tests/fuzz.rs), longer than in
 # `make test` (150 mutations each): no panic, every rejection a short clear error.

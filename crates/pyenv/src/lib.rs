@@ -160,13 +160,15 @@ pub fn write_package(dir: &Path, files: &[(&str, &str)]) -> std::io::Result<()> 
 /// to the folder and not embedded imports in a checkout and fails in the binary; each crate that
 /// embeds a package tests it with this. The error lists both sides.
 pub fn check_embedded(dir: &Path, package: &str, files: &[(&str, &str)]) -> Result<(), String> {
-    let entries = std::fs::read_dir(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut on_disk: Vec<String> = entries
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.ends_with(".py"))
-        .map(|n| format!("{package}/{n}"))
-        .collect();
+    let unreadable = |e: std::io::Error| format!("{}: {e}", dir.display());
+    let mut on_disk = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(unreadable)? {
+        let name = entry.map_err(unreadable)?.file_name();
+        let name = name.to_string_lossy();
+        if name.ends_with(".py") {
+            on_disk.push(format!("{package}/{name}"));
+        }
+    }
     on_disk.sort();
     let mut embedded: Vec<String> = files.iter().map(|(p, _)| p.to_string()).collect();
     embedded.sort();
