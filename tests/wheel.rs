@@ -46,13 +46,42 @@ fn cargo_profile() -> String {
     }
 }
 
+/// Whether `var` is one Cargo (or nextest) sets for a test process about the test's own
+/// package (`CARGO_MANIFEST_DIR`, `CARGO_PKG_*`, `CARGO_BIN_EXE_*`, ...), as opposed to Cargo's
+/// configuration (`CARGO_HOME`, `CARGO_PROFILE_*`, ...).
+fn set_for_the_test(var: &str) -> bool {
+    [
+        "CARGO_MANIFEST_DIR",
+        "CARGO_MANIFEST_PATH",
+        "CARGO_CRATE_NAME",
+        "CARGO_BIN_NAME",
+        "CARGO_PRIMARY_PACKAGE",
+        "CARGO_TARGET_TMPDIR",
+        "OUT_DIR",
+    ]
+    .contains(&var)
+        || ["CARGO_PKG_", "CARGO_BIN_EXE_", "NEXTEST"]
+            .iter()
+            .any(|p| var.starts_with(p))
+}
+
 /// Builds the wheel with the repository environment's maturin; returns its path.
+///
+/// Without the test's own Cargo variables: build scripts that read one of them (ring's reads
+/// `CARGO_MANIFEST_DIR`) would see it change, and Cargo would compile them and everything above
+/// them again (ring, rustls, tonic, the client, coordinator, worker and binary: 264 s of the
+/// wheel test on 2 cores), then once more at the next `cargo build`.
 fn build_wheel(into: &Path) -> PathBuf {
     let maturin = repo().join(".venv/bin/maturin");
+    let mut cmd = Command::new(maturin);
+    for (var, _) in std::env::vars_os() {
+        if var.to_str().is_some_and(set_for_the_test) {
+            cmd.env_remove(var);
+        }
+    }
     run_in(
         &repo(),
-        Command::new(maturin)
-            .args(["build", "--profile", &cargo_profile(), "--out"])
+        cmd.args(["build", "--profile", &cargo_profile(), "--out"])
             .arg(into),
     );
     let wheels: Vec<PathBuf> = std::fs::read_dir(into)
