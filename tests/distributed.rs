@@ -174,8 +174,9 @@ fn distributed_matches_single_process() {
     // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
     // (validation jobs of their own on the distributed path).
     // HMC, so that the extension re-adapts the chains from their draws on both paths; short
-    // chains and trajectories (150 iterations, 50 of them burn-in, integration time 1): the
-    // test compares the paths, and HMC's gradients were most of its time.
+    // chains and trajectories (150 iterations, 50 of them burn-in, integration time 0.5): the
+    // test compares the paths, and HMC's gradients were most of its time (at integration time
+    // 1, 81 s of a local run's 133 s, three runs in the test).
     let text = project_text()
         .replace(
             "iterations = 300\nburn_in = 100\n",
@@ -183,7 +184,7 @@ fn distributed_matches_single_process() {
         )
         .replace(
             "kernel = \"mh\"\nstart = \"prior\"\n",
-            "kernel = \"hmc\"\nstart = \"optimised\"\nhmc_integration_time = 1.0\n",
+            "kernel = \"hmc\"\nstart = \"optimised\"\nhmc_integration_time = 0.5\n",
         )
         .replace(
             "max_extensions = 0\n",
