@@ -437,7 +437,12 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
     let _ = std::fs::remove_dir_all(&scratch);
     let simulated = inp.runner.simulated_input(&idf, &scratch)?;
     let _ = std::fs::remove_dir_all(&scratch);
-    write_atomic(&cal.out.calibrated_idf(), simulated.to_text().as_bytes())?;
+    write_atomic(
+        &cal.out.calibrated_idf(),
+        simulated
+            .to_text_with_field_names(inp.runner.idd())
+            .as_bytes(),
+    )?;
     let mut toml = format!(
         "# Parameter values of the calibrated model of '{}' (estimate: {}; calibrated and fixed).\n\
          # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\

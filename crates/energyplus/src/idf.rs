@@ -7,6 +7,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use crate::idd::Idd;
 use crate::Error;
 
 /// One IDF object: its class and its fields (the first field is usually the name).
@@ -113,6 +114,17 @@ impl Idf {
 
     /// Writes the model as IDF text.
     pub fn to_text(&self) -> String {
+        self.write(None)
+    }
+
+    /// The IDF as text with each field named from the IDD in a `!-` comment, as IDF Editor
+    /// writes them (`    10.0,                     !- Watts per Floor Area`): the calibrated
+    /// model a user reads field by field. Fields past the IDD's list have no comment.
+    pub fn to_text_with_field_names(&self, idd: &Idd) -> String {
+        self.write(Some(idd))
+    }
+
+    fn write(&self, idd: Option<&Idd>) -> String {
         let mut s = String::with_capacity(self.objects.len() * 120);
         for o in &self.objects {
             s.push_str(&o.class);
@@ -121,9 +133,19 @@ impl Idf {
                 continue;
             }
             s.push_str(",\n");
+            let names = idd.and_then(|d| d.fields(&o.class)).unwrap_or_default();
             for (i, f) in o.fields.iter().enumerate() {
                 let sep = if i + 1 == o.fields.len() { ';' } else { ',' };
-                let _ = writeln!(s, "    {f}{sep}");
+                match names.get(i) {
+                    // The comments in one column where the values allow it.
+                    Some(name) => {
+                        let cell = format!("    {f}{sep}");
+                        let _ = writeln!(s, "{cell:<29} !- {name}");
+                    }
+                    None => {
+                        let _ = writeln!(s, "    {f}{sep}");
+                    }
+                }
             }
             s.push('\n');
         }
@@ -162,6 +184,31 @@ mod tests {
         );
         let e = Idf::parse("Zone, Z1", Path::new("bad.idf")).unwrap_err();
         assert!(e.to_string().contains("bad.idf:1"), "{e}");
+    }
+
+    #[test]
+    fn field_names_from_the_idd_are_comments_that_parse_back() {
+        let idd = Idd::parse("Lights,\n  A1 , \\field Name\n  N1 ; \\field Watts per Floor Area\n");
+        let idf = Idf::parse("Lights, L1, 10.0, 3;\nZone, Z1;\n", Path::new("m.idf")).unwrap();
+        let text = idf.to_text_with_field_names(&idd);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[1], format!("{:<29} !- Name", "    L1,"), "{text}");
+        assert_eq!(
+            lines[2],
+            format!("{:<29} !- Watts per Floor Area", "    10.0,"),
+            "{text}"
+        );
+        // Past the IDD's fields, and in a class it does not list: no comment.
+        assert_eq!(lines[3], "    3;", "{text}");
+        assert!(text.contains("Zone,\n    Z1;\n"), "{text}");
+        let fields = |i: &Idf| -> Vec<(String, Vec<String>)> {
+            i.objects
+                .iter()
+                .map(|o| (o.class.clone(), o.fields.clone()))
+                .collect()
+        };
+        let again = Idf::parse(&text, Path::new("m.idf")).unwrap();
+        assert_eq!(fields(&again), fields(&idf));
     }
 
     #[test]
