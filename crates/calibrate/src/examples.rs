@@ -15,30 +15,55 @@ pub struct Example {
 }
 
 /// Every bundled example.
-pub const EXAMPLES: &[Example] = &[Example {
-    name: "office",
-    about: "the example office: model.toml (4 storeys, 20 zones, 38 parameters) with project.toml \
+pub const EXAMPLES: &[Example] = &[
+    Example {
+        name: "office",
+        about:
+            "the example office: model.toml (4 storeys, 20 zones, 38 parameters) with project.toml \
             (the demo's calibration), small.toml (a one-zone box) with quick.toml (six parameters, \
             `make quick`); meters come from `bemcal synthesize` or your own CSV",
-    files: &[
-        (
-            "model.toml",
-            include_str!("../../../examples/office/model.toml"),
-        ),
-        (
-            "project.toml",
-            include_str!("../../../examples/office/project.toml"),
-        ),
-        (
-            "small.toml",
-            include_str!("../../../examples/office/small.toml"),
-        ),
-        (
-            "quick.toml",
-            include_str!("../../../examples/office/quick.toml"),
-        ),
-    ],
-}];
+        files: &[
+            (
+                "model.toml",
+                include_str!("../../../examples/office/model.toml"),
+            ),
+            (
+                "project.toml",
+                include_str!("../../../examples/office/project.toml"),
+            ),
+            (
+                "small.toml",
+                include_str!("../../../examples/office/small.toml"),
+            ),
+            (
+                "quick.toml",
+                include_str!("../../../examples/office/quick.toml"),
+            ),
+        ],
+    },
+    Example {
+        name: "own-idf",
+        about: "your own IDF: building.idf (a one-zone office with IDF Editor's field comments) \
+            mapped by model.toml onto six parameters (people, lights and equipment, \
+            infiltration, both set-point schedules; set, scale and offset edits), with \
+            project.toml (`make quick`'s settings); meters from `bemcal synthesize` as \
+            project.toml says, or your own CSV",
+        files: &[
+            (
+                "building.idf",
+                include_str!("../../../examples/own-idf/building.idf"),
+            ),
+            (
+                "model.toml",
+                include_str!("../../../examples/own-idf/model.toml"),
+            ),
+            (
+                "project.toml",
+                include_str!("../../../examples/own-idf/project.toml"),
+            ),
+        ],
+    },
+];
 
 /// The example called `name`.
 pub fn find(name: &str) -> Option<&'static Example> {
@@ -90,5 +115,11 @@ mod tests {
         let again = office.write_to(dir.path()).unwrap_err();
         assert_eq!(again.kind(), std::io::ErrorKind::AlreadyExists);
         assert!(find("nowhere").is_none());
+
+        let own = find("own-idf").unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(own.write_to(dir.path()).unwrap().len(), 3);
+        let map = std::fs::read_to_string(dir.path().join("model.toml")).unwrap();
+        assert!(map.contains("path = \"building.idf\""));
     }
 }

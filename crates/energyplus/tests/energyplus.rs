@@ -772,3 +772,83 @@ fn economizer_and_doas_fan_coils_simulate_and_respond() {
         "fan coils: cooling {c_warm} -> {c_cool}"
     );
 }
+
+/// The bundled `own-idf` example (`examples/own-idf`): its map loads against the IDD and each
+/// parameter edits what its description says in the example's IDF, an IDF with IDF Editor's
+/// field comments, and nothing else: people, lights, equipment, infiltration and both
+/// set-point schedules.
+#[test]
+fn the_own_idf_examples_map_edits_its_objects() {
+    let Some(r) = runner() else { return };
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/own-idf");
+    let model = Model::load(&dir.join("model.toml"), r.idd()).unwrap();
+    let at = |given: &[(&str, f64)]| {
+        let values: ParameterValues = given.iter().map(|(k, v)| (k.to_string(), *v)).collect();
+        model.instantiate(&values, r.idd()).unwrap()
+    };
+    let field = |idf: &bemcal_energyplus::idf::Idf, class: &str, name: &str| -> Vec<String> {
+        let i = r.idd().field_index(class, name).unwrap();
+        idf.of_class(class).map(|o| o.fields[i].clone()).collect()
+    };
+    let number = |idf: &bemcal_energyplus::idf::Idf, class: &str, name: &str| -> f64 {
+        let v = field(idf, class, name);
+        assert_eq!(v.len(), 1, "{class}: {v:?}");
+        v[0].parse().unwrap()
+    };
+    let schedule = |idf: &bemcal_energyplus::idf::Idf, name: &str| -> Vec<String> {
+        idf.of_class("Schedule:Compact")
+            .find(|o| o.name() == Some(name))
+            .unwrap()
+            .fields
+            .clone()
+    };
+    // At the prior modes the IDF's own values (10 m2 per person, 10 and 17.5 W/m2, 0.2 ACH).
+    let modes = at(&[]);
+    let people = ("People", "Floor Area per Person");
+    let lights = ("Lights", "Watts per Floor Area");
+    let equipment = ("ElectricEquipment", "Watts per Floor Area");
+    let infiltration = ("ZoneInfiltration:DesignFlowRate", "Air Changes per Hour");
+    assert_eq!(number(&modes, people.0, people.1), 10.0);
+    assert_eq!(number(&modes, lights.0, lights.1), 10.0);
+    assert_eq!(number(&modes, equipment.0, equipment.1), 17.5);
+    assert_eq!(number(&modes, infiltration.0, infiltration.1), 0.2);
+
+    let edited = at(&[
+        ("floor_area_per_person", 14.0),
+        ("lighting_scale", 1.25),
+        ("equipment_scale", 0.8),
+        ("infiltration_scale", 1.8),
+        ("heating_setpoint_offset", -1.0),
+        ("cooling_setpoint_offset", 1.0),
+    ]);
+    let close = |a: f64, b: f64| assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+    close(number(&edited, people.0, people.1), 14.0);
+    close(number(&edited, lights.0, lights.1), 12.5);
+    close(number(&edited, equipment.0, equipment.1), 14.0);
+    close(number(&edited, infiltration.0, infiltration.1), 0.36);
+    for (name, by) in [("Heating Setpoint", -1.0), ("Cooling Setpoint", 1.0)] {
+        let (after, before) = (schedule(&edited, name), schedule(&modes, name));
+        assert_eq!(after.len(), before.len());
+        let mut moved = 0;
+        for (a, b) in after.iter().zip(&before) {
+            match (a.parse::<f64>(), b.parse::<f64>()) {
+                (Ok(x), Ok(y)) => {
+                    close(x - y, by);
+                    moved += 1;
+                }
+                _ => assert_eq!(a, b),
+            }
+        }
+        assert!(moved >= 4, "{name}: {moved} values moved");
+    }
+    // Nothing else changed: every other schedule and every object of another class.
+    assert_eq!(modes.objects.len(), edited.objects.len());
+    for (a, b) in modes.objects.iter().zip(&edited.objects) {
+        let mapped = [people.0, lights.0, equipment.0, infiltration.0].contains(&a.class.as_str())
+            || a.name() == Some("Heating Setpoint")
+            || a.name() == Some("Cooling Setpoint");
+        if !mapped {
+            assert_eq!(a, b);
+        }
+    }
+}
