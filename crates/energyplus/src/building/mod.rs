@@ -309,6 +309,14 @@ impl BuildingSpec {
     /// [`BuildingSpec::validate`], with the TOML key of the field at fault (`["footprint_m"]`,
     /// `["priors", "shgc"]`) so that a spec file's message can name its line.
     fn check_fields(&self) -> Result<(), (Vec<String>, String)> {
+        self.check_geometry()?;
+        self.check_systems()?;
+        self.check_schedules()?;
+        self.check_priors()
+    }
+
+    /// Storeys, footprint, heights, perimeter depth and windows.
+    fn check_geometry(&self) -> Result<(), (Vec<String>, String)> {
         let at = |key: &str, message: String| (vec![key.to_string()], message);
         if self.storeys == 0 || self.storeys > 60 {
             return Err(at(
@@ -361,6 +369,12 @@ impl BuildingSpec {
                 ),
             ));
         }
+        Ok(())
+    }
+
+    /// The time step and what the HVAC system can have.
+    fn check_systems(&self) -> Result<(), (Vec<String>, String)> {
+        let at = |key: &str, message: String| (vec![key.to_string()], message);
         if ![1, 2, 3, 4, 5, 6, 10, 12, 15, 20, 30, 60].contains(&self.timesteps_per_hour) {
             return Err(at(
                 "timesteps_per_hour",
@@ -391,6 +405,12 @@ impl BuildingSpec {
                 "economizer = true needs hvac = \"vav_reheat\" (fan coils have no outdoor-air mixing)".into(),
             ));
         }
+        Ok(())
+    }
+
+    /// Occupied hours, the year and the schedules' interval boundaries.
+    fn check_schedules(&self) -> Result<(), (Vec<String>, String)> {
+        let at = |key: &str, message: String| (vec![key.to_string()], message);
         let [a, b] = self.occupied_hours;
         if !(a < b && b <= 24) {
             return Err(at(
@@ -410,6 +430,11 @@ impl BuildingSpec {
         ] {
             check_boundaries(bounds).map_err(|m| at(what, format!("{what}: {m}")))?;
         }
+        Ok(())
+    }
+
+    /// Every prior override names a parameter of this building and is a valid triangle.
+    fn check_priors(&self) -> Result<(), (Vec<String>, String)> {
         let names: Vec<String> = self.parameters().into_iter().map(|d| d.name).collect();
         for (name, p) in &self.priors {
             let at = |m: String| (vec!["priors".to_string(), name.clone()], m);
