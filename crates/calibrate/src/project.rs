@@ -923,12 +923,17 @@ impl Project {
     /// columns are listed (otherwise they are detected from the CSV's headers, checked once it
     /// is read).
     fn check_meter_roles(&self, outputs: &[&str]) -> Result<(), Error> {
-        let roles = self.output_roles();
-        let columns = &self.meters.columns;
-        if columns.is_empty() {
+        if self.meters.columns.is_empty() {
             return Ok(());
         }
+        self.check_roles_have_columns()?;
+        self.check_columns_are_used(outputs)
+    }
+
+    /// Every `[outputs]` role and every base's submeter has a column.
+    fn check_roles_have_columns(&self) -> Result<(), Error> {
         use bemcal_precal::meters::MeterRole;
+        let columns = &self.meters.columns;
         let column_roles = || {
             let mut r: Vec<&str> = vec![];
             for c in columns {
@@ -970,6 +975,15 @@ impl Project {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Every column is compared with a model output or is a base's submeter, one column per
+    /// role, and `fit = false` only on a compared meter.
+    fn check_columns_are_used(&self, outputs: &[&str]) -> Result<(), Error> {
+        use bemcal_precal::meters::MeterRole;
+        let roles = self.output_roles();
+        let columns = &self.meters.columns;
         // A column whose role no model output is compared with and no base uses would be read
         // and then ignored: a misspelt `heatng` left heating out of the calibration unnoticed.
         let compared: Vec<MeterRole> = roles.values().cloned().map(MeterRole::from).collect();
