@@ -909,6 +909,17 @@ pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
         }
         rows[c].push((d, values));
     }
+    in_draw_order(path, rows, cols.iter().map(|&k| h[k].clone()).collect())
+}
+
+/// The rows of `draws.csv` by chain (`rows[c]` = (draw number, values by column)) as
+/// [`Draws`] of `columns`: chains numbered from 0, equally long, each draw number once, in
+/// draw order.
+fn in_draw_order(
+    path: &Path,
+    rows: Vec<Vec<(u64, Vec<f64>)>>,
+    columns: Vec<String>,
+) -> Result<Draws, ReportError> {
     if rows.is_empty() {
         return Err(parse_err(path, "no draws: the file has a header only"));
     }
@@ -941,13 +952,13 @@ pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
         }
         numbers.push(chain.iter().map(|(d, _)| *d).collect());
         chains.push(
-            (0..cols.len())
+            (0..columns.len())
                 .map(|k| chain.iter().map(|(_, v)| v[k]).collect())
                 .collect(),
         );
     }
     Ok(Draws {
-        columns: cols.iter().map(|&k| h[k].clone()).collect(),
+        columns,
         chains,
         numbers,
     })
