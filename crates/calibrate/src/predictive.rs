@@ -321,27 +321,7 @@ pub fn assess(
             })
             .collect();
         let residual_phi = lag1_autocorrelation(&standardised);
-        let totals = [TotalPeriod::Day, TotalPeriod::Month]
-            .into_iter()
-            .map(|period| {
-                let periods = period.periods(fit.len());
-                let judge = |phi: f64| -> Result<PeriodCoverage, Error> {
-                    let mut iv = total_intervals(&sims, &scales, phi, &periods, &LEVELS)?;
-                    if non_negative {
-                        iv.clamp_below(0.0);
-                    }
-                    Ok(in_and_out(inp, k, &fit, |m, hours| {
-                        let (totals, whole) = period_totals(m, hours, &periods);
-                        level_coverage(&iv, &totals, &whole)
-                    }))
-                };
-                Ok(TotalsCoverage {
-                    period,
-                    ar1: judge(residual_phi)?,
-                    independent: judge(0.0)?,
-                })
-            })
-            .collect::<Result<Vec<_>, Error>>()?;
+        let totals = totals_coverage(inp, k, &fit, &sims, &scales, residual_phi, non_negative)?;
         let held: Vec<&[Coverage]> = (by_error_model.iter())
             .map(|m| m.coverage.held_out.as_slice())
             .collect();
@@ -369,6 +349,41 @@ pub fn assess(
         held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
         outputs,
     }))
+}
+
+/// Coverage of the intervals of daily and monthly totals of meter `k` (EnergyPlus at the draws
+/// `sims`, noise of hourly scale `scales`), with the residuals' lag-1 autocorrelation `phi` in
+/// the noise of a sum and as if hours were independent.
+fn totals_coverage(
+    inp: &crate::Inputs,
+    k: usize,
+    fit: &[bool],
+    sims: &[Vec<f64>],
+    scales: &[f64],
+    phi: f64,
+    non_negative: bool,
+) -> Result<Vec<TotalsCoverage>, Error> {
+    [TotalPeriod::Day, TotalPeriod::Month]
+        .into_iter()
+        .map(|period| {
+            let periods = period.periods(fit.len());
+            let judge = |phi: f64| -> Result<PeriodCoverage, Error> {
+                let mut iv = total_intervals(sims, scales, phi, &periods, &LEVELS)?;
+                if non_negative {
+                    iv.clamp_below(0.0);
+                }
+                Ok(in_and_out(inp, k, fit, |m, hours| {
+                    let (totals, whole) = period_totals(m, hours, &periods);
+                    level_coverage(&iv, &totals, &whole)
+                }))
+            };
+            Ok(TotalsCoverage {
+                period,
+                ar1: judge(phi)?,
+                independent: judge(0.0)?,
+            })
+        })
+        .collect()
 }
 
 /// Coverage of the intervals `iv` at every level of [`LEVELS`] on the values of `measured`
