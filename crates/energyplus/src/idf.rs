@@ -136,16 +136,12 @@ impl Idf {
             let names = idd.and_then(|d| d.fields(&o.class)).unwrap_or_default();
             for (i, f) in o.fields.iter().enumerate() {
                 let sep = if i + 1 == o.fields.len() { ';' } else { ',' };
-                match names.get(i) {
+                let cell = format!("    {f}{sep}");
+                let _ = match names.get(i) {
                     // The comments in one column where the values allow it.
-                    Some(name) => {
-                        let cell = format!("    {f}{sep}");
-                        let _ = writeln!(s, "{cell:<29} !- {name}");
-                    }
-                    None => {
-                        let _ = writeln!(s, "    {f}{sep}");
-                    }
-                }
+                    Some(name) => writeln!(s, "{cell:<29} !- {name}"),
+                    None => writeln!(s, "{cell}"),
+                };
             }
             s.push('\n');
         }

@@ -580,6 +580,32 @@ fn energyplus_runs_on_an_epw_built_from_isd_lite() {
 /// `Lights` object, one offset moves every value of the cooling set-point schedules (matched by
 /// a name pattern); EnergyPlus's cooling answers the offset. Non-numeric targets are refused at
 /// load, naming the object and field.
+/// The fields of the `Schedule:Compact` called `name`.
+fn schedule(idf: &bemcal_energyplus::idf::Idf, name: &str) -> Vec<String> {
+    idf.of_class("Schedule:Compact")
+        .find(|o| o.name() == Some(name))
+        .unwrap()
+        .fields
+        .clone()
+}
+
+/// Asserts that a schedule's fields `after` are those `before` with every value moved by `by`
+/// (`Through:`, `For:`, `Until:` and the type limits unchanged); returns how many moved.
+fn assert_offset(after: &[String], before: &[String], by: f64) -> usize {
+    assert_eq!(after.len(), before.len());
+    let mut moved = 0;
+    for (a, b) in after.iter().zip(before) {
+        match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(x), Ok(y)) => {
+                assert!((x - y - by).abs() < 1e-9, "{a} vs {b}");
+                moved += 1;
+            }
+            _ => assert_eq!(a, b),
+        }
+    }
+    moved
+}
+
 #[test]
 fn relative_idf_edits_scale_and_offset_the_users_values() {
     let Some(r) = runner() else { return };
@@ -629,22 +655,11 @@ meters = ["InteriorLights:Electricity"]
     for (a, b) in lpd(&at(0.5, 0.0)).iter().zip(&original) {
         assert!((a - 0.5 * b).abs() < 1e-9, "{a} vs {b}");
     }
-    let schedule = |idf: &bemcal_energyplus::idf::Idf, name: &str| -> Vec<String> {
-        idf.of_class("Schedule:Compact")
-            .find(|o| o.name() == Some(name))
-            .unwrap()
-            .fields
-            .clone()
-    };
-    let moved = schedule(&at(1.0, 1.5), "Cooling Setpoint");
-    let before = schedule(&idf, "Cooling Setpoint");
-    assert_eq!(moved.len(), before.len());
-    for (a, b) in moved.iter().zip(&before) {
-        match (a.parse::<f64>(), b.parse::<f64>()) {
-            (Ok(x), Ok(y)) => assert!((x - y - 1.5).abs() < 1e-9, "{a} vs {b}"),
-            _ => assert_eq!(a, b), // Through:, For:, Until: and the type limits stay
-        }
-    }
+    assert_offset(
+        &schedule(&at(1.0, 1.5), "Cooling Setpoint"),
+        &schedule(&idf, "Cooling Setpoint"),
+        1.5,
+    );
     // The heating schedule does not match "cool*".
     assert_eq!(
         schedule(&at(1.0, 1.5), "Heating Setpoint"),
@@ -795,13 +810,6 @@ fn the_own_idf_examples_map_edits_its_objects() {
         assert_eq!(v.len(), 1, "{class}: {v:?}");
         v[0].parse().unwrap()
     };
-    let schedule = |idf: &bemcal_energyplus::idf::Idf, name: &str| -> Vec<String> {
-        idf.of_class("Schedule:Compact")
-            .find(|o| o.name() == Some(name))
-            .unwrap()
-            .fields
-            .clone()
-    };
     // At the prior modes the IDF's own values (10 m2 per person, 10 and 17.5 W/m2, 0.2 ACH).
     let modes = at(&[]);
     let people = ("People", "Floor Area per Person");
@@ -827,18 +835,7 @@ fn the_own_idf_examples_map_edits_its_objects() {
     close(number(&edited, equipment.0, equipment.1), 14.0);
     close(number(&edited, infiltration.0, infiltration.1), 0.36);
     for (name, by) in [("Heating Setpoint", -1.0), ("Cooling Setpoint", 1.0)] {
-        let (after, before) = (schedule(&edited, name), schedule(&modes, name));
-        assert_eq!(after.len(), before.len());
-        let mut moved = 0;
-        for (a, b) in after.iter().zip(&before) {
-            match (a.parse::<f64>(), b.parse::<f64>()) {
-                (Ok(x), Ok(y)) => {
-                    close(x - y, by);
-                    moved += 1;
-                }
-                _ => assert_eq!(a, b),
-            }
-        }
+        let moved = assert_offset(&schedule(&edited, name), &schedule(&modes, name), by);
         assert!(moved >= 4, "{name}: {moved} values moved");
     }
     // Nothing else changed: every other schedule and every object of another class.
