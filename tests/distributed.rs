@@ -16,6 +16,10 @@
 //!   sample a tempered likelihood (`mcmc.temperature = 3`), which the chain jobs carry. Then
 //!   once more with one chain per job (`--chains-per-job 1`): the extension re-adapts the
 //!   chains of both jobs together, to the same draws.
+//!   The lighting prior reaches below zero, where EnergyPlus refuses the `Lights` object: the
+//!   design point in the lowest stratum fails, is recorded with EnergyPlus's lines and replaced
+//!   by a spare hypercube point, the same way on both paths; reruns reuse the settled (or
+//!   interrupted) design.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -169,6 +173,15 @@ fn distributed_matches_single_process() {
     }
     let tmp = tempfile::tempdir().unwrap();
     let pf = project(tmp.path());
+    // A design point EnergyPlus cannot simulate, made on purpose: the lighting prior reaches
+    // below zero, where EnergyPlus refuses the `Lights` object.
+    let model = tmp.path().join("model.toml");
+    let text = std::fs::read_to_string(&model).unwrap();
+    std::fs::write(
+        &model,
+        format!("{text}\n[priors.lighting_power_density]\nmin = -12.0\nmode = 12.5\nmax = 20.0\n"),
+    )
+    .unwrap();
     // An R-hat target no chains reach, one extension; ESS not judged (so the extension is one
     // step of iterations - burn_in).
     // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
@@ -206,6 +219,7 @@ fn distributed_matches_single_process() {
         local_log.contains("extending to 275 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
+    failed_design_point_is_replaced(&local, &local_log);
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
     let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")), &[]);
@@ -233,6 +247,9 @@ fn distributed_matches_single_process() {
         "the banner is on the first screen"
     );
     assert!(html.contains("(target &le; 0.5)"));
+    // ... and the design points EnergyPlus could not simulate.
+    assert!(html.contains("Design points EnergyPlus could not simulate"));
+    assert!(html.contains("watts_per_floor_area"));
 
     for f in [
         "design.csv",
@@ -314,6 +331,25 @@ fn distributed_matches_single_process() {
     assert!(short[0]["rhat"].as_f64().unwrap() >= short[1]["rhat"].as_f64().unwrap());
     assert_eq!(c["max_rhat"], short[0]["rhat"]);
     assert_eq!(sa["convergence"], sb["convergence"]);
+    // The same design, failures and replacements (the error texts name each run's own folder).
+    for k in [
+        "reasons",
+        "replaced",
+        "dropped",
+        "simulated",
+        "suggestions",
+        "invalid_region",
+    ] {
+        assert_eq!(sa["design"][k], sb["design"][k], "{k}\n{log}");
+    }
+    let slots_values = |s: &serde_json::Value| -> Vec<(serde_json::Value, serde_json::Value)> {
+        let f = s["design"]["failed"].as_array().unwrap();
+        f.iter()
+            .map(|f| (f["slot"].clone(), f["values"].clone()))
+            .collect()
+    };
+    assert_eq!(slots_values(&sa), slots_values(&sb));
+    assert!(log.contains("replaced by spare hypercube points"), "{log}");
     let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
     assert_eq!(draws.lines().count(), 1 + 2 * 200);
 
@@ -355,6 +391,97 @@ fn distributed_matches_single_process() {
         std::fs::read_to_string(grouped.join("draws.csv")).unwrap() == draws,
         "draws.csv: one job per chain against the single process"
     );
+
+    // A rerun reads the settled design (simulations/design.json) and runs nothing.
+    let rerun = |out: &Path, surrogate: Option<&Path>| {
+        let (status, log) = calibrate_status(&pf, out, surrogate, &[]);
+        assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
+        log
+    };
+    let log = rerun(&local, None);
+    assert!(log.contains("design: settled earlier"), "{log}");
+    assert!(!log.contains("simulations: 1/"), "{log}");
+    // A design interrupted before it settled resumes: every simulated point is reused and
+    // the failed one is not run again (simulations/failures.json).
+    std::fs::remove_file(local.join("simulations/design.json")).unwrap();
+    let log = rerun(&local, None);
+    assert!(log.contains("failed in an earlier run"), "{log}");
+    assert!(log.contains("simulations: 0 run"), "{log}");
+    // The same through the coordinator: every wave, the replacement's too, comes whole from its
+    // simulation cache, so no completion arrives to advance the run; it must go on anyway (it
+    // stalled in `simulate` before). Short random-walk chains and no predictive draws: the
+    // same design and surrogate, and the HMC chains above would take 60 s more.
+    let cheap = tmp.path().join("project_rerun.toml");
+    let text = project_text().replace(
+        "iterations = 300\nburn_in = 100\n",
+        "iterations = 60\nburn_in = 30\n",
+    );
+    assert!(text.contains("iterations = 60\n"));
+    std::fs::write(&cheap, text).unwrap();
+    let (status, log) = calibrate_status(&cheap, &dist, Some(&local.join("surrogate")), &[]);
+    assert!(finished(status), "{log}");
+    assert!(
+        log.contains("train (running)") || log.contains("chains (running)"),
+        "{log}"
+    );
+    let sd: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dist.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(sd["design"]["simulated"], 6);
+}
+
+/// The design point in the lowest lighting stratum failed: the calibration recorded it with
+/// EnergyPlus's lines, simulated a spare hypercube point in its place, refused proposals near
+/// it, and ran to its end; the report shows it.
+fn failed_design_point_is_replaced(local: &Path, log: &str) {
+    assert!(log.contains("EnergyPlus failed"), "{log}");
+    assert!(log.contains("replaced by spare hypercube points"), "{log}");
+    let sa: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(local.join("summary.json")).unwrap()).unwrap();
+    let d = &sa["design"];
+    let failed = d["failed"].as_array().unwrap();
+    assert!(!failed.is_empty(), "{d}");
+    for f in failed {
+        let lpd = f["values"][0].as_f64().unwrap();
+        assert!(lpd < 0.0, "only negative lighting fails: {f}");
+        assert!(
+            f["error"]
+                .as_str()
+                .unwrap()
+                .contains("watts_per_floor_area"),
+            "{f}"
+        );
+    }
+    assert_eq!(d["simulated"], 6, "{d}");
+    assert!(d["dropped"].as_array().unwrap().is_empty(), "{d}");
+    let replaced = d["replaced"].as_array().unwrap();
+    assert!(!replaced.is_empty(), "{d}");
+    assert!(
+        d["reasons"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("Lights"),
+        "{d}"
+    );
+    assert!(
+        d["suggestions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s.as_str().unwrap().contains("prior")),
+        "{d}"
+    );
+    assert_eq!(sa["design_points"], 6);
+    // Where EnergyPlus failed, the chains refuse proposals: one ball per failed point.
+    let balls = d["invalid_region"]["balls"].as_array().unwrap();
+    assert_eq!(balls.len(), failed.len(), "{d}");
+    assert!(log.contains("are refused"), "{log}");
+    // The replacement's simulation is saved under its slot with positive lighting.
+    let slot = replaced[0].as_u64().unwrap();
+    let saved: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(local.join(format!("simulations/point_{slot:03}.json"))).unwrap(),
+    )
+    .unwrap();
+    assert!(saved["values"]["lighting_power_density"].as_f64().unwrap() > 0.0);
 }
 
 #[test]
@@ -523,142 +650,6 @@ fn surrogate_error_is_in_the_likelihood(s: &serde_json::Value, dir: &Path, log: 
     if value > 1.0 {
         assert!(log.contains("likelihood temperature"), "{log}");
     }
-}
-
-/// A design point EnergyPlus cannot simulate, made on purpose: the lighting prior reaches
-/// below zero, where EnergyPlus refuses the `Lights` object (a Severe in input processing, then
-/// a Fatal). The hypercube point in the lowest stratum fails; the calibration records it with
-/// EnergyPlus's lines, simulates a spare hypercube point in its place and runs to its end, the
-/// same way in the single-process and the distributed path.
-#[test]
-fn failed_design_point_is_replaced_local_and_distributed() {
-    if !have_engine() {
-        eprintln!("skipping: no .venv (run `make setup`)");
-        return;
-    }
-    let tmp = tempfile::tempdir().unwrap();
-    let pf = project(tmp.path());
-    let model = tmp.path().join("model.toml");
-    let text = std::fs::read_to_string(&model).unwrap();
-    std::fs::write(
-        &model,
-        format!("{text}\n[priors.lighting_power_density]\nmin = -12.0\nmode = 12.5\nmax = 20.0\n"),
-    )
-    .unwrap();
-    let local = tmp.path().join("local");
-    let log = calibrate(&pf, &local, None);
-    assert!(log.contains("EnergyPlus failed"), "{log}");
-    assert!(log.contains("replaced by spare hypercube points"), "{log}");
-    let summary = |dir: &Path| -> serde_json::Value {
-        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
-    };
-    let sa = summary(&local);
-    let d = &sa["design"];
-    let failed = d["failed"].as_array().unwrap();
-    assert!(!failed.is_empty(), "{d}");
-    for f in failed {
-        let lpd = f["values"][0].as_f64().unwrap();
-        assert!(lpd < 0.0, "only negative lighting fails: {f}");
-        assert!(
-            f["error"]
-                .as_str()
-                .unwrap()
-                .contains("watts_per_floor_area"),
-            "{f}"
-        );
-    }
-    assert_eq!(d["simulated"], 6, "{d}");
-    assert!(d["dropped"].as_array().unwrap().is_empty(), "{d}");
-    let replaced = d["replaced"].as_array().unwrap();
-    assert!(!replaced.is_empty(), "{d}");
-    assert!(
-        d["reasons"][0]["reason"]
-            .as_str()
-            .unwrap()
-            .contains("Lights"),
-        "{d}"
-    );
-    assert!(
-        d["suggestions"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|s| s.as_str().unwrap().contains("prior")),
-        "{d}"
-    );
-    assert_eq!(sa["design_points"], 6);
-    // Where EnergyPlus failed, the chains refuse proposals: one ball per failed point.
-    let balls = d["invalid_region"]["balls"].as_array().unwrap();
-    assert_eq!(balls.len(), failed.len(), "{d}");
-    assert!(log.contains("are refused"), "{log}");
-    // The report shows the failed points and the warning.
-    let r = bemcal().arg("report").arg(&local).output().unwrap();
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let html = std::fs::read_to_string(local.join("report.html")).unwrap();
-    assert!(html.contains("Design points EnergyPlus could not simulate"));
-    assert!(html.contains("watts_per_floor_area"));
-    assert!(sa["posterior"]["max_rhat"].as_f64().unwrap().is_finite());
-    // The replacement's simulation is saved under its slot with positive lighting.
-    let slot = replaced[0].as_u64().unwrap();
-    let saved: serde_json::Value = serde_json::from_slice(
-        &std::fs::read(local.join(format!("simulations/point_{slot:03}.json"))).unwrap(),
-    )
-    .unwrap();
-    assert!(saved["values"]["lighting_power_density"].as_f64().unwrap() > 0.0);
-
-    // The same design through the coordinator and two workers (same first surrogate).
-    let dist = tmp.path().join("dist");
-    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
-    let sb = summary(&dist);
-    assert!(log.contains("replaced by spare hypercube points"), "{log}");
-    // The same design, failures and replacements (the error texts name each run's own folder).
-    for k in [
-        "reasons",
-        "replaced",
-        "dropped",
-        "simulated",
-        "suggestions",
-        "invalid_region",
-    ] {
-        assert_eq!(sa["design"][k], sb["design"][k], "{k}\n{log}");
-    }
-    let slots_values = |s: &serde_json::Value| -> Vec<(serde_json::Value, serde_json::Value)> {
-        let f = s["design"]["failed"].as_array().unwrap();
-        f.iter()
-            .map(|f| (f["slot"].clone(), f["values"].clone()))
-            .collect()
-    };
-    assert_eq!(slots_values(&sa), slots_values(&sb));
-    for f in [
-        "draws.csv",
-        "simulations/point_000.json",
-        "simulations/point_005.json",
-    ] {
-        assert_eq!(
-            std::fs::read(local.join(f)).unwrap(),
-            std::fs::read(dist.join(f)).unwrap(),
-            "{f}"
-        );
-    }
-    // A rerun reads the settled design (simulations/design.json) and runs nothing.
-    let log = calibrate(&pf, &local, None);
-    assert!(log.contains("design: settled earlier"), "{log}");
-    assert!(!log.contains("simulations: 1/"), "{log}");
-    // A design interrupted before it settled resumes: every simulated point is reused and
-    // the failed one is not run again (simulations/failures.json).
-    std::fs::remove_file(local.join("simulations/design.json")).unwrap();
-    let log = calibrate(&pf, &local, None);
-    assert!(log.contains("failed in an earlier run"), "{log}");
-    assert!(log.contains("simulations: 0 run"), "{log}");
-    // The same through the coordinator: every wave, the replacement's too, comes whole from its
-    // simulation cache, so no completion arrives to advance the run; it must go on anyway (it
-    // stalled in `simulate` before).
-    let log = calibrate(&pf, &dist, Some(&local.join("surrogate")));
-    assert!(
-        log.contains("train (running)") || log.contains("chains (running)"),
-        "{log}"
-    );
-    assert_eq!(summary(&dist)["design"]["simulated"], 6);
 }
 
 #[test]
