@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use bemcal_client::client::{submit_project, upload, Client, Connect};
 use bemcal_client::proto::{
-    CompleteRequest, FileRef, HealthRequest, HeartbeatRequest, LeaseRequest, RunRequest,
-    SubmitRequest,
+    CompleteRequest, FileRef, HealthRequest, HeartbeatRequest, JobState, LeaseRequest, RunRequest,
+    RunState, SubmitRequest,
 };
 use common::*;
 
@@ -312,7 +312,7 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             .unwrap()
             .into_inner();
         let j = st.jobs.iter().find(|j| j.job_id == job.job_id).unwrap();
-        assert_eq!(j.state, "leased");
+        assert_eq!(j.state(), JobState::Leased);
         assert!(j.result_json.is_empty());
         // The same project submitted again while its run runs (an interrupted client coming
         // back) is that run, its lease untouched; once the run has ended, a new one.
@@ -456,14 +456,18 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
             .await
             .unwrap()
             .into_inner();
-        assert_eq!(st.state, "failed", "{st:?}");
+        assert_eq!(st.state(), RunState::Failed, "{st:?}");
         assert!(
             st.error
                 .contains("per-run quota of 1500 bytes (--max-run-gb)"),
             "{}",
             st.error
         );
-        let done = st.jobs.iter().filter(|j| j.state == "done").count();
+        let done = st
+            .jobs
+            .iter()
+            .filter(|j| j.state() == JobState::Done)
+            .count();
         assert_eq!(done, 2, "the third point's outputs are not recorded");
         // Nothing more is handed out for it.
         assert!(w.lease(lease).await.unwrap().into_inner().job.is_none());

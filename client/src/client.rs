@@ -239,10 +239,10 @@ pub async fn fetch_results(client: &mut Client, run: &str, out: &Path) -> anyhow
         .await
         .map_err(|e| anyhow::anyhow!("{}", e.message()))?
         .into_inner();
-    if st.state != "done" {
+    if st.state() != proto::RunState::Done {
         anyhow::bail!(
             "run {run} is {} (stage {}){}",
-            st.state,
+            st.state().word(),
             st.stage,
             if st.error.is_empty() {
                 String::new()
@@ -277,7 +277,7 @@ pub fn progress_lines(st: &proto::RunStatus) -> Vec<String> {
                 "-".repeat(width - filled),
                 s.done,
                 s.total,
-                s.state,
+                s.state().word(),
                 if s.running > 0 {
                     format!(" ({} running)", s.running)
                 } else {
@@ -321,7 +321,7 @@ pub async fn watch(
         };
         let key = format!(
             "{} {} {:?} {}",
-            st.state,
+            st.state().word(),
             st.stage,
             progress_lines(&st),
             st.log.len()
@@ -330,7 +330,7 @@ pub async fn watch(
             on_change(&st);
             last = key;
         }
-        if st.state != "running" {
+        if st.state() != proto::RunState::Running {
             return Ok(st);
         }
         tokio::time::sleep(Duration::from_millis(500)).await;

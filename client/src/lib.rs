@@ -18,6 +18,45 @@ pub mod proto {
     tonic::include_proto!("bemcal.v1");
 }
 
+/// Declares `word` (the state as users read it: in `bemcal status`, `portfolio.json`, error
+/// messages) for proto enums whose variants are named `PREFIX_WORD`.
+macro_rules! state_words {
+    ($($name:ident { $($v:ident = $s:literal,)+ })+) => {$(
+        impl proto::$name {
+            /// The state as users read it (`unspecified` for a reply without one).
+            pub fn word(self) -> &'static str {
+                match self { $(proto::$name::$v => $s,)+ }
+            }
+        }
+    )+};
+}
+
+state_words! {
+    RunState {
+        Unspecified = "unspecified",
+        Running = "running",
+        Done = "done",
+        Failed = "failed",
+        Cancelled = "cancelled",
+    }
+    StageState {
+        Unspecified = "unspecified",
+        Pending = "pending",
+        Running = "running",
+        Done = "done",
+        Failed = "failed",
+        Cancelled = "cancelled",
+    }
+    JobState {
+        Unspecified = "unspecified",
+        Queued = "queued",
+        Leased = "leased",
+        Done = "done",
+        Failed = "failed",
+        Cancelled = "cancelled",
+    }
+}
+
 impl proto::ChainSegmentJob {
     /// The likelihood's temperature the job's chains run at: 0 (a job written before the field
     /// existed) is 1.

@@ -8,10 +8,12 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-pub use bemcal_report::portfolio::{write, BuildingRow, OutputRow, PortfolioSummary};
+pub use bemcal_report::portfolio::{
+    write, BuildingRow, BuildingState, OutputRow, PortfolioSummary,
+};
 
 use crate::client::{self, Client};
-use crate::proto::{self, RunStatus};
+use crate::proto::{self, RunState, RunStatus};
 
 /// One building of a manifest.
 #[derive(Debug, Clone, Deserialize)]
@@ -130,13 +132,23 @@ pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Ve
 
 fn progress(s: &RunStatus) -> String {
     let g = s.stages.iter().find(|g| g.stage == s.stage);
-    match g {
-        Some(g) if s.state == "running" && g.total > 1 => {
+    match (s.state(), g) {
+        (RunState::Running, Some(g)) if g.total > 1 => {
             format!("{} {}/{}", s.stage, g.done, g.total)
         }
-        _ if s.state == "running" => s.stage.clone(),
-        _ if s.state == "failed" => format!("FAILED at {}: {}", s.stage, s.error),
-        _ => s.state.clone(),
+        (RunState::Running, _) => s.stage.clone(),
+        (RunState::Failed, _) => format!("FAILED at {}: {}", s.stage, s.error),
+        (state, _) => state.word().to_string(),
+    }
+}
+
+/// A run's state as its building's row shows it (a reply without one: still running).
+fn building_state(s: RunState) -> BuildingState {
+    match s {
+        RunState::Running | RunState::Unspecified => BuildingState::Running,
+        RunState::Done => BuildingState::Done,
+        RunState::Failed => BuildingState::Failed,
+        RunState::Cancelled => BuildingState::Cancelled,
     }
 }
 
@@ -151,7 +163,7 @@ pub async fn follow(
     loop {
         let runs = statuses(c, id, false).await?;
         for r in &runs {
-            let key = format!("{} {}", r.state, r.stage);
+            let key = format!("{} {}", r.state().word(), r.stage);
             match last.iter_mut().find(|l| l.0 == r.run_id) {
                 Some(l) if l.1 == key => continue,
                 Some(l) => l.1 = key,
@@ -159,7 +171,7 @@ pub async fn follow(
             }
             log(&format!("{}: {}", r.building, progress(r)));
         }
-        if runs.iter().all(|r| r.state != "running") {
+        if runs.iter().all(|r| r.state() != RunState::Running) {
             return statuses(c, id, true).await;
         }
         tokio::time::sleep(std::time::Duration::from_millis(1000)).await;
@@ -217,7 +229,7 @@ pub fn row(s: &RunStatus) -> BuildingRow {
             s.building.clone()
         },
         run: s.run_id.clone(),
-        state: s.state.clone(),
+        state: building_state(s.state()),
         stage: s.stage.clone(),
         error: (!s.error.is_empty()).then(|| s.error.clone()),
         g14_pass: outputs
@@ -248,7 +260,7 @@ pub fn summarize(
         rows.push(BuildingRow {
             building: b.clone(),
             run: String::new(),
-            state: "failed".into(),
+            state: BuildingState::Failed,
             stage: "submit".into(),
             error: Some(e.clone()),
             g14_pass: None,
@@ -266,8 +278,14 @@ pub fn summarize(
         portfolio: id.to_string(),
         name: name.to_string(),
         buildings: rows.len(),
-        done: rows.iter().filter(|r| r.state == "done").count(),
-        failed: rows.iter().filter(|r| r.state == "failed").count(),
+        done: rows
+            .iter()
+            .filter(|r| r.state == BuildingState::Done)
+            .count(),
+        failed: rows
+            .iter()
+            .filter(|r| r.state == BuildingState::Failed)
+            .count(),
         simulations_run: rows.iter().map(|r| r.simulations_run).sum(),
         simulations_shared: rows.iter().map(|r| r.simulations_shared).sum(),
         rows,
@@ -276,7 +294,7 @@ pub fn summarize(
 
 /// Downloads each finished building's files into `out/<building>/`.
 pub async fn fetch(c: &mut Client, runs: &[RunStatus], out: &Path) -> anyhow::Result<()> {
-    for r in runs.iter().filter(|r| r.state == "done") {
+    for r in runs.iter().filter(|r| r.state() == RunState::Done) {
         let name = if r.building.is_empty() {
             &r.run_id
         } else {
@@ -290,7 +308,7 @@ pub async fn fetch(c: &mut Client, runs: &[RunStatus], out: &Path) -> anyhow::Re
 
 #[cfg(test)]
 mod tests {
-    use super::{row, RunStatus};
+    use super::{row, RunState, RunStatus};
 
     /// A meter left out of the fit (`fit = false`, summary `not_fitted`) is shown with its
     /// Guideline 14 figures and does not fail the building.
@@ -299,7 +317,7 @@ mod tests {
         let status = |not_fitted: &str| RunStatus {
             run_id: "r1".into(),
             name: "rsf".into(),
-            state: "done".into(),
+            state: RunState::Done.into(),
             summary_json: format!(
                 r#"{{"validation": [
                     {{"output": "heating_kwh", "nmbe": 2.0, "cv_rmse": 20.0, "pass": true}},

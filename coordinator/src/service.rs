@@ -183,11 +183,11 @@ impl Service {
             .map(|(i, s)| {
                 let mine: Vec<_> = jobs.iter().filter(|j| j.stage == *s).collect();
                 let state = if i < cur {
-                    "done"
+                    StageState::Done
                 } else if i == cur {
-                    r.state.as_str()
+                    StageState::from(r.state)
                 } else {
-                    "pending"
+                    StageState::Pending
                 };
                 let (done, total) = if mine.is_empty() {
                     let d = (i < cur) as u32;
@@ -200,7 +200,7 @@ impl Service {
                 };
                 StageProgress {
                     stage: s.to_string(),
-                    state: state.to_string(),
+                    state: state.into(),
                     done,
                     total,
                     running: mine.iter().filter(|j| j.state == JobState::Leased).count() as u32,
@@ -210,7 +210,7 @@ impl Service {
         Ok(RunStatus {
             run_id: r.id.clone(),
             name: r.name.clone(),
-            state: r.state.to_string(),
+            state: crate::proto::RunState::from(r.state).into(),
             stage: r.stage.to_string(),
             error: r.error.clone().unwrap_or_default(),
             stages,
@@ -252,7 +252,7 @@ impl Service {
                             job_id: j.id,
                             stage: j.stage.to_string(),
                             label: j.label.clone(),
-                            state: j.state.to_string(),
+                            state: crate::proto::JobState::from(j.state).into(),
                             attempts: a.map_or(0, |a| a.1),
                             worker: a.map_or(String::new(), |a| a.2.clone()),
                             cached: j.cached,

@@ -1,6 +1,9 @@
 //! The typed states of runs and jobs. They are text only in the database (each type converts
 //! itself at the SQL boundary, [`rusqlite::ToSql`] / [`rusqlite::types::FromSql`]) and on the
-//! wire (the proto's strings, [`RunState::as_str`]).
+//! wire (the proto's enums, each with its `From`), and users read the same words
+//! (`proto::RunState::word`).
+
+use crate::proto;
 
 /// Declares an enum whose variants are stored as fixed words.
 macro_rules! words {
@@ -107,9 +110,57 @@ words! {
     }
 }
 
+/// The wire's run state.
+impl From<RunState> for proto::RunState {
+    fn from(s: RunState) -> Self {
+        match s {
+            RunState::Running => proto::RunState::Running,
+            RunState::Done => proto::RunState::Done,
+            RunState::Failed => proto::RunState::Failed,
+            RunState::Cancelled => proto::RunState::Cancelled,
+        }
+    }
+}
+
+/// The wire's state of a run's current stage: the run's own.
+impl From<RunState> for proto::StageState {
+    fn from(s: RunState) -> Self {
+        match s {
+            RunState::Running => proto::StageState::Running,
+            RunState::Done => proto::StageState::Done,
+            RunState::Failed => proto::StageState::Failed,
+            RunState::Cancelled => proto::StageState::Cancelled,
+        }
+    }
+}
+
+/// The wire's job state.
+impl From<JobState> for proto::JobState {
+    fn from(s: JobState) -> Self {
+        match s {
+            JobState::Queued => proto::JobState::Queued,
+            JobState::Leased => proto::JobState::Leased,
+            JobState::Done => proto::JobState::Done,
+            JobState::Failed => proto::JobState::Failed,
+            JobState::Cancelled => proto::JobState::Cancelled,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_wire_shows_each_state_with_its_stored_word() {
+        for s in RunState::ALL {
+            assert_eq!(proto::RunState::from(*s).word(), s.as_str());
+            assert_eq!(proto::StageState::from(*s).word(), s.as_str());
+        }
+        for s in JobState::ALL {
+            assert_eq!(proto::JobState::from(*s).word(), s.as_str());
+        }
+    }
 
     #[test]
     fn every_word_reads_back_as_its_value() {

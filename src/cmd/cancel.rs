@@ -23,6 +23,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .await
         .map_err(|e| anyhow::anyhow!("{}", e.message()))
     })?;
-    println!("{} {}", st.get_ref().run_id, st.get_ref().state);
+    println!("{} {}", st.get_ref().run_id, st.get_ref().state().word());
     Ok(())
 }

@@ -11,7 +11,7 @@ use anyhow::Context;
 use bemcal_calibrate::Summary;
 use bemcal_client::auth::{load_token, load_worker_token, random_token, TOKEN_ENV};
 use bemcal_client::client::{self, Connect};
-use bemcal_client::proto::{ListRunsRequest, RunRequest};
+use bemcal_client::proto::{ListRunsRequest, RunRequest, RunState};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
 
@@ -279,7 +279,7 @@ pub fn calibrate_local(
             .runs;
         for left in runs
             .iter()
-            .filter(|s| s.state == "running" && s.run_id != run)
+            .filter(|s| s.state() == RunState::Running && s.run_id != run)
         {
             c.cancel(RunRequest {
                 run_id: left.run_id.clone(),
@@ -299,14 +299,14 @@ pub fn calibrate_local(
                 log(l);
             }
             said = said.max(s.log.len());
-            log(&format!("{} ({})", s.stage, s.state));
+            log(&format!("{} ({})", s.stage, s.state().word()));
             for l in client::progress_lines(s) {
                 eprintln!("{l}");
             }
         })
         .await?;
-        if st.state != "done" {
-            anyhow::bail!("run {run} {}: {}", st.state, st.error);
+        if st.state() != RunState::Done {
+            anyhow::bail!("run {run} {}: {}", st.state().word(), st.error);
         }
         let n = client::fetch_results(&mut c, &run, out).await?;
         log(&format!("{n} result files written to {}", out.display()));

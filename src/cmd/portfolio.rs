@@ -199,7 +199,11 @@ fn finish(
     local_failures: &[(String, String)],
 ) -> anyhow::Result<PortfolioSummary> {
     let mut p = portfolio::summarize(id, name, runs, local_failures);
-    for r in p.rows.iter_mut().filter(|r| r.state == "done") {
+    for r in p
+        .rows
+        .iter_mut()
+        .filter(|r| r.state == portfolio::BuildingState::Done)
+    {
         let dir = out.join(&r.building);
         match bemcal_report::write_report(&dir, None) {
             Ok(_) => r.report = Some(format!("{}/report.html", r.building)),
@@ -233,7 +237,7 @@ fn print_table(p: &PortfolioSummary) {
         println!(
             "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8.0}  {}",
             r.building,
-            r.state,
+            r.state.word(),
             r.stage,
             match r.g14_pass {
                 Some(true) => "pass",

@@ -24,7 +24,7 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
     serde_json::json!({
         "run": s.run_id,
         "name": s.name,
-        "state": s.state,
+        "state": s.state().word(),
         "stage": s.stage,
         "error": s.error,
         "jobs_total": s.jobs_total,
@@ -32,10 +32,10 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
         "created_ms": s.created_ms,
         "finished_ms": s.finished_ms,
         "stages": s.stages.iter().map(|g| serde_json::json!({
-            "stage": g.stage, "state": g.state, "done": g.done, "total": g.total, "running": g.running,
+            "stage": g.stage, "state": g.state().word(), "done": g.done, "total": g.total, "running": g.running,
         })).collect::<Vec<_>>(),
         "jobs": s.jobs.iter().map(|j| serde_json::json!({
-            "id": j.job_id, "stage": j.stage, "label": j.label, "state": j.state,
+            "id": j.job_id, "stage": j.stage, "label": j.label, "state": j.state().word(),
             "attempts": j.attempts, "worker": j.worker, "cached": j.cached,
             "result": serde_json::from_str::<serde_json::Value>(&j.result_json).unwrap_or_default(),
         })).collect::<Vec<_>>(),
@@ -101,7 +101,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "{}  {:<24} {:<9} stage {:<9} jobs {:>3} attempts {:>3}{}",
             s.run_id,
             s.name,
-            s.state,
+            s.state().word(),
             s.stage,
             s.jobs_total,
             s.attempts_total,

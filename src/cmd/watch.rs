@@ -1,5 +1,7 @@
 //! `bemcal watch`: follows a run, printing per-stage progress whenever it changes.
 
+use bemcal_client::proto::RunState;
+
 use super::coordinator::ClientArgs;
 
 /// Follow a run until it ends (exit status 1 if it fails or is cancelled).
@@ -28,7 +30,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 "[{:>7.1} s] run {} {} (stage {})",
                 t0.elapsed().as_secs_f64(),
                 s.run_id,
-                s.state,
+                s.state().word(),
                 s.stage
             );
             for l in bemcal_client::client::progress_lines(s) {
@@ -37,8 +39,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         })
         .await
     })?;
-    if st.state != "done" {
-        anyhow::bail!("run {} {}: {}", st.run_id, st.state, st.error);
+    if st.state() != RunState::Done {
+        anyhow::bail!("run {} {}: {}", st.run_id, st.state().word(), st.error);
     }
     Ok(())
 }

@@ -26,6 +26,38 @@ pub struct OutputRow {
     pub fitted: bool,
 }
 
+/// Where a building's calibration is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BuildingState {
+    /// Its run is in a stage.
+    Running,
+    /// Its run finished: summary and results stored.
+    Done,
+    /// It failed to load, or its run failed in a stage.
+    Failed,
+    /// Its run was cancelled.
+    Cancelled,
+}
+
+impl BuildingState {
+    /// The word `portfolio.json`, `portfolio.csv` and the page show.
+    pub fn word(self) -> &'static str {
+        match self {
+            BuildingState::Running => "running",
+            BuildingState::Done => "done",
+            BuildingState::Failed => "failed",
+            BuildingState::Cancelled => "cancelled",
+        }
+    }
+}
+
+impl std::fmt::Display for BuildingState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.word())
+    }
+}
+
 /// One building in the summary.
 #[derive(Debug, Clone, Serialize)]
 pub struct BuildingRow {
@@ -33,8 +65,8 @@ pub struct BuildingRow {
     pub building: String,
     /// Its run on the coordinator (empty for a building that failed to load locally).
     pub run: String,
-    /// done, failed, cancelled, running.
-    pub state: String,
+    /// Where its calibration is.
+    pub state: BuildingState,
     /// The stage reached (where it failed, for a failed one).
     pub stage: String,
     /// Why it failed: the loader's message or the job's error (EnergyPlus error lines).
@@ -232,10 +264,10 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
         h.push_str(&format!(
             "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{g14}</td><td>{}</td><td>{:.0}</td>",
             esc(&r.building),
-            if r.state == "failed" {
+            if r.state == BuildingState::Failed {
                 format!("<span class=\"fail\">failed</span> ({})", esc(&r.stage))
             } else {
-                esc(&r.state)
+                r.state.word().to_string()
             },
             num(r.max_rhat, 3),
             r.run_time_s
