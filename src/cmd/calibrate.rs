@@ -316,72 +316,78 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
         );
     }
     if let Some(p) = &s.predictive {
-        println!(
-            "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + the noise \
-             of each meter's error model, by default {}): share of measured hours inside, mean width",
-            p.draws,
-            if p.with_surrogate_error { " with the surrogate's error" } else { "" },
-            p.failed,
-            model_name(p.error_model)
-        );
-        let cov = |c: &[bemcal_stats::predictive::Coverage]| {
-            c.iter()
-                .map(|c| {
-                    format!(
-                        "{:.0} %: {:5.1} % ({:.1} kWh)",
-                        c.nominal * 100.0,
-                        c.fraction * 100.0,
-                        c.mean_width
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join(", ")
-        };
-        // The error model each meter's held-out hours favour, as one `error_model` setting.
-        let mut favoured = std::collections::BTreeMap::new();
-        for o in &p.outputs {
-            if let Some(m) = o.by_error_model.first() {
-                let c = &m.coverage;
-                println!("{:<18} in-sample  {}", o.output, cov(&c.in_sample));
-                if m.error_model != p.error_model {
-                    println!(
-                        "{:<18} (its own error model: {})",
-                        "",
-                        model_name(m.error_model)
-                    );
+        print_predictive(p);
+    }
+}
+
+/// The hourly predictive intervals' coverage per meter, in-sample and held out, and the error
+/// models the held-out hours favour.
+fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
+    println!(
+        "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + the noise \
+         of each meter's error model, by default {}): share of measured hours inside, mean width",
+        p.draws,
+        if p.with_surrogate_error { " with the surrogate's error" } else { "" },
+        p.failed,
+        model_name(p.error_model)
+    );
+    let cov = |c: &[bemcal_stats::predictive::Coverage]| {
+        c.iter()
+            .map(|c| {
+                format!(
+                    "{:.0} %: {:5.1} % ({:.1} kWh)",
+                    c.nominal * 100.0,
+                    c.fraction * 100.0,
+                    c.mean_width
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    // The error model each meter's held-out hours favour, as one `error_model` setting.
+    let mut favoured = std::collections::BTreeMap::new();
+    for o in &p.outputs {
+        if let Some(m) = o.by_error_model.first() {
+            let c = &m.coverage;
+            println!("{:<18} in-sample  {}", o.output, cov(&c.in_sample));
+            if m.error_model != p.error_model {
+                println!(
+                    "{:<18} (its own error model: {})",
+                    "",
+                    model_name(m.error_model)
+                );
+            }
+            if !c.held_out.is_empty() {
+                println!("{:<18} held out   {}", "", cov(&c.held_out));
+            }
+            let model = match &o.held_out_favours {
+                Some(f) => {
+                    println!("{:<18} {}", "", held_out_choice(f, m.error_model));
+                    f.error_model
                 }
-                if !c.held_out.is_empty() {
-                    println!("{:<18} held out   {}", "", cov(&c.held_out));
-                }
-                let model = match &o.held_out_favours {
-                    Some(f) => {
-                        println!("{:<18} {}", "", held_out_choice(f, m.error_model));
-                        f.error_model
-                    }
-                    None => m.error_model,
-                };
-                if model != p.error_model {
-                    favoured.insert(o.output.as_str(), model);
-                }
+                None => m.error_model,
+            };
+            if model != p.error_model {
+                favoured.insert(o.output.as_str(), model);
             }
         }
-        let configured = p.outputs.iter().filter_map(|o| {
-            let m = o.by_error_model.first()?.error_model;
-            (m != p.error_model).then_some((o.output.as_str(), m))
-        });
-        if favoured != configured.collect() {
-            let entries: Vec<String> = std::iter::once(("default", p.error_model))
-                .chain(favoured)
-                .map(|(k, m)| format!("{} = {}", toml_key(k), model_name(m)))
-                .collect();
-            println!(
-                "to use the error models the held-out hours favour (chosen on them: judge the \
-                 choice on another period): [validation] error_model = {{ {} }}",
-                entries.join(", ")
-            );
-        }
-        print_totals(p, &cov);
     }
+    let configured = p.outputs.iter().filter_map(|o| {
+        let m = o.by_error_model.first()?.error_model;
+        (m != p.error_model).then_some((o.output.as_str(), m))
+    });
+    if favoured != configured.collect() {
+        let entries: Vec<String> = std::iter::once(("default", p.error_model))
+            .chain(favoured)
+            .map(|(k, m)| format!("{} = {}", toml_key(k), model_name(m)))
+            .collect();
+        println!(
+            "to use the error models the held-out hours favour (chosen on them: judge the \
+             choice on another period): [validation] error_model = {{ {} }}",
+            entries.join(", ")
+        );
+    }
+    print_totals(p, &cov);
 }
 
 /// An error model as the project file spells it, quoted (`"hour_of_day"`).

@@ -5,7 +5,7 @@ use bemcal_weather::grid::GridYear;
 use std::path::{Path, PathBuf};
 
 use bemcal_energyplus::{Engine, Model, RunOptions, Runner};
-use bemcal_precal::meters::{read_meters, MeterRole};
+use bemcal_precal::meters::{read_meters, MeterData, MeterRole};
 use bemcal_precal::pipeline::PriorsFile;
 use bemcal_weather::{Epw, HourlyFeatures};
 
@@ -246,67 +246,9 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         Some(calendar.year),
         Some(epw.location.time_zone_h),
     )?;
-    let mut outputs = vec![];
-    let mut measured = vec![];
-    let roles = project.output_roles();
-    for o in model.outputs() {
-        if let Some(role) = roles.get(&o.name) {
-            if let Some(s) = data.get(&MeterRole::from(role.clone())) {
-                outputs.push(o.name.clone());
-                measured.push(s.values.clone());
-            }
-        }
-    }
-    // Checked at load against listed columns; with columns detected from the headers, a role
-    // that `[outputs]` names explicitly must be among those found.
-    for (name, role) in &project.outputs {
-        if data.get(&MeterRole::from(role.clone())).is_none() {
-            return Err(project.error_at(
-                &["outputs", name],
-                format!(
-                    "[outputs] {} = \"{}\": {} has no meter of role '{}' (it has: {})",
-                    excerpt(name),
-                    excerpt(role),
-                    meters_path.display(),
-                    excerpt(role),
-                    data.series
-                        .iter()
-                        .map(|s| s.role.name().to_string())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ));
-        }
-    }
-    if outputs.is_empty() {
-        return Err(Error::Config(format!(
-            "no model output has a meter: outputs map {:?}, meters found: {:?}",
-            roles,
-            data.series
-                .iter()
-                .map(|s| s.role.name().to_string())
-                .collect::<Vec<_>>()
-        )));
-    }
+    let (outputs, mut measured) = metered_outputs(project, &model, &data)?;
     let fitted = fitted_outputs(project, &outputs)?;
-    let held_out = match &project.validation.holdout {
-        None => None,
-        Some(h) => {
-            let at = |m: String| project.error_at(&["validation", "holdout"], m);
-            let hours = data.held_out_hours(h).map_err(at)?;
-            let held = HeldOut::split(h.to_string(), hours, &mut measured);
-            if let Some(k) = measured
-                .iter()
-                .position(|m| !m.iter().any(|v| v.is_finite()))
-            {
-                return Err(at(format!(
-                    "holdout '{h}' holds out every measured hour of {}: nothing is left to calibrate it with",
-                    outputs[k]
-                )));
-            }
-            Some(held)
-        }
-    };
+    let held_out = hold_out(project, &data, &outputs, &mut measured)?;
     // A fitted meter with no reading left (every hour excluded or missing) would add nothing
     // to the likelihood: the chains would sample the prior without a word.
     if let Some(k) =
@@ -337,6 +279,86 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         held_out,
         bases,
         base_reports,
+    })
+}
+
+/// The model's outputs that have a meter (in the model's order) and each meter's readings;
+/// an output `[outputs]` names must have its meter, and at least one output must.
+fn metered_outputs(
+    project: &Project,
+    model: &Model,
+    data: &MeterData,
+) -> Result<(Vec<String>, Vec<Vec<f64>>), Error> {
+    let mut outputs = vec![];
+    let mut measured = vec![];
+    let roles = project.output_roles();
+    for o in model.outputs() {
+        if let Some(role) = roles.get(&o.name) {
+            if let Some(s) = data.get(&MeterRole::from(role.clone())) {
+                outputs.push(o.name.clone());
+                measured.push(s.values.clone());
+            }
+        }
+    }
+    // Checked at load against listed columns; with columns detected from the headers, a role
+    // that `[outputs]` names explicitly must be among those found.
+    for (name, role) in &project.outputs {
+        if data.get(&MeterRole::from(role.clone())).is_none() {
+            return Err(project.error_at(
+                &["outputs", name],
+                format!(
+                    "[outputs] {} = \"{}\": {} has no meter of role '{}' (it has: {})",
+                    excerpt(name),
+                    excerpt(role),
+                    project.meters_file().display(),
+                    excerpt(role),
+                    data.series
+                        .iter()
+                        .map(|s| s.role.name().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+    }
+    if outputs.is_empty() {
+        return Err(Error::Config(format!(
+            "no model output has a meter: outputs map {:?}, meters found: {:?}",
+            roles,
+            data.series
+                .iter()
+                .map(|s| s.role.name().to_string())
+                .collect::<Vec<_>>()
+        )));
+    }
+    Ok((outputs, measured))
+}
+
+/// The project's held-out period (`[validation] holdout`), taken out of `measured`: those
+/// hours never enter the likelihood. Refused where it holds out every reading of a meter.
+fn hold_out(
+    project: &Project,
+    data: &MeterData,
+    outputs: &[String],
+    measured: &mut [Vec<f64>],
+) -> Result<Option<HeldOut>, Error> {
+    Ok(match &project.validation.holdout {
+        None => None,
+        Some(h) => {
+            let at = |m: String| project.error_at(&["validation", "holdout"], m);
+            let hours = data.held_out_hours(h).map_err(at)?;
+            let held = HeldOut::split(h.to_string(), hours, measured);
+            if let Some(k) = measured
+                .iter()
+                .position(|m| !m.iter().any(|v| v.is_finite()))
+            {
+                return Err(at(format!(
+                    "holdout '{h}' holds out every measured hour of {}: nothing is left to calibrate it with",
+                    outputs[k]
+                )));
+            }
+            Some(held)
+        }
     })
 }
 

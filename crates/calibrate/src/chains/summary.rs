@@ -12,6 +12,7 @@ use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
 use super::{independence_dropped, moved_chains, MovedChain, Sampler};
+use crate::design::Plan;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
@@ -32,30 +33,8 @@ impl Sampler<'_> {
     ) -> Result<ChainSummary, Error> {
         let cal = self.cal;
         let inp = &cal.inputs;
-        let d = inp.plan.calibrated.len();
-        let mut theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
-        // The estimate and its fallbacks are the draws best by the untempered posterior
-        // (`ln p + T (ln pi_T - ln p)`, prior p): the tempered one ranks a draw T times less by
-        // its fit and T times more by its prior.
-        let t = self.temperature.value;
-        if t != 1.0 {
-            let post = self.posterior();
-            for (td, dr) in theta_draws.iter_mut().zip(draws) {
-                for (i, ld) in td.log_density.iter_mut().enumerate() {
-                    let prior = post.ln_prior(dr.point(i));
-                    *ld = prior + t * (*ld - prior);
-                }
-            }
-        }
-        let priors: Vec<Prior> = inp
-            .plan
-            .calibrated
-            .iter()
-            .zip(&inp.plan.priors)
-            .zip(&inp.plan.units)
-            .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
-            .collect();
-        let posterior = summarize(&priors, &theta_draws)?;
+        let theta_draws = self.untempered(draws);
+        let posterior = summarize(&parameter_priors(&inp.plan), &theta_draws)?;
         let sbox = self.sigma_box.clone();
         let noise = self.noise.clone();
         let (post, eval) = self.split();
@@ -92,11 +71,7 @@ impl Sampler<'_> {
         let (sigma_delta_kwh, residual_ar1) =
             noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
         write_posterior_predictive(cal, &post, eval, &theta_draws)?;
-        let estimate: Vec<f64> = match cal.project.validation.estimate {
-            Estimate::Map | Estimate::BestSimulated => posterior.map_point.clone(),
-            Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
-            Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
-        };
+        let estimate = point_estimate(&posterior, cal.project.validation.estimate);
         let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
         let surrogate_at_predictive = (predictive.iter())
             .map(|x| surrogate_metrics_at(inp, eval, x))
@@ -132,6 +107,46 @@ impl Sampler<'_> {
             predictive,
             temperature: self.temperature,
         })
+    }
+
+    /// The draws' parameters, each with its log density under the untempered posterior
+    /// (`ln p + T (ln pi_T - ln p)`, prior p): the estimate and its fallbacks are the best by
+    /// it, where the tempered one ranks a draw T times less by its fit and T times more by its
+    /// prior.
+    fn untempered(&self, draws: &[Draws]) -> Vec<Draws> {
+        let d = self.cal.inputs.plan.calibrated.len();
+        let mut theta_draws: Vec<Draws> = draws.iter().map(|dr| sub_draws(dr, d)).collect();
+        let t = self.temperature.value;
+        if t != 1.0 {
+            let post = self.posterior();
+            for (td, dr) in theta_draws.iter_mut().zip(draws) {
+                for (i, ld) in td.log_density.iter_mut().enumerate() {
+                    let prior = post.ln_prior(dr.point(i));
+                    *ld = prior + t * (*ld - prior);
+                }
+            }
+        }
+        theta_draws
+    }
+}
+
+/// Each calibrated parameter's name, unit and prior, as the posterior summary reports them.
+fn parameter_priors(plan: &Plan) -> Vec<Prior> {
+    plan.calibrated
+        .iter()
+        .zip(&plan.priors)
+        .zip(&plan.units)
+        .map(|((n, p), u)| Prior::new(n.clone(), u.clone(), *p))
+        .collect()
+}
+
+/// The point the project asks for as its estimate: the MAP draw (also where EnergyPlus will
+/// choose among simulated draws), or the posterior mean or median of each parameter.
+fn point_estimate(posterior: &PosteriorSummary, kind: Estimate) -> Vec<f64> {
+    match kind {
+        Estimate::Map | Estimate::BestSimulated => posterior.map_point.clone(),
+        Estimate::Mean => posterior.parameters.iter().map(|p| p.mean).collect(),
+        Estimate::Median => posterior.parameters.iter().map(|p| p.median).collect(),
     }
 }
 
