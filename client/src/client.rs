@@ -243,7 +243,7 @@ pub async fn fetch_results(client: &mut Client, run: &str, out: &Path) -> anyhow
         anyhow::bail!(
             "run {run} is {} (stage {}){}",
             st.state().word(),
-            st.stage,
+            st.stage().word(),
             if st.error.is_empty() {
                 String::new()
             } else {
@@ -272,7 +272,7 @@ pub fn progress_lines(st: &proto::RunStatus) -> Vec<String> {
             };
             format!(
                 "  {:<9} [{}{}] {:>3}/{:<3} {}{}",
-                s.stage,
+                s.stage().word(),
                 "#".repeat(filled),
                 "-".repeat(width - filled),
                 s.done,
@@ -322,7 +322,7 @@ pub async fn watch(
         let key = format!(
             "{} {} {:?} {}",
             st.state().word(),
-            st.stage,
+            st.stage().word(),
             progress_lines(&st),
             st.log.len()
         );

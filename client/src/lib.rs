@@ -18,12 +18,12 @@ pub mod proto {
     tonic::include_proto!("bemcal.v1");
 }
 
-/// Declares `word` (the state as users read it: in `bemcal status`, `portfolio.json`, error
-/// messages) for proto enums whose variants are named `PREFIX_WORD`.
+/// Declares `word` (the stage or state as users read it: in `bemcal status`, `portfolio.json`,
+/// error messages) for proto enums whose variants are named `PREFIX_WORD`.
 macro_rules! state_words {
     ($($name:ident { $($v:ident = $s:literal,)+ })+) => {$(
         impl proto::$name {
-            /// The state as users read it (`unspecified` for a reply without one).
+            /// As users read it (`unspecified` for a reply without one).
             pub fn word(self) -> &'static str {
                 match self { $(proto::$name::$v => $s,)+ }
             }
@@ -32,6 +32,18 @@ macro_rules! state_words {
 }
 
 state_words! {
+    Stage {
+        Unspecified = "unspecified",
+        Design = "design",
+        Simulate = "simulate",
+        Train = "train",
+        Chains = "chains",
+        Merge = "merge",
+        Refine = "refine",
+        Validate = "validate",
+        Summary = "summary",
+        Done = "done",
+    }
     RunState {
         Unspecified = "unspecified",
         Running = "running",

@@ -132,12 +132,13 @@ pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Ve
 
 fn progress(s: &RunStatus) -> String {
     let g = s.stages.iter().find(|g| g.stage == s.stage);
+    let stage = s.stage().word();
     match (s.state(), g) {
         (RunState::Running, Some(g)) if g.total > 1 => {
-            format!("{} {}/{}", s.stage, g.done, g.total)
+            format!("{stage} {}/{}", g.done, g.total)
         }
-        (RunState::Running, _) => s.stage.clone(),
-        (RunState::Failed, _) => format!("FAILED at {}: {}", s.stage, s.error),
+        (RunState::Running, _) => stage.to_string(),
+        (RunState::Failed, _) => format!("FAILED at {stage}: {}", s.error),
         (state, _) => state.word().to_string(),
     }
 }
@@ -163,7 +164,7 @@ pub async fn follow(
     loop {
         let runs = statuses(c, id, false).await?;
         for r in &runs {
-            let key = format!("{} {}", r.state().word(), r.stage);
+            let key = format!("{} {}", r.state().word(), r.stage().word());
             match last.iter_mut().find(|l| l.0 == r.run_id) {
                 Some(l) if l.1 == key => continue,
                 Some(l) => l.1 = key,
@@ -230,7 +231,7 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         },
         run: s.run_id.clone(),
         state: building_state(s.state()),
-        stage: s.stage.clone(),
+        stage: s.stage().word().to_string(),
         error: (!s.error.is_empty()).then(|| s.error.clone()),
         g14_pass: outputs
             .iter()

@@ -13,7 +13,7 @@ use crate::driver::State;
 use crate::proto::coordinator_server::Coordinator;
 use crate::proto::job::Kind;
 use crate::proto::*;
-use crate::states::{JobKind, JobState, RunState, Stage};
+use crate::states::{wire_stage, JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
 use bemcal_calibrate::OutputDir;
@@ -199,7 +199,7 @@ impl Service {
                     )
                 };
                 StageProgress {
-                    stage: s.to_string(),
+                    stage: wire_stage(*s).into(),
                     state: state.into(),
                     done,
                     total,
@@ -211,7 +211,7 @@ impl Service {
             run_id: r.id.clone(),
             name: r.name.clone(),
             state: crate::proto::RunState::from(r.state).into(),
-            stage: r.stage.to_string(),
+            stage: wire_stage(r.stage).into(),
             error: r.error.clone().unwrap_or_default(),
             stages,
             results: if with_results {
@@ -250,7 +250,7 @@ impl Service {
                         let a = att.iter().find(|a| a.0 == j.id);
                         JobInfo {
                             job_id: j.id,
-                            stage: j.stage.to_string(),
+                            stage: wire_stage(j.stage).into(),
                             label: j.label.clone(),
                             state: crate::proto::JobState::from(j.state).into(),
                             attempts: a.map_or(0, |a| a.1),

@@ -110,6 +110,21 @@ words! {
     }
 }
 
+/// The wire's stage (a function: both types are other crates').
+pub fn wire_stage(s: Stage) -> proto::Stage {
+    match s {
+        Stage::Design => proto::Stage::Design,
+        Stage::Simulate => proto::Stage::Simulate,
+        Stage::Train => proto::Stage::Train,
+        Stage::Chains => proto::Stage::Chains,
+        Stage::Merge => proto::Stage::Merge,
+        Stage::Refine => proto::Stage::Refine,
+        Stage::Validate => proto::Stage::Validate,
+        Stage::Summary => proto::Stage::Summary,
+        Stage::Done => proto::Stage::Done,
+    }
+}
+
 /// The wire's run state.
 impl From<RunState> for proto::RunState {
     fn from(s: RunState) -> Self {
@@ -153,6 +168,9 @@ mod tests {
 
     #[test]
     fn the_wire_shows_each_state_with_its_stored_word() {
+        for s in Stage::ALL {
+            assert_eq!(wire_stage(*s).word(), s.as_str());
+        }
         for s in RunState::ALL {
             assert_eq!(proto::RunState::from(*s).word(), s.as_str());
             assert_eq!(proto::StageState::from(*s).word(), s.as_str());

@@ -299,7 +299,7 @@ pub fn calibrate_local(
                 log(l);
             }
             said = said.max(s.log.len());
-            log(&format!("{} ({})", s.stage, s.state().word()));
+            log(&format!("{} ({})", s.stage().word(), s.state().word()));
             for l in client::progress_lines(s) {
                 eprintln!("{l}");
             }

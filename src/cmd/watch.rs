@@ -31,7 +31,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 t0.elapsed().as_secs_f64(),
                 s.run_id,
                 s.state().word(),
-                s.stage
+                s.stage().word()
             );
             for l in bemcal_client::client::progress_lines(s) {
                 println!("{l}");
