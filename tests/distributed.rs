@@ -135,6 +135,11 @@ fn wait_for(
     }
 }
 
+/// A calibration's `summary.json` in output folder `dir`.
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
+}
+
 /// `bemcal calibrate` of `pf` into `out`, which must run to its end (converged or not,
 /// [`finished`]): on this process without `surrogate`; with it, through 2 local workers, given
 /// that surrogate (copied into `out/surrogate`). Returns its log.
@@ -271,10 +276,8 @@ fn distributed_matches_single_process() {
             "{f} differs between the single-process and distributed runs"
         );
     }
-    let sa: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(local.join("summary.json")).unwrap()).unwrap();
-    let sb: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dist.join("summary.json")).unwrap()).unwrap();
+    let sa = summary(&local);
+    let sb = summary(&dist);
     for k in [
         "posterior",
         "calibrated_values",
@@ -424,8 +427,7 @@ fn distributed_matches_single_process() {
         log.contains("train (running)") || log.contains("chains (running)"),
         "{log}"
     );
-    let sd: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dist.join("summary.json")).unwrap()).unwrap();
+    let sd = summary(&dist);
     assert_eq!(sd["design"]["simulated"], 6);
 }
 
@@ -435,8 +437,7 @@ fn distributed_matches_single_process() {
 fn failed_design_point_is_replaced(local: &Path, log: &str) {
     assert!(log.contains("EnergyPlus failed"), "{log}");
     assert!(log.contains("replaced by spare hypercube points"), "{log}");
-    let sa: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(local.join("summary.json")).unwrap()).unwrap();
+    let sa = summary(local);
     let d = &sa["design"];
     let failed = d["failed"].as_array().unwrap();
     assert!(!failed.is_empty(), "{d}");
@@ -501,9 +502,6 @@ fn refinement_round_local_and_distributed() {
     let log = calibrate(&pf, &local, None);
     assert!(log.contains("refinement round 1: 3/3 simulations"), "{log}");
 
-    let summary = |dir: &Path| -> serde_json::Value {
-        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap()
-    };
     let sa = summary(&local);
     let rounds = sa["refinement"].as_array().unwrap();
     assert_eq!(rounds.len(), 1, "{}", sa["refinement"]);
