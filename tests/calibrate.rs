@@ -28,7 +28,7 @@ fn write_project(dir: &Path) {
         "weather = \"bundled:USA_CO_Golden-NREL.724666_TMY3.epw\"\ncalibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
     );
     project.push_str(
-        "[design]\npoints = 10\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\nhidden = 64\n[mcmc]\nchains = 2\niterations = 1000\nburn_in = 400\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n\
+        "[design]\npoints = 10\nparallel = 2\n[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\nhidden = 64\n[mcmc]\nchains = 2\niterations = 600\nburn_in = 200\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\nmax_extensions = 0\n[refine]\nrounds = 0\n\
          [validation]\nholdout = \"last 2 months\"\npredictive_draws = 4\n\
          error_model = { heating_kwh = \"hour_of_day\" }\n",
     );
@@ -182,7 +182,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let project = std::fs::read_to_string(dir.join("project.toml"))
         .unwrap()
         .replace(
-        "iterations = 1000\nburn_in = 400\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\n",
+        "iterations = 600\nburn_in = 200\nsegment = 500\nkernel = \"mh\"\nstart = \"prior\"\n",
         "iterations = 80\nburn_in = 30\nsegment = 500\nkernel = \"hmc\"\nstart = \"optimised\"\n",
     )
         .replace(
@@ -844,11 +844,12 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
             "calibrate = [\"schedule_weekday_05\", \"schedule_weekend_06\"]",
         );
     assert!(project.contains("schedule_weekend_06"));
-    // Shorter chains than above: two schedule fractions are well identified by a year of meters.
+    // Chains of 800 iterations (300 of them burn-in), as its tolerance below was measured with:
+    // two schedule fractions are well identified by a year of meters.
     // No predictive draws: this test checks the calendar, the test above the intervals.
     project = project
         .replace(
-            "iterations = 1000\nburn_in = 400\n",
+            "iterations = 600\nburn_in = 200\n",
             "iterations = 800\nburn_in = 300\n",
         )
         .replace("predictive_draws = 4\n", "predictive_draws = 0\n");
@@ -1002,7 +1003,7 @@ fn cross_validation_by_month(dir: &Path, out: &Path) {
         .unwrap()
         .replace("holdout = \"last 2 months\"\n", "")
         .replace(
-            "iterations = 1000\nburn_in = 400\n",
+            "iterations = 600\nburn_in = 200\n",
             "iterations = 120\nburn_in = 60\n",
         )
         .replace(

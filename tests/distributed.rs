@@ -192,13 +192,13 @@ fn distributed_matches_single_process() {
     // December held out, and the predictive intervals from 3 EnergyPlus runs at posterior draws
     // (validation jobs of their own on the distributed path).
     // HMC, so that the extension re-adapts the chains from their draws on both paths; short
-    // chains and trajectories (150 iterations, 50 of them burn-in, integration time 0.5): the
+    // chains and trajectories (100 iterations, 50 of them burn-in, integration time 0.5): the
     // test compares the paths, and HMC's gradients were most of its time (at integration time
     // 1, 81 s of a local run's 133 s, three runs in the test).
     let text = project_text()
         .replace(
             "iterations = 300\nburn_in = 100\n",
-            "iterations = 150\nburn_in = 50\n",
+            "iterations = 100\nburn_in = 50\n",
         )
         .replace(
             "kernel = \"mh\"\nstart = \"prior\"\n",
@@ -221,7 +221,7 @@ fn distributed_matches_single_process() {
     let local = tmp.path().join("local");
     let (status, local_log) = calibrate_status(&pf, &local, None, &[]);
     assert!(
-        local_log.contains("extending to 275 iterations (extension 1 of at most 1)"),
+        local_log.contains("extending to 175 iterations (extension 1 of at most 1)"),
         "{local_log}"
     );
     failed_design_point_is_replaced(&local, &local_log);
@@ -230,7 +230,7 @@ fn distributed_matches_single_process() {
     let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")), &[]);
     // The one driver says the same through the coordinator (its messages in the run's status).
     assert!(
-        log.contains("extending to 275 iterations (extension 1 of at most 1)"),
+        log.contains("extending to 175 iterations (extension 1 of at most 1)"),
         "{log}"
     );
 
@@ -311,13 +311,13 @@ fn distributed_matches_single_process() {
             .unwrap()
             > 700
     );
-    // One extension of 150 - 50 draws after a re-adaptation window of 25 iterations (half the
-    // burn-in, at least 25) that are not drawn: 2 chains x 200 draws after burn-in.
+    // One extension of 100 - 50 draws after a re-adaptation window of 25 iterations (half the
+    // burn-in, at least 25) that are not drawn: 2 chains x 100 draws after burn-in.
     let ck: serde_json::Value =
         serde_json::from_slice(&std::fs::read(local.join("chains.json")).unwrap()).unwrap();
     for s in ck["states"].as_array().unwrap() {
         assert_eq!(
-            s["window_end"], 175,
+            s["window_end"], 125,
             "re-adapted at the extension: {}",
             s["window_end"]
         );
@@ -354,15 +354,19 @@ fn distributed_matches_single_process() {
     assert_eq!(slots_values(&sa), slots_values(&sb));
     assert!(log.contains("replaced by spare hypercube points"), "{log}");
     let draws = std::fs::read_to_string(local.join("draws.csv")).unwrap();
-    assert_eq!(draws.lines().count(), 1 + 2 * 200);
+    assert_eq!(draws.lines().count(), 1 + 2 * 100);
 
     // The chains split into one job per chain (`--chains-per-job 1`, as a cluster spreads them
     // over its workers): each job runs its chain's segments on its own, and the extension
     // re-adapts the chains of both jobs together from all their draws (one metric for both).
     // The surrogate evaluates every proposal on its own (its graphs take `p` as `[1,
     // n_params]`), so a chain alone runs as it does beside another: the draws are the
-    // single-process run's, bit for bit.
+    // single-process run's, bit for bit. Its coordinator starts from a copy of the distributed
+    // run's state, so that EnergyPlus's design runs come from its simulation cache (7 runs of
+    // EnergyPlus fewer): the run must still go on through waves whose every job is answered
+    // from the cache.
     let grouped = tmp.path().join("grouped");
+    copy_dir(&dist.join(".distributed"), &grouped.join(".distributed"));
     let (status, log) = calibrate_status(
         &pf,
         &grouped,
@@ -371,7 +375,11 @@ fn distributed_matches_single_process() {
     );
     assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
     assert!(
-        log.contains("extending to 275 iterations (extension 1 of at most 1)"),
+        log.contains("extending to 175 iterations (extension 1 of at most 1)"),
+        "{log}"
+    );
+    assert!(
+        log.contains("EnergyPlus design simulations: 0 run, 7 from the coordinator's cache"),
         "{log}"
     );
     let cg: serde_json::Value =
@@ -383,7 +391,7 @@ fn distributed_matches_single_process() {
         "one re-adapted metric for the chains of both jobs"
     );
     for s in states {
-        assert_eq!(s["window_end"], 175, "{}", s["window_end"]);
+        assert_eq!(s["window_end"], 125, "{}", s["window_end"]);
         assert_eq!(s["readapted"], 25);
     }
     assert_eq!(
@@ -429,6 +437,19 @@ fn distributed_matches_single_process() {
     );
     let sd = summary(&dist);
     assert_eq!(sd["design"]["simulated"], 6);
+}
+
+/// Copies the folder `from` to `to`, its subfolders included.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
 }
 
 /// The design point in the lowest lighting stratum failed: the calibration recorded it with

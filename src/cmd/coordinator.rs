@@ -308,6 +308,10 @@ pub fn calibrate_local(
         if st.state() != RunState::Done {
             anyhow::bail!("run {run} {}: {}", st.state().word(), st.error);
         }
+        log(&format!(
+            "EnergyPlus design simulations: {} run, {} from the coordinator's cache",
+            st.simulations_run, st.simulations_shared
+        ));
         let n = client::fetch_results(&mut c, &run, out).await?;
         log(&format!("{n} result files written to {}", out.display()));
         let s: Summary = serde_json::from_str(&st.summary_json)?;
