@@ -116,6 +116,18 @@ CREATE TABLE run_log (                                -- the driver's messages, 
     UNIQUE (run_id, line)
 );
 "#,
+    r#"
+CREATE TABLE run_files (                              -- each distinct file a run's jobs produced
+    run_id TEXT NOT NULL,                             -- (answers from the simulation cache not
+    sha256 TEXT NOT NULL,                             -- counted): its quota's running total
+    size   INTEGER NOT NULL,
+    PRIMARY KEY (run_id, sha256)
+);
+INSERT OR IGNORE INTO run_files (run_id, sha256, size)
+    SELECT j.run_id, json_extract(f.value, '$.sha256'), json_extract(f.value, '$.size')
+    FROM jobs j, json_each(j.outputs) f
+    WHERE j.state = 'done' AND j.cached = 0 AND json_valid(j.outputs);
+"#,
 ];
 
 pub use bemcal_client::File;
@@ -299,29 +311,44 @@ fn end_run_in(
 
 /// Bytes of the distinct files a run's jobs produced (answers from the simulation cache cost
 /// it nothing), before and after `more` is added: what [`Store::complete_within`] holds to a
-/// run's quota.
+/// run's quota. Read from the run's running list (`run_files`, one row per file), not from
+/// every finished job's outputs: a completion costs the same at its run's thousandth job as
+/// at its first.
 fn run_output_bytes(
     tx: &rusqlite::Transaction<'_>,
     run: &str,
     more: &[File],
 ) -> Result<(u64, u64)> {
-    let mut st =
-        tx.prepare("SELECT outputs FROM jobs WHERE run_id = ?1 AND state = 'done' AND cached = 0")?;
-    let done = st
-        .query_map([run], |r| r.get::<_, Option<String>>(0))?
-        .collect::<rusqlite::Result<Vec<_>>>()?;
-    let mut sizes = std::collections::HashMap::new();
-    for f in done.into_iter().flat_map(parse_files) {
-        sizes.insert(f.sha256, f.size);
-    }
-    let total = |sizes: &std::collections::HashMap<String, u64>| {
-        sizes.values().fold(0u64, |a, &b| a.saturating_add(b))
-    };
-    let before = total(&sizes);
+    let before: i64 = tx.query_row(
+        "SELECT COALESCE(SUM(size), 0) FROM run_files WHERE run_id = ?1",
+        [run],
+        |r| r.get(0),
+    )?;
+    let before = before.max(0) as u64;
+    let mut new = std::collections::HashMap::new();
     for f in more {
-        sizes.insert(f.sha256.clone(), f.size);
+        let known: bool = tx.query_row(
+            "SELECT EXISTS (SELECT 1 FROM run_files WHERE run_id = ?1 AND sha256 = ?2)",
+            params![run, f.sha256],
+            |r| r.get(0),
+        )?;
+        if !known {
+            new.insert(f.sha256.as_str(), f.size);
+        }
     }
-    Ok((before, total(&sizes)))
+    let after = new.values().fold(before, |a, &b| a.saturating_add(b));
+    Ok((before, after))
+}
+
+/// Adds a finished job's `outputs` to its run's list of files ([`run_output_bytes`]).
+fn record_run_files(tx: &rusqlite::Transaction<'_>, run: &str, outputs: &[File]) -> Result<()> {
+    for f in outputs {
+        tx.execute(
+            "INSERT OR IGNORE INTO run_files (run_id, sha256, size) VALUES (?1, ?2, ?3)",
+            params![run, f.sha256, f.size as i64],
+        )?;
+    }
+    Ok(())
 }
 
 fn files_json(f: &[File]) -> String {
@@ -962,6 +989,7 @@ impl Store {
                 "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, finished_ms = ?4, lease_id = NULL WHERE id = ?1",
                 params![job, files_json(outputs), result, now],
             )?;
+            record_run_files(&tx, &run, outputs)?;
             tx.execute(
                 "UPDATE leases SET active = 0 WHERE job_id = ?1",
                 [job],
@@ -1441,6 +1469,35 @@ mod tests {
         assert!(done
             .iter()
             .all(|j| j.outputs.iter().all(|f| f.sha256 != file('z', 0).sha256)));
+        // The running list holds A's files once each (900 bytes; z was refused); a
+        // database from before the list has it filled from the finished jobs' outputs by the
+        // migration that made it: the same rows.
+        let files = |s: &Store| -> Vec<(String, String, i64)> {
+            s.with(|c| {
+                let mut st =
+                    c.prepare("SELECT run_id, sha256, size FROM run_files ORDER BY run_id, sha256")?;
+                let rows = st
+                    .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+                    .collect::<rusqlite::Result<Vec<_>>>()?;
+                Ok(rows)
+            })
+            .unwrap()
+        };
+        let kept = files(&s);
+        let short = |c: char| c.to_string().repeat(64);
+        assert_eq!(
+            kept.iter().filter(|f| f.0 == "A").cloned().collect::<Vec<_>>(),
+            vec![("A".into(), short('x'), 600), ("A".into(), short('y'), 300)]
+        );
+        let backfill = MIGRATIONS.last().unwrap();
+        let backfill = &backfill[backfill.find("INSERT OR IGNORE INTO run_files").unwrap()..];
+        s.with(|c| {
+            c.execute("DELETE FROM run_files", [])?;
+            c.execute_batch(backfill)?;
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(files(&s), kept);
         // A run that has ended takes no more stages or jobs (its driver may still be working).
         s.set_stage("A", Stage::Train, jobs(1, |_| None)).unwrap();
         s.add_jobs("A", jobs(1, |_| None)).unwrap();
