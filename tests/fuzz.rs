@@ -371,7 +371,7 @@ fn draws_csv() {
 
 #[test]
 fn protocol_messages() {
-    use bemcal_client::proto::{CompleteRequest, FileRef, Job, SubmitRequest};
+    use bemcal_client::proto::{CompleteRequest, FileRef, Job, JobResult, SubmitRequest};
     use prost::Message;
     let job = Job {
         job_id: 7,
@@ -404,7 +404,7 @@ fn protocol_messages() {
         worker_id: "w".into(),
         lease_id: 3,
         outputs: vec![],
-        result_json: "{\"seconds\": 1.0}".into(),
+        result: Some(JobResult::simulated(Some(1.0))),
     }
     .encode_to_vec();
     fuzz("proto-complete", &complete, |b| {
@@ -422,8 +422,8 @@ fn protocol_messages() {
 fn protocol_messages_through_the_coordinator() {
     use bemcal_client::client::Connect;
     use bemcal_client::proto::{
-        CompleteRequest, FailRequest, FileRef, HealthRequest, HeartbeatRequest, LeaseRequest,
-        RunRequest, SubmitRequest,
+        CompleteRequest, FailRequest, FileRef, HealthRequest, HeartbeatRequest, JobResult,
+        LeaseRequest, RunRequest, SubmitRequest,
     };
     use prost::Message;
     const CLIENT: &str = "fuzz-client-token-0123456789";
@@ -476,7 +476,7 @@ fn protocol_messages_through_the_coordinator() {
                 worker_id: "w1".into(),
                 lease_id: 3,
                 outputs: vec![file.clone()],
-                result_json: "{\"seconds\": 1.0}".into(),
+                result: Some(JobResult::simulated(Some(1.0))),
             }
             .encode_to_vec(),
         ),

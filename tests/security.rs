@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use bemcal_client::client::{submit_project, upload, Client, Connect};
 use bemcal_client::proto::{
-    CompleteRequest, FileRef, HealthRequest, HeartbeatRequest, JobState, LeaseRequest, RunRequest,
-    RunState, SubmitRequest,
+    CompleteRequest, FileRef, HealthRequest, HeartbeatRequest, JobResult, JobState, LeaseRequest,
+    RunRequest, RunState, SubmitRequest,
 };
 use common::*;
 
@@ -265,23 +265,29 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             w.heartbeat(hb).await.unwrap_err().code(),
             tonic::Code::PermissionDenied
         );
-        let forged = |worker: &str, outputs: Vec<FileRef>, result: &str| CompleteRequest {
+        let forged = |worker: &str, outputs: Vec<FileRef>, result: JobResult| CompleteRequest {
             worker_id: worker.into(),
             lease_id: id,
             outputs,
-            result_json: result.into(),
+            result: Some(result),
         };
         let e = w
-            .complete(forged("w2", vec![], "{\"seconds\": 1.0}"))
+            .complete(forged("w2", vec![], JobResult::simulated(Some(1.0))))
             .await
             .unwrap_err();
         assert_eq!(e.code(), tonic::Code::PermissionDenied);
-        // The lease's own worker cannot hand over what a simulation does not produce.
-        let e = w
-            .complete(forged("w1", vec![], "{\"forged\": true}"))
-            .await
-            .unwrap_err();
-        assert_eq!(e.code(), tonic::Code::InvalidArgument, "{}", e.message());
+        // The lease's own worker cannot hand over what a simulation does not produce: another
+        // kind of job's result, or none.
+        for result in [JobResult::chains(100), JobResult::default()] {
+            let e = w.complete(forged("w1", vec![], result)).await.unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument, "{}", e.message());
+            assert!(
+                e.message()
+                    .contains("a simulate job completed with the result"),
+                "{}",
+                e.message()
+            );
+        }
         let point =
             "{\"values\": {}, \"outputs\": {\"names\": [\"heating_kwh\"], \"series\": [[1.0]]}}";
         let sha = upload(&mut w, point.as_bytes().to_vec()).await.unwrap();
@@ -294,7 +300,7 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             size: point.len() as u64,
         };
         let e = w
-            .complete(forged("w1", vec![file], "{\"seconds\": 1.0}"))
+            .complete(forged("w1", vec![file], JobResult::simulated(Some(1.0))))
             .await
             .unwrap_err();
         assert!(e.message().contains("hours simulated"), "{}", e.message());
@@ -421,7 +427,7 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
                         sha256: sha.clone(),
                         size: 1,
                     }],
-                    result_json: "{\"seconds\": 1.0}".into(),
+                    result: Some(JobResult::simulated(Some(1.0))),
                 })
                 .await
                 .unwrap_err();
@@ -439,7 +445,7 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
                     sha256: sha,
                     size: point.len() as u64,
                 }],
-                result_json: "{\"seconds\": 1.0}".into(),
+                result: Some(JobResult::simulated(Some(1.0))),
             })
             .await
             .unwrap();

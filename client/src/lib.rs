@@ -90,7 +90,9 @@ impl proto::ChainSegmentJob {
 /// - 1: `ChainSegmentJob::temperature` (the likelihood's temperature, issue 20).
 /// - 2: HMC states re-adapted at an extension (`window_end`, `readapted`: an older worker would
 ///   drop them and draw the adaptation window).
-pub const PROTOCOL: u32 = 2;
+/// - 3: a completion's result is a typed `JobResult` (it was JSON text), and a validation's
+///   Guideline 14 figures are the coordinator's to compute from the job's files.
+pub const PROTOCOL: u32 = 3;
 
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;
@@ -129,9 +131,10 @@ impl From<&File> for proto::FileRef {
     }
 }
 
-/// The result of a job whose EnergyPlus run failed in a way the calibration handles (a design
-/// point or refinement draw EnergyPlus could not simulate, a validation candidate): the job is
-/// done, and the driver decides what follows (a replacement point, the next-best draw).
+/// The stored form of [`proto::EnergyPlusFailure`]: the result of a job whose EnergyPlus run
+/// failed in a way the calibration handles (a design point or refinement draw EnergyPlus could
+/// not simulate, a validation candidate). The job is done, and the driver decides what follows
+/// (a replacement point, the next-best draw).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReportedFailure {
@@ -139,7 +142,8 @@ pub struct ReportedFailure {
     pub error: String,
 }
 
-/// The result of a simulation job that ran (its point file is the job's one output).
+/// The stored form of [`proto::SimulationRun`]: the result of a simulation job that ran (its
+/// point file is the job's one output).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationRun {
@@ -147,12 +151,74 @@ pub struct SimulationRun {
     pub seconds: Option<f64>,
 }
 
-/// A job result as JSON text (`CompleteRequest::result_json`).
-pub fn result_json<T: Serialize>(result: &T) -> String {
-    serde_json::to_string(result).unwrap_or_else(|_| "{}".into())
+use proto::job_result::Outcome;
+
+impl proto::JobResult {
+    /// A simulation that ran (`seconds`: EnergyPlus's wall time) or was already there.
+    pub fn simulated(seconds: Option<f64>) -> proto::JobResult {
+        Self::of(Outcome::Simulated(proto::SimulationRun { seconds }))
+    }
+
+    /// EnergyPlus's failure, reported as the job's result.
+    pub fn energyplus_failed(error: String) -> proto::JobResult {
+        Self::of(Outcome::EnergyplusFailed(proto::EnergyPlusFailure {
+            error,
+        }))
+    }
+
+    /// A training done.
+    pub fn trained() -> proto::JobResult {
+        Self::of(Outcome::Trained(proto::TrainingDone {}))
+    }
+
+    /// A chain segment done, its chains at `iteration`.
+    pub fn chains(iteration: u64) -> proto::JobResult {
+        Self::of(Outcome::Chains(proto::ChainSegmentDone { iteration }))
+    }
+
+    /// A validation run done.
+    pub fn validated() -> proto::JobResult {
+        Self::of(Outcome::Validated(proto::ValidationDone {}))
+    }
+
+    fn of(outcome: Outcome) -> proto::JobResult {
+        proto::JobResult {
+            outcome: Some(outcome),
+        }
+    }
+
+    /// The result's kind as the proto names it (`missing` without one), for messages.
+    pub fn word(&self) -> &'static str {
+        match &self.outcome {
+            Some(Outcome::Simulated(_)) => "simulated",
+            Some(Outcome::EnergyplusFailed(_)) => "energyplus_failed",
+            Some(Outcome::Trained(_)) => "trained",
+            Some(Outcome::Chains(_)) => "chains",
+            Some(Outcome::Validated(_)) => "validated",
+            None => "missing",
+        }
+    }
+
+    /// The result as the coordinator stores and shows it (the one place a result becomes
+    /// text): `{"seconds": s}`, `{"error": "..."}`, `{"iteration": n}` or `{}`.
+    pub fn to_text(&self) -> String {
+        let v = match &self.outcome {
+            Some(Outcome::Simulated(s)) => {
+                serde_json::to_value(SimulationRun { seconds: s.seconds })
+            }
+            Some(Outcome::EnergyplusFailed(f)) => serde_json::to_value(ReportedFailure {
+                error: f.error.clone(),
+            }),
+            Some(Outcome::Chains(c)) => Ok(serde_json::json!({ "iteration": c.iteration })),
+            Some(Outcome::Trained(_)) | Some(Outcome::Validated(_)) | None => {
+                Ok(serde_json::json!({}))
+            }
+        };
+        v.map(|v| v.to_string()).unwrap_or_else(|_| "{}".into())
+    }
 }
 
-/// A job result read back from its JSON text, if it is one of type `T`.
+/// A stored job result read back, if it is one of type `T`.
 pub fn parse_result<T: serde::de::DeserializeOwned>(json: &str) -> Option<T> {
     serde_json::from_str(json).ok()
 }
@@ -199,5 +265,54 @@ pub async fn shutdown_signal() {
     #[cfg(not(unix))]
     {
         let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each result is stored as the JSON its readers expect; an EnergyPlus failure reads back
+    /// as one, and no other result does.
+    #[test]
+    fn results_are_stored_as_their_readers_expect() {
+        let failed = proto::JobResult::energyplus_failed("Lights: watts < 0".into());
+        assert_eq!(failed.to_text(), r#"{"error":"Lights: watts < 0"}"#);
+        assert_eq!(
+            parse_result::<ReportedFailure>(&failed.to_text()).map(|f| f.error),
+            Some("Lights: watts < 0".into())
+        );
+        let ran = proto::JobResult::simulated(Some(5.5));
+        assert_eq!(ran.to_text(), r#"{"seconds":5.5}"#);
+        assert_eq!(
+            parse_result::<SimulationRun>(&ran.to_text()),
+            Some(SimulationRun { seconds: Some(5.5) })
+        );
+        assert_eq!(
+            proto::JobResult::simulated(None).to_text(),
+            r#"{"seconds":null}"#
+        );
+        assert_eq!(
+            proto::JobResult::chains(300).to_text(),
+            r#"{"iteration":300}"#
+        );
+        for r in [
+            proto::JobResult::trained(),
+            proto::JobResult::validated(),
+            proto::JobResult::default(),
+        ] {
+            assert_eq!(r.to_text(), "{}");
+        }
+        for r in [
+            ran,
+            proto::JobResult::chains(1),
+            proto::JobResult::trained(),
+        ] {
+            assert!(
+                parse_result::<ReportedFailure>(&r.to_text()).is_none(),
+                "{r:?}"
+            );
+        }
+        assert_eq!(proto::JobResult::default().word(), "missing");
     }
 }

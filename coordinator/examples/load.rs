@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use bemcal_client::client::Connect;
 use bemcal_client::proto::{
-    job::Kind, ChainSegmentJob, CompleteRequest, HeartbeatRequest, Job, LeaseRequest,
+    job::Kind, ChainSegmentJob, CompleteRequest, HeartbeatRequest, Job, JobResult, LeaseRequest,
 };
 use bemcal_coordinator::artifacts::ArtifactDir;
 use bemcal_coordinator::auth::CheckToken;
@@ -146,7 +146,7 @@ fn main() -> anyhow::Result<()> {
                         worker_id: id.clone(),
                         lease_id: job.lease_id,
                         outputs: vec![],
-                        result_json: "{\"iteration\": 100}".into(),
+                        result: Some(JobResult::chains(100)),
                     })
                     .await?;
                     complete_ms.push(t.elapsed().as_secs_f64() * 1e3);

@@ -1474,8 +1474,9 @@ mod tests {
         // migration that made it: the same rows.
         let files = |s: &Store| -> Vec<(String, String, i64)> {
             s.with(|c| {
-                let mut st =
-                    c.prepare("SELECT run_id, sha256, size FROM run_files ORDER BY run_id, sha256")?;
+                let mut st = c.prepare(
+                    "SELECT run_id, sha256, size FROM run_files ORDER BY run_id, sha256",
+                )?;
                 let rows = st
                     .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
                     .collect::<rusqlite::Result<Vec<_>>>()?;
@@ -1486,7 +1487,10 @@ mod tests {
         let kept = files(&s);
         let short = |c: char| c.to_string().repeat(64);
         assert_eq!(
-            kept.iter().filter(|f| f.0 == "A").cloned().collect::<Vec<_>>(),
+            kept.iter()
+                .filter(|f| f.0 == "A")
+                .cloned()
+                .collect::<Vec<_>>(),
             vec![("A".into(), short('x'), 600), ("A".into(), short('y'), 300)]
         );
         let backfill = MIGRATIONS.last().unwrap();

@@ -22,7 +22,7 @@ use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::sequence::{Round, ValidationRun};
 use bemcal_calibrate::Project;
-use bemcal_calibrate::{stage_seconds, Calibration, Error, OutputMetrics, Summary, Timings};
+use bemcal_calibrate::{stage_seconds, Calibration, Error, Summary, Timings};
 use bemcal_stats::chain::Chain;
 use bemcal_stats::mcmc::Draws;
 use sha2::{Digest, Sha256};
@@ -815,15 +815,14 @@ impl Executor for Leased<'_> {
             Ready::Pending => return Ok(Ready::Pending),
         };
         let mut results = vec![];
-        for j in &rows {
+        for (j, run) in rows.iter().zip(runs) {
             if let Some(e) = reported_failure(j) {
                 results.push(Err(e));
                 continue;
             }
             self.st.place(&cal.out, &j.outputs).map_err(ex)?;
-            let m: Vec<OutputMetrics> =
-                serde_json::from_str(j.result.as_deref().unwrap_or("[]")).map_err(ex)?;
-            results.push(Ok(m));
+            // Guideline 14 from the run's file, as the single process computes it.
+            results.push(Ok(cal.validated(run.key, &run.values)?));
         }
         Ok(Ready::Done(results))
     }

@@ -17,7 +17,6 @@ use crate::states::{wire_stage, JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
 use bemcal_calibrate::OutputDir;
-use bemcal_client::{parse_result, ReportedFailure, SimulationRun};
 
 /// Largest artifact accepted (bytes).
 pub const MAX_ARTIFACT_BYTES: u64 = 1 << 30;
@@ -82,27 +81,48 @@ fn check_files(st: &State, files: &[FileRef]) -> Result<Vec<File>, Status> {
         .collect()
 }
 
-/// What a worker hands over for `job` is what that kind of job produces. A simulation either
-/// reports EnergyPlus's failure (no outputs) or brings exactly its point file, which must hold
-/// finite hourly series; other jobs bring a JSON result.
-fn check_result(st: &State, job: &JobRow, outputs: &[File], result: &str) -> Result<(), String> {
-    let Some(Kind::Simulate(s)) = &job.spec.kind else {
-        return serde_json::from_str::<serde_json::Value>(result)
-            .map(|_| ())
-            .map_err(|e| format!("the result is not JSON: {e}"));
+/// What a worker hands over for `job` is what that kind of job produces: a result of the job's
+/// kind, and for a simulation either EnergyPlus's failure (no outputs) or exactly its point
+/// file, holding finite hourly series; a validation brings its point file. Only a simulation,
+/// or a validation that tolerates failure, may report EnergyPlus's failure.
+fn check_result(
+    st: &State,
+    job: &JobRow,
+    outputs: &[File],
+    result: &JobResult,
+) -> Result<(), String> {
+    use job_result::Outcome;
+    let kind = job.spec.kind.as_ref();
+    let fits = match (kind, &result.outcome) {
+        (Some(Kind::Simulate(_)), Some(Outcome::Simulated(_))) => true,
+        (Some(Kind::Simulate(_)), Some(Outcome::EnergyplusFailed(_))) => outputs.is_empty(),
+        (Some(Kind::Validate(v)), Some(Outcome::EnergyplusFailed(_))) => {
+            v.tolerate_failure && outputs.is_empty()
+        }
+        (Some(Kind::Validate(v)), Some(Outcome::Validated(_))) => {
+            let point = OutputDir::validation_point_rel(v.index as usize);
+            outputs.iter().any(|f| f.path == point)
+        }
+        (Some(Kind::Train(_)), Some(Outcome::Trained(_))) => true,
+        (Some(Kind::Chains(_)), Some(Outcome::Chains(_))) => true,
+        _ => false,
     };
-    if outputs.is_empty() {
-        return parse_result::<ReportedFailure>(result)
-            .map(|_| ())
-            .ok_or_else(|| "a simulation without outputs must report its failure".to_string());
+    if !fits {
+        return Err(format!(
+            "a {} job completed with the result `{}` and {} output file(s)",
+            job.kind,
+            result.word(),
+            outputs.len()
+        ));
     }
+    let (Some(Kind::Simulate(s)), Some(Outcome::Simulated(run))) = (kind, &result.outcome) else {
+        return Ok(());
+    };
     let want = OutputDir::point_rel(s.point as usize);
     match outputs {
         [f] if f.path == want => {}
         _ => return Err(format!("a simulation brings one file, {want}")),
     }
-    let run: SimulationRun = parse_result(result)
-        .ok_or_else(|| "a simulation's result is {\"seconds\": ...}".to_string())?;
     if run.seconds.is_some_and(|t| !t.is_finite() || t < 0.0) {
         return Err("a simulation's seconds must be a finite, non-negative number".into());
     }
@@ -319,16 +339,19 @@ impl Coordinator for Service {
         let r = req.into_inner();
         check_worker(&r.worker_id)?;
         let outputs = check_files(&self.st, &r.outputs)?;
-        if r.result_json.len() > 1 << 20 {
-            return Err(invalid("result_json over 1 MiB"));
+        let result = r.result.unwrap_or_default();
+        if let Some(job_result::Outcome::EnergyplusFailed(f)) = &result.outcome {
+            if f.error.len() > 1 << 20 {
+                return Err(invalid("an EnergyPlus failure's error over 1 MiB"));
+            }
         }
         let Some(job) = self.own_lease(r.lease_id, &r.worker_id)? else {
             return Ok(Response::new(Ack {}));
         };
         // What a finished job hands over is checked before it is recorded (and, for a
         // simulation, shared with every run with the same inputs).
-        let (st, files, result) = (self.st.clone(), outputs.clone(), r.result_json.clone());
-        tokio::task::spawn_blocking(move || check_result(&st, &job, &files, &result))
+        let (st, files, checked) = (self.st.clone(), outputs.clone(), result.clone());
+        tokio::task::spawn_blocking(move || check_result(&st, &job, &files, &checked))
             .await
             .map_err(internal)?
             .map_err(|e| invalid(format!("lease {}: {e}", r.lease_id)))?;
@@ -339,7 +362,7 @@ impl Coordinator for Service {
             .complete_within(
                 r.lease_id,
                 &outputs,
-                &r.result_json,
+                &result.to_text(),
                 self.st.config.max_run_bytes,
             )
             .map_err(internal)?;

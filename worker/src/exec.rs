@@ -10,11 +10,10 @@ use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
 use bemcal_client::client::walk;
 use bemcal_client::proto::{self, job::Kind};
-use bemcal_client::{result_json, ReportedFailure, SimulationRun};
 use bemcal_stats::chain::Chain;
 
-/// Output files (`relative path`, file) and a small JSON result.
-pub type Outputs = (Vec<(String, PathBuf)>, String);
+/// Output files (`relative path`, file) and the job's result.
+pub type Outputs = (Vec<(String, PathBuf)>, proto::JobResult);
 
 fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
@@ -40,19 +39,12 @@ fn simulate(cal: &Calibration, s: &proto::SimulateJob, work: &Path) -> Result<Ou
     // the design point (or leaves the refinement draw out) with the reason recorded.
     let secs = match cal.simulate_point(i, &s.values) {
         Ok((_, secs)) => secs,
-        Err(e) => {
-            return Ok((
-                vec![],
-                result_json(&ReportedFailure {
-                    error: e.to_string(),
-                }),
-            ))
-        }
+        Err(e) => return Ok((vec![], proto::JobResult::energyplus_failed(e.to_string()))),
     };
     let rel = OutputDir::point_rel(i);
     Ok((
         vec![(rel.clone(), work.join(&rel))],
-        result_json(&SimulationRun { seconds: secs }),
+        proto::JobResult::simulated(secs),
     ))
 }
 
@@ -69,7 +61,7 @@ fn train(cal: &Calibration, t: &proto::TrainJob, work: &Path) -> Result<Outputs,
         let rel = p.strip_prefix(work).map_err(err)?;
         files.push((rel.to_string_lossy().replace('\\', "/"), p));
     }
-    Ok((files, "{}".into()))
+    Ok((files, proto::JobResult::trained()))
 }
 
 /// A segment of chains advanced from their saved states (or new chains from the
@@ -116,7 +108,7 @@ fn chains(cal: &Calibration, c: &proto::ChainSegmentJob, work: &Path) -> Result<
             (STATES_FILE.into(), out_states),
             (DRAWS_FILE.into(), out_draws),
         ],
-        serde_json::json!({ "iteration": states.first().map(|s| s.iteration()) }).to_string(),
+        proto::JobResult::chains(states.first().map_or(0, |s| s.iteration())),
     ))
 }
 
@@ -132,22 +124,19 @@ fn validate(cal: &Calibration, v: &proto::ValidateJob, work: &Path) -> Result<Ou
         return Err(format!("bad validation label {:?}", v.label));
     }
     let i = v.index as usize;
-    let m = match cal.validate(i, &v.label, &v.values) {
-        Ok(m) => m,
+    // The metrics computed here are the coordinator's to compute again from the files: what
+    // a worker says about its own run is not taken on trust.
+    match cal.validate(i, &v.label, &v.values) {
+        Ok(_) => {}
         Err(e) if v.tolerate_failure => {
-            return Ok((
-                vec![],
-                result_json(&ReportedFailure {
-                    error: e.to_string(),
-                }),
-            ))
+            return Ok((vec![], proto::JobResult::energyplus_failed(e.to_string())))
         }
         Err(e) => return Err(e.to_string()),
-    };
+    }
     let a = OutputDir::validation_point_rel(i);
     let b = format!("validation/{}.csv", v.label);
     Ok((
         vec![(a.clone(), work.join(&a)), (b.clone(), work.join(&b))],
-        serde_json::to_string(&m).map_err(err)?,
+        proto::JobResult::validated(),
     ))
 }

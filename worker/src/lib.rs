@@ -260,7 +260,7 @@ async fn report_outputs(
     worker: &str,
     job: &proto::Job,
     files: Vec<(String, std::path::PathBuf)>,
-    result: String,
+    result: proto::JobResult,
 ) -> Outcome {
     let lease = job.lease_id;
     let mut outputs = vec![];
@@ -289,7 +289,7 @@ async fn report_outputs(
                 worker_id: worker.to_string(),
                 lease_id: lease,
                 outputs: outputs.clone(),
-                result_json: result.clone(),
+                result: Some(result.clone()),
             };
             async move { c.complete(req).await }
         })

@@ -3,11 +3,12 @@
 //! ([`best_simulated`]); and the rule for when it can simulate none of them: the next-best
 //! posterior draws, in order, each under its own key in `validation/`.
 
+use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::metrics::{g14, g14_monthly};
 use bemcal_weather::period::months_of_hours;
 use serde::{Deserialize, Serialize};
 
-use crate::design::simulate_point;
+use crate::design::{saved_outputs, simulate_point};
 use crate::sequence::CALIBRATED_LABEL;
 use crate::summary::write_outputs_csv;
 use crate::summary::PeriodMetrics;
@@ -277,9 +278,31 @@ impl Calibration {
             i,
         )?;
         write_outputs_csv(&vdir.join(format!("{label}.csv")), inp.year, &o)?;
+        self.validation_metrics(&o)
+    }
+
+    /// Guideline 14 of the validation run saved under key `i` at `x` in `validation/` (a
+    /// worker's on the distributed path: its figures are computed here again, from its file).
+    pub fn validated(&self, i: usize, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
+        let o = saved_outputs(&self.out.validation(), i, &self.inputs.plan.values(x)).ok_or_else(
+            || {
+                Error::Config(format!(
+                    "validation run {i}: no simulation saved at its parameter values"
+                ))
+            },
+        )?;
+        self.validation_metrics(&o)
+    }
+
+    /// Guideline 14 per output of a validation run's outputs against the meters.
+    fn validation_metrics(&self, o: &HourlyOutputs) -> Result<Vec<OutputMetrics>, Error> {
+        let inp = &self.inputs;
         let mut m = vec![];
         for (k, name) in inp.outputs.iter().enumerate() {
-            m.push(inp.metrics(k, name, o.get(name).expect("model output"))?);
+            let sim = o.get(name).ok_or_else(|| {
+                Error::Config(format!("validation run: no output {name:?} simulated"))
+            })?;
+            m.push(inp.metrics(k, name, sim)?);
         }
         Ok(m)
     }
