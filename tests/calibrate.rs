@@ -1022,11 +1022,7 @@ fn cross_validation_by_month(dir: &Path, out: &Path) {
             std::fs::copy(&p, all.join("simulations").join(p.file_name().unwrap())).unwrap();
         }
     }
-    std::fs::create_dir_all(all.join("surrogate")).unwrap();
-    for e in std::fs::read_dir(out.join("surrogate")).unwrap() {
-        let p = e.unwrap().path();
-        std::fs::copy(&p, all.join("surrogate").join(p.file_name().unwrap())).unwrap();
-    }
+    common::copy_dir(&out.join("surrogate"), &all.join("surrogate"));
     let r = bemcal()
         .arg("crossval")
         .arg(dir.join("project_cv.toml"))

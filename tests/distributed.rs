@@ -37,8 +37,8 @@ use std::time::{Duration, Instant};
 
 mod common;
 use common::{
-    bemcal, finished, golden_epw, have_engine, http_get, metric, repo, small_project, Proc,
-    NOT_CONVERGED,
+    bemcal, copy_dir, finished, golden_epw, have_engine, http_get, metric, repo, small_project,
+    Proc, NOT_CONVERGED,
 };
 
 const TOKEN: &str = "test-token-0123456789abcdef";
@@ -159,11 +159,7 @@ fn calibrate_status(
     let mut c = bemcal();
     c.arg("calibrate").arg(pf).args(args);
     if let Some(from) = surrogate {
-        std::fs::create_dir_all(out.join("surrogate")).unwrap();
-        for e in std::fs::read_dir(from).unwrap() {
-            let e = e.unwrap();
-            std::fs::copy(e.path(), out.join("surrogate").join(e.file_name())).unwrap();
-        }
+        copy_dir(from, &out.join("surrogate"));
         c.args(["--local-workers", "2"]);
     }
     let o = c.arg("--out").arg(out).output().unwrap();
@@ -437,19 +433,6 @@ fn distributed_matches_single_process() {
     );
     let sd = summary(&dist);
     assert_eq!(sd["design"]["simulated"], 6);
-}
-
-/// Copies the folder `from` to `to`, its subfolders included.
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &to.join(e.file_name()));
-        } else {
-            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-        }
-    }
 }
 
 /// The design point in the lowest lighting stratum failed: the calibration recorded it with
