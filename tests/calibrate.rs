@@ -755,6 +755,26 @@ fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
         a, b,
         "simulate --values calibrated.toml differs from the validation run"
     );
+    // As calibrated.toml says: from the project's folder, the project's model and weather.
+    let toml = std::fs::read_to_string(out.join("calibrated.toml")).unwrap();
+    assert!(
+        toml.contains("bemcal simulate --project project.toml --values calibrated.toml"),
+        "{toml}"
+    );
+    let by_project = dir.join("again-project.csv");
+    run_ok(
+        bemcal()
+            .current_dir(dir)
+            .args(["simulate", "--project", "project.toml", "--values"])
+            .arg(out.join("calibrated.toml"))
+            .arg("--out")
+            .arg(&by_project),
+    );
+    assert_eq!(
+        a,
+        read(&by_project),
+        "simulate --project --values calibrated.toml differs from the validation run"
+    );
 }
 
 /// A building whose weekend is Friday-Saturday (meters from EnergyPlus with that calendar):

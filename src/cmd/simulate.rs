@@ -11,12 +11,18 @@ use super::common;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Model file: a building spec (TOML) or an `[idf]` parameter map.
+    #[arg(long, required_unless_present = "project", conflicts_with = "project")]
+    pub model: Option<PathBuf>,
+    /// A calibration's project file instead of --model: its model as the calibration loaded it
+    /// (with the schedule intervals of its `priors` file) and, without --weather, its weather
+    /// (the metered year's EPW where it has `[measured_weather]`).
     #[arg(long)]
-    pub model: PathBuf,
+    pub project: Option<PathBuf>,
     /// EnergyPlus weather file (EPW), or `bundled:FILE` from EnergyPlus's WeatherData folder
-    /// (e.g. `bundled:USA_CO_Golden-NREL.724666_TMY3.epw`).
-    #[arg(long)]
-    pub weather: String,
+    /// (e.g. `bundled:USA_CO_Golden-NREL.724666_TMY3.epw`); with --project, the project's
+    /// weather by default.
+    #[arg(long, required_unless_present = "project")]
+    pub weather: Option<String>,
     /// Parameter values from a file: a calibration's `calibrated.toml` (NAME = VALUE lines),
     /// its `summary.json` (its calibrated values), or its `draws.csv` with --draw (any
     /// posterior draw, over the `calibrated.toml` beside it for the parameters not sampled);
@@ -42,7 +48,14 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let (model, runner) = common::load_model(&a.model)?;
+    let (model, runner, project_weather) = match (&a.project, &a.model) {
+        (Some(project), _) => model_of_project(project)?,
+        (None, Some(model)) => {
+            let (model, runner) = common::load_model(model)?;
+            (model, runner, None)
+        }
+        (None, None) => anyhow::bail!("simulate needs --model or --project"),
+    };
     let mut given = match &a.values {
         Some(p) => read_values(p, a.draw.as_deref())?,
         None => Default::default(),
@@ -51,7 +64,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let idf = model.instantiate(&given, runner.idd())?;
     let tmp = tempfile::tempdir().context("creating a temporary run directory")?;
     let dir = a.keep.clone().unwrap_or_else(|| tmp.path().join("run"));
-    let weather = common::resolve_weather_ref(&a.weather)?;
+    let weather = match (&a.weather, project_weather) {
+        (Some(w), _) => common::resolve_weather_ref(w)?,
+        (None, Some(w)) => w,
+        (None, None) => anyhow::bail!("simulate needs --weather with --model"),
+    };
     let result = runner.run(&idf, &weather, model.outputs(), &dir)?;
     common::write_hourly_csv(&a.out, common::model_year(&model), &result.outputs)?;
     let totals = result.outputs.totals();
@@ -75,6 +92,24 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!("wrote {}", a.out.display());
     }
     Ok(())
+}
+
+/// The model of a calibration's project as the calibration loads it (`priors` applied), its
+/// runner, and the weather it simulates with.
+fn model_of_project(
+    path: &std::path::Path,
+) -> anyhow::Result<(
+    bemcal_energyplus::Model,
+    bemcal_energyplus::Runner,
+    Option<PathBuf>,
+)> {
+    let project = bemcal_calibrate::Project::load(path)?;
+    let engine = bemcal_energyplus::Engine::locate()?;
+    let runner = bemcal_energyplus::Runner::new(engine, Default::default())?;
+    let model = bemcal_calibrate::load_model(&project, &runner)?;
+    let (weather, _) =
+        bemcal_calibrate::weather_for(&project, runner.engine(), common::model_year(&model))?;
+    Ok((model, runner, Some(weather)))
 }
 
 /// Parameter values from `calibrated.toml` (name = value), `summary.json` (calibrated_values)

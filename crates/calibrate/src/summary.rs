@@ -443,17 +443,29 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
             .to_text_with_field_names(inp.runner.idd())
             .as_bytes(),
     )?;
+    // The project by its file name, from its own folder: a run through a coordinator loads a
+    // copy of it, whose path means nothing where the results are downloaded.
+    let project_file = cal
+        .project
+        .path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "project.toml".into());
     let mut toml = format!(
         "# Parameter values of the calibrated model of '{}' (estimate: {}; calibrated and fixed).\n\
-         # Simulate it: bemcal simulate --model {} --weather {} --values calibrated.toml --out hourly.csv\n\
-         # or run EnergyPlus on calibrated.idf (HVAC templates expanded) with that weather file.\n",
+         # Simulate it from the project's folder (its model with the priors' schedule intervals,\n\
+         # and its weather, as the calibration loaded them):\n\
+         #   bemcal simulate --project {project_file} --values calibrated.toml --out hourly.csv\n\
+         # or run EnergyPlus on calibrated.idf (HVAC templates expanded) with weather file {}.\n",
         cal.project.name,
         serde_json::to_value(cal.project.validation.estimate)
             .ok()
             .and_then(|v| v.as_str().map(str::to_string))
             .unwrap_or_default(),
-        inp.model.path.display(),
-        inp.weather_path.display()
+        inp.weather_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
     );
     for (name, v) in &values {
         toml.push_str(&format!("{name} = {v}\n"));
