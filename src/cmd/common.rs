@@ -9,10 +9,14 @@ use bemcal_energyplus::{Engine, HourlyOutputs, Model, RunOptions, Runner};
 
 /// Finds EnergyPlus and loads a model file.
 pub fn load_model(path: &Path) -> anyhow::Result<(Model, Runner)> {
-    let engine = Engine::locate()?;
-    let runner = Runner::new(engine, RunOptions::default())?;
+    let runner = runner()?;
     let model = Model::load(path, runner.idd())?;
     Ok((model, runner))
+}
+
+/// Finds EnergyPlus: a runner with the default options.
+pub fn runner() -> anyhow::Result<Runner> {
+    Ok(Runner::new(Engine::locate()?, RunOptions::default())?)
 }
 
 /// The year a model simulates (its `year`, 2021 by default).

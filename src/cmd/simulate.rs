@@ -49,7 +49,10 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let (model, runner, project_weather) = match (&a.project, &a.model) {
-        (Some(project), _) => model_of_project(project)?,
+        (Some(project), _) => {
+            let (model, runner, weather) = model_of_project(project)?;
+            (model, runner, Some(weather))
+        }
         (None, Some(model)) => {
             let (model, runner) = common::load_model(model)?;
             (model, runner, None)
@@ -98,18 +101,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// runner, and the weather it simulates with.
 fn model_of_project(
     path: &std::path::Path,
-) -> anyhow::Result<(
-    bemcal_energyplus::Model,
-    bemcal_energyplus::Runner,
-    Option<PathBuf>,
-)> {
+) -> anyhow::Result<(bemcal_energyplus::Model, bemcal_energyplus::Runner, PathBuf)> {
     let project = bemcal_calibrate::Project::load(path)?;
-    let engine = bemcal_energyplus::Engine::locate()?;
-    let runner = bemcal_energyplus::Runner::new(engine, Default::default())?;
+    let runner = common::runner()?;
     let model = bemcal_calibrate::load_model(&project, &runner)?;
     let (weather, _) =
         bemcal_calibrate::weather_for(&project, runner.engine(), common::model_year(&model))?;
-    Ok((model, runner, Some(weather)))
+    Ok((model, runner, weather))
 }
 
 /// Parameter values from `calibrated.toml` (name = value), `summary.json` (calibrated_values)
