@@ -1,34 +1,23 @@
 //! The typed states of runs and jobs. They are text only in the database (each type converts
 //! itself at the SQL boundary, [`rusqlite::ToSql`] / [`rusqlite::types::FromSql`]) and on the
-//! wire (the proto's enums, each with its `From`), and users read the same words
-//! (`proto::RunState::word`).
+//! wire (the proto's enums, each with its `From`), and users read the same words: a run's or a
+//! job's state is stored as its wire value's `word()` (`proto::RunState::word`), so the words
+//! are listed once, in the client crate.
 
 use crate::proto;
 
-/// Declares an enum whose variants are stored as fixed words.
-macro_rules! words {
-    ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = $s:literal,)+ }) => {
-        $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-        pub enum $name { $($(#[$vm])* $v,)+ }
-
-        impl $name {
-            /// Every value, in order.
-            pub const ALL: &'static [$name] = &[$($name::$v,)+];
-
-            /// The word stored in the database and sent on the wire.
-            pub fn as_str(self) -> &'static str {
-                match self { $($name::$v => $s,)+ }
-            }
-        }
-
+/// Parsing, display and the SQL conversions of a type with `ALL` and `as_str`: each value is
+/// stored as its word.
+macro_rules! stored_as_words {
+    ($name:ident) => {
         impl std::str::FromStr for $name {
             type Err = String;
             fn from_str(s: &str) -> Result<Self, String> {
-                match s {
-                    $($s => Ok($name::$v),)+
-                    _ => Err(format!("unknown {} {s:?}", stringify!($name))),
-                }
+                $name::ALL
+                    .iter()
+                    .copied()
+                    .find(|v| v.as_str() == s)
+                    .ok_or_else(|| format!("unknown {} {s:?}", stringify!($name)))
             }
         }
 
@@ -45,12 +34,64 @@ macro_rules! words {
         }
 
         impl rusqlite::types::FromSql for $name {
-            fn column_result(v: rusqlite::types::ValueRef<'_>) -> rusqlite::types::FromSqlResult<Self> {
+            fn column_result(
+                v: rusqlite::types::ValueRef<'_>,
+            ) -> rusqlite::types::FromSqlResult<Self> {
                 v.as_str()?
                     .parse()
                     .map_err(|e: String| rusqlite::types::FromSqlError::Other(e.into()))
             }
         }
+    };
+}
+
+/// Declares an enum whose variants are stored as fixed words.
+macro_rules! words {
+    ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = $s:literal,)+ }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name { $($(#[$vm])* $v,)+ }
+
+        impl $name {
+            /// Every value, in order.
+            pub const ALL: &'static [$name] = &[$($name::$v,)+];
+
+            /// The word stored in the database.
+            pub fn as_str(self) -> &'static str {
+                match self { $($name::$v => $s,)+ }
+            }
+        }
+
+        stored_as_words!($name);
+    };
+}
+
+/// Declares an enum that has a twin on the wire (`proto::$name`, the same variants): its
+/// `From`, and its stored word, the wire value's `word()` (one list of words, the client's).
+macro_rules! wire_words {
+    ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident,)+ }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name { $($(#[$vm])* $v,)+ }
+
+        impl $name {
+            /// Every value, in order.
+            pub const ALL: &'static [$name] = &[$($name::$v,)+];
+
+            /// The word stored in the database and shown to users: the wire value's.
+            pub fn as_str(self) -> &'static str {
+                proto::$name::from(self).word()
+            }
+        }
+
+        /// The wire's value.
+        impl From<$name> for proto::$name {
+            fn from(s: $name) -> Self {
+                match s { $($name::$v => proto::$name::$v,)+ }
+            }
+        }
+
+        stored_as_words!($name);
     };
 }
 
@@ -66,33 +107,33 @@ pub(crate) fn stage_column(r: &rusqlite::Row<'_>, i: usize) -> rusqlite::Result<
     })
 }
 
-words! {
+wire_words! {
     /// A run's state.
     RunState {
         /// Submitted and not finished.
-        Running = "running",
+        Running,
         /// Finished: its summary and results are stored.
-        Done = "done",
+        Done,
         /// Stopped by an error (its `error` says which).
-        Failed = "failed",
+        Failed,
         /// Cancelled by a client.
-        Cancelled = "cancelled",
+        Cancelled,
     }
 }
 
-words! {
+wire_words! {
     /// A job's state.
     JobState {
         /// Waiting for a worker.
-        Queued = "queued",
+        Queued,
         /// Leased to a worker.
-        Leased = "leased",
+        Leased,
         /// Completed, its outputs stored.
-        Done = "done",
+        Done,
         /// Failed too often (its run failed).
-        Failed = "failed",
+        Failed,
         /// Its run ended first.
-        Cancelled = "cancelled",
+        Cancelled,
     }
 }
 
@@ -125,18 +166,6 @@ pub fn wire_stage(s: Stage) -> proto::Stage {
     }
 }
 
-/// The wire's run state.
-impl From<RunState> for proto::RunState {
-    fn from(s: RunState) -> Self {
-        match s {
-            RunState::Running => proto::RunState::Running,
-            RunState::Done => proto::RunState::Done,
-            RunState::Failed => proto::RunState::Failed,
-            RunState::Cancelled => proto::RunState::Cancelled,
-        }
-    }
-}
-
 /// The wire's state of a run's current stage: the run's own.
 impl From<RunState> for proto::StageState {
     fn from(s: RunState) -> Self {
@@ -145,19 +174,6 @@ impl From<RunState> for proto::StageState {
             RunState::Done => proto::StageState::Done,
             RunState::Failed => proto::StageState::Failed,
             RunState::Cancelled => proto::StageState::Cancelled,
-        }
-    }
-}
-
-/// The wire's job state.
-impl From<JobState> for proto::JobState {
-    fn from(s: JobState) -> Self {
-        match s {
-            JobState::Queued => proto::JobState::Queued,
-            JobState::Leased => proto::JobState::Leased,
-            JobState::Done => proto::JobState::Done,
-            JobState::Failed => proto::JobState::Failed,
-            JobState::Cancelled => proto::JobState::Cancelled,
         }
     }
 }
@@ -178,6 +194,17 @@ mod tests {
         for s in JobState::ALL {
             assert_eq!(proto::JobState::from(*s).word(), s.as_str());
         }
+    }
+
+    #[test]
+    fn stored_words_are_those_of_existing_databases() {
+        // The words come from the client's wire enums; a database written by any earlier
+        // build holds these, so they must not change.
+        let words = |w: Vec<&str>| w.join(" ");
+        let run: Vec<&str> = RunState::ALL.iter().map(|s| s.as_str()).collect();
+        assert_eq!(words(run), "running done failed cancelled");
+        let job: Vec<&str> = JobState::ALL.iter().map(|s| s.as_str()).collect();
+        assert_eq!(words(job), "queued leased done failed cancelled");
     }
 
     #[test]
