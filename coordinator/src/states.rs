@@ -6,10 +6,19 @@
 
 use crate::proto;
 
-/// Parsing, display and the SQL conversions of a type with `ALL` and `as_str`: each value is
-/// stored as its word.
-macro_rules! stored_as_words {
-    ($name:ident) => {
+/// Declares an enum stored as words: its `ALL`, parsing, display and the SQL conversions,
+/// through the `as_str` the declaring macro ([`words!`], [`wire_words!`]) writes.
+macro_rules! stored_enum {
+    ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident,)+ }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum $name { $($(#[$vm])* $v,)+ }
+
+        impl $name {
+            /// Every value, in order.
+            pub const ALL: &'static [$name] = &[$($name::$v,)+];
+        }
+
         impl std::str::FromStr for $name {
             type Err = String;
             fn from_str(s: &str) -> Result<Self, String> {
@@ -48,21 +57,14 @@ macro_rules! stored_as_words {
 /// Declares an enum whose variants are stored as fixed words.
 macro_rules! words {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident = $s:literal,)+ }) => {
-        $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-        pub enum $name { $($(#[$vm])* $v,)+ }
+        stored_enum!($(#[$m])* $name { $($(#[$vm])* $v,)+ });
 
         impl $name {
-            /// Every value, in order.
-            pub const ALL: &'static [$name] = &[$($name::$v,)+];
-
             /// The word stored in the database.
             pub fn as_str(self) -> &'static str {
                 match self { $($name::$v => $s,)+ }
             }
         }
-
-        stored_as_words!($name);
     };
 }
 
@@ -70,14 +72,9 @@ macro_rules! words {
 /// `From`, and its stored word, the wire value's `word()` (one list of words, the client's).
 macro_rules! wire_words {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident,)+ }) => {
-        $(#[$m])*
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-        pub enum $name { $($(#[$vm])* $v,)+ }
+        stored_enum!($(#[$m])* $name { $($(#[$vm])* $v,)+ });
 
         impl $name {
-            /// Every value, in order.
-            pub const ALL: &'static [$name] = &[$($name::$v,)+];
-
             /// The word stored in the database and shown to users: the wire value's.
             pub fn as_str(self) -> &'static str {
                 proto::$name::from(self).word()
@@ -90,8 +87,6 @@ macro_rules! wire_words {
                 match s { $($name::$v => proto::$name::$v,)+ }
             }
         }
-
-        stored_as_words!($name);
     };
 }
 
