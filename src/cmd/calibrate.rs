@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use bemcal_calibrate::{calibrate, Project};
+use bemcal_report::informed::{uninformed, why_uninformed};
 
 /// Run design points, training, chains and validation for a project; write summary.json,
 /// draws.csv, the surrogate and the validation runs under --out.
@@ -107,8 +108,14 @@ fn print_meters(s: &bemcal_calibrate::Summary) {
 
 /// The posterior table: priors, posterior summaries, the estimate, R-hat, ESS, width.
 fn print_posterior(s: &bemcal_calibrate::Summary) {
+    let t = s.temperature.value;
+    let tempered = if t > 1.0 {
+        format!("; likelihood tempered, T = {t:.1}")
+    } else {
+        String::new()
+    };
     println!(
-        "\nposterior ({} chains; {}):",
+        "\nposterior ({} chains; {}{tempered}):",
         s.acceptance_rate.len(),
         s.convergence
     );
@@ -136,6 +143,11 @@ fn print_posterior(s: &bemcal_calibrate::Summary) {
             "{:<30} {:>9.4} {:>9.4} {:>9.4} | {:>9.4} {:>9.4} {:>9.4} {:>9.4} {:>6.3} {:>6.0} {:>5.2}",
             p.name, r.prior_min, r.prior_mode, r.prior_max, p.mean, p.q5, p.q95, est, p.rhat, p.ess_bulk, p.width_ratio
         );
+    }
+    let params = &s.posterior.parameters;
+    let barely = params.iter().filter(|p| uninformed(p.width_ratio)).count();
+    if barely > 0 {
+        println!("note: {}", why_uninformed(barely, params.len(), t));
     }
 }
 

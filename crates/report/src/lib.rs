@@ -11,12 +11,13 @@
 //! folder (`bemcal precalibrate --out PDIR`) it adds the daily profile clusters (Fig. 4), the
 //! per-hour schedule boxes (Fig. 5) and the merged intervals (Fig. 6).
 //!
-//! Layout: [`io`] does all file reading and writing; [`analysis`], [`plots`] (data in, SVG out)
-//! and [`html`] are pure.
+//! Layout: [`io`] does all file reading and writing; [`analysis`], [`informed`], [`plots`] (data
+//! in, SVG out) and [`html`] are pure.
 #![deny(missing_docs)]
 
 pub mod analysis;
 pub mod html;
+pub mod informed;
 pub mod io;
 pub mod plots;
 pub mod portfolio;

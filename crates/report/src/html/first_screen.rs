@@ -1,7 +1,8 @@
 //! The report's first screen after its header: the banners (not converged, out of reach), the
 //! warnings and the design points EnergyPlus could not simulate.
 
-use super::{esc, fit::g14_pass, g, ESS_LIMIT, RHAT_LIMIT, WIDTH_RATIO_LIMIT};
+use super::{esc, fit::g14_pass, g, ESS_LIMIT, RHAT_LIMIT};
+use crate::informed::{uninformed, why_uninformed};
 use std::fmt::Write as _;
 
 /// A banner on the first screen naming the meters no posterior draw of the model reaches.
@@ -104,14 +105,19 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
             low_ess.join(", ")
         ));
     }
-    for p in &post.parameters {
-        if p.width_ratio > WIDTH_RATIO_LIMIT {
-            warn.push(format!(
-                "<b>{}</b>: posterior 90 % interval is {:.0} % of the prior's &mdash; the meters did not inform it (not identifiable from these data).",
-                esc(&p.name),
-                100.0 * p.width_ratio
-            ));
-        }
+    let barely: Vec<String> = post
+        .parameters
+        .iter()
+        .filter(|p| uninformed(p.width_ratio))
+        .map(|p| format!("<b>{}</b> ({:.0} %)", esc(&p.name), 100.0 * p.width_ratio))
+        .collect();
+    if !barely.is_empty() {
+        let t = s.temperature.map_or(1.0, |t| t.value);
+        warn.push(format!(
+            "{} Their intervals against the prior's: {}.",
+            esc(&why_uninformed(barely.len(), post.parameters.len(), t)),
+            barely.join(", ")
+        ));
     }
     for c in &post.correlated_pairs {
         warn.push(format!(

@@ -32,8 +32,6 @@ pub const G14_CV_RMSE_LIMIT: f64 = 30.0;
 pub const RHAT_LIMIT: f64 = 1.01;
 /// Bulk ESS below this is flagged.
 pub const ESS_LIMIT: f64 = 400.0;
-/// Width ratio (posterior 90 % interval / prior's) above this: the data barely informed it.
-pub const WIDTH_RATIO_LIMIT: f64 = 0.9;
 
 const CSS: &str = "
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,Helvetica,Arial,sans-serif;margin:0;color:#222;background:#fafafa}

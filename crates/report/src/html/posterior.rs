@@ -3,8 +3,9 @@
 
 use std::fmt::Write as _;
 
-use super::{duration, esc, f, figure, g, legend, ESS_LIMIT, RHAT_LIMIT, WIDTH_RATIO_LIMIT};
+use super::{duration, esc, f, figure, g, legend, ESS_LIMIT, RHAT_LIMIT};
 use crate::analysis;
+use crate::informed::uninformed;
 use crate::io::CalibrationData;
 use crate::plots::{self, PriorPosterior};
 use crate::ReportError;
@@ -99,7 +100,7 @@ fn parameter_row(s: &crate::io::Summary, k: usize, p: &crate::io::PriorInfo) -> 
         let _ = write!(h, "<td colspan=\"{cols}\">no posterior summary</td></tr>");
         return h;
     };
-    let wr = flag(q.width_ratio > WIDTH_RATIO_LIMIT);
+    let wr = flag(uninformed(q.width_ratio));
     let rh = flag(q.rhat > RHAT_LIMIT);
     let es = flag(q.ess_bulk < ESS_LIMIT);
     let with_error = carried.map_or(String::new(), |c| {
