@@ -336,8 +336,9 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
 /// models the held-out hours favour.
 fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
     println!(
-        "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, + the noise \
-         of each meter's error model, by default {}): share of measured hours inside, mean width",
+        "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, each + the noise \
+         of its own residuals under each meter's error model, by default {}): share of measured \
+         hours inside, mean width",
         p.draws,
         if p.with_surrogate_error { " with the surrogate's error" } else { "" },
         p.failed,

@@ -5,8 +5,9 @@
 //!
 //! The draws are EnergyPlus at evenly spaced posterior draws (with the surrogate's error
 //! carried, where a refinement round measured it, so that the surrogate's bias in parameter
-//! space is in the spread); the noise is the error model's scale of EnergyPlus's residuals at
-//! the estimate over the calibration hours (`[validation] error_model`). Numerics in
+//! space is in the spread); each draw's noise is the error model's scale of its own
+//! EnergyPlus residuals over the calibration hours (`[validation] error_model`), so that a draw
+//! whose simulation sits off the meter carries the wider noise its residuals show. Numerics in
 //! [`bemcal_stats::predictive`]; the driver has EnergyPlus simulate [`ChainSummary::predictive_candidates`]
 //! and [`crate::write_summary`] reads their runs once and calls [`assess`].
 //!
@@ -20,7 +21,7 @@ use std::ops::Range;
 
 use bemcal_stats::predictive::{
     coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_totals,
-    total_intervals, Coverage, ErrorModel, Intervals,
+    total_intervals, Coverage, ErrorModel, Intervals, Noise,
 };
 use serde::{Deserialize, Serialize};
 
@@ -290,12 +291,17 @@ pub fn assess(
         let mut by_error_model = vec![];
         let mut noise_kwh = f64::NAN;
         let mut configured_scales = vec![];
+        let mut configured_noise = vec![];
         for &model in &models {
             let scales = model.scales(&inp.measured[k], &estimate, &fit)?;
             if model == ErrorModel::Constant {
                 noise_kwh = scales.first().copied().unwrap_or(f64::NAN);
             }
-            let mut iv = intervals(&sims, &scales, &LEVELS)?;
+            // Each draw's noise is the error model's scale of its own residuals.
+            let noise = (sims.iter())
+                .map(|s| model.scales(&inp.measured[k], s, &fit))
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut iv = intervals(&sims, Noise::PerDraw(&noise), &LEVELS)?;
             if non_negative {
                 iv.clamp_below(0.0);
             }
@@ -311,6 +317,7 @@ pub fn assess(
                 columns.push((format!("{name}_q75"), iv.upper[0].clone()));
                 columns.push((format!("{name}_q95"), iv.upper[1].clone()));
                 configured_scales = scales;
+                configured_noise = noise;
             }
         }
         let scales = configured_scales;
@@ -321,7 +328,8 @@ pub fn assess(
             })
             .collect();
         let residual_phi = lag1_autocorrelation(&standardised);
-        let totals = totals_coverage(inp, k, &fit, &sims, &scales, residual_phi, non_negative)?;
+        let noise = Noise::PerDraw(&configured_noise);
+        let totals = totals_coverage(inp, k, &fit, &sims, noise, residual_phi, non_negative)?;
         let held: Vec<&[Coverage]> = (by_error_model.iter())
             .map(|m| m.coverage.held_out.as_slice())
             .collect();
@@ -352,14 +360,14 @@ pub fn assess(
 }
 
 /// Coverage of the intervals of daily and monthly totals of meter `k` (EnergyPlus at the draws
-/// `sims`, noise of hourly scale `scales`), with the residuals' lag-1 autocorrelation `phi` in
-/// the noise of a sum and as if hours were independent.
+/// `sims`, with their hourly `noise`), with the residuals' lag-1 autocorrelation `phi` in the
+/// noise of a sum and as if hours were independent.
 fn totals_coverage(
     inp: &crate::Inputs,
     k: usize,
     fit: &[bool],
     sims: &[Vec<f64>],
-    scales: &[f64],
+    noise: Noise<'_>,
     phi: f64,
     non_negative: bool,
 ) -> Result<Vec<TotalsCoverage>, Error> {
@@ -368,7 +376,7 @@ fn totals_coverage(
         .map(|period| {
             let periods = period.periods(fit.len());
             let judge = |phi: f64| -> Result<PeriodCoverage, Error> {
-                let mut iv = total_intervals(sims, scales, phi, &periods, &LEVELS)?;
+                let mut iv = total_intervals(sims, noise, phi, &periods, &LEVELS)?;
                 if non_negative {
                     iv.clamp_below(0.0);
                 }

@@ -1,12 +1,13 @@
 //! Hourly posterior predictive intervals of a meter and how often they hold.
 //!
 //! The predictive distribution of hour `h` is the simulations at `J` posterior draws, each with
-//! the error model's noise added: the equal-weight mixture `(1/J) Σ_j N(c_j(h), s(h)²)`
+//! the error model's noise added: the equal-weight mixture `(1/J) Σ_j N(c_j(h), s_j(h)²)`
 //! (Gelman et al., *Bayesian Data Analysis*, 3rd ed., §6.3: draws of the parameters, then of
 //! the data given them). Its quantiles are found by bisection on the mixture's CDF. The noise
-//! `s(h)` is the residual scale of the model at the estimate over the calibration hours, either
-//! one value per meter ([`ErrorModel::Constant`]) or one per hour of the day
-//! ([`ErrorModel::HourOfDay`]). Coverage is the share of measured hours inside an interval
+//! `s_j(h)` is the residual scale of draw `j`'s own simulation over the calibration hours
+//! ([`Noise::PerDraw`]; or one series for every draw, [`Noise::Shared`]), either one value per
+//! meter ([`ErrorModel::Constant`]), one per hour of the day ([`ErrorModel::HourOfDay`]) or one
+//! per level of the simulated value ([`ErrorModel::Level`]). Coverage is the share of measured hours inside an interval
 //! (the check of calibrated prediction: Gneiting, Balabdaoui & Raftery 2007, JRSS B 69).
 //!
 //! Totals over a run of hours (a day, a month: what M&V practice checks) come from the same
@@ -136,26 +137,36 @@ fn level_scales(measured: &[f64], simulated: &[f64], fit: &[bool], constant: f64
         .collect()
 }
 
-/// The `p` quantile of the equal-weight mixture of `N(c, sd²)` over `centers` (bisection on
-/// the mixture CDF to 1e-9 of the bracket). `sd <= 0` gives the centers' own quantile.
+/// The `p` quantile of the equal-weight mixture of `N(c, sd²)` over `centers`, one `sd` for
+/// all ([`mixture_quantile_each`]).
 pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
-    let (lo, hi) = centers
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &c| {
-            (a.min(c), b.max(c))
-        });
-    if centers.is_empty() || !lo.is_finite() {
+    let components: Vec<(f64, f64)> = centers.iter().map(|&c| (c, sd)).collect();
+    mixture_quantile_each(&components, p)
+}
+
+/// The `p` quantile of the equal-weight mixture of `N(c, sd²)` over `components` `(c, sd)`
+/// (bisection on the mixture CDF to 1e-9 of the bracket). A component with `sd <= 0` is its
+/// center alone (a point mass).
+pub fn mixture_quantile_each(components: &[(f64, f64)], p: f64) -> f64 {
+    let (lo, hi) =
+        components
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &(c, sd)| {
+                let sd = sd.max(0.0);
+                (a.min(c - 9.0 * sd), b.max(c + 9.0 * sd))
+            });
+    if components.is_empty() || !lo.is_finite() {
         return f64::NAN;
     }
-    let sd = if sd > 0.0 {
-        sd
-    } else {
-        1e-12 * (1.0 + hi.abs())
-    };
+    let tiny = 1e-12 * (1.0 + lo.abs().max(hi.abs()));
     let cdf = |x: f64| {
-        centers.iter().map(|&c| norm_cdf((x - c) / sd)).sum::<f64>() / centers.len() as f64
+        components
+            .iter()
+            .map(|&(c, sd)| norm_cdf((x - c) / if sd > 0.0 { sd } else { tiny }))
+            .sum::<f64>()
+            / components.len() as f64
     };
-    let (mut a, mut b) = (lo - 9.0 * sd, hi + 9.0 * sd);
+    let (mut a, mut b) = (lo - 9.0 * tiny, hi + 9.0 * tiny);
     let tol = 1e-9 * (b - a);
     // At most 100 halvings (a bracket of any width reaches 1e-9 of itself in 30); stop early
     // where floating point cannot split the bracket any more.
@@ -173,6 +184,36 @@ pub fn mixture_quantile(centers: &[f64], sd: f64, p: f64) -> f64 {
     0.5 * (a + b)
 }
 
+/// The noise scale of the predictive distribution's hours, per posterior draw.
+#[derive(Debug, Clone, Copy)]
+pub enum Noise<'a> {
+    /// One scale series for every draw (the residual scale at one point, the estimate).
+    Shared(&'a [f64]),
+    /// Each draw its own scale series: the residual scale of that draw's simulation, the
+    /// noise's conditional posterior given the draw's parameters (Gelman et al., *Bayesian
+    /// Data Analysis*, 3rd ed., §6.3: parameters and noise drawn together), so that a draw
+    /// whose simulation sits off the meter carries the wider noise its residuals show.
+    PerDraw(&'a [Vec<f64>]),
+}
+
+impl Noise<'_> {
+    /// Scale of draw `j` at hour `h`.
+    fn of(&self, j: usize, h: usize) -> f64 {
+        match self {
+            Noise::Shared(s) => s[h],
+            Noise::PerDraw(s) => s[j][h],
+        }
+    }
+
+    /// Whether every series has `n` hours, for `draws` draws.
+    fn fits(&self, draws: usize, n: usize) -> bool {
+        match self {
+            Noise::Shared(s) => s.len() == n,
+            Noise::PerDraw(s) => s.len() == draws && s.iter().all(|s| s.len() == n),
+        }
+    }
+}
+
 /// Central predictive intervals of every hour at the nominal levels (e.g. 0.5 and 0.9).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Intervals {
@@ -187,12 +228,12 @@ pub struct Intervals {
 }
 
 /// Predictive intervals of each hour from `sims` (one hourly series per posterior draw, meter
-/// units) and the noise scale `scales[h]`. An hour where no draw has a value is NaN.
-pub fn intervals(sims: &[Vec<f64>], scales: &[f64], levels: &[f64]) -> Result<Intervals> {
-    let n = scales.len();
-    if sims.is_empty() || sims.iter().any(|s| s.len() != n) {
+/// units) and the noise scale of each draw's hours. An hour where no draw has a value is NaN.
+pub fn intervals(sims: &[Vec<f64>], noise: Noise<'_>, levels: &[f64]) -> Result<Intervals> {
+    let n = sims.first().map_or(0, Vec::len);
+    if sims.is_empty() || sims.iter().any(|s| s.len() != n) || !noise.fits(sims.len(), n) {
         return Err(StatsError::Shape(format!(
-            "{} simulations for {n} hours (each must have {n} values)",
+            "{} simulations and their noise scales for {n} hours (each must have {n} values)",
             sims.len()
         )));
     }
@@ -210,11 +251,15 @@ pub fn intervals(sims: &[Vec<f64>], scales: &[f64], levels: &[f64]) -> Result<In
     let mut c = Vec::with_capacity(sims.len());
     for h in 0..n {
         c.clear();
-        c.extend(sims.iter().map(|s| s[h]).filter(|v| v.is_finite()));
-        out.median.push(mixture_quantile(&c, scales[h], 0.5));
+        c.extend(
+            (sims.iter().enumerate())
+                .filter(|(_, s)| s[h].is_finite())
+                .map(|(j, s)| (s[h], noise.of(j, h))),
+        );
+        out.median.push(mixture_quantile_each(&c, 0.5));
         for (i, l) in levels.iter().enumerate() {
-            out.lower[i].push(mixture_quantile(&c, scales[h], 0.5 - l / 2.0));
-            out.upper[i].push(mixture_quantile(&c, scales[h], 0.5 + l / 2.0));
+            out.lower[i].push(mixture_quantile_each(&c, 0.5 - l / 2.0));
+            out.upper[i].push(mixture_quantile_each(&c, 0.5 + l / 2.0));
         }
     }
     Ok(out)
@@ -271,31 +316,43 @@ pub fn ar1_sum_variance(scales: &[f64], phi: f64) -> f64 {
 }
 
 /// Predictive intervals of the totals over `periods` (runs of hours: days, months): each
-/// draw's sum over the period is a center, the noise is that of the sum of the hours' noise
-/// with AR(1) coefficient `phi` ([`ar1_sum_variance`]; `phi = 0`: independent hours). A
+/// draw's sum over the period is a center, the noise is that of the sum of the draw's hourly
+/// noise with AR(1) coefficient `phi` ([`ar1_sum_variance`]; `phi = 0`: independent hours). A
 /// period in which some draw lacks a value is NaN.
 pub fn total_intervals(
     sims: &[Vec<f64>],
-    scales: &[f64],
+    noise: Noise<'_>,
     phi: f64,
     periods: &[std::ops::Range<usize>],
     levels: &[f64],
 ) -> Result<Intervals> {
-    if let Some(p) = periods.iter().find(|p| p.end > scales.len()) {
+    let n = sims.first().map_or(0, Vec::len);
+    if !noise.fits(sims.len(), n) {
         return Err(StatsError::Shape(format!(
-            "period {p:?} past {} hours",
-            scales.len()
+            "noise scales that do not match {} simulations of {n} hours",
+            sims.len()
         )));
+    }
+    if let Some(p) = periods.iter().find(|p| p.end > n) {
+        return Err(StatsError::Shape(format!("period {p:?} past {n} hours")));
     }
     let sums: Vec<Vec<f64>> = sims
         .iter()
         .map(|s| periods.iter().map(|p| s[p.clone()].iter().sum()).collect())
         .collect();
-    let sd: Vec<f64> = periods
-        .iter()
-        .map(|p| ar1_sum_variance(&scales[p.clone()], phi).max(0.0).sqrt())
-        .collect();
-    intervals(&sums, &sd, levels)
+    let sd_of = |scales: &[f64]| -> Vec<f64> {
+        periods
+            .iter()
+            .map(|p| ar1_sum_variance(&scales[p.clone()], phi).max(0.0).sqrt())
+            .collect()
+    };
+    match noise {
+        Noise::Shared(s) => intervals(&sums, Noise::Shared(&sd_of(s)), levels),
+        Noise::PerDraw(s) => {
+            let sds: Vec<Vec<f64>> = s.iter().map(|s| sd_of(s)).collect();
+            intervals(&sums, Noise::PerDraw(&sds), levels)
+        }
+    }
 }
 
 /// The measured total of each period where every hour of it is measured and selected (NaN
@@ -499,6 +556,64 @@ mod tests {
     }
 
     #[test]
+    fn each_draw_carries_its_own_noise() {
+        // Two draws at 0 with scales 1 and 3: the 95 % quantile q solves
+        // (Phi(q) + Phi(q / 3)) / 2 = 0.95.
+        let (one, three) = (vec![1.0; 2], vec![3.0; 2]);
+        let per = [one.clone(), three];
+        let iv = intervals(&[vec![0.0; 2], vec![0.0; 2]], Noise::PerDraw(&per), &[0.9]).unwrap();
+        let q = iv.upper[0][0];
+        assert!(
+            ((norm_cdf(q) + norm_cdf(q / 3.0)) / 2.0 - 0.95).abs() < 1e-8,
+            "{q}"
+        );
+        assert!((iv.lower[0][1] + q).abs() < 1e-6 && iv.median[0].abs() < 1e-6);
+        // Equal scales per draw are the shared scale.
+        let sims = [vec![1.0, 2.0], vec![4.0, -1.0]];
+        let shared = intervals(&sims, Noise::Shared(&one), &[0.5, 0.9]).unwrap();
+        let each = intervals(
+            &sims,
+            Noise::PerDraw(&[one.clone(), one.clone()]),
+            &[0.5, 0.9],
+        );
+        assert_eq!(shared, each.unwrap());
+        // A draw's series of the wrong length, or a scale series per draw missing, is refused.
+        assert!(intervals(&sims, Noise::PerDraw(std::slice::from_ref(&one)), &[0.9]).is_err());
+        assert!(intervals(&sims, Noise::Shared(&[1.0]), &[0.9]).is_err());
+    }
+
+    #[test]
+    fn per_draw_noise_holds_where_the_draws_sit_off_the_meter() {
+        // The meter is truth + N(0, 0.5²); the four draws all sit 1.0 above it (a model bias
+        // the draws share), the estimate at the truth. The estimate's residual scale (0.5)
+        // around the biased draws holds far fewer hours than nominal; each draw's own residual
+        // scale (sqrt(0.25 + 1) = 1.118, the bias in its residuals) holds at least nominal:
+        // P(|1 - 0.5 z| < 1.645 * 1.118) = 95.3 % at 90 %.
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let n = 4000;
+        let mut z = move || rng.sample::<f64, _>(StandardNormal);
+        let truth: Vec<f64> = (0..n).map(|h| 10.0 + (h as f64 / 24.0).sin()).collect();
+        let y: Vec<f64> = truth.iter().map(|t| t + 0.5 * z()).collect();
+        let sims: Vec<Vec<f64>> = (0..4)
+            .map(|_| truth.iter().map(|t| t + 1.0).collect())
+            .collect();
+        let all = vec![true; n];
+        let at_estimate = ErrorModel::Constant.scales(&y, &truth, &all).unwrap();
+        let each: Vec<Vec<f64>> = (sims.iter())
+            .map(|s| ErrorModel::Constant.scales(&y, s, &all).unwrap())
+            .collect();
+        let cover = |noise| {
+            let iv = intervals(&sims, noise, &[0.9]).unwrap();
+            coverage(0.9, &y, &iv.lower[0], &iv.upper[0], &all).unwrap()
+        };
+        let shared = cover(Noise::Shared(&at_estimate));
+        let own = cover(Noise::PerDraw(&each));
+        // P(|1 - 0.5 z| < 0.822) = Phi(-0.356) - Phi(-3.644) = 36.1 %.
+        assert!((shared.fraction - 0.361).abs() < 0.025, "{shared:?}");
+        assert!((own.fraction - 0.953).abs() < 0.015, "{own:?}");
+    }
+
+    #[test]
     fn ar1_sum_variance_is_the_double_sum() {
         let s = [1.0, 2.0, 0.5, 3.0, 1.5];
         for phi in [0.0, 0.5, 0.9, -0.3] {
@@ -545,8 +660,14 @@ mod tests {
         let periods: Vec<std::ops::Range<usize>> = (0..days).map(|d| 24 * d..24 * d + 24).collect();
         let (totals, all) = period_totals(&y, &vec![true; n], &periods);
         let judge = |phi: f64| {
-            let iv = total_intervals(std::slice::from_ref(&truth), &scales, phi, &periods, &[0.9])
-                .unwrap();
+            let iv = total_intervals(
+                std::slice::from_ref(&truth),
+                Noise::Shared(&scales),
+                phi,
+                &periods,
+                &[0.9],
+            )
+            .unwrap();
             coverage(0.9, &totals, &iv.lower[0], &iv.upper[0], &all).unwrap()
         };
         let (ar1, independent) = (judge(phi_hat), judge(0.0));
@@ -595,14 +716,14 @@ mod tests {
             .map(|_| truth.iter().map(|t| t + 0.3 * z()).collect())
             .collect();
         let s = vec![0.5; n];
-        let iv = intervals(&sims, &s, &[0.5, 0.9]).unwrap();
+        let iv = intervals(&sims, Noise::Shared(&s), &[0.5, 0.9]).unwrap();
         for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
             let c = coverage(nominal, &y, &iv.lower[i], &iv.upper[i], &vec![true; n]).unwrap();
             assert!((c.fraction - nominal).abs() < 0.025, "{nominal}: {c:?}");
         }
         // Without the draws' spread (the truth alone), the 90 % interval is too narrow:
         // P(|N(0, 0.34)| < 1.645 * 0.5) = 84.1 %.
-        let one = intervals(std::slice::from_ref(&truth), &s, &[0.9]).unwrap();
+        let one = intervals(std::slice::from_ref(&truth), Noise::Shared(&s), &[0.9]).unwrap();
         let c = coverage(0.9, &y, &one.lower[0], &one.upper[0], &vec![true; n]).unwrap();
         assert!((c.fraction - 0.841).abs() < 0.02, "{c:?}");
         // The constant scale of the residuals at the truth is their root mean square.
@@ -669,7 +790,7 @@ mod tests {
 
     #[test]
     fn clamping_raises_bounds_below_the_floor() {
-        let mut iv = intervals(&[vec![0.0, 5.0]], &[1.0, 1.0], &[0.9]).unwrap();
+        let mut iv = intervals(&[vec![0.0, 5.0]], Noise::Shared(&[1.0, 1.0]), &[0.9]).unwrap();
         iv.clamp_below(0.0);
         assert_eq!(iv.lower[0][0], 0.0);
         assert!((iv.upper[0][0] - 1.6448536).abs() < 1e-6);

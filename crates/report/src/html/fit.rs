@@ -146,7 +146,7 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
     let _ = write!(
         h,
         "<h3 id=\"predictive\">Hourly predictive intervals</h3><p class=\"sub\">EnergyPlus at {} \
-         posterior draws{} ({} failed), plus noise of the error model: share of the measured \
+         posterior draws{} ({} failed), each plus the error model's noise at the scale of its own residuals: share of the measured \
          hours inside the 50 % and 90 % intervals, and their mean width. Intervals that hold \
          read about 50 % and 90 %; the first error model is the one in \
          <code>validation/predictive_intervals.csv</code> (<code>[validation] error_model</code>).</p>\
@@ -399,8 +399,8 @@ pub(super) fn held_out_weeks(cal: &CalibrationData) -> Result<String, ReportErro
     }
     let mut h = String::from(
         "<p class=\"sub\">Held-out weeks: the meter (hours that fitted nothing) against the \
-         predictive median and 5&ndash;95 % interval of EnergyPlus at posterior draws plus the \
-         error model's noise, and EnergyPlus at the estimate.</p><div class=\"grid\">",
+         predictive median and 5&ndash;95 % interval of EnergyPlus at posterior draws, each plus \
+         the error model's noise at the scale of its own residuals, and EnergyPlus at the estimate.</p><div class=\"grid\">",
     );
     for o in &cal.summary.outputs {
         let view = hourly_view(iv, o, cal.calibrated.as_ref());
