@@ -288,15 +288,15 @@ pub fn assess(
         // An energy meter does not read below zero: its intervals are those of max(0, Y).
         let meter = inp.meter(k);
         let non_negative = !meter.iter().any(|v| *v < 0.0);
+        // The estimate's residual scales: its root mean square residual, and the standardised
+        // residuals whose autocorrelation the totals' noise takes.
+        let estimate_scales = |m: ErrorModel| m.scales(&inp.measured[k], &estimate, &fit);
+        let noise_kwh =
+            (estimate_scales(ErrorModel::Constant)?.first().copied()).unwrap_or(f64::NAN);
+        let scales = estimate_scales(configured)?;
         let mut by_error_model = vec![];
-        let mut noise_kwh = f64::NAN;
-        let mut configured_scales = vec![];
         let mut configured_noise = vec![];
         for &model in &models {
-            let scales = model.scales(&inp.measured[k], &estimate, &fit)?;
-            if model == ErrorModel::Constant {
-                noise_kwh = scales.first().copied().unwrap_or(f64::NAN);
-            }
             // Each draw's noise is the error model's scale of its own residuals.
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
@@ -316,11 +316,9 @@ pub fn assess(
                 columns.push((format!("{name}_q50"), iv.median.clone()));
                 columns.push((format!("{name}_q75"), iv.upper[0].clone()));
                 columns.push((format!("{name}_q95"), iv.upper[1].clone()));
-                configured_scales = scales;
                 configured_noise = noise;
             }
         }
-        let scales = configured_scales;
         let standardised: Vec<f64> = (0..fit.len())
             .map(|t| match fit[t] {
                 true => (inp.measured[k][t] - estimate[t]) / scales[t],
