@@ -21,7 +21,7 @@ use std::ops::Range;
 
 use bemcal_stats::predictive::{
     coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_totals,
-    total_intervals, Coverage, ErrorModel, Intervals, Noise,
+    total_intervals, Coverage, ErrorModel, Intervals,
 };
 use serde::{Deserialize, Serialize};
 
@@ -301,7 +301,7 @@ pub fn assess(
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
                 .collect::<Result<Vec<_>, _>>()?;
-            let mut iv = intervals(&sims, Noise::PerDraw(&noise), &LEVELS)?;
+            let mut iv = intervals(&sims, &noise, &LEVELS)?;
             if non_negative {
                 iv.clamp_below(0.0);
             }
@@ -326,7 +326,7 @@ pub fn assess(
             })
             .collect();
         let residual_phi = lag1_autocorrelation(&standardised);
-        let noise = Noise::PerDraw(&configured_noise);
+        let noise = &configured_noise;
         let totals = totals_coverage(inp, k, &fit, &sims, noise, residual_phi, non_negative)?;
         let held: Vec<&[Coverage]> = (by_error_model.iter())
             .map(|m| m.coverage.held_out.as_slice())
@@ -365,7 +365,7 @@ fn totals_coverage(
     k: usize,
     fit: &[bool],
     sims: &[Vec<f64>],
-    noise: Noise<'_>,
+    noise: &[Vec<f64>],
     phi: f64,
     non_negative: bool,
 ) -> Result<Vec<TotalsCoverage>, Error> {

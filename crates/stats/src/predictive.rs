@@ -4,8 +4,9 @@
 //! the error model's noise added: the equal-weight mixture `(1/J) Σ_j N(c_j(h), s_j(h)²)`
 //! (Gelman et al., *Bayesian Data Analysis*, 3rd ed., §6.3: draws of the parameters, then of
 //! the data given them). Its quantiles are found by bisection on the mixture's CDF. The noise
-//! `s_j(h)` is the residual scale of draw `j`'s own simulation over the calibration hours
-//! ([`Noise::PerDraw`]; or one series for every draw, [`Noise::Shared`]), either one value per
+//! `s_j(h)` is the residual scale of draw `j`'s own simulation over the calibration hours (the
+//! noise's conditional posterior given the draw's parameters, so that a draw whose simulation
+//! sits off the meter carries the wider noise its residuals show), either one value per
 //! meter ([`ErrorModel::Constant`]), one per hour of the day ([`ErrorModel::HourOfDay`]) or one
 //! per level of the simulated value ([`ErrorModel::Level`]). Coverage is the share of measured hours inside an interval
 //! (the check of calibrated prediction: Gneiting, Balabdaoui & Raftery 2007, JRSS B 69).
@@ -184,36 +185,6 @@ pub fn mixture_quantile_each(components: &[(f64, f64)], p: f64) -> f64 {
     0.5 * (a + b)
 }
 
-/// The noise scale of the predictive distribution's hours, per posterior draw.
-#[derive(Debug, Clone, Copy)]
-pub enum Noise<'a> {
-    /// One scale series for every draw (the residual scale at one point, the estimate).
-    Shared(&'a [f64]),
-    /// Each draw its own scale series: the residual scale of that draw's simulation, the
-    /// noise's conditional posterior given the draw's parameters (Gelman et al., *Bayesian
-    /// Data Analysis*, 3rd ed., §6.3: parameters and noise drawn together), so that a draw
-    /// whose simulation sits off the meter carries the wider noise its residuals show.
-    PerDraw(&'a [Vec<f64>]),
-}
-
-impl Noise<'_> {
-    /// Scale of draw `j` at hour `h`.
-    fn of(&self, j: usize, h: usize) -> f64 {
-        match self {
-            Noise::Shared(s) => s[h],
-            Noise::PerDraw(s) => s[j][h],
-        }
-    }
-
-    /// Whether every series has `n` hours, for `draws` draws.
-    fn fits(&self, draws: usize, n: usize) -> bool {
-        match self {
-            Noise::Shared(s) => s.len() == n,
-            Noise::PerDraw(s) => s.len() == draws && s.iter().all(|s| s.len() == n),
-        }
-    }
-}
-
 /// Central predictive intervals of every hour at the nominal levels (e.g. 0.5 and 0.9).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Intervals {
@@ -228,10 +199,11 @@ pub struct Intervals {
 }
 
 /// Predictive intervals of each hour from `sims` (one hourly series per posterior draw, meter
-/// units) and the noise scale of each draw's hours. An hour where no draw has a value is NaN.
-pub fn intervals(sims: &[Vec<f64>], noise: Noise<'_>, levels: &[f64]) -> Result<Intervals> {
+/// units) and `noise[j][h]`, the noise scale of draw `j` at hour `h`. An hour where no draw
+/// has a value is NaN.
+pub fn intervals(sims: &[Vec<f64>], noise: &[Vec<f64>], levels: &[f64]) -> Result<Intervals> {
     let n = sims.first().map_or(0, Vec::len);
-    if sims.is_empty() || sims.iter().any(|s| s.len() != n) || !noise.fits(sims.len(), n) {
+    if sims.is_empty() || sims.iter().any(|s| s.len() != n) || !fits(noise, sims.len(), n) {
         return Err(StatsError::Shape(format!(
             "{} simulations and their noise scales for {n} hours (each must have {n} values)",
             sims.len()
@@ -254,7 +226,7 @@ pub fn intervals(sims: &[Vec<f64>], noise: Noise<'_>, levels: &[f64]) -> Result<
         c.extend(
             (sims.iter().enumerate())
                 .filter(|(_, s)| s[h].is_finite())
-                .map(|(j, s)| (s[h], noise.of(j, h))),
+                .map(|(j, s)| (s[h], noise[j][h])),
         );
         out.median.push(mixture_quantile_each(&c, 0.5));
         for (i, l) in levels.iter().enumerate() {
@@ -317,17 +289,17 @@ pub fn ar1_sum_variance(scales: &[f64], phi: f64) -> f64 {
 
 /// Predictive intervals of the totals over `periods` (runs of hours: days, months): each
 /// draw's sum over the period is a center, the noise is that of the sum of the draw's hourly
-/// noise with AR(1) coefficient `phi` ([`ar1_sum_variance`]; `phi = 0`: independent hours). A
+/// noise `noise[j]` with AR(1) coefficient `phi` ([`ar1_sum_variance`]; `phi = 0`: independent hours). A
 /// period in which some draw lacks a value is NaN.
 pub fn total_intervals(
     sims: &[Vec<f64>],
-    noise: Noise<'_>,
+    noise: &[Vec<f64>],
     phi: f64,
     periods: &[std::ops::Range<usize>],
     levels: &[f64],
 ) -> Result<Intervals> {
     let n = sims.first().map_or(0, Vec::len);
-    if !noise.fits(sims.len(), n) {
+    if !fits(noise, sims.len(), n) {
         return Err(StatsError::Shape(format!(
             "noise scales that do not match {} simulations of {n} hours",
             sims.len()
@@ -340,19 +312,19 @@ pub fn total_intervals(
         .iter()
         .map(|s| periods.iter().map(|p| s[p.clone()].iter().sum()).collect())
         .collect();
-    let sd_of = |scales: &[f64]| -> Vec<f64> {
-        periods
-            .iter()
-            .map(|p| ar1_sum_variance(&scales[p.clone()], phi).max(0.0).sqrt())
-            .collect()
-    };
-    match noise {
-        Noise::Shared(s) => intervals(&sums, Noise::Shared(&sd_of(s)), levels),
-        Noise::PerDraw(s) => {
-            let sds: Vec<Vec<f64>> = s.iter().map(|s| sd_of(s)).collect();
-            intervals(&sums, Noise::PerDraw(&sds), levels)
-        }
-    }
+    let sds: Vec<Vec<f64>> = (noise.iter())
+        .map(|scales| {
+            (periods.iter())
+                .map(|p| ar1_sum_variance(&scales[p.clone()], phi).max(0.0).sqrt())
+                .collect()
+        })
+        .collect();
+    intervals(&sums, &sds, levels)
+}
+
+/// Whether `noise` holds one scale series of `n` hours for each of `draws` draws.
+fn fits(noise: &[Vec<f64>], draws: usize, n: usize) -> bool {
+    noise.len() == draws && noise.iter().all(|s| s.len() == n)
 }
 
 /// The measured total of each period where every hour of it is measured and selected (NaN
@@ -561,25 +533,23 @@ mod tests {
         // (Phi(q) + Phi(q / 3)) / 2 = 0.95.
         let (one, three) = (vec![1.0; 2], vec![3.0; 2]);
         let per = [one.clone(), three];
-        let iv = intervals(&[vec![0.0; 2], vec![0.0; 2]], Noise::PerDraw(&per), &[0.9]).unwrap();
+        let iv = intervals(&[vec![0.0; 2], vec![0.0; 2]], &per, &[0.9]).unwrap();
         let q = iv.upper[0][0];
         assert!(
             ((norm_cdf(q) + norm_cdf(q / 3.0)) / 2.0 - 0.95).abs() < 1e-8,
             "{q}"
         );
         assert!((iv.lower[0][1] + q).abs() < 1e-6 && iv.median[0].abs() < 1e-6);
-        // Equal scales per draw are the shared scale.
+        // Equal scales per draw are the mixture of one scale.
         let sims = [vec![1.0, 2.0], vec![4.0, -1.0]];
-        let shared = intervals(&sims, Noise::Shared(&one), &[0.5, 0.9]).unwrap();
-        let each = intervals(
-            &sims,
-            Noise::PerDraw(&[one.clone(), one.clone()]),
-            &[0.5, 0.9],
-        );
-        assert_eq!(shared, each.unwrap());
+        let each = intervals(&sims, &[one.clone(), one.clone()], &[0.5, 0.9]).unwrap();
+        for (h, centers) in [[1.0, 4.0], [2.0, -1.0]].iter().enumerate() {
+            assert_eq!(each.median[h], mixture_quantile(centers, 1.0, 0.5));
+            assert_eq!(each.upper[1][h], mixture_quantile(centers, 1.0, 0.95));
+        }
         // A draw's series of the wrong length, or a scale series per draw missing, is refused.
-        assert!(intervals(&sims, Noise::PerDraw(std::slice::from_ref(&one)), &[0.9]).is_err());
-        assert!(intervals(&sims, Noise::Shared(&[1.0]), &[0.9]).is_err());
+        assert!(intervals(&sims, std::slice::from_ref(&one), &[0.9]).is_err());
+        assert!(intervals(&sims, &[vec![1.0], vec![1.0]], &[0.9]).is_err());
     }
 
     #[test]
@@ -602,12 +572,12 @@ mod tests {
         let each: Vec<Vec<f64>> = (sims.iter())
             .map(|s| ErrorModel::Constant.scales(&y, s, &all).unwrap())
             .collect();
-        let cover = |noise| {
+        let cover = |noise: &[Vec<f64>]| {
             let iv = intervals(&sims, noise, &[0.9]).unwrap();
             coverage(0.9, &y, &iv.lower[0], &iv.upper[0], &all).unwrap()
         };
-        let shared = cover(Noise::Shared(&at_estimate));
-        let own = cover(Noise::PerDraw(&each));
+        let shared = cover(&vec![at_estimate; sims.len()]);
+        let own = cover(&each);
         // P(|1 - 0.5 z| < 0.822) = Phi(-0.356) - Phi(-3.644) = 36.1 %.
         assert!((shared.fraction - 0.361).abs() < 0.025, "{shared:?}");
         assert!((own.fraction - 0.953).abs() < 0.015, "{own:?}");
@@ -662,7 +632,7 @@ mod tests {
         let judge = |phi: f64| {
             let iv = total_intervals(
                 std::slice::from_ref(&truth),
-                Noise::Shared(&scales),
+                std::slice::from_ref(&scales),
                 phi,
                 &periods,
                 &[0.9],
@@ -716,14 +686,19 @@ mod tests {
             .map(|_| truth.iter().map(|t| t + 0.3 * z()).collect())
             .collect();
         let s = vec![0.5; n];
-        let iv = intervals(&sims, Noise::Shared(&s), &[0.5, 0.9]).unwrap();
+        let iv = intervals(&sims, &vec![s.clone(); sims.len()], &[0.5, 0.9]).unwrap();
         for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
             let c = coverage(nominal, &y, &iv.lower[i], &iv.upper[i], &vec![true; n]).unwrap();
             assert!((c.fraction - nominal).abs() < 0.025, "{nominal}: {c:?}");
         }
         // Without the draws' spread (the truth alone), the 90 % interval is too narrow:
         // P(|N(0, 0.34)| < 1.645 * 0.5) = 84.1 %.
-        let one = intervals(std::slice::from_ref(&truth), Noise::Shared(&s), &[0.9]).unwrap();
+        let one = intervals(
+            std::slice::from_ref(&truth),
+            std::slice::from_ref(&s),
+            &[0.9],
+        );
+        let one = one.unwrap();
         let c = coverage(0.9, &y, &one.lower[0], &one.upper[0], &vec![true; n]).unwrap();
         assert!((c.fraction - 0.841).abs() < 0.02, "{c:?}");
         // The constant scale of the residuals at the truth is their root mean square.
@@ -790,7 +765,7 @@ mod tests {
 
     #[test]
     fn clamping_raises_bounds_below_the_floor() {
-        let mut iv = intervals(&[vec![0.0, 5.0]], Noise::Shared(&[1.0, 1.0]), &[0.9]).unwrap();
+        let mut iv = intervals(&[vec![0.0, 5.0]], &[vec![1.0, 1.0]], &[0.9]).unwrap();
         iv.clamp_below(0.0);
         assert_eq!(iv.lower[0][0], 0.0);
         assert!((iv.upper[0][0] - 1.6448536).abs() < 1e-6);
