@@ -389,11 +389,31 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
             let in90 = m["in_sample"][1]["fraction"].as_f64().unwrap();
             assert!((0.75..=0.99).contains(&in90), "{o}");
             assert_eq!(m["held_out"].as_array().unwrap().len(), 2, "{o}");
+            // Recalibrated on the calibration hours: nested levels inside (0, 1), and the
+            // posterior's own intervals' coverage kept beside.
+            let levels = m["levels"].as_array().unwrap();
+            let (l50, l90) = (&levels[0], &levels[1]);
+            let at = |l: &serde_json::Value, i: usize| l[i].as_f64().unwrap();
+            assert!(0.0 <= at(l90, 0) && at(l90, 0) <= at(l50, 0), "{o}");
+            assert!(at(l50, 0) < at(l50, 1) && at(l50, 1) <= at(l90, 1) && at(l90, 1) <= 1.0);
+            let before = &m["before_recalibration"];
+            for c in before["in_sample"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .chain(before["held_out"].as_array().unwrap())
+            {
+                assert!(
+                    (0.0..=1.0).contains(&c["fraction"].as_f64().unwrap()),
+                    "{o}"
+                );
+            }
         }
     }
     // Intervals of daily and monthly totals (issue 24), with the AR(1) noise of a sum and as if
     // hours were independent: shares of whole measured days and months, in-sample and held out
-    // (November and December), the AR(1) intervals no narrower where phi > 0.
+    // (November and December), the AR(1) intervals before recalibration no narrower where
+    // phi > 0.
     for o in p["outputs"].as_array().unwrap() {
         let phi = o["residual_phi"].as_f64().unwrap();
         assert!((-1.0..1.0).contains(&phi), "{o}");
@@ -404,7 +424,7 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
             assert_eq!(held.len(), 2, "{t}");
             let periods = if t["period"] == "day" { 61 } else { 2 };
             assert_eq!(held[0]["hours"].as_u64(), Some(periods), "{t}");
-            for kind in ["ar1", "independent"] {
+            for kind in ["ar1", "before_recalibration", "independent"] {
                 for c in t[kind]["in_sample"].as_array().unwrap() {
                     assert!(
                         (0.0..=1.0).contains(&c["fraction"].as_f64().unwrap()),
@@ -412,9 +432,11 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
                     );
                 }
             }
+            // Before recalibration, the AR(1) noise of a sum is no narrower than independent
+            // hours' (the recalibrated `ar1` may be either).
             let width = |kind: &str| t[kind]["in_sample"][1]["mean_width"].as_f64().unwrap();
             if phi > 0.0 {
-                assert!(width("ar1") >= width("independent"), "{t}");
+                assert!(width("before_recalibration") >= width("independent"), "{t}");
             }
         }
     }

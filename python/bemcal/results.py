@@ -169,7 +169,8 @@ def inference_data(
     if "posterior_predictive" in groups:
         data.posterior_predictive.attrs["note"] = (
             "EnergyPlus at posterior draws (validation/predictive_NN.csv), without the "
-            "likelihood's noise; validation/predictive_intervals.csv adds it"
+            "likelihood's noise; validation/predictive_intervals.csv adds it and recalibrates "
+            "the intervals on the calibration period"
         )
     if "observed_data" in groups:
         data.observed_data.attrs["held_out"] = str(holdout.get("period") or "")

@@ -335,10 +335,14 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
 /// The hourly predictive intervals' coverage per meter, in-sample and held out, and the error
 /// models the held-out hours favour.
 fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
+    use bemcal_calibrate::predictive::PeriodCoverage;
+    use bemcal_stats::predictive::Coverage;
     println!(
         "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, each + the noise \
-         of its own residuals under each meter's error model, by default {}): share of measured \
-         hours inside, mean width",
+         of its own residuals under each meter's error model, by default {}; recalibrated on the \
+         calibration period, so that they hold their nominal share there: the held-out hours \
+         are the check): share of measured hours inside, mean width [the posterior's own \
+         intervals before recalibration]",
         p.draws,
         if p.with_surrogate_error { " with the surrogate's error" } else { "" },
         p.failed,
@@ -362,7 +366,15 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
     for o in &p.outputs {
         if let Some(m) = o.by_error_model.first() {
             let c = &m.coverage;
-            println!("{:<18} in-sample  {}", o.output, cov(&c.in_sample));
+            let before = |of: fn(&PeriodCoverage) -> &Vec<Coverage>| {
+                before_recalibration(m.before_recalibration.as_ref().map(of))
+            };
+            println!(
+                "{:<18} in-sample  {}{}",
+                o.output,
+                cov(&c.in_sample),
+                before(|b| &b.in_sample)
+            );
             if m.error_model != p.error_model {
                 println!(
                     "{:<18} (its own error model: {})",
@@ -371,7 +383,12 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
                 );
             }
             if !c.held_out.is_empty() {
-                println!("{:<18} held out   {}", "", cov(&c.held_out));
+                println!(
+                    "{:<18} held out   {}{}",
+                    "",
+                    cov(&c.held_out),
+                    before(|b| &b.held_out)
+                );
             }
             let model = match &o.held_out_favours {
                 Some(f) => {
@@ -401,6 +418,16 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
         );
     }
     print_totals(p, &cov);
+}
+
+/// The shares inside the intervals before recalibration, `  [76.9 %, 99.6 %]` (empty without).
+fn before_recalibration(c: Option<&Vec<bemcal_stats::predictive::Coverage>>) -> String {
+    c.map_or(String::new(), |c| {
+        let f: Vec<String> = (c.iter())
+            .map(|c| format!("{:.1} %", c.fraction * 100.0))
+            .collect();
+        format!("  [{}]", f.join(", "))
+    })
 }
 
 /// An error model as the project file spells it, quoted (`"hour_of_day"`).
@@ -450,27 +477,35 @@ fn print_totals(
     p: &bemcal_calibrate::predictive::PredictiveReport,
     cov: &dyn Fn(&[bemcal_stats::predictive::Coverage]) -> String,
 ) {
+    use bemcal_calibrate::predictive::PeriodCoverage;
+    use bemcal_stats::predictive::Coverage;
     if p.outputs.iter().all(|o| o.totals.is_empty()) {
         return;
     }
     println!(
         "\nintervals of daily and monthly totals: share of whole measured days / months inside \
-         (AR(1) noise of a sum; as if hours were independent)"
+         (AR(1) noise of a sum, recalibrated on the calibration period's days [before \
+         recalibration]; as if hours were independent)"
     );
     for o in &p.outputs {
         for t in &o.totals {
             let name = format!("{} {:?}", o.output, t.period).to_lowercase();
+            let before = |of: fn(&PeriodCoverage) -> &Vec<Coverage>| {
+                before_recalibration(t.before_recalibration.as_ref().map(of))
+            };
             println!(
-                "{name:<24} phi {:.2}  in-sample  {} | independent {}",
+                "{name:<24} phi {:.2}  in-sample  {}{} | independent {}",
                 o.residual_phi,
                 cov(&t.ar1.in_sample),
+                before(|b| &b.in_sample),
                 cov(&t.independent.in_sample)
             );
             if !t.ar1.held_out.is_empty() {
                 println!(
-                    "{:<34}held out   {} | independent {}",
+                    "{:<34}held out   {}{} | independent {}",
                     "",
                     cov(&t.ar1.held_out),
+                    before(|b| &b.held_out),
                     cov(&t.independent.held_out)
                 );
             }

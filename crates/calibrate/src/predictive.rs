@@ -7,7 +7,13 @@
 //! carried, where a refinement round measured it, so that the surrogate's bias in parameter
 //! space is in the spread); each draw's noise is the error model's scale of its own
 //! EnergyPlus residuals over the calibration hours (`[validation] error_model`), so that a draw
-//! whose simulation sits off the meter carries the wider noise its residuals show. Numerics in
+//! whose simulation sits off the meter carries the wider noise its residuals show. The
+//! intervals are then recalibrated on the calibration period (the mixture's quantiles at the
+//! levels the measured hours' probability integral transforms say; Kuleshov et al. 2018), so
+//! that a posterior whose draws spread wider than the meters (a tempered likelihood) or sit to
+//! one side of them gives intervals that hold their nominal share there: the held-out period
+//! is the independent check, and the posterior predictive's own coverage is reported beside
+//! it (`before_recalibration`). Numerics in
 //! [`bemcal_stats::predictive`]; the driver has EnergyPlus simulate [`ChainSummary::predictive_candidates`]
 //! and [`crate::write_summary`] reads their runs once and calls [`assess`].
 //!
@@ -20,8 +26,8 @@ use bemcal_stats::mcmc::Draws;
 use std::ops::Range;
 
 use bemcal_stats::predictive::{
-    coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_totals,
-    total_intervals, Coverage, ErrorModel, Intervals,
+    coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_mixture,
+    period_totals, pits, Coverage, ErrorModel, Intervals, Levels,
 };
 use serde::{Deserialize, Serialize};
 
@@ -201,9 +207,17 @@ impl TotalPeriod {
 pub struct TotalsCoverage {
     /// What the totals are taken over.
     pub period: TotalPeriod,
-    /// With the AR(1) noise of a sum (`residual_phi`): the intervals to read.
+    /// With the AR(1) noise of a sum (`residual_phi`), recalibrated on the calibration
+    /// period's whole days or months where it has
+    /// [`bemcal_stats::predictive::MIN_RECALIBRATION_VALUES`] of them (the
+    /// hourly intervals' rule; a year's months never do): the intervals to read.
     pub ar1: PeriodCoverage,
-    /// As if the hours' noise were independent (`phi = 0`): for comparison.
+    /// The same before recalibration: the posterior predictive's own intervals. Absent from a
+    /// summary written before recalibration.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub before_recalibration: Option<PeriodCoverage>,
+    /// As if the hours' noise were independent (`phi = 0`), not recalibrated: for comparison
+    /// with `before_recalibration`.
     pub independent: PeriodCoverage,
 }
 
@@ -221,9 +235,19 @@ pub struct PeriodCoverage {
 pub struct ModelCoverage {
     /// The error model the intervals use.
     pub error_model: ErrorModel,
-    /// Their coverage, in-sample and held out.
+    /// Their coverage, in-sample and held out (the recalibrated intervals: in-sample about
+    /// nominal by construction).
     #[serde(flatten)]
     pub coverage: PeriodCoverage,
+    /// The mixture's probability levels of each interval's lower and upper bound, recalibrated
+    /// on the calibration period (`[0.25, 0.75]` and `[0.05, 0.95]` where it had too few
+    /// hours). Empty in a summary written before recalibration.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub levels: Vec<[f64; 2]>,
+    /// Coverage of the posterior predictive's own central intervals, before recalibration:
+    /// how far the posterior's spread is from the meters'.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub before_recalibration: Option<PeriodCoverage>,
 }
 
 /// EnergyPlus at the predictive draws, as validation saved them (draws it could not simulate
@@ -301,13 +325,24 @@ pub fn assess(
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
                 .collect::<Result<Vec<_>, _>>()?;
-            let mut iv = intervals(&sims, &noise, &LEVELS)?;
-            if non_negative {
-                iv.clamp_below(0.0);
-            }
+            let bounded = |levels: &Levels| -> Result<Intervals, Error> {
+                let mut iv = intervals(&sims, &noise, levels)?;
+                if non_negative {
+                    iv.clamp_below(0.0);
+                }
+                Ok(iv)
+            };
+            let posterior = bounded(&Levels::central(&LEVELS)?)?;
+            let levels =
+                Levels::recalibrated(&LEVELS, &pits(&sims, &noise, &inp.measured[k], &fit))?;
+            let iv = bounded(&levels)?;
             by_error_model.push(ModelCoverage {
                 error_model: model,
                 coverage: in_and_out(inp, k, &fit, |m, hours| level_coverage(&iv, m, hours)),
+                levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
+                before_recalibration: Some(in_and_out(inp, k, &fit, |m, hours| {
+                    level_coverage(&posterior, m, hours)
+                })),
             });
             if model == configured {
                 columns.push((format!("{name}_measured"), meter.clone()));
@@ -373,8 +408,17 @@ fn totals_coverage(
         .into_iter()
         .map(|period| {
             let periods = period.periods(fit.len());
-            let judge = |phi: f64| -> Result<PeriodCoverage, Error> {
-                let mut iv = total_intervals(sims, noise, phi, &periods, &LEVELS)?;
+            let judge = |phi: f64, recalibrate: bool| -> Result<PeriodCoverage, Error> {
+                let m = period_mixture(sims, noise, phi, &periods)?;
+                let levels = match recalibrate {
+                    true => {
+                        let (totals, whole) = period_totals(&inp.measured[k], fit, &periods);
+                        let pits = pits(&m.centers, &m.scales, &totals, &whole);
+                        Levels::recalibrated(&LEVELS, &pits)?
+                    }
+                    false => Levels::central(&LEVELS)?,
+                };
+                let mut iv = intervals(&m.centers, &m.scales, &levels)?;
                 if non_negative {
                     iv.clamp_below(0.0);
                 }
@@ -385,8 +429,9 @@ fn totals_coverage(
             };
             Ok(TotalsCoverage {
                 period,
-                ar1: judge(phi)?,
-                independent: judge(0.0)?,
+                ar1: judge(phi, true)?,
+                before_recalibration: Some(judge(phi, false)?),
+                independent: judge(0.0, false)?,
             })
         })
         .collect()

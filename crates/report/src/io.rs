@@ -185,8 +185,11 @@ pub struct OutputPredictiveBlock {
 pub struct TotalsBlock {
     /// `day` or `month`.
     pub period: String,
-    /// With the AR(1) noise of a sum.
+    /// With the AR(1) noise of a sum (recalibrated where `before_recalibration` is present).
     pub ar1: PeriodCoverageBlock,
+    /// The same before recalibration.
+    #[serde(default)]
+    pub before_recalibration: Option<PeriodCoverageBlock>,
     /// As if the hours' noise were independent.
     pub independent: PeriodCoverageBlock,
 }
@@ -206,9 +209,14 @@ pub struct PeriodCoverageBlock {
 pub struct ModelCoverageBlock {
     /// Its name.
     pub error_model: String,
-    /// 50 % and 90 % over the calibration hours and the held-out hours.
+    /// 50 % and 90 % over the calibration hours and the held-out hours (the intervals
+    /// recalibrated on the calibration period, where `before_recalibration` is present).
     #[serde(flatten)]
     pub coverage: PeriodCoverageBlock,
+    /// The posterior predictive's own central intervals' coverage, before recalibration
+    /// (absent from a summary written before recalibration).
+    #[serde(default)]
+    pub before_recalibration: Option<PeriodCoverageBlock>,
 }
 
 /// How often one interval held.
