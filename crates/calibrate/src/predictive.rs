@@ -325,17 +325,9 @@ pub fn assess(
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
                 .collect::<Result<Vec<_>, _>>()?;
-            let bounded = |levels: &Levels| -> Result<Intervals, Error> {
-                let mut iv = intervals(&sims, &noise, levels)?;
-                if non_negative {
-                    iv.clamp_below(0.0);
-                }
-                Ok(iv)
-            };
-            let posterior = bounded(&Levels::central(&LEVELS)?)?;
-            let levels =
-                Levels::recalibrated(&LEVELS, &pits(&sims, &noise, &inp.measured[k], &fit))?;
-            let iv = bounded(&levels)?;
+            let (posterior, _) = bounded(&sims, &noise, None, non_negative)?;
+            let calibration = Some((inp.measured[k].as_slice(), fit.as_slice()));
+            let (iv, levels) = bounded(&sims, &noise, calibration, non_negative)?;
             by_error_model.push(ModelCoverage {
                 error_model: model,
                 coverage: in_and_out(inp, k, &fit, |m, hours| level_coverage(&iv, m, hours)),
@@ -392,6 +384,29 @@ pub fn assess(
     }))
 }
 
+/// The intervals at [`LEVELS`] of the mixture of `centers` with their noise `scales` (per
+/// draw, per value), with the levels they were taken at: central, or recalibrated on the
+/// values of `calibration`'s measured series that its selection keeps (their PITs,
+/// [`Levels::recalibrated`]); raised to 0 for a meter that cannot read below it.
+fn bounded(
+    centers: &[Vec<f64>],
+    scales: &[Vec<f64>],
+    calibration: Option<(&[f64], &[bool])>,
+    non_negative: bool,
+) -> Result<(Intervals, Levels), Error> {
+    let levels = match calibration {
+        Some((measured, select)) => {
+            Levels::recalibrated(&LEVELS, &pits(centers, scales, measured, select))?
+        }
+        None => Levels::central(&LEVELS)?,
+    };
+    let mut iv = intervals(centers, scales, &levels)?;
+    if non_negative {
+        iv.clamp_below(0.0);
+    }
+    Ok((iv, levels))
+}
+
 /// Coverage of the intervals of daily and monthly totals of meter `k` (EnergyPlus at the draws
 /// `sims`, with their hourly `noise`), with the residuals' lag-1 autocorrelation `phi` in the
 /// noise of a sum and as if hours were independent.
@@ -410,18 +425,9 @@ fn totals_coverage(
             let periods = period.periods(fit.len());
             let judge = |phi: f64, recalibrate: bool| -> Result<PeriodCoverage, Error> {
                 let m = period_mixture(sims, noise, phi, &periods)?;
-                let levels = match recalibrate {
-                    true => {
-                        let (totals, whole) = period_totals(&inp.measured[k], fit, &periods);
-                        let pits = pits(&m.centers, &m.scales, &totals, &whole);
-                        Levels::recalibrated(&LEVELS, &pits)?
-                    }
-                    false => Levels::central(&LEVELS)?,
-                };
-                let mut iv = intervals(&m.centers, &m.scales, &levels)?;
-                if non_negative {
-                    iv.clamp_below(0.0);
-                }
+                let (totals, whole) = period_totals(&inp.measured[k], fit, &periods);
+                let calibration = recalibrate.then_some((totals.as_slice(), whole.as_slice()));
+                let (iv, _) = bounded(&m.centers, &m.scales, calibration, non_negative)?;
                 Ok(in_and_out(inp, k, fit, |m, hours| {
                     let (totals, whole) = period_totals(m, hours, &periods);
                     level_coverage(&iv, &totals, &whole)
