@@ -51,7 +51,8 @@ class Calibration:
     #: Hourly predictions indexed by timestamp: measured meters, EnergyPlus at the estimate
     #: (``<output>_calibrated``), the surrogate's posterior quantiles (``<output>_q5/q50/q95``)
     #: and, where simulated, the predictive intervals from EnergyPlus at posterior draws with
-    #: the error model's noise (``<output>_pi5 .. _pi95``; ``held_out`` marks held-out hours).
+    #: the error model's noise, recalibrated on the calibration period (``<output>_pi5 ..
+    #: _pi95``: the bounds of the 90 % and 50 % intervals; ``held_out`` marks held-out hours).
     predictions: pd.DataFrame
     #: The calibrated parameters' values at the estimate (``summary.json`` ``estimate``: by
     #: default the posterior draw EnergyPlus fits best by Guideline 14's hourly criteria).
