@@ -29,7 +29,7 @@
 //! sum of `e_t = s_t z_t` has variance `sum_i sum_j s_i s_j phi^|i-j|` ([`ar1_sum_variance`]).
 //! Intervals of totals built from independent hours (`phi = 0`) are too narrow for that
 //! reason (ASHRAE Guideline 14's autocorrelation correction of savings uncertainty; CalTRACK's
-//! hourly-uncertainty discussion): [`total_intervals`] takes `phi` from the residuals
+//! hourly-uncertainty discussion): [`period_mixture`] takes `phi` from the residuals
 //! ([`lag1_autocorrelation`]).
 
 use serde::{Deserialize, Serialize};
@@ -249,13 +249,6 @@ impl Levels {
             nominal: central.nominal,
         })
     }
-
-    /// Whether these are the central levels (no recalibration).
-    pub fn is_central(&self) -> bool {
-        self.median == 0.5
-            && (self.nominal.iter().zip(&self.bounds))
-                .all(|(l, b)| *b == (0.5 - l / 2.0, 0.5 + l / 2.0))
-    }
 }
 
 /// The CDF at `x` of the equal-weight mixture of `N(c, sd²)` over `components` `(c, sd)` (a
@@ -289,15 +282,21 @@ pub fn pits(sims: &[Vec<f64>], noise: &[Vec<f64>], measured: &[f64], select: &[b
     (0..n.min(measured.len()).min(select.len()))
         .filter(|&h| select[h] && measured[h].is_finite())
         .filter_map(|h| {
-            c.clear();
-            c.extend(
-                (sims.iter().enumerate())
-                    .filter(|(_, s)| s[h].is_finite())
-                    .map(|(j, s)| (s[h], noise[j][h])),
-            );
+            components_at(sims, noise, h, &mut c);
             (!c.is_empty()).then(|| mixture_cdf_each(&c, measured[h]))
         })
         .collect()
+}
+
+/// Value `h`'s mixture components `(center, scale)` into `out`: each draw with a finite value
+/// there, with its own noise scale.
+fn components_at(sims: &[Vec<f64>], noise: &[Vec<f64>], h: usize, out: &mut Vec<(f64, f64)>) {
+    out.clear();
+    out.extend(
+        (sims.iter().enumerate())
+            .filter(|(_, s)| s[h].is_finite())
+            .map(|(j, s)| (s[h], noise[j][h])),
+    );
 }
 
 /// Predictive intervals of every hour at the nominal levels (e.g. 0.5 and 0.9), central or
@@ -334,12 +333,7 @@ pub fn intervals(sims: &[Vec<f64>], noise: &[Vec<f64>], levels: &Levels) -> Resu
     };
     let mut c = Vec::with_capacity(sims.len());
     for h in 0..n {
-        c.clear();
-        c.extend(
-            (sims.iter().enumerate())
-                .filter(|(_, s)| s[h].is_finite())
-                .map(|(j, s)| (s[h], noise[j][h])),
-        );
+        components_at(sims, noise, h, &mut c);
         out.median.push(mixture_quantile_each(&c, levels.median));
         for (i, &(lo, hi)) in levels.bounds.iter().enumerate() {
             out.lower[i].push(mixture_quantile_each(&c, lo));
@@ -445,19 +439,6 @@ pub struct Mixture {
     pub centers: Vec<Vec<f64>>,
     /// Per draw, the noise scale of each value.
     pub scales: Vec<Vec<f64>>,
-}
-
-/// Predictive intervals of the totals over `periods` ([`period_mixture`]'s mixture). A period
-/// in which some draw lacks a value is NaN.
-pub fn total_intervals(
-    sims: &[Vec<f64>],
-    noise: &[Vec<f64>],
-    phi: f64,
-    periods: &[std::ops::Range<usize>],
-    levels: &Levels,
-) -> Result<Intervals> {
-    let m = period_mixture(sims, noise, phi, periods)?;
-    intervals(&m.centers, &m.scales, levels)
 }
 
 /// Whether `noise` holds one scale series of `n` hours for each of `draws` draws.
@@ -671,7 +652,7 @@ mod tests {
         let pit = pits(&sims, &noise, &fit, &vec![true; n]);
         assert_eq!(pit.len(), n);
         let levels = Levels::recalibrated(&[0.5, 0.9], &pit).unwrap();
-        assert!(!levels.is_central());
+        assert_ne!(levels, central(&[0.5, 0.9]));
         let (lo, hi) = levels.bounds[1];
         let q = |p: f64| mixture_quantile(&[0.0], 2.0, p);
         assert!((q(lo) - (1.0 - 1.645)).abs() < 0.1, "{}", q(lo));
@@ -698,7 +679,7 @@ mod tests {
             assert!((got.0 - want.0).abs() < 1e-3 && (got.1 - want.1).abs() < 1e-3);
         }
         let few = Levels::recalibrated(&[0.9], &pit[..MIN_RECALIBRATION_VALUES - 1]).unwrap();
-        assert!(few.is_central());
+        assert_eq!(few, central(&[0.9]));
         assert!(Levels::central(&[1.0]).is_err());
         // A point mass: the CDF steps at its center; an unselected or missing value has no PIT.
         assert_eq!(mixture_cdf_each(&[(1.0, 0.0)], 1.0), 1.0);
@@ -829,14 +810,14 @@ mod tests {
         let periods: Vec<std::ops::Range<usize>> = (0..days).map(|d| 24 * d..24 * d + 24).collect();
         let (totals, all) = period_totals(&y, &vec![true; n], &periods);
         let judge = |phi: f64| {
-            let iv = total_intervals(
+            let m = period_mixture(
                 std::slice::from_ref(&truth),
                 std::slice::from_ref(&scales),
                 phi,
                 &periods,
-                &central(&[0.9]),
             )
             .unwrap();
+            let iv = intervals(&m.centers, &m.scales, &central(&[0.9])).unwrap();
             coverage(0.9, &totals, &iv.lower[0], &iv.upper[0], &all).unwrap()
         };
         let (ar1, independent) = (judge(phi_hat), judge(0.0));
