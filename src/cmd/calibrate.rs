@@ -335,8 +335,6 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
 /// The hourly predictive intervals' coverage per meter, in-sample and held out, and the error
 /// models the held-out hours favour.
 fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
-    use bemcal_calibrate::predictive::PeriodCoverage;
-    use bemcal_stats::predictive::Coverage;
     println!(
         "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, each + the noise \
          of its own residuals under each meter's error model, by default {}; recalibrated on the \
@@ -366,14 +364,12 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
     for o in &p.outputs {
         if let Some(m) = o.by_error_model.first() {
             let c = &m.coverage;
-            let before = |of: fn(&PeriodCoverage) -> &Vec<Coverage>| {
-                before_recalibration(m.before_recalibration.as_ref().map(of))
-            };
+            let before = m.before_recalibration.as_ref();
             println!(
                 "{:<18} in-sample  {}{}",
                 o.output,
                 cov(&c.in_sample),
-                before(|b| &b.in_sample)
+                before_recalibration(before.map(|b| &b.in_sample))
             );
             if m.error_model != p.error_model {
                 println!(
@@ -387,7 +383,7 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
                     "{:<18} held out   {}{}",
                     "",
                     cov(&c.held_out),
-                    before(|b| &b.held_out)
+                    before_recalibration(before.map(|b| &b.held_out))
                 );
             }
             let model = match &o.held_out_favours {
@@ -477,8 +473,6 @@ fn print_totals(
     p: &bemcal_calibrate::predictive::PredictiveReport,
     cov: &dyn Fn(&[bemcal_stats::predictive::Coverage]) -> String,
 ) {
-    use bemcal_calibrate::predictive::PeriodCoverage;
-    use bemcal_stats::predictive::Coverage;
     if p.outputs.iter().all(|o| o.totals.is_empty()) {
         return;
     }
@@ -490,14 +484,12 @@ fn print_totals(
     for o in &p.outputs {
         for t in &o.totals {
             let name = format!("{} {:?}", o.output, t.period).to_lowercase();
-            let before = |of: fn(&PeriodCoverage) -> &Vec<Coverage>| {
-                before_recalibration(t.before_recalibration.as_ref().map(of))
-            };
+            let before = t.before_recalibration.as_ref();
             println!(
                 "{name:<24} phi {:.2}  in-sample  {}{} | independent {}",
                 o.residual_phi,
                 cov(&t.ar1.in_sample),
-                before(|b| &b.in_sample),
+                before_recalibration(before.map(|b| &b.in_sample)),
                 cov(&t.independent.in_sample)
             );
             if !t.ar1.held_out.is_empty() {
@@ -505,7 +497,7 @@ fn print_totals(
                     "{:<34}held out   {}{} | independent {}",
                     "",
                     cov(&t.ar1.held_out),
-                    before(|b| &b.held_out),
+                    before_recalibration(before.map(|b| &b.held_out)),
                     cov(&t.independent.held_out)
                 );
             }
