@@ -396,7 +396,8 @@ fn bounded(
 ) -> Result<(Intervals, Levels), Error> {
     let levels = match calibration {
         Some((measured, select)) => {
-            Levels::recalibrated(&LEVELS, &pits(centers, scales, measured, select))?
+            let floor = non_negative.then_some(0.0);
+            Levels::recalibrated(&LEVELS, &pits(centers, scales, measured, select, floor))?
         }
         None => Levels::central(&LEVELS)?,
     };

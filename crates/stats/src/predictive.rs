@@ -22,6 +22,12 @@
 //! empirical CDF as the monotone map): its in-sample coverage is nominal by construction, and
 //! a held-out period is the independent check ([`Levels::recalibrated`]).
 //!
+//! Where the predictive has an atom at the measured value (a draw with no noise, or a meter
+//! that cannot read below 0 and reads 0), its PIT is not one value but the interval
+//! `[F(y-), F(y)]` ([`Pit`]; Czado, Gneiting & Held 2009, *Predictive model assessment for
+//! count data*, Biometrics 65): the lower bounds are recalibrated on the `F(y)`, the upper on
+//! the `F(y-)`, the condition for a closed interval to hold the reading.
+//!
 //! Totals over a run of hours (a day, a month: what M&V practice checks) come from the same
 //! draws' sums with the noise of the sum. Hourly residuals are autocorrelated, so the noise of
 //! a sum is not the sum of independent hours' noise: with standardised residuals an AR(1)
@@ -231,49 +237,80 @@ impl Levels {
 
     /// The levels recalibrated on `pits`, the probability integral transforms of the
     /// calibration period's measured values under their mixtures ([`pits`]): each central
-    /// level `p` becomes `R^-1(p)`, the `p` quantile of the `pits` (Kuleshov et al. 2018,
-    /// Algorithm 1). Central where fewer than [`MIN_RECALIBRATION_VALUES`] values are given.
-    pub fn recalibrated(nominal: &[f64], pits: &[f64]) -> Result<Levels> {
+    /// level `p` becomes `R^-1(p)`, the `p` quantile of the PITs (Kuleshov et al. 2018,
+    /// Algorithm 1). A closed interval `[Q(a), Q(b)]` holds `y` when `F(y) >= a` and
+    /// `F(y-) <= b`, so a lower level is a quantile of the PITs' `at` and an upper one of their
+    /// `below` (the same where the predictive has no atom): each tail then misses its nominal
+    /// share of the calibration values, an idle meter's readings at its atom included. Central
+    /// where fewer than [`MIN_RECALIBRATION_VALUES`] values are given.
+    pub fn recalibrated(nominal: &[f64], pits: &[Pit]) -> Result<Levels> {
         let central = Levels::central(nominal)?;
-        let mut sorted: Vec<f64> = pits.iter().copied().filter(|p| p.is_finite()).collect();
-        if sorted.len() < MIN_RECALIBRATION_VALUES {
+        let sorted = |side: fn(&Pit) -> f64| {
+            let mut v: Vec<f64> = pits.iter().map(side).filter(|p| p.is_finite()).collect();
+            v.sort_by(f64::total_cmp);
+            v
+        };
+        let (at, below) = (sorted(|p| p.at), sorted(|p| p.below));
+        if at.len() < MIN_RECALIBRATION_VALUES {
             return Ok(central);
         }
-        sorted.sort_by(f64::total_cmp);
-        let at = |p: f64| crate::diagnostics::quantile_sorted(&sorted, p);
+        let q = crate::diagnostics::quantile_sorted;
         Ok(Levels {
             bounds: (central.bounds.iter())
-                .map(|&(lo, hi)| (at(lo), at(hi)))
+                .map(|&(lo, hi)| (q(&at, lo), q(&below, hi)))
                 .collect(),
-            median: at(central.median),
+            median: q(&at, central.median),
             nominal: central.nominal,
         })
     }
 }
 
+/// The probability integral transform of one measured value `y` under its predictive `F`:
+/// the interval `[F(y-), F(y)]`, a single value (`below == at`) unless `F` has an atom at `y`
+/// (Czado, Gneiting & Held 2009).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pit {
+    /// `F(y-)`, the probability of reading less than `y`.
+    pub below: f64,
+    /// `F(y)`, the probability of reading at most `y`.
+    pub at: f64,
+}
+
 /// The CDF at `x` of the equal-weight mixture of `N(c, sd²)` over `components` `(c, sd)` (a
-/// component with `sd <= 0` is a point mass at its center).
-pub fn mixture_cdf_each(components: &[(f64, f64)], x: f64) -> f64 {
+/// component with `sd <= 0` is a point mass at its center), and its limit from below: `(F(x-),
+/// F(x))`, equal unless a point mass sits at `x`.
+pub fn mixture_cdf_each(components: &[(f64, f64)], x: f64) -> (f64, f64) {
     if components.is_empty() {
-        return f64::NAN;
+        return (f64::NAN, f64::NAN);
     }
-    let step = |d: f64| if d >= 0.0 { 1.0 } else { 0.0 };
-    components
-        .iter()
-        .map(|&(c, sd)| match sd > 0.0 {
-            true => norm_cdf((x - c) / sd),
-            false => step(x - c),
-        })
-        .sum::<f64>()
-        / components.len() as f64
+    let (mut below, mut at) = (0.0, 0.0);
+    for &(c, sd) in components {
+        if sd > 0.0 {
+            let f = norm_cdf((x - c) / sd);
+            below += f;
+            at += f;
+        } else {
+            below += f64::from(u8::from(x > c));
+            at += f64::from(u8::from(x >= c));
+        }
+    }
+    let n = components.len() as f64;
+    (below / n, at / n)
 }
 
 /// The probability integral transform of each value of `measured` that `select` keeps (finite,
 /// with at least one draw's value) under its mixture of the draws `sims` with their noise
 /// `noise` ([`intervals`]' mixture): `F_h(y_h)`, uniform on (0, 1) where the predictive is
-/// calibrated (Dawid 1984). A meter that cannot read below 0 reads `max(0, Y)`, whose CDF at
-/// `y >= 0` is the mixture's: no change.
-pub fn pits(sims: &[Vec<f64>], noise: &[Vec<f64>], measured: &[f64], select: &[bool]) -> Vec<f64> {
+/// calibrated (Dawid 1984), an interval where it has an atom at `y_h` ([`Pit`]). A meter that
+/// cannot read below `floor` reads `max(floor, Y)`: the same CDF above `floor`, and an atom of
+/// `F(floor)` at it, so that a reading at the floor has the PIT `[0, F(floor)]`.
+pub fn pits(
+    sims: &[Vec<f64>],
+    noise: &[Vec<f64>],
+    measured: &[f64],
+    select: &[bool],
+    floor: Option<f64>,
+) -> Vec<Pit> {
     let n = sims.first().map_or(0, Vec::len);
     if !fits(noise, sims.len(), n) {
         return vec![];
@@ -283,7 +320,15 @@ pub fn pits(sims: &[Vec<f64>], noise: &[Vec<f64>], measured: &[f64], select: &[b
         .filter(|&h| select[h] && measured[h].is_finite())
         .filter_map(|h| {
             components_at(sims, noise, h, &mut c);
-            (!c.is_empty()).then(|| mixture_cdf_each(&c, measured[h]))
+            (!c.is_empty()).then(|| {
+                let y = measured[h];
+                let (below, at) = mixture_cdf_each(&c, y);
+                let at_floor = floor.is_some_and(|f| y <= f);
+                Pit {
+                    below: if at_floor { 0.0 } else { below },
+                    at,
+                }
+            })
         })
         .collect()
 }
@@ -649,7 +694,7 @@ mod tests {
         let noise = vec![vec![2.0; n]];
         let fit: Vec<f64> = (0..n).map(|_| 1.0 + z()).collect();
         let fresh: Vec<f64> = (0..n).map(|_| 1.0 + z()).collect();
-        let pit = pits(&sims, &noise, &fit, &vec![true; n]);
+        let pit = pits(&sims, &noise, &fit, &vec![true; n], None);
         assert_eq!(pit.len(), n);
         let levels = Levels::recalibrated(&[0.5, 0.9], &pit).unwrap();
         assert_ne!(levels, central(&[0.5, 0.9]));
@@ -673,7 +718,10 @@ mod tests {
     #[test]
     fn calibrated_pits_leave_the_levels_nearly_central_and_few_leave_them_central() {
         // Uniform PITs: the recalibrated levels are the central ones within sampling error.
-        let pit: Vec<f64> = (0..1000).map(|i| (i as f64 + 0.5) / 1000.0).collect();
+        let pit: Vec<Pit> = (0..1000)
+            .map(|i| (i as f64 + 0.5) / 1000.0)
+            .map(|u| Pit { below: u, at: u })
+            .collect();
         let levels = Levels::recalibrated(&[0.5, 0.9], &pit).unwrap();
         for (got, want) in levels.bounds.iter().zip(&central(&[0.5, 0.9]).bounds) {
             assert!((got.0 - want.0).abs() < 1e-3 && (got.1 - want.1).abs() < 1e-3);
@@ -682,15 +730,74 @@ mod tests {
         assert_eq!(few, central(&[0.9]));
         assert!(Levels::central(&[1.0]).is_err());
         // A point mass: the CDF steps at its center; an unselected or missing value has no PIT.
-        assert_eq!(mixture_cdf_each(&[(1.0, 0.0)], 1.0), 1.0);
-        assert_eq!(mixture_cdf_each(&[(1.0, 0.0), (3.0, 0.0)], 2.0), 0.5);
+        assert_eq!(mixture_cdf_each(&[(1.0, 0.0)], 1.0), (0.0, 1.0));
+        assert_eq!(mixture_cdf_each(&[(1.0, 0.0), (3.0, 0.0)], 2.0), (0.5, 0.5));
         let p = pits(
             &[vec![0.0, 0.0, 0.0]],
             &[vec![1.0; 3]],
             &[0.0, f64::NAN, 5.0],
             &[true, true, false],
+            None,
         );
-        assert_eq!(p, vec![0.5]);
+        assert_eq!(
+            p,
+            vec![Pit {
+                below: 0.5,
+                at: 0.5
+            }]
+        );
+    }
+
+    #[test]
+    fn readings_at_an_atom_are_held_in_their_nominal_share() {
+        // A meter idle 30 % of the hours: the draws simulate 0 with no noise there and the
+        // meter reads 0; busy hours read N(10, 1) under a predictive N(10, 1.5²). Recalibrated,
+        // the closed intervals hold the nominal share of fresh hours, idle ones included.
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut z = move || rng.sample::<f64, _>(StandardNormal);
+        let n = 4000;
+        let idle = |h: usize| h % 10 < 3;
+        let sims = vec![(0..n)
+            .map(|h| if idle(h) { 0.0 } else { 10.0 })
+            .collect::<Vec<_>>()];
+        let noise = vec![(0..n)
+            .map(|h| if idle(h) { 0.0 } else { 1.5 })
+            .collect::<Vec<_>>()];
+        let mut meter = |h: usize| if idle(h) { 0.0 } else { 10.0 + z() };
+        let fit: Vec<f64> = (0..n).map(&mut meter).collect();
+        let fresh: Vec<f64> = (0..n).map(&mut meter).collect();
+        let pit = pits(&sims, &noise, &fit, &vec![true; n], None);
+        assert_eq!(
+            pit[0],
+            Pit {
+                below: 0.0,
+                at: 1.0
+            }
+        );
+        let levels = Levels::recalibrated(&[0.5, 0.9], &pit).unwrap();
+        let iv = intervals(&sims, &noise, &levels).unwrap();
+        let all = vec![true; n];
+        for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
+            let c = coverage(nominal, &fresh, &iv.lower[i], &iv.upper[i], &all).unwrap();
+            assert!((c.fraction - nominal).abs() < 0.03, "{nominal}: {c:?}");
+        }
+        // A meter that cannot read below 0 reads max(0, Y): a reading of 0 under N(0, 1) has
+        // the PIT [0, 1/2], a positive one its CDF alone.
+        let floor = pits(
+            &[vec![0.0, 0.0]],
+            &[vec![1.0; 2]],
+            &[0.0, 1.0],
+            &[true; 2],
+            Some(0.0),
+        );
+        assert_eq!(
+            floor[0],
+            Pit {
+                below: 0.0,
+                at: 0.5
+            }
+        );
+        assert!((floor[1].below - 0.841_344_746).abs() < 1e-6 && floor[1].below == floor[1].at);
     }
 
     #[test]
