@@ -93,13 +93,23 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
     text: &str,
     path: &std::path::Path,
 ) -> Result<T, Error> {
-    toml::from_str(text).map_err(|e| Error::Input {
-        path: path.to_path_buf(),
-        line: e
+    toml::from_str(text).map_err(|e| {
+        let line = e
             .span()
             .map(|s| text[..s.start].matches('\n').count() + 1)
-            .unwrap_or(0),
-        message: e.message().to_string(),
+            .unwrap_or(0);
+        // toml's own message names the value, not its key: the line's text says which.
+        let at = match text.lines().nth(line.wrapping_sub(1)).map(str::trim) {
+            Some(found) if !found.is_empty() => {
+                format!(" (in `{}`)", bemcal_excerpt::excerpt(found, 80))
+            }
+            _ => String::new(),
+        };
+        Error::Input {
+            path: path.to_path_buf(),
+            line,
+            message: format!("{}{at}", e.message().trim_end()),
+        }
     })
 }
 
