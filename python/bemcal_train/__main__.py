@@ -17,6 +17,8 @@ def parser():
     ap.add_argument("--batch-size", type=int, default=1024)
     ap.add_argument("--eval-batch-size", type=int, default=8760)
     ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--lr-schedule", choices=("constant", "cosine"), default="constant",
+                    help="cosine: annealed from --lr to 1/100 of it over --epochs")
     ap.add_argument("--hidden", type=int, default=128)
     ap.add_argument("--layers", type=int, default=2)
     ap.add_argument("--time-features", choices=TIME_FEATURES, default="none")

@@ -1,6 +1,7 @@
 """Training loop, held-out metrics, export and metadata."""
 
 import json
+import math
 import os
 import time
 
@@ -106,6 +107,21 @@ def warm_start(model, init_dir, scale, n_features, names):
     print(f"warm start from {path} (head rescaled by {ratio.tolist()})", flush=True)
 
 
+LR_FLOOR = 0.01
+"""The cosine schedule's last learning rate, as a fraction of the first."""
+
+
+def learning_rate(lr, schedule, progress):
+    """The learning rate at `progress` (0 at the first step, 1 after the last epoch): `lr`
+    throughout (`constant`), or annealed from `lr` to `LR_FLOOR * lr` along a half cosine
+    (`cosine`: Loshchilov & Hutter, "SGDR: stochastic gradient descent with warm restarts",
+    ICLR 2017, eq. 5, one period, no restart)."""
+    if schedule == "constant":
+        return lr
+    low = LR_FLOOR * lr
+    return low + 0.5 * (lr - low) * (1 + math.cos(math.pi * min(progress, 1.0)))
+
+
 def train(args):
     t_start = time.time()
     torch.manual_seed(args.seed)
@@ -145,13 +161,16 @@ def train(args):
     gen = torch.Generator(device="cpu").manual_seed(args.seed)
     y_held = win.y[held_pts]
 
+    schedule = getattr(args, "lr_schedule", "constant")
+    steps_per_epoch = -(-n // args.batch_size)
     best, best_state, best_epoch, bad, history = float("inf"), None, 0, 0, []
     for epoch in range(1, args.epochs + 1):
         t0 = time.time()
         model.train()
         perm = torch.randperm(n, generator=gen).to(device)
         total = 0.0
-        for s in range(0, n, args.batch_size):
+        for k, s in enumerate(range(0, n, args.batch_size)):
+            opt.lr = learning_rate(args.lr, schedule, (epoch - 1 + k / steps_per_epoch) / args.epochs)
             idx = perm[s : s + args.batch_size]
             x, y = win.batch(tr_point[idx], tr_hour[idx])
             loss = torch.mean((model(x) - y) ** 2)
@@ -273,7 +292,7 @@ def train(args):
         "int8": int8,
         "training": {"seed": args.seed, "epochs_max": args.epochs, "epochs_run": len(history),
                      "best_epoch": best_epoch, "patience": args.patience, "batch_size": args.batch_size,
-                     "lr": args.lr, "optimizer": "adam", "init": init, "loss": "mse on scaled targets",
+                     "lr": args.lr, "lr_schedule": schedule, "optimizer": "adam", "init": init, "loss": "mse on scaled targets",
                      "device": str(device), "threads": torch.get_num_threads(), "seconds": train_seconds,
                      "torch_version": torch.__version__, "train_points": train_pts,
                      "history": history},

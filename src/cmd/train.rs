@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use bemcal_surrogate::{TimeFeatures, TrainOptions};
+use bemcal_surrogate::{LrSchedule, TimeFeatures, TrainOptions};
 
 /// Train the LSTM surrogate on a training-set directory and export it to ONNX.
 #[derive(Debug, clap::Args)]
@@ -34,6 +34,12 @@ pub struct Args {
     /// torch threads (0: torch's default).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Adam's learning rate (the first where it is scheduled).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// The learning rate's schedule: constant, or cosine (annealed to 1/100 over the epochs).
+    #[arg(long, default_value = "constant")]
+    pub lr_schedule: LrSchedule,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -45,6 +51,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         time_features: args.time_features,
         device: args.device,
         threads: args.threads,
+        lr: args.lr,
+        lr_schedule: args.lr_schedule,
         ..TrainOptions::default()
     };
     let report = bemcal_surrogate::train(&args.dataset, &args.out, &opts)?;

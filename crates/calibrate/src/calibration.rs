@@ -234,6 +234,8 @@ impl Calibration {
             quiet: true,
             init: init.map(Path::to_path_buf),
             hidden: sp.hidden,
+            lr: sp.lr,
+            lr_schedule: sp.lr_schedule,
             ..TrainOptions::default()
         };
         bemcal_surrogate::train(&self.out.dataset(), &self.surrogate_dir(), &opts)?;

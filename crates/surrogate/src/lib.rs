@@ -23,4 +23,4 @@ pub use surrogate::{
     ort_environment, ort_library_path, Evaluator, Precision, Surrogate, SurrogateError,
     SurrogateMeta,
 };
-pub use train::{train, TimeFeatures, TrainOptions, TrainReport, WEIGHTS_FILE};
+pub use train::{train, LrSchedule, TimeFeatures, TrainOptions, TrainReport, WEIGHTS_FILE};

@@ -72,6 +72,39 @@ impl TimeFeatures {
     }
 }
 
+/// How the learning rate moves over a training.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// The same rate throughout (the reference).
+    #[default]
+    Constant,
+    /// Annealed from the rate to 1/100 of it along a half cosine over the most epochs
+    /// (Loshchilov & Hutter 2017, SGDR, eq. 5, without restarts).
+    Cosine,
+}
+
+impl LrSchedule {
+    /// The trainer's spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LrSchedule::Constant => "constant",
+            LrSchedule::Cosine => "cosine",
+        }
+    }
+}
+
+impl std::str::FromStr for LrSchedule {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "constant" => Ok(LrSchedule::Constant),
+            "cosine" => Ok(LrSchedule::Cosine),
+            _ => Err(format!("'{s}': expected constant or cosine")),
+        }
+    }
+}
+
 impl std::str::FromStr for TimeFeatures {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -114,6 +147,10 @@ pub struct TrainOptions {
     pub init: Option<PathBuf>,
     /// Hidden units per LSTM layer (the reference's 128).
     pub hidden: usize,
+    /// Adam's learning rate (1e-3), the first where it is scheduled.
+    pub lr: f64,
+    /// The learning rate's schedule (constant).
+    pub lr_schedule: LrSchedule,
 }
 
 impl Default for TrainOptions {
@@ -130,6 +167,8 @@ impl Default for TrainOptions {
             quiet: false,
             init: None,
             hidden: 128,
+            lr: 1e-3,
+            lr_schedule: LrSchedule::Constant,
         }
     }
 }
@@ -198,7 +237,9 @@ pub fn train(
         .args(["--time-features", opts.time_features.as_str()])
         .args(["--device", &opts.device])
         .args(["--threads", &opts.threads.to_string()])
-        .args(["--hidden", &opts.hidden.to_string()]);
+        .args(["--hidden", &opts.hidden.to_string()])
+        .args(["--lr", &opts.lr.to_string()])
+        .args(["--lr-schedule", opts.lr_schedule.as_str()]);
     if let Some(init) = &opts.init {
         cmd.arg("--init").arg(init);
     }

@@ -6,7 +6,8 @@ mod common;
 
 use bemcal_surrogate::parity::relative_error;
 use bemcal_surrogate::{
-    train, ParityFixture, Precision, Surrogate, SurrogateError, TimeFeatures, TrainOptions,
+    train, LrSchedule, ParityFixture, Precision, Surrogate, SurrogateError, TimeFeatures,
+    TrainOptions,
 };
 use ndarray::Array3;
 
@@ -27,6 +28,7 @@ fn environment_ready() -> bool {
 
 fn train_small(
     time_features: TimeFeatures,
+    lr_schedule: LrSchedule,
 ) -> Option<(tempfile::TempDir, bemcal_surrogate::TrainReport)> {
     if !environment_ready() {
         return None;
@@ -44,6 +46,7 @@ fn train_small(
         time_features,
         threads: 1,
         quiet: true,
+        lr_schedule,
         ..TrainOptions::default()
     };
     let report = train(&ds, &tmp.path().join("model"), &opts).expect("training runs");
@@ -52,7 +55,7 @@ fn train_small(
 
 #[test]
 fn warm_start_continues_from_the_saved_weights() {
-    let Some((tmp, first)) = train_small(TimeFeatures::None) else {
+    let Some((tmp, first)) = train_small(TimeFeatures::None, LrSchedule::Constant) else {
         return;
     };
     let dir = tmp.path().join("model");
@@ -90,10 +93,14 @@ fn warm_start_continues_from_the_saved_weights() {
 
 #[test]
 fn trains_exports_and_matches_torch() {
-    let Some((tmp, report)) = train_small(TimeFeatures::HourSchedule) else {
+    let Some((tmp, report)) = train_small(TimeFeatures::HourSchedule, LrSchedule::Cosine) else {
         return;
     };
     let meta = &report.meta;
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("model/surrogate.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["training"]["lr_schedule"], "cosine");
     assert_eq!(
         meta.output_names(),
         ["heating_kwh", "cooling_kwh", "electricity_kwh"]
