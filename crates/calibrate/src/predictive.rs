@@ -426,8 +426,9 @@ fn totals_coverage(
             let periods = period.periods(fit.len());
             let judge = |phi: f64, recalibrate: bool| -> Result<PeriodCoverage, Error> {
                 let m = period_mixture(sims, noise, phi, &periods)?;
-                let (totals, whole) = period_totals(&inp.measured[k], fit, &periods);
-                let calibration = recalibrate.then_some((totals.as_slice(), whole.as_slice()));
+                let totals = recalibrate.then(|| period_totals(&inp.measured[k], fit, &periods));
+                let calibration =
+                    (totals.as_ref()).map(|(t, whole)| (t.as_slice(), whole.as_slice()));
                 let (iv, _) = bounded(&m.centers, &m.scales, calibration, non_negative)?;
                 Ok(in_and_out(inp, k, fit, |m, hours| {
                     let (totals, whole) = period_totals(m, hours, &periods);

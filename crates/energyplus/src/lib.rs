@@ -99,7 +99,8 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
             .map(|s| text[..s.start].matches('\n').count() + 1)
             .unwrap_or(0);
         // toml's own message names the value, not its key: the line's text says which.
-        let at = match text.lines().nth(line.wrapping_sub(1)).map(str::trim) {
+        let found = line.checked_sub(1).and_then(|i| text.lines().nth(i));
+        let at = match found.map(str::trim) {
             Some(found) if !found.is_empty() => {
                 format!(" (in `{}`)", bemcal_excerpt::excerpt(found, 80))
             }

@@ -62,6 +62,13 @@ pub enum TimeFeatures {
 }
 
 impl TimeFeatures {
+    /// Every mode, in the order an error message lists them.
+    pub const ALL: [TimeFeatures; 3] = [
+        TimeFeatures::None,
+        TimeFeatures::Hour,
+        TimeFeatures::HourSchedule,
+    ];
+
     /// The trainer's spelling.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -69,6 +76,13 @@ impl TimeFeatures {
             TimeFeatures::Hour => "hour",
             TimeFeatures::HourSchedule => "hour+schedule",
         }
+    }
+}
+
+impl std::str::FromStr for TimeFeatures {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        spelled(s, &TimeFeatures::ALL, TimeFeatures::as_str)
     }
 }
 
@@ -85,7 +99,10 @@ pub enum LrSchedule {
 }
 
 impl LrSchedule {
-    /// The trainer's spelling.
+    /// Every schedule, in the order an error message lists them.
+    pub const ALL: [LrSchedule; 2] = [LrSchedule::Constant, LrSchedule::Cosine];
+
+    /// The trainer's spelling (the project file's too).
     pub fn as_str(self) -> &'static str {
         match self {
             LrSchedule::Constant => "constant",
@@ -97,24 +114,23 @@ impl LrSchedule {
 impl std::str::FromStr for LrSchedule {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "constant" => Ok(LrSchedule::Constant),
-            "cosine" => Ok(LrSchedule::Cosine),
-            _ => Err(format!("'{s}': expected constant or cosine")),
-        }
+        spelled(s, &LrSchedule::ALL, LrSchedule::as_str)
     }
 }
 
-impl std::str::FromStr for TimeFeatures {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "none" => Ok(TimeFeatures::None),
-            "hour" => Ok(TimeFeatures::Hour),
-            "hour+schedule" => Ok(TimeFeatures::HourSchedule),
-            _ => Err(format!("'{s}': expected none, hour or hour+schedule")),
-        }
+/// The one of `all` that `spelling` spells `s`, or a message listing what was expected
+/// (`'x': expected a, b or c`).
+fn spelled<T: Copy>(s: &str, all: &[T], spelling: fn(T) -> &'static str) -> Result<T, String> {
+    if let Some(v) = all.iter().copied().find(|v| spelling(*v) == s) {
+        return Ok(v);
     }
+    let names: Vec<&str> = all.iter().map(|v| spelling(*v)).collect();
+    let expected = match names.split_last() {
+        Some((last, [])) => last.to_string(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+        None => String::new(),
+    };
+    Err(format!("'{s}': expected {expected}"))
 }
 
 /// The trained weights (PyTorch `state_dict` and output scale) in a surrogate folder, kept for
@@ -307,7 +323,7 @@ pub fn train(
 
 #[cfg(test)]
 mod tests {
-    use super::TRAINER_FILES;
+    use super::{LrSchedule, TimeFeatures, TRAINER_FILES};
 
     /// A module added to `python/bemcal_train` and not to `TRAINER_FILES` imports in a checkout
     /// and fails in every training the binary runs.
@@ -316,5 +332,23 @@ mod tests {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../python/bemcal_train");
         bemcal_pyenv::check_embedded(std::path::Path::new(dir), "bemcal_train", &TRAINER_FILES)
             .unwrap();
+    }
+
+    #[test]
+    fn each_spelling_reads_back_and_a_wrong_one_lists_the_right_ones() {
+        for t in TimeFeatures::ALL {
+            assert_eq!(t.as_str().parse::<TimeFeatures>(), Ok(t));
+        }
+        for l in LrSchedule::ALL {
+            assert_eq!(l.as_str().parse::<LrSchedule>(), Ok(l));
+        }
+        assert_eq!(
+            "day".parse::<TimeFeatures>(),
+            Err("'day': expected none, hour or hour+schedule".to_string())
+        );
+        assert_eq!(
+            "step".parse::<LrSchedule>(),
+            Err("'step': expected constant or cosine".to_string())
+        );
     }
 }
