@@ -721,7 +721,8 @@ fn map_estimate(
 
 /// `estimate = "best_simulated"`: of the points EnergyPlus `simulated` (the MAP draw first,
 /// then the predictive draws and the `steps` of output space mapping), makes the one the rule
-/// [`crate::best_simulated`] chooses by Guideline 14's hourly criteria the estimate, its run `validation/calibrated.csv`; its metrics, or `None`
+/// [`crate::best_simulated`] chooses by Guideline 14's criteria the estimate, its run
+/// `validation/calibrated.csv`; its metrics, or `None`
 /// when none ran (the fallbacks are tried then). `map_failure`: why EnergyPlus could not
 /// simulate the MAP draw, if it could not.
 fn adopt_best_simulated(
@@ -733,8 +734,8 @@ fn adopt_best_simulated(
     map_failure: Option<&String>,
     log: Log<'_>,
 ) -> Result<Option<Vec<OutputMetrics>>, Error> {
-    let ratios: Vec<f64> = (simulated.iter())
-        .map(|(_, m)| crate::limit_ratio(m, &cal.inputs.fitted))
+    let fits: Vec<crate::Fit> = (simulated.iter())
+        .map(|(_, m)| crate::Fit::of(m, &cal.inputs.fitted))
         .collect();
     let map_ran = simulated
         .first()
@@ -742,7 +743,7 @@ fn adopt_best_simulated(
     let first_mapped = (simulated.iter())
         .position(|(r, _)| r.role == ValidationRole::Mapped)
         .unwrap_or(simulated.len());
-    let Some(b) = crate::best_simulated(&ratios, map_ran, first_mapped) else {
+    let Some(b) = crate::best_simulated(&fits, map_ran, first_mapped) else {
         return Ok(None);
     };
     let (run, metrics) = &simulated[b];
@@ -758,10 +759,11 @@ fn adopt_best_simulated(
     };
     let choice = crate::EstimateChoice {
         chosen: run.label.clone(),
-        candidates: (simulated.iter().zip(&ratios))
-            .map(|((r, _), ratio)| crate::SimulatedFit {
+        candidates: (simulated.iter().zip(&fits))
+            .map(|((r, _), fit)| crate::SimulatedFit {
                 label: r.label.clone(),
-                limit_ratio: ratio.is_finite().then_some(*ratio),
+                limit_ratio: fit.hourly.is_finite().then_some(fit.hourly),
+                monthly_limit_ratio: fit.monthly,
             })
             .collect(),
         outside_interval: match run.role {

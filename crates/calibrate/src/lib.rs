@@ -55,8 +55,8 @@ pub use summary::{
     OutputMetrics, ParameterReport, PeriodMetrics, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
 };
 pub use validation::{
-    best_simulated, fallback_note, limit_ratio, next_candidate, Candidate, EstimateChoice,
-    SimulatedFit, ValidationStep, FALLBACKS, INITIAL_KEY,
+    best_simulated, fallback_note, limit_ratio, monthly_limit_ratio, next_candidate, Candidate,
+    EstimateChoice, Fit, SimulatedFit, ValidationStep, FALLBACKS, INITIAL_KEY,
 };
 
 /// Errors of the pipeline, each naming the stage, file or setting concerned.

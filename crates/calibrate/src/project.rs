@@ -599,9 +599,10 @@ pub enum Estimate {
     /// The draw with the highest log posterior: a joint point, so it satisfies every
     /// constraint, and it is what the reference marks at the posterior peak (its Fig. 10).
     Map,
-    /// The MAP draw where EnergyPlus passes Guideline 14 hourly there; where it fails, of the
-    /// posterior draws EnergyPlus simulates anyway (the MAP draw and the predictive draws,
-    /// `predictive_draws`), the one whose worst meter is nearest inside the hourly limits
+    /// The MAP draw where EnergyPlus passes Guideline 14 there, hourly and monthly; where it
+    /// misses either, of the posterior draws EnergyPlus simulates anyway (the MAP draw and the
+    /// predictive draws, `predictive_draws`), one that passes both, else the MAP draw if it
+    /// passes hourly, else the one whose worst meter is nearest inside the hourly limits
     /// (default; [`crate::best_simulated`]): the MAP is the surrogate's best, and where the
     /// surrogate is wrong near it, another draw of the posterior can fit the meters better in
     /// EnergyPlus. Where EnergyPlus fails at all of them, up to `mapping_steps` steps of

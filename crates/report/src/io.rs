@@ -473,6 +473,9 @@ pub struct SimulatedFit {
     /// Its worst fitted meter's ratio to Guideline 14's hourly limits (`None`: no metrics).
     #[serde(default)]
     pub limit_ratio: Option<f64>,
+    /// The same for the monthly limits (`None`: no monthly figures, or an older summary).
+    #[serde(default)]
+    pub monthly_limit_ratio: Option<f64>,
 }
 
 /// `summary.json` as written by `bemcal calibrate`.

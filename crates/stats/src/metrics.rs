@@ -44,10 +44,19 @@ impl G14Metrics {
     /// `CV-RMSE / 30 %`, so at most 1 exactly when both hourly criteria are met; infinite
     /// when either is not a number.
     pub fn hourly_limit_ratio(&self) -> f64 {
-        let r = (
-            self.nmbe.abs() / HOURLY_NMBE_LIMIT,
-            self.cv_rmse / HOURLY_CV_RMSE_LIMIT,
-        );
+        self.limit_ratio(HOURLY_NMBE_LIMIT, HOURLY_CV_RMSE_LIMIT)
+    }
+
+    /// [`Self::hourly_limit_ratio`] for metrics of monthly totals ([`g14_monthly`]): the
+    /// larger of `|NMBE| / 5 %` and `CV-RMSE / 15 %`.
+    pub fn monthly_limit_ratio(&self) -> f64 {
+        self.limit_ratio(MONTHLY_NMBE_LIMIT, MONTHLY_CV_RMSE_LIMIT)
+    }
+
+    /// The larger of `|NMBE| / nmbe_limit` and `CV-RMSE / cv_limit`; infinite when either is
+    /// not a number.
+    fn limit_ratio(&self, nmbe_limit: f64, cv_limit: f64) -> f64 {
+        let r = (self.nmbe.abs() / nmbe_limit, self.cv_rmse / cv_limit);
         if r.0.is_nan() || r.1.is_nan() {
             return f64::INFINITY;
         }
@@ -285,5 +294,9 @@ mod tests {
             assert!(m(nmbe, cv).hourly_limit_ratio() > 1.0 && !m(nmbe, cv).pass);
         }
         assert_eq!(m(f64::NAN, 1.0).hourly_limit_ratio(), f64::INFINITY);
+        // Monthly totals: half the hourly limits.
+        assert_eq!(m(-2.5, 4.5).monthly_limit_ratio(), 0.5);
+        assert_eq!(m(5.0, 15.0).monthly_limit_ratio(), 1.0);
+        assert_eq!(m(6.0, 9.0).monthly_limit_ratio(), 1.2);
     }
 }

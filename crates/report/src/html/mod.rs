@@ -232,7 +232,21 @@ fn estimate_label(s: &Summary) -> String {
     let n = c.candidates.len();
     let map = c.candidates.first().filter(|f| f.label == "calibrated");
     let map_passes = map.and_then(|f| f.limit_ratio).is_some_and(|r| r <= 1.0);
+    let map_misses_monthly = map_passes
+        && map
+            .and_then(|f| f.monthly_limit_ratio)
+            .is_some_and(|r| r > 1.0);
     let why = match (c.chosen == "calibrated", map, map_passes) {
+        (true, _, true) if map_misses_monthly => format!(
+            "the MAP draw: EnergyPlus passes Guideline 14 hourly there and misses its monthly \
+             criteria, and passes both at none of the other {} points it simulated",
+            n - 1
+        ),
+        (false, Some(_), true) => format!(
+            "{}: EnergyPlus passes Guideline 14 hourly at the MAP draw but misses its monthly \
+             criteria there, and passes both at this one ({n} points simulated)",
+            c.chosen
+        ),
         _ if c.chose_mapped() => format!(
             "{}: a point found by output space mapping, not a posterior draw: EnergyPlus fails \
              Guideline 14 hourly at every posterior draw it simulated and passes at this one \
