@@ -185,10 +185,19 @@ impl EstimateChoice {
                 String::new(),
             ),
         };
+        let monthly = match self
+            .fit_of(&self.chosen)
+            .and_then(|f| f.monthly_limit_ratio)
+        {
+            Some(r) if r <= 1.0 => format!(
+                "; it passes the monthly criteria too (worst meter at {r:.2} of their limits)"
+            ),
+            _ => String::new(),
+        };
         format!(
             "EnergyPlus at posterior draw {} fits the meters {than} by Guideline 14's hourly \
-             criteria (its worst meter at {} of the limits{map_ratio}), of {n} points simulated: \
-             it is the estimate",
+             criteria (its worst meter at {} of the limits{map_ratio}), of {n} points \
+             simulated{monthly}: it is the estimate",
             self.chosen,
             shown(ratio(&self.chosen)),
         )
@@ -736,6 +745,18 @@ pub(crate) mod tests {
         assert!(kept_map
             .describe(None)
             .contains("no other of the 3 points it simulated passes both"));
+
+        // The MAP draw fails hourly; the chosen draw passes monthly as well: said.
+        let mut monthly_too = choice("predictive_01");
+        monthly_too.candidates[2].monthly_limit_ratio = Some(0.8);
+        let note = monthly_too.describe(None);
+        assert!(
+            note.contains(
+                "of 3 points simulated; it passes the monthly criteria too (worst \
+                           meter at 0.80 of their limits): it is the estimate"
+            ),
+            "{note}"
+        );
 
         let mut failed = chains(1);
         failed.predictive = vec![vec![5.0]];
