@@ -154,6 +154,70 @@ pub struct OutputPredictive {
     /// With a held-out period: the error model its hours favour ([`HeldOutChoice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out_favours: Option<HeldOutChoice>,
+    /// A meter that cannot read below zero and reads zero in some hours: the configured error
+    /// model's coverage on the hours it runs ([`RunningHours`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub running: Option<RunningHours>,
+}
+
+/// The coverage of a meter's hourly intervals on the hours it reads above zero, and how many
+/// hours read zero. Where the predictive has an atom at zero (the draws idle, or `max(0, Y)`
+/// of a meter that cannot read below it), a reading of zero lies inside every interval whose
+/// lower bound is 0: a closed interval holds an atom's readings whole, not in its nominal
+/// share. The recalibration balances that on the calibration period ([`Levels::recalibrated`]);
+/// a period with more idle hours (a held-out autumn for a cooling meter) then over-covers
+/// though the intervals hold where the meter runs. These are the figures to judge them by.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunningHours {
+    /// Share of the measured calibration hours that read zero.
+    pub idle_in_sample: f64,
+    /// The same over the held-out period (absent without one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub idle_held_out: Option<f64>,
+    /// Coverage of the hours that read above zero, in-sample and held out.
+    #[serde(flatten)]
+    pub coverage: PeriodCoverage,
+}
+
+/// The share of the values of `measured` that `select` keeps (finite) that are zero; `None`
+/// without such values.
+fn idle_share(measured: &[f64], select: &[bool]) -> Option<f64> {
+    let kept = (measured.iter().zip(select)).filter(|(y, s)| **s && y.is_finite());
+    let (n, idle) = kept.fold((0usize, 0usize), |(n, i), (y, _)| {
+        (n + 1, i + usize::from(*y == 0.0))
+    });
+    (n > 0).then(|| idle as f64 / n as f64)
+}
+
+/// The values of `measured` that `select` keeps and that are above zero.
+fn running(measured: &[f64], select: &[bool]) -> Vec<bool> {
+    (measured.iter().zip(select))
+        .map(|(y, s)| *s && *y > 0.0)
+        .collect()
+}
+
+/// [`RunningHours`] of meter `k` under intervals `iv`; `None` for a meter that can read below
+/// zero or that never reads zero.
+fn running_hours(
+    inp: &crate::Inputs,
+    k: usize,
+    fit: &[bool],
+    iv: &Intervals,
+    non_negative: bool,
+) -> Option<RunningHours> {
+    let idle_in_sample = idle_share(&inp.measured[k], fit)?;
+    let idle_held_out = (inp.held_out.as_ref()).and_then(|h| idle_share(&h.measured[k], &h.hours));
+    if !non_negative || (idle_in_sample == 0.0 && idle_held_out.is_none_or(|s| s == 0.0)) {
+        return None;
+    }
+    let coverage = in_and_out(inp, k, fit, |m, hours| {
+        level_coverage(iv, m, &running(m, hours))
+    });
+    Some(RunningHours {
+        idle_in_sample,
+        idle_held_out,
+        coverage,
+    })
 }
 
 /// Two error models whose held-out coverage is within this many percentage points of each
@@ -320,6 +384,7 @@ pub fn assess(
         let scales = estimate_scales(configured)?;
         let mut by_error_model = vec![];
         let mut configured_noise = vec![];
+        let mut running = None;
         for &model in &models {
             // Each draw's noise is the error model's scale of its own residuals.
             let noise = (sims.iter())
@@ -344,6 +409,7 @@ pub fn assess(
                 columns.push((format!("{name}_q75"), iv.upper[0].clone()));
                 columns.push((format!("{name}_q95"), iv.upper[1].clone()));
                 configured_noise = noise;
+                running = running_hours(inp, k, &fit, &iv, non_negative);
             }
         }
         let standardised: Vec<f64> = (0..fit.len())
@@ -371,6 +437,7 @@ pub fn assess(
             residual_phi,
             totals,
             held_out_favours,
+            running,
         });
     }
     write_intervals_csv(cal, &fit, &columns)?;
@@ -516,5 +583,26 @@ mod tests {
         assert_eq!(evenly(&all, 0), Vec::<usize>::new());
         assert_eq!(evenly(&all[..10], 50).len(), 10);
         assert!(is_predictive(&label(3)) && !is_predictive("calibrated"));
+    }
+
+    #[test]
+    fn running_hours_leave_out_the_readings_at_zero() {
+        let measured = [0.0, 0.0, 5.0, f64::NAN, 7.0, 0.0];
+        let select = [true, true, true, true, true, false];
+        assert_eq!(idle_share(&measured, &select), Some(0.5));
+        assert_eq!(idle_share(&measured, &[false; 6]), None);
+        let kept = running(&measured, &select);
+        assert_eq!(kept, [false, false, true, false, true, false]);
+        // The idle hours sit inside the interval from 0; of the running hours one of two.
+        let iv = Intervals {
+            levels: LEVELS.to_vec(),
+            lower: vec![vec![0.0; 6]; 2],
+            upper: vec![vec![6.0; 6]; 2],
+            median: vec![3.0; 6],
+        };
+        let all = level_coverage(&iv, &measured, &select);
+        let runs = level_coverage(&iv, &measured, &kept);
+        assert_eq!((all[0].hours, all[0].fraction), (4, 0.75));
+        assert_eq!((runs[0].hours, runs[0].fraction), (2, 0.5));
     }
 }

@@ -178,6 +178,22 @@ pub struct OutputPredictiveBlock {
     /// Intervals of daily and monthly totals.
     #[serde(default)]
     pub totals: Vec<TotalsBlock>,
+    /// A meter that reads zero in some hours: the coverage of the hours it runs.
+    #[serde(default)]
+    pub running: Option<RunningBlock>,
+}
+
+/// The coverage of a meter's hourly intervals on the hours it reads above zero.
+#[derive(Debug, Clone, Deserialize)]
+pub struct RunningBlock {
+    /// Share of the measured calibration hours that read zero.
+    pub idle_in_sample: f64,
+    /// The same held out.
+    #[serde(default)]
+    pub idle_held_out: Option<f64>,
+    /// Coverage of the hours above zero.
+    #[serde(flatten)]
+    pub coverage: PeriodCoverageBlock,
 }
 
 /// Coverage of the intervals of one kind of total.

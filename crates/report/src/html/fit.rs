@@ -198,6 +198,22 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
                 before(|b| &b.held_out),
             );
         }
+        if let Some(r) = &o.running {
+            let idle =
+                |s: Option<f64>| s.map_or("&ndash;".into(), |s| format!("{:.1} %", s * 100.0));
+            let _ = write!(
+                h,
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{} on the hours it reads above 0</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>&ndash;</td><td colspan=\"2\" class=\"l\">hours that read 0: {} in-sample, {} held out; a reading of 0 lies inside every interval that starts at 0</td></tr>",
+                esc(&o.output),
+                esc(o.by_error_model.first().map_or("", |m| m.error_model.as_str())),
+                pct(r.coverage.in_sample.first()),
+                pct(r.coverage.in_sample.get(1)),
+                pct(r.coverage.held_out.first()),
+                pct(r.coverage.held_out.get(1)),
+                idle(Some(r.idle_in_sample)),
+                idle(r.idle_held_out),
+            );
+        }
     }
     h.push_str("</table>\n");
     h.push_str(&totals_coverage(p, &pct));
