@@ -242,7 +242,8 @@ impl Levels {
     /// `F(y-) <= b`, so a lower level is a quantile of the PITs' `at` and an upper one of their
     /// `below` (the same where the predictive has no atom): each tail then misses its nominal
     /// share of the calibration values, an idle meter's readings at its atom included. Central
-    /// where fewer than [`MIN_RECALIBRATION_VALUES`] values are given.
+    /// where fewer than [`MIN_RECALIBRATION_VALUES`] values are given, or where a lower level
+    /// would pass its upper one.
     pub fn recalibrated(nominal: &[f64], pits: &[Pit]) -> Result<Levels> {
         let central = Levels::central(nominal)?;
         let sorted = |side: fn(&Pit) -> f64| {
@@ -255,10 +256,17 @@ impl Levels {
             return Ok(central);
         }
         let q = crate::diagnostics::quantile_sorted;
+        let bounds: Vec<(f64, f64)> = (central.bounds.iter())
+            .map(|&(lo, hi)| (q(&at, lo), q(&below, hi)))
+            .collect();
+        // Far from the meter, with many readings at an atom, a lower level can pass its upper
+        // one (the `at` of idle readings high, the `below` of the others low): no interval
+        // holds the nominal share then, and the posterior's own central ones stay.
+        if bounds.iter().any(|(lo, hi)| lo > hi) {
+            return Ok(central);
+        }
         Ok(Levels {
-            bounds: (central.bounds.iter())
-                .map(|&(lo, hi)| (q(&at, lo), q(&below, hi)))
-                .collect(),
+            bounds,
             median: q(&at, central.median),
             nominal: central.nominal,
         })
@@ -798,6 +806,27 @@ mod tests {
             }
         );
         assert!((floor[1].below - 0.841_344_746).abs() < 1e-6 && floor[1].below == floor[1].at);
+    }
+
+    #[test]
+    fn levels_that_would_cross_stay_central() {
+        // A model far above a meter that is idle 80 % of the hours (the RSF's cooling): the
+        // idle readings' F(0) are high, the running readings' PITs low, so the 25 % quantile
+        // of the `at` passes the 75 % quantile of the `below`.
+        let pits: Vec<Pit> = (0..100)
+            .map(|h| match h % 10 < 8 {
+                true => Pit {
+                    below: 0.0,
+                    at: 0.6,
+                },
+                false => Pit {
+                    below: 0.01,
+                    at: 0.01,
+                },
+            })
+            .collect();
+        let levels = Levels::recalibrated(&[0.5, 0.9], &pits).unwrap();
+        assert_eq!(levels, Levels::central(&[0.5, 0.9]).unwrap());
     }
 
     #[test]
