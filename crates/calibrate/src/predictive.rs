@@ -205,9 +205,12 @@ fn running_hours(
     iv: &Intervals,
     non_negative: bool,
 ) -> Option<RunningHours> {
+    if !non_negative {
+        return None;
+    }
     let idle_in_sample = idle_share(&inp.measured[k], fit)?;
     let idle_held_out = (inp.held_out.as_ref()).and_then(|h| idle_share(&h.measured[k], &h.hours));
-    if !non_negative || (idle_in_sample == 0.0 && idle_held_out.is_none_or(|s| s == 0.0)) {
+    if idle_in_sample == 0.0 && idle_held_out.is_none_or(|s| s == 0.0) {
         return None;
     }
     let coverage = in_and_out(inp, k, fit, |m, hours| {

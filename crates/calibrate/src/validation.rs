@@ -126,9 +126,7 @@ impl EstimateChoice {
         let map = shown(ratio(CALIBRATED_LABEL));
         let n = self.candidates.len();
         let map_passes_hourly = ratio(CALIBRATED_LABEL).is_some_and(|r| r <= 1.0);
-        let map_monthly = self
-            .fit_of(CALIBRATED_LABEL)
-            .and_then(|f| f.monthly_limit_ratio);
+        let map_monthly = self.monthly_of(CALIBRATED_LABEL);
         let map_misses_monthly = map_passes_hourly && map_monthly.is_some_and(|r| r > 1.0);
         let monthly_miss = || {
             format!(
@@ -169,10 +167,7 @@ impl EstimateChoice {
                 monthly_miss(),
                 self.chosen,
                 shown(ratio(&self.chosen)),
-                shown(
-                    self.fit_of(&self.chosen)
-                        .and_then(|f| f.monthly_limit_ratio)
-                ),
+                shown(self.monthly_of(&self.chosen)),
             );
         }
         let (than, map_ratio) = match map_failure {
@@ -185,10 +180,7 @@ impl EstimateChoice {
                 String::new(),
             ),
         };
-        let monthly = match self
-            .fit_of(&self.chosen)
-            .and_then(|f| f.monthly_limit_ratio)
-        {
+        let monthly = match self.monthly_of(&self.chosen) {
             Some(r) if r <= 1.0 => format!(
                 "; it passes the monthly criteria too (worst meter at {r:.2} of their limits)"
             ),
@@ -248,6 +240,12 @@ impl EstimateChoice {
     /// The hourly limit ratio of the candidate labelled `label`, if it ran with metrics.
     fn ratio_of(&self, label: &str) -> Option<f64> {
         self.fit_of(label).and_then(|c| c.limit_ratio)
+    }
+
+    /// The monthly limit ratio of the candidate labelled `label`, if it ran with monthly
+    /// figures.
+    fn monthly_of(&self, label: &str) -> Option<f64> {
+        self.fit_of(label).and_then(|c| c.monthly_limit_ratio)
     }
 
     /// The candidate labelled `label`.
