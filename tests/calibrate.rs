@@ -364,14 +364,24 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
     let p = &summary["predictive"];
     assert_eq!(p["draws"].as_u64(), Some(4), "{p}");
     // The heating's intervals take its own error model (`error_model = { heating_kwh = ... }`),
-    // the other meters the default.
-    assert_eq!(p["error_model"], "level", "{p}");
+    // the other meters the one their calibration months favour (the default, "auto"), each
+    // judged on the months of the calibration period by intervals built without it.
+    assert_eq!(p["error_model"], "auto", "{p}");
     for o in p["outputs"].as_array().unwrap() {
+        let favoured = &o["cross_validation_favours"]["error_model"];
         let own = if o["output"] == "heating_kwh" {
             "hour_of_day"
         } else {
-            "level"
+            favoured.as_str().unwrap()
         };
+        for m in o["by_error_model"].as_array().unwrap() {
+            let cv = &m["cross_validated"];
+            // Ten calibration months (a month the gap empties is not judged).
+            assert!((9..=10).contains(&cv["months"].as_u64().unwrap()), "{o}");
+            assert!(cv["mean_month_miss_points"]
+                .as_f64()
+                .is_some_and(f64::is_finite));
+        }
         assert_eq!(o["error_model"], own, "{o}");
         assert_eq!(o["by_error_model"][0]["error_model"], own, "{o}");
         for m in o["by_error_model"].as_array().unwrap() {

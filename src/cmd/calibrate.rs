@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use bemcal_calibrate::project::ErrorModelSetting;
 use bemcal_calibrate::{calibrate, Project};
 use bemcal_report::informed::{uninformed, why_uninformed};
 
@@ -344,7 +345,7 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
         p.draws,
         if p.with_surrogate_error { " with the surrogate's error" } else { "" },
         p.failed,
-        model_name(p.error_model)
+        setting_name(p.error_model)
     );
     let cov = |c: &[bemcal_stats::predictive::Coverage]| {
         c.iter()
@@ -360,55 +361,54 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
             .join(", ")
     };
     // The error model each meter's held-out hours favour, as one `error_model` setting.
-    let mut favoured = std::collections::BTreeMap::new();
+    let default = match p.error_model {
+        ErrorModelSetting::Fixed(m) => Some(m),
+        ErrorModelSetting::Auto => None,
+    };
+    let (mut entries, mut differs) = (vec![], false);
     for o in &p.outputs {
-        if let Some(m) = o.by_error_model.first() {
-            let c = &m.coverage;
-            let before = m.before_recalibration.as_ref();
+        let Some(m) = o.by_error_model.first() else {
+            continue;
+        };
+        let c = &m.coverage;
+        let before = m.before_recalibration.as_ref();
+        println!(
+            "{:<18} in-sample  {}{}",
+            o.output,
+            cov(&c.in_sample),
+            before_recalibration(before.map(|b| &b.in_sample))
+        );
+        if let Some(line) = cross_validation_line(o, default) {
+            println!("{:<18} {line}", "");
+        }
+        if !c.held_out.is_empty() {
             println!(
-                "{:<18} in-sample  {}{}",
-                o.output,
-                cov(&c.in_sample),
-                before_recalibration(before.map(|b| &b.in_sample))
+                "{:<18} held out   {}{}",
+                "",
+                cov(&c.held_out),
+                before_recalibration(before.map(|b| &b.held_out))
             );
-            if m.error_model != p.error_model {
-                println!(
-                    "{:<18} (its own error model: {})",
-                    "",
-                    model_name(m.error_model)
-                );
+        }
+        if let Some(r) = &o.running {
+            println!("{:<18} {}", "", running_hours(r));
+        }
+        let model = match &o.held_out_favours {
+            Some(f) => {
+                println!("{:<18} {}", "", held_out_choice(f, m.error_model));
+                f.error_model
             }
-            if !c.held_out.is_empty() {
-                println!(
-                    "{:<18} held out   {}{}",
-                    "",
-                    cov(&c.held_out),
-                    before_recalibration(before.map(|b| &b.held_out))
-                );
-            }
-            if let Some(r) = &o.running {
-                println!("{:<18} {}", "", running_hours(r));
-            }
-            let model = match &o.held_out_favours {
-                Some(f) => {
-                    println!("{:<18} {}", "", held_out_choice(f, m.error_model));
-                    f.error_model
-                }
-                None => m.error_model,
-            };
-            if model != p.error_model {
-                favoured.insert(o.output.as_str(), model);
-            }
+            None => m.error_model,
+        };
+        differs |= model != m.error_model;
+        // The entry this meter needs for its favoured model: one the default would not give.
+        if default.map_or(model != m.error_model, |d| model != d) {
+            entries.push((o.output.as_str(), model.as_str()));
         }
     }
-    let configured = p.outputs.iter().filter_map(|o| {
-        let m = o.by_error_model.first()?.error_model;
-        (m != p.error_model).then_some((o.output.as_str(), m))
-    });
-    if favoured != configured.collect() {
-        let entries: Vec<String> = std::iter::once(("default", p.error_model))
-            .chain(favoured)
-            .map(|(k, m)| format!("{} = {}", toml_key(k), model_name(m)))
+    if differs {
+        let entries: Vec<String> = std::iter::once(("default", p.error_model.as_str()))
+            .chain(entries)
+            .map(|(k, m)| format!("{} = \"{m}\"", toml_key(k)))
             .collect();
         println!(
             "to use the error models the held-out hours favour (chosen on them: judge the \
@@ -459,6 +459,50 @@ fn model_name(m: bemcal_stats::predictive::ErrorModel) -> String {
     format!("\"{}\"", m.as_str())
 }
 
+/// An error model setting as the project file spells it, quoted (`"auto"`).
+fn setting_name(m: ErrorModelSetting) -> String {
+    format!("\"{}\"", m.as_str())
+}
+
+/// A meter's error models judged month by month out of time, and the one its intervals take
+/// where the default does not name it: `months judged out of time (9), points from nominal a
+/// month: "level" 3.1, "constant" 5.0, "hour_of_day" 4.2; they favour "level"; "auto" takes
+/// it`.
+fn cross_validation_line(
+    o: &bemcal_calibrate::predictive::OutputPredictive,
+    default: Option<bemcal_stats::predictive::ErrorModel>,
+) -> Option<String> {
+    let own = o.by_error_model.first()?.error_model;
+    let taken = match default {
+        Some(d) if d != own => Some(format!("its own error model: {}", model_name(own))),
+        Some(_) => None,
+        None => Some(format!("\"auto\" takes {}", model_name(own))),
+    };
+    let mut months = 0;
+    let misses: Vec<String> = (o.by_error_model.iter())
+        .filter_map(|m| {
+            let cv = m.cross_validated.as_ref()?;
+            months = months.max(cv.months);
+            Some(format!(
+                "{} {:.1}",
+                model_name(m.error_model),
+                cv.mean_month_miss_points
+            ))
+        })
+        .collect();
+    if misses.is_empty() {
+        return taken.map(|t| format!("({t})"));
+    }
+    let favours = (o.cross_validation_favours.as_ref())
+        .map(|f| format!("; they favour {}", model_name(f.error_model)));
+    Some(format!(
+        "months judged out of time ({months}), points from nominal a month: {}{}{}",
+        misses.join(", "),
+        favours.unwrap_or_default(),
+        taken.map(|t| format!("; {t}")).unwrap_or_default()
+    ))
+}
+
 /// A TOML key: bare where it may be, quoted otherwise.
 fn toml_key(k: &str) -> String {
     let bare = !k.is_empty()
@@ -472,7 +516,7 @@ fn toml_key(k: &str) -> String {
 
 /// The error model a meter's held-out hours favour, in words.
 fn held_out_choice(
-    f: &bemcal_calibrate::predictive::HeldOutChoice,
+    f: &bemcal_calibrate::predictive::Favoured,
     configured: bemcal_stats::predictive::ErrorModel,
 ) -> String {
     let configured_miss = f

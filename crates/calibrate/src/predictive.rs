@@ -26,8 +26,9 @@ use bemcal_stats::mcmc::Draws;
 use std::ops::Range;
 
 use bemcal_stats::predictive::{
-    coverage, coverage_miss, intervals, lag1_autocorrelation, nearest_nominal, period_mixture,
-    period_totals, pits, Coverage, ErrorModel, Intervals, Levels,
+    coverage, coverage_miss, cross_validated_coverage, intervals, lag1_autocorrelation,
+    mean_block_miss, period_mixture, period_totals, pits, pooled_coverage, sharpest_within,
+    Coverage, ErrorModel, Intervals, Levels,
 };
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +36,7 @@ use bemcal_energyplus::{HourlyOutputs, Model};
 
 use crate::design::{saved_outputs, Plan};
 use crate::output::timestamps;
+use crate::project::ErrorModelSetting;
 use crate::validation::{candidate_key, Candidate, FALLBACKS};
 use crate::{write_atomic, Calibration, ChainSummary, Error};
 
@@ -119,9 +121,9 @@ pub struct PredictiveReport {
     pub failed: usize,
     /// Whether the draws carry the surrogate's error (`draws_with_surrogate_error.csv`).
     pub with_surrogate_error: bool,
-    /// The error model of `validation/predictive_intervals.csv` for the meters
-    /// `[validation] error_model` does not name (each meter's: its `error_model`).
-    pub error_model: ErrorModel,
+    /// `[validation] error_model` for the meters it does not name (each meter's error model
+    /// in `validation/predictive_intervals.csv`: its `error_model`).
+    pub error_model: ErrorModelSetting,
     /// The held-out period, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<String>,
@@ -151,9 +153,14 @@ pub struct OutputPredictive {
     /// noise of a sum and as if hours were independent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub totals: Vec<TotalsCoverage>,
-    /// With a held-out period: the error model its hours favour ([`HeldOutChoice`]).
+    /// The error model the calibration period's months favour, each judged by intervals built
+    /// without it ([`Favoured`]; `error_model = "auto"` takes it). Absent from a summary
+    /// written before it, or with fewer than two months measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub held_out_favours: Option<HeldOutChoice>,
+    pub cross_validation_favours: Option<Favoured>,
+    /// With a held-out period: the error model its hours favour ([`Favoured`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_favours: Option<Favoured>,
     /// A meter that cannot read below zero and reads zero in some hours: the configured error
     /// model's coverage on the hours it runs ([`RunningHours`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -223,25 +230,84 @@ fn running_hours(
     })
 }
 
-/// Two error models whose held-out coverage is within this many percentage points of each
-/// other (summed over the 50 % and 90 % levels) count as equal: the narrower one is favoured.
+/// Two error models whose coverage is within this many percentage points of each other
+/// (summed over the 50 % and 90 % levels) count as equal: the narrower one is favoured.
 pub const TIE_POINTS: f64 = 2.0;
 
-/// The error model whose hourly intervals hold best on a meter's held-out hours: the one whose
-/// 50 % and 90 % coverage there is nearest nominal, the narrower of those within [`TIE_POINTS`]
-/// ([`bemcal_stats::predictive::nearest_nominal`]). A guide to `[validation] error_model` (set
-/// per meter where the meters favour different ones); chosen on the held-out
-/// hours, so that their coverage under it is no longer an independent check (three candidates
-/// on thousands of hours: a small bias).
+/// The error model whose hourly intervals hold nearest nominal on a set of hours, the
+/// narrower of those within [`TIE_POINTS`]
+/// ([`bemcal_stats::predictive::sharpest_within`]): on the calibration period's months judged
+/// out of time (`cross_validation_favours`, what `error_model = "auto"` takes), or on the
+/// held-out hours (`held_out_favours`: a check of that choice, not a choice, since a model
+/// chosen on them leaves their coverage no independent check).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct HeldOutChoice {
+pub struct Favoured {
     /// The favoured error model.
     pub error_model: ErrorModel,
-    /// Its held-out coverage's distance from nominal, percentage points over both levels.
+    /// Its distance from nominal, percentage points over both levels (by cross-validation: the
+    /// mean over the months, [`bemcal_stats::predictive::mean_block_miss`]).
     pub miss_points: f64,
-    /// The same for the configured error model (`validation/predictive_intervals.csv`'s);
-    /// `None` where its held-out coverage was not judged.
+    /// The same for the meter's configured error model (`auto`'s: its choice); `None` where
+    /// it was not judged.
     pub configured_miss_points: Option<f64>,
+}
+
+/// [`Favoured`] of `candidates` `(error model, miss, summed width)`, with the miss of the one
+/// `configured` names; `None` where none was judged.
+fn favoured(
+    candidates: impl Iterator<Item = (ErrorModel, f64, f64)>,
+    configured: ErrorModelSetting,
+) -> Option<Favoured> {
+    let (models, (misses, widths)): (Vec<ErrorModel>, (Vec<f64>, Vec<f64>)) =
+        candidates.map(|(m, miss, w)| (m, (miss, w))).unzip();
+    let i = sharpest_within(&misses, &widths, TIE_POINTS)?;
+    let configured = match configured {
+        ErrorModelSetting::Fixed(m) => models.iter().position(|c| *c == m),
+        ErrorModelSetting::Auto => Some(i),
+    };
+    Some(Favoured {
+        error_model: models[i],
+        miss_points: misses[i],
+        configured_miss_points: configured.map(|c| misses[c]).filter(|m| m.is_finite()),
+    })
+}
+
+/// The summed mean width of intervals at every level.
+fn width(coverage: &[Coverage]) -> f64 {
+    coverage.iter().map(|c| c.mean_width).sum()
+}
+
+/// An error model's hourly intervals judged month by month out of time: each month of the
+/// calibration period by intervals whose noise scales and recalibration never saw it
+/// ([`bemcal_stats::predictive::cross_validated_coverage`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CrossValidated {
+    /// Months judged.
+    pub months: usize,
+    /// Coverage over all of them, one per level.
+    pub coverage: Vec<Coverage>,
+    /// The mean over the months of their coverage's distance from nominal, percentage points
+    /// over both levels ([`bemcal_stats::predictive::mean_block_miss`]): what
+    /// `error_model = "auto"` minimises.
+    pub mean_month_miss_points: f64,
+}
+
+impl CrossValidated {
+    /// The record of months judged `blocks` (one coverage per level each); `None` without one.
+    pub fn of(blocks: &[Vec<Coverage>]) -> Option<CrossValidated> {
+        let coverage: Vec<Coverage> = (0..blocks.first()?.len())
+            .filter_map(|i| {
+                let parts: Vec<Coverage> =
+                    blocks.iter().filter_map(|b| b.get(i).copied()).collect();
+                pooled_coverage(&parts)
+            })
+            .collect();
+        Some(CrossValidated {
+            months: blocks.len(),
+            coverage,
+            mean_month_miss_points: mean_block_miss(blocks),
+        })
+    }
 }
 
 /// What a total is taken over.
@@ -315,6 +381,9 @@ pub struct ModelCoverage {
     /// how far the posterior's spread is from the meters'.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub before_recalibration: Option<PeriodCoverage>,
+    /// The calibration period judged month by month out of time ([`CrossValidated`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cross_validated: Option<CrossValidated>,
 }
 
 /// EnergyPlus at the predictive draws, as validation saved them (draws it could not simulate
@@ -369,26 +438,18 @@ pub fn assess(
     let mut outputs = vec![];
     let mut columns: Vec<(String, Vec<f64>)> = vec![];
     let error_models = &cal.project.validation.error_model;
+    let months = TotalPeriod::Month.periods(fit.len());
     for (k, name) in inp.outputs.iter().enumerate() {
-        let configured = error_models.of(name);
-        let mut models = vec![configured];
-        models.extend(ErrorModel::ALL.iter().filter(|m| **m != configured));
         let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
         let estimate = series(at_estimate);
         // An energy meter does not read below zero: its intervals are those of max(0, Y).
         let meter = inp.meter(k);
         let non_negative = !meter.iter().any(|v| *v < 0.0);
-        // The estimate's residual scales: its root mean square residual, and the standardised
-        // residuals whose autocorrelation the totals' noise takes.
-        let estimate_scales = |m: ErrorModel| m.scales(&inp.measured[k], &estimate, &fit);
-        let noise_kwh =
-            (estimate_scales(ErrorModel::Constant)?.first().copied()).unwrap_or(f64::NAN);
-        let scales = estimate_scales(configured)?;
-        let mut by_error_model = vec![];
-        let mut configured_noise = vec![];
-        let mut running = None;
-        for &model in &models {
+        let floor = non_negative.then_some(0.0);
+        // Every error model's intervals, in the order of `ErrorModel::ALL`.
+        let mut judged = vec![];
+        for model in ErrorModel::ALL {
             // Each draw's noise is the error model's scale of its own residuals.
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
@@ -396,25 +457,63 @@ pub fn assess(
             let (posterior, _) = bounded(&sims, &noise, None, non_negative)?;
             let calibration = Some((inp.measured[k].as_slice(), fit.as_slice()));
             let (iv, levels) = bounded(&sims, &noise, calibration, non_negative)?;
-            by_error_model.push(ModelCoverage {
+            let blocks = cross_validated_coverage(
+                &sims,
+                &inp.measured[k],
+                &fit,
+                &months,
+                model,
+                &LEVELS,
+                floor,
+            )?;
+            let coverage = ModelCoverage {
                 error_model: model,
                 coverage: in_and_out(inp, k, &fit, |m, hours| level_coverage(&iv, m, hours)),
                 levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
                 before_recalibration: Some(in_and_out(inp, k, &fit, |m, hours| {
                     level_coverage(&posterior, m, hours)
                 })),
-            });
-            if model == configured {
-                columns.push((format!("{name}_measured"), meter.clone()));
-                columns.push((format!("{name}_q5"), iv.lower[1].clone()));
-                columns.push((format!("{name}_q25"), iv.lower[0].clone()));
-                columns.push((format!("{name}_q50"), iv.median.clone()));
-                columns.push((format!("{name}_q75"), iv.upper[0].clone()));
-                columns.push((format!("{name}_q95"), iv.upper[1].clone()));
-                configured_noise = noise;
-                running = running_hours(inp, k, &fit, &iv, non_negative);
-            }
+                cross_validated: CrossValidated::of(&blocks),
+            };
+            judged.push((coverage, noise, iv));
         }
+        let cross_validation_favours = favoured(
+            (judged.iter().map(|j| &j.0)).map(|m| {
+                let cv = m.cross_validated.as_ref();
+                let miss = cv.map_or(f64::NAN, |c| c.mean_month_miss_points);
+                (
+                    m.error_model,
+                    miss,
+                    cv.map_or(f64::NAN, |c| width(&c.coverage)),
+                )
+            }),
+            error_models.of(name),
+        );
+        let configured = match error_models.of(name) {
+            ErrorModelSetting::Fixed(m) => m,
+            ErrorModelSetting::Auto => {
+                cross_validation_favours.map_or(ErrorModel::Level, |f| f.error_model)
+            }
+        };
+        // The configured error model's first.
+        judged.sort_by_key(|j| j.0.error_model != configured);
+        let mut judged = judged.into_iter();
+        let (first, configured_noise, iv) = judged.next().expect("three error models");
+        let by_error_model: Vec<ModelCoverage> =
+            std::iter::once(first).chain(judged.map(|j| j.0)).collect();
+        columns.push((format!("{name}_measured"), meter.clone()));
+        columns.push((format!("{name}_q5"), iv.lower[1].clone()));
+        columns.push((format!("{name}_q25"), iv.lower[0].clone()));
+        columns.push((format!("{name}_q50"), iv.median.clone()));
+        columns.push((format!("{name}_q75"), iv.upper[0].clone()));
+        columns.push((format!("{name}_q95"), iv.upper[1].clone()));
+        let running = running_hours(inp, k, &fit, &iv, non_negative);
+        // The estimate's residual scales: its root mean square residual, and the standardised
+        // residuals whose autocorrelation the totals' noise takes.
+        let estimate_scales = |m: ErrorModel| m.scales(&inp.measured[k], &estimate, &fit);
+        let noise_kwh =
+            (estimate_scales(ErrorModel::Constant)?.first().copied()).unwrap_or(f64::NAN);
+        let scales = estimate_scales(configured)?;
         let standardised: Vec<f64> = (0..fit.len())
             .map(|t| match fit[t] {
                 true => (inp.measured[k][t] - estimate[t]) / scales[t],
@@ -424,14 +523,13 @@ pub fn assess(
         let residual_phi = lag1_autocorrelation(&standardised);
         let noise = &configured_noise;
         let totals = totals_coverage(inp, k, &fit, &sims, noise, residual_phi, non_negative)?;
-        let held: Vec<&[Coverage]> = (by_error_model.iter())
-            .map(|m| m.coverage.held_out.as_slice())
-            .collect();
-        let held_out_favours = nearest_nominal(&held, TIE_POINTS).map(|i| HeldOutChoice {
-            error_model: by_error_model[i].error_model,
-            miss_points: coverage_miss(held[i]),
-            configured_miss_points: Some(coverage_miss(held[0])).filter(|m| m.is_finite()),
-        });
+        let held_out_favours = favoured(
+            by_error_model.iter().map(|m| {
+                let held = &m.coverage.held_out;
+                (m.error_model, coverage_miss(held), width(held))
+            }),
+            ErrorModelSetting::Fixed(configured),
+        );
         outputs.push(OutputPredictive {
             output: name.clone(),
             error_model: Some(configured),
@@ -439,6 +537,7 @@ pub fn assess(
             by_error_model,
             residual_phi,
             totals,
+            cross_validation_favours,
             held_out_favours,
             running,
         });
@@ -586,6 +685,57 @@ mod tests {
         assert_eq!(evenly(&all, 0), Vec::<usize>::new());
         assert_eq!(evenly(&all[..10], 50).len(), 10);
         assert!(is_predictive(&label(3)) && !is_predictive("calibrated"));
+    }
+
+    #[test]
+    fn the_favoured_error_model_is_nearest_nominal_and_auto_reports_its_own_miss() {
+        let cov = |f50: f64, f90: f64, hours: usize| {
+            vec![
+                Coverage {
+                    nominal: 0.5,
+                    hours,
+                    fraction: f50,
+                    mean_width: 1.0,
+                    relative_width: None,
+                },
+                Coverage {
+                    nominal: 0.9,
+                    hours,
+                    fraction: f90,
+                    mean_width: 3.0,
+                    relative_width: None,
+                },
+            ]
+        };
+        // Two months: 4 and 2 points from nominal over 100 and 300 hours, 2.5 on average.
+        let cv = CrossValidated::of(&[cov(0.52, 0.92, 100), cov(0.49, 0.91, 300)]).unwrap();
+        assert_eq!(cv.months, 2);
+        assert!((cv.mean_month_miss_points - 2.5).abs() < 1e-9);
+        assert!((cv.coverage[0].fraction - 0.4975).abs() < 1e-12);
+        assert_eq!(cv.coverage[1].hours, 400);
+        assert!(CrossValidated::of(&[]).is_none());
+        let candidates = [
+            (ErrorModel::Constant, 9.0, 4.0),
+            (ErrorModel::HourOfDay, 3.0, 5.0),
+            (ErrorModel::Level, 4.5, 4.5),
+        ];
+        // Within 2 points of the nearest, the narrower.
+        let fixed = favoured(
+            candidates.into_iter(),
+            ErrorModelSetting::Fixed(ErrorModel::Constant),
+        );
+        assert_eq!(
+            fixed,
+            Some(Favoured {
+                error_model: ErrorModel::Level,
+                miss_points: 4.5,
+                configured_miss_points: Some(9.0),
+            })
+        );
+        let auto = favoured(candidates.into_iter(), ErrorModelSetting::Auto).unwrap();
+        assert_eq!(auto.configured_miss_points, Some(4.5));
+        let none = [(ErrorModel::Level, f64::NAN, 1.0)];
+        assert_eq!(favoured(none.into_iter(), ErrorModelSetting::Auto), None);
     }
 
     #[test]

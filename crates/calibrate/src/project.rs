@@ -641,34 +641,90 @@ pub struct ValidationSettings {
     pub mapping_steps: usize,
 }
 
-/// `[validation] error_model`: one error model for every meter (`"level"`), or a table by
-/// output with an optional `default` (`{ default = "level", heating_kwh = "hour_of_day" }`): the
-/// meters of one building may favour different ones (`summary.json`
-/// `predictive.outputs[].held_out_favours`). `default` is the key of the others, not an
-/// output's name.
+/// `[validation] error_model`: one setting for every meter (`"level"`, `"auto"`), or a table
+/// by output with an optional `default` (`{ default = "auto", heating_kwh = "hour_of_day" }`):
+/// the meters of one building may favour different ones. `default` is the key of the others,
+/// not an output's name.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorModels {
-    /// The error model of an output the table does not name. Chosen by held-out coverage
-    /// (docs/benchmarks.md, issue 24): on the quick example with three months held out,
-    /// `level` held 52-67 % / 90-93 % of the held-out hours in its 50 % / 90 % intervals,
-    /// `constant` up to 93 % / 99 % (too wide when idle).
-    pub default: bemcal_stats::predictive::ErrorModel,
-    /// Outputs with their own error model.
-    pub by_output: BTreeMap<String, bemcal_stats::predictive::ErrorModel>,
+    /// The setting of an output the table does not name: `auto` unless set (docs/benchmarks.md,
+    /// issue 24, error models chosen by cross-validation: on twelve meters with three months
+    /// held out, `auto` chose the error model the held-out hours favour for eleven).
+    pub default: ErrorModelSetting,
+    /// Outputs with their own setting.
+    pub by_output: BTreeMap<String, ErrorModelSetting>,
+}
+
+/// One output's `[validation] error_model`: an error model by name, or the one the
+/// calibration period's months favour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorModelSetting {
+    /// `"auto"`: the error model whose intervals hold nearest nominal month by month when each
+    /// month of the calibration period is judged by intervals built without it
+    /// (`summary.json` `predictive.outputs[].cross_validation_favours`;
+    /// [`bemcal_stats::predictive::cross_validated_coverage`]). A held-out period never
+    /// chooses, so its coverage stays an independent check.
+    Auto,
+    /// This error model.
+    Fixed(bemcal_stats::predictive::ErrorModel),
+}
+
+impl ErrorModelSetting {
+    /// The name a project file gives it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorModelSetting::Auto => "auto",
+            ErrorModelSetting::Fixed(m) => m.as_str(),
+        }
+    }
+}
+
+impl std::str::FromStr for ErrorModelSetting {
+    type Err = String;
+    fn from_str(v: &str) -> Result<Self, String> {
+        use bemcal_stats::predictive::ErrorModel;
+        if v == "auto" {
+            return Ok(ErrorModelSetting::Auto);
+        }
+        (ErrorModel::ALL.into_iter())
+            .find(|m| m.as_str() == v)
+            .map(ErrorModelSetting::Fixed)
+            .ok_or_else(|| {
+                let names: Vec<&str> = ErrorModel::ALL.iter().map(|m| m.as_str()).collect();
+                format!(
+                    "unknown error model \"{}\": expected \"auto\" or one of {}",
+                    excerpt(v),
+                    names.join(", ")
+                )
+            })
+    }
+}
+
+impl Serialize for ErrorModelSetting {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> Deserialize<'de> for ErrorModelSetting {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let v = String::deserialize(d)?;
+        v.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 impl Default for ErrorModels {
     fn default() -> Self {
         ErrorModels {
-            default: bemcal_stats::predictive::ErrorModel::Level,
+            default: ErrorModelSetting::Auto,
             by_output: BTreeMap::new(),
         }
     }
 }
 
 impl ErrorModels {
-    /// The error model of `output`'s intervals.
-    pub fn of(&self, output: &str) -> bemcal_stats::predictive::ErrorModel {
+    /// The setting of `output`'s intervals.
+    pub fn of(&self, output: &str) -> ErrorModelSetting {
         self.by_output.get(output).copied().unwrap_or(self.default)
     }
 }
@@ -694,22 +750,15 @@ impl<'de> Deserialize<'de> for ErrorModels {
         impl<'de> serde::de::Visitor<'de> for Visitor {
             type Value = ErrorModels;
             fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                let names: Vec<String> = bemcal_stats::predictive::ErrorModel::ALL
-                    .iter()
-                    .map(|m| format!("\"{}\"", m.as_str()))
-                    .collect();
                 write!(
                     f,
-                    "an error model ({}), or a table of them by output with an optional default",
-                    names.join(", ")
+                    "an error model (\"auto\", \"constant\", \"hour_of_day\", \"level\"), or a \
+                     table of them by output with an optional default"
                 )
             }
             fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ErrorModels, E> {
-                let default = bemcal_stats::predictive::ErrorModel::deserialize(
-                    serde::de::value::StrDeserializer::<E>::new(v),
-                )?;
                 Ok(ErrorModels {
-                    default,
+                    default: v.parse().map_err(E::custom)?,
                     by_output: BTreeMap::new(),
                 })
             }
@@ -901,10 +950,7 @@ impl Project {
                         "[validation] error_model.{} = \"{}\": the model has no output {} (it \
                          has {}; `default` sets the others')",
                         excerpt(name),
-                        serde_json::to_value(self.validation.error_model.of(name))
-                            .ok()
-                            .and_then(|v| v.as_str().map(str::to_string))
-                            .unwrap_or_default(),
+                        self.validation.error_model.of(name).as_str(),
                         excerpt(name),
                         outputs.join(", ")
                     ),
@@ -1436,21 +1482,28 @@ mod tests {
     #[test]
     fn an_error_model_for_every_meter_or_one_per_meter() {
         use bemcal_stats::predictive::ErrorModel;
+        use ErrorModelSetting::{Auto, Fixed};
         let models = |extra: &str| project(&format!("[validation]\n{extra}")).unwrap();
         let one = models("error_model = \"hour_of_day\"\n")
             .validation
             .error_model;
-        assert_eq!(one.of("heating_kwh"), ErrorModel::HourOfDay);
-        assert_eq!(
-            project("").unwrap().validation.error_model.of("x"),
-            ErrorModel::Level
-        );
+        assert_eq!(one.of("heating_kwh"), Fixed(ErrorModel::HourOfDay));
+        assert_eq!(project("").unwrap().validation.error_model.of("x"), Auto);
         let each =
             models("error_model = { heating_kwh = \"hour_of_day\", default = \"constant\" }\n")
                 .validation
                 .error_model;
-        assert_eq!(each.of("heating_kwh"), ErrorModel::HourOfDay);
-        assert_eq!(each.of("cooling_kwh"), ErrorModel::Constant);
+        assert_eq!(each.of("heating_kwh"), Fixed(ErrorModel::HourOfDay));
+        assert_eq!(each.of("cooling_kwh"), Fixed(ErrorModel::Constant));
+        let auto = models("error_model = { default = \"auto\", heating_kwh = \"level\" }\n")
+            .validation
+            .error_model;
+        assert_eq!(auto.of("cooling_kwh"), Auto);
+        assert_eq!(auto.of("heating_kwh"), Fixed(ErrorModel::Level));
+        assert_eq!(
+            serde_json::to_string(&auto).unwrap(),
+            r#"{"default":"auto","heating_kwh":"level"}"#
+        );
         // Written back as read: a string for one, a table with its default for several.
         assert_eq!(serde_json::to_string(&one).unwrap(), "\"hour_of_day\"");
         assert_eq!(

@@ -233,6 +233,22 @@ pub struct ModelCoverageBlock {
     /// (absent from a summary written before recalibration).
     #[serde(default)]
     pub before_recalibration: Option<PeriodCoverageBlock>,
+    /// The calibration period judged month by month out of time (absent from a summary
+    /// written before it).
+    #[serde(default)]
+    pub cross_validated: Option<CrossValidatedBlock>,
+}
+
+/// An error model's hourly intervals judged month by month out of time: each calibration
+/// month by intervals built without it.
+#[derive(Debug, Clone, Deserialize)]
+pub struct CrossValidatedBlock {
+    /// Months judged.
+    pub months: usize,
+    /// 50 % and 90 % coverage over all of them.
+    pub coverage: Vec<CoverageBlock>,
+    /// The mean over the months of their distance from nominal, percentage points.
+    pub mean_month_miss_points: f64,
 }
 
 /// How often one interval held.

@@ -413,6 +413,96 @@ impl Intervals {
     }
 }
 
+/// An error model's recalibrated intervals judged out of time, by blocked cross-validation
+/// over the calibration period (Roberts et al. 2017, *Cross-validation strategies for data
+/// with temporal, spatial, hierarchical, or phylogenetic structure*, Ecography 40, 913-929:
+/// blocks long against the residuals' autocorrelation): for each block of `folds` (calendar
+/// months), the draws' noise scales ([`ErrorModel::scales`]) and the recalibrated levels
+/// ([`Levels::recalibrated`]) are taken from the other blocks' calibration hours alone
+/// (`fit`), and the intervals so built are judged on the block's own. Recalibrated intervals
+/// hold their nominal share of the hours they were recalibrated on by construction, which
+/// says nothing of an error model; this says how they hold on a month they did not see,
+/// without a held-out period. The intervals of `max(floor, Y)` where `floor` is given (as
+/// [`pits`]). Per block judged (those with a measured calibration hour), one [`Coverage`] per
+/// `nominal` level.
+pub fn cross_validated_coverage(
+    sims: &[Vec<f64>],
+    measured: &[f64],
+    fit: &[bool],
+    folds: &[std::ops::Range<usize>],
+    model: ErrorModel,
+    nominal: &[f64],
+    floor: Option<f64>,
+) -> Result<Vec<Vec<Coverage>>> {
+    let n = fit.len();
+    if measured.len() != n || sims.iter().any(|s| s.len() != n) || folds.iter().any(|f| f.end > n) {
+        return Err(StatsError::Shape(format!(
+            "{} simulations, {} measured values, {n} hour flags and folds up to hour {} \
+             (each must have {n} values)",
+            sims.len(),
+            measured.len(),
+            folds.iter().map(|f| f.end).max().unwrap_or(0)
+        )));
+    }
+    let mut judged = vec![];
+    let mut c = Vec::with_capacity(sims.len());
+    for fold in folds {
+        let hours: Vec<usize> = (fold.clone())
+            .filter(|&h| fit[h] && measured[h].is_finite())
+            .collect();
+        if hours.is_empty() {
+            continue;
+        }
+        let mut train = fit.to_vec();
+        train[fold.clone()].iter_mut().for_each(|t| *t = false);
+        let noise = (sims.iter())
+            .map(|s| model.scales(measured, s, &train))
+            .collect::<Result<Vec<_>>>()?;
+        let levels = Levels::recalibrated(nominal, &pits(sims, &noise, measured, &train, floor))?;
+        let k = nominal.len();
+        let (mut lower, mut upper) = (vec![vec![f64::NAN; n]; k], vec![vec![f64::NAN; n]; k]);
+        let mut select = vec![false; n];
+        for &h in &hours {
+            components_at(sims, &noise, h, &mut c);
+            select[h] = true;
+            let bound = |p: f64| {
+                let q = mixture_quantile_each(&c, p);
+                floor.map_or(q, |f| q.max(f))
+            };
+            for (i, &(lo, hi)) in levels.bounds.iter().enumerate() {
+                (lower[i][h], upper[i][h]) = (bound(lo), bound(hi));
+            }
+        }
+        judged.push(
+            (nominal.iter().enumerate())
+                .filter_map(|(i, &l)| coverage(l, measured, &lower[i], &upper[i], &select))
+                .collect(),
+        );
+    }
+    Ok(judged)
+}
+
+/// The mean over blocks of their intervals' distance from nominal ([`coverage_miss`]),
+/// weighted by the hours each judged: how far from calibrated the intervals are within a
+/// block, not only over them all (intervals too wide in winter and too narrow in summer can
+/// hold their nominal share over a year and in no month; a held-out season sees one side).
+/// NaN without a block judged.
+pub fn mean_block_miss(blocks: &[Vec<Coverage>]) -> f64 {
+    let (mut sum, mut hours) = (0.0, 0usize);
+    for b in blocks {
+        let (m, n) = (coverage_miss(b), b.first().map_or(0, |c| c.hours));
+        if m.is_finite() {
+            sum += m * n as f64;
+            hours += n;
+        }
+    }
+    if hours == 0 {
+        f64::NAN
+    } else {
+        sum / hours as f64
+    }
+}
+
 /// Lag-one autocorrelation of `z` over the consecutive pairs where both values are finite:
 /// `sum z_t z_(t-1) / sum z_t^2` (the sum of squares over the same values; 0 without a pair),
 /// clamped to `[-0.999, 0.999]` so that an AR(1) built on it is stationary.
@@ -543,15 +633,24 @@ pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
 /// where no candidate was judged.
 pub fn nearest_nominal(candidates: &[&[Coverage]], tie_points: f64) -> Option<usize> {
     let misses: Vec<f64> = candidates.iter().map(|c| coverage_miss(c)).collect();
+    let widths: Vec<f64> = (candidates.iter())
+        .map(|c| c.iter().map(|c| c.mean_width).sum())
+        .collect();
+    sharpest_within(&misses, &widths, tie_points)
+}
+
+/// Of candidates with a distance from nominal `misses` (percentage points; NaN: not judged)
+/// and a `widths` (summed over the levels), the index of the smallest miss, or among those
+/// within `tie_points` of it the narrowest ([`nearest_nominal`]'s rule).
+pub fn sharpest_within(misses: &[f64], widths: &[f64], tie_points: f64) -> Option<usize> {
     let best = misses
         .iter()
         .copied()
         .filter(|m| m.is_finite())
         .min_by(f64::total_cmp)?;
-    let width = |c: &[Coverage]| c.iter().map(|c| c.mean_width).sum::<f64>();
-    (0..candidates.len())
+    (0..misses.len().min(widths.len()))
         .filter(|&i| misses[i].is_finite() && misses[i] <= best + tie_points)
-        .min_by(|&a, &b| width(candidates[a]).total_cmp(&width(candidates[b])))
+        .min_by(|&a, &b| widths[a].total_cmp(&widths[b]))
 }
 
 /// How often one interval level held on a set of hours.
@@ -678,6 +777,73 @@ mod tests {
         // Nothing judged.
         assert_eq!(nearest_nominal(&[&[][..]], 1.0), None);
         assert!(coverage_miss(&[]).is_nan());
+    }
+
+    #[test]
+    fn cross_validation_by_block_finds_the_error_model_that_holds_in_every_season() {
+        // A meter whose level runs from 1 in winter to 10 in summer, its noise 10 % of the
+        // level: four draws on the level (1 % apart), twelve 720-hour months, the last one
+        // not calibrated. The constant scale's recalibrated intervals hold their share over
+        // the year and in no month (too wide in winter, too narrow in summer); the level's
+        // hold in each month, judged on months they did not see.
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let n = 12 * 720;
+        let level: Vec<f64> = (0..n)
+            .map(|t| 1.0 + 9.0 * (0.5 - 0.5 * (std::f64::consts::TAU * t as f64 / n as f64).cos()))
+            .collect();
+        let measured: Vec<f64> = (level.iter())
+            .map(|m| m + 0.1 * m * rng.sample::<f64, _>(StandardNormal))
+            .collect();
+        let sims: Vec<Vec<f64>> = (0..4)
+            .map(|j| {
+                level
+                    .iter()
+                    .map(|m| m * (1.0 + 0.01 * (j as f64 - 1.5)))
+                    .collect()
+            })
+            .collect();
+        let mut fit = vec![true; n];
+        fit[11 * 720..].iter_mut().for_each(|f| *f = false);
+        let folds: Vec<_> = (0..12).map(|m| 720 * m..720 * (m + 1)).collect();
+        let judge = |model| {
+            cross_validated_coverage(&sims, &measured, &fit, &folds, model, &[0.5, 0.9], None)
+                .unwrap()
+        };
+        let (constant, by_level) = (judge(ErrorModel::Constant), judge(ErrorModel::Level));
+        assert_eq!((constant.len(), by_level.len()), (11, 11));
+        assert!(by_level.iter().all(|b| b.len() == 2 && b[0].hours == 720));
+        let pooled = |blocks: &[Vec<Coverage>], i: usize| {
+            let parts: Vec<Coverage> = blocks.iter().map(|b| b[i]).collect();
+            pooled_coverage(&parts).unwrap().fraction
+        };
+        // Over the year both hold about their share; month by month only the level's.
+        for blocks in [&constant, &by_level] {
+            assert!(
+                (pooled(blocks, 1) - 0.9).abs() < 0.03,
+                "{}",
+                pooled(blocks, 1)
+            );
+        }
+        let (c, l) = (mean_block_miss(&constant), mean_block_miss(&by_level));
+        assert!(l < 8.0 && c > 25.0, "level {l}, constant {c}");
+        let w = |b: &[Vec<Coverage>]| b[0][1].mean_width;
+        assert!(w(&by_level) < w(&constant), "narrower in winter");
+        // The choice: the smallest miss; within the tie margin, the narrower.
+        assert_eq!(sharpest_within(&[c, l], &[1.0, 2.0], 2.0), Some(1));
+        assert_eq!(sharpest_within(&[3.0, 2.0], &[1.0, 2.0], 2.0), Some(0));
+        assert_eq!(sharpest_within(&[f64::NAN], &[1.0], 2.0), None);
+        // Shapes are checked.
+        assert!(cross_validated_coverage(
+            &sims,
+            &measured[1..],
+            &fit,
+            &folds,
+            ErrorModel::Level,
+            &[0.5],
+            None
+        )
+        .is_err());
+        assert!(mean_block_miss(&[]).is_nan());
     }
 
     use super::*;

@@ -152,11 +152,15 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
          hours' probability integral transforms give; Kuleshov et al. 2018), so that they hold \
          about 50 % and 90 % of its hours by construction: the held-out hours are the check, \
          and the posterior's own intervals, before recalibration, show how far its spread is \
-         from the meters'. The first error model is the one in \
-         <code>validation/predictive_intervals.csv</code> (<code>[validation] error_model</code>).</p>\
+         from the meters'. Each month of the calibration period is also judged out of time, by \
+         intervals built without it (their coverage over the months, and how far from nominal \
+         a month's is on average). The first error model is the one in \
+         <code>validation/predictive_intervals.csv</code> (<code>[validation] error_model</code>; \
+         <code>\"auto\"</code>, the default, takes the one nearest nominal month by month).</p>\
          <table><tr><th class=\"l\">output</th><th class=\"l\">error model</th>\
          <th>in-sample 50 %</th><th>in-sample 90 %</th><th>held out 50 %</th><th>held out 90 %</th>\
-         <th>90 % width, kWh</th><th>before recalibration: in-sample 50 / 90 %</th>\
+         <th>90 % width, kWh</th><th>months out of time: 50 / 90 % (points a month)</th>\
+         <th>before recalibration: in-sample 50 / 90 %</th>\
          <th>held out 50 / 90 %</th></tr>",
         p.draws,
         if p.with_surrogate_error {
@@ -183,7 +187,7 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
                 };
             let _ = write!(
                 h,
-                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&o.output),
                 esc(&m.error_model),
                 pct(m.coverage.in_sample.first()),
@@ -194,6 +198,12 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
                     .in_sample
                     .get(1)
                     .map_or("&ndash;".into(), |c| g(c.mean_width)),
+                m.cross_validated.as_ref().map_or("&ndash;".into(), |c| format!(
+                    "{} / {} ({:.1})",
+                    pct(c.coverage.first()),
+                    pct(c.coverage.get(1)),
+                    c.mean_month_miss_points
+                )),
                 before(|b| &b.in_sample),
                 before(|b| &b.held_out),
             );
@@ -203,7 +213,7 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
                 |s: Option<f64>| s.map_or("&ndash;".into(), |s| format!("{:.1} %", s * 100.0));
             let _ = write!(
                 h,
-                "<tr><td class=\"l\">{}</td><td class=\"l\">{} on the hours it reads above 0</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>&ndash;</td><td colspan=\"2\" class=\"l\">hours that read 0: {} in-sample, {} held out; a reading of 0 lies inside every interval that starts at 0</td></tr>",
+                "<tr><td class=\"l\">{}</td><td class=\"l\">{} on the hours it reads above 0</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>&ndash;</td><td>&ndash;</td><td colspan=\"2\" class=\"l\">hours that read 0: {} in-sample, {} held out; a reading of 0 lies inside every interval that starts at 0</td></tr>",
                 esc(&o.output),
                 esc(o.by_error_model.first().map_or("", |m| m.error_model.as_str())),
                 pct(r.coverage.in_sample.first()),
