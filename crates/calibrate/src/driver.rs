@@ -628,7 +628,7 @@ fn validate(
 /// `estimate = "best_simulated"`, where EnergyPlus fits none of the points it `simulated`
 /// (the MAP draw and the predictive draws; appended to as it goes): output space mapping
 /// ([`crate::mapping`]), at most `validation.mapping_steps` steps while no point passes
-/// Guideline 14 hourly, each from the best point so far ([`mapping::next_step`]), its points
+/// Guideline 14 hourly and monthly, each from the best point so far ([`mapping::next_step`]), its points
 /// simulated as one validation wave. The steps are recorded in `validation/mapping.json`, so
 /// that a later call of the driver asks for the same points (and says so only when it computes
 /// a step); a step's mapped points EnergyPlus cannot simulate, or that the model's
@@ -644,11 +644,11 @@ fn map_estimate(
     let mut record = mapping::read(&vdir);
     let (mut steps, mut anchors) = (vec![], vec![]);
     loop {
-        let ratios: Vec<f64> = (simulated.iter())
-            .map(|(_, m)| crate::limit_ratio(m, &inp.fitted))
+        let fits: Vec<crate::Fit> = (simulated.iter())
+            .map(|(_, m)| crate::Fit::of(m, &inp.fitted))
             .collect();
         let max = cal.project.validation.mapping_steps;
-        let Some((a, fractions)) = mapping::next_step(&ratios, &anchors, max) else {
+        let Some((a, fractions)) = mapping::next_step(&fits, &anchors, max) else {
             break;
         };
         anchors.push(a);
@@ -674,13 +674,17 @@ fn map_estimate(
                 record.truncate(steps.len());
                 record.push(step.clone());
                 mapping::write(&vdir, &record)?;
+                let monthly = (fits[a].monthly).map_or(String::new(), |m| {
+                    format!(" and {m:.2} of its monthly ones")
+                });
                 log(&format!(
-                    "validation: EnergyPlus fits none of the {} points simulated (the best, {}, \
-                     at {:.2} of Guideline 14's hourly limits): output space mapping step {} \
-                     from it, EnergyPlus at {} of the way to the corrected surrogate's mode",
+                    "validation: EnergyPlus fits none of the {} points simulated by Guideline \
+                     14's hourly and monthly criteria (the nearest, {}, at {:.2} of its hourly \
+                     limits{monthly}): output space mapping step {} from it, EnergyPlus at {} \
+                     of the way to the corrected surrogate's mode",
                     simulated.len(),
                     anchor.label,
-                    ratios[a],
+                    fits[a].hourly,
                     steps.len() + 1,
                     (fractions.iter().map(|f| format!("{f:.3}")))
                         .collect::<Vec<_>>()
