@@ -154,8 +154,9 @@ pub struct OutputPredictive {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub totals: Vec<TotalsCoverage>,
     /// The error model the calibration period's months favour, each judged by intervals built
-    /// without it ([`Favoured`]; `error_model = "auto"` takes it). Absent from a summary
-    /// written before it, or with fewer than two months measured.
+    /// without it ([`Favoured`]; `error_model = "auto"` takes it, `level` where it is
+    /// absent). Absent from a summary written before it, and where no month could be judged (a
+    /// calibration period of one month).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cross_validation_favours: Option<Favoured>,
     /// With a held-out period: the error model its hours favour ([`Favoured`]).

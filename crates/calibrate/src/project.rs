@@ -662,8 +662,9 @@ pub enum ErrorModelSetting {
     /// `"auto"`: the error model whose intervals hold nearest nominal month by month when each
     /// month of the calibration period is judged by intervals built without it
     /// (`summary.json` `predictive.outputs[].cross_validation_favours`;
-    /// [`bemcal_stats::predictive::cross_validated_coverage`]). A held-out period never
-    /// chooses, so its coverage stays an independent check.
+    /// [`bemcal_stats::predictive::cross_validated_coverage`]; `level` where no month can be
+    /// judged, a calibration period of one month). A held-out period never chooses, so its
+    /// coverage stays an independent check.
     Auto,
     /// This error model.
     Fixed(bemcal_stats::predictive::ErrorModel),

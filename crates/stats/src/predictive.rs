@@ -423,8 +423,8 @@ impl Intervals {
 /// hold their nominal share of the hours they were recalibrated on by construction, which
 /// says nothing of an error model; this says how they hold on a month they did not see,
 /// without a held-out period. The intervals of `max(floor, Y)` where `floor` is given (as
-/// [`pits`]). Per block judged (those with a measured calibration hour), one [`Coverage`] per
-/// `nominal` level.
+/// [`pits`]). Per block judged (those with a measured calibration hour, and at least
+/// [`MIN_RECALIBRATION_VALUES`] in the other blocks), one [`Coverage`] per `nominal` level.
 pub fn cross_validated_coverage(
     sims: &[Vec<f64>],
     measured: &[f64],
@@ -455,6 +455,12 @@ pub fn cross_validated_coverage(
         }
         let mut train = fit.to_vec();
         train[fold.clone()].iter_mut().for_each(|t| *t = false);
+        let trained = (0..n)
+            .filter(|&h| train[h] && measured[h].is_finite())
+            .count();
+        if trained < MIN_RECALIBRATION_VALUES {
+            continue;
+        }
         let noise = (sims.iter())
             .map(|s| model.scales(measured, s, &train))
             .collect::<Result<Vec<_>>>()?;
@@ -832,6 +838,19 @@ mod tests {
         assert_eq!(sharpest_within(&[c, l], &[1.0, 2.0], 2.0), Some(1));
         assert_eq!(sharpest_within(&[3.0, 2.0], &[1.0, 2.0], 2.0), Some(0));
         assert_eq!(sharpest_within(&[f64::NAN], &[1.0], 2.0), None);
+        // A calibration period of one month: no other month to build its intervals from.
+        let mut one = vec![false; n];
+        one[..720].iter_mut().for_each(|f| *f = true);
+        let alone = cross_validated_coverage(
+            &sims,
+            &measured,
+            &one,
+            &folds,
+            ErrorModel::Level,
+            &[0.5],
+            None,
+        );
+        assert_eq!(alone.unwrap().len(), 0);
         // Shapes are checked.
         assert!(cross_validated_coverage(
             &sims,
