@@ -137,8 +137,9 @@ pub struct OutputPredictive {
     /// The calibrated output (and its meter).
     pub output: String,
     /// The error model of its intervals in `validation/predictive_intervals.csv`
-    /// (`[validation] error_model`; `by_error_model`'s first). Absent from a summary written
-    /// before error models per meter: the report's `error_model` then.
+    /// (`[validation] error_model`, with `auto` resolved: `cross_validation_favours`;
+    /// `by_error_model`'s first). Absent from a summary written before error models per meter:
+    /// the report's `error_model` then.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_model: Option<ErrorModel>,
     /// Root mean square residual of EnergyPlus at the estimate over the calibration hours (kWh).
