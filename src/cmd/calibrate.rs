@@ -345,7 +345,7 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
         p.draws,
         if p.with_surrogate_error { " with the surrogate's error" } else { "" },
         p.failed,
-        setting_name(p.error_model)
+        quoted(p.error_model.as_str())
     );
     let cov = |c: &[bemcal_stats::predictive::Coverage]| {
         c.iter()
@@ -408,7 +408,7 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
     if differs {
         let entries: Vec<String> = std::iter::once(("default", p.error_model.as_str()))
             .chain(entries)
-            .map(|(k, m)| format!("{} = \"{m}\"", toml_key(k)))
+            .map(|(k, m)| format!("{} = {}", toml_key(k), quoted(m)))
             .collect();
         println!(
             "to use the error models the held-out hours favour (chosen on them: judge the \
@@ -456,12 +456,12 @@ fn before_recalibration(c: Option<&Vec<bemcal_stats::predictive::Coverage>>) -> 
 
 /// An error model as the project file spells it, quoted (`"hour_of_day"`).
 fn model_name(m: bemcal_stats::predictive::ErrorModel) -> String {
-    format!("\"{}\"", m.as_str())
+    quoted(m.as_str())
 }
 
-/// An error model setting as the project file spells it, quoted (`"auto"`).
-fn setting_name(m: ErrorModelSetting) -> String {
-    format!("\"{}\"", m.as_str())
+/// A name as the project file spells it, quoted (`"auto"`).
+fn quoted(name: &str) -> String {
+    format!("\"{name}\"")
 }
 
 /// A meter's error models judged month by month out of time, and the one its intervals take

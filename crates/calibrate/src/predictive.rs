@@ -28,7 +28,7 @@ use std::ops::Range;
 use bemcal_stats::predictive::{
     coverage, coverage_miss, cross_validated_coverage, intervals, lag1_autocorrelation,
     mean_block_miss, period_mixture, period_totals, pits, pooled_coverage, sharpest_within,
-    Coverage, ErrorModel, Intervals, Levels,
+    summed_width, Coverage, ErrorModel, Intervals, Levels,
 };
 use serde::{Deserialize, Serialize};
 
@@ -274,11 +274,6 @@ fn favoured(
     })
 }
 
-/// The summed mean width of intervals at every level.
-fn width(coverage: &[Coverage]) -> f64 {
-    coverage.iter().map(|c| c.mean_width).sum()
-}
-
 /// An error model's hourly intervals judged month by month out of time: each month of the
 /// calibration period by intervals whose noise scales and recalibration never saw it
 /// ([`bemcal_stats::predictive::cross_validated_coverage`]).
@@ -442,6 +437,7 @@ pub fn assess(
     let error_models = &cal.project.validation.error_model;
     let months = TotalPeriod::Month.periods(fit.len());
     for (k, name) in inp.outputs.iter().enumerate() {
+        let setting = error_models.of(name);
         let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();
         let estimate = series(at_estimate);
@@ -486,12 +482,12 @@ pub fn assess(
                 (
                     m.error_model,
                     miss,
-                    cv.map_or(f64::NAN, |c| width(&c.coverage)),
+                    cv.map_or(f64::NAN, |c| summed_width(&c.coverage)),
                 )
             }),
-            error_models.of(name),
+            setting,
         );
-        let configured = match error_models.of(name) {
+        let configured = match setting {
             ErrorModelSetting::Fixed(m) => m,
             ErrorModelSetting::Auto => {
                 cross_validation_favours.map_or(ErrorModel::Level, |f| f.error_model)
@@ -528,7 +524,7 @@ pub fn assess(
         let held_out_favours = favoured(
             by_error_model.iter().map(|m| {
                 let held = &m.coverage.held_out;
-                (m.error_model, coverage_miss(held), width(held))
+                (m.error_model, coverage_miss(held), summed_width(held))
             }),
             ErrorModelSetting::Fixed(configured),
         );

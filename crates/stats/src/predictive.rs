@@ -370,6 +370,16 @@ pub struct Intervals {
 /// units) and `noise[j][h]`, the noise scale of draw `j` at hour `h`, bounded at the mixture's
 /// probability `levels`. An hour where no draw has a value is NaN.
 pub fn intervals(sims: &[Vec<f64>], noise: &[Vec<f64>], levels: &Levels) -> Result<Intervals> {
+    intervals_on(sims, noise, levels, None)
+}
+
+/// [`intervals`] of the hours `select` keeps (all with `None`); NaN at the others.
+fn intervals_on(
+    sims: &[Vec<f64>],
+    noise: &[Vec<f64>],
+    levels: &Levels,
+    select: Option<&[bool]>,
+) -> Result<Intervals> {
     let n = sims.first().map_or(0, Vec::len);
     if sims.is_empty() || sims.iter().any(|s| s.len() != n) || !fits(noise, sims.len(), n) {
         return Err(StatsError::Shape(format!(
@@ -386,7 +396,11 @@ pub fn intervals(sims: &[Vec<f64>], noise: &[Vec<f64>], levels: &Levels) -> Resu
     };
     let mut c = Vec::with_capacity(sims.len());
     for h in 0..n {
-        components_at(sims, noise, h, &mut c);
+        if select.is_some_and(|s| !s.get(h).copied().unwrap_or(false)) {
+            c.clear();
+        } else {
+            components_at(sims, noise, h, &mut c);
+        }
         out.median.push(mixture_quantile_each(&c, levels.median));
         for (i, &(lo, hi)) in levels.bounds.iter().enumerate() {
             out.lower[i].push(mixture_quantile_each(&c, lo));
@@ -445,12 +459,12 @@ pub fn cross_validated_coverage(
         )));
     }
     let mut judged = vec![];
-    let mut c = Vec::with_capacity(sims.len());
     for fold in folds {
-        let hours: Vec<usize> = (fold.clone())
-            .filter(|&h| fit[h] && measured[h].is_finite())
+        // The block's measured calibration hours.
+        let block: Vec<bool> = (0..n)
+            .map(|h| fold.contains(&h) && fit[h] && measured[h].is_finite())
             .collect();
-        if hours.is_empty() {
+        if !block.contains(&true) {
             continue;
         }
         let mut train = fit.to_vec();
@@ -465,23 +479,13 @@ pub fn cross_validated_coverage(
             .map(|s| model.scales(measured, s, &train))
             .collect::<Result<Vec<_>>>()?;
         let levels = Levels::recalibrated(nominal, &pits(sims, &noise, measured, &train, floor))?;
-        let k = nominal.len();
-        let (mut lower, mut upper) = (vec![vec![f64::NAN; n]; k], vec![vec![f64::NAN; n]; k]);
-        let mut select = vec![false; n];
-        for &h in &hours {
-            components_at(sims, &noise, h, &mut c);
-            select[h] = true;
-            let bound = |p: f64| {
-                let q = mixture_quantile_each(&c, p);
-                floor.map_or(q, |f| q.max(f))
-            };
-            for (i, &(lo, hi)) in levels.bounds.iter().enumerate() {
-                (lower[i][h], upper[i][h]) = (bound(lo), bound(hi));
-            }
+        let mut iv = intervals_on(sims, &noise, &levels, Some(&block))?;
+        if let Some(f) = floor {
+            iv.clamp_below(f);
         }
         judged.push(
             (nominal.iter().enumerate())
-                .filter_map(|(i, &l)| coverage(l, measured, &lower[i], &upper[i], &select))
+                .filter_map(|(i, &l)| coverage(l, measured, &iv.lower[i], &iv.upper[i], &block))
                 .collect(),
         );
     }
@@ -633,21 +637,16 @@ pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
         .sum()
 }
 
-/// Of several candidates' coverages (on the same hours), the index of the one nearest nominal
-/// ([`coverage_miss`]); among those within `tie_points` of it, the sharpest (the smallest mean
-/// width over the levels): sharpness subject to calibration (Gneiting et al. 2007). `None`
-/// where no candidate was judged.
-pub fn nearest_nominal(candidates: &[&[Coverage]], tie_points: f64) -> Option<usize> {
-    let misses: Vec<f64> = candidates.iter().map(|c| coverage_miss(c)).collect();
-    let widths: Vec<f64> = (candidates.iter())
-        .map(|c| c.iter().map(|c| c.mean_width).sum())
-        .collect();
-    sharpest_within(&misses, &widths, tie_points)
+/// The summed mean width of a set of intervals over their levels (meter units): the
+/// sharpness [`sharpest_within`] weighs.
+pub fn summed_width(coverage: &[Coverage]) -> f64 {
+    coverage.iter().map(|c| c.mean_width).sum()
 }
 
 /// Of candidates with a distance from nominal `misses` (percentage points; NaN: not judged)
-/// and a `widths` (summed over the levels), the index of the smallest miss, or among those
-/// within `tie_points` of it the narrowest ([`nearest_nominal`]'s rule).
+/// and a `widths` (summed over the levels, [`summed_width`]), the index of the smallest miss,
+/// or among those within `tie_points` of it the narrowest: sharpness subject to calibration
+/// (Gneiting et al. 2007). `None` where no candidate was judged.
 pub fn sharpest_within(misses: &[f64], widths: &[f64], tie_points: f64) -> Option<usize> {
     let best = misses
         .iter()
@@ -774,10 +773,16 @@ mod tests {
             cov(0.547, 0.903, 191.0),
         );
         assert!((coverage_miss(&level) - 18.4).abs() < 1e-9);
+        let nearest_nominal = |candidates: &[&[Coverage]], tie: f64| {
+            let misses: Vec<f64> = candidates.iter().map(|c| coverage_miss(c)).collect();
+            let widths: Vec<f64> = candidates.iter().map(|c| summed_width(c)).collect();
+            sharpest_within(&misses, &widths, tie)
+        };
         assert_eq!(nearest_nominal(&[&level, &constant, &hour], 1.0), Some(2));
         // Within the tie margin, the narrower intervals.
         let wide = cov(0.50, 0.90, 300.0);
         let narrow = cov(0.505, 0.905, 100.0);
+        assert_eq!(summed_width(&wide), 900.0);
         assert_eq!(nearest_nominal(&[&wide, &narrow], 0.5), Some(0));
         assert_eq!(nearest_nominal(&[&wide, &narrow], 1.5), Some(1));
         // Nothing judged.
