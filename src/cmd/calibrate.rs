@@ -340,7 +340,9 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
         "\nhourly predictive intervals (EnergyPlus at {} posterior draws{}, {} failed, each + the noise \
          of its own residuals under each meter's error model, by default {}; recalibrated on the \
          calibration period, so that they hold their nominal share there: the held-out hours \
-         are the check): share of measured hours inside, mean width [the posterior's own \
+         are the check): share of measured hours inside (PIT: where a meter reads 0 in hours \
+         the draws may find idle, each such reading counted by its share of probability \
+         inside, the share to hold against nominal), mean width [the posterior's own \
          intervals before recalibration]",
         p.draws,
         if p.with_surrogate_error { " with the surrogate's error" } else { "" },
@@ -350,8 +352,11 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
     let cov = |c: &[bemcal_stats::predictive::Coverage]| {
         c.iter()
             .map(|c| {
+                let pit = c
+                    .pit_fraction
+                    .map_or(String::new(), |f| format!("PIT {:.1} %, ", f * 100.0));
                 format!(
-                    "{:.0} %: {:5.1} % ({:.1} kWh)",
+                    "{:.0} %: {:5.1} % ({pit}{:.1} kWh)",
                     c.nominal * 100.0,
                     c.fraction * 100.0,
                     c.mean_width

@@ -11,9 +11,10 @@
 //! intervals are then recalibrated on the calibration period (the mixture's quantiles at the
 //! levels the measured hours' probability integral transforms say; Kuleshov et al. 2018), so
 //! that a posterior whose draws spread wider than the meters (a tempered likelihood) or sit to
-//! one side of them gives intervals that hold their nominal share there: the held-out period
-//! is the independent check, and the posterior predictive's own coverage is reported beside
-//! it (`before_recalibration`). Numerics in
+//! one side of them gives intervals that hold their nominal share there (of PIT, where a meter
+//! reads at its floor: [`Coverage::pit_fraction`]): the held-out period is the independent
+//! check, and the posterior predictive's own coverage is reported beside it
+//! (`before_recalibration`). Numerics in
 //! [`bemcal_stats::predictive`]; the driver has EnergyPlus simulate [`ChainSummary::predictive_candidates`]
 //! and [`crate::write_summary`] reads their runs once and calls [`assess`].
 //!
@@ -173,9 +174,11 @@ pub struct OutputPredictive {
 /// hours read zero. Where the predictive has an atom at zero (the draws idle, or `max(0, Y)`
 /// of a meter that cannot read below it), a reading of zero lies inside every interval whose
 /// lower bound is 0: a closed interval holds an atom's readings whole, not in its nominal
-/// share. The recalibration balances that on the calibration period ([`Levels::recalibrated`]);
-/// a period with more idle hours (a held-out autumn for a cooling meter) then over-covers
-/// though the intervals hold where the meter runs. These are the figures to judge them by.
+/// share, so the share of all hours inside exceeds nominal and the PIT share
+/// ([`Coverage::pit_fraction`]) is the one to hold against it. These figures say how the
+/// intervals do where the meter runs: near nominal where the predictive is calibrated and the
+/// idle hours are foreseen (an hour the draws may find running or idle widens its interval
+/// over both).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct RunningHours {
     /// Share of the measured calibration hours that read zero.
@@ -452,9 +455,21 @@ pub fn assess(
             let noise = (sims.iter())
                 .map(|s| model.scales(&inp.measured[k], s, &fit))
                 .collect::<Result<Vec<_>, _>>()?;
-            let (posterior, _) = bounded(&sims, &noise, None, non_negative)?;
+            let (posterior, central) = bounded(&sims, &noise, None, non_negative)?;
             let calibration = Some((inp.measured[k].as_slice(), fit.as_slice()));
             let (iv, levels) = bounded(&sims, &noise, calibration, non_negative)?;
+            let recalibrated = Judge {
+                iv: &iv,
+                levels: &levels,
+                centers: &sims,
+                scales: &noise,
+                floor,
+            };
+            let own = Judge {
+                iv: &posterior,
+                levels: &central,
+                ..recalibrated
+            };
             let blocks = cross_validated_coverage(
                 &sims,
                 &inp.measured[k],
@@ -466,10 +481,10 @@ pub fn assess(
             )?;
             let coverage = ModelCoverage {
                 error_model: model,
-                coverage: in_and_out(inp, k, &fit, |m, hours| level_coverage(&iv, m, hours)),
+                coverage: in_and_out(inp, k, &fit, |m, hours| recalibrated.coverage(m, hours)),
                 levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
                 before_recalibration: Some(in_and_out(inp, k, &fit, |m, hours| {
-                    level_coverage(&posterior, m, hours)
+                    own.coverage(m, hours)
                 })),
                 cross_validated: CrossValidated::of(&blocks),
             };
@@ -596,10 +611,17 @@ fn totals_coverage(
                 let totals = recalibrate.then(|| period_totals(&inp.measured[k], fit, &periods));
                 let calibration =
                     (totals.as_ref()).map(|(t, whole)| (t.as_slice(), whole.as_slice()));
-                let (iv, _) = bounded(&m.centers, &m.scales, calibration, non_negative)?;
+                let (iv, levels) = bounded(&m.centers, &m.scales, calibration, non_negative)?;
+                let judge = Judge {
+                    iv: &iv,
+                    levels: &levels,
+                    centers: &m.centers,
+                    scales: &m.scales,
+                    floor: non_negative.then_some(0.0),
+                };
                 Ok(in_and_out(inp, k, fit, |m, hours| {
                     let (totals, whole) = period_totals(m, hours, &periods);
-                    level_coverage(&iv, &totals, &whole)
+                    judge.coverage(&totals, &whole)
                 }))
             };
             Ok(TotalsCoverage {
@@ -620,6 +642,30 @@ fn level_coverage(iv: &Intervals, measured: &[f64], select: &[bool]) -> Vec<Cove
         .enumerate()
         .filter_map(|(i, l)| coverage(*l, measured, &iv.lower[i], &iv.upper[i], select))
         .collect()
+}
+
+/// Intervals with the mixture they were taken from, to judge them by.
+struct Judge<'a> {
+    iv: &'a Intervals,
+    levels: &'a Levels,
+    /// Each draw's values.
+    centers: &'a [Vec<f64>],
+    /// Each draw's noise scales.
+    scales: &'a [Vec<f64>],
+    /// The meter's floor (0 for one that cannot read below it).
+    floor: Option<f64>,
+}
+
+impl Judge<'_> {
+    /// [`level_coverage`] of the values of `measured` that `select` keeps, with the PIT share
+    /// where some of them read at an atom ([`Coverage::with_pits`]).
+    fn coverage(&self, measured: &[f64], select: &[bool]) -> Vec<Coverage> {
+        let pits = pits(self.centers, self.scales, measured, select, self.floor);
+        (level_coverage(self.iv, measured, select).into_iter())
+            .zip(&self.levels.bounds)
+            .map(|(c, &bounds)| c.with_pits(&pits, bounds))
+            .collect()
+    }
 }
 
 /// `cover` of meter `k` over the calibration period (`fit`) and, where one is held out, over
@@ -695,6 +741,7 @@ mod tests {
                     fraction: f50,
                     mean_width: 1.0,
                     relative_width: None,
+                    pit_fraction: None,
                 },
                 Coverage {
                     nominal: 0.9,
@@ -702,6 +749,7 @@ mod tests {
                     fraction: f90,
                     mean_width: 3.0,
                     relative_width: None,
+                    pit_fraction: None,
                 },
             ]
         };

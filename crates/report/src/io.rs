@@ -260,6 +260,10 @@ pub struct CoverageBlock {
     pub hours: usize,
     /// Share inside.
     pub fraction: f64,
+    /// Share of PIT inside, where some hours read at an atom (a meter at 0 in hours the draws
+    /// may find idle): the share to hold against nominal.
+    #[serde(default)]
+    pub pit_fraction: Option<f64>,
     /// Mean width, kWh.
     pub mean_width: f64,
 }

@@ -24,9 +24,16 @@
 //!
 //! Where the predictive has an atom at the measured value (a draw with no noise, or a meter
 //! that cannot read below 0 and reads 0), its PIT is not one value but the interval
-//! `[F(y-), F(y)]` ([`Pit`]; Czado, Gneiting & Held 2009, *Predictive model assessment for
-//! count data*, Biometrics 65): the lower bounds are recalibrated on the `F(y)`, the upper on
-//! the `F(y-)`, the condition for a closed interval to hold the reading.
+//! `[F(y-), F(y)]` ([`Pit`]), and the reading counts as uniform over it: the non-randomised
+//! PIT of Czado, Gneiting & Held (2009, *Predictive model assessment for count data*,
+//! Biometrics 65), whose distribution over the readings, `F̄(u) = mean_i G_i(u)`, is uniform
+//! when the predictive is calibrated. The recalibration inverts `F̄`. A closed interval holds
+//! an atom's readings whole, so a meter often at its atom (a cooling meter idle in winter)
+//! has more of its hours inside its intervals than their nominal share however calibrated they
+//! are; its readings' share of PIT inside the interval's levels ([`Coverage::pit_fraction`])
+//! is the figure that says whether they hold. (Forcing the closed intervals' share to nominal
+//! instead narrows them where the meter runs: on a real building idle 68 % of the hours, the
+//! 50 % intervals held 7 % of the running hours.)
 //!
 //! Totals over a run of hours (a day, a month: what M&V practice checks) come from the same
 //! draws' sums with the noise of the sum. Hourly residuals are autocorrelated, so the noise of
@@ -237,37 +244,22 @@ impl Levels {
 
     /// The levels recalibrated on `pits`, the probability integral transforms of the
     /// calibration period's measured values under their mixtures ([`pits`]): each central
-    /// level `p` becomes `R^-1(p)`, the `p` quantile of the PITs (Kuleshov et al. 2018,
-    /// Algorithm 1). A closed interval `[Q(a), Q(b)]` holds `y` when `F(y) >= a` and
-    /// `F(y-) <= b`, so a lower level is a quantile of the PITs' `at` and an upper one of their
-    /// `below` (the same where the predictive has no atom): each tail then misses its nominal
-    /// share of the calibration values, an idle meter's readings at its atom included. Central
-    /// where fewer than [`MIN_RECALIBRATION_VALUES`] values are given, or where a lower level
-    /// would pass its upper one.
+    /// level `p` becomes `R^-1(p)`, `R` the distribution of the PITs (Kuleshov et al. 2018,
+    /// Algorithm 1), a reading at an atom uniform over its PIT interval (Czado et al. 2009:
+    /// [`pit_quantile`]). Central where fewer than [`MIN_RECALIBRATION_VALUES`] values are
+    /// given.
     pub fn recalibrated(nominal: &[f64], pits: &[Pit]) -> Result<Levels> {
         let central = Levels::central(nominal)?;
-        let sorted = |side: fn(&Pit) -> f64| {
-            let mut v: Vec<f64> = pits.iter().map(side).filter(|p| p.is_finite()).collect();
-            v.sort_by(f64::total_cmp);
-            v
-        };
-        let (at, below) = (sorted(|p| p.at), sorted(|p| p.below));
-        if at.len() < MIN_RECALIBRATION_VALUES {
+        let pits: Vec<Pit> = pits.iter().copied().filter(Pit::is_finite).collect();
+        if pits.len() < MIN_RECALIBRATION_VALUES {
             return Ok(central);
         }
-        let q = crate::diagnostics::quantile_sorted;
-        let bounds: Vec<(f64, f64)> = (central.bounds.iter())
-            .map(|&(lo, hi)| (q(&at, lo), q(&below, hi)))
-            .collect();
-        // Far from the meter, with many readings at an atom, a lower level can pass its upper
-        // one (the `at` of idle readings high, the `below` of the others low): no interval
-        // holds the nominal share then, and the posterior's own central ones stay.
-        if bounds.iter().any(|(lo, hi)| lo > hi) {
-            return Ok(central);
-        }
+        let q = |p: f64| pit_quantile(&pits, p);
         Ok(Levels {
-            bounds,
-            median: q(&at, central.median),
+            bounds: (central.bounds.iter())
+                .map(|&(lo, hi)| (q(lo), q(hi)))
+                .collect(),
+            median: q(central.median),
             nominal: central.nominal,
         })
     }
@@ -282,6 +274,71 @@ pub struct Pit {
     pub below: f64,
     /// `F(y)`, the probability of reading at most `y`.
     pub at: f64,
+}
+
+impl Pit {
+    /// Whether both ends are finite.
+    pub fn is_finite(&self) -> bool {
+        self.below.is_finite() && self.at.is_finite()
+    }
+
+    /// Whether the reading sits at an atom of its predictive (`below < at`).
+    pub fn at_atom(&self) -> bool {
+        self.below < self.at
+    }
+
+    /// The non-randomised PIT's distribution function at `u` (Czado et al. 2009, Eq. 2): the
+    /// share of `[below, at]` at or below `u`; for a single value, whether it is at most `u`.
+    pub fn cdf(&self, u: f64) -> f64 {
+        if self.at_atom() {
+            ((u - self.below) / (self.at - self.below)).clamp(0.0, 1.0)
+        } else {
+            f64::from(u8::from(self.at <= u))
+        }
+    }
+
+    /// The share of the PIT inside `[lo, hi]`: `cdf(hi) - cdf(lo)`, and for a single value
+    /// whether it lies inside (bounds included).
+    pub fn share_within(&self, lo: f64, hi: f64) -> f64 {
+        if self.at_atom() {
+            (self.cdf(hi) - self.cdf(lo)).max(0.0)
+        } else {
+            f64::from(u8::from(lo <= self.at && self.at <= hi))
+        }
+    }
+}
+
+/// The `p` quantile of the PITs `pits` (finite), each reading at an atom uniform over its
+/// interval: `inf { u : F̄(u) >= p }`, `F̄ = mean_i Pit::cdf` (Czado et al. 2009), by
+/// bisection on `[0, 1]` to 1e-12. Without atoms it is the empirical quantile. NaN without
+/// PITs.
+pub fn pit_quantile(pits: &[Pit], p: f64) -> f64 {
+    if pits.is_empty() {
+        return f64::NAN;
+    }
+    let n = pits.len() as f64;
+    let cdf = |u: f64| pits.iter().map(|x| x.cdf(u)).sum::<f64>() / n;
+    let (mut a, mut b) = (0.0f64, 1.0f64);
+    if cdf(a) >= p {
+        return a;
+    }
+    while b - a > 1e-12 {
+        let m = 0.5 * (a + b);
+        if cdf(m) >= p {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    b
+}
+
+/// The share of the PITs `pits` inside the probability levels `[lo, hi]`, each reading at an
+/// atom counted by the share of its interval inside (Czado et al. 2009): the coverage of a
+/// calibrated predictive's interval at those levels is nominal in this sense, atoms included.
+/// NaN without PITs.
+pub fn pit_coverage(pits: &[Pit], (lo, hi): (f64, f64)) -> f64 {
+    pits.iter().map(|p| p.share_within(lo, hi)).sum::<f64>() / pits.len() as f64
 }
 
 /// The CDF at `x` of the equal-weight mixture of `N(c, sd²)` over `components` `(c, sd)` (a
@@ -434,11 +491,12 @@ impl Intervals {
 /// months), the draws' noise scales ([`ErrorModel::scales`]) and the recalibrated levels
 /// ([`Levels::recalibrated`]) are taken from the other blocks' calibration hours alone
 /// (`fit`), and the intervals so built are judged on the block's own. Recalibrated intervals
-/// hold their nominal share of the hours they were recalibrated on by construction, which
-/// says nothing of an error model; this says how they hold on a month they did not see,
+/// hold their nominal share (of PIT) of the hours they were recalibrated on by construction,
+/// which says nothing of an error model; this says how they hold on a month they did not see,
 /// without a held-out period. The intervals of `max(floor, Y)` where `floor` is given (as
 /// [`pits`]). Per block judged (those with a measured calibration hour, and at least
-/// [`MIN_RECALIBRATION_VALUES`] in the other blocks), one [`Coverage`] per `nominal` level.
+/// [`MIN_RECALIBRATION_VALUES`] in the other blocks), one [`Coverage`] per `nominal` level,
+/// with its PIT share where a reading sits at an atom ([`Coverage::with_pits`]).
 pub fn cross_validated_coverage(
     sims: &[Vec<f64>],
     measured: &[f64],
@@ -483,9 +541,13 @@ pub fn cross_validated_coverage(
         if let Some(f) = floor {
             iv.clamp_below(f);
         }
+        let block_pits = pits(sims, &noise, measured, &block, floor);
         judged.push(
             (nominal.iter().enumerate())
-                .filter_map(|(i, &l)| coverage(l, measured, &iv.lower[i], &iv.upper[i], &block))
+                .filter_map(|(i, &l)| {
+                    let c = coverage(l, measured, &iv.lower[i], &iv.upper[i], &block)?;
+                    Some(c.with_pits(&block_pits, levels.bounds[i]))
+                })
                 .collect(),
         );
     }
@@ -624,16 +686,17 @@ pub fn period_totals(
 }
 
 /// How far a set of intervals' coverage is from nominal: the sum over its levels of
-/// `|fraction - nominal|`, in percentage points (NaN with no level judged): how far from
-/// calibrated the intervals are, in the sense of Gneiting, Balabdaoui & Raftery (2007, JRSS B
-/// 69), who ask for sharpness subject to calibration.
+/// `|fraction - nominal|` ([`Coverage::calibration_fraction`]), in percentage points (NaN
+/// with no level judged): how far from calibrated the intervals are, in the sense of
+/// Gneiting, Balabdaoui & Raftery (2007, JRSS B 69), who ask for sharpness subject to
+/// calibration.
 pub fn coverage_miss(coverage: &[Coverage]) -> f64 {
     if coverage.is_empty() || coverage.iter().any(|c| c.hours == 0) {
         return f64::NAN;
     }
     coverage
         .iter()
-        .map(|c| 100.0 * (c.fraction - c.nominal).abs())
+        .map(|c| 100.0 * (c.calibration_fraction() - c.nominal).abs())
         .sum()
 }
 
@@ -672,6 +735,34 @@ pub struct Coverage {
     /// Mean width over the mean measured value of those hours (absent where that mean is 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_width: Option<f64>,
+    /// Where some of the hours read at an atom of their predictive (a meter at its floor of
+    /// 0 where draws simulate it idle): the share of their PITs inside the interval's
+    /// probability levels, a reading at the atom counted by the share of its PIT interval
+    /// inside ([`pit_coverage`]). A closed interval holds such a reading whole, so `fraction`
+    /// exceeds nominal however calibrated the intervals are; this is nominal when they are.
+    /// Absent where no hour reads at an atom (`fraction` says it then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pit_fraction: Option<f64>,
+}
+
+impl Coverage {
+    /// The coverage with [`Coverage::pit_fraction`] from `pits`, the PITs of the same hours,
+    /// and the interval's probability levels `bounds`, where some reading sits at an atom.
+    pub fn with_pits(self, pits: &[Pit], bounds: (f64, f64)) -> Coverage {
+        Coverage {
+            pit_fraction: pits
+                .iter()
+                .any(Pit::at_atom)
+                .then(|| pit_coverage(pits, bounds)),
+            ..self
+        }
+    }
+
+    /// The share to hold against nominal: [`Coverage::pit_fraction`] where there is one, else
+    /// `fraction`.
+    pub fn calibration_fraction(&self) -> f64 {
+        self.pit_fraction.unwrap_or(self.fraction)
+    }
 }
 
 /// Coverage of `lower..=upper` on the hours where `select[h]` is true and `measured[h]` and
@@ -708,12 +799,14 @@ pub fn coverage(
         fraction: inside as f64 / nf,
         mean_width: width / nf,
         relative_width: (level != 0.0).then(|| width / level),
+        pit_fraction: None,
     })
 }
 
 /// One interval level's coverage over the union of disjoint sets of hours, from each set's
 /// (hours, share inside and mean width weighted by hours; the relative width where every set
-/// has one). None without hours.
+/// has one; the PIT share where some set has one, the others' `fraction` standing in). None
+/// without hours.
 pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
     let n: usize = parts.iter().map(|c| c.hours).sum();
     if n == 0 {
@@ -726,12 +819,20 @@ pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
         .iter()
         .map(|c| c.relative_width.map(|r| c.mean_width * c.hours as f64 / r))
         .sum();
+    let pit = (parts.iter().any(|c| c.pit_fraction.is_some())).then(|| {
+        let held: f64 = parts
+            .iter()
+            .map(|c| c.calibration_fraction() * c.hours as f64)
+            .sum();
+        held / nf
+    });
     Some(Coverage {
         nominal: parts[0].nominal,
         hours: n,
         fraction: inside / nf,
         mean_width: width / nf,
         relative_width: level.filter(|l| *l != 0.0).map(|l| width / l),
+        pit_fraction: pit,
     })
 }
 
@@ -756,6 +857,7 @@ mod tests {
                     fraction: f50,
                     mean_width: w,
                     relative_width: None,
+                    pit_fraction: None,
                 },
                 Coverage {
                     nominal: 0.9,
@@ -763,6 +865,7 @@ mod tests {
                     fraction: f90,
                     mean_width: 2.0 * w,
                     relative_width: None,
+                    pit_fraction: None,
                 },
             ]
         };
@@ -947,13 +1050,18 @@ mod tests {
     }
 
     #[test]
-    fn readings_at_an_atom_are_held_in_their_nominal_share() {
+    fn readings_at_an_atom_count_by_their_share_and_the_running_hours_keep_theirs() {
         // A meter idle 30 % of the hours: the draws simulate 0 with no noise there and the
-        // meter reads 0; busy hours read N(10, 1) under a predictive N(10, 1.5²). Recalibrated,
-        // the closed intervals hold the nominal share of fresh hours, idle ones included.
+        // meter reads 0 (PIT [0, 1]); busy hours read N(10, 1) under a predictive N(10, 1.5²).
+        // Recalibrated on F̄(u) = 0.3 u + 0.7 G(u), G(u) = Phi(1.5 Phi^-1(u)) the busy hours'
+        // PIT distribution, the levels are [0.3075, 0.6925] and [0.1013, 0.8987] (solved with
+        // scipy), so on fresh hours the PIT share is nominal, the busy hours hold G(b) - G(a)
+        // = 54.9 % and 94.4 %, and the closed intervals, which hold every idle hour, 0.3 +
+        // 0.7 (G(b) - G(a)) = 68.5 % and 96.1 %. (Forcing the closed share to nominal would
+        // leave the busy hours (50 % - 30 %) / 70 % = 28.6 % of the 50 % interval.)
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut z = move || rng.sample::<f64, _>(StandardNormal);
-        let n = 4000;
+        let n = 8000;
         let idle = |h: usize| h % 10 < 3;
         let sims = vec![(0..n)
             .map(|h| if idle(h) { 0.0 } else { 10.0 })
@@ -973,11 +1081,36 @@ mod tests {
             }
         );
         let levels = Levels::recalibrated(&[0.5, 0.9], &pit).unwrap();
+        let want = [(0.3075, 0.6925), (0.1013, 0.8987)];
+        for (got, want) in levels.bounds.iter().zip(want) {
+            assert!((got.0 - want.0).abs() < 0.01 && (got.1 - want.1).abs() < 0.01);
+        }
         let iv = intervals(&sims, &noise, &levels).unwrap();
         let all = vec![true; n];
+        let busy: Vec<bool> = (0..n).map(|h| !idle(h)).collect();
+        let fresh_pits = pits(&sims, &noise, &fresh, &all, None);
+        let expected = [(0.549, 0.685), (0.944, 0.961)];
         for (i, nominal) in [0.5, 0.9].into_iter().enumerate() {
             let c = coverage(nominal, &fresh, &iv.lower[i], &iv.upper[i], &all).unwrap();
-            assert!((c.fraction - nominal).abs() < 0.03, "{nominal}: {c:?}");
+            let c = c.with_pits(&fresh_pits, levels.bounds[i]);
+            let pit_share = c.pit_fraction.expect("idle readings sit at an atom");
+            assert!((pit_share - nominal).abs() < 0.02, "{nominal}: {c:?}");
+            assert_eq!(c.calibration_fraction(), pit_share);
+            assert!(
+                (c.fraction - expected[i].1).abs() < 0.02,
+                "{nominal}: {c:?}"
+            );
+            let running = coverage(nominal, &fresh, &iv.lower[i], &iv.upper[i], &busy).unwrap();
+            assert!(
+                (running.fraction - expected[i].0).abs() < 0.02,
+                "{running:?}"
+            );
+            // Without a reading at an atom there is no PIT share: the fraction says it.
+            let busy_pits = pits(&sims, &noise, &fresh, &busy, None);
+            assert_eq!(
+                running.with_pits(&busy_pits, levels.bounds[i]).pit_fraction,
+                None
+            );
         }
         // A meter that cannot read below 0 reads max(0, Y): a reading of 0 under N(0, 1) has
         // the PIT [0, 1/2], a positive one its CDF alone.
@@ -999,10 +1132,11 @@ mod tests {
     }
 
     #[test]
-    fn levels_that_would_cross_stay_central() {
-        // A model far above a meter that is idle 80 % of the hours (the RSF's cooling): the
-        // idle readings' F(0) are high, the running readings' PITs low, so the 25 % quantile
-        // of the `at` passes the 75 % quantile of the `below`.
+    fn a_model_above_a_mostly_idle_meter_gets_low_levels_that_hold_their_share() {
+        // The RSF's cooling: idle 80 % of the hours where the model gives F(0) = 0.6, running
+        // hours far below the model (PIT 0.01). F̄(u) = 0.8 min(u / 0.6, 1) + 0.2 [u >= 0.01]:
+        // the 50 % levels are F̄^-1(0.25) = 0.0375 and F̄^-1(0.75) = 0.4125, and the readings'
+        // PIT share inside them is 50 %.
         let pits: Vec<Pit> = (0..100)
             .map(|h| match h % 10 < 8 {
                 true => Pit {
@@ -1015,8 +1149,21 @@ mod tests {
                 },
             })
             .collect();
-        let levels = Levels::recalibrated(&[0.5, 0.9], &pits).unwrap();
-        assert_eq!(levels, Levels::central(&[0.5, 0.9]).unwrap());
+        let levels = Levels::recalibrated(&[0.5], &pits).unwrap();
+        let (lo, hi) = levels.bounds[0];
+        assert!(
+            (lo - 0.0375).abs() < 1e-9 && (hi - 0.4125).abs() < 1e-9,
+            "{lo} {hi}"
+        );
+        assert!((pit_coverage(&pits, (lo, hi)) - 0.5).abs() < 1e-9);
+        // Without atoms the quantile is the smallest PIT with at least the share at or below.
+        let points: Vec<Pit> = [0.4, 0.1, 0.3, 0.2]
+            .map(|u| Pit { below: u, at: u })
+            .to_vec();
+        assert!((pit_quantile(&points, 0.5) - 0.2).abs() < 1e-9);
+        assert!((pit_quantile(&points, 0.51) - 0.3).abs() < 1e-9);
+        assert_eq!(pit_quantile(&points, 0.0), 0.0);
+        assert!(pit_quantile(&[], 0.5).is_nan());
     }
 
     #[test]

@@ -152,7 +152,11 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
          hours' probability integral transforms give; Kuleshov et al. 2018), so that they hold \
          about 50 % and 90 % of its hours by construction: the held-out hours are the check, \
          and the posterior's own intervals, before recalibration, show how far its spread is \
-         from the meters'. Each month of the calibration period is also judged out of time, by \
+         from the meters'. A meter that reads 0 in hours the draws may find idle has more of its hours \
+         inside than nominal however calibrated the intervals are (an interval from 0 holds \
+         every such reading); its share of PIT, each such reading counted by its share of \
+         probability inside (Czado et al. 2009), is given beside it and is the one to hold \
+         against nominal. Each month of the calibration period is also judged out of time, by \
          intervals built without it (their coverage over the months, and how far from nominal \
          a month's is on average). The first error model is the one in \
          <code>validation/predictive_intervals.csv</code> (<code>[validation] error_model</code>; \
@@ -171,8 +175,9 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
         p.failed
     );
     let pct = |c: Option<&crate::io::CoverageBlock>| {
-        c.map_or("&ndash;".to_string(), |c| {
-            format!("{:.1} %", c.fraction * 100.0)
+        c.map_or("&ndash;".to_string(), |c| match c.pit_fraction {
+            Some(pit) => format!("{:.1} % (PIT {:.1} %)", c.fraction * 100.0, pit * 100.0),
+            None => format!("{:.1} %", c.fraction * 100.0),
         })
     };
     for o in &p.outputs {
