@@ -34,9 +34,9 @@ use crate::Error;
 pub const FIRST_KEY: usize = 1000;
 
 /// How far along the line from the anchor to the corrected surrogate's mode a step's points
-/// lie, the first time an anchor is used. When the same anchor is used again (no point of its
-/// last step fitted better), its mode is the same, and the step simulates one point nearer
-/// it: 0.25, then 0.125, ... (a smaller trust region; [`next_step`]).
+/// lie, the first time an anchor is used. An anchor is used again only once every point
+/// simulated has anchored a step ([`next_step`]); its mode is the same then, and the step
+/// simulates one point nearer it: 0.25, then 0.125, ... (a smaller trust region).
 pub const FRACTIONS: [f64; 2] = [0.5, 1.0];
 
 /// The record of the search, `validation/mapping.json`.
@@ -80,10 +80,16 @@ pub fn is_mapped(label: &str) -> bool {
 
 /// The next step of the search over the points simulated so far (`fits`: each one's
 /// [`crate::Fit`], in the order they ran), after the steps anchored at `anchors` (indices into
-/// the same list), at most `max_steps` in all: its anchor (the point nearest inside both sets
-/// of Guideline 14's limits, [`crate::Fit::worst`], the first on a tie) and the fractions of
-/// [`line()`] ([`FRACTIONS`] for a new anchor; for one used `k` times before, the one fraction
-/// `0.5^(k+1)`, which no step from it ran yet). `None` when a point passes Guideline 14 hourly
+/// the same list), at most `max_steps` in all: its anchor and the fractions of [`line()`].
+/// The anchor is the point nearest inside both sets of Guideline 14's limits
+/// ([`crate::Fit::worst`], the first on a tie) that has not anchored a step yet, with
+/// [`FRACTIONS`]: where a step found nothing nearer, the next one corrects the surrogate at
+/// another point rather than nearer the same one (the correction is exact at its anchor
+/// only, and another anchor's mode lies elsewhere: from the draws of the demo's final chains
+/// re-adapted once, a step from the best draw, at 1.35 of the hourly limits, found a point at
+/// 1.19, and a step from that one and two nearer it found nothing nearer; a step from the
+/// best point not yet an anchor, a draw at 1.40, found one at 0.66). Once every point has
+/// anchored, the nearest again, with the one fraction `0.5^(k+1)` for one used `k` times. `None` when a point passes Guideline 14 hourly
 /// and monthly ([`crate::Fit::passes_both`]: the search is for a fit, not for the best fit),
 /// when none ran, or when the steps are used up. A point that passes hourly and misses the
 /// monthly criteria anchors a step too: the corrected surrogate's mode fits the meters' hours,
@@ -98,7 +104,17 @@ pub fn next_step(
         return None;
     }
     let worst: Vec<f64> = fits.iter().map(crate::Fit::worst).collect();
-    let a = crate::validation::smallest_finite(&worst)?;
+    let fresh: Vec<f64> = (worst.iter().enumerate())
+        .map(|(i, &w)| {
+            if anchors.contains(&i) {
+                f64::INFINITY
+            } else {
+                w
+            }
+        })
+        .collect();
+    let a = crate::validation::smallest_finite(&fresh)
+        .or_else(|| crate::validation::smallest_finite(&worst))?;
     let used = anchors.iter().filter(|&&b| b == a).count();
     let fractions = match used {
         0 => FRACTIONS.to_vec(),
@@ -203,15 +219,29 @@ mod tests {
             next_step(&fits(&[2.7, inf, 1.9, 1.9]), &[], 2),
             Some((2, vec![0.5, 1.0]))
         );
-        // The same anchor again (its step found nothing better): one point nearer it, then
-        // one nearer still; none that a step from it ran before.
+        // The best point anchored a step that found nothing nearer: the next-best point
+        // that has not anchored one, at full length (2.2 before 2.5 and 2.7).
         assert_eq!(
             next_step(&fits(&[2.7, 1.9, 2.2, 2.5]), &[1], 2),
+            Some((2, vec![0.5, 1.0]))
+        );
+        assert_eq!(
+            next_step(&fits(&[2.7, 1.9, 2.2, 2.5, 2.6, 2.65]), &[1, 2], 3),
+            Some((3, vec![0.5, 1.0]))
+        );
+        // Every point has anchored: the best again, one point nearer it, then nearer still.
+        assert_eq!(
+            next_step(&fits(&[2.7, 1.9]), &[1, 0], 3),
             Some((1, vec![0.25]))
         );
         assert_eq!(
-            next_step(&fits(&[2.7, 1.9, 2.2, 2.5, 2.1]), &[1, 1], 3),
+            next_step(&fits(&[2.7, 1.9]), &[1, 0, 1], 4),
             Some((1, vec![0.125]))
+        );
+        // A point that ran no metrics never anchors.
+        assert_eq!(
+            next_step(&fits(&[inf, 1.9]), &[1], 2),
+            Some((1, vec![0.25]))
         );
         // A new best anchors the next step at full length.
         assert_eq!(

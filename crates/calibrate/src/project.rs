@@ -792,7 +792,7 @@ impl Default for ValidationSettings {
             holdout: None,
             predictive_draws: 8,
             error_model: ErrorModels::default(),
-            mapping_steps: 2,
+            mapping_steps: 4,
         }
     }
 }
