@@ -495,11 +495,12 @@ fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
 /// stop: `convergence` meets its targets, or `m.max_extensions` are done. An extension adds
 /// `iterations - burn_in` draws per chain (as many again as the first run), or what the
 /// smallest ESS says the ESS target needs ([`bemcal_stats::convergence::draws_for_ess`]), at
-/// most four times that. HMC chains are re-adapted at each extension and run its window on
-/// top ([`bemcal_stats::hmc::readapt_window`], not drawn); their first extension adds one
-/// step, because the ESS per draw of the metric burn-in estimated says little of the one
-/// re-adapted from the draws (measured on the demo: 4 to 8 times more bulk ESS per draw
-/// after it). One rule, the driver's.
+/// most four times that. HMC chains are re-adapted at their first extension and run its
+/// window on top ([`bemcal_stats::hmc::readapt_window`], not drawn;
+/// [`bemcal_stats::chain::readapt`]: once); their first extension adds one step, because the
+/// ESS per draw of the metric burn-in estimated says little of the one re-adapted from the
+/// draws (measured on the demo: 4 to 8 times more bulk ESS per draw after it). One rule, the
+/// driver's.
 pub fn extended_target(
     m: &McmcSettings,
     convergence: &Convergence,
@@ -514,10 +515,11 @@ pub fn extended_target(
         Kernel::Mh => 0,
     };
     let step = m.iterations - m.burn_in;
-    // Draws per chain so far (saturating: a record from before the windows spent none).
-    let draws = target
-        .saturating_sub(m.burn_in + u64::from(extensions) * window)
-        .max(1);
+    // Draws per chain so far (saturating: a record from before the windows spent none); the
+    // one window was spent at the first extension.
+    let spent = if extensions > 0 { window } else { 0 };
+    let draws = target.saturating_sub(m.burn_in + spent).max(1);
+    let window = if extensions == 0 { window } else { 0 };
     let min_ess = convergence.min_ess_bulk.min(convergence.min_ess_tail);
     let for_ess = match (m.kernel, extensions) {
         (Kernel::Hmc, 0) => step,
@@ -641,7 +643,7 @@ mod tests {
     }
 
     #[test]
-    fn hmc_extensions_add_the_readaptation_window_undrawn() {
+    fn the_first_hmc_extension_adds_the_readaptation_window_undrawn() {
         let m = McmcSettings {
             iterations: 1000,
             burn_in: 400,
@@ -653,8 +655,9 @@ mod tests {
         assert_eq!(window, 200);
         let rhat_only = verdict(false, 2000.0, 2000.0);
         assert_eq!(extended_target(&m, &rhat_only, 0, 1000), Some(1800));
-        // 1,800 iterations: 400 burn-in, 200 in the window, 1,200 draws; 600 more.
-        assert_eq!(extended_target(&m, &rhat_only, 1, 1800), Some(2600));
+        // 1,800 iterations: 400 burn-in, 200 in the window, 1,200 draws; 600 more, and no
+        // window (the chains are re-adapted once).
+        assert_eq!(extended_target(&m, &rhat_only, 1, 1800), Some(2400));
         // The first extension adds one step whatever the ESS (the metric changes with it).
         assert_eq!(
             extended_target(&m, &verdict(false, 900.0, 50.0), 0, 1000),
@@ -663,7 +666,7 @@ mod tests {
         // Later ones count draws, not iterations: 1,200 draws at tail ESS 200 ask 2,640.
         assert_eq!(
             extended_target(&m, &verdict(false, 900.0, 200.0), 1, 1800),
-            Some(1800 + 200 + 1440)
+            Some(1800 + 1440)
         );
     }
 }

@@ -444,6 +444,11 @@ impl HmcState {
         Ok(())
     }
 
+    /// Whether a re-adaptation window was ever opened ([`HmcState::readapt`]).
+    pub fn was_readapted(&self) -> bool {
+        self.window_end > 0
+    }
+
     /// Divergent (stopped and rejected) trajectories, all and after burn-in.
     pub fn divergent(&self) -> (u64, u64) {
         (self.divergent, self.divergent_post_burn_in)
