@@ -515,18 +515,20 @@ pub fn extended_target(
         Kernel::Mh => 0,
     };
     let step = m.iterations - m.burn_in;
-    // Draws per chain so far (saturating: a record from before the windows spent none); the
-    // one window was spent at the first extension.
-    let spent = if extensions > 0 { window } else { 0 };
+    // The one window opens at the first extension and is spent by the later ones' turn.
+    let (spent, opens) = match extensions {
+        0 => (0, window),
+        _ => (window, 0),
+    };
+    // Draws per chain so far (saturating: a record from before the window spent none).
     let draws = target.saturating_sub(m.burn_in + spent).max(1);
-    let window = if extensions == 0 { window } else { 0 };
     let min_ess = convergence.min_ess_bulk.min(convergence.min_ess_tail);
     let for_ess = match (m.kernel, extensions) {
         (Kernel::Hmc, 0) => step,
         _ => draws_for_ess(draws, min_ess, convergence.targets.ess)
             .map_or(0, |n| n.saturating_sub(draws)),
     };
-    Some(target + window + for_ess.clamp(step, 4 * step))
+    Some(target + opens + for_ess.clamp(step, 4 * step))
 }
 
 /// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower

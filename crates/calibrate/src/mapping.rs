@@ -89,8 +89,9 @@ pub fn is_mapped(label: &str) -> bool {
 /// re-adapted once, a step from the best draw, at 1.35 of the hourly limits, found a point at
 /// 1.19, and a step from that one and two nearer it found nothing nearer; a step from the
 /// best point not yet an anchor, a draw at 1.40, found one at 0.66). Once every point has
-/// anchored, the nearest again, with the one fraction `0.5^(k+1)` for one used `k` times. `None` when a point passes Guideline 14 hourly
-/// and monthly ([`crate::Fit::passes_both`]: the search is for a fit, not for the best fit),
+/// anchored, the nearest again, with the one fraction `0.5^(k+1)` for one used `k` times.
+/// `None` when a point passes Guideline 14 hourly and monthly ([`crate::Fit::passes_both`]:
+/// the search is for a fit, not for the best fit),
 /// when none ran, or when the steps are used up. A point that passes hourly and misses the
 /// monthly criteria anchors a step too: the corrected surrogate's mode fits the meters' hours,
 /// and so their months' totals, nearer than the anchor does (on the held-out 20-point demo

@@ -657,14 +657,11 @@ struct Judge<'a> {
 }
 
 impl Judge<'_> {
-    /// [`level_coverage`] of the values of `measured` that `select` keeps, with the PIT share
-    /// where some of them read at an atom ([`Coverage::with_pits`]).
+    /// The coverage of the values of `measured` that `select` keeps, with the PIT share where
+    /// some of them read at an atom ([`Intervals::coverage`]).
     fn coverage(&self, measured: &[f64], select: &[bool]) -> Vec<Coverage> {
         let pits = pits(self.centers, self.scales, measured, select, self.floor);
-        (level_coverage(self.iv, measured, select).into_iter())
-            .zip(&self.levels.bounds)
-            .map(|(c, &bounds)| c.with_pits(&pits, bounds))
-            .collect()
+        self.iv.coverage(self.levels, measured, select, &pits)
     }
 }
 

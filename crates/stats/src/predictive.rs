@@ -468,6 +468,24 @@ fn intervals_on(
 }
 
 impl Intervals {
+    /// Their coverage at each level on the values of `measured` that `select` keeps, with the
+    /// share of `pits` (the PITs of the same values) inside `levels`' bounds where some reading
+    /// sits at an atom ([`Coverage::with_pits`]).
+    pub fn coverage(
+        &self,
+        levels: &Levels,
+        measured: &[f64],
+        select: &[bool],
+        pits: &[Pit],
+    ) -> Vec<Coverage> {
+        (self.levels.iter().zip(&levels.bounds).enumerate())
+            .filter_map(|(i, (&l, &bounds))| {
+                let c = coverage(l, measured, &self.lower[i], &self.upper[i], select)?;
+                Some(c.with_pits(pits, bounds))
+            })
+            .collect()
+    }
+
     /// Raises every bound and median below `floor` to it: the intervals of `max(floor, Y)`
     /// (quantiles commute with a monotone map), for a meter that cannot read below `floor`.
     pub fn clamp_below(&mut self, floor: f64) {
@@ -542,14 +560,7 @@ pub fn cross_validated_coverage(
             iv.clamp_below(f);
         }
         let block_pits = pits(sims, &noise, measured, &block, floor);
-        judged.push(
-            (nominal.iter().enumerate())
-                .filter_map(|(i, &l)| {
-                    let c = coverage(l, measured, &iv.lower[i], &iv.upper[i], &block)?;
-                    Some(c.with_pits(&block_pits, levels.bounds[i]))
-                })
-                .collect(),
-        );
+        judged.push(iv.coverage(&levels, measured, &block, &block_pits));
     }
     Ok(judged)
 }
