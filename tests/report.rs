@@ -365,6 +365,68 @@ fn cli_writes_the_report() {
 }
 
 #[test]
+fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
+    let (tmp, cal, _pre) = fixture();
+    // Posterior 90 % intervals (fixture): lighting 12.40 +- 0.49, cooling set-point 22.60 +-
+    // 0.18, infiltration 0.50 +- 0.04. Lighting's truth is inside; infiltration's lies at its
+    // prior's 99.6 % quantile (outer tails: explained); the cooling set-point's misses at its
+    // prior's 17 % quantile, and its correlated partner (lighting, rho -0.86) does not explain
+    // it: the fixture's draws are independent, so the pair's combination misses as well.
+    let truth = tmp.path().join("truth.json");
+    std::fs::write(
+        &truth,
+        r#"{"lighting_power_density": 12.4, "cooling_setpoint_occupied": 22.0,
+            "infiltration_ach": 0.95, "not_calibrated": 3.0}"#,
+    )
+    .unwrap();
+    let w = bemcal_report::write_report_with_truth(&cal, None, Some(&truth)).unwrap();
+    let r = w.recovery.unwrap();
+    assert_eq!((r.rows.len(), r.inside(), r.unexplained()), (3, 1, 1));
+    assert_eq!(r.central(), (1, 2));
+    let html = std::fs::read_to_string(&w.path).unwrap();
+    assert!(html.contains("id=\"truth\"") && html.contains("href=\"#truth\""));
+    assert!(html.contains("<b>1 of 3</b>"), "count");
+    assert!(html.contains("1 of the 2 misses is not explained"));
+    assert!(html.contains("prior's 99.6 % quantile (outer tails)"));
+    assert!(html.contains("identified combination is not recovered"));
+
+    // The CLI prints the same.
+    let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
+        .arg("report")
+        .arg(&cal)
+        .arg("--truth")
+        .arg(&truth)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("truth inside the 90 % interval for 1 of 3 parameters (1 of the 2"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("miss cooling_setpoint_occupied") && stdout.contains("NOT EXPLAINED"));
+
+    // A truth file that is not one, or names no calibrated parameter, is an error naming it.
+    std::fs::write(&truth, r#"{"lighting_power_density": "high"}"#).unwrap();
+    let e = bemcal_report::write_report_with_truth(&cal, None, Some(&truth))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("truth.json") && e.contains("line 1"), "{e}");
+    std::fs::write(&truth, r#"{"other": 1.0}"#).unwrap();
+    let e = bemcal_report::write_report_with_truth(&cal, None, Some(&truth))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("names none of the 3 calibrated parameters"),
+        "{e}"
+    );
+}
+
+#[test]
 fn report_renders_in_headless_chromium() {
     let chromium = Path::new("/usr/bin/chromium");
     if !chromium.exists() {

@@ -1,9 +1,12 @@
-//! `bemcal report DIR [--precal PDIR]`: writes `DIR/report.html`, a self-contained HTML report
-//! of a calibration (and of its pre-calibration, if given); see the `bemcal-report` crate.
+//! `bemcal report DIR [--precal PDIR] [--truth FILE]`: writes `DIR/report.html`, a
+//! self-contained HTML report of a calibration (and of its pre-calibration, if given); with a
+//! synthetic run's hidden truth it also prints the truth beside the posterior, each miss
+//! explained. See the `bemcal-report` crate.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
+use bemcal_report::truth::Recovery;
 
 /// Arguments of `bemcal report`.
 #[derive(Debug, clap::Args)]
@@ -14,20 +17,81 @@ pub struct Args {
     /// schedule figures.
     #[arg(long)]
     pub precal: Option<PathBuf>,
-    /// Print the report's path as JSON.
+    /// A synthetic run's hidden true values (`bemcal synthesize --truth FILE`): the report and
+    /// the terminal show each truth against its posterior 90 % interval, each miss explained.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Print the report's path (and the truth's counts) as JSON.
     #[arg(long)]
     pub json: bool,
 }
 
 /// Run `bemcal report`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let path = bemcal_report::write_report(&args.dir, args.precal.as_deref())
-        .with_context(|| format!("writing the report of {}", args.dir.display()))?;
+    let written = bemcal_report::write_report_with_truth(
+        &args.dir,
+        args.precal.as_deref(),
+        args.truth.as_deref(),
+    )
+    .with_context(|| format!("writing the report of {}", args.dir.display()))?;
+    let path = &written.path;
     if args.json {
-        println!("{}", serde_json::json!({ "report": path }));
+        let truth = written.recovery.as_ref().map(|r| {
+            serde_json::json!({
+                "parameters": r.rows.len(),
+                "inside": r.inside(),
+                "unexplained": r.unexplained(),
+            })
+        });
+        println!("{}", serde_json::json!({ "report": path, "truth": truth }));
     } else {
-        let kb = std::fs::metadata(&path).map_or(0, |m| m.len() / 1024);
+        if let Some(r) = &written.recovery {
+            print_recovery(r);
+        }
+        let kb = std::fs::metadata(path).map_or(0, |m| m.len() / 1024);
         println!("{} ({kb} KiB)", path.display());
     }
     Ok(())
+}
+
+/// The truth beside the posterior: one line per parameter, the count, each miss's reasons.
+fn print_recovery(r: &Recovery) {
+    println!(
+        "\n{:30} {:>10} {:>10} {:>10} {:>10}  in 90 %",
+        "parameter", "truth", "estimate", "q5", "q95"
+    );
+    for row in &r.rows {
+        println!(
+            "{:30} {:>10.4} {:>10} {:>10.4} {:>10.4}  {}",
+            row.name,
+            row.truth,
+            row.estimate.map_or("-".into(), |e| format!("{e:.4}")),
+            row.q5,
+            row.q95,
+            if row.miss.is_none() { "yes" } else { "no" }
+        );
+    }
+    let (central_inside, central) = r.central();
+    println!(
+        "\ntruth inside the 90 % interval for {} of {} parameters ({central_inside} of the \
+         {central} truths inside their prior's central 90 %)",
+        r.inside(),
+        r.rows.len()
+    );
+    for row in &r.rows {
+        let Some(m) = &row.miss else { continue };
+        println!(
+            "  miss {}: outside by {} of its interval's width, the interval {:.0} % of the \
+             prior's; {}{}",
+            row.name,
+            bemcal_report::truth::percent(m.outside_by),
+            100.0 * row.width_ratio,
+            m.describe(),
+            if m.explained() {
+                ""
+            } else {
+                " (NOT EXPLAINED)"
+            }
+        );
+    }
 }

@@ -7,6 +7,7 @@
 //! a partial folder, but the files the report cannot do without are required and their absence is
 //! an error naming the file.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
@@ -744,6 +745,8 @@ pub struct CalibrationData {
     /// `validation/predictive_intervals.csv` (EnergyPlus at posterior draws plus noise), if
     /// written.
     pub intervals: Option<Hourly>,
+    /// A synthetic run's hidden true values ([`read_truth`]), if given.
+    pub truth: Option<BTreeMap<String, f64>>,
 }
 
 /// One row of `calendar.csv`.
@@ -887,6 +890,22 @@ pub fn read_summary(path: &Path) -> Result<Summary, ReportError> {
     )?;
     let text = read_text(path)?;
     serde_json::from_str(&text).map_err(|e| parse_err(path, e.to_string()))
+}
+
+/// Reads a synthetic run's hidden true values, as `bemcal synthesize --truth FILE` writes them:
+/// a JSON object of parameter name to true value.
+pub fn read_truth(path: &Path) -> Result<BTreeMap<String, f64>, ReportError> {
+    require(
+        path,
+        "the hidden true values written by `bemcal synthesize --truth`",
+    )?;
+    let text = read_text(path)?;
+    serde_json::from_str(&text).map_err(|e| {
+        parse_err(
+            path,
+            format!("{e}; expected a JSON object of parameter name to true value"),
+        )
+    })
 }
 
 /// Reads `draws.csv` (or any draws file with `chain,draw,<column>...`), strictly: chains are
@@ -1100,6 +1119,7 @@ pub fn read_calibration(dir: &Path) -> Result<CalibrationData, ReportError> {
         calibrated: with_bases(opt("calibrated.csv")?),
         initial: with_bases(opt("initial.csv")?),
         intervals: opt("predictive_intervals.csv")?,
+        truth: None,
         summary,
         draws,
         predictive,

@@ -9,10 +9,12 @@
 //! the posterior predictive band and the meter's gaps, as a daily year view plus one week per
 //! season at full resolution (Fig. 11); timings and acceptance rates. With a pre-calibration
 //! folder (`bemcal precalibrate --out PDIR`) it adds the daily profile clusters (Fig. 4), the
-//! per-hour schedule boxes (Fig. 5) and the merged intervals (Fig. 6).
+//! per-hour schedule boxes (Fig. 5) and the merged intervals (Fig. 6). With a synthetic run's
+//! hidden truth (`bemcal synthesize --truth FILE`) it adds the truth beside the posterior, each
+//! miss explained ([`truth`]).
 //!
-//! Layout: [`io`] does all file reading and writing; [`analysis`], [`informed`], [`plots`] (data
-//! in, SVG out) and [`html`] are pure.
+//! Layout: [`io`] does all file reading and writing; [`analysis`], [`informed`], [`truth`],
+//! [`plots`] (data in, SVG out) and [`html`] are pure.
 #![deny(missing_docs)]
 
 pub mod analysis;
@@ -21,6 +23,7 @@ pub mod informed;
 pub mod io;
 pub mod plots;
 pub mod portfolio;
+pub mod truth;
 
 use std::path::{Path, PathBuf};
 
@@ -70,10 +73,51 @@ pub fn write_report(
     calibration_dir: &Path,
     precal_dir: Option<&Path>,
 ) -> Result<PathBuf, ReportError> {
-    let cal = io::read_calibration(calibration_dir)?;
+    Ok(write_report_with_truth(calibration_dir, precal_dir, None)?.path)
+}
+
+/// What [`write_report_with_truth`] wrote.
+#[derive(Debug, Clone)]
+pub struct Written {
+    /// `report.html`.
+    pub path: PathBuf,
+    /// The truth beside the posterior, when a truth file was given.
+    pub recovery: Option<truth::Recovery>,
+}
+
+/// [`write_report`], and with `truth_file` (a synthetic run's hidden true values) the truth
+/// beside the posterior in the report and in what is returned. A truth file that names none of
+/// the calibrated parameters is an error.
+pub fn write_report_with_truth(
+    calibration_dir: &Path,
+    precal_dir: Option<&Path>,
+    truth_file: Option<&Path>,
+) -> Result<Written, ReportError> {
+    let mut cal = io::read_calibration(calibration_dir)?;
     let pre = precal_dir.map(io::read_precal).transpose()?;
+    cal.truth = truth_file.map(io::read_truth).transpose()?;
+    let recovery = cal
+        .truth
+        .as_ref()
+        .map(|t| truth::recovery(t, &cal.summary, &cal.draws));
+    if let (Some(r), Some(f)) = (&recovery, truth_file) {
+        if r.rows.is_empty() {
+            return Err(ReportError::Parse {
+                path: f.to_path_buf(),
+                msg: format!(
+                    "names none of the {} calibrated parameters ({}, ...)",
+                    cal.summary.posterior.parameters.len(),
+                    cal.summary
+                        .posterior
+                        .parameters
+                        .first()
+                        .map_or("", |p| p.name.as_str())
+                ),
+            });
+        }
+    }
     let text = render(&cal, pre.as_ref())?;
     let path = calibration_dir.join("report.html");
     io::write_html(&path, &text)?;
-    Ok(path)
+    Ok(Written { path, recovery })
 }

@@ -21,6 +21,7 @@ use fit::{
 };
 use posterior::{
     acceptance_rates, chain_plots, parameters_table, prior_vs_posterior, refinement, run_timings,
+    truth_table,
 };
 use precal::precal_section;
 
@@ -151,7 +152,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
         h.push_str(&not_converged_banner(s));
     }
     h.push_str(&out_of_reach_banner(s));
-    h.push_str(&nav(precal.is_some()));
+    h.push_str(&nav(precal.is_some(), cal.truth.is_some()));
     h.push_str(&warnings(s));
     h.push_str(&design_failures(s));
     h.push_str(&goodness_of_fit(s));
@@ -160,6 +161,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     h.push_str(&model_form(s)?);
     h.push_str(&held_out_weeks(cal)?);
     h.push_str(&parameters_table(s));
+    h.push_str(&truth_table(cal));
     h.push_str(&prior_vs_posterior(cal)?);
     h.push_str(&chain_plots(cal)?);
     h.push_str(&hourly_fit(cal)?);
@@ -272,12 +274,19 @@ fn estimate_label(s: &Summary) -> String {
     format!("{setting} ({why})")
 }
 
-/// The navigation bar: a link to each section (the pre-calibration's where there is one).
-fn nav(with_precal: bool) -> String {
+/// The navigation bar: a link to each section (the truth's and the pre-calibration's where
+/// there are).
+fn nav(with_precal: bool, with_truth: bool) -> String {
     let mut h = String::new();
     h.push_str(
         "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
-<a href=\"#parameters\">Parameters</a><a href=\"#prior-posterior\">Prior vs posterior</a>\
+<a href=\"#parameters\">Parameters</a>",
+    );
+    if with_truth {
+        h.push_str("<a href=\"#truth\">Truth</a>");
+    }
+    h.push_str(
+        "<a href=\"#prior-posterior\">Prior vs posterior</a>\
 <a href=\"#chains\">Chains</a><a href=\"#fit\">Measured vs calibrated</a><a href=\"#run\">Run</a>",
     );
     if with_precal {

@@ -8,6 +8,7 @@ use crate::analysis;
 use crate::informed::uninformed;
 use crate::io::CalibrationData;
 use crate::plots::{self, PriorPosterior};
+use crate::truth;
 use crate::ReportError;
 
 /// The estimated parameters (the reference's Table 4): prior, posterior and estimate per
@@ -145,6 +146,75 @@ fn correlated_pairs_table(post: &crate::io::PosteriorBlock) -> String {
         );
     }
     h.push_str("</table>");
+    h
+}
+
+/// A synthetic run's hidden truth beside the posterior ([`crate::truth`]): how many truths lie
+/// inside their 90 % interval, and each miss with its reason (empty without a truth).
+pub(super) fn truth_table(cal: &CalibrationData) -> String {
+    let Some(t) = &cal.truth else {
+        return String::new();
+    };
+    let r = truth::recovery(t, &cal.summary, &cal.draws);
+    let mut h = String::new();
+    let misses = r.rows.len() - r.inside();
+    let (central_inside, central) = r.central();
+    let unexplained = r.unexplained();
+    let _ = write!(
+        h,
+        "<h2 id=\"truth\">Recovered against the hidden truth</h2><p class=\"sub\">The truth \
+         lies inside the posterior 90 % interval for <b>{} of {}</b> parameters; of the {central} \
+         truths inside their prior's central 90 %, {central_inside} are inside. {}A 90 % \
+         interval holds the truth 90 % of the time on average over truths drawn from the prior \
+         (Talts et al. 2018); a truth in its prior's outer tails is left out where the meters say \
+         little about the parameter, and a strongly correlated pair is judged by the combination \
+         the meters identify.</p>",
+        r.inside(),
+        r.rows.len(),
+        match (misses, unexplained) {
+            (0, _) => String::new(),
+            (m, 0) => format!("Each of the {m} misses is explained below. "),
+            (m, u) => format!(
+                "<span class=\"fail\">{u} of the {m} misses {} not explained.</span> ",
+                if u == 1 { "is" } else { "are" }
+            ),
+        }
+    );
+    h.push_str(
+        "<table><tr><th class=\"l\">parameter</th><th>truth</th><th>estimate</th>\
+<th>posterior 90 %</th><th>inside</th><th>truth's prior quantile</th><th>width ratio</th>\
+<th class=\"l\">miss explained by</th></tr>",
+    );
+    for row in &r.rows {
+        let (inside, why) = match &row.miss {
+            None => ("<td class=\"pass\">yes</td>".to_string(), String::new()),
+            Some(m) => (
+                format!(
+                    "<td{}>no, by {}</td>",
+                    if m.explained() { "" } else { " class=\"fail\"" },
+                    truth::percent(m.outside_by)
+                ),
+                esc(&m.describe()),
+            ),
+        };
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>{inside}\
+<td>{}</td><td>{}</td><td class=\"l\">{why}</td></tr>",
+            esc(&row.name),
+            g(row.truth),
+            row.estimate.map_or("&ndash;".into(), g),
+            g(row.q5),
+            g(row.q95),
+            row.prior_quantile.map_or("&ndash;".into(), truth::percent),
+            f(row.width_ratio, 2),
+        );
+    }
+    h.push_str(
+        "</table><p class=\"sub\">A miss's size is its distance outside the interval in widths \
+         of the interval; the width ratio is the posterior interval's width over the prior's \
+         (near 1: the meters said little).</p>",
+    );
     h
 }
 
