@@ -410,6 +410,35 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
     );
     assert!(stdout.contains("miss cooling_setpoint_occupied") && stdout.contains("NOT EXPLAINED"));
 
+    // Where the calibration carried the surrogate's error into the intervals, the truth is
+    // judged by those (what the report says to read), the chains' own beside them: a carried
+    // cooling set-point interval of [21.8, 23.4] holds its truth.
+    let path = cal.join("summary.json");
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    summary["surrogate_error"] = serde_json::json!({"round": 1, "points": 8, "parameters": [
+        {"name": "cooling_setpoint_occupied", "q5": 21.8, "q95": 23.4},
+        {"name": "infiltration_ach", "q5": 0.4, "q95": 0.6}]});
+    std::fs::write(&path, summary.to_string()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
+        .arg("report")
+        .arg(&cal)
+        .arg("--truth")
+        .arg(&truth)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains(
+            "truth inside the 90 % interval with the surrogate's error for 2 of 3 parameters \
+             (2 of the 2 truths inside their prior's central 90 %; 1 of 3 inside the chains' own)"
+        ),
+        "{stdout}"
+    );
+    let html = std::fs::read_to_string(cal.join("report.html")).unwrap();
+    assert!(html.contains("<b>2 of 3</b> parameters with the surrogate's error carried in"));
+    assert!(html.contains("The one miss is explained below"));
+
     // A truth file that is not one, or names no calibrated parameter, is an error naming it.
     std::fs::write(&truth, r#"{"lighting_power_density": "high"}"#).unwrap();
     let e = bemcal_report::write_report_with_truth(&cal, None, Some(&truth))

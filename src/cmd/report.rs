@@ -56,33 +56,62 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// The truth beside the posterior: one line per parameter, the count, each miss's reasons.
 fn print_recovery(r: &Recovery) {
+    let carried = r.with_surrogate_error();
     println!(
-        "\n{:30} {:>10} {:>10} {:>10} {:>10}  in 90 %",
-        "parameter", "truth", "estimate", "q5", "q95"
+        "\n{:30} {:>10} {:>10} {:>10} {:>10}  in 90 %{}",
+        "parameter",
+        "truth",
+        "estimate",
+        "q5",
+        "q95",
+        if carried {
+            "   with surrogate error: q5, q95, in"
+        } else {
+            ""
+        }
     );
+    let yes = |inside: bool| if inside { "yes" } else { "no" };
     for row in &r.rows {
+        let with_error = match (carried, row.with_surrogate_error) {
+            (true, Some([lo, hi])) => {
+                format!("   {lo:>10.4} {hi:>10.4}  {}", yes(row.miss.is_none()))
+            }
+            _ => String::new(),
+        };
         println!(
-            "{:30} {:>10.4} {:>10} {:>10.4} {:>10.4}  {}",
+            "{:30} {:>10.4} {:>10} {:>10.4} {:>10.4}  {:7}{with_error}",
             row.name,
             row.truth,
             row.estimate.map_or("-".into(), |e| format!("{e:.4}")),
             row.q5,
             row.q95,
-            if row.miss.is_none() { "yes" } else { "no" }
+            yes(row.inside_own)
         );
     }
     let (central_inside, central) = r.central();
+    let (with, own) = if carried {
+        (
+            " with the surrogate's error",
+            format!(
+                "; {} of {} inside the chains' own",
+                r.inside_own(),
+                r.rows.len()
+            ),
+        )
+    } else {
+        ("", String::new())
+    };
     println!(
-        "\ntruth inside the 90 % interval for {} of {} parameters ({central_inside} of the \
-         {central} truths inside their prior's central 90 %)",
+        "\ntruth inside the 90 % interval{with} for {} of {} parameters ({central_inside} of \
+         the {central} truths inside their prior's central 90 %{own})",
         r.inside(),
         r.rows.len()
     );
     for row in &r.rows {
         let Some(m) = &row.miss else { continue };
         println!(
-            "  miss {}: outside by {} of its interval's width, the interval {:.0} % of the \
-             prior's; {}{}",
+            "  miss {}: outside by {} of its interval's width, the chains' interval {:.0} % of \
+             the prior's; {}{}",
             row.name,
             bemcal_report::truth::percent(m.outside_by),
             100.0 * row.width_ratio,

@@ -1,6 +1,8 @@
 //! A synthetic calibration's hidden truth (`bemcal synthesize --truth FILE`) beside what the
 //! calibration recovered: whether each true value lies inside its posterior 90 % interval and,
-//! where it does not, why (pure).
+//! where it does not, why (pure). The interval is the one the report says to read: with the
+//! surrogate's error carried in where the calibration measured it (`summary.json`
+//! `surrogate_error`), else the chains' own; the chains' own is judged beside it.
 //!
 //! A posterior 90 % interval holds the truth 90 % of the time *on average over truths drawn
 //! from the prior* (the self-consistency that simulation-based calibration checks: Talts et al.
@@ -32,16 +34,28 @@ pub struct TruthRow {
     pub truth: f64,
     /// The calibrated value (`calibrated_values`), if written.
     pub estimate: Option<f64>,
-    /// Posterior 5 % quantile.
+    /// Posterior 5 % quantile (the chains' own).
     pub q5: f64,
-    /// Posterior 95 % quantile.
+    /// Posterior 95 % quantile (the chains' own).
     pub q95: f64,
+    /// The 90 % interval with the surrogate's error carried in, where measured.
+    pub with_surrogate_error: Option<[f64; 2]>,
+    /// Whether the truth lies inside the chains' own `[q5, q95]`.
+    pub inside_own: bool,
     /// The truth's quantile in its (triangular) prior, if the prior is known.
     pub prior_quantile: Option<f64>,
     /// Posterior 90 % interval width over the prior's.
     pub width_ratio: f64,
-    /// `None` when the truth lies inside `[q5, q95]`.
+    /// `None` when the truth lies inside the interval to read ([`TruthRow::interval`]).
     pub miss: Option<Miss>,
+}
+
+impl TruthRow {
+    /// The interval the truth is judged by: with the surrogate's error where measured, else
+    /// the chains' own.
+    pub fn interval(&self) -> [f64; 2] {
+        self.with_surrogate_error.unwrap_or([self.q5, self.q95])
+    }
 }
 
 /// A truth outside its posterior 90 % interval.
@@ -128,9 +142,19 @@ pub struct Recovery {
 }
 
 impl Recovery {
-    /// Truths inside their posterior 90 % interval.
+    /// Truths inside their posterior 90 % interval (the one to read).
     pub fn inside(&self) -> usize {
         self.rows.iter().filter(|r| r.miss.is_none()).count()
+    }
+
+    /// Whether the intervals judged carry the surrogate's error.
+    pub fn with_surrogate_error(&self) -> bool {
+        self.rows.iter().any(|r| r.with_surrogate_error.is_some())
+    }
+
+    /// Truths inside the chains' own 90 % interval.
+    pub fn inside_own(&self) -> usize {
+        self.rows.iter().filter(|r| r.inside_own).count()
     }
 
     /// Misses that nothing explains.
@@ -159,11 +183,15 @@ impl Recovery {
     }
 }
 
-/// A share as a percentage, to one decimal below 1 % and above 99 % (where whole percents
-/// would read 0 or 100), else whole.
+/// A share as a percentage, to one decimal below 1 % and between 99 and 100 % (where whole
+/// percents would read 0 or 100), else whole.
 pub fn percent(share: f64) -> String {
     let pct = 100.0 * share;
-    let digits = if (1.0..=99.0).contains(&pct) { 0 } else { 1 };
+    let digits = if pct < 1.0 || (pct > 99.0 && pct < 100.0) {
+        1
+    } else {
+        0
+    };
     format!("{pct:.digits$} %")
 }
 
@@ -202,9 +230,14 @@ pub fn recovery(truth: &BTreeMap<String, f64>, summary: &Summary, draws: &Draws)
                 .iter()
                 .find(|q| q.name == p.name)
                 .map(|q| triangular_cdf(q.prior_min, q.prior_mode, q.prior_max, t));
-            let miss = (!(p.q5 <= t && t <= p.q95)).then(|| {
-                let width = p.q95 - p.q5;
-                let off = if t < p.q5 { p.q5 - t } else { t - p.q95 };
+            let with_surrogate_error = summary.surrogate_error.as_ref().and_then(|c| {
+                let x = c.parameters.iter().find(|x| x.name == p.name)?;
+                Some([x.q5, x.q95])
+            });
+            let [lo, hi] = with_surrogate_error.unwrap_or([p.q5, p.q95]);
+            let miss = (!(lo <= t && t <= hi)).then(|| {
+                let width = hi - lo;
+                let off = if t < lo { lo - t } else { t - hi };
                 let mut reasons = Vec::new();
                 if let Some(q) =
                     prior_quantile.filter(|q| !(PRIOR_TAILS.0..=PRIOR_TAILS.1).contains(q))
@@ -241,6 +274,8 @@ pub fn recovery(truth: &BTreeMap<String, f64>, summary: &Summary, draws: &Draws)
                 estimate: estimates.get(p.name.as_str()).copied(),
                 q5: p.q5,
                 q95: p.q95,
+                with_surrogate_error,
+                inside_own: p.q5 <= t && t <= p.q95,
                 prior_quantile,
                 width_ratio: p.width_ratio,
                 miss,

@@ -160,11 +160,21 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
     let misses = r.rows.len() - r.inside();
     let (central_inside, central) = r.central();
     let unexplained = r.unexplained();
+    let carried = r.with_surrogate_error();
+    let which = if carried {
+        format!(
+            " with the surrogate's error carried in (the chains' own: {} of {})",
+            r.inside_own(),
+            r.rows.len()
+        )
+    } else {
+        String::new()
+    };
     let _ = write!(
         h,
         "<h2 id=\"truth\">Recovered against the hidden truth</h2><p class=\"sub\">The truth \
-         lies inside the posterior 90 % interval for <b>{} of {}</b> parameters; of the {central} \
-         truths inside their prior's central 90 %, {central_inside} are inside. {}A 90 % \
+         lies inside the posterior 90 % interval for <b>{} of {}</b> parameters{which}; of the \
+         {central} truths inside their prior's central 90 %, {central_inside} are inside. {}A 90 % \
          interval holds the truth 90 % of the time on average over truths drawn from the prior \
          (Talts et al. 2018); a truth in its prior's outer tails is left out where the meters say \
          little about the parameter, and a strongly correlated pair is judged by the combination \
@@ -173,6 +183,7 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
         r.rows.len(),
         match (misses, unexplained) {
             (0, _) => String::new(),
+            (1, 0) => "The one miss is explained below. ".into(),
             (m, 0) => format!("Each of the {m} misses is explained below. "),
             (m, u) => format!(
                 "<span class=\"fail\">{u} of the {m} misses {} not explained.</span> ",
@@ -180,10 +191,16 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
             ),
         }
     );
-    h.push_str(
+    let _ = write!(
+        h,
         "<table><tr><th class=\"l\">parameter</th><th>truth</th><th>estimate</th>\
-<th>posterior 90 %</th><th>inside</th><th>truth's prior quantile</th><th>width ratio</th>\
+<th>posterior 90 %</th>{}<th>inside</th><th>truth's prior quantile</th><th>width ratio</th>\
 <th class=\"l\">miss explained by</th></tr>",
+        if carried {
+            "<th>90 % with surrogate error</th>"
+        } else {
+            ""
+        }
     );
     for row in &r.rows {
         let (inside, why) = match &row.miss {
@@ -197,10 +214,15 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
                 esc(&m.describe()),
             ),
         };
+        let with_error = match (carried, row.with_surrogate_error) {
+            (false, _) => String::new(),
+            (true, None) => "<td>&ndash;</td>".into(),
+            (true, Some([lo, hi])) => format!("<td>{}&ndash;{}</td>", g(lo), g(hi)),
+        };
         let _ = write!(
             h,
-            "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>{inside}\
-<td>{}</td><td>{}</td><td class=\"l\">{why}</td></tr>",
+            "<tr><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}&ndash;{}</td>{with_error}\
+{inside}<td>{}</td><td>{}</td><td class=\"l\">{why}</td></tr>",
             esc(&row.name),
             g(row.truth),
             row.estimate.map_or("&ndash;".into(), g),
