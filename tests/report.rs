@@ -387,7 +387,7 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
     assert!(html.contains("id=\"truth\"") && html.contains("href=\"#truth\""));
     assert!(html.contains("<b>1 of 3</b>"), "count");
     assert!(html.contains("1 of the 2 misses is not explained"));
-    assert!(html.contains("prior's 99.6 % quantile (outer tails)"));
+    assert!(html.contains("prior's outer tails (its 99.6 % quantile)"));
     assert!(html.contains("identified combination is not recovered"));
 
     // The CLI prints the same.
@@ -450,7 +450,10 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("names none of the 3 calibrated parameters"),
+        e.contains(
+            "names none of the calibrated parameters (lighting_power_density, \
+             cooling_setpoint_occupied, infiltration_ach); it names other"
+        ),
         "{e}"
     );
 }

@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use bemcal_report::truth::Recovery;
+use bemcal_report::truth::{percent, Recovery};
 
 /// Arguments of `bemcal report`.
 #[derive(Debug, clap::Args)]
@@ -37,10 +37,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let path = &written.path;
     if args.json {
         let truth = written.recovery.as_ref().map(|r| {
+            let (central_inside, central) = r.central();
             serde_json::json!({
                 "parameters": r.rows.len(),
                 "inside": r.inside(),
+                "with_surrogate_error": r.with_surrogate_error(),
+                "inside_own": r.inside_own(),
+                "central": central,
+                "central_inside": central_inside,
                 "unexplained": r.unexplained(),
+                "without_truth": r.without_truth,
             })
         });
         println!("{}", serde_json::json!({ "report": path, "truth": truth }));
@@ -110,17 +116,24 @@ fn print_recovery(r: &Recovery) {
     for row in &r.rows {
         let Some(m) = &row.miss else { continue };
         println!(
-            "  miss {}: outside by {} of its interval's width, the chains' interval {:.0} % of \
-             the prior's; {}{}",
+            "  miss {}: outside {}, the truth at its prior's {} quantile, the chains' interval \
+             {} of the prior's width; explained by: {}{}",
             row.name,
-            bemcal_report::truth::percent(m.outside_by),
-            100.0 * row.width_ratio,
+            m.distance(),
+            row.prior_quantile.map_or("?".into(), percent),
+            percent(row.width_ratio),
             m.describe(),
             if m.explained() {
                 ""
             } else {
                 " (NOT EXPLAINED)"
             }
+        );
+    }
+    if !r.without_truth.is_empty() {
+        println!(
+            "  not counted, without a truth in the file: {}",
+            r.without_truth.join(", ")
         );
     }
 }

@@ -34,6 +34,23 @@ pub fn triangular_quantile(min: f64, mode: f64, max: f64, p: f64) -> f64 {
     }
 }
 
+/// CDF of the triangular distribution `(min, mode, max)` at `x` (as `bemcal_stats::prior::
+/// Triangular::cdf`: this crate reads output folders and does not depend on the sampler's).
+pub fn triangular_cdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
+    if x.is_nan() || min.is_nan() || max.is_nan() || max <= min {
+        return f64::NAN;
+    }
+    if x <= min {
+        0.0
+    } else if x >= max {
+        1.0
+    } else if x <= mode {
+        (x - min).powi(2) / ((max - min) * (mode - min))
+    } else {
+        1.0 - (max - x).powi(2) / ((max - min) * (max - mode))
+    }
+}
+
 /// Quantile `q` in [0, 1] of finite values (linear interpolation); NaN if none.
 pub fn quantile(values: &[f64], q: f64) -> f64 {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
@@ -348,6 +365,17 @@ pub fn binned_pairs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn triangular_cdf_matches_its_quantile() {
+        let (lo, mode, hi) = (0.03, 0.04, 0.06);
+        for p in [0.0, 0.01, 0.2, 1.0 / 3.0, 0.5, 0.9, 0.99, 1.0] {
+            let x = triangular_quantile(lo, mode, hi, p);
+            assert!((triangular_cdf(lo, mode, hi, x) - p).abs() < 1e-12, "{p}");
+        }
+        assert_eq!(triangular_cdf(lo, mode, hi, 0.0), 0.0);
+        assert_eq!(triangular_cdf(lo, mode, hi, 1.0), 1.0);
+    }
 
     #[test]
     fn monthly_totals_use_the_hours_both_series_have() {

@@ -745,8 +745,9 @@ pub struct CalibrationData {
     /// `validation/predictive_intervals.csv` (EnergyPlus at posterior draws plus noise), if
     /// written.
     pub intervals: Option<Hourly>,
-    /// A synthetic run's hidden true values ([`read_truth`]), if given.
-    pub truth: Option<BTreeMap<String, f64>>,
+    /// A synthetic run's hidden truth against the posterior ([`read_truth`],
+    /// [`crate::truth::recovery`]), if given.
+    pub truth: Option<crate::truth::Recovery>,
 }
 
 /// One row of `calendar.csv`.
@@ -903,7 +904,7 @@ pub fn read_truth(path: &Path) -> Result<BTreeMap<String, f64>, ReportError> {
     serde_json::from_str(&text).map_err(|e| {
         parse_err(
             path,
-            format!("{e}; expected a JSON object of parameter name to true value"),
+            format!("{e}; the file should be a JSON object of parameter name to number"),
         )
     })
 }

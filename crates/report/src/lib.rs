@@ -95,29 +95,31 @@ pub fn write_report_with_truth(
 ) -> Result<Written, ReportError> {
     let mut cal = io::read_calibration(calibration_dir)?;
     let pre = precal_dir.map(io::read_precal).transpose()?;
-    cal.truth = truth_file.map(io::read_truth).transpose()?;
-    let recovery = cal
-        .truth
-        .as_ref()
-        .map(|t| truth::recovery(t, &cal.summary, &cal.draws));
-    if let (Some(r), Some(f)) = (&recovery, truth_file) {
-        if r.rows.is_empty() {
+    if let Some(f) = truth_file {
+        let values = io::read_truth(f)?;
+        let recovery = truth::recovery(&values, &cal.summary, &cal.draws);
+        if recovery.rows.is_empty() {
+            let names = |v: Vec<&str>| match v.len() {
+                0 => "none".to_string(),
+                n if n <= 3 => v.join(", "),
+                n => format!("{}, ... ({n})", v[..3].join(", ")),
+            };
             return Err(ReportError::Parse {
                 path: f.to_path_buf(),
                 msg: format!(
-                    "names none of the {} calibrated parameters ({}, ...)",
-                    cal.summary.posterior.parameters.len(),
-                    cal.summary
-                        .posterior
-                        .parameters
-                        .first()
-                        .map_or("", |p| p.name.as_str())
+                    "names none of the calibrated parameters ({}); it names {}",
+                    names(recovery.without_truth.iter().map(String::as_str).collect()),
+                    names(values.keys().map(String::as_str).collect())
                 ),
             });
         }
+        cal.truth = Some(recovery);
     }
     let text = render(&cal, pre.as_ref())?;
     let path = calibration_dir.join("report.html");
     io::write_html(&path, &text)?;
-    Ok(Written { path, recovery })
+    Ok(Written {
+        path,
+        recovery: cal.truth,
+    })
 }

@@ -15,11 +15,16 @@
 //!   width against the prior's says how little the data said); or
 //! - the parameter is strongly correlated with another (`posterior.correlated_pairs`): the
 //!   meters identify a combination of the pair rather than each, and the combination is
-//!   recovered when the truth's value of it lies inside the draws' 90 % interval of it.
+//!   recovered when the truth's value of it lies inside the draws' 90 % interval of it (the
+//!   chains' own draws: the surrogate's error is carried into each parameter's interval, not
+//!   into the pair's).
+//!
+//! Counts are over the calibrated parameters the truth file names; those it does not name are
+//! listed ([`Recovery::without_truth`]).
 
 use std::collections::BTreeMap;
 
-use crate::analysis::quantile;
+use crate::analysis::{quantile, triangular_cdf};
 use crate::io::{Draws, Summary};
 
 /// The prior quantiles outside which a truth counts as in its prior's outer tails.
@@ -92,7 +97,7 @@ impl std::fmt::Display for Reason {
         match self {
             Reason::PriorTail { quantile } => write!(
                 f,
-                "the truth at its prior's {} quantile (outer tails)",
+                "the truth in its prior's outer tails (its {} quantile)",
                 percent(*quantile)
             ),
             Reason::Pair {
@@ -113,6 +118,16 @@ impl std::fmt::Display for Reason {
 }
 
 impl Miss {
+    /// How far outside, in words: "by 13 % of its interval's width", or of a zero-width
+    /// interval.
+    pub fn distance(&self) -> String {
+        if self.outside_by.is_finite() {
+            format!("by {} of its interval's width", percent(self.outside_by))
+        } else {
+            "of a zero-width interval".into()
+        }
+    }
+
     /// The reasons in words, or why none applies.
     pub fn describe(&self) -> String {
         if self.reasons.is_empty() {
@@ -139,6 +154,8 @@ impl Miss {
 pub struct Recovery {
     /// One row per parameter that has a true value.
     pub rows: Vec<TruthRow>,
+    /// Calibrated parameters the truth file does not name (not counted).
+    pub without_truth: Vec<String>,
 }
 
 impl Recovery {
@@ -183,31 +200,21 @@ impl Recovery {
     }
 }
 
-/// A share as a percentage, to one decimal below 1 % and between 99 and 100 % (where whole
-/// percents would read 0 or 100), else whole.
-pub fn percent(share: f64) -> String {
-    let pct = 100.0 * share;
-    let digits = if pct < 1.0 || (pct > 99.0 && pct < 100.0) {
-        1
-    } else {
-        0
-    };
-    format!("{pct:.digits$} %")
+/// Whether a prior quantile lies in the prior's outer tails ([`PRIOR_TAILS`]; not for NaN).
+pub fn in_prior_tails(q: f64) -> bool {
+    q.is_finite() && !(PRIOR_TAILS.0..=PRIOR_TAILS.1).contains(&q)
 }
 
-/// CDF of the triangular distribution `(min, mode, max)` at `x`.
-pub fn triangular_cdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
-    if x.is_nan() || min.is_nan() || max.is_nan() || max <= min {
-        return f64::NAN;
-    }
-    if x <= min {
-        0.0
-    } else if x >= max {
-        1.0
-    } else if x <= mode {
-        (x - min).powi(2) / ((max - min) * (mode - min))
+/// A share as a percentage, to one decimal below 1 % and between 99 and 100 % (rounded down
+/// there, so that it never reads 100 short of it), else whole.
+pub fn percent(share: f64) -> String {
+    let pct = 100.0 * share;
+    if pct > 99.0 && pct < 100.0 {
+        format!("{:.1} %", (pct * 10.0).floor() / 10.0)
+    } else if pct < 1.0 {
+        format!("{pct:.1} %")
     } else {
-        1.0 - (max - x).powi(2) / ((max - min) * (max - mode))
+        format!("{pct:.0} %")
     }
 }
 
@@ -239,9 +246,7 @@ pub fn recovery(truth: &BTreeMap<String, f64>, summary: &Summary, draws: &Draws)
                 let width = hi - lo;
                 let off = if t < lo { lo - t } else { t - hi };
                 let mut reasons = Vec::new();
-                if let Some(q) =
-                    prior_quantile.filter(|q| !(PRIOR_TAILS.0..=PRIOR_TAILS.1).contains(q))
-                {
+                if let Some(q) = prior_quantile.filter(|&q| in_prior_tails(q)) {
                     reasons.push(Reason::PriorTail { quantile: q });
                 }
                 for pair in &summary.posterior.correlated_pairs {
@@ -282,7 +287,14 @@ pub fn recovery(truth: &BTreeMap<String, f64>, summary: &Summary, draws: &Draws)
             })
         })
         .collect();
-    Recovery { rows }
+    let without_truth = (summary.posterior.parameters.iter())
+        .filter(|p| !truth.contains_key(&p.name))
+        .map(|p| p.name.clone())
+        .collect();
+    Recovery {
+        rows,
+        without_truth,
+    }
 }
 
 /// Whether the truth's value of a correlated pair's identified combination lies inside the
@@ -323,14 +335,25 @@ mod tests {
     use super::*;
 
     #[test]
-    fn triangular_cdf_matches_its_quantile() {
-        let (lo, mode, hi) = (0.03, 0.04, 0.06);
-        for p in [0.0, 0.01, 0.2, 1.0 / 3.0, 0.5, 0.9, 0.99, 1.0] {
-            let x = crate::analysis::triangular_quantile(lo, mode, hi, p);
-            assert!((triangular_cdf(lo, mode, hi, x) - p).abs() < 1e-12, "{p}");
-        }
-        assert_eq!(triangular_cdf(lo, mode, hi, 0.0), 0.0);
-        assert_eq!(triangular_cdf(lo, mode, hi, 1.0), 1.0);
+    fn tails_and_percentages() {
+        assert!(in_prior_tails(0.01) && in_prior_tails(0.97));
+        assert!(!in_prior_tails(0.05) && !in_prior_tails(0.5) && !in_prior_tails(f64::NAN));
+        assert_eq!(percent(0.002), "0.2 %");
+        assert_eq!(percent(0.13), "13 %");
+        assert_eq!(percent(0.9996), "99.9 %");
+        assert_eq!(percent(1.46), "146 %");
+        let far = Miss {
+            outside_by: f64::INFINITY,
+            reasons: vec![],
+        };
+        assert_eq!(far.distance(), "of a zero-width interval");
+        assert!(!far.explained());
+        let tail = Miss {
+            outside_by: 0.13,
+            reasons: vec![Reason::PriorTail { quantile: 0.001 }],
+        };
+        assert_eq!(tail.distance(), "by 13 % of its interval's width");
+        assert!(tail.explained());
     }
 
     fn draws(columns: &[(&str, Vec<f64>)]) -> Draws {

@@ -152,10 +152,9 @@ fn correlated_pairs_table(post: &crate::io::PosteriorBlock) -> String {
 /// A synthetic run's hidden truth beside the posterior ([`crate::truth`]): how many truths lie
 /// inside their 90 % interval, and each miss with its reason (empty without a truth).
 pub(super) fn truth_table(cal: &CalibrationData) -> String {
-    let Some(t) = &cal.truth else {
+    let Some(r) = &cal.truth else {
         return String::new();
     };
-    let r = truth::recovery(t, &cal.summary, &cal.draws);
     let mut h = String::new();
     let misses = r.rows.len() - r.inside();
     let (central_inside, central) = r.central();
@@ -174,7 +173,8 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
         h,
         "<h2 id=\"truth\">Recovered against the hidden truth</h2><p class=\"sub\">The truth \
          lies inside the posterior 90 % interval for <b>{} of {}</b> parameters{which}; of the \
-         {central} truths inside their prior's central 90 %, {central_inside} are inside. {}A 90 % \
+         {central} truths inside their prior's central 90 %, {central_inside} lie inside their \
+         posterior interval. {}{}A 90 % \
          interval holds the truth 90 % of the time on average over truths drawn from the prior \
          (Talts et al. 2018); a truth in its prior's outer tails is left out where the meters say \
          little about the parameter, and a strongly correlated pair is judged by the combination \
@@ -189,6 +189,14 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
                 "<span class=\"fail\">{u} of the {m} misses {} not explained.</span> ",
                 if u == 1 { "is" } else { "are" }
             ),
+        },
+        if r.without_truth.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "Not counted, without a truth in the file: {}. ",
+                esc(&r.without_truth.join(", "))
+            )
         }
     );
     let _ = write!(
@@ -207,9 +215,13 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
             None => ("<td class=\"pass\">yes</td>".to_string(), String::new()),
             Some(m) => (
                 format!(
-                    "<td{}>no, by {}</td>",
+                    "<td{}>no, {}</td>",
                     if m.explained() { "" } else { " class=\"fail\"" },
-                    truth::percent(m.outside_by)
+                    if m.outside_by.is_finite() {
+                        format!("by {}", truth::percent(m.outside_by))
+                    } else {
+                        "the interval has no width".into()
+                    }
                 ),
                 esc(&m.describe()),
             ),
