@@ -340,15 +340,11 @@ fn missing_files_are_named() {
     );
 }
 
-#[test]
-fn cli_writes_the_report() {
-    let (_tmp, cal, pre) = fixture();
+/// `bemcal report ARGS...`, which must succeed; its standard output.
+fn report_cli(args: &[&std::ffi::OsStr]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
         .arg("report")
-        .arg(&cal)
-        .arg("--precal")
-        .arg(&pre)
-        .arg("--json")
+        .args(args)
         .output()
         .unwrap();
     assert!(
@@ -356,7 +352,19 @@ fn cli_writes_the_report() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    String::from_utf8(out.stdout).unwrap()
+}
+
+#[test]
+fn cli_writes_the_report() {
+    let (_tmp, cal, pre) = fixture();
+    let stdout = report_cli(&[
+        cal.as_os_str(),
+        "--precal".as_ref(),
+        pre.as_os_str(),
+        "--json".as_ref(),
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(
         v["report"].as_str().unwrap(),
         cal.join("report.html").to_str().unwrap()
@@ -391,19 +399,8 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
     assert!(html.contains("identified combination is not recovered"));
 
     // The CLI prints the same.
-    let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
-        .arg("report")
-        .arg(&cal)
-        .arg("--truth")
-        .arg(&truth)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let with_truth = [cal.as_os_str(), "--truth".as_ref(), truth.as_os_str()];
+    let stdout = report_cli(&with_truth);
     assert!(
         stdout.contains("truth inside the 90 % interval for 1 of 3 parameters (1 of the 2"),
         "{stdout}"
@@ -420,14 +417,7 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
         {"name": "cooling_setpoint_occupied", "q5": 21.8, "q95": 23.4},
         {"name": "infiltration_ach", "q5": 0.4, "q95": 0.6}]});
     std::fs::write(&path, summary.to_string()).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
-        .arg("report")
-        .arg(&cal)
-        .arg("--truth")
-        .arg(&truth)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = report_cli(&with_truth);
     assert!(
         stdout.contains(
             "truth inside the 90 % interval with the surrogate's error for 2 of 3 parameters \

@@ -27,9 +27,9 @@ use bemcal_stats::mcmc::Draws;
 use std::ops::Range;
 
 use bemcal_stats::predictive::{
-    coverage, coverage_miss, cross_validated_coverage, intervals, lag1_autocorrelation,
-    mean_block_miss, period_mixture, period_totals, pits, pooled_coverage, sharpest_within,
-    summed_width, Coverage, ErrorModel, Intervals, Levels,
+    coverage_miss, cross_validated_coverage, intervals, lag1_autocorrelation, mean_block_miss,
+    period_mixture, period_totals, pits, pooled_coverage, sharpest_within, summed_width, Coverage,
+    ErrorModel, Intervals, Levels,
 };
 use serde::{Deserialize, Serialize};
 
@@ -634,13 +634,13 @@ fn totals_coverage(
         .collect()
 }
 
-/// Coverage of the intervals `iv` at every level of [`LEVELS`] on the values of `measured`
-/// that `select` keeps (hours, or the totals of whole measured periods).
+/// Coverage of the intervals `iv` at each of their levels on the values of `measured` that
+/// `select` keeps, each counted whole ([`Intervals::level_coverage`], levels without a value
+/// left out).
 fn level_coverage(iv: &Intervals, measured: &[f64], select: &[bool]) -> Vec<Coverage> {
-    LEVELS
-        .iter()
-        .enumerate()
-        .filter_map(|(i, l)| coverage(*l, measured, &iv.lower[i], &iv.upper[i], select))
+    iv.level_coverage(measured, select)
+        .into_iter()
+        .flatten()
         .collect()
 }
 

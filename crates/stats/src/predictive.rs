@@ -468,9 +468,16 @@ fn intervals_on(
 }
 
 impl Intervals {
-    /// Their coverage at each level on the values of `measured` that `select` keeps, with the
-    /// share of `pits` (the PITs of the same values) inside `levels`' bounds where some reading
-    /// sits at an atom ([`Coverage::with_pits`]).
+    /// Their [`coverage`] at each level on the values of `measured` that `select` keeps, each
+    /// reading counted whole; `None` at a level where no value is judged.
+    pub fn level_coverage(&self, measured: &[f64], select: &[bool]) -> Vec<Option<Coverage>> {
+        (self.levels.iter().enumerate())
+            .map(|(i, &l)| coverage(l, measured, &self.lower[i], &self.upper[i], select))
+            .collect()
+    }
+
+    /// [`Intervals::level_coverage`], with the share of `pits` (the PITs of the same values)
+    /// inside `levels`' bounds where some reading sits at an atom ([`Coverage::with_pits`]).
     pub fn coverage(
         &self,
         levels: &Levels,
@@ -478,11 +485,9 @@ impl Intervals {
         select: &[bool],
         pits: &[Pit],
     ) -> Vec<Coverage> {
-        (self.levels.iter().zip(&levels.bounds).enumerate())
-            .filter_map(|(i, (&l, &bounds))| {
-                let c = coverage(l, measured, &self.lower[i], &self.upper[i], select)?;
-                Some(c.with_pits(pits, bounds))
-            })
+        (self.level_coverage(measured, select).into_iter())
+            .zip(&levels.bounds)
+            .filter_map(|(c, &bounds)| Some(c?.with_pits(pits, bounds)))
             .collect()
     }
 
