@@ -395,7 +395,7 @@ pub struct McmcSettings {
     /// Algorithm 1, with the adaptive and independence variants above) or `hmc` (Hamiltonian
     /// Monte Carlo with gradients through the surrogate's VJP graph, `stats::hmc`; needs
     /// `sigma_delta = "marginal"` or `"fixed"`). An HMC iteration is a whole trajectory
-    /// (`ceil(hmc_integration_time / step)` gradients, about 8 at paper size, each costing
+    /// (`ceil(hmc_integration_time / step)` gradients, 10 to 14 at paper size, each costing
     /// about 3.3 surrogate evaluations), so set `iterations` and `burn_in` for it in hundreds,
     /// not thousands (e.g. 400 and 150). With `start = "optimised"` the Laplace covariance is
     /// its initial metric.
