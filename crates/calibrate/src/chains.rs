@@ -491,42 +491,50 @@ fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
     m
 }
 
-/// The iteration target after one more extension of the final chains, or `None` when they
-/// stop: `convergence` meets its targets, or `m.max_extensions` are done. An extension adds
-/// `iterations - burn_in` draws per chain (as many again as the first run), or what the
-/// smallest ESS says the ESS target needs ([`bemcal_stats::convergence::draws_for_ess`]), at
-/// most four times that. HMC chains are re-adapted at their first extension and run its
-/// window on top ([`bemcal_stats::hmc::readapt_window`], not drawn;
-/// [`bemcal_stats::chain::readapt`]: once); their first extension adds one step, because the
-/// ESS per draw of the metric burn-in estimated says little of the one re-adapted from the
-/// draws (measured on the demo: 4 to 8 times more bulk ESS per draw after it). One rule, the
-/// driver's.
+/// Where the final chains stand when they are judged: what the extension rule
+/// ([`extended_target`]) counts from, read off the chains themselves
+/// ([`crate::posterior::Checkpoint::drawn`]) rather than worked out from the iterations asked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Drawn {
+    /// Draws per chain so far (the fewest of any chain): after burn-in, outside
+    /// re-adaptation windows.
+    pub draws: u64,
+    /// Whether the chains were re-adapted ([`bemcal_stats::chain::readapt`]: once).
+    pub readapted: bool,
+}
+
+/// The iteration target after one more extension of the final chains, which ran to `target`
+/// iterations per chain and stand at `drawn`, or `None` when they stop: `convergence` meets
+/// its targets, or `m.max_extensions` are done. An extension adds `iterations - burn_in` draws
+/// per chain (as many again as the first run), or what the smallest ESS says the ESS target
+/// needs ([`bemcal_stats::convergence::draws_for_ess`]), at most four times that. HMC chains
+/// not yet re-adapted are re-adapted at the extension ([`bemcal_stats::chain::readapt`]; the
+/// executor tries again at the next one where the draws gave no metric) and run its window on
+/// top ([`bemcal_stats::hmc::readapt_window`], not drawn); that extension adds one step,
+/// because the ESS per draw of the metric burn-in estimated says little of the one re-adapted
+/// from the draws (measured on the demo: 4 to 8 times more bulk ESS per draw after it). One
+/// rule, the driver's.
 pub fn extended_target(
     m: &McmcSettings,
     convergence: &Convergence,
     extensions: u32,
     target: u64,
+    drawn: Drawn,
 ) -> Option<u64> {
     if convergence.converged || extensions >= m.max_extensions {
         return None;
     }
-    let window = match m.kernel {
-        Kernel::Hmc => bemcal_stats::hmc::readapt_window(m.burn_in),
-        Kernel::Mh => 0,
+    let opens = match m.kernel {
+        Kernel::Hmc if !drawn.readapted => bemcal_stats::hmc::readapt_window(m.burn_in),
+        _ => 0,
     };
     let step = m.iterations - m.burn_in;
-    // The one window opens at the first extension and is spent by the later ones' turn.
-    let (spent, opens) = match extensions {
-        0 => (0, window),
-        _ => (window, 0),
-    };
-    // Draws per chain so far (saturating: a record from before the window spent none).
-    let draws = target.saturating_sub(m.burn_in + spent).max(1);
+    let draws = drawn.draws.max(1);
     let min_ess = convergence.min_ess_bulk.min(convergence.min_ess_tail);
-    let for_ess = match (m.kernel, extensions) {
-        (Kernel::Hmc, 0) => step,
-        _ => draws_for_ess(draws, min_ess, convergence.targets.ess)
+    let for_ess = match opens {
+        0 => draws_for_ess(draws, min_ess, convergence.targets.ess)
             .map_or(0, |n| n.saturating_sub(draws)),
+        _ => step,
     };
     Some(target + opens + for_ess.clamp(step, 4 * step))
 }
@@ -600,6 +608,10 @@ mod tests {
         }
     }
 
+    fn drawn(draws: u64, readapted: bool) -> Drawn {
+        Drawn { draws, readapted }
+    }
+
     #[test]
     fn chains_are_extended_while_a_target_is_missed_up_to_the_limit() {
         let m = McmcSettings {
@@ -609,66 +621,103 @@ mod tests {
             kernel: Kernel::Mh,
             ..McmcSettings::default()
         };
+        let at = |draws| drawn(draws, false);
         // ESS already large (R-hat missed): one step of iterations - burn_in.
         let rhat_only = verdict(false, 2000.0, 2000.0);
-        assert_eq!(extended_target(&m, &rhat_only, 0, 1000), Some(1600));
-        assert_eq!(extended_target(&m, &rhat_only, 1, 1600), Some(2200));
         assert_eq!(
-            extended_target(&m, &rhat_only, 2, 2200),
+            extended_target(&m, &rhat_only, 0, 1000, at(600)),
+            Some(1600)
+        );
+        assert_eq!(
+            extended_target(&m, &rhat_only, 1, 1600, at(1200)),
+            Some(2200)
+        );
+        assert_eq!(
+            extended_target(&m, &rhat_only, 2, 2200, at(1800)),
             None,
             "at most max_extensions"
         );
         assert_eq!(
-            extended_target(&m, &verdict(true, 2000.0, 2000.0), 0, 1000),
+            extended_target(&m, &verdict(true, 2000.0, 2000.0), 0, 1000, at(600)),
             None,
             "converged"
         );
         // 600 draws gave tail ESS 200: 600 x 1.1 x 2 = 1,320 draws, 720 more.
         assert_eq!(
-            extended_target(&m, &verdict(false, 900.0, 200.0), 0, 1000),
+            extended_target(&m, &verdict(false, 900.0, 200.0), 0, 1000, at(600)),
             Some(1720)
         );
         // A tiny ESS asks for at most 4 steps; an ESS that could not be computed for one.
         assert_eq!(
-            extended_target(&m, &verdict(false, 3.0, 3.0), 0, 1000),
+            extended_target(&m, &verdict(false, 3.0, 3.0), 0, 1000, at(600)),
             Some(3400)
         );
         assert_eq!(
-            extended_target(&m, &verdict(false, f64::NAN, f64::NAN), 0, 1000),
+            extended_target(&m, &verdict(false, f64::NAN, f64::NAN), 0, 1000, at(600)),
             Some(1600)
         );
         let report_only = McmcSettings {
             max_extensions: 0,
             ..m
         };
-        assert_eq!(extended_target(&report_only, &rhat_only, 0, 1000), None);
+        assert_eq!(
+            extended_target(&report_only, &rhat_only, 0, 1000, at(600)),
+            None
+        );
     }
 
     #[test]
-    fn the_first_hmc_extension_adds_the_readaptation_window_undrawn() {
+    fn the_hmc_extension_that_readapts_adds_the_window_undrawn() {
         let m = McmcSettings {
             iterations: 1000,
             burn_in: 400,
-            max_extensions: 2,
+            max_extensions: 3,
             kernel: Kernel::Hmc,
             ..McmcSettings::default()
         };
         let window = bemcal_stats::hmc::readapt_window(400);
         assert_eq!(window, 200);
         let rhat_only = verdict(false, 2000.0, 2000.0);
-        assert_eq!(extended_target(&m, &rhat_only, 0, 1000), Some(1800));
-        // 1,800 iterations: 400 burn-in, 200 in the window, 1,200 draws; 600 more, and no
-        // window (the chains are re-adapted once).
-        assert_eq!(extended_target(&m, &rhat_only, 1, 1800), Some(2400));
-        // The first extension adds one step whatever the ESS (the metric changes with it).
         assert_eq!(
-            extended_target(&m, &verdict(false, 900.0, 50.0), 0, 1000),
+            extended_target(&m, &rhat_only, 0, 1000, drawn(600, false)),
             Some(1800)
         );
-        // Later ones count draws, not iterations: 1,200 draws at tail ESS 200 ask 2,640.
+        // 1,800 iterations: 400 burn-in, 200 in the window, 1,200 draws; 600 more, and no
+        // window (the chains are re-adapted once).
         assert_eq!(
-            extended_target(&m, &verdict(false, 900.0, 200.0), 1, 1800),
+            extended_target(&m, &rhat_only, 1, 1800, drawn(1200, true)),
+            Some(2400)
+        );
+        // The extension that re-adapts adds one step whatever the ESS (the metric changes
+        // with it).
+        assert_eq!(
+            extended_target(&m, &verdict(false, 900.0, 50.0), 0, 1000, drawn(600, false)),
+            Some(1800)
+        );
+        // Later ones count the chains' draws: 1,200 at tail ESS 200 ask 2,640.
+        assert_eq!(
+            extended_target(
+                &m,
+                &verdict(false, 900.0, 200.0),
+                1,
+                1800,
+                drawn(1200, true)
+            ),
             Some(1800 + 1440)
+        );
+        // Where the draws gave no metric at the first extension, the chains were not
+        // re-adapted and the window's 200 iterations were drawn (1,400 draws): the next
+        // extension re-adapts them, with its window (the executor tries again), and adds one
+        // step.
+        assert_eq!(
+            extended_target(
+                &m,
+                &verdict(false, 900.0, 200.0),
+                1,
+                1800,
+                drawn(1400, false)
+            ),
+            Some(1800 + 200 + 600)
         );
     }
 }

@@ -511,7 +511,7 @@ fn final_chains(
                 c
             }
         };
-        match after_final_chains(m, &chains, state.target) {
+        match after_final_chains(m, &chains, state.target, ck.drawn()) {
             AfterFinalChains::Extend { iterations } => {
                 log(&format!(
                     "chains: {}: extending to {iterations} iterations (extension {} of at most {})",

@@ -40,8 +40,8 @@ use std::path::{Path, PathBuf};
 
 pub use calibration::{Calibration, FittedData, Log};
 pub use chains::{
-    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
-    Sampler,
+    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, Drawn,
+    MovedChain, Sampler,
 };
 pub use driver::log_design_outcome;
 pub use inputs::{

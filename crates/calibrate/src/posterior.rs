@@ -288,6 +288,16 @@ pub struct Checkpoint {
     pub target: u64,
 }
 
+impl Checkpoint {
+    /// Where the chains stand for the extension rule ([`crate::extended_target`]).
+    pub fn drawn(&self) -> crate::chains::Drawn {
+        crate::chains::Drawn {
+            draws: self.draws.iter().map(|d| d.len() as u64).min().unwrap_or(0),
+            readapted: self.states.iter().any(Chain::was_readapted),
+        }
+    }
+}
+
 /// The likelihood's temperature of a record written before it had one: 1 (serde's default for
 /// [`Checkpoint::temperature`] and `RefineRound::temperature`).
 pub(crate) fn untempered() -> f64 {

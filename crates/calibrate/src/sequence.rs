@@ -15,7 +15,7 @@
 
 use crate::project::{McmcSettings, Project};
 use crate::validation::{next_candidate, ValidationStep, INITIAL_KEY};
-use crate::{extended_target, ChainSummary};
+use crate::{extended_target, ChainSummary, Drawn};
 
 /// The stages of a calibration, in the order the driver ([`crate::driver`]) enters them; a
 /// stage is entered again for each refinement round and extension. The coordinator stores a
@@ -162,13 +162,14 @@ pub enum AfterFinalChains {
 
 /// The final chains' next step: an extension while `chains.convergence` misses its targets and
 /// `mcmc.max_extensions` allows (the rule [`extended_target`]), else the validation. `target`:
-/// the iterations per chain they ran to.
+/// the iterations per chain they ran to; `drawn`: where they stand.
 pub fn after_final_chains(
     m: &McmcSettings,
     chains: &ChainSummary,
     target: u64,
+    drawn: Drawn,
 ) -> AfterFinalChains {
-    match extended_target(m, &chains.convergence, chains.extensions, target) {
+    match extended_target(m, &chains.convergence, chains.extensions, target, drawn) {
         Some(iterations) => AfterFinalChains::Extend { iterations },
         None => AfterFinalChains::Validate,
     }
@@ -308,21 +309,31 @@ mod tests {
     fn final_chains_are_extended_while_short_and_allowed_then_validated() {
         let p = project("[mcmc]\niterations = 500\nburn_in = 100\nmax_extensions = 1\n");
         let mut c = chains(0);
+        let (first, extended) = (
+            Drawn {
+                draws: 400,
+                readapted: false,
+            },
+            Drawn {
+                draws: 800,
+                readapted: true,
+            },
+        );
         // Not converged (the default verdict), no extension yet: one step of 400 draws more,
         // after the HMC chains' re-adaptation window of 50.
         assert_eq!(
-            after_final_chains(&p.mcmc, &c, 500),
+            after_final_chains(&p.mcmc, &c, 500, first),
             AfterFinalChains::Extend { iterations: 950 }
         );
         c.extensions = 1;
         assert_eq!(
-            after_final_chains(&p.mcmc, &c, 950),
+            after_final_chains(&p.mcmc, &c, 950, extended),
             AfterFinalChains::Validate
         );
         c.extensions = 0;
         c.convergence.converged = true;
         assert_eq!(
-            after_final_chains(&p.mcmc, &c, 500),
+            after_final_chains(&p.mcmc, &c, 500, first),
             AfterFinalChains::Validate
         );
     }

@@ -71,6 +71,13 @@ impl Chain {
             Chain::Hmc(_) => false,
         }
     }
+    /// Whether the chain was re-adapted ([`readapt`]; never for Metropolis-Hastings).
+    pub fn was_readapted(&self) -> bool {
+        match self {
+            Chain::Mh(_) => false,
+            Chain::Hmc(s) => s.was_readapted(),
+        }
+    }
     /// Divergent trajectories after burn-in (HMC; 0 for Metropolis-Hastings).
     pub fn divergent_post_burn_in(&self) -> u64 {
         match self {
