@@ -51,6 +51,15 @@ pub fn triangular_cdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
     }
 }
 
+/// Mean and sample standard deviation (`n - 1`) of `values`, all of them (filter first);
+/// the sd is NaN below two values.
+pub fn mean_sd(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    (mean, var.sqrt())
+}
+
 /// Quantile `q` in [0, 1] of finite values (linear interpolation); NaN if none.
 pub fn quantile(values: &[f64], q: f64) -> f64 {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
@@ -102,8 +111,7 @@ pub fn kde(values: &[f64], grid: &[f64]) -> Vec<f64> {
     let step = v.len().div_ceil(4000);
     let v: Vec<f64> = v.iter().step_by(step).copied().collect();
     let n = v.len() as f64;
-    let mean = v.iter().sum::<f64>() / n;
-    let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let (_, sd) = mean_sd(&v);
     let iqr = quantile(&v, 0.75) - quantile(&v, 0.25);
     let spread = if iqr > 0.0 { sd.min(iqr / 1.34) } else { sd };
     let h = 0.9 * spread * n.powf(-0.2);

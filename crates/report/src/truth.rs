@@ -24,7 +24,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::analysis::{quantile, triangular_cdf};
+use crate::analysis::{mean_sd, quantile, triangular_cdf};
 use crate::io::{Draws, Summary};
 
 /// The prior quantiles outside which a truth counts as in its prior's outer tails.
@@ -313,13 +313,7 @@ fn combination_inside(
     if xa.len() < 2 || xa.len() != xb.len() {
         return None;
     }
-    let moments = |x: &[f64]| {
-        let n = x.len() as f64;
-        let m = x.iter().sum::<f64>() / n;
-        let v = x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0);
-        (m, v.sqrt())
-    };
-    let ((ma, sa), (mb, sb)) = (moments(&xa), moments(&xb));
+    let ((ma, sa), (mb, sb)) = (mean_sd(&xa), mean_sd(&xb));
     if !(sa > 0.0 && sb > 0.0) {
         return None;
     }
