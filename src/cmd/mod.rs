@@ -8,6 +8,7 @@ pub mod check;
 mod common;
 pub mod completions;
 pub mod coordinator;
+pub mod corpus;
 pub mod crossval;
 pub mod design;
 pub mod diagnose;
@@ -54,6 +55,8 @@ pub enum Command {
     Precalibrate(precalibrate::Args),
     /// Design points: a Latin hypercube over the priors, optionally simulated.
     Design(design::Args),
+    /// Simulate the building family's corpus for the pretrained surrogate (resumable).
+    Corpus(corpus::Args),
     /// Train the LSTM surrogate on a training set and export it to ONNX.
     Train(train::Args),
     /// Predict hourly meters with a trained surrogate.
@@ -117,6 +120,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Doctor(a) => doctor::run(a),
         Command::Weather(a) => weather::run(a),
         Command::Precalibrate(a) => precalibrate::run(a),
+        Command::Corpus(a) => corpus::run(a),
         Command::Train(a) => train::run(a),
         Command::Predict(a) => predict::run(a),
         Command::Diagnose(a) => diagnose::run(a),

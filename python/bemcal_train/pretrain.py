@@ -1,0 +1,493 @@
+"""The pretrained, building-conditioned surrogate (issue 66) and its learning curve.
+
+One LSTM (the reference's family: lookback 3, ReLU after the last step, a linear head) for the
+whole building family, trained once on a corpus of generated buildings (``bemcal corpus``) and
+fine-tuned per building on a few of its own EnergyPlus runs. What makes it transfer:
+
+* **Inputs that do not assume one parameter layout.** A building's schedule intervals (how many,
+  where they end) vary, so schedule fractions enter as the hourly *value* of the schedule at
+  that hour (from the intervals, the day type and the parameters), beside an occupied-hours
+  flag; the engineering parameters enter by name (a system without one, the fan coils' DOAS
+  without unoccupied outdoor air, gets 0 and a flag). The hot-water peak flow enters per m2.
+* **The building's descriptors** (storeys, footprint, floor-to-floor height, window-to-wall
+  ratio, zoning, heating source, HVAC system, occupied hours and the envelope ratios that follow)
+  beside them, constant over the year.
+* **Outputs per m2 of floor** (Wh/m2 per hour), a scale that carries between buildings.
+
+Corpus folder (``crates/corpus/src/store.rs``): ``index.jsonl`` (one finished case a line:
+spec, values, climate, floor area), ``cases/<key>.npy`` float16 [8760, 5] and
+``weather/<climate>.npy`` float32 [8760, 5].
+
+Command line::
+
+    python -m bemcal_train.pretrain curve --corpus DIR --heldout DIR --sizes 100,200 --out DIR
+    python -m bemcal_train.pretrain train --corpus DIR --cases N --out DIR
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+import numpy as np
+import torch
+
+from . import LOOKBACK
+from .adam import Adam
+from .data import window_index
+from .model import Surrogate
+
+# The generator's engineering parameters by name (crates/energyplus/src/building/mod.rs).
+ENGINEERING = [
+    "wall_insulation_conductivity", "roof_insulation_conductivity", "window_glass_conductivity",
+    "shgc", "equipment_power_density", "lighting_power_density", "people_area_per_person",
+    "cooling_setpoint_occupied", "cooling_setpoint_unoccupied", "heating_setpoint_occupied",
+    "heating_setpoint_unoccupied", "chilled_water_supply_temp", "supply_air_temp",
+    "outdoor_air_ach_occupied", "outdoor_air_ach_unoccupied", "hot_water_peak_flow",
+]
+DESCRIPTORS = [
+    "storeys", "length_m", "width_m", "floor_to_floor_m", "window_to_wall", "perimeter_core",
+    "district_heating", "doas_fan_coil", "occupied_start", "occupied_end", "log_floor_area",
+    "perimeter_share", "wall_per_floor", "window_per_floor", "roof_per_floor", "no_unoccupied_oa",
+]
+HOURLY = ["dry_bulb_c", "rel_humidity_pct", "wind_speed_m_s", "global_horizontal_wh_m2",
+          "off_day", "hour_sin", "hour_cos", "schedule", "occupied"]
+CALIBRATED_METERS = ["heating_kwh", "cooling_kwh", "electricity_kwh"]
+
+
+def read_index(corpus):
+    """The finished cases of a corpus folder, in the order of the manifest's sequence."""
+    rows = []
+    with open(os.path.join(corpus, "index.jsonl")) as f:
+        for line in f:
+            line = line.strip()
+            if line:
+                try:
+                    rows.append(json.loads(line))
+                except json.JSONDecodeError:
+                    pass  # a torn last line (a stop mid-write)
+    rows.sort(key=lambda r: r["index"])
+    return rows
+
+
+def describe(spec):
+    """The building's descriptors (DESCRIPTORS order) from its spec."""
+    L, W = spec["footprint_m"]
+    n, h = spec["storeys"], spec["floor_to_floor_m"]
+    area = L * W * n
+    pc = spec["zoning"] == "perimeter_core"
+    d = spec.get("perimeter_depth_m", 4.57)
+    perimeter_share = 1.0 - max(L - 2 * d, 0) * max(W - 2 * d, 0) / (L * W) if pc else 0.0
+    wall = 2 * (L + W) * h * n / area
+    doas = spec.get("hvac", "vav_reheat") == "doas_fan_coil"
+    return [n, L, W, h, spec["window_to_wall"], float(pc),
+            float(spec["heating_source"] == "district"), float(doas),
+            spec["occupied_hours"][0], spec["occupied_hours"][1], math.log(area),
+            perimeter_share, wall, wall * spec["window_to_wall"], 1.0 / n, float(doas)]
+
+
+def engineering(values, area):
+    """The engineering parameters (ENGINEERING order); a missing one is 0, hot water per m2."""
+    out = []
+    for name in ENGINEERING:
+        v = values.get(name, 0.0)
+        if name == "hot_water_peak_flow":
+            v = v / area * 1e6  # ml/s per m2
+        out.append(v)
+    return out
+
+
+def schedule_hours(spec, values, off_day):
+    """The schedule's value and the occupied flag at every hour, [T, 2], from the spec's interval
+    boundaries, the parameters and the day type (weekends and holidays run the weekend intervals)."""
+    T = off_day.shape[0]
+    hour = np.arange(T) % 24
+
+    def profile(bounds, prefix):
+        p = np.zeros(24)
+        start = 0
+        for i, end in enumerate(bounds):
+            p[start:end] = values[f"{prefix}_{i + 1:02d}"]
+            start = end
+        return p
+
+    wd = profile(spec["weekday_boundaries"], "schedule_weekday")
+    we = profile(spec["weekend_boundaries"], "schedule_weekend")
+    sched = np.where(off_day, we[hour], wd[hour])
+    a, b = spec["occupied_hours"]
+    occupied = (~off_day) & (hour >= a) & (hour < b)
+    return np.stack([sched, occupied.astype(np.float64)], axis=1)
+
+
+class Corpus:
+    """Cases as arrays: static features [N, S], per-case hourly schedule [N, T, 2], each case's
+    climate index, climates' weather [C, T, 7] and targets [N, T, n_out] (Wh/m2)."""
+
+    def __init__(self, folder, rows, climates=None):
+        self.rows = rows
+        names = sorted({r["climate"] for r in rows})
+        self.climates = climates if climates is not None else {}
+        for c in names:
+            if c not in self.climates:
+                self.climates[c] = np.load(os.path.join(folder, "weather", f"{c}.npy")).astype(np.float64)
+        with open(os.path.join(folder, "corpus.json")) as f:
+            self.outputs = json.load(f)["outputs"]
+        self.static = np.array([describe(r["spec"]) + engineering(r["values"], r["floor_area_m2"])
+                                for r in rows])
+        self.climate = [r["climate"] for r in rows]
+        self.sched = np.stack([schedule_hours(r["spec"], r["values"], self.climates[r["climate"]][:, 4] != 0)
+                               for r in rows])
+        self.y = np.stack([np.load(os.path.join(folder, "cases", f"{r['key']}.npy")).astype(np.float32)
+                           for r in rows])
+
+    def weather_hourly(self, climate):
+        """A climate's hourly inputs before normalisation: its five features (day type as an
+        off-day flag) and the hour of day, [T, 7]."""
+        w = self.climates[climate]
+        T = w.shape[0]
+        ang = 2 * np.pi * (np.arange(T) % 24) / 24
+        return np.concatenate([w[:, :4], (w[:, 4:5] != 0).astype(np.float64),
+                               np.sin(ang)[:, None], np.cos(ang)[:, None]], axis=1)
+
+
+class Normaliser:
+    """Mean and standard deviation of the static and hourly inputs, and each output's scale,
+    fitted on the pretraining cases and kept with the network (the model card)."""
+
+    def __init__(self, corpus=None, state=None):
+        if state is not None:
+            self.__dict__.update({k: np.asarray(v) for k, v in state.items()})
+            return
+        s = corpus.static
+        self.static_mean, self.static_std = s.mean(0), np.where(s.std(0) > 1e-9, s.std(0), 1.0)
+        h = np.concatenate([np.concatenate([corpus.weather_hourly(c), np.zeros((corpus.y.shape[1], 2))], 1)
+                            for c in sorted(set(corpus.climate))])
+        sc = corpus.sched.reshape(-1, 2)
+        mean = h.mean(0)
+        std = np.where(h.std(0) > 1e-9, h.std(0), 1.0)
+        mean[-2:], std[-2:] = sc.mean(0), np.where(sc.std(0) > 1e-9, sc.std(0), 1.0)
+        # The hour-of-day and off-day columns stay as they are.
+        mean[4:7], std[4:7] = 0.0, 1.0
+        self.hourly_mean, self.hourly_std = mean, std
+        self.y_scale = np.maximum(np.quantile(corpus.y.reshape(-1, corpus.y.shape[2]), 0.999, axis=0), 1e-6)
+
+    def state(self):
+        return {k: np.asarray(v).tolist() for k, v in self.__dict__.items()}
+
+
+class Windows:
+    """Window batches on the device: static features of the case, the climate's weather and the
+    case's schedule at hours t-2..t."""
+
+    def __init__(self, corpus, norm, device):
+        cl = sorted(corpus.climates)
+        self.ci = torch.as_tensor([cl.index(c) for c in corpus.climate], device=device)
+        self.w = torch.as_tensor(np.stack([(np.concatenate([corpus.weather_hourly(c), np.zeros((corpus.y.shape[1], 2))], 1)
+                                            - norm.hourly_mean) / norm.hourly_std for c in cl])[..., :7],
+                                 dtype=torch.float32, device=device)  # [C, T, 7]
+        self.sched = torch.as_tensor((corpus.sched - norm.hourly_mean[7:]) / norm.hourly_std[7:],
+                                     dtype=torch.float32, device=device)  # [N, T, 2]
+        self.s = torch.as_tensor((corpus.static - norm.static_mean) / norm.static_std,
+                                 dtype=torch.float32, device=device)  # [N, S]
+        self.y = torch.as_tensor(corpus.y / norm.y_scale, dtype=torch.float32, device=device)  # [N, T, O]
+        self.widx = torch.as_tensor(window_index(corpus.y.shape[1]), device=device)
+        self.n_features = self.s.shape[1] + 9
+
+    def batch(self, case, hour):
+        h = self.widx[hour]  # [B, 3]
+        w = self.w[self.ci[case][:, None], h]  # [B, 3, 7]
+        sc = self.sched[case[:, None], h]  # [B, 3, 2]
+        s = self.s[case].unsqueeze(1).expand(-1, LOOKBACK, -1)
+        return torch.cat([s, w, sc], dim=2), self.y[case, hour]
+
+
+def predict(model, win, cases, batch=8760):
+    """Predictions (scaled) for every hour of ``cases``, [len, T, O]."""
+    model.eval()
+    T = win.y.shape[1]
+    out = []
+    with torch.no_grad():
+        for c in cases:
+            hour = torch.arange(T, device=win.y.device)
+            x, _ = win.batch(torch.full_like(hour, c), hour)
+            out.append(torch.cat([model(x[s:s + batch]) for s in range(0, T, batch)]))
+    return torch.relu(torch.stack(out))
+
+
+def cv_rmse(pred, true, names):
+    """Per output: CV-RMSE and NMBE (%) pooled over the cases' hours (ASHRAE Guideline 14's
+    hourly figures, p = 0)."""
+    res = {}
+    for k, n in enumerate(names):
+        e = pred[..., k] - true[..., k]
+        m = float(true[..., k].mean())
+        res[n] = {"cv_rmse_pct": 100 * float(np.sqrt((e ** 2).mean())) / m if m > 0 else None,
+                  "nmbe_pct": 100 * float(e.mean()) / m if m > 0 else None}
+    return res
+
+
+def fit(model, win, cases, epochs, hours_per_case, lr, seed, log=None, held=None, patience=None):
+    """Adam on the MSE of scaled targets; each epoch draws ``hours_per_case`` hours of every case
+    (all hours where it is None). With ``held`` cases and ``patience``, the best epoch on them
+    is kept (early stopping)."""
+    gen = torch.Generator().manual_seed(seed)
+    opt = Adam(model.parameters(), lr=lr)
+    T = win.y.shape[1]
+    device = win.y.device
+    cases_t = torch.as_tensor(cases)
+    best, best_state, bad = float("inf"), None, 0
+    for epoch in range(1, epochs + 1):
+        t0 = time.time()
+        model.train()
+        if hours_per_case is None:
+            case = cases_t.repeat_interleave(T)
+            hour = torch.arange(T).repeat(len(cases))
+        else:
+            case = cases_t.repeat_interleave(hours_per_case)
+            hour = torch.randint(0, T, (len(case),), generator=gen)
+        perm = torch.randperm(len(case), generator=gen)
+        case, hour = case[perm].to(device), hour[perm].to(device)
+        total = 0.0
+        for s in range(0, len(case), 1024):
+            x, y = win.batch(case[s:s + 1024], hour[s:s + 1024])
+            loss = torch.mean((model(x) - y) ** 2)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += loss.item() * x.shape[0]
+        line = f"epoch {epoch:3d} train {total / len(case):.6f}"
+        if held:
+            h = float(torch.mean((predict(model, win, held) - win.y[held]) ** 2))
+            line += f" held-out {h:.6f}"
+            if h < best:
+                best, bad = h, 0
+                best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            else:
+                bad += 1
+        if log:
+            log(f"{line} {time.time() - t0:.1f} s")
+        if patience and bad >= patience:
+            break
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    return model
+
+
+def pretrain(corpus_dir, n_cases, args, log=print):
+    """The conditioned network on the first ``n_cases`` finished cases of a corpus."""
+    rows = read_index(corpus_dir)[:n_cases]
+    corpus = Corpus(corpus_dir, rows)
+    norm = Normaliser(corpus)
+    win = Windows(corpus, norm, "cpu")
+    torch.manual_seed(args.seed)
+    model = Surrogate(win.n_features, len(corpus.outputs), args.hidden, args.layers)
+    t0 = time.time()
+    fit(model, win, list(range(len(rows))), args.epochs, args.hours_per_case, args.lr, args.seed, log)
+    return model, norm, corpus, time.time() - t0
+
+
+def card(corpus, norm, args, seconds):
+    """The model card's training part: the corpus, its ranges, the normalisation."""
+    spec = np.array([describe(r["spec"]) for r in corpus.rows])
+    return {"format": "bemcal-pretrained-surrogate", "format_version": 1,
+            "model": {"kind": "lstm", "lookback": LOOKBACK, "layers": args.layers, "hidden": args.hidden},
+            "inputs": {"static": DESCRIPTORS + ENGINEERING, "hourly": HOURLY},
+            "outputs": corpus.outputs, "output_unit": "Wh/m2 per hour",
+            "corpus": {"cases": len(corpus.rows), "climates": sorted(set(corpus.climate)),
+                       "descriptor_ranges": {n: [float(spec[:, k].min()), float(spec[:, k].max())]
+                                             for k, n in enumerate(DESCRIPTORS)}},
+            "normalisation": norm.state(),
+            "training": {"epochs": args.epochs, "hours_per_case": args.hours_per_case, "lr": args.lr,
+                         "seed": args.seed, "seconds": seconds, "threads": torch.get_num_threads(),
+                         "torch_version": torch.__version__}}
+
+
+def heldout_buildings(heldout_dir, norm, climates):
+    """The held-out corpus grouped by building: (rows, Corpus) of each building's points."""
+    rows = read_index(heldout_dir)
+    by = {}
+    for r in rows:
+        by.setdefault(r["building"], []).append(r)
+    out = []
+    for b, rs in sorted(by.items()):
+        rs.sort(key=lambda r: r["point"])
+        out.append((b, Corpus(heldout_dir, rs, dict(climates))))
+    return out
+
+
+def evaluate(model, win, corpus, test):
+    pred = predict(model, win, test).numpy()
+    y = win.y[test].numpy()
+    return cv_rmse(pred, y, corpus.outputs)
+
+
+def from_scratch(corpus, train, test, args, log):
+    """Today's per-building surrogate on the same points: the bemcal_train architecture and
+    settings of the demo (2 x 64, Adam 1e-3, early stopping on a fifth of the points, at most
+    200 epochs, patience 15), its inputs the building's parameters normalised by their ranges,
+    the weather and hour of day; trained from a random start."""
+    rows = corpus.rows
+    names = sorted(rows[0]["values"])
+    lo = np.array([rows[0]["ranges"][n][0] for n in names])
+    hi = np.array([rows[0]["ranges"][n][1] for n in names])
+    p = np.array([[r["values"][n] for n in names] for r in rows])
+    p = (p - lo) / (hi - lo)
+    w = corpus.weather_hourly(corpus.climate[0])
+    w = (w - w.mean(0)) / np.where(w.std(0) > 1e-9, w.std(0), 1.0)
+    scale = np.maximum(corpus.y[train].max(axis=(0, 1)), 1e-6)
+
+    class W:
+        pass
+
+    win = W()
+    win.y = torch.as_tensor(corpus.y / scale, dtype=torch.float32)
+    pt = torch.as_tensor(p, dtype=torch.float32)
+    wt = torch.as_tensor(w, dtype=torch.float32)
+    widx = torch.as_tensor(window_index(w.shape[0]))
+
+    def batch(case, hour):
+        x = torch.cat([pt[case].unsqueeze(1).expand(-1, LOOKBACK, -1), wt[widx[hour]]], dim=2)
+        return x, win.y[case, hour]
+
+    win.batch = batch
+    torch.manual_seed(args.seed)
+    model = Surrogate(p.shape[1] + w.shape[1], corpus.y.shape[2], args.scratch_hidden, args.layers)
+    k = max(1, len(train) // 5)
+    fit(model, win, train[:-k], 200, None, 1e-3, args.seed, None, held=train[-k:], patience=15)
+    pred = predict(model, win, test).numpy()
+    return cv_rmse(pred, win.y[test].numpy(), corpus.outputs)
+
+
+def finetune(model, corpus, norm, train, args):
+    """The pretrained network fine-tuned on a building's own points: every weight, Adam at a
+    tenth of the pretraining rate, early stopping on a fifth of the points where there are 10
+    or more (else a fixed number of epochs)."""
+    import copy
+
+    m = copy.deepcopy(model)
+    win = Windows(corpus, norm, "cpu")
+    if len(train) >= 10:
+        k = len(train) // 5
+        fit(m, win, train[:-k], args.finetune_epochs, None, args.lr / 10, args.seed, held=train[-k:], patience=5)
+    else:
+        fit(m, win, train, max(args.finetune_epochs // 4, 3), None, args.lr / 10, args.seed)
+    return m, win
+
+
+def curve(args):
+    """Held-out CV-RMSE per meter for each corpus size: zero-shot, fine-tuned on 5 / 10 / 20 of
+    a building's own points, and today's from-scratch surrogate on the same 20; tested on the
+    building's last ``test`` points."""
+    sizes = [int(s) for s in args.sizes.split(",")]
+    results = {"sizes": {}, "buildings": {}, "settings": vars(args)}
+    available = len(read_index(args.corpus))
+    test_n = args.test
+    log = (lambda m: print(m, flush=True)) if args.verbose else (lambda m: None)
+    scratch = {}
+    for n in sizes:
+        if n > available:
+            print(f"corpus size {n}: only {available} cases finished; skipped", flush=True)
+            continue
+        model, norm, corpus, secs = pretrain(args.corpus, n, args, log)
+        print(f"pretrained on {n} cases in {secs:.0f} s", flush=True)
+        rows = {}
+        for b, hc in heldout_buildings(args.heldout, norm, corpus.climates):
+            pts = len(hc.rows)
+            test = list(range(pts - test_n, pts))
+            win = Windows(hc, norm, "cpu")
+            r = {"zero_shot": evaluate(model, win, hc, test)}
+            for k in (5, 10, 20):
+                if k <= pts - test_n:
+                    t0 = time.time()
+                    m, w = finetune(model, hc, norm, list(range(k)), args)
+                    r[f"finetuned_{k}"] = evaluate(m, w, hc, test)
+                    r[f"finetuned_{k}"]["seconds"] = time.time() - t0
+            if b not in scratch and pts - test_n >= 20:
+                t0 = time.time()
+                scratch[b] = from_scratch(hc, list(range(20)), test, args, log)
+                scratch[b]["seconds"] = time.time() - t0
+            r["scratch_20"] = scratch.get(b)
+            spec = hc.rows[0]["spec"]
+            results["buildings"][b] = {"climate": hc.climate[0], "storeys": spec["storeys"],
+                                       "footprint_m": spec["footprint_m"], "zoning": spec["zoning"],
+                                       "hvac": spec.get("hvac", "vav_reheat"),
+                                       "heating_source": spec["heating_source"]}
+            rows[b] = r
+            print(f"  building {b} ({hc.climate[0]}): " + "; ".join(
+                f"{how} " + "/".join(f"{v[m]['cv_rmse_pct']:.0f}" for m in CALIBRATED_METERS)
+                for how, v in r.items() if v), flush=True)
+        results["sizes"][n] = {"pretrain_seconds": secs, "buildings": rows, "card": card(corpus, norm, args, secs)}
+        if args.out:
+            os.makedirs(args.out, exist_ok=True)
+            torch.save(model.state_dict(), os.path.join(args.out, f"pretrained_{n}.pt"))
+            with open(os.path.join(args.out, "curve.json"), "w") as f:
+                json.dump(results, f, indent=1)
+    print(table(results))
+    return results
+
+
+def table(results):
+    """The learning curve as Markdown: median over held-out buildings of each meter's CV-RMSE."""
+    hows = ["zero_shot", "finetuned_5", "finetuned_10", "finetuned_20", "scratch_20"]
+    lines = ["| corpus cases | " + " | ".join(hows) + " |", "|---|" + "---|" * len(hows)]
+    for n, s in results["sizes"].items():
+        cells = []
+        for how in hows:
+            vals = [[b[how][m]["cv_rmse_pct"] for m in CALIBRATED_METERS]
+                    for b in s["buildings"].values() if b.get(how)]
+            if not vals:
+                cells.append("-")
+                continue
+            med = np.median(np.array(vals, dtype=float), axis=0)
+            cells.append(" / ".join(f"{v:.0f}" for v in med))
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    lines.append("(median over held-out buildings of hourly CV-RMSE %, heating / cooling / electricity)")
+    return "\n".join(lines)
+
+
+def parser():
+    ap = argparse.ArgumentParser(prog="python -m bemcal_train.pretrain", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command", required=True)
+    for name in ("curve", "train"):
+        p = sub.add_parser(name)
+        p.add_argument("--corpus", required=True)
+        p.add_argument("--out", default=None)
+        p.add_argument("--epochs", type=int, default=30)
+        p.add_argument("--hours-per-case", type=int, default=1000)
+        p.add_argument("--hidden", type=int, default=64)
+        p.add_argument("--scratch-hidden", type=int, default=64)
+        p.add_argument("--layers", type=int, default=2)
+        p.add_argument("--lr", type=float, default=3e-3)
+        p.add_argument("--finetune-epochs", type=int, default=40)
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--threads", type=int, default=0)
+        p.add_argument("--verbose", action="store_true")
+        if name == "curve":
+            p.add_argument("--heldout", required=True)
+            p.add_argument("--sizes", default="100,200,400,800")
+            p.add_argument("--test", type=int, default=5)
+        else:
+            p.add_argument("--cases", type=int, required=True)
+    return ap
+
+
+def main(argv=None):
+    args = parser().parse_args(sys.argv[1:] if argv is None else argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    if args.command == "curve":
+        curve(args)
+    else:
+        model, norm, corpus, secs = pretrain(args.corpus, args.cases, args, print)
+        os.makedirs(args.out, exist_ok=True)
+        torch.save(model.state_dict(), os.path.join(args.out, "weights.pt"))
+        with open(os.path.join(args.out, "card.json"), "w") as f:
+            json.dump(card(corpus, norm, args, secs), f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
