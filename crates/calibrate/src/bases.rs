@@ -5,10 +5,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
+use crate::error::{write_atomic, Error};
+use crate::inputs::Inputs;
 use crate::output::timestamps;
 use crate::project::Project;
-use crate::{write_atomic, Error};
-use crate::{Calibration, Inputs};
 
 /// A base load in `summary.json`.
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -11,17 +11,19 @@ use ndarray::{Array2, Array3};
 use crate::design::{
     make_design, read_outcome, simulate_point, write_design_csv, write_outcome, OUTCOME_FILE,
 };
+use crate::error::Error;
 use crate::inputs::load_inputs;
+use crate::inputs::Inputs;
+use crate::output::OutputDir;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};
-use crate::{Error, Inputs, OutputDir};
 
 /// Progress messages.
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
 
 /// A loaded calibration: the project, its inputs and the output folder. Each stage is a method;
 /// the driver ([`crate::driver::drive`]) calls them in order, and the executors do the
-/// expensive ones here ([`calibrate`](crate::calibrate)) or on workers (simulations, training
+/// expensive ones here ([`calibrate`](crate::local::calibrate)) or on workers (simulations, training
 /// and chain segments as separate jobs).
 pub struct Calibration {
     /// The project file's settings.
@@ -314,7 +316,7 @@ impl FittedData {
 /// the path from the files to these series has no parallel sums and no hash-ordered maps;
 /// values enter rounded to 9 significant digits, in text, so the fingerprint does not depend
 /// on how a platform prints or stores the last bits.
-pub(crate) fn readings_fingerprint(inputs: &crate::Inputs) -> String {
+pub(crate) fn readings_fingerprint(inputs: &crate::inputs::Inputs) -> String {
     use sha2::{Digest, Sha256};
     let mut h = Sha256::new();
     for k in (0..inputs.outputs.len()).filter(|&k| inputs.fitted[k]) {

@@ -16,10 +16,12 @@ use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConf
 use bemcal_surrogate::{Evaluator, Surrogate};
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
+use crate::error::Error;
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::summary::OutputMetrics;
 use crate::surrogate_error::ChainTemperature;
-use crate::{Calibration, Error, OutputMetrics};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
 pub struct Sampler<'c> {
@@ -476,7 +478,7 @@ fn optimise(
 
 /// [`Sampler::settings_for`]: the project's `[mcmc]` for round `round`, with the round's own
 /// random stream and, in a preliminary round, `refine.kernel` when set.
-fn settings_for(project: &crate::Project, round: u32) -> McmcSettings {
+fn settings_for(project: &crate::project::Project, round: u32) -> McmcSettings {
     let mut m = project.mcmc.clone();
     if round > 0 {
         m.seed = m
@@ -582,7 +584,7 @@ mod tests {
 
     #[test]
     fn preliminary_rounds_take_the_refine_kernel_and_the_final_round_the_mcmc_one() {
-        let mut p: crate::Project = toml::from_str(
+        let mut p: crate::project::Project = toml::from_str(
             "name = \"x\"\nmodel = \"m.toml\"\nweather = \"w.epw\"\n[meters]\nfile = \"m.csv\"\n",
         )
         .unwrap();

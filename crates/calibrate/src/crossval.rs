@@ -18,7 +18,12 @@ use bemcal_stats::metrics::{g14_of_totals, g14_pooled, G14Metrics};
 use bemcal_stats::predictive::{pooled_coverage, Coverage};
 use serde::{Deserialize, Serialize};
 
-use crate::{calibrate, Error, Log, OutputDir, Project, Summary};
+use crate::calibration::Log;
+use crate::error::Error;
+use crate::local::calibrate;
+use crate::output::OutputDir;
+use crate::project::Project;
+use crate::summary::Summary;
 
 /// The months' names as a held-out period takes them.
 pub const MONTHS: [&str; 12] = [
@@ -241,7 +246,7 @@ pub fn cross_validate(
         folds,
     };
     let json = serde_json::to_vec_pretty(&cv).map_err(|e| Error::Config(e.to_string()))?;
-    crate::write_atomic(&out.join(CROSSVAL_FILE), &json)?;
+    crate::error::write_atomic(&out.join(CROSSVAL_FILE), &json)?;
     Ok(cv)
 }
 

@@ -10,8 +10,8 @@ use bemcal_stats::prior::Triangular;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::error::Error;
 use crate::replacement::{self, Attempt, Outcome, Policy, Step};
-use crate::Error;
 use bemcal_energyplus::errfile::failure_reason;
 
 /// Which parameters are calibrated and the values of the others.
@@ -204,7 +204,7 @@ pub fn write_design_csv(path: &Path, plan: &Plan, design: &Design) -> Result<(),
         }
         s.push('\n');
     }
-    crate::write_atomic(path, s.as_bytes())
+    crate::error::write_atomic(path, s.as_bytes())
 }
 
 /// A design simulated to its end (see [`crate::replacement`]).
@@ -439,7 +439,7 @@ pub(crate) fn save_failures(
     if !failures.is_empty() {
         let json =
             serde_json::to_vec_pretty(&failures).map_err(|e| Error::Config(e.to_string()))?;
-        crate::write_atomic(path, &json)?;
+        crate::error::write_atomic(path, &json)?;
     }
     Ok(())
 }
@@ -454,7 +454,7 @@ pub fn read_outcome(dir: &Path) -> Option<Outcome> {
 /// Writes the settled design of simulations folder `dir` (`design.json`).
 pub fn write_outcome(dir: &Path, outcome: &Outcome) -> Result<(), Error> {
     let json = serde_json::to_vec_pretty(outcome).map_err(|e| Error::Config(e.to_string()))?;
-    crate::write_atomic(&dir.join(OUTCOME_FILE), &json)
+    crate::error::write_atomic(&dir.join(OUTCOME_FILE), &json)
 }
 
 /// Severe messages EnergyPlus wrote in the saved run of point `i` that left its results usable
@@ -532,7 +532,7 @@ pub fn simulate_point(
         notes: r.notes.clone(),
     })
     .map_err(|e| Error::Config(e.to_string()))?;
-    crate::write_atomic(&saved, &json)?;
+    crate::error::write_atomic(&saved, &json)?;
     let _ = std::fs::remove_dir_all(&run_dir);
     Ok((r.outputs, Some(r.seconds)))
 }

@@ -1,7 +1,7 @@
 //! The one driver of a calibration: every stage in the order the data flows, every decision
 //! taken once, here, by the rules of [`crate::sequence`], [`crate::replacement`],
-//! [`crate::refine`] and [`crate::next_candidate`]. How the work is done is an [`Executor`]'s:
-//! the local one ([`crate::calibrate`]) runs it in this process and answers at once; the
+//! [`crate::refine`] and [`crate::validation::next_candidate`]. How the work is done is an [`Executor`]'s:
+//! the local one ([`crate::local::calibrate`]) runs it in this process and answers at once; the
 //! coordinator's leases it to workers as jobs and answers [`Ready::Pending`] until they are
 //! done, then calls [`drive`] again.
 //!
@@ -24,7 +24,10 @@ use std::path::Path;
 use bemcal_energyplus::HourlyOutputs;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::{Calibration, Log};
+use crate::chains::{ChainSummary, Sampler};
 use crate::design::{read_outcome, saved_outputs};
+use crate::error::Error;
 use crate::mapping::{self, MappingStep};
 use crate::posterior::Checkpoint;
 use crate::project::Estimate;
@@ -34,10 +37,8 @@ use crate::sequence::{
     after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, Stage,
     ValidationRole, ValidationRun,
 };
+use crate::summary::{write_summary, OutputMetrics, Summary, Timings};
 use crate::surrogate_error::{chain_temperature, ChainTemperature};
-use crate::{
-    write_summary, Calibration, ChainSummary, Error, Log, OutputMetrics, Sampler, Summary, Timings,
-};
 
 /// Work done now, or not yet (an executor that leases jobs: the driver is called again when
 /// they finish).
@@ -177,7 +178,7 @@ pub fn drive(
     // written when it changes, not on every call (the coordinator calls once per job).
     let fitted = cal.fitted_data().to_text();
     if std::fs::read_to_string(cal.out.holdout_txt()).ok() != Some(fitted.clone()) {
-        crate::write_atomic(&cal.out.holdout_txt(), fitted.as_bytes())?;
+        crate::error::write_atomic(&cal.out.holdout_txt(), fitted.as_bytes())?;
     }
     match read_outcome(&cal.simulations_dir()) {
         // Settled before this call: `Calibration::load` learnt its invalid region.
@@ -478,7 +479,7 @@ impl FinalChains {
 
     fn write(&self, cal: &Calibration) -> Result<(), Error> {
         let json = serde_json::to_vec(self).map_err(|e| Error::Config(e.to_string()))?;
-        crate::write_atomic(&cal.out.chains_summary(), &json)
+        crate::error::write_atomic(&cal.out.chains_summary(), &json)
     }
 }
 
@@ -644,8 +645,8 @@ fn map_estimate(
     let mut record = mapping::read(&vdir);
     let (mut steps, mut anchors) = (vec![], vec![]);
     loop {
-        let fits: Vec<crate::Fit> = (simulated.iter())
-            .map(|(_, m)| crate::Fit::of(m, &inp.fitted))
+        let fits: Vec<crate::validation::Fit> = (simulated.iter())
+            .map(|(_, m)| crate::validation::Fit::of(m, &inp.fitted))
             .collect();
         let max = cal.project.validation.mapping_steps;
         let Some((a, fractions)) = mapping::next_step(&fits, &anchors, max) else {
@@ -725,7 +726,7 @@ fn map_estimate(
 
 /// `estimate = "best_simulated"`: of the points EnergyPlus `simulated` (the MAP draw first,
 /// then the predictive draws and the `steps` of output space mapping), makes the one the rule
-/// [`crate::best_simulated`] chooses by Guideline 14's criteria the estimate, its run
+/// [`crate::validation::best_simulated`] chooses by Guideline 14's criteria the estimate, its run
 /// `validation/calibrated.csv`; its metrics, or `None`
 /// when none ran (the fallbacks are tried then). `map_failure`: why EnergyPlus could not
 /// simulate the MAP draw, if it could not.
@@ -738,8 +739,8 @@ fn adopt_best_simulated(
     map_failure: Option<&String>,
     log: Log<'_>,
 ) -> Result<Option<Vec<OutputMetrics>>, Error> {
-    let fits: Vec<crate::Fit> = (simulated.iter())
-        .map(|(_, m)| crate::Fit::of(m, &cal.inputs.fitted))
+    let fits: Vec<crate::validation::Fit> = (simulated.iter())
+        .map(|(_, m)| crate::validation::Fit::of(m, &cal.inputs.fitted))
         .collect();
     let map_ran = simulated
         .first()
@@ -747,7 +748,7 @@ fn adopt_best_simulated(
     let first_mapped = (simulated.iter())
         .position(|(r, _)| r.role == ValidationRole::Mapped)
         .unwrap_or(simulated.len());
-    let Some(b) = crate::best_simulated(&fits, map_ran, first_mapped) else {
+    let Some(b) = crate::validation::best_simulated(&fits, map_ran, first_mapped) else {
         return Ok(None);
     };
     let (run, metrics) = &simulated[b];
@@ -761,10 +762,10 @@ fn adopt_best_simulated(
         }
         ValidationRole::Calibrated { .. } | ValidationRole::Initial => None,
     };
-    let choice = crate::EstimateChoice {
+    let choice = crate::validation::EstimateChoice {
         chosen: run.label.clone(),
         candidates: (simulated.iter().zip(&fits))
-            .map(|((r, _), fit)| crate::SimulatedFit {
+            .map(|((r, _), fit)| crate::validation::SimulatedFit {
                 label: r.label.clone(),
                 limit_ratio: fit.hourly.is_finite().then_some(fit.hourly),
                 monthly_limit_ratio: fit.monthly,
@@ -779,7 +780,7 @@ fn adopt_best_simulated(
     if adopted.is_some() {
         let o = saved_run(cal, run)?;
         let calibrated = cal.out.validation().join("calibrated.csv");
-        crate::write_outputs_csv(&calibrated, cal.inputs.year, &o)?;
+        crate::summary::write_outputs_csv(&calibrated, cal.inputs.year, &o)?;
     }
     let map_failure = map_failure.map(String::as_str);
     log(&format!("validation: {}", choice.describe(map_failure)));

@@ -10,8 +10,8 @@ use bemcal_precal::pipeline::PriorsFile;
 use bemcal_weather::{Epw, HourlyFeatures};
 
 use crate::design::Plan;
+use crate::error::{write_atomic, Error};
 use crate::project::{excerpt, Project};
-use crate::{write_atomic, Error};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,
 /// measurements.

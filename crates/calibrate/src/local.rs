@@ -10,13 +10,16 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::calibration::FittedData;
+use crate::calibration::{Calibration, Log};
+use crate::chains::chains_at;
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
+use crate::error::Error;
 use crate::posterior::{run_chains, Checkpoint};
 use crate::project::Project;
 use crate::replacement::Attempt;
 use crate::sequence::{Round, Stage, ValidationRun};
-use crate::{chains_at, Calibration, Error, Log, Summary, Timings};
+use crate::summary::{Summary, Timings};
 
 /// Runs the whole calibration of `project` into `out` on this machine: each stage in the
 /// order the data flows, every decision taken by the one driver.

@@ -18,8 +18,9 @@ use bemcal_stats::model_form::{
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
+use crate::error::{write_atomic, Error};
 use crate::output::timestamps;
-use crate::{write_atomic, Calibration, Error};
 
 /// Outdoor temperature bands (equal counts of hours) the residuals are grouped by.
 pub const TEMPERATURE_BANDS: usize = 10;

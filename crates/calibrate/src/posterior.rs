@@ -15,7 +15,7 @@ use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
 use crate::design::Plan;
-use crate::Error;
+use crate::error::Error;
 use bemcal_energyplus::Model;
 
 /// Bounds of `ln sigma_delta` in hyperparameter mode: one sampled dimension per fitted
@@ -289,7 +289,7 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
-    /// Where the chains stand for the extension rule ([`crate::extended_target`]).
+    /// Where the chains stand for the extension rule ([`crate::chains::extended_target`]).
     pub fn drawn(&self) -> crate::chains::Drawn {
         crate::chains::Drawn {
             draws: self.draws.iter().map(|d| d.len() as u64).min().unwrap_or(0),
@@ -364,7 +364,7 @@ pub fn run_chains(
             d.extend(s);
         }
         let bytes = serde_json::to_vec(&ck).map_err(|e| Error::Config(e.to_string()))?;
-        crate::write_atomic(path, &bytes)?;
+        crate::error::write_atomic(path, &bytes)?;
     }
     Ok(ck)
 }

@@ -16,7 +16,7 @@
 //! check, and the posterior predictive's own coverage is reported beside it
 //! (`before_recalibration`). Numerics in
 //! [`bemcal_stats::predictive`]; the driver has EnergyPlus simulate [`ChainSummary::predictive_candidates`]
-//! and [`crate::write_summary`] reads their runs once and calls [`assess`].
+//! and [`crate::summary::write_summary`] reads their runs once and calls [`assess`].
 //!
 //! Totals over days and months ([`TotalPeriod`]) get intervals too: the draws' sums with the
 //! noise of a sum of AR(1) residuals (`phi` from EnergyPlus's standardised residuals at the
@@ -35,11 +35,13 @@ use serde::{Deserialize, Serialize};
 
 use bemcal_energyplus::{HourlyOutputs, Model};
 
+use crate::calibration::Calibration;
+use crate::chains::ChainSummary;
 use crate::design::{saved_outputs, Plan};
+use crate::error::{write_atomic, Error};
 use crate::output::timestamps;
 use crate::project::ErrorModelSetting;
 use crate::validation::{candidate_key, Candidate, FALLBACKS};
-use crate::{write_atomic, Calibration, ChainSummary, Error};
 
 /// Key of the first predictive draw in `validation/` (0 is the estimate, 1 the initial model,
 /// 2.. the fallbacks).
@@ -211,7 +213,7 @@ fn running(measured: &[f64], select: &[bool]) -> Vec<bool> {
 /// [`RunningHours`] of meter `k` under intervals `iv`; `None` for a meter that can read below
 /// zero or that never reads zero.
 fn running_hours(
-    inp: &crate::Inputs,
+    inp: &crate::inputs::Inputs,
     k: usize,
     fit: &[bool],
     iv: &Intervals,
@@ -594,7 +596,7 @@ fn bounded(
 /// `sims`, with their hourly `noise`), with the residuals' lag-1 autocorrelation `phi` in the
 /// noise of a sum and as if hours were independent.
 fn totals_coverage(
-    inp: &crate::Inputs,
+    inp: &crate::inputs::Inputs,
     k: usize,
     fit: &[bool],
     sims: &[Vec<f64>],
@@ -668,7 +670,7 @@ impl Judge<'_> {
 /// `cover` of meter `k` over the calibration period (`fit`) and, where one is held out, over
 /// the held-out period.
 fn in_and_out(
-    inp: &crate::Inputs,
+    inp: &crate::inputs::Inputs,
     k: usize,
     fit: &[bool],
     cover: impl Fn(&[f64], &[bool]) -> Vec<Coverage>,

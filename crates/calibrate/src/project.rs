@@ -43,7 +43,7 @@ use bemcal_precal::meters::MeterSpec;
 use bemcal_stats::convergence::Targets;
 use serde::{Deserialize, Serialize};
 
-use crate::Error;
+use crate::error::Error;
 
 /// A calibration project.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -404,7 +404,7 @@ pub struct McmcSettings {
     pub hmc_integration_time: f64,
     /// Convergence target: every parameter's rank-normalised split R-hat at or below this
     /// (Vehtari et al. 2021: 1.01). The final chains are extended while a target is missed
-    /// ([`crate::extended_target`]), and a calibration that ends short of one says so
+    /// ([`crate::chains::extended_target`]), and a calibration that ends short of one says so
     /// (`summary.json` `converged` and `convergence`, the report's banner, exit status 3).
     pub rhat_target: f64,
     /// Convergence target: every parameter's bulk and tail ESS, all chains together, at or
@@ -414,7 +414,7 @@ pub struct McmcSettings {
     /// and report only). Each adds at least `iterations - burn_in` draws per chain, more when
     /// the ESS shortfall asks for it (at most 4x that), except HMC's first, which adds that
     /// step: it re-adapts the chains, whose ESS per draw then changes. HMC chains run an
-    /// undrawn re-adaptation window on top ([`crate::extended_target`]).
+    /// undrawn re-adaptation window on top ([`crate::chains::extended_target`]).
     pub max_extensions: u32,
     /// The likelihood's temperature `T`: the chains sample `p(theta) L(theta)^(1/T)`
     /// ([`Temperature`]; default 1, the posterior itself).
@@ -603,7 +603,7 @@ pub enum Estimate {
     /// misses either, of the posterior draws EnergyPlus simulates anyway (the MAP draw and the
     /// predictive draws, `predictive_draws`), one that passes both, else the MAP draw if it
     /// passes hourly, else the one whose worst meter is nearest inside the hourly limits
-    /// (default; [`crate::best_simulated`]): the MAP is the surrogate's best, and where the
+    /// (default; [`crate::validation::best_simulated`]): the MAP is the surrogate's best, and where the
     /// surrogate is wrong near it, another draw of the posterior can fit the meters better in
     /// EnergyPlus. Where it passes both at none of them, up to `mapping_steps` steps of
     /// output space mapping look for a point it passes at ([`crate::mapping`]).

@@ -18,8 +18,10 @@ use bemcal_stats::lhs::Design;
 use bemcal_stats::mcmc::Draws;
 use serde::{Deserialize, Serialize};
 
-use crate::{write_atomic, Error};
-use crate::{Calibration, OutputMetrics, Sampler};
+use crate::calibration::Calibration;
+use crate::chains::Sampler;
+use crate::error::{write_atomic, Error};
+use crate::summary::OutputMetrics;
 
 /// File of the refinement log in the output folder.
 pub const REFINE_FILE: &str = "refine.json";

@@ -13,13 +13,13 @@
 //!      (the estimate; while EnergyPlus fails there, next_validation) -> summary
 //! ```
 
+use crate::chains::{extended_target, ChainSummary, Drawn};
 use crate::project::{McmcSettings, Project};
 use crate::validation::{next_candidate, ValidationStep, INITIAL_KEY};
-use crate::{extended_target, ChainSummary, Drawn};
 
 /// The stages of a calibration, in the order the driver ([`crate::driver`]) enters them; a
 /// stage is entered again for each refinement round and extension. The coordinator stores a
-/// run's stage as [`Stage::as_str`]; both executors time the stages by it ([`crate::Timings`]).
+/// run's stage as [`Stage::as_str`]; both executors time the stages by it ([`crate::summary::Timings`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Stage {
     /// The Latin hypercube and its spares (in-process).
@@ -181,7 +181,7 @@ pub enum ValidationRole {
     /// The calibrated model: the estimate (`rank` 0) or the `rank`-th next-best draw after
     /// EnergyPlus failed at those before it.
     Calibrated {
-        /// 0 for the estimate; `k` for the `k`-th fallback draw ([`crate::FALLBACKS`]).
+        /// 0 for the estimate; `k` for the `k`-th fallback draw ([`crate::validation::FALLBACKS`]).
         rank: usize,
     },
     /// The initial model (the prior modes), for comparison (`validation.initial`).

@@ -4,8 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::error::Error;
 use crate::project::Project;
-use crate::Error;
 
 const MIB: u64 = 1 << 20;
 

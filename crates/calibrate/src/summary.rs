@@ -10,12 +10,14 @@ use bemcal_stats::metrics::G14Metrics;
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
+use crate::chains::{ChainSummary, MovedChain};
 use crate::design::read_outcome;
+use crate::error::{write_atomic, Error};
 use crate::output::timestamps;
 use crate::posterior::{Posterior, SigmaDeltaBox};
 use crate::project::Estimate;
 use crate::replacement::{Attempt, FailureGroup, Outcome};
-use crate::{write_atomic, Calibration, ChainSummary, Error, MovedChain};
 
 /// Wall time of each stage, s.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
@@ -121,13 +123,13 @@ pub struct Summary {
     /// per-parameter statistics, the MAP draw, correlated pairs, R-hat and ESS.
     pub posterior: PosteriorSummary,
     /// Model-discrepancy standard deviation per output, kWh (`{output: value}`).
-    #[serde(with = "crate::named")]
+    #[serde(with = "bemcal_named")]
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// AR(1) coefficient of the hourly residuals at the MAP, per output (empty with iid).
-    #[serde(default, with = "crate::named")]
+    #[serde(default, with = "bemcal_named")]
     pub residual_ar1: Vec<(String, f64)>,
     /// The surrogate's held-out error per output, kWh (`{output: value}`).
-    #[serde(with = "crate::named")]
+    #[serde(with = "bemcal_named")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
     /// Acceptance rate after burn-in, per chain (of the final chains).
     pub acceptance_rate: Vec<f64>,
@@ -156,9 +158,9 @@ pub struct Summary {
     /// With `estimate = "best_simulated"`: each draw EnergyPlus simulated, its worst fitted
     /// meter's ratio to Guideline 14's hourly limits, and the one chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub estimate_choice: Option<crate::EstimateChoice>,
+    pub estimate_choice: Option<crate::validation::EstimateChoice>,
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
-    #[serde(with = "crate::named")]
+    #[serde(with = "bemcal_named")]
     pub calibrated_values: Vec<(String, f64)>,
     /// Guideline 14 of EnergyPlus at the estimate against the meters, per output.
     pub validation: Vec<OutputMetrics>,
@@ -222,7 +224,7 @@ pub struct HoldoutReport {
     /// Hour slots held out.
     pub hours: usize,
     /// Per output, the measured hours held out and those left to calibrate with.
-    #[serde(with = "crate::named")]
+    #[serde(with = "bemcal_named")]
     pub measured_hours: Vec<(String, MeasuredHours)>,
 }
 
@@ -236,7 +238,7 @@ pub struct MeasuredHours {
 }
 
 impl HoldoutReport {
-    fn of(inp: &crate::Inputs) -> Option<HoldoutReport> {
+    fn of(inp: &crate::inputs::Inputs) -> Option<HoldoutReport> {
         let h = inp.held_out.as_ref()?;
         let count = |v: &[f64]| v.iter().filter(|x| x.is_finite()).count();
         Some(HoldoutReport {

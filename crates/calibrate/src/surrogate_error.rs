@@ -15,9 +15,9 @@ use bemcal_stats::surrogate_error::{add_to_draws, rms, shifts, temperature};
 use serde::{Deserialize, Serialize};
 
 use crate::design::Plan;
+use crate::error::Error;
 use crate::project::Temperature;
 use crate::refine::{RefineLog, RefineRound};
-use crate::Error;
 
 /// `summary.json` `surrogate_error`: the intervals with the surrogate's error.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -8,11 +8,15 @@ use bemcal_stats::metrics::{g14, g14_monthly};
 use bemcal_weather::period::months_of_hours;
 use serde::{Deserialize, Serialize};
 
+use crate::calibration::Calibration;
+use crate::chains::ChainSummary;
 use crate::design::{saved_outputs, simulate_point};
+use crate::error::Error;
+use crate::inputs::Inputs;
 use crate::sequence::CALIBRATED_LABEL;
 use crate::summary::write_outputs_csv;
+use crate::summary::OutputMetrics;
 use crate::summary::PeriodMetrics;
-use crate::{Calibration, ChainSummary, Error, Inputs, OutputMetrics};
 
 /// Draws tried, in order, when EnergyPlus fails at the estimate.
 pub const FALLBACKS: usize = 3;

@@ -12,14 +12,16 @@ use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
 use super::{independence_dropped, moved_chains, MovedChain, Sampler};
+use crate::calibration::Calibration;
 use crate::design::Plan;
+use crate::error::Error;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
+use crate::summary::OutputMetrics;
 use crate::summary::{write_bands_csv, write_draws_csv};
 use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
 use crate::validation::{fallback_note, EstimateChoice, FALLBACKS};
-use crate::{Calibration, Error, OutputMetrics};
 
 impl Sampler<'_> {
     /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
@@ -160,7 +162,7 @@ type PerOutput = Vec<(String, f64)>;
 fn noise_summary(
     post: &Posterior<'_>,
     eval: &mut Evaluator,
-    inp: &crate::Inputs,
+    inp: &crate::inputs::Inputs,
     noise: &[OutputNoise],
     draws: &[Draws],
     map_point: &[f64],
@@ -267,7 +269,7 @@ fn write_posterior_predictive(
 
 /// Guideline 14 of the surrogate at `estimate` against the meters, per output.
 pub(super) fn surrogate_metrics_at(
-    inp: &crate::Inputs,
+    inp: &crate::inputs::Inputs,
     eval: &mut Evaluator,
     estimate: &[f64],
 ) -> Result<Vec<OutputMetrics>, Error> {
@@ -352,7 +354,7 @@ pub struct ChainSummary {
 
 impl ChainSummary {
     /// Makes the validated candidate the estimate: after `failures` (EnergyPlus failed at the
-    /// estimate and at the fallbacks before the one that ran, in [`crate::next_candidate`]'s
+    /// estimate and at the fallbacks before the one that ran, in [`crate::validation::next_candidate`]'s
     /// order), that fallback's values, with a note saying why.
     pub fn settle_estimate(&mut self, failures: &[String]) {
         if let Some(x) = failures
