@@ -39,6 +39,13 @@ pub fn run(_: Args) -> anyhow::Result<()> {
         required: true,
     });
     found.push(Found {
+        what: "EnergyPlus sandbox",
+        result: Ok(bemcal_energyplus::confine::Sandbox::probe()
+            .describe()
+            .to_string()),
+        required: false,
+    });
+    found.push(Found {
         what: "ONNX Runtime",
         result: bemcal_surrogate::ort_library_path()
             .and_then(|p| bemcal_surrogate::ort_environment().map(|_| p))

@@ -11,6 +11,7 @@
 
 pub mod building;
 pub mod calendar;
+pub mod confine;
 pub mod engine;
 pub mod errfile;
 pub mod idd;
@@ -19,6 +20,7 @@ pub mod meters;
 pub mod model;
 pub mod params;
 pub mod runner;
+pub mod screen;
 
 use std::path::PathBuf;
 
@@ -85,6 +87,14 @@ pub enum Error {
         dir: PathBuf,
         /// The limit, s.
         seconds: u64,
+    },
+    /// EnergyPlus ended by a signal: past its output or memory limit, or killed.
+    #[error("EnergyPlus stopped in {dir}: {message}")]
+    Limit {
+        /// The run's folder.
+        dir: PathBuf,
+        /// Which limit, where one explains it.
+        message: String,
     },
 }
 

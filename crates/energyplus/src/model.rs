@@ -255,6 +255,7 @@ impl Model {
         let idf_path = path.parent().unwrap_or(Path::new(".")).join(&map.idf.path);
         let idf_text = std::fs::read_to_string(&idf_path).map_err(io_err(&idf_path))?;
         let idf = Idf::parse(&idf_text, &idf_path)?;
+        crate::screen::screen(&idf, idd, &idf_path)?;
         let err = |message: String| Error::Input {
             path: path.into(),
             line: 0,

@@ -5,6 +5,7 @@ use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::confine::{confine, Limits, Sandbox};
 use crate::engine::Engine;
 use crate::errfile::{Class, ErrFile};
 use crate::idd::Idd;
@@ -15,8 +16,9 @@ use crate::{io_err, Error};
 /// How a run is carried out.
 #[derive(Debug, Clone)]
 pub struct RunOptions {
-    /// Wall-clock limit of one EnergyPlus process.
-    pub timeout: Duration,
+    /// Limits of one EnergyPlus process: wall time, memory, output size (a run past one is a
+    /// failed simulation with that reason).
+    pub limits: Limits,
     /// Set the water-coil controllers' convergence tolerance to 0.1 K (the expanded templates
     /// autosize it): about 20 % faster, annual totals within 0.05 % (measured on the example
     /// building, docs/benchmarks.md). The coils keep the templates' `DetailedAnalysis`:
@@ -30,7 +32,7 @@ pub struct RunOptions {
 impl Default for RunOptions {
     fn default() -> Self {
         RunOptions {
-            timeout: Duration::from_secs(900),
+            limits: Limits::default(),
             fast_coils: true,
         }
     }
@@ -43,6 +45,7 @@ pub struct Runner {
     engine: Engine,
     idd: Arc<Idd>,
     options: RunOptions,
+    sandbox: Sandbox,
 }
 
 /// What one run produced.
@@ -69,7 +72,25 @@ impl Runner {
             engine,
             idd: Arc::new(idd),
             options,
+            sandbox: Sandbox::probe(),
         })
+    }
+
+    /// The isolation EnergyPlus runs under on this host.
+    pub fn sandbox(&self) -> Sandbox {
+        self.sandbox
+    }
+
+    /// The same runner with other limits (a project's `[simulation]` settings).
+    pub fn with_limits(&self, limits: Limits) -> Runner {
+        let mut r = self.clone();
+        r.options.limits = limits;
+        r
+    }
+
+    /// The limits of each EnergyPlus process.
+    pub fn limits(&self) -> &Limits {
+        &self.options.limits
     }
 
     /// The engine.
@@ -119,13 +140,15 @@ impl Runner {
         std::fs::copy(weather, dir.join("in.epw")).map_err(io_err(weather))?;
         let model = self.simulated_input(idf, dir)?;
         let input = dir.join("model.idf");
+        // The exact input, after every edit bemcal applied, is screened once more.
+        crate::screen::screen(&model, &self.idd, &input)?;
         std::fs::write(&input, model.to_text()).map_err(io_err(&input))?;
         let mut cmd = bemcal_pyenv::child_command(&self.engine.executable);
         cmd.args(["-w", "in.epw", "-d", "."])
             .arg("model.idf")
-            .current_dir(dir)
             .stdin(Stdio::null());
-        let status = run_with_timeout(cmd, dir, self.options.timeout)?;
+        confine(&mut cmd, dir, &self.options.limits, self.sandbox);
+        let status = run_with_timeout(cmd, dir, &self.options.limits)?;
         let err = read_err_file(dir)?;
         let mut notes = vec![];
         let mut bad: Vec<String> = vec![];
@@ -190,8 +213,13 @@ impl Runner {
             std::fs::copy(self.engine.idd(), &idd).map_err(io_err(&idd))?;
         }
         let mut cmd = bemcal_pyenv::child_command(self.engine.expand_objects());
-        cmd.current_dir(&xdir).stdin(Stdio::null());
-        let status = run_with_timeout(cmd, &xdir, Duration::from_secs(120))?;
+        cmd.stdin(Stdio::null());
+        let limits = Limits {
+            wall: Duration::from_secs(120).min(self.options.limits.wall),
+            ..self.options.limits
+        };
+        confine(&mut cmd, &xdir, &limits, self.sandbox);
+        let status = run_with_timeout(cmd, &xdir, &limits)?;
         let out = xdir.join("expanded.idf");
         if status != 0 || !out.exists() {
             let msg = std::fs::read_to_string(xdir.join("expandedidf.err")).unwrap_or_default();
@@ -224,7 +252,7 @@ impl Runner {
     }
 }
 
-fn run_with_timeout(mut cmd: Command, dir: &Path, timeout: Duration) -> Result<i32, Error> {
+fn run_with_timeout(mut cmd: Command, dir: &Path, limits: &Limits) -> Result<i32, Error> {
     let log = dir.join("stdout.log");
     let file = std::fs::File::create(&log).map_err(io_err(&log))?;
     let file2 = file.try_clone().map_err(io_err(&log))?;
@@ -240,13 +268,22 @@ fn run_with_timeout(mut cmd: Command, dir: &Path, timeout: Duration) -> Result<i
     let start = Instant::now();
     loop {
         match child.try_wait().map_err(io_err(dir))? {
-            Some(status) => return Ok(status.code().unwrap_or(-1)),
-            None if start.elapsed() > timeout => {
+            Some(status) => {
+                use std::os::unix::process::ExitStatusExt;
+                if let Some(signal) = status.signal() {
+                    return Err(Error::Limit {
+                        dir: dir.into(),
+                        message: crate::confine::signal_reason(signal, limits),
+                    });
+                }
+                return Ok(status.code().unwrap_or(-1));
+            }
+            None if start.elapsed() > limits.wall => {
                 let _ = child.kill();
                 let _ = child.wait();
                 return Err(Error::Timeout {
                     dir: dir.into(),
-                    seconds: timeout.as_secs(),
+                    seconds: limits.wall.as_secs(),
                 });
             }
             None => std::thread::sleep(Duration::from_millis(20)),

@@ -852,3 +852,110 @@ fn the_own_idf_examples_map_edits_its_objects() {
         }
     }
 }
+
+/// The process of the EnergyPlus run in `dir`, found by its working folder.
+fn process_in(dir: &std::path::Path) -> Option<u32> {
+    let want = dir.canonicalize().ok()?;
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let cwd = std::fs::read_link(entry.path().join("cwd")).ok();
+        let exe = std::fs::read_link(entry.path().join("exe")).ok();
+        let is_energyplus = exe.is_some_and(|e| e.to_string_lossy().contains("energyplus"));
+        if is_energyplus && cwd.as_deref() == Some(want.as_path()) {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+/// A submitted model is untrusted code (issue 68): EnergyPlus starts with a cleared environment,
+/// so a model's code could not read the worker's token. Read from /proc/PID/environ while it
+/// runs.
+#[test]
+fn energyplus_runs_without_bemcal_variables_in_its_environment() {
+    let Some(r) = runner() else { return };
+    // SAFETY: set before the run's threads start; no other test reads this variable.
+    unsafe { std::env::set_var("BEMCAL_TOKEN", "a-secret-the-model-must-not-see") };
+    let model = Model::generated(warm_up_spec());
+    let dir = tempfile::tempdir().unwrap();
+    let run_dir = dir.path().join("run");
+    let environ = std::thread::scope(|s| {
+        let run = s.spawn(|| simulate(&r, &model, &[], &run_dir));
+        let mut found = None;
+        while !run.is_finished() && found.is_none() {
+            if let Some(pid) = process_in(&run_dir) {
+                found = std::fs::read(format!("/proc/{pid}/environ")).ok();
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        run.join().unwrap().unwrap();
+        found.expect("EnergyPlus's process seen while it ran")
+    });
+    let vars: Vec<String> = environ
+        .split(|&b| b == 0)
+        .map(|v| String::from_utf8_lossy(v).to_string())
+        .filter(|v| !v.is_empty())
+        .collect();
+    assert!(vars.iter().all(|v| !v.starts_with("BEMCAL_")), "{vars:?}");
+    assert!(vars.iter().any(|v| v.starts_with("PATH=")), "{vars:?}");
+    let names: Vec<&str> = vars.iter().filter_map(|v| v.split('=').next()).collect();
+    assert_eq!(names.len(), 4, "only PATH, LANG, HOME, TMPDIR: {names:?}");
+}
+
+/// A run past its wall-time or output limit is a failed simulation with that reason.
+#[test]
+fn a_run_past_its_limits_fails_with_the_reason() {
+    let Some(r) = runner() else { return };
+    let model = Model::generated(warm_up_spec());
+    let dir = tempfile::tempdir().unwrap();
+    let slow = r.with_limits(bemcal_energyplus::confine::Limits {
+        wall: std::time::Duration::from_millis(300),
+        ..Default::default()
+    });
+    let e = simulate(&slow, &model, &[], &dir.path().join("slow")).unwrap_err();
+    assert!(matches!(e, Error::Timeout { .. }), "{e}");
+    assert!(e.to_string().contains("time limit"), "{e}");
+    let small = r.with_limits(bemcal_energyplus::confine::Limits {
+        output_bytes: Some(256 << 10),
+        ..Default::default()
+    });
+    let e = simulate(&small, &model, &[], &dir.path().join("big")).unwrap_err();
+    assert!(e.to_string().contains("output limit"), "{e}");
+}
+
+/// An own IDF with code or a file outside the run folder is refused at load, naming the object
+/// and its line.
+#[test]
+fn an_idf_with_code_or_outside_files_is_refused_with_object_and_line() {
+    let Some(r) = runner() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("PythonPlugin:Instance,\n  Steal, No, stealer, Plugin;\n", "PythonPlugin:Instance 'Steal'"),
+        (
+            "ExternalInterface,\n  PtolemyServer;\n",
+            "ExternalInterface",
+        ),
+        (
+            "Schedule:File,\n  Occ, Fraction, /proc/self/environ, 1, 0;\n",
+            "Schedule:File 'Occ' field 'File Name'",
+        ),
+        (
+            "Table:IndependentVariable,\n  T, Linear, Constant, -10, 10, , , ../../x.csv, 1, 1, 1;\n",
+            "'External File Name'",
+        ),
+    ];
+    for (object, what) in cases {
+        let idf = dir.path().join("model.idf");
+        std::fs::write(&idf, format!("Version,25.2;\n\n{object}")).unwrap();
+        let map = dir.path().join("model.toml");
+        std::fs::write(
+            &map,
+            "[idf]\npath = \"model.idf\"\n[[output]]\nname = \"electricity_kwh\"\nmeters = [\"Electricity:Facility\"]\n",
+        )
+        .unwrap();
+        let e = Model::load(&map, r.idd()).unwrap_err().to_string();
+        assert!(e.contains("model.idf:3:") && e.contains(what), "{e}");
+    }
+}
