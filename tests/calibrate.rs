@@ -105,7 +105,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     // A year of meters: every point has monthly figures.
     assert!(recorded.iter().all(|f| f.monthly.is_some()), "{choice}");
     let first_mapped = (fits.iter())
-        .position(|f| bemcal_calibrate::mapping::is_mapped(&label(f)))
+        .position(|f| bemcal_calibrate::keys::is_mapped(&label(f)))
         .unwrap_or(fits.len());
     let map_ran = label(&fits[0]) == "calibrated";
     let b = bemcal_calibrate::best_simulated(&recorded, map_ran, first_mapped).unwrap();

@@ -754,7 +754,7 @@ fn adopt_best_simulated(
     let (run, metrics) = &simulated[b];
     let adopted = match run.role {
         ValidationRole::Predictive => {
-            crate::predictive::draw_of_key(run.key).and_then(|j| chains.predictive_point(j))
+            crate::keys::draw_of_key(run.key).and_then(|j| chains.predictive_point(j))
         }
         ValidationRole::Mapped => {
             let surrogate = sampler.get()?.surrogate_metrics(&run.values)?;

@@ -20,6 +20,7 @@ pub mod driver;
 mod error;
 pub mod examples;
 mod inputs;
+pub mod keys;
 mod local;
 pub mod mapping;
 pub mod model_form;
@@ -47,6 +48,7 @@ pub use error::{write_atomic, Error};
 pub use inputs::{
     load_inputs, load_model, resolve_weather, weather_for, weather_reference, HeldOut, Inputs,
 };
+pub use keys::{FALLBACKS, INITIAL_KEY};
 pub use local::{calibrate, stage_seconds};
 pub use output::OutputDir;
 pub use project::Project;
@@ -56,5 +58,5 @@ pub use summary::{
 };
 pub use validation::{
     best_simulated, fallback_note, limit_ratio, monthly_limit_ratio, next_candidate, Candidate,
-    EstimateChoice, Fit, SimulatedFit, ValidationStep, FALLBACKS, INITIAL_KEY,
+    EstimateChoice, Fit, SimulatedFit, ValidationStep,
 };

@@ -28,10 +28,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
-
-/// The key in `validation/` of the first mapped point (`mapped_01`); the next ones follow.
-/// Above every predictive draw's (`Project::validate` caps `validation.predictive_draws`).
-pub const FIRST_KEY: usize = 1000;
+use crate::keys::{mapped_label, FIRST_MAPPED_KEY};
 
 /// How far along the line from the anchor to the corrected surrogate's mode a step's points
 /// lie, the first time an anchor is used. An anchor is used again only once every point
@@ -58,7 +55,7 @@ pub struct MappingStep {
 /// A point of a step.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MappedPoint {
-    /// Its key in `validation/` ([`FIRST_KEY`] onwards).
+    /// Its key in `validation/` ([`FIRST_MAPPED_KEY`] onwards).
     pub key: usize,
     /// Its validation label, `mapped_NN`.
     pub label: String,
@@ -66,16 +63,6 @@ pub struct MappedPoint {
     pub fraction: f64,
     /// Its calibrated values (physical units, plan order).
     pub values: Vec<f64>,
-}
-
-/// The label of the `n`-th mapped point (from 1).
-pub fn label(n: usize) -> String {
-    format!("mapped_{n:02}")
-}
-
-/// Whether a validation label is a mapped point's.
-pub fn is_mapped(label: &str) -> bool {
-    label.starts_with("mapped_")
 }
 
 /// The next step of the search over the points simulated so far (`fits`: each one's
@@ -143,7 +130,7 @@ pub fn line(anchor: &[f64], mode: &[f64], fractions: &[f64]) -> Vec<Vec<f64>> {
 impl MappingStep {
     /// A step from `anchor` (its label and values) to `mode`, its points at `fractions`
     /// numbered from `first` (the mapped points of the steps before, plus one: `mapped_01`
-    /// has the key [`FIRST_KEY`]).
+    /// has the key [`FIRST_MAPPED_KEY`]).
     pub fn new(
         anchor: (&str, &[f64]),
         mode: Vec<f64>,
@@ -153,8 +140,8 @@ impl MappingStep {
         let points = (line(anchor.1, &mode, fractions).into_iter().zip(fractions))
             .enumerate()
             .map(|(j, (values, fraction))| MappedPoint {
-                key: FIRST_KEY + first + j - 1,
-                label: label(first + j),
+                key: FIRST_MAPPED_KEY + first + j - 1,
+                label: mapped_label(first + j),
                 fraction: *fraction,
                 values,
             })
@@ -296,7 +283,6 @@ mod tests {
         assert!(s.starts_at("predictive_04", &[1.0, 10.0]) && s.at(&[0.5, 1.0]));
         assert!(!s.at(&[0.25]));
         assert!(!s.starts_at("predictive_04", &[1.0, 10.5]));
-        assert!(is_mapped("mapped_03") && !is_mapped("predictive_03"));
         // The record reads back exactly what was written (the coordinator matches a
         // validation job by its values).
         let dir = std::env::temp_dir().join(format!("bemcal-mapping-{}", std::process::id()));

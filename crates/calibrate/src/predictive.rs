@@ -1,5 +1,5 @@
 //! Stage 7b, hourly posterior predictive intervals from EnergyPlus: which posterior draws are
-//! simulated (keys [`FIRST_KEY`].. in `validation/`, labels `predictive_NN`), and the
+//! simulated (keys [`FIRST_PREDICTIVE_KEY`].. in `validation/`, labels `predictive_NN`), and the
 //! intervals, their coverage of the measured hours (calibration period and held-out period)
 //! and their width, for `summary.json` and `validation/predictive_intervals.csv`.
 //!
@@ -39,33 +39,13 @@ use crate::calibration::Calibration;
 use crate::chains::ChainSummary;
 use crate::design::{saved_outputs, Plan};
 use crate::error::{write_atomic, Error};
+use crate::keys::{candidate_key, predictive_label, FALLBACKS, FIRST_PREDICTIVE_KEY};
 use crate::output::timestamps;
 use crate::project::ErrorModelSetting;
-use crate::validation::{candidate_key, Candidate, FALLBACKS};
-
-/// Key of the first predictive draw in `validation/` (0 is the estimate, 1 the initial model,
-/// 2.. the fallbacks).
-pub const FIRST_KEY: usize = 10;
+use crate::validation::Candidate;
 
 /// The nominal levels of the intervals.
 pub const LEVELS: [f64; 2] = [0.5, 0.9];
-
-/// The label (and `validation/LABEL.csv`) of predictive draw `j`.
-pub fn label(j: usize) -> String {
-    format!("predictive_{j:02}")
-}
-
-/// The predictive draw (index into `ChainSummary::predictive`) whose run is under `key` in
-/// `validation/`, if it is one's ([`ChainSummary::predictive_candidates`] gives draw `j` the
-/// key `FIRST_KEY + j`).
-pub fn draw_of_key(key: usize) -> Option<usize> {
-    key.checked_sub(FIRST_KEY)
-}
-
-/// Whether a validation label is a predictive draw's.
-pub fn is_predictive(label: &str) -> bool {
-    label.starts_with("predictive_")
-}
 
 /// `k` draws evenly spaced through the merged chains (unit space; the middle of each of `k`
 /// equal stretches) among those EnergyPlus can be asked to simulate (every model constraint
@@ -105,10 +85,10 @@ impl ChainSummary {
                 (
                     Candidate {
                         rank: 0,
-                        key: FIRST_KEY + j,
+                        key: FIRST_PREDICTIVE_KEY + j,
                         values: x.clone(),
                     },
-                    label(j),
+                    predictive_label(j),
                 )
             })
             .collect()
@@ -727,7 +707,6 @@ mod tests {
         assert_eq!(evenly(&all, 4), vec![2, 7, 12, 17]);
         assert_eq!(evenly(&all, 0), Vec::<usize>::new());
         assert_eq!(evenly(&all[..10], 50).len(), 10);
-        assert!(is_predictive(&label(3)) && !is_predictive("calibrated"));
     }
 
     #[test]

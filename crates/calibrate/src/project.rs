@@ -838,7 +838,7 @@ impl Project {
             );
         }
         self.surrogate.check()?;
-        let most = crate::mapping::FIRST_KEY - crate::predictive::FIRST_KEY;
+        let most = crate::keys::FIRST_MAPPED_KEY - crate::keys::FIRST_PREDICTIVE_KEY;
         if self.validation.predictive_draws > most {
             return Err(format!(
                 "validation.predictive_draws = {}: at most {most} (each is an EnergyPlus run)",

@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use crate::calibration::Calibration;
 use crate::chains::Sampler;
 use crate::error::{write_atomic, Error};
+use crate::keys::first_refinement_key;
 use crate::summary::OutputMetrics;
 
 /// File of the refinement log in the output folder.
@@ -101,12 +102,10 @@ impl RefineLog {
     /// `design_points` hypercube slots: past every draw of every earlier round, those
     /// EnergyPlus could not simulate included (their keys were used too).
     pub fn next_key(&self, design_points: usize) -> usize {
-        design_points
-            + self
-                .rounds
-                .iter()
-                .map(|r| r.points.len() + r.failed.len())
-                .sum::<usize>()
+        let drawn_before = (self.rounds.iter())
+            .map(|r| r.points.len() + r.failed.len())
+            .sum::<usize>();
+        first_refinement_key(design_points, drawn_before)
     }
 }
 

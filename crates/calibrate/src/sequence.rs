@@ -14,8 +14,9 @@
 //! ```
 
 use crate::chains::{extended_target, ChainSummary, Drawn};
+use crate::keys::{CALIBRATED_LABEL, INITIAL_KEY};
 use crate::project::{McmcSettings, Project};
-use crate::validation::{next_candidate, ValidationStep, INITIAL_KEY};
+use crate::validation::{next_candidate, ValidationStep};
 
 /// The stages of a calibration, in the order the driver ([`crate::driver`]) enters them; a
 /// stage is entered again for each refinement round and extension. The coordinator stores a
@@ -181,7 +182,7 @@ pub enum ValidationRole {
     /// The calibrated model: the estimate (`rank` 0) or the `rank`-th next-best draw after
     /// EnergyPlus failed at those before it.
     Calibrated {
-        /// 0 for the estimate; `k` for the `k`-th fallback draw ([`crate::validation::FALLBACKS`]).
+        /// 0 for the estimate; `k` for the `k`-th fallback draw ([`crate::keys::FALLBACKS`]).
         rank: usize,
     },
     /// The initial model (the prior modes), for comparison (`validation.initial`).
@@ -245,10 +246,6 @@ pub fn validation_runs(chains: &ChainSummary, initial: Option<Vec<f64>>) -> Vec<
     );
     runs
 }
-
-/// The label of the calibrated model's validation run (`validation/calibrated.csv`): the
-/// estimate, or the fallback that replaced it.
-pub const CALIBRATED_LABEL: &str = "calibrated";
 
 /// The calibrated model's run after EnergyPlus failed at the first `failures.len()`
 /// candidates (the rule [`next_candidate`]), or the message that every candidate failed.

@@ -13,26 +13,10 @@ use crate::chains::ChainSummary;
 use crate::design::{saved_outputs, simulate_point};
 use crate::error::Error;
 use crate::inputs::Inputs;
-use crate::sequence::CALIBRATED_LABEL;
+use crate::keys::{candidate_key, is_mapped, CALIBRATED_LABEL};
 use crate::summary::write_outputs_csv;
 use crate::summary::OutputMetrics;
 use crate::summary::PeriodMetrics;
-
-/// Draws tried, in order, when EnergyPlus fails at the estimate.
-pub const FALLBACKS: usize = 3;
-
-/// Key of the initial model (the prior modes) in `validation/`.
-pub const INITIAL_KEY: usize = 1;
-
-/// The key in `validation/` of the `rank`-th candidate: 0 the estimate, then `rank + 1` (1 is
-/// the initial model).
-pub fn candidate_key(rank: usize) -> usize {
-    if rank == 0 {
-        0
-    } else {
-        rank + 1
-    }
-}
 
 /// A point to validate the calibration at: the estimate (`rank` 0) or the `rank`-th fallback.
 #[derive(Debug, Clone, PartialEq)]
@@ -160,7 +144,7 @@ impl EstimateChoice {
                 )
             };
         }
-        if crate::mapping::is_mapped(&self.chosen) {
+        if is_mapped(&self.chosen) {
             return self.describe_mapped(map_failure, &map);
         }
         if map_misses_monthly {
@@ -202,7 +186,7 @@ impl EstimateChoice {
     /// [`Self::describe`] where a point of the output space mapping became the estimate.
     fn describe_mapped(&self, map_failure: Option<&str>, map: &str) -> String {
         let draws: Vec<&SimulatedFit> = (self.candidates.iter())
-            .filter(|c| !crate::mapping::is_mapped(&c.label))
+            .filter(|c| !is_mapped(&c.label))
             .collect();
         let drawn = draws.len();
         let nearest = |r: fn(&SimulatedFit) -> Option<f64>| {

@@ -15,13 +15,14 @@ use super::{independence_dropped, moved_chains, MovedChain, Sampler};
 use crate::calibration::Calibration;
 use crate::design::Plan;
 use crate::error::Error;
+use crate::keys::FALLBACKS;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
 use crate::summary::OutputMetrics;
 use crate::summary::{write_bands_csv, write_draws_csv};
 use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
-use crate::validation::{fallback_note, EstimateChoice, FALLBACKS};
+use crate::validation::{fallback_note, EstimateChoice};
 
 impl Sampler<'_> {
     /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
