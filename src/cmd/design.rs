@@ -2,7 +2,8 @@
 
 use std::path::PathBuf;
 
-use bemcal_calibrate::design::{make_design, simulate_design, write_design_csv, Plan};
+use bemcal_calibrate::design::{make_design, simulate_design, write_design_csv};
+use bemcal_calibrate::plan::Plan;
 
 use super::common;
 

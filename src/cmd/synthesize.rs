@@ -50,7 +50,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (model, runner) = common::load_model(&a.model)?;
     let mut given = parse_assignments(&a.set)?;
     if let Some(seed) = a.truth_seed {
-        let plan = bemcal_calibrate::design::Plan::new(&model, &a.draw, &Default::default())?;
+        let plan = bemcal_calibrate::plan::Plan::new(&model, &a.draw, &Default::default())?;
         let d = bemcal_calibrate::design::make_design(&plan, &model, 1, seed, 0)?;
         for (n, v) in plan.calibrated.iter().zip(&d.points[0]) {
             given.entry(n.clone()).or_insert(*v);

@@ -64,10 +64,10 @@ impl Calibration {
     }
 
     /// Takes the region where EnergyPlus failed from a settled design into the plan, so that
-    /// the chains refuse proposals there (see [`crate::replacement::InvalidRegion`]).
+    /// the chains refuse proposals there (see [`crate::plan::InvalidRegion`]).
     pub fn learn_invalid_region(&mut self, outcome: &Outcome) {
         self.inputs.plan.invalid =
-            crate::replacement::InvalidRegion::from_outcome(outcome, &self.inputs.plan.priors);
+            crate::plan::InvalidRegion::from_outcome(outcome, &self.inputs.plan.priors);
     }
 
     /// Stage 1: the design (deterministic for the project's seed); writes `design.csv`.

@@ -9,8 +9,8 @@ use bemcal_precal::meters::{read_meters, MeterData, MeterRole};
 use bemcal_precal::pipeline::PriorsFile;
 use bemcal_weather::{Epw, HourlyFeatures};
 
-use crate::design::Plan;
 use crate::error::{write_atomic, Error};
+use crate::plan::Plan;
 use crate::project::{excerpt, Project};
 
 /// Loaded inputs of a calibration: model (with pre-calibration priors applied), weather,

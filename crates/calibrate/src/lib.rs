@@ -26,6 +26,7 @@ pub mod mapping;
 pub mod model_form;
 pub use bemcal_named as named;
 pub mod output;
+pub mod plan;
 pub mod posterior;
 pub mod predictive;
 pub mod project;

@@ -14,8 +14,8 @@ use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws};
 use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
-use crate::design::Plan;
 use crate::error::Error;
+use crate::plan::Plan;
 use bemcal_energyplus::Model;
 
 /// Bounds of `ln sigma_delta` in hyperparameter mode: one sampled dimension per fitted

@@ -37,10 +37,11 @@ use bemcal_energyplus::{HourlyOutputs, Model};
 
 use crate::calibration::Calibration;
 use crate::chains::ChainSummary;
-use crate::design::{saved_outputs, Plan};
+use crate::design::saved_outputs;
 use crate::error::{write_atomic, Error};
 use crate::keys::{candidate_key, predictive_label, FALLBACKS, FIRST_PREDICTIVE_KEY};
 use crate::output::timestamps;
+use crate::plan::Plan;
 use crate::project::ErrorModelSetting;
 use crate::validation::Candidate;
 

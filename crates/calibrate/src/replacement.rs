@@ -15,7 +15,7 @@ use bemcal_stats::lhs::{farthest_candidate, Design};
 use bemcal_stats::prior::Triangular;
 use serde::{Deserialize, Serialize};
 
-use crate::design::Plan;
+use crate::plan::{distance, probabilities, InvalidBall, InvalidRegion, Plan};
 
 /// One simulation of a design slot: the values tried and what came of it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -184,30 +184,7 @@ pub fn next_step(
     }
 }
 
-/// Where the model could not be simulated, learned from the design's failures: a ball in
-/// probability space around each point EnergyPlus refused (a model failure, not a time limit),
-/// of radius half its distance to the nearest point it simulated. The chains refuse proposals
-/// inside (their log prior is -inf there, as outside a constraint), so that the posterior does
-/// not settle where the surrogate extrapolates and EnergyPlus would fail again. A ball and not
-/// the failed point's whole neighbourhood: between a failure and a success the model's edge is
-/// unknown, and half-way is the nearest-neighbour guess.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct InvalidRegion {
-    /// One ball per design point EnergyPlus refused (empty: the chains refuse nothing).
-    pub balls: Vec<InvalidBall>,
-}
-
-/// One failed point's ball.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct InvalidBall {
-    /// The failed point, physical units (plan order).
-    pub values: Vec<f64>,
-    /// Radius in probability space (`p = F(x)` per parameter).
-    pub radius: f64,
-    /// Why EnergyPlus failed there ([`failure_reason`]).
-    pub reason: String,
-}
-
+/// The region where EnergyPlus failed ([`InvalidRegion`], the plan's), from its failures.
 impl InvalidRegion {
     /// The region of a settled design.
     pub fn from_outcome(outcome: &Outcome, priors: &[Triangular]) -> InvalidRegion {
@@ -235,29 +212,6 @@ impl InvalidRegion {
             .collect();
         InvalidRegion { balls }
     }
-
-    /// The ball `x` (physical units) lies in, if any.
-    pub fn refuses(&self, priors: &[Triangular], x: &[f64]) -> Option<&InvalidBall> {
-        if self.balls.is_empty() {
-            return None;
-        }
-        let p = probabilities(priors, x);
-        self.balls
-            .iter()
-            .find(|b| distance(&probabilities(priors, &b.values), &p) < b.radius)
-    }
-}
-
-fn distance(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
-}
-
-fn probabilities(priors: &[Triangular], x: &[f64]) -> Vec<f64> {
-    priors.iter().zip(x).map(|(p, v)| p.cdf(*v)).collect()
 }
 
 /// Failures of one reason ([`failure_reason`]): how many runs, at which slots.

@@ -282,7 +282,7 @@ pub struct DesignReport {
     pub notes: Vec<PointNote>,
     /// Where the chains refused proposals because EnergyPlus failed there.
     #[serde(default)]
-    pub invalid_region: crate::replacement::InvalidRegion,
+    pub invalid_region: crate::plan::InvalidRegion,
 }
 
 /// A Severe message accepted as usable at a design point.

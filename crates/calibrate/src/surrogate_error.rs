@@ -14,8 +14,8 @@ use bemcal_stats::mcmc::Draws;
 use bemcal_stats::surrogate_error::{add_to_draws, rms, shifts, temperature};
 use serde::{Deserialize, Serialize};
 
-use crate::design::Plan;
 use crate::error::Error;
+use crate::plan::Plan;
 use crate::project::Temperature;
 use crate::refine::{RefineLog, RefineRound};
 

@@ -13,9 +13,9 @@ use serde::{Deserialize, Serialize};
 
 use super::{independence_dropped, moved_chains, MovedChain, Sampler};
 use crate::calibration::Calibration;
-use crate::design::Plan;
 use crate::error::Error;
 use crate::keys::FALLBACKS;
+use crate::plan::Plan;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
