@@ -127,7 +127,9 @@ fn hostile_inputs_get_short_errors_and_the_coordinator_lives() {
             ),
         ] {
             let p = small(&dir.path().join(name), &bad);
-            let e = submit_project(&mut c, &p, None).await.unwrap_err();
+            let e = submit_project(&mut c, &p, None, Default::default())
+                .await
+                .unwrap_err();
             let msg = format!("{e:#}");
             assert!(msg.contains("meters.csv"), "{name}: {msg}");
             assert!(msg.len() < 1_200, "{name}: {} bytes", msg.len());
@@ -214,9 +216,14 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         let mut c = client(&url, TOKEN);
         let mut w = client(&url, WORKER_TOKEN);
         // Roles: a worker cannot submit, a client cannot lease.
-        let e = submit_project(&mut w, &p, None).await.unwrap_err();
+        let e = submit_project(&mut w, &p, None, Default::default())
+            .await
+            .unwrap_err();
         assert!(format!("{e:#}").contains("client token"), "{e:#}");
-        let run = submit_project(&mut c, &p, None).await.unwrap().run_id;
+        let run = submit_project(&mut c, &p, None, Default::default())
+            .await
+            .unwrap()
+            .run_id;
         let lease = |id: &str| LeaseRequest {
             worker_id: id.into(),
             free_slots: 1,
@@ -322,7 +329,9 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         assert!(j.result_json.is_empty());
         // The same project submitted again while its run runs (an interrupted client coming
         // back) is that run, its lease untouched; once the run has ended, a new one.
-        let again = submit_project(&mut c, &p, None).await.unwrap();
+        let again = submit_project(&mut c, &p, None, Default::default())
+            .await
+            .unwrap();
         assert_eq!((again.run_id.as_str(), again.resumed), (run.as_str(), true));
         let hb = HeartbeatRequest {
             worker_id: "w1".into(),
@@ -334,7 +343,9 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         })
         .await
         .unwrap();
-        let after = submit_project(&mut c, &p, None).await.unwrap();
+        let after = submit_project(&mut c, &p, None, Default::default())
+            .await
+            .unwrap();
         assert!(after.run_id != run && !after.resumed, "{after:?}");
         c.cancel(RunRequest {
             run_id: after.run_id,
@@ -394,7 +405,10 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
     rt.block_on(async {
         let mut c = client(&url, TOKEN);
         let mut w = client(&url, WORKER_TOKEN);
-        let run = submit_project(&mut c, &p, None).await.unwrap().run_id;
+        let run = submit_project(&mut c, &p, None, Default::default())
+            .await
+            .unwrap()
+            .run_id;
         let lease = LeaseRequest {
             worker_id: "w1".into(),
             free_slots: 1,

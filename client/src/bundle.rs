@@ -11,18 +11,36 @@ use crate::File;
 /// Name of the project file in a bundle.
 pub const PROJECT_FILE: &str = "project.toml";
 
+/// What a bundle may hold. A project's files are sent to a coordinator that others share, so
+/// only regular files travel; a file outside the project's folder (a symlink in the folder
+/// that points out of it included) only where the user says so; a file of the system's
+/// special folders (`/proc`, `/sys`, `/dev`) never.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Policy {
+    /// Files outside the project's folder may travel (`--allow-outside`).
+    pub allow_outside: bool,
+}
+
+/// Folders whose files are never bundled, whatever the policy: their "regular" files are the
+/// kernel's views of processes and devices (`/proc/self/environ` holds a process's secrets).
+pub const NEVER_BUNDLED: [&str; 3] = ["/proc", "/sys", "/dev"];
+
 /// Collects a project's files: `(relative path in the bundle, bytes)`, project file first. Paths
 /// that leave the project's folder are renamed under `files/` and the project file is rewritten
-/// to point at them.
-pub fn collect(project_file: &Path) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
+/// to point at them. Each file is checked against `policy` first.
+pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
     let text = std::fs::read_to_string(project_file)
         .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", project_file.display()))?;
     let mut doc: toml::Table = toml::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: {}", project_file.display(), e.message()))?;
     let mut files = Collector {
         project_file,
-        base: project_file.parent().unwrap_or(Path::new(".")),
+        base: match project_file.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        },
         files: BTreeMap::new(),
+        policy,
     };
     let str_at = |t: &toml::Table, k: &str| t.get(k).and_then(|v| v.as_str()).map(str::to_string);
     let model = str_at(&doc, "model")
@@ -83,6 +101,7 @@ struct Collector<'a> {
     /// The project file's folder: relative paths in it start there.
     base: &'a Path,
     files: BTreeMap<String, PathBuf>,
+    policy: Policy,
 }
 
 impl Collector<'_> {
@@ -98,15 +117,39 @@ impl Collector<'_> {
             Ok(_) => p.to_string(),
             Err(_) => format!("files/{}-{}", self.files.len(), bundle_stem(&src)),
         };
-        if !src.is_file() {
-            anyhow::bail!(
-                "{}: file {} not found",
-                self.project_file.display(),
-                src.display()
-            );
-        }
+        self.check(p, &src)?;
         self.files.insert(name.clone(), src);
         Ok(name)
+    }
+
+    /// Refuses what `policy` does not let travel: a missing or non-regular file, a special
+    /// file of the system, a file outside the project's folder without `allow_outside`.
+    fn check(&self, named: &str, src: &Path) -> anyhow::Result<()> {
+        let at = self.project_file.display();
+        let meta = std::fs::metadata(src)
+            .map_err(|_| anyhow::anyhow!("{at}: file {} not found", src.display()))?;
+        let real = src.canonicalize()?;
+        if NEVER_BUNDLED.iter().any(|d| real.starts_with(d)) {
+            anyhow::bail!(
+                "{at}: '{named}' is {}, a special file of the system: never sent to a coordinator",
+                real.display()
+            );
+        }
+        if !meta.is_file() {
+            anyhow::bail!(
+                "{at}: '{named}' is not a regular file (a folder, socket, FIFO or device): only regular files are sent"
+            );
+        }
+        let folder = self.base.canonicalize()?;
+        if !real.starts_with(&folder) && !self.policy.allow_outside {
+            anyhow::bail!(
+                "{at}: '{named}' is outside the project's folder ({}{}): copy it into {}, or send it with --allow-outside",
+                real.display(),
+                if src.canonicalize().ok().as_deref() != Some(src) && src.is_symlink() { ", through a link" } else { "" },
+                folder.display()
+            );
+        }
+        Ok(())
     }
 
     /// Adds the files a model file names relative to itself (an `[idf]` table's `path`, a
@@ -136,6 +179,7 @@ impl Collector<'_> {
                 )
             })?;
             let src = model_src.parent().unwrap_or(Path::new(".")).join(idf);
+            self.check(idf, &src)?;
             self.files.insert(rel, src);
         }
         Ok(())
@@ -229,7 +273,13 @@ mod tests {
             ),
         )
         .unwrap();
-        let files = collect(&d.join("p.toml")).unwrap();
+        let files = collect(
+            &d.join("p.toml"),
+            Policy {
+                allow_outside: true,
+            },
+        )
+        .unwrap();
         let names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
         let renamed = names
             .iter()
@@ -240,5 +290,61 @@ mod tests {
         assert_eq!(files.iter().find(|(n, _)| n == renamed).unwrap().1, b"isd");
         // The building spec's day-type calendar travels beside it.
         assert!(names.contains(&"calendar.csv"), "{names:?}");
+    }
+
+    fn project_naming(d: &Path, meters: &str) -> PathBuf {
+        std::fs::write(d.join("model.toml"), "storeys = 1\n").unwrap();
+        let p = d.join("p.toml");
+        std::fs::write(
+            &p,
+            format!("model = \"model.toml\"\n[meters]\nfile = \"{meters}\"\n"),
+        )
+        .unwrap();
+        p
+    }
+
+    #[test]
+    fn files_outside_the_folder_travel_only_when_allowed() {
+        let dir = tempfile::tempdir().unwrap();
+        let outside = tempfile::tempdir().unwrap();
+        let meters = outside.path().join("meters.csv");
+        std::fs::write(&meters, "timestamp,e\n").unwrap();
+        let p = project_naming(dir.path(), &meters.display().to_string());
+        let e = collect(&p, Policy::default()).unwrap_err().to_string();
+        assert!(
+            e.contains("outside the project's folder") && e.contains("--allow-outside"),
+            "{e}"
+        );
+        let allowed = Policy {
+            allow_outside: true,
+        };
+        assert_eq!(collect(&p, allowed).unwrap().len(), 3);
+        // A link inside the folder that points out of it follows the same rule.
+        std::os::unix::fs::symlink(&meters, dir.path().join("linked.csv")).unwrap();
+        let p = project_naming(dir.path(), "linked.csv");
+        let e = collect(&p, Policy::default()).unwrap_err().to_string();
+        assert!(e.contains("through a link"), "{e}");
+        assert_eq!(collect(&p, allowed).unwrap().len(), 3);
+    }
+
+    #[test]
+    fn special_files_never_travel() {
+        let dir = tempfile::tempdir().unwrap();
+        let allowed = Policy {
+            allow_outside: true,
+        };
+        for special in ["/proc/self/environ", "/dev/null"] {
+            let p = project_naming(dir.path(), special);
+            let e = collect(&p, allowed).unwrap_err().to_string();
+            assert!(e.contains("special file of the system"), "{special}: {e}");
+            assert!(!e.contains("BEMCAL"), "{e}");
+        }
+        let fifo = dir.path().join("fifo.csv");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a plain system call on a valid C string.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        let p = project_naming(dir.path(), "fifo.csv");
+        let e = collect(&p, allowed).unwrap_err().to_string();
+        assert!(e.contains("not a regular file"), "{e}");
     }
 }

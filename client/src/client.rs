@@ -186,8 +186,9 @@ pub async fn submit_project(
     client: &mut Client,
     project_file: &Path,
     surrogate: Option<&Path>,
+    policy: crate::bundle::Policy,
 ) -> anyhow::Result<Submitted> {
-    submit_building(client, project_file, surrogate, "", "").await
+    submit_building(client, project_file, surrogate, "", "", policy).await
 }
 
 /// Submits a project as building `building` of portfolio `portfolio` (empty: a lone run).
@@ -198,8 +199,9 @@ pub async fn submit_building(
     surrogate: Option<&Path>,
     portfolio: &str,
     building: &str,
+    policy: crate::bundle::Policy,
 ) -> anyhow::Result<Submitted> {
-    let files = crate::bundle::collect(project_file)?;
+    let files = crate::bundle::collect(project_file, policy)?;
     let mut bundle = vec![];
     for (rel, bytes) in files {
         let size = bytes.len() as u64;

@@ -93,10 +93,11 @@ pub async fn submit(
     c: &mut Client,
     m: &Manifest,
     id: &str,
+    policy: bemcal_client::bundle::Policy,
 ) -> anyhow::Result<Vec<(String, Result<String, String>)>> {
     let mut out = vec![];
     for b in &m.buildings {
-        let r = client::submit_building(c, &b.project, None, id, &b.name)
+        let r = client::submit_building(c, &b.project, None, id, &b.name, policy)
             .await
             .map(|s| s.run_id)
             .map_err(|e| format!("{e:#}"));

@@ -261,8 +261,14 @@ pub fn calibrate_local(
         // every job it finished); a run of another project would compete with the new one for
         // the workers: cancelled (its simulations stay in the coordinator's cache and the new
         // run reuses them).
+        // On loopback the files never leave this machine: they may lie outside the project's
+        // folder (special files of the system are still refused).
+        let local = bemcal_client::bundle::Policy {
+            allow_outside: true,
+        };
         let sub =
-            client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path())).await?;
+            client::submit_project(&mut c, project, reuse.then_some(surrogate.as_path()), local)
+                .await?;
         let run = sub.run_id;
         if sub.resumed {
             log(&format!(

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use bemcal_client::bundle::Policy;
 use bemcal_client::client::Client;
 use bemcal_client::proto::RunStatus;
 use bemcal_coordinator::portfolio::{self, PortfolioSummary};
@@ -24,6 +25,10 @@ pub enum Sub {
         manifest: PathBuf,
         #[command(flatten)]
         client: ClientArgs,
+        /// Send files that lie outside a building's project folder too (links out of it
+        /// included); without it such a building is not submitted, with the reason.
+        #[arg(long)]
+        allow_outside: bool,
     },
     /// Run a portfolio through a coordinator and worker processes on loopback; writes
     /// OUT/<building>/ (with report.html), portfolio.csv, portfolio.json and portfolio.html.
@@ -62,7 +67,11 @@ pub enum Sub {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     match a.command {
-        Sub::Submit { manifest, client } => submit(&manifest, client),
+        Sub::Submit {
+            manifest,
+            client,
+            allow_outside,
+        } => submit(&manifest, client, Policy { allow_outside }),
         Sub::Status {
             portfolio: id,
             client,
@@ -82,14 +91,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 /// `portfolio submit`: every building of the manifest submitted; prints the portfolio id.
-fn submit(manifest: &Path, client: ClientArgs) -> anyhow::Result<()> {
+fn submit(manifest: &Path, client: ClientArgs, policy: Policy) -> anyhow::Result<()> {
     let rt = bemcal_client::runtime()?;
     let m = portfolio::load_manifest(manifest)?;
     let connect = client.connect()?;
     let id = portfolio::new_id();
     let subs = rt.block_on(async {
         let mut c = connect.client()?;
-        portfolio::submit(&mut c, &m, &id).await
+        portfolio::submit(&mut c, &m, &id, policy).await
     })?;
     for (b, r) in &subs {
         match r {
@@ -151,7 +160,12 @@ fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Resul
     let id = portfolio::new_id();
     let (runs, local_failures) = rt.block_on(async {
         let mut c: Client = connect.client()?;
-        let subs = portfolio::submit(&mut c, &m, &id).await?;
+        // On loopback the files never leave this machine: a building's files may lie anywhere
+        // (special files of the system are still refused).
+        let local = Policy {
+            allow_outside: true,
+        };
+        let subs = portfolio::submit(&mut c, &m, &id, local).await?;
         let mut failed = vec![];
         for (b, r) in subs {
             match r {

@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use bemcal_client::bundle::Policy;
+
 use super::coordinator::ClientArgs;
 
 /// Submit a calibration project to a coordinator (the files are validated there).
@@ -15,14 +17,35 @@ pub struct Args {
     /// A trained surrogate folder to use instead of training one.
     #[arg(long)]
     pub surrogate: Option<PathBuf>,
+    /// Send files that lie outside the project's folder too (a link in the folder that points
+    /// out of it included). Special files of the system (/proc, /sys, /dev), sockets and FIFOs
+    /// are never sent.
+    #[arg(long)]
+    pub allow_outside: bool,
+    /// List the files that would be uploaded, with their sizes; upload nothing.
+    #[arg(long)]
+    pub dry_run: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    let policy = Policy {
+        allow_outside: a.allow_outside,
+    };
+    if a.dry_run {
+        let files = bemcal_client::bundle::collect(&a.project, policy)?;
+        let total: usize = files.iter().map(|(_, b)| b.len()).sum();
+        for (name, bytes) in &files {
+            println!("{:>12}  {name}", bytes.len());
+        }
+        println!("{total:>12}  in {} files (nothing uploaded)", files.len());
+        return Ok(());
+    }
     let connect = a.client.connect()?;
     let rt = bemcal_client::runtime()?;
     let s = rt.block_on(async {
         let mut c = connect.client()?;
-        bemcal_client::client::submit_project(&mut c, &a.project, a.surrogate.as_deref()).await
+        bemcal_client::client::submit_project(&mut c, &a.project, a.surrogate.as_deref(), policy)
+            .await
     })?;
     if s.resumed {
         eprintln!(
