@@ -125,6 +125,42 @@ impl Inputs {
             Some(h) => h.hours.iter().map(|o| !o).collect(),
         }
     }
+
+    /// The part of meter `k` the model simulates: the meter less its base (NaN where either is
+    /// missing). The likelihood compares the surrogate with this.
+    pub fn model_share(&self, k: usize) -> Vec<f64> {
+        self.measured[k]
+            .iter()
+            .zip(&self.bases[k])
+            .map(|(m, b)| m - b)
+            .collect()
+    }
+
+    /// The likelihood's observations (the reference's y, Eq. 5), row-major `hours x outputs`:
+    /// each fitted meter's model share; NaN where it is missing or held out, and at every hour
+    /// of a meter with `fit = false` (the likelihood leaves it out).
+    pub fn likelihood_observations(&self) -> Vec<f64> {
+        let (n_h, n_out) = (self.features.len(), self.outputs.len());
+        let mut observed = vec![f64::NAN; n_h * n_out];
+        for k in (0..n_out).filter(|&k| self.fitted[k]) {
+            for (h, v) in self.model_share(k).iter().enumerate() {
+                observed[h * n_out + k] = *v;
+            }
+        }
+        observed
+    }
+
+    /// True when output `k` has a base (`[[bases]]`).
+    pub fn has_base(&self, k: usize) -> bool {
+        self.base_reports
+            .iter()
+            .any(|b| b.output == self.outputs[k])
+    }
+
+    /// A model output `sim` of output `k` with its base added: what the meter is compared with.
+    pub fn with_base(&self, k: usize, sim: &[f64]) -> Vec<f64> {
+        sim.iter().zip(&self.bases[k]).map(|(s, b)| s + b).collect()
+    }
 }
 
 /// Resolves the project's weather reference ([`weather_reference`]).

@@ -422,7 +422,7 @@ pub fn write_summary(
         timings,
     };
     write_calibrated_model(cal, &chains.estimate)?;
-    crate::bases::write_bases_csv(cal)?;
+    write_bases_csv(cal)?;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
     write_atomic(&cal.out.summary_json(), &json)?;
     Ok(summary)
@@ -473,6 +473,36 @@ pub fn write_calibrated_model(cal: &Calibration, estimate: &[f64]) -> Result<(),
         toml.push_str(&format!("{name} = {v}\n"));
     }
     write_atomic(&cal.out.calibrated_toml(), toml.as_bytes())
+}
+
+/// `validation/bases.csv`: the hourly bases of the outputs that have one (`[[bases]]`), which
+/// the report adds to the EnergyPlus runs before drawing them against the meters.
+fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
+    let inp = &cal.inputs;
+    let with: Vec<usize> = (0..inp.outputs.len())
+        .filter(|&k| inp.has_base(k))
+        .collect();
+    if with.is_empty() {
+        return Ok(());
+    }
+    let mut s = String::from("timestamp");
+    for &k in &with {
+        s.push_str(&format!(",{}", inp.outputs[k]));
+    }
+    s.push('\n');
+    for (t, ts) in timestamps(inp.year, inp.bases[0].len()) {
+        s.push_str(&ts);
+        for &k in &with {
+            let b = inp.bases[k][t];
+            s.push_str(&if b.is_finite() {
+                format!(",{b:.6}")
+            } else {
+                ",".into()
+            });
+        }
+        s.push('\n');
+    }
+    write_atomic(&cal.out.bases_csv(), s.as_bytes())
 }
 
 pub(crate) fn write_draws_csv(
