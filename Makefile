@@ -92,7 +92,7 @@ DEMO := out/demo
 # CLI and the report judge the model and its predictive intervals on it.
 HOLDOUT ?=
 WITH_HOLDOUT = $(if $(HOLDOUT),printf '\n[validation]\nholdout = "%s"\n' "$(HOLDOUT)" >>,true)
-# POINTS=60 sets `make demo`'s and `make quick`'s `[design] points` (docs/benchmarks.md: the
+# POINTS=60 sets `make demo`'s and `make quick`'s `[design] points` (docs/benchmarks-history.md: the
 # held-out demo converged at 60 where it did not at 20); the calibration goes to calibration-pN/.
 POINTS ?=
 SET_POINTS = $(PY) -c "import re, sys; p = sys.argv[1]; s = open(p).read(); \

@@ -46,7 +46,7 @@ chains = 4
 iterations = 4000
 burn_in = 2000
 segment = 1000
-kernel = "mh"        # the settings docs/benchmarks.md's figures were measured with
+kernel = "mh"        # the settings docs/benchmarks-history.md's figures were measured with
 start = "prior"
 max_extensions = 0
 [refine]

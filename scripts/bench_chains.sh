@@ -29,7 +29,7 @@ fi
 if [ "${BENCH_HMC:-0}" = 1 ]; then
   # HMC (gradients through the VJP graph) from gradient-BFGS optima: 4 x 360 iterations,
   # 100 burn-in, is its target run (an iteration is a trajectory of ~7 gradients): measured
-  # R-hat 1.0089, bulk ESS 581 in 14.7 min with the optimisation (docs/benchmarks.md).
+  # R-hat 1.0089, bulk ESS 581 in 14.7 min with the optimisation (docs/benchmarks-history.md).
   export BENCH_OPTIMISED=1; ITER="${ITER:-360}"; BURN="${BURN:-100}"
 elif [ "${FULL:-0}" = 1 ]; then ITER=10000; BURN=2000; else ITER="${ITER:-2500}"; BURN="${BURN:-500}"; fi
 (cd "$ROOT" && cargo build --release -q -p bemcal-calibrate --example bench_chains)

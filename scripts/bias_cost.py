@@ -1,4 +1,4 @@
-"""What a persistent bias costs the calibration's likelihood (docs/benchmarks.md, issue 17).
+"""What a persistent bias costs the calibration's likelihood (docs/benchmarks-history.md, issue 17).
 
     python scripts/bias_cost.py FOLDER [KEY]
 

@@ -1,5 +1,5 @@
 //! TLS end to end: a coordinator serving a certificate signed by a private CA, reached by a
-//! client that trusts that CA (the deployment in README.md "Kubernetes"), and refused to
+//! client that trusts that CA (the deployment in docs/cluster.md "Kubernetes"), and refused to
 //! clients that speak plaintext, trust another CA or send the wrong token.
 
 use std::path::Path;
