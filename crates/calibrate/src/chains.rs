@@ -18,9 +18,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::calibration::Calibration;
 use crate::error::Error;
+use crate::metrics::OutputMetrics;
 use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
-use crate::summary::OutputMetrics;
 use crate::surrogate_error::ChainTemperature;
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.

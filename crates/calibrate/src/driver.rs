@@ -29,6 +29,7 @@ use crate::chains::{ChainSummary, Sampler};
 use crate::design::{read_outcome, saved_outputs};
 use crate::error::Error;
 use crate::mapping::{self, MappingStep};
+use crate::metrics::OutputMetrics;
 use crate::posterior::Checkpoint;
 use crate::project::Estimate;
 use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
@@ -37,7 +38,7 @@ use crate::sequence::{
     after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, Stage,
     ValidationRole, ValidationRun,
 };
-use crate::summary::{write_summary, OutputMetrics, Summary, Timings};
+use crate::summary::{write_summary, Summary, Timings};
 use crate::surrogate_error::{chain_temperature, ChainTemperature};
 
 /// Work done now, or not yet (an executor that leases jobs: the driver is called again when
@@ -645,8 +646,8 @@ fn map_estimate(
     let mut record = mapping::read(&vdir);
     let (mut steps, mut anchors) = (vec![], vec![]);
     loop {
-        let fits: Vec<crate::validation::Fit> = (simulated.iter())
-            .map(|(_, m)| crate::validation::Fit::of(m, &inp.fitted))
+        let fits: Vec<crate::metrics::Fit> = (simulated.iter())
+            .map(|(_, m)| crate::metrics::Fit::of(m, &inp.fitted))
             .collect();
         let max = cal.project.validation.mapping_steps;
         let Some((a, fractions)) = mapping::next_step(&fits, &anchors, max) else {
@@ -726,7 +727,7 @@ fn map_estimate(
 
 /// `estimate = "best_simulated"`: of the points EnergyPlus `simulated` (the MAP draw first,
 /// then the predictive draws and the `steps` of output space mapping), makes the one the rule
-/// [`crate::validation::best_simulated`] chooses by Guideline 14's criteria the estimate, its run
+/// [`crate::metrics::best_simulated`] chooses by Guideline 14's criteria the estimate, its run
 /// `validation/calibrated.csv`; its metrics, or `None`
 /// when none ran (the fallbacks are tried then). `map_failure`: why EnergyPlus could not
 /// simulate the MAP draw, if it could not.
@@ -739,8 +740,8 @@ fn adopt_best_simulated(
     map_failure: Option<&String>,
     log: Log<'_>,
 ) -> Result<Option<Vec<OutputMetrics>>, Error> {
-    let fits: Vec<crate::validation::Fit> = (simulated.iter())
-        .map(|(_, m)| crate::validation::Fit::of(m, &cal.inputs.fitted))
+    let fits: Vec<crate::metrics::Fit> = (simulated.iter())
+        .map(|(_, m)| crate::metrics::Fit::of(m, &cal.inputs.fitted))
         .collect();
     let map_ran = simulated
         .first()
@@ -748,7 +749,7 @@ fn adopt_best_simulated(
     let first_mapped = (simulated.iter())
         .position(|(r, _)| r.role == ValidationRole::Mapped)
         .unwrap_or(simulated.len());
-    let Some(b) = crate::validation::best_simulated(&fits, map_ran, first_mapped) else {
+    let Some(b) = crate::metrics::best_simulated(&fits, map_ran, first_mapped) else {
         return Ok(None);
     };
     let (run, metrics) = &simulated[b];
@@ -762,10 +763,10 @@ fn adopt_best_simulated(
         }
         ValidationRole::Calibrated { .. } | ValidationRole::Initial => None,
     };
-    let choice = crate::validation::EstimateChoice {
+    let choice = crate::estimate::EstimateChoice {
         chosen: run.label.clone(),
         candidates: (simulated.iter().zip(&fits))
-            .map(|((r, _), fit)| crate::validation::SimulatedFit {
+            .map(|((r, _), fit)| crate::estimate::SimulatedFit {
                 label: r.label.clone(),
                 limit_ratio: fit.hourly.is_finite().then_some(fit.hourly),
                 monthly_limit_ratio: fit.monthly,
@@ -780,7 +781,7 @@ fn adopt_best_simulated(
     if adopted.is_some() {
         let o = saved_run(cal, run)?;
         let calibrated = cal.out.validation().join("calibrated.csv");
-        crate::summary::write_outputs_csv(&calibrated, cal.inputs.year, &o)?;
+        crate::output::write_outputs_csv(&calibrated, cal.inputs.year, &o)?;
     }
     let map_failure = map_failure.map(String::as_str);
     log(&format!("validation: {}", choice.describe(map_failure)));

@@ -18,11 +18,13 @@ pub mod crossval;
 pub mod design;
 pub mod driver;
 mod error;
+pub mod estimate;
 pub mod examples;
 mod inputs;
 pub mod keys;
 mod local;
 pub mod mapping;
+pub mod metrics;
 pub mod model_form;
 pub use bemcal_named as named;
 pub mod output;
@@ -46,18 +48,19 @@ pub use chains::{
 };
 pub use driver::log_design_outcome;
 pub use error::{write_atomic, Error};
+pub use estimate::{fallback_note, EstimateChoice, SimulatedFit};
 pub use inputs::{
     load_inputs, load_model, resolve_weather, weather_for, weather_reference, HeldOut, Inputs,
 };
 pub use keys::{FALLBACKS, INITIAL_KEY};
 pub use local::{calibrate, stage_seconds};
-pub use output::OutputDir;
+pub use metrics::{
+    best_simulated, limit_ratio, monthly_limit_ratio, Fit, OutputMetrics, PeriodMetrics,
+};
+pub use output::{write_outputs_csv, OutputDir};
 pub use project::Project;
 pub use summary::{
-    write_calibrated_model, write_outputs_csv, write_summary, DesignReport, HoldoutReport,
-    OutputMetrics, ParameterReport, PeriodMetrics, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
+    write_calibrated_model, write_summary, DesignReport, HoldoutReport, ParameterReport, PointNote,
+    Summary, Timings, NOT_CONVERGED_EXIT,
 };
-pub use validation::{
-    best_simulated, fallback_note, limit_ratio, monthly_limit_ratio, next_candidate, Candidate,
-    EstimateChoice, Fit, SimulatedFit, ValidationStep,
-};
+pub use validation::{next_candidate, Candidate, ValidationStep};

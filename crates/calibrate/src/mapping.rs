@@ -15,7 +15,7 @@
 //!
 //! The search runs while no point simulated passes Guideline 14 hourly and monthly, so a
 //! point that passes hourly and misses the monthly criteria anchors a step too. A mapped point
-//! becomes the estimate only where EnergyPlus passes there ([`crate::validation::best_simulated`]: both
+//! becomes the estimate only where EnergyPlus passes there ([`crate::metrics::best_simulated`]: both
 //! criteria before the MAP draw passing hourly alone, hourly before a draw that fails); where
 //! none does (a meter the model cannot reach), the estimate stays the best posterior draw.
 //!
@@ -66,10 +66,10 @@ pub struct MappedPoint {
 }
 
 /// The next step of the search over the points simulated so far (`fits`: each one's
-/// [`crate::validation::Fit`], in the order they ran), after the steps anchored at `anchors` (indices into
+/// [`crate::metrics::Fit`], in the order they ran), after the steps anchored at `anchors` (indices into
 /// the same list), at most `max_steps` in all: its anchor and the fractions of [`line()`].
 /// The anchor is the point nearest inside both sets of Guideline 14's limits
-/// ([`crate::validation::Fit::worst`], the first on a tie) that has not anchored a step yet, with
+/// ([`crate::metrics::Fit::worst`], the first on a tie) that has not anchored a step yet, with
 /// [`FRACTIONS`]: where a step found nothing nearer, the next one corrects the surrogate at
 /// another point rather than nearer the same one (the correction is exact at its anchor
 /// only, and another anchor's mode lies elsewhere: from the draws of the demo's final chains
@@ -77,21 +77,21 @@ pub struct MappedPoint {
 /// 1.19, and a step from that one and two nearer it found nothing nearer; a step from the
 /// best point not yet an anchor, a draw at 1.40, found one at 0.66). Once every point has
 /// anchored, the nearest again, with the one fraction `0.5^(k+1)` for one used `k` times.
-/// `None` when a point passes Guideline 14 hourly and monthly ([`crate::validation::Fit::passes_both`]:
+/// `None` when a point passes Guideline 14 hourly and monthly ([`crate::metrics::Fit::passes_both`]:
 /// the search is for a fit, not for the best fit),
 /// when none ran, or when the steps are used up. A point that passes hourly and misses the
 /// monthly criteria anchors a step too: the corrected surrogate's mode fits the meters' hours,
 /// and so their months' totals, nearer than the anchor does (on the held-out 20-point demo
 /// the first mapped point passed hourly at 0.97 and missed the monthly criteria at 2.19).
 pub fn next_step(
-    fits: &[crate::validation::Fit],
+    fits: &[crate::metrics::Fit],
     anchors: &[usize],
     max_steps: usize,
 ) -> Option<(usize, Vec<f64>)> {
-    if anchors.len() >= max_steps || fits.iter().any(crate::validation::Fit::passes_both) {
+    if anchors.len() >= max_steps || fits.iter().any(crate::metrics::Fit::passes_both) {
         return None;
     }
-    let worst: Vec<f64> = fits.iter().map(crate::validation::Fit::worst).collect();
+    let worst: Vec<f64> = fits.iter().map(crate::metrics::Fit::worst).collect();
     let fresh: Vec<f64> = (worst.iter().enumerate())
         .map(|(i, &w)| {
             if anchors.contains(&i) {
@@ -101,8 +101,8 @@ pub fn next_step(
             }
         })
         .collect();
-    let a = crate::validation::smallest_finite(&fresh)
-        .or_else(|| crate::validation::smallest_finite(&worst))?;
+    let a = crate::metrics::smallest_finite(&fresh)
+        .or_else(|| crate::metrics::smallest_finite(&worst))?;
     let used = anchors.iter().filter(|&&b| b == a).count();
     let fractions = match used {
         0 => FRACTIONS.to_vec(),
@@ -188,7 +188,7 @@ pub fn write(dir: &Path, steps: &[MappingStep]) -> Result<(), Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::validation::Fit;
+    use crate::metrics::Fit;
 
     #[test]
     fn a_step_anchors_at_the_best_fit_while_none_passes_and_shrinks_on_a_repeat() {

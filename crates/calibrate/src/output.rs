@@ -6,6 +6,8 @@
 use bemcal_weather::grid::GridYear;
 use std::path::{Path, PathBuf};
 
+use crate::error::{write_atomic, Error};
+
 /// A chain-segment job's chain states at its end (and the next segment's input).
 pub const STATES_FILE: &str = "states.json";
 /// A chain-segment job's draws.
@@ -146,4 +148,21 @@ pub(crate) fn timestamps(year: GridYear, n: usize) -> Vec<(usize, String)> {
     year.chronological(n)
         .map(|t| (t, year.slot_time(t).format("%Y-%m-%dT%H:%M").to_string()))
         .collect()
+}
+
+/// Writes hourly outputs as `timestamp,<output>...`.
+pub fn write_outputs_csv(
+    path: &Path,
+    year: bemcal_weather::grid::GridYear,
+    o: &bemcal_energyplus::HourlyOutputs,
+) -> Result<(), Error> {
+    let mut s = format!("timestamp,{}\n", o.names.join(","));
+    for (t, ts) in timestamps(year, o.hours()) {
+        s.push_str(&ts);
+        for series in &o.series {
+            s.push_str(&format!(",{:.6}", series[t]));
+        }
+        s.push('\n');
+    }
+    write_atomic(path, s.as_bytes())
 }

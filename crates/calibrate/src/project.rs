@@ -603,7 +603,7 @@ pub enum Estimate {
     /// misses either, of the posterior draws EnergyPlus simulates anyway (the MAP draw and the
     /// predictive draws, `predictive_draws`), one that passes both, else the MAP draw if it
     /// passes hourly, else the one whose worst meter is nearest inside the hourly limits
-    /// (default; [`crate::validation::best_simulated`]): the MAP is the surrogate's best, and where the
+    /// (default; [`crate::metrics::best_simulated`]): the MAP is the surrogate's best, and where the
     /// surrogate is wrong near it, another draw of the posterior can fit the meters better in
     /// EnergyPlus. Where it passes both at none of them, up to `mapping_steps` steps of
     /// output space mapping look for a point it passes at ([`crate::mapping`]).

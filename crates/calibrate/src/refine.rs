@@ -22,7 +22,7 @@ use crate::calibration::Calibration;
 use crate::chains::Sampler;
 use crate::error::{write_atomic, Error};
 use crate::keys::first_refinement_key;
-use crate::summary::OutputMetrics;
+use crate::metrics::OutputMetrics;
 
 /// File of the refinement log in the output folder.
 pub const REFINE_FILE: &str = "refine.json";

@@ -6,7 +6,6 @@ use std::path::Path;
 use bemcal_stats::convergence::Convergence;
 use bemcal_stats::lhs::Design;
 use bemcal_stats::mcmc::{DrawStats, Draws};
-use bemcal_stats::metrics::G14Metrics;
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
@@ -14,6 +13,7 @@ use crate::calibration::Calibration;
 use crate::chains::{ChainSummary, MovedChain};
 use crate::design::read_outcome;
 use crate::error::{write_atomic, Error};
+use crate::metrics::OutputMetrics;
 use crate::output::timestamps;
 use crate::posterior::{Posterior, SigmaDeltaBox};
 use crate::project::Estimate;
@@ -41,46 +41,6 @@ pub struct Timings {
     pub refinement_s: f64,
     /// The whole calibration.
     pub total_s: f64,
-}
-
-/// Metrics of one model against the meters, per output: ASHRAE Guideline 14 hourly (the
-/// flattened `metrics`) and monthly over the calibration period, and on the held-out period.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct OutputMetrics {
-    /// The calibrated output (and its meter).
-    pub output: String,
-    /// Hourly Guideline 14 over the calibration period: hours, measured mean (kWh), NMBE and
-    /// CV-RMSE (%), pass.
-    #[serde(flatten)]
-    pub metrics: G14Metrics,
-    /// On monthly totals of the same hours (absent under two months of data).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub monthly: Option<G14Metrics>,
-    /// On the held-out period (`[validation] holdout`): hours that did not fit the model.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub held_out: Option<PeriodMetrics>,
-}
-
-/// Guideline 14 of one period, hourly and monthly.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PeriodMetrics {
-    /// On the period's hours.
-    pub hourly: G14Metrics,
-    /// On monthly totals of the same hours (absent under two months of data).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub monthly: Option<G14Metrics>,
-}
-
-impl OutputMetrics {
-    /// Hourly metrics alone (pooled comparisons that are not a period of the meters).
-    pub fn hourly(output: &str, metrics: G14Metrics) -> OutputMetrics {
-        OutputMetrics {
-            output: output.to_string(),
-            metrics,
-            monthly: None,
-            held_out: None,
-        }
-    }
 }
 
 /// Exit status of `bemcal calibrate` (and `bemcal portfolio` when a building's run is
@@ -158,7 +118,7 @@ pub struct Summary {
     /// With `estimate = "best_simulated"`: each draw EnergyPlus simulated, its worst fitted
     /// meter's ratio to Guideline 14's hourly limits, and the one chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub estimate_choice: Option<crate::validation::EstimateChoice>,
+    pub estimate_choice: Option<crate::estimate::EstimateChoice>,
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
     #[serde(with = "bemcal_named")]
     pub calibrated_values: Vec<(String, f64)>,
@@ -556,23 +516,6 @@ pub(crate) fn write_draws_csv(
             }
             s.push('\n');
         }
-    }
-    write_atomic(path, s.as_bytes())
-}
-
-/// Writes hourly outputs as `timestamp,<output>...`.
-pub fn write_outputs_csv(
-    path: &Path,
-    year: bemcal_weather::grid::GridYear,
-    o: &bemcal_energyplus::HourlyOutputs,
-) -> Result<(), Error> {
-    let mut s = format!("timestamp,{}\n", o.names.join(","));
-    for (t, ts) in timestamps(year, o.hours()) {
-        s.push_str(&ts);
-        for series in &o.series {
-            s.push_str(&format!(",{:.6}", series[t]));
-        }
-        s.push('\n');
     }
     write_atomic(path, s.as_bytes())
 }

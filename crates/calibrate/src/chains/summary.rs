@@ -14,15 +14,15 @@ use serde::{Deserialize, Serialize};
 use super::{independence_dropped, moved_chains, MovedChain, Sampler};
 use crate::calibration::Calibration;
 use crate::error::Error;
+use crate::estimate::{fallback_note, EstimateChoice};
 use crate::keys::FALLBACKS;
+use crate::metrics::OutputMetrics;
 use crate::plan::Plan;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
-use crate::summary::OutputMetrics;
 use crate::summary::{write_bands_csv, write_draws_csv};
 use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
-use crate::validation::{fallback_note, EstimateChoice};
 
 impl Sampler<'_> {
     /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
