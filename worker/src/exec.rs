@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
-use bemcal_calibrate::surrogate_error::ChainTemperature;
+use bemcal_calibrate::posterior::ChainTemperature;
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;

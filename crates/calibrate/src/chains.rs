@@ -19,9 +19,8 @@ use serde::{Deserialize, Serialize};
 use crate::calibration::Calibration;
 use crate::error::Error;
 use crate::metrics::OutputMetrics;
-use crate::posterior::{advance_chains, Posterior, SigmaDeltaBox};
+use crate::posterior::{advance_chains, ChainTemperature, Drawn, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
-use crate::surrogate_error::ChainTemperature;
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
 pub struct Sampler<'c> {
@@ -491,18 +490,6 @@ fn settings_for(project: &crate::project::Project, round: u32) -> McmcSettings {
         }
     }
     m
-}
-
-/// Where the final chains stand when they are judged: what the extension rule
-/// ([`extended_target`]) counts from, read off the chains themselves
-/// ([`crate::posterior::Checkpoint::drawn`]) rather than worked out from the iterations asked.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Drawn {
-    /// Draws per chain so far (the fewest of any chain): after burn-in, outside
-    /// re-adaptation windows.
-    pub draws: u64,
-    /// Whether the chains were re-adapted ([`bemcal_stats::chain::readapt`]: once).
-    pub readapted: bool,
 }
 
 /// The iteration target after one more extension of the final chains, which ran to `target`

@@ -30,6 +30,7 @@ use crate::design::{read_outcome, saved_outputs};
 use crate::error::Error;
 use crate::mapping::{self, MappingStep};
 use crate::metrics::OutputMetrics;
+use crate::posterior::ChainTemperature;
 use crate::posterior::Checkpoint;
 use crate::project::Estimate;
 use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
@@ -39,7 +40,7 @@ use crate::sequence::{
     ValidationRole, ValidationRun,
 };
 use crate::summary::{write_summary, Summary, Timings};
-use crate::surrogate_error::{chain_temperature, ChainTemperature};
+use crate::surrogate_error::chain_temperature;
 
 /// Work done now, or not yet (an executor that leases jobs: the driver is called again when
 /// they finish).
@@ -424,7 +425,7 @@ struct FinalChains {
     /// The settings it holds for.
     settings: String,
     /// The likelihood's temperature it holds for (the same up to
-    /// [`crate::surrogate_error::same_temperature`]).
+    /// [`crate::posterior::same_temperature`]).
     #[serde(default = "crate::posterior::untempered")]
     temperature: f64,
     /// Iterations per chain the final chains run to (raised by each extension).
@@ -456,12 +457,12 @@ impl FinalChains {
     }
 
     /// Whether this record holds for `settings` at `temperature` (the same up to
-    /// [`crate::surrogate_error::same_temperature`]). A record written before the temperature
+    /// [`crate::posterior::same_temperature`]). A record written before the temperature
     /// had its own field ended its settings with `legacy` and the temperature, and said nothing
     /// of the estimate: it holds at the same temperature, so that chains extended before an
     /// upgrade keep their extensions.
     fn holds_for(&self, settings: &str, legacy: &str, temperature: f64) -> bool {
-        use crate::surrogate_error::same_temperature;
+        use crate::posterior::same_temperature;
         if self.settings == settings {
             return same_temperature(self.temperature, temperature);
         }

@@ -43,8 +43,8 @@ mod validation;
 
 pub use calibration::{Calibration, FittedData, Log};
 pub use chains::{
-    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, Drawn,
-    MovedChain, Sampler,
+    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
+    Sampler,
 };
 pub use driver::log_design_outcome;
 pub use error::{write_atomic, Error};
@@ -58,6 +58,7 @@ pub use metrics::{
     best_simulated, limit_ratio, monthly_limit_ratio, Fit, OutputMetrics, PeriodMetrics,
 };
 pub use output::{write_outputs_csv, OutputDir};
+pub use posterior::Drawn;
 pub use project::Project;
 pub use summary::{
     write_calibrated_model, write_summary, DesignReport, HoldoutReport, ParameterReport, PointNote,

@@ -289,14 +289,61 @@ pub struct Checkpoint {
 }
 
 impl Checkpoint {
-    /// Where the chains stand for the extension rule ([`crate::chains::extended_target`]).
-    pub fn drawn(&self) -> crate::chains::Drawn {
-        crate::chains::Drawn {
+    /// Where the chains stand for the extension rule (`chains::extended_target`).
+    pub fn drawn(&self) -> Drawn {
+        Drawn {
             draws: self.draws.iter().map(|d| d.len() as u64).min().unwrap_or(0),
             readapted: self.states.iter().any(Chain::was_readapted),
         }
     }
 }
+
+/// Where the final chains stand when they are judged: what the extension rule
+/// (`chains::extended_target`) counts from, read off the chains themselves
+/// ([`Checkpoint::drawn`]) rather than worked out from the iterations asked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Drawn {
+    /// Draws per chain so far (the fewest of any chain): after burn-in, outside
+    /// re-adaptation windows.
+    pub draws: u64,
+    /// Whether the chains were re-adapted ([`bemcal_stats::chain::readapt`]: once).
+    pub readapted: bool,
+}
+
+/// The likelihood's temperature of a round's chains (`summary.json` `temperature`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ChainTemperature {
+    /// `T`: the chains sample `p(theta) L(theta)^(1/T)`.
+    pub value: f64,
+    /// The refinement round whose recoveries measured it (`mcmc.temperature =
+    /// "surrogate_error"`); `None` for a fixed temperature, or before any round.
+    pub measured_at_round: Option<u32>,
+}
+
+impl ChainTemperature {
+    /// The posterior itself.
+    pub const ONE: ChainTemperature = ChainTemperature {
+        value: 1.0,
+        measured_at_round: None,
+    };
+
+    /// [`ChainTemperature::ONE`], for serde's defaults.
+    pub fn one() -> ChainTemperature {
+        ChainTemperature::ONE
+    }
+}
+
+/// Whether chains recorded at temperature `a` may go on at `b`: equal to [`SAME_TEMPERATURE`].
+/// A measured temperature is found by bisection to a relative 1e-9, so the same rounds give
+/// temperatures that differ in their last digits across builds (another summation order):
+/// exact equality refused a checkpoint a rebuilt binary measured 1.4e-10 apart.
+pub fn same_temperature(a: f64, b: f64) -> bool {
+    (a - b).abs() <= SAME_TEMPERATURE * a.abs().max(b.abs())
+}
+
+/// The relative difference below which two temperatures are the same ([`same_temperature`]):
+/// far above the bisection's 1e-9, far below what moves a chain (T is measured to per cents).
+pub const SAME_TEMPERATURE: f64 = 1e-6;
 
 /// The likelihood's temperature of a record written before it had one: 1 (serde's default for
 /// [`Checkpoint::temperature`] and `RefineRound::temperature`).
@@ -333,7 +380,7 @@ pub fn run_chains(
             }
         }
     };
-    if !crate::surrogate_error::same_temperature(ck.temperature, post.temperature) {
+    if !same_temperature(ck.temperature, post.temperature) {
         return Err(Error::Stage {
             stage: "chains",
             message: format!(
@@ -446,6 +493,15 @@ pub fn advance_chains(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn temperatures_apart_by_rounding_are_the_same_and_measurably_different_ones_are_not() {
+        // Two builds measured these from the same refinement rounds.
+        assert!(same_temperature(294.3081622329743, 294.30816227335754));
+        assert!(same_temperature(1.0, 1.0));
+        assert!(!same_temperature(294.3, 294.4));
+        assert!(!same_temperature(1.0, 141.0));
+    }
 
     #[test]
     fn a_meter_not_fitted_gets_no_sampled_sigma_delta() {

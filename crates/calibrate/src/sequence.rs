@@ -13,8 +13,9 @@
 //!      (the estimate; while EnergyPlus fails there, next_validation) -> summary
 //! ```
 
-use crate::chains::{extended_target, ChainSummary, Drawn};
+use crate::chains::{extended_target, ChainSummary};
 use crate::keys::{CALIBRATED_LABEL, INITIAL_KEY};
+use crate::posterior::Drawn;
 use crate::project::{McmcSettings, Project};
 use crate::validation::{next_candidate, ValidationStep};
 

@@ -99,8 +99,8 @@ pub struct Summary {
     /// The likelihood's temperature of the final chains (`mcmc.temperature`): they sample
     /// `p(theta) L(theta)^(1/T)`; with `measured_at_round`, `T` was measured from the
     /// surrogate's error at that refinement round's points.
-    #[serde(default = "crate::surrogate_error::ChainTemperature::one")]
-    pub temperature: crate::surrogate_error::ChainTemperature,
+    #[serde(default = "crate::posterior::ChainTemperature::one")]
+    pub temperature: crate::posterior::ChainTemperature,
     /// Chains started in the best optimum's mode instead of their own (`mcmc.restart_below`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub moved_chains: Vec<MovedChain>,

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::plan::Plan;
+use crate::posterior::ChainTemperature;
 use crate::project::Temperature;
 use crate::refine::{RefineLog, RefineRound};
 
@@ -126,41 +127,6 @@ fn unit_points_and_shifts(
     Ok((truths, unit_shifts))
 }
 
-/// The likelihood's temperature of a round's chains (`summary.json` `temperature`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ChainTemperature {
-    /// `T`: the chains sample `p(theta) L(theta)^(1/T)`.
-    pub value: f64,
-    /// The refinement round whose recoveries measured it (`mcmc.temperature =
-    /// "surrogate_error"`); `None` for a fixed temperature, or before any round.
-    pub measured_at_round: Option<u32>,
-}
-
-impl ChainTemperature {
-    /// The posterior itself.
-    pub const ONE: ChainTemperature = ChainTemperature {
-        value: 1.0,
-        measured_at_round: None,
-    };
-
-    /// [`ChainTemperature::ONE`], for serde's defaults.
-    pub fn one() -> ChainTemperature {
-        ChainTemperature::ONE
-    }
-}
-
-/// Whether chains recorded at temperature `a` may go on at `b`: equal to [`SAME_TEMPERATURE`].
-/// A measured temperature is found by bisection to a relative 1e-9, so the same rounds give
-/// temperatures that differ in their last digits across builds (another summation order):
-/// exact equality refused a checkpoint a rebuilt binary measured 1.4e-10 apart.
-pub fn same_temperature(a: f64, b: f64) -> bool {
-    (a - b).abs() <= SAME_TEMPERATURE * a.abs().max(b.abs())
-}
-
-/// The relative difference below which two temperatures are the same ([`same_temperature`]):
-/// far above the bisection's 1e-9, far below what moves a chain (T is measured to per cents).
-pub const SAME_TEMPERATURE: f64 = 1e-6;
-
 /// The posterior intervals a measured temperature is chosen to make hold: the central 90 % that
 /// `summary.json` (`q5` to `q95`), the CLI and the report give for each parameter.
 pub const INTERVAL_LEVEL: f64 = 0.9;
@@ -244,15 +210,6 @@ mod tests {
             temperature: 1.0,
             spread: 1.0,
         }
-    }
-
-    #[test]
-    fn temperatures_apart_by_rounding_are_the_same_and_measurably_different_ones_are_not() {
-        // Two builds measured these from the same refinement rounds.
-        assert!(same_temperature(294.3081622329743, 294.30816227335754));
-        assert!(same_temperature(1.0, 1.0));
-        assert!(!same_temperature(294.3, 294.4));
-        assert!(!same_temperature(1.0, 141.0));
     }
 
     #[test]

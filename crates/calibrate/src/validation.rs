@@ -162,7 +162,7 @@ pub(crate) mod tests {
             extensions: 0,
             convergence: Default::default(),
             surrogate_error: None,
-            temperature: crate::surrogate_error::ChainTemperature::ONE,
+            temperature: crate::posterior::ChainTemperature::ONE,
             predictive: vec![],
         }
     }

@@ -18,11 +18,12 @@ use crate::estimate::{fallback_note, EstimateChoice};
 use crate::keys::FALLBACKS;
 use crate::metrics::OutputMetrics;
 use crate::plan::Plan;
+use crate::posterior::ChainTemperature;
 use crate::posterior::Posterior;
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
 use crate::summary::{write_bands_csv, write_draws_csv};
-use crate::surrogate_error::{carry, ChainTemperature, SurrogateError};
+use crate::surrogate_error::{carry, SurrogateError};
 
 impl Sampler<'_> {
     /// Stage 6: merged chains (their final `states` and `draws`) -> posterior summary, draws.csv
