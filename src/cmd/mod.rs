@@ -20,6 +20,7 @@ pub mod params;
 pub mod portfolio;
 pub mod precalibrate;
 pub mod predict;
+pub mod reference;
 pub mod report;
 pub mod results;
 pub mod simulate;
@@ -95,6 +96,8 @@ pub enum Command {
     Completions(completions::Args),
     /// Many buildings calibrated together: submit, run locally, status, results.
     Portfolio(portfolio::Args),
+    /// Write the reference pages generated from the code (the CLI's, docs/reference/cli.md).
+    Reference(reference::Args),
 }
 
 impl Command {
@@ -141,6 +144,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Export(a) => export::run(a),
         Command::Completions(a) => completions::run(a),
         Command::Portfolio(a) => portfolio::run(a),
+        Command::Reference(a) => reference::run(a),
     }
 }
 
@@ -174,6 +178,17 @@ mod tests {
         let mut missing = vec![];
         walk(&Cli::command(), "", &mut missing);
         assert!(missing.is_empty(), "without help text: {missing:#?}");
+    }
+
+    /// docs/reference/cli.md is what `bemcal reference` writes from today's definitions.
+    #[test]
+    fn the_cli_reference_is_current() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/reference/cli.md");
+        let committed = std::fs::read_to_string(path).unwrap_or_default();
+        assert!(
+            committed == super::reference::cli_markdown(),
+            "docs/reference/cli.md is out of date: run `bemcal reference` (target/release/bemcal reference) and commit it"
+        );
     }
 
     #[test]
