@@ -2,27 +2,31 @@
 //! posterior, the estimate and its fallbacks, the noise, `draws.csv` and the posterior
 //! predictive; what validation and `summary.json` are built from.
 
+use std::path::Path;
+
+use bemcal_energyplus::Model;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::convergence::{assess, Convergence};
 use bemcal_stats::likelihood::OutputNoise;
-use bemcal_stats::mcmc::Draws;
+use bemcal_stats::mcmc::{DrawStats, Draws};
 use bemcal_stats::prior::Prior;
 use bemcal_stats::summary::{predictive_bands, summarize, PosteriorSummary};
 use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
-use super::{independence_dropped, moved_chains, MovedChain, Sampler};
 use crate::calibration::Calibration;
-use crate::error::Error;
+use crate::chains::{
+    independence_dropped, moved_chains, surrogate_metrics_at, MovedChain, Sampler,
+};
+use crate::error::{write_atomic, Error};
 use crate::estimate::{fallback_note, EstimateChoice};
 use crate::keys::FALLBACKS;
 use crate::metrics::OutputMetrics;
+use crate::output::timestamps;
 use crate::plan::Plan;
-use crate::posterior::ChainTemperature;
-use crate::posterior::Posterior;
+use crate::posterior::{ChainTemperature, Posterior, SigmaDeltaBox};
 use crate::project::{Estimate, Temperature};
 use crate::refine::RefineLog;
-use crate::summary::{write_bands_csv, write_draws_csv};
 use crate::surrogate_error::{carry, SurrogateError};
 
 impl Sampler<'_> {
@@ -62,15 +66,9 @@ impl Sampler<'_> {
             Some((report, shifted)) => {
                 let path = cal.out.draws_with_surrogate_error_csv();
                 write_draws_csv(&path, &post, &inp.outputs, &shifted, &sbox, false)?;
-                (
-                    Some(report),
-                    crate::predictive::pick(post.plan, &inp.model, &shifted, k),
-                )
+                (Some(report), pick(post.plan, &inp.model, &shifted, k))
             }
-            None => (
-                None,
-                crate::predictive::pick(post.plan, &inp.model, draws, k),
-            ),
+            None => (None, pick(post.plan, &inp.model, draws, k)),
         };
         let (sigma_delta_kwh, residual_ar1) =
             noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
@@ -269,20 +267,122 @@ fn write_posterior_predictive(
     )
 }
 
-/// Guideline 14 of the surrogate at `estimate` against the meters, per output.
-pub(super) fn surrogate_metrics_at(
-    inp: &crate::inputs::Inputs,
-    eval: &mut Evaluator,
-    estimate: &[f64],
-) -> Result<Vec<OutputMetrics>, Error> {
-    let n_h = inp.features.len();
-    let y = eval.evaluate(estimate)?;
-    let mut metrics = vec![];
-    for (k, name) in inp.outputs.iter().enumerate() {
-        let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
-        metrics.push(inp.metrics(k, name, &pred)?);
+/// `k` draws evenly spaced through the merged chains (unit space; the middle of each of `k`
+/// equal stretches) among those EnergyPlus can be asked to simulate (every model constraint
+/// met, outside the region it refused), in physical units.
+pub fn pick(plan: &Plan, model: &Model, draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
+    let feasible: Vec<Vec<f64>> = draws
+        .iter()
+        .flat_map(|d| (0..d.len()).map(move |i| d.point(i)))
+        .map(|u| {
+            plan.priors
+                .iter()
+                .zip(u)
+                .map(|(p, u)| p.from_unit(*u))
+                .collect::<Vec<f64>>()
+        })
+        .filter(|x| plan.feasible(model, x) && plan.refused(x).is_none())
+        .collect();
+    evenly(&feasible, k)
+}
+
+/// `k` items evenly spaced through `all`, the middle of each of `k` equal stretches.
+fn evenly<T: Clone>(all: &[T], k: usize) -> Vec<T> {
+    let k = k.min(all.len());
+    (0..k)
+        .map(|j| all[(2 * j + 1) * all.len() / (2 * k)].clone())
+        .collect()
+}
+
+/// `draws.csv` (or, without `log_posterior`, the draws with the surrogate's error): each
+/// draw's parameters (physical units), sampled sigma_delta, and with `log_posterior` its log
+/// density and the sampler's statistics.
+fn write_draws_csv(
+    path: &Path,
+    post: &Posterior<'_>,
+    outputs: &[String],
+    draws: &[Draws],
+    sbox: &SigmaDeltaBox,
+    log_posterior: bool,
+) -> Result<(), Error> {
+    let d = post.plan.calibrated.len();
+    let mut s = format!("chain,draw,{}", post.plan.calibrated.join(","));
+    if post.sigma_box.is_some() {
+        for &k in &sbox.outputs {
+            s.push_str(&format!(",sigma_delta_{}", outputs[k]));
+        }
     }
-    Ok(metrics)
+    if log_posterior {
+        s.push_str(",log_posterior");
+    }
+    // The sampler's statistics per draw, named as CmdStan names them, when every chain has them.
+    let stats: Option<Vec<&[DrawStats]>> = match log_posterior {
+        true => draws.iter().map(Draws::stats).collect(),
+        false => None,
+    };
+    if stats.is_some() {
+        s.push_str(",accept_stat__,stepsize__,n_leapfrog__,divergent__");
+    }
+    s.push('\n');
+    for (c, dr) in draws.iter().enumerate() {
+        for i in 0..dr.len() {
+            let u = dr.point(i);
+            s.push_str(&format!("{c},{i}"));
+            for x in post.theta(u) {
+                s.push_str(&format!(",{x}"));
+            }
+            if post.sigma_box.is_some() {
+                for j in 0..sbox.len() {
+                    s.push_str(&format!(",{}", sbox.sigma(j, u[d + j])));
+                }
+            }
+            if log_posterior {
+                s.push_str(&format!(",{}", dr.log_density[i]));
+            }
+            if let Some(st) = stats.as_ref().map(|all| all[c][i]) {
+                let divergent = u8::from(st.divergent);
+                s.push_str(&format!(
+                    ",{},{},{},{divergent}",
+                    st.accept_stat, st.step_size, st.n_leapfrog
+                ));
+            }
+            s.push('\n');
+        }
+    }
+    write_atomic(path, s.as_bytes())
+}
+
+/// `posterior_predictive.csv`'s rows: per hour, each output's meter and its 5 / 50 / 95 % bands.
+fn write_bands_csv(
+    path: &Path,
+    year: bemcal_weather::grid::GridYear,
+    outputs: &[String],
+    measured: &[Vec<f64>],
+    bands: &[bemcal_stats::summary::PredictiveBands],
+) -> Result<(), Error> {
+    let mut s = String::from("timestamp");
+    for o in outputs {
+        s.push_str(&format!(",{o}_measured,{o}_q5,{o}_q50,{o}_q95"));
+    }
+    s.push('\n');
+    let n = bands.first().map_or(0, |b| b.q50.len());
+    for (t, ts) in timestamps(year, n) {
+        s.push_str(&ts);
+        for (k, b) in bands.iter().enumerate() {
+            let m = measured[k][t];
+            let m = if m.is_finite() {
+                format!("{m:.4}")
+            } else {
+                String::new()
+            };
+            s.push_str(&format!(
+                ",{m},{:.4},{:.4},{:.4}",
+                b.q5[t], b.q50[t], b.q95[t]
+            ));
+        }
+        s.push('\n');
+    }
+    write_atomic(path, s.as_bytes())
 }
 
 /// The merged chains, summarised ([`Sampler::summarize`]): what validation and `summary.json`
@@ -437,4 +537,144 @@ fn sub_draws(d: &Draws, dim: usize) -> Draws {
     out.log_density = d.log_density.clone();
     out.stats = d.stats.clone();
     out
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::estimate::tests::choice;
+    use crate::metrics::tests::metrics;
+
+    /// Merged chains with the estimate `[0.0]` and fallbacks `[1.0]`, `[2.0]`, ...
+    pub(crate) fn chains(fallbacks: usize) -> ChainSummary {
+        ChainSummary {
+            posterior: serde_json::from_value(serde_json::json!({
+                "parameters": [], "map_point": [], "map_log_density": 0.0,
+                "correlated_pairs": [], "max_rhat": 1.0, "min_ess_bulk": 100.0
+            }))
+            .unwrap_or_else(|e| panic!("{e}")),
+            sigma_delta_kwh: vec![],
+            residual_ar1: vec![],
+            estimate: vec![0.0],
+            surrogate_at_estimate: vec![],
+            fallbacks: (1..=fallbacks).map(|k| vec![k as f64]).collect(),
+            estimate_note: None,
+            estimate_choice: None,
+            surrogate_at_predictive: vec![],
+            moved_chains: vec![],
+            independence_dropped: vec![],
+            acceptance: vec![],
+            sigma_eta: vec![],
+            held_out: serde_json::Value::Null,
+            extensions: 0,
+            convergence: Default::default(),
+            surrogate_error: None,
+            temperature: ChainTemperature::ONE,
+            predictive: vec![],
+        }
+    }
+
+    #[test]
+    fn a_fallback_that_ran_becomes_the_estimate_with_a_note() {
+        let mut c = chains(2);
+        c.settle_estimate(&[]);
+        assert_eq!(
+            (c.estimate.clone(), c.estimate_note.is_none()),
+            (vec![0.0], true)
+        );
+        c.settle_estimate(&["a".into(), "b".into()]);
+        assert_eq!(c.estimate, vec![2.0]);
+        assert!(c.estimate_note.unwrap().contains("2 failed: a | b"));
+    }
+
+    #[test]
+    fn a_predictive_draw_fitted_best_becomes_the_estimate_with_its_surrogate_metrics() {
+        let metrics = |nmbe: f64| vec![metrics("heating", nmbe, 10.0)];
+        let mut c = chains(1);
+        c.predictive = vec![vec![5.0], vec![6.0]];
+        c.surrogate_at_estimate = metrics(0.0);
+        c.surrogate_at_predictive = vec![metrics(5.0), metrics(6.0)];
+
+        let mut passing = choice("calibrated");
+        passing.candidates[0].limit_ratio = Some(0.5);
+        assert!(passing
+            .describe(None)
+            .contains("passes Guideline 14 hourly at the MAP draw (worst meter at 0.50"));
+        assert!(choice("calibrated")
+            .describe(None)
+            .contains("fails Guideline 14 hourly at the MAP draw (worst meter at 1.60"));
+
+        let mut kept = c.clone();
+        kept.adopt_best_simulated(None, choice("calibrated"), None);
+        assert_eq!(kept.estimate, vec![0.0]);
+        assert!(kept.estimate_note.is_none());
+        assert_eq!(kept.estimate_choice.unwrap().chosen, "calibrated");
+
+        c.adopt_best_simulated(c.predictive_point(1), choice("predictive_01"), None);
+        assert_eq!(c.estimate, vec![6.0]);
+        assert_eq!(c.surrogate_at_estimate[0].metrics.nmbe, 6.0);
+        let note = c.estimate_note.clone().unwrap();
+        assert!(
+            note.contains("predictive_01 fits the meters better than the MAP draw, which fails")
+                && note.contains("worst meter at 0.70 of the limits, the MAP draw's at 1.60")
+                && note.contains("of 3 points"),
+            "{note}"
+        );
+
+        // The MAP draw passes hourly and misses monthly; predictive_01 passes both.
+        let monthly = |c: &mut EstimateChoice| {
+            c.candidates[0].limit_ratio = Some(0.56);
+            for (f, m) in c.candidates.iter_mut().zip([1.22, 1.1, 0.72]) {
+                f.monthly_limit_ratio = Some(m);
+            }
+        };
+        let mut both = choice("predictive_01");
+        monthly(&mut both);
+        let note = both.describe(None);
+        assert!(
+            note.contains("passes Guideline 14 hourly at the MAP draw (worst meter at 0.56")
+                && note.contains("misses its monthly criteria (worst meter at 1.22")
+                && note.contains("at posterior draw predictive_01 it passes both")
+                && note.contains("0.70 of the hourly and 0.72 of the monthly limits"),
+            "{note}"
+        );
+        let mut kept_map = choice("calibrated");
+        monthly(&mut kept_map);
+        assert!(kept_map
+            .describe(None)
+            .contains("no other of the 3 points it simulated passes both"));
+
+        // The MAP draw fails hourly; the chosen draw passes monthly as well: said.
+        let mut monthly_too = choice("predictive_01");
+        monthly_too.candidates[2].monthly_limit_ratio = Some(0.8);
+        let note = monthly_too.describe(None);
+        assert!(
+            note.contains(
+                "of 3 points simulated; it passes the monthly criteria too (worst \
+                           meter at 0.80 of their limits): it is the estimate"
+            ),
+            "{note}"
+        );
+
+        let mut failed = chains(1);
+        failed.predictive = vec![vec![5.0]];
+        failed.adopt_best_simulated(
+            failed.predictive_point(0),
+            choice("predictive_00"),
+            Some("Fatal: no"),
+        );
+        assert_eq!(failed.estimate, vec![5.0]);
+        assert!(failed
+            .estimate_note
+            .unwrap()
+            .contains("could not simulate the MAP draw: Fatal: no"));
+    }
+
+    #[test]
+    fn picks_spread_evenly() {
+        let all: Vec<usize> = (0..20).collect();
+        assert_eq!(evenly(&all, 4), vec![2, 7, 12, 17]);
+        assert_eq!(evenly(&all, 0), Vec::<usize>::new());
+        assert_eq!(evenly(&all[..10], 50).len(), 10);
+    }
 }

@@ -1,10 +1,5 @@
 //! Stage 5, the chains: the likelihood bound to the surrogate ([`Sampler`]), chain starts,
-//! segments and the rule that extends them; stage 6, the merged chains' summary, in
-//! [`summary`].
-
-mod summary;
-
-pub use summary::ChainSummary;
+//! segments and the rule that extends them. Their summary (stage 6) is `chain_summary`'s.
 
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
@@ -18,13 +13,15 @@ use serde::{Deserialize, Serialize};
 
 use crate::calibration::Calibration;
 use crate::error::Error;
+use crate::inputs::Inputs;
 use crate::metrics::OutputMetrics;
 use crate::posterior::{advance_chains, ChainTemperature, Drawn, Posterior, SigmaDeltaBox};
 use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
 pub struct Sampler<'c> {
-    cal: &'c Calibration,
+    /// The calibration the sampler is of.
+    pub(crate) cal: &'c Calibration,
     /// The surrogate bound to the calibration's weather ([`Surrogate::bind`]).
     pub evaluator: Evaluator,
     /// The Gaussian likelihood of each meter less its base over the calibration period, given
@@ -42,7 +39,7 @@ pub struct Sampler<'c> {
     pub held_out: serde_json::Value,
     /// The likelihood's temperature of the chains this sampler runs (1 until
     /// [`Sampler::set_temperature`]; [`crate::project::Temperature`]).
-    temperature: ChainTemperature,
+    pub(crate) temperature: ChainTemperature,
 }
 
 impl Calibration {
@@ -343,7 +340,7 @@ impl Sampler<'_> {
 
     /// Guideline 14 of the surrogate against the meters at `x` (physical calibrated values).
     pub fn surrogate_metrics(&mut self, x: &[f64]) -> Result<Vec<OutputMetrics>, Error> {
-        summary::surrogate_metrics_at(&self.cal.inputs, &mut self.evaluator, x)
+        surrogate_metrics_at(&self.cal.inputs, &mut self.evaluator, x)
     }
 
     /// Stage 5, one job: advances chains by `n` iterations; returns this segment's draws.
@@ -555,6 +552,22 @@ pub fn independence_dropped(states: &[Chain]) -> Vec<usize> {
     (0..states.len())
         .filter(|&c| states[c].independence_dropped())
         .collect()
+}
+
+/// Guideline 14 of the surrogate at `estimate` against the meters, per output.
+pub(crate) fn surrogate_metrics_at(
+    inp: &Inputs,
+    eval: &mut Evaluator,
+    estimate: &[f64],
+) -> Result<Vec<OutputMetrics>, Error> {
+    let n_h = inp.features.len();
+    let y = eval.evaluate(estimate)?;
+    let mut metrics = vec![];
+    for (k, name) in inp.outputs.iter().enumerate() {
+        let pred: Vec<f64> = (0..n_h).map(|h| f64::from(y[[h, k]])).collect();
+        metrics.push(inp.metrics(k, name, &pred)?);
+    }
+    Ok(metrics)
 }
 
 fn mean_sd(s: &[f64]) -> (f64, f64) {

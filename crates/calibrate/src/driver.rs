@@ -25,7 +25,8 @@ use bemcal_energyplus::HourlyOutputs;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{Calibration, Log};
-use crate::chains::{ChainSummary, Sampler};
+use crate::chain_summary::ChainSummary;
+use crate::chains::Sampler;
 use crate::design::{read_outcome, saved_outputs};
 use crate::error::Error;
 use crate::mapping::{self, MappingStep};

@@ -13,6 +13,7 @@
 
 pub mod bases;
 mod calibration;
+mod chain_summary;
 mod chains;
 pub mod crossval;
 pub mod design;
@@ -42,9 +43,9 @@ pub mod synth;
 mod validation;
 
 pub use calibration::{Calibration, FittedData, Log};
+pub use chain_summary::ChainSummary;
 pub use chains::{
-    chains_at, extended_target, independence_dropped, moved_chains, ChainSummary, MovedChain,
-    Sampler,
+    chains_at, extended_target, independence_dropped, moved_chains, MovedChain, Sampler,
 };
 pub use driver::log_design_outcome;
 pub use error::{write_atomic, Error};

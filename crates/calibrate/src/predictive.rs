@@ -23,7 +23,6 @@
 //! estimate), beside the same intervals as if hours were independent, which are too narrow
 //! where the residuals are autocorrelated; both are judged on whole measured days and months.
 
-use bemcal_stats::mcmc::Draws;
 use std::ops::Range;
 
 use bemcal_stats::predictive::{
@@ -33,47 +32,19 @@ use bemcal_stats::predictive::{
 };
 use serde::{Deserialize, Serialize};
 
-use bemcal_energyplus::{HourlyOutputs, Model};
+use bemcal_energyplus::HourlyOutputs;
 
 use crate::calibration::Calibration;
-use crate::chains::ChainSummary;
+use crate::chain_summary::ChainSummary;
 use crate::design::saved_outputs;
 use crate::error::{write_atomic, Error};
 use crate::keys::{candidate_key, predictive_label, FALLBACKS, FIRST_PREDICTIVE_KEY};
 use crate::output::timestamps;
-use crate::plan::Plan;
 use crate::project::ErrorModelSetting;
 use crate::validation::Candidate;
 
 /// The nominal levels of the intervals.
 pub const LEVELS: [f64; 2] = [0.5, 0.9];
-
-/// `k` draws evenly spaced through the merged chains (unit space; the middle of each of `k`
-/// equal stretches) among those EnergyPlus can be asked to simulate (every model constraint
-/// met, outside the region it refused), in physical units.
-pub fn pick(plan: &Plan, model: &Model, draws: &[Draws], k: usize) -> Vec<Vec<f64>> {
-    let feasible: Vec<Vec<f64>> = draws
-        .iter()
-        .flat_map(|d| (0..d.len()).map(move |i| d.point(i)))
-        .map(|u| {
-            plan.priors
-                .iter()
-                .zip(u)
-                .map(|(p, u)| p.from_unit(*u))
-                .collect::<Vec<f64>>()
-        })
-        .filter(|x| plan.feasible(model, x) && plan.refused(x).is_none())
-        .collect();
-    evenly(&feasible, k)
-}
-
-/// `k` items evenly spaced through `all`, the middle of each of `k` equal stretches.
-fn evenly<T: Clone>(all: &[T], k: usize) -> Vec<T> {
-    let k = k.min(all.len());
-    (0..k)
-        .map(|j| all[(2 * j + 1) * all.len() / (2 * k)].clone())
-        .collect()
-}
 
 impl ChainSummary {
     /// The posterior draws EnergyPlus simulates for the predictive intervals, with their keys
@@ -701,14 +672,6 @@ fn write_intervals_csv(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn picks_spread_evenly() {
-        let all: Vec<usize> = (0..20).collect();
-        assert_eq!(evenly(&all, 4), vec![2, 7, 12, 17]);
-        assert_eq!(evenly(&all, 0), Vec::<usize>::new());
-        assert_eq!(evenly(&all[..10], 50).len(), 10);
-    }
 
     #[test]
     fn the_favoured_error_model_is_nearest_nominal_and_auto_reports_its_own_miss() {

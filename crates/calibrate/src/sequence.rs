@@ -13,7 +13,8 @@
 //!      (the estimate; while EnergyPlus fails there, next_validation) -> summary
 //! ```
 
-use crate::chains::{extended_target, ChainSummary};
+use crate::chain_summary::ChainSummary;
+use crate::chains::extended_target;
 use crate::keys::{CALIBRATED_LABEL, INITIAL_KEY};
 use crate::posterior::Drawn;
 use crate::project::{McmcSettings, Project};
@@ -268,7 +269,7 @@ pub fn next_validation(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::validation::tests::chains;
+    use crate::chain_summary::tests::chains;
     use std::path::Path;
 
     fn project(extra: &str) -> Project {

@@ -1,21 +1,18 @@
 //! The last stage: `summary.json`, the calibrated model a user takes away, and the CSV files
 //! of draws, hourly outputs and predictive bands.
 
-use std::path::Path;
-
 use bemcal_stats::convergence::Convergence;
 use bemcal_stats::lhs::Design;
-use bemcal_stats::mcmc::{DrawStats, Draws};
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::Calibration;
-use crate::chains::{ChainSummary, MovedChain};
+use crate::chain_summary::ChainSummary;
+use crate::chains::MovedChain;
 use crate::design::read_outcome;
 use crate::error::{write_atomic, Error};
 use crate::metrics::OutputMetrics;
 use crate::output::timestamps;
-use crate::posterior::{Posterior, SigmaDeltaBox};
 use crate::project::Estimate;
 use crate::replacement::{Attempt, FailureGroup, Outcome};
 
@@ -463,91 +460,4 @@ fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
         s.push('\n');
     }
     write_atomic(&cal.out.bases_csv(), s.as_bytes())
-}
-
-pub(crate) fn write_draws_csv(
-    path: &Path,
-    post: &Posterior<'_>,
-    outputs: &[String],
-    draws: &[Draws],
-    sbox: &SigmaDeltaBox,
-    log_posterior: bool,
-) -> Result<(), Error> {
-    let d = post.plan.calibrated.len();
-    let mut s = format!("chain,draw,{}", post.plan.calibrated.join(","));
-    if post.sigma_box.is_some() {
-        for &k in &sbox.outputs {
-            s.push_str(&format!(",sigma_delta_{}", outputs[k]));
-        }
-    }
-    if log_posterior {
-        s.push_str(",log_posterior");
-    }
-    // The sampler's statistics per draw, named as CmdStan names them, when every chain has them.
-    let stats: Option<Vec<&[DrawStats]>> = match log_posterior {
-        true => draws.iter().map(Draws::stats).collect(),
-        false => None,
-    };
-    if stats.is_some() {
-        s.push_str(",accept_stat__,stepsize__,n_leapfrog__,divergent__");
-    }
-    s.push('\n');
-    for (c, dr) in draws.iter().enumerate() {
-        for i in 0..dr.len() {
-            let u = dr.point(i);
-            s.push_str(&format!("{c},{i}"));
-            for x in post.theta(u) {
-                s.push_str(&format!(",{x}"));
-            }
-            if post.sigma_box.is_some() {
-                for j in 0..sbox.len() {
-                    s.push_str(&format!(",{}", sbox.sigma(j, u[d + j])));
-                }
-            }
-            if log_posterior {
-                s.push_str(&format!(",{}", dr.log_density[i]));
-            }
-            if let Some(st) = stats.as_ref().map(|all| all[c][i]) {
-                let divergent = u8::from(st.divergent);
-                s.push_str(&format!(
-                    ",{},{},{},{divergent}",
-                    st.accept_stat, st.step_size, st.n_leapfrog
-                ));
-            }
-            s.push('\n');
-        }
-    }
-    write_atomic(path, s.as_bytes())
-}
-
-pub(crate) fn write_bands_csv(
-    path: &Path,
-    year: bemcal_weather::grid::GridYear,
-    outputs: &[String],
-    measured: &[Vec<f64>],
-    bands: &[bemcal_stats::summary::PredictiveBands],
-) -> Result<(), Error> {
-    let mut s = String::from("timestamp");
-    for o in outputs {
-        s.push_str(&format!(",{o}_measured,{o}_q5,{o}_q50,{o}_q95"));
-    }
-    s.push('\n');
-    let n = bands.first().map_or(0, |b| b.q50.len());
-    for (t, ts) in timestamps(year, n) {
-        s.push_str(&ts);
-        for (k, b) in bands.iter().enumerate() {
-            let m = measured[k][t];
-            let m = if m.is_finite() {
-                format!("{m:.4}")
-            } else {
-                String::new()
-            };
-            s.push_str(&format!(
-                ",{m},{:.4},{:.4},{:.4}",
-                b.q5[t], b.q50[t], b.q95[t]
-            ));
-        }
-        s.push('\n');
-    }
-    write_atomic(path, s.as_bytes())
 }

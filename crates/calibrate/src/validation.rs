@@ -8,7 +8,7 @@ use bemcal_stats::metrics::{g14, g14_monthly};
 use bemcal_weather::period::months_of_hours;
 
 use crate::calibration::Calibration;
-use crate::chains::ChainSummary;
+use crate::chain_summary::ChainSummary;
 use crate::design::{saved_outputs, simulate_point};
 use crate::error::Error;
 use crate::inputs::Inputs;
@@ -132,40 +132,9 @@ impl Inputs {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-    use crate::estimate::tests::choice;
-    use crate::estimate::EstimateChoice;
-    use crate::metrics::tests::metrics;
-
-    /// Merged chains with the estimate `[0.0]` and fallbacks `[1.0]`, `[2.0]`, ...
-    pub(crate) fn chains(fallbacks: usize) -> ChainSummary {
-        ChainSummary {
-            posterior: serde_json::from_value(serde_json::json!({
-                "parameters": [], "map_point": [], "map_log_density": 0.0,
-                "correlated_pairs": [], "max_rhat": 1.0, "min_ess_bulk": 100.0
-            }))
-            .unwrap_or_else(|e| panic!("{e}")),
-            sigma_delta_kwh: vec![],
-            residual_ar1: vec![],
-            estimate: vec![0.0],
-            surrogate_at_estimate: vec![],
-            fallbacks: (1..=fallbacks).map(|k| vec![k as f64]).collect(),
-            estimate_note: None,
-            estimate_choice: None,
-            surrogate_at_predictive: vec![],
-            moved_chains: vec![],
-            independence_dropped: vec![],
-            acceptance: vec![],
-            sigma_eta: vec![],
-            held_out: serde_json::Value::Null,
-            extensions: 0,
-            convergence: Default::default(),
-            surrogate_error: None,
-            temperature: crate::posterior::ChainTemperature::ONE,
-            predictive: vec![],
-        }
-    }
+    use crate::chain_summary::tests::chains;
 
     #[test]
     fn the_estimate_then_each_fallback_under_its_own_key_then_exhausted() {
@@ -200,101 +169,5 @@ pub(crate) mod tests {
             panic!("three failures with two fallbacks must end the validation");
         };
         assert!(m.contains("at the estimate and at the next 2 draws"), "{m}");
-    }
-
-    #[test]
-    fn a_fallback_that_ran_becomes_the_estimate_with_a_note() {
-        let mut c = chains(2);
-        c.settle_estimate(&[]);
-        assert_eq!(
-            (c.estimate.clone(), c.estimate_note.is_none()),
-            (vec![0.0], true)
-        );
-        c.settle_estimate(&["a".into(), "b".into()]);
-        assert_eq!(c.estimate, vec![2.0]);
-        assert!(c.estimate_note.unwrap().contains("2 failed: a | b"));
-    }
-
-    #[test]
-    fn a_predictive_draw_fitted_best_becomes_the_estimate_with_its_surrogate_metrics() {
-        let metrics = |nmbe: f64| vec![metrics("heating", nmbe, 10.0)];
-        let mut c = chains(1);
-        c.predictive = vec![vec![5.0], vec![6.0]];
-        c.surrogate_at_estimate = metrics(0.0);
-        c.surrogate_at_predictive = vec![metrics(5.0), metrics(6.0)];
-
-        let mut passing = choice("calibrated");
-        passing.candidates[0].limit_ratio = Some(0.5);
-        assert!(passing
-            .describe(None)
-            .contains("passes Guideline 14 hourly at the MAP draw (worst meter at 0.50"));
-        assert!(choice("calibrated")
-            .describe(None)
-            .contains("fails Guideline 14 hourly at the MAP draw (worst meter at 1.60"));
-
-        let mut kept = c.clone();
-        kept.adopt_best_simulated(None, choice("calibrated"), None);
-        assert_eq!(kept.estimate, vec![0.0]);
-        assert!(kept.estimate_note.is_none());
-        assert_eq!(kept.estimate_choice.unwrap().chosen, "calibrated");
-
-        c.adopt_best_simulated(c.predictive_point(1), choice("predictive_01"), None);
-        assert_eq!(c.estimate, vec![6.0]);
-        assert_eq!(c.surrogate_at_estimate[0].metrics.nmbe, 6.0);
-        let note = c.estimate_note.clone().unwrap();
-        assert!(
-            note.contains("predictive_01 fits the meters better than the MAP draw, which fails")
-                && note.contains("worst meter at 0.70 of the limits, the MAP draw's at 1.60")
-                && note.contains("of 3 points"),
-            "{note}"
-        );
-
-        // The MAP draw passes hourly and misses monthly; predictive_01 passes both.
-        let monthly = |c: &mut EstimateChoice| {
-            c.candidates[0].limit_ratio = Some(0.56);
-            for (f, m) in c.candidates.iter_mut().zip([1.22, 1.1, 0.72]) {
-                f.monthly_limit_ratio = Some(m);
-            }
-        };
-        let mut both = choice("predictive_01");
-        monthly(&mut both);
-        let note = both.describe(None);
-        assert!(
-            note.contains("passes Guideline 14 hourly at the MAP draw (worst meter at 0.56")
-                && note.contains("misses its monthly criteria (worst meter at 1.22")
-                && note.contains("at posterior draw predictive_01 it passes both")
-                && note.contains("0.70 of the hourly and 0.72 of the monthly limits"),
-            "{note}"
-        );
-        let mut kept_map = choice("calibrated");
-        monthly(&mut kept_map);
-        assert!(kept_map
-            .describe(None)
-            .contains("no other of the 3 points it simulated passes both"));
-
-        // The MAP draw fails hourly; the chosen draw passes monthly as well: said.
-        let mut monthly_too = choice("predictive_01");
-        monthly_too.candidates[2].monthly_limit_ratio = Some(0.8);
-        let note = monthly_too.describe(None);
-        assert!(
-            note.contains(
-                "of 3 points simulated; it passes the monthly criteria too (worst \
-                           meter at 0.80 of their limits): it is the estimate"
-            ),
-            "{note}"
-        );
-
-        let mut failed = chains(1);
-        failed.predictive = vec![vec![5.0]];
-        failed.adopt_best_simulated(
-            failed.predictive_point(0),
-            choice("predictive_00"),
-            Some("Fatal: no"),
-        );
-        assert_eq!(failed.estimate, vec![5.0]);
-        assert!(failed
-            .estimate_note
-            .unwrap()
-            .contains("could not simulate the MAP draw: Fatal: no"));
     }
 }
