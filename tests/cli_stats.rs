@@ -139,3 +139,28 @@ fn diagnose_bad_input_is_an_error() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("e.csv: line 3, column 'draw'"));
 }
+
+/// A bug (a panic) gives a short message that names the file with the details and says how to
+/// report it, not Rust's raw panic text; the exit status is 101.
+#[test]
+fn a_panic_prints_a_short_message_and_keeps_the_details() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_bemcal"))
+        .arg("--version")
+        .env("BEMCAL_PANIC_TEST", "1")
+        .env("XDG_STATE_HOME", dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(101));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("internal error") && err.contains("please report"), "{err}");
+    assert!(err.len() < 600 && !err.contains("RUST_BACKTRACE"), "{err}");
+    let logs: Vec<_> = std::fs::read_dir(dir.path().join("bemcal"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert_eq!(logs.len(), 1);
+    let details = std::fs::read_to_string(logs[0].path()).unwrap();
+    assert!(err.contains(&logs[0].path().display().to_string()), "{err}");
+    assert!(details.contains("backtrace") && details.contains("--version"), "{details}");
+}
