@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use bemcal_report::truth::{percent, Recovery};
+use bemcal_report::recovery::{percent, Recovery};
 
 /// Arguments of `bemcal report`.
 #[derive(Debug, clap::Args)]

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::ReportError;
+use crate::error::ReportError;
 
 /// A parameter's triangular prior (`summary.json` `parameters[]`).
 #[derive(Debug, Clone, Deserialize)]
@@ -746,8 +746,8 @@ pub struct CalibrationData {
     /// written.
     pub intervals: Option<Hourly>,
     /// A synthetic run's hidden truth against the posterior ([`read_truth`],
-    /// [`crate::truth::recovery`]), if given.
-    pub truth: Option<crate::truth::Recovery>,
+    /// `truth::recovery`), if given.
+    pub truth: Option<crate::recovery::Recovery>,
 }
 
 /// One row of `calendar.csv`.

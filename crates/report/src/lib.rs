@@ -13,51 +13,23 @@
 //! hidden truth (`bemcal synthesize --truth FILE`) it adds the truth beside the posterior, each
 //! miss explained ([`truth`]).
 //!
-//! Layout: [`io`] does all file reading and writing; [`analysis`], [`informed`], [`truth`],
+//! Layout: [`io`] does all file reading and writing; [`analysis`], [`informed`], [`recovery`], [`truth`],
 //! [`plots`] (data in, SVG out) and [`html`] are pure.
 #![deny(missing_docs)]
 
 pub mod analysis;
+mod error;
 pub mod html;
 pub mod informed;
 pub mod io;
 pub mod plots;
 pub mod portfolio;
+pub mod recovery;
 pub mod truth;
 
-use std::path::{Path, PathBuf};
+pub use error::{PlotError, ReportError};
 
-/// Why a report could not be written. Each variant names the file.
-#[derive(Debug, thiserror::Error)]
-pub enum ReportError {
-    /// A required file or folder does not exist.
-    #[error("{}: missing ({what})", path.display())]
-    Missing {
-        /// The path looked for.
-        path: PathBuf,
-        /// What it should contain.
-        what: String,
-    },
-    /// A file could not be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The error.
-        source: std::io::Error,
-    },
-    /// A file is not in the expected format.
-    #[error("{}: {}", path.display(), bemcal_excerpt::shorten(.msg))]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        msg: String,
-    },
-    /// A figure could not be drawn.
-    #[error(transparent)]
-    Plot(#[from] plots::PlotError),
-}
+use std::path::{Path, PathBuf};
 
 /// Builds the report HTML for already-loaded data (pure).
 pub fn render(
@@ -82,7 +54,7 @@ pub struct Written {
     /// `report.html`.
     pub path: PathBuf,
     /// The truth beside the posterior, when a truth file was given.
-    pub recovery: Option<truth::Recovery>,
+    pub recovery: Option<recovery::Recovery>,
 }
 
 /// [`write_report`], and with `truth_file` (a synthetic run's hidden true values) the truth

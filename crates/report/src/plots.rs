@@ -7,12 +7,8 @@ use plotters::prelude::*;
 use plotters::series::DashedLineSeries;
 
 use crate::analysis::{self, Window};
+use crate::error::PlotError;
 use crate::io::{ScheduleHour, ScheduleInterval};
-
-/// A figure could not be drawn.
-#[derive(Debug, thiserror::Error)]
-#[error("drawing a figure: {0}")]
-pub struct PlotError(pub String);
 
 type DynErr = Box<dyn std::error::Error>;
 type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;

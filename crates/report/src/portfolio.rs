@@ -6,9 +6,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::error::ReportError;
 use crate::html::esc;
 use crate::io::write_atomic;
-use crate::ReportError;
 
 /// G14 metrics of one output at the calibrated parameters.
 #[derive(Debug, Clone, Serialize)]

@@ -6,9 +6,9 @@ use std::fmt::Write as _;
 
 use super::{esc, f, figure, g, legend, G14_CV_RMSE_LIMIT, G14_NMBE_LIMIT};
 use crate::analysis;
+use crate::error::ReportError;
 use crate::io::{CalibrationData, Hourly, OutputMetrics};
 use crate::plots::{self, HourlyView};
-use crate::ReportError;
 
 pub(super) fn g14_pass(m: &OutputMetrics) -> bool {
     m.nmbe.abs() <= G14_NMBE_LIMIT && m.cv_rmse <= G14_CV_RMSE_LIMIT

@@ -6,8 +6,8 @@
 
 use std::fmt::Write as _;
 
+use crate::error::ReportError;
 use crate::io::{CalibrationData, PrecalData, Summary};
-use crate::ReportError;
 
 mod first_screen;
 mod fit;

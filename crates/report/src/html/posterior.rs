@@ -5,11 +5,11 @@ use std::fmt::Write as _;
 
 use super::{duration, esc, f, figure, g, legend, ESS_LIMIT, RHAT_LIMIT};
 use crate::analysis;
+use crate::error::ReportError;
 use crate::informed::uninformed;
 use crate::io::CalibrationData;
 use crate::plots::{self, PriorPosterior};
-use crate::truth;
-use crate::ReportError;
+use crate::recovery;
 
 /// The estimated parameters (the reference's Table 4): prior, posterior and estimate per
 /// parameter (with the surrogate error carried in, where measured), and the correlated pairs.
@@ -218,7 +218,7 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
                     "<td{}>no, {}</td>",
                     if m.explained() { "" } else { " class=\"fail\"" },
                     if m.outside_by.is_finite() {
-                        format!("by {}", truth::percent(m.outside_by))
+                        format!("by {}", recovery::percent(m.outside_by))
                     } else {
                         "the interval has no width".into()
                     }
@@ -240,7 +240,8 @@ pub(super) fn truth_table(cal: &CalibrationData) -> String {
             row.estimate.map_or("&ndash;".into(), g),
             g(row.q5),
             g(row.q95),
-            row.prior_quantile.map_or("&ndash;".into(), truth::percent),
+            row.prior_quantile
+                .map_or("&ndash;".into(), recovery::percent),
             f(row.width_ratio, 2),
         );
     }

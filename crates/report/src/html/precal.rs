@@ -4,9 +4,9 @@ use std::fmt::Write as _;
 
 use super::{esc, figure, legend};
 use crate::analysis;
+use crate::error::ReportError;
 use crate::io::{PrecalData, ScheduleHour};
 use crate::plots;
-use crate::ReportError;
 
 pub(super) fn precal_section(h: &mut String, p: &PrecalData) -> Result<(), ReportError> {
     let _ = write!(
