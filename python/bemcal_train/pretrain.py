@@ -327,7 +327,8 @@ def from_scratch(corpus, train, test, args, log):
     """Today's per-building surrogate on the same points: the bemcal_train architecture and
     settings of the demo (2 x 64, Adam 1e-3, early stopping on a fifth of the points, at most
     200 epochs, patience 15), its inputs the building's parameters normalised by their ranges,
-    the weather and hour of day; trained from a random start."""
+    the weather and hour of day; trained from a random start. Each epoch draws ``fit_hours``
+    hours of every point (the fine-tuning's budget too; bemcal_train takes all 8,760)."""
     rows = corpus.rows
     names = sorted(rows[0]["values"])
     lo = np.array([rows[0]["ranges"][n][0] for n in names])
@@ -355,7 +356,7 @@ def from_scratch(corpus, train, test, args, log):
     torch.manual_seed(args.seed)
     model = Surrogate(p.shape[1] + w.shape[1], corpus.y.shape[2], args.scratch_hidden, args.layers)
     k = max(1, len(train) // 5)
-    fit(model, win, train[:-k], 200, None, 1e-3, args.seed, None, held=train[-k:], patience=15)
+    fit(model, win, train[:-k], 200, args.fit_hours, 1e-3, args.seed, None, held=train[-k:], patience=15)
     pred = predict(model, win, test).numpy()
     return cv_rmse(pred, win.y[test].numpy(), corpus.outputs)
 
@@ -363,16 +364,18 @@ def from_scratch(corpus, train, test, args, log):
 def finetune(model, corpus, norm, train, args):
     """The pretrained network fine-tuned on a building's own points: every weight, Adam at a
     tenth of the pretraining rate, early stopping on a fifth of the points where there are 10
-    or more (else a fixed number of epochs)."""
+    or more (patience 8; else a quarter of the epochs, fixed), ``fit_hours`` hours of every point
+    an epoch."""
     import copy
 
     m = copy.deepcopy(model)
     win = Windows(corpus, norm, "cpu")
     if len(train) >= 10:
         k = len(train) // 5
-        fit(m, win, train[:-k], args.finetune_epochs, None, args.lr / 10, args.seed, held=train[-k:], patience=5)
+        fit(m, win, train[:-k], args.finetune_epochs, args.fit_hours, args.lr / 10, args.seed,
+            held=train[-k:], patience=8)
     else:
-        fit(m, win, train, max(args.finetune_epochs // 4, 3), None, args.lr / 10, args.seed)
+        fit(m, win, train, max(args.finetune_epochs // 4, 3), args.fit_hours, args.lr / 10, args.seed)
     return m, win
 
 
@@ -381,12 +384,20 @@ def curve(args):
     a building's own points, and today's from-scratch surrogate on the same 20; tested on the
     building's last ``test`` points."""
     sizes = [int(s) for s in args.sizes.split(",")]
-    results = {"sizes": {}, "buildings": {}, "settings": vars(args)}
+    results = {"sizes": {}, "buildings": {}, "scratch": {}, "settings": vars(args)}
+    saved = os.path.join(args.out, "curve.json") if args.out else None
+    if saved and os.path.exists(saved):
+        with open(saved) as f:
+            results = json.load(f)  # sizes already measured stay; the scratch results are reused
+        results["settings"] = vars(args)
     available = len(read_index(args.corpus))
     test_n = args.test
     log = (lambda m: print(m, flush=True)) if args.verbose else (lambda m: None)
-    scratch = {}
+    scratch = {int(b): r for b, r in results.get("scratch", {}).items()}
     for n in sizes:
+        if str(n) in results["sizes"] or n in results["sizes"]:
+            print(f"corpus size {n}: measured before ({saved}); kept", flush=True)
+            continue
         if n > available:
             print(f"corpus size {n}: only {available} cases finished; skipped", flush=True)
             continue
@@ -399,7 +410,7 @@ def curve(args):
             win = Windows(hc, norm, "cpu")
             r = {"zero_shot": evaluate(model, win, hc, test)}
             for k in (5, 10, 20):
-                if k <= pts - test_n:
+                if k <= pts - test_n and k <= args.max_own:
                     t0 = time.time()
                     m, w = finetune(model, hc, norm, list(range(k)), args)
                     r[f"finetuned_{k}"] = evaluate(m, w, hc, test)
@@ -409,16 +420,18 @@ def curve(args):
                 scratch[b] = from_scratch(hc, list(range(20)), test, args, log)
                 scratch[b]["seconds"] = time.time() - t0
             r["scratch_20"] = scratch.get(b)
+            results["scratch"][str(b)] = scratch.get(b)
             spec = hc.rows[0]["spec"]
-            results["buildings"][b] = {"climate": hc.climate[0], "storeys": spec["storeys"],
+            results["buildings"][str(b)] = {"climate": hc.climate[0], "storeys": spec["storeys"],
                                        "footprint_m": spec["footprint_m"], "zoning": spec["zoning"],
                                        "hvac": spec.get("hvac", "vav_reheat"),
                                        "heating_source": spec["heating_source"]}
-            rows[b] = r
+            rows[str(b)] = r
             print(f"  building {b} ({hc.climate[0]}): " + "; ".join(
                 f"{how} " + "/".join(f"{v[m]['cv_rmse_pct']:.0f}" for m in CALIBRATED_METERS)
                 for how, v in r.items() if v), flush=True)
-        results["sizes"][n] = {"pretrain_seconds": secs, "buildings": rows, "card": card(corpus, norm, args, secs)}
+        results["sizes"][str(n)] = {"pretrain_seconds": secs, "buildings": rows,
+                                    "card": card(corpus, norm, args, secs)}
         if args.out:
             os.makedirs(args.out, exist_ok=True)
             torch.save(model.state_dict(), os.path.join(args.out, f"pretrained_{n}.pt"))
@@ -455,7 +468,7 @@ def parser():
         p = sub.add_parser(name)
         p.add_argument("--corpus", required=True)
         p.add_argument("--out", default=None)
-        p.add_argument("--epochs", type=int, default=30)
+        p.add_argument("--epochs", type=int, default=15)
         p.add_argument("--hours-per-case", type=int, default=1000)
         p.add_argument("--hidden", type=int, default=64)
         p.add_argument("--scratch-hidden", type=int, default=64)
@@ -469,6 +482,10 @@ def parser():
             p.add_argument("--heldout", required=True)
             p.add_argument("--sizes", default="100,200,400,800")
             p.add_argument("--test", type=int, default=5)
+            p.add_argument("--fit-hours", type=int, default=2000,
+                           help="hours of every point an epoch when fine-tuning and training from scratch")
+            p.add_argument("--max-own", type=int, default=20,
+                           help="the most own simulations fine-tuned on (5, 10, 20 up to it)")
         else:
             p.add_argument("--cases", type=int, required=True)
     return ap
