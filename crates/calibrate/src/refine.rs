@@ -226,7 +226,7 @@ pub fn next_starts(
                 .fold(f64::NEG_INFINITY, f64::max)
         })
         .collect();
-    let Some((best, below)) = bemcal_stats::mcmc::far_below_best(&best_lp, gap) else {
+    let Some((best, below)) = bemcal_stats::optim::far_below_best(&best_lp, gap) else {
         return (last.to_vec(), vec![]);
     };
     let restarted: Vec<(usize, f64)> = below.into_iter().filter(|&(c, _)| c < last.len()).collect();

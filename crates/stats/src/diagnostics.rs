@@ -22,8 +22,8 @@
 use rustfft::{num_complex::Complex, FftPlanner};
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::normal::norm_ppf;
-use crate::{Result, StatsError};
 
 /// Diagnostics and summary statistics of one parameter over all chains.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

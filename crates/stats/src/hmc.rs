@@ -40,8 +40,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::mcmc::{cholesky, f64_bits, DrawStats, Draws};
-use crate::{Result, StatsError};
 
 /// Energy error (nats) past which a trajectory counts as divergent and is rejected.
 pub const DIVERGENCE: f64 = 1000.0;

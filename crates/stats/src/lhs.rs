@@ -22,8 +22,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::prior::Triangular;
-use crate::{Result, StatsError};
 
 /// The pairwise constraint `x[i] - x[j] <= c` on a design point (parameter indices).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

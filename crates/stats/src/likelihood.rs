@@ -22,7 +22,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Result, StatsError};
+use crate::error::{Result, StatsError};
 
 /// Noise standard deviations of one output, in that output's units.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

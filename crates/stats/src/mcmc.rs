@@ -53,8 +53,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{ChiSquared, StandardNormal};
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::prior::Triangular;
-use crate::{Result, StatsError};
 
 /// Burn-in independence proposals needed before the kernel may be switched off
 /// ([`ChainState::independence_dropped`]).
@@ -891,24 +891,6 @@ pub fn run_segment_batch<F: FnMut(&[Vec<f64>]) -> Vec<f64>>(
         step_batch(states, &mut target, &mut draws)?;
     }
     Ok(draws)
-}
-
-/// Stuck-chain detection: the index of the largest of `values` (log posteriors, one per chain)
-/// and every entry more than `gap` nats below it, with how far below. `None` when `values` is
-/// empty; nothing is below an infinite gap or a best of `-inf`.
-pub fn far_below_best(values: &[f64], gap: f64) -> Option<(usize, Vec<(usize, f64)>)> {
-    let (best, top) = values
-        .iter()
-        .copied()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    let below = values
-        .iter()
-        .enumerate()
-        .map(|(i, v)| (i, top - v))
-        .filter(|&(_, d)| d > gap)
-        .collect();
-    Some((best, below))
 }
 
 /// Chains started at optima ([`crate::optim::maximise_batch`]), each with its Laplace

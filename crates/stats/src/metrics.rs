@@ -11,7 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Result, StatsError};
+use crate::error::{Result, StatsError};
 
 /// Number of adjustable model parameters `p` in the Guideline 14 denominators.
 pub const P: usize = 1;

@@ -31,8 +31,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::metrics::{g14, HOURLY_CV_RMSE_LIMIT, HOURLY_NMBE_LIMIT};
-use crate::{Result, StatsError};
 
 /// Share of a prior's range next to a bound within which a posterior median counts as piled
 /// against that bound ([`piled_at_bound`]).

@@ -250,6 +250,24 @@ fn newton_step(
     }
 }
 
+/// Stuck-chain detection: the index of the largest of `values` (log posteriors, one per chain)
+/// and every entry more than `gap` nats below it, with how far below. `None` when `values` is
+/// empty; nothing is below an infinite gap or a best of `-inf`.
+pub fn far_below_best(values: &[f64], gap: f64) -> Option<(usize, Vec<(usize, f64)>)> {
+    let (best, top) = values
+        .iter()
+        .copied()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    let below = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (i, top - v))
+        .filter(|&(_, d)| d > gap)
+        .collect();
+    Some((best, below))
+}
+
 /// Mode pruning for chains started at optima: every optimum more than `gap` nats below the
 /// best one is replaced by the best one (point, log density and Laplace covariance). For modes
 /// of similar curvature, a mode `gap` nats lower holds about e^-gap of the best one's mass, so
@@ -258,7 +276,7 @@ fn newton_step(
 /// replaced optimum with its gap. `f64::INFINITY` keeps every optimum.
 pub fn keep_best_modes(optima: &mut [Optimum], gap: f64) -> Vec<(usize, f64)> {
     let lps: Vec<f64> = optima.iter().map(|o| o.log_density).collect();
-    let Some((best, moved)) = crate::mcmc::far_below_best(&lps, gap) else {
+    let Some((best, moved)) = far_below_best(&lps, gap) else {
         return vec![];
     };
     let b = optima[best].clone();

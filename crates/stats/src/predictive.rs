@@ -47,8 +47,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::error::{Result, StatsError};
 use crate::normal::norm_cdf;
-use crate::{Result, StatsError};
 
 /// How the noise scale of the predictive distribution is estimated from in-sample residuals.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

@@ -6,7 +6,7 @@
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::{Result, StatsError};
+use crate::error::{Result, StatsError};
 
 /// A triangular distribution on `[min, max]` with its peak at `mode`.
 ///

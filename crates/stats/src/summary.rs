@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::diagnostics::{self, quantile_sorted};
+use crate::error::{Result, StatsError};
 use crate::mcmc::Draws;
 use crate::prior::Prior;
-use crate::{Result, StatsError};
 
 /// Threshold of `|rho|` above which a pair of parameters is flagged as strongly correlated.
 pub const STRONG_CORRELATION: f64 = 0.8;
@@ -224,7 +224,7 @@ pub fn predictive_bands(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Triangular;
+    use crate::prior::Triangular;
 
     #[test]
     fn summary_of_known_draws() {

@@ -37,9 +37,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::diagnostics::var;
+use crate::error::{Result, StatsError};
 use crate::mcmc::Draws;
 use crate::normal::{norm_cdf, norm_ppf};
-use crate::{Result, StatsError};
 
 /// The shifts `delta_i = recovered_i - true_i` (same space, one vector per point).
 ///
