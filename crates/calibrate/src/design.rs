@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
+use crate::output::read_record;
 use crate::plan::Plan;
 use crate::replacement::{self, Attempt, Outcome, Policy, Step};
 use bemcal_energyplus::errfile::failure_reason;
@@ -251,10 +252,7 @@ pub(crate) fn simulate_wave(
 
 /// The failed attempts of earlier runs of simulations folder `dir` (`failures.json`).
 pub(crate) fn read_failures(dir: &Path) -> Vec<Attempt> {
-    std::fs::read_to_string(dir.join(FAILURES_FILE))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or_default()
+    (read_record(&dir.join(FAILURES_FILE)).ok().flatten()).unwrap_or_default()
 }
 
 /// The failed attempt at this slot and point in an earlier run of the folder, if any.
@@ -288,8 +286,7 @@ pub(crate) fn save_failures(
 /// The settled design of simulations folder `dir` (written by [`simulate_design`] or a
 /// coordinator when the design was done), if any.
 pub fn read_outcome(dir: &Path) -> Option<Outcome> {
-    let text = std::fs::read_to_string(dir.join(OUTCOME_FILE)).ok()?;
-    serde_json::from_str(&text).ok()
+    read_record(&dir.join(OUTCOME_FILE)).ok().flatten()
 }
 
 /// Writes the settled design of simulations folder `dir` (`design.json`).
@@ -380,8 +377,9 @@ pub fn simulate_point(
 
 /// Checks a simulated point's file (`simulations/point_NNN.json`) as a worker uploads it,
 /// before a coordinator records or shares it: it parses, has one series per named output,
-/// every series as long as the first and at least a day, every value finite. Whether it
-/// answers the job's parameter values is checked when the driver reads it back.
+/// every series a year of hours (the 8,760 slots EnergyPlus simulates), every value finite and
+/// plausible (an hour's kWh of a meter, non-negative and below 1e9). Whether it answers the
+/// job's parameter values is checked when the driver reads it back.
 pub fn check_point_file(bytes: &[u8]) -> Result<(), String> {
     let run: SavedRun =
         serde_json::from_slice(bytes).map_err(|e| format!("not a simulated point's file: {e}"))?;
@@ -393,9 +391,9 @@ pub fn check_point_file(bytes: &[u8]) -> Result<(), String> {
             o.series.len()
         ));
     }
-    let hours = o.hours();
-    if hours < 24 {
-        return Err(format!("{hours} hours simulated"));
+    let hours = bemcal_weather::HOURS_PER_YEAR;
+    if o.hours() != hours {
+        return Err(format!("{} hours simulated, not {hours}", o.hours()));
     }
     for (name, s) in o.names.iter().zip(&o.series) {
         if s.len() != hours {
@@ -403,6 +401,12 @@ pub fn check_point_file(bytes: &[u8]) -> Result<(), String> {
         }
         if let Some(t) = s.iter().position(|v| !v.is_finite()) {
             return Err(format!("output {name:?}: hour {t} is not a finite number"));
+        }
+        if let Some(t) = s.iter().position(|v| !(-1e-6..1e9).contains(v)) {
+            return Err(format!(
+                "output {name:?}: hour {t} holds {} kWh, outside [0, 1e9)",
+                s[t]
+            ));
         }
     }
     if let Some(v) = run.values.values().find(|v| !v.is_finite()) {

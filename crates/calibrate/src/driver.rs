@@ -31,6 +31,7 @@ use crate::design::{read_outcome, saved_outputs};
 use crate::error::Error;
 use crate::mapping::{self, MappingStep};
 use crate::metrics::OutputMetrics;
+use crate::output::read_record;
 use crate::posterior::ChainTemperature;
 use crate::posterior::Checkpoint;
 use crate::project::Estimate;
@@ -444,9 +445,10 @@ impl FinalChains {
         let (mcmc, estimate) = (&cal.project.mcmc, cal.project.validation.estimate);
         let settings = format!("{mcmc:?} after {rounds} refinement rounds, estimate {estimate:?}");
         let legacy = format!("{mcmc:?} after {rounds} refinement rounds at temperature ");
-        std::fs::read(cal.out.chains_summary())
+        let saved = read_record::<FinalChains>(&cal.out.chains_summary())
             .ok()
-            .and_then(|b| serde_json::from_slice::<FinalChains>(&b).ok())
+            .flatten();
+        saved
             .filter(|f| f.holds_for(&settings, &legacy, temperature))
             .unwrap_or(FinalChains {
                 settings,

@@ -15,6 +15,7 @@ use crate::chains::chains_at;
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
 use crate::error::Error;
+use crate::output::read_record;
 use crate::posterior::{run_chains, Checkpoint};
 use crate::project::Project;
 use crate::replacement::Attempt;
@@ -103,11 +104,11 @@ fn summary_not_fitted(cal: &Calibration) -> Vec<String> {
         #[serde(default)]
         not_fitted: Vec<String>,
     }
-    std::fs::read_to_string(cal.out.summary_json())
+    (read_record::<NotFitted>(&cal.out.summary_json())
         .ok()
-        .and_then(|t| serde_json::from_str::<NotFitted>(&t).ok())
-        .map(|n| n.not_fitted)
-        .unwrap_or_default()
+        .flatten())
+    .map(|n| n.not_fitted)
+    .unwrap_or_default()
 }
 
 /// The executor of `bemcal calibrate` without workers: all work in this process, at once.

@@ -29,6 +29,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::keys::{mapped_label, FIRST_MAPPED_KEY};
+use crate::output::read_record;
 
 /// How far along the line from the anchor to the corrected surrogate's mode a step's points
 /// lie, the first time an anchor is used. An anchor is used again only once every point
@@ -170,10 +171,7 @@ impl MappingStep {
 
 /// The steps recorded in `dir` (`validation/`), none where there is no record.
 pub fn read(dir: &Path) -> Vec<MappingStep> {
-    std::fs::read_to_string(dir.join(RECORD))
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok())
-        .unwrap_or_default()
+    (read_record(&dir.join(RECORD)).ok().flatten()).unwrap_or_default()
 }
 
 /// Records `steps` in `dir` (`validation/`).

@@ -6,6 +6,8 @@
 use bemcal_weather::grid::GridYear;
 use std::path::{Path, PathBuf};
 
+use serde::de::DeserializeOwned;
+
 use crate::error::{write_atomic, Error};
 
 /// A chain-segment job's chain states at its end (and the next segment's input).
@@ -19,6 +21,21 @@ pub const WARM_FILE: &str = "warm.json";
 /// folder; its EnergyPlus run directory is the same name without `.json`.
 pub fn point_file(i: usize) -> String {
     format!("point_{i:03}.json")
+}
+
+/// Reads a record that a finished stage left in the output folder as JSON: the settled design
+/// (`simulations/design.json`) and its failed attempts (`simulations/failures.json`), the
+/// refinement rounds (`refine.json`), the final chains' record (`chains_summary.json`), the
+/// chains' checkpoints, the steps of output space mapping (`validation/mapping.json`) and
+/// `summary.json`. `Ok(None)` where the file cannot be read (not written yet); the parse error
+/// where it does not parse, which each caller turns into what an unreadable record means for
+/// it. The one reader of what a run already settled, so that a rerun or the coordinator's next
+/// call goes on from it.
+pub fn read_record<T: DeserializeOwned>(path: &Path) -> Result<Option<T>, serde_json::Error> {
+    match std::fs::read(path) {
+        Ok(bytes) => serde_json::from_slice(&bytes).map(Some),
+        Err(_) => Ok(None),
+    }
 }
 
 /// The output folder of one calibration. It dereferences to its root path.

@@ -15,6 +15,7 @@ use bemcal_surrogate::Evaluator;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
+use crate::output::read_record;
 use crate::plan::Plan;
 use bemcal_energyplus::Model;
 
@@ -365,12 +366,13 @@ pub fn run_chains(
     path: &Path,
     progress: &dyn Fn(u64, u64),
 ) -> Result<Checkpoint, Error> {
-    let mut ck = match std::fs::read(path) {
-        Ok(bytes) => serde_json::from_slice::<Checkpoint>(&bytes).map_err(|e| Error::Stage {
-            stage: "chains",
-            message: format!("checkpoint {} is unreadable: {e}", path.display()),
-        })?,
-        Err(_) => {
+    let saved = read_record::<Checkpoint>(path).map_err(|e| Error::Stage {
+        stage: "chains",
+        message: format!("checkpoint {} is unreadable: {e}", path.display()),
+    })?;
+    let mut ck = match saved {
+        Some(ck) => ck,
+        None => {
             let states = initial(post, eval)?;
             Checkpoint {
                 draws: states.iter().map(|s| Draws::new(s.dim())).collect(),

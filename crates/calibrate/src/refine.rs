@@ -23,6 +23,7 @@ use crate::chains::Sampler;
 use crate::error::{write_atomic, Error};
 use crate::keys::first_refinement_key;
 use crate::metrics::OutputMetrics;
+use crate::output::read_record;
 
 /// File of the refinement log in the output folder.
 pub const REFINE_FILE: &str = "refine.json";
@@ -254,13 +255,13 @@ impl Calibration {
     /// The finished refinement rounds (`refine.json`; none when it does not exist).
     pub fn refine_log(&self) -> Result<RefineLog, Error> {
         let path = self.out.join(REFINE_FILE);
-        match std::fs::read(&path) {
-            Ok(bytes) => serde_json::from_slice(&bytes).map_err(|e| Error::Input {
+        match read_record(&path) {
+            Ok(log) => Ok(log.unwrap_or_default()),
+            Err(e) => Err(Error::Input {
                 path,
                 line: 0,
                 message: format!("unreadable refinement log: {e}"),
             }),
-            Err(_) => Ok(RefineLog::default()),
         }
     }
 
