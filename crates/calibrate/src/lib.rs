@@ -9,39 +9,64 @@
 //! [`driver::Executor`] does the work: [`calibrate`] in this process, the coordinator as jobs
 //! leased to workers. Each stage's results are written under the output folder and reused by
 //! a rerun, so an interrupted calibration resumes.
+//!
+//! The modules stand in three layers. A module imports only from the layers below its own and
+//! from the modules listed before it in its layer, by module path (this file's re-exports are
+//! the crate's API for the CLI, the coordinator and the worker, not for the modules):
+//!
+//! 1. Settings, records and rules, no stage's work: `error` ([`Error`]), [`keys`] (every
+//!    EnergyPlus run's key), [`output`] (the folder's layout and the one reader of what a run
+//!    settled, [`output::read_record`]), [`project`], [`submitted`], [`plan`], [`metrics`]
+//!    (Guideline 14 and [`best_simulated`]), [`mapping`], [`estimate`], [`replacement`],
+//!    [`bases`].
+//! 2. The stages' work, in the order the data flows: `inputs`, [`design`], `calibration`,
+//!    [`posterior`], `chains`, [`refine`], [`surrogate_error`], `chain_summary`, `validation`,
+//!    [`predictive`], [`model_form`], `summary`.
+//! 3. The driver: [`sequence`] (its rules), [`driver`], `local` (the in-process executor),
+//!    [`crossval`].
+//!
+//! [`examples`] and [`synth`] stand apart.
+
 #![deny(missing_docs)]
 
+// 1. Settings, records and rules.
 pub mod bases;
+mod error;
+pub mod estimate;
+pub mod keys;
+pub mod mapping;
+pub mod metrics;
+pub mod output;
+pub mod plan;
+pub mod project;
+pub mod replacement;
+pub mod submitted;
+
+// 2. The stages' work.
 mod calibration;
 mod chain_summary;
 mod chains;
-pub mod crossval;
 pub mod design;
-pub mod driver;
-mod error;
-pub mod estimate;
-pub mod examples;
 mod inputs;
-pub mod keys;
-mod local;
-pub mod mapping;
-pub mod metrics;
 pub mod model_form;
-pub use bemcal_named as named;
-pub mod output;
-pub mod plan;
 pub mod posterior;
 pub mod predictive;
-pub mod project;
 pub mod refine;
-pub mod replacement;
-pub mod sequence;
-pub mod submitted;
 mod summary;
 pub mod surrogate_error;
-pub mod synth;
 mod validation;
 
+// 3. The driver.
+pub mod crossval;
+pub mod driver;
+mod local;
+pub mod sequence;
+
+// Apart: the bundled examples and synthetic meters.
+pub mod examples;
+pub mod synth;
+
+pub use bemcal_named as named;
 pub use calibration::{Calibration, FittedData, Log};
 pub use chain_summary::ChainSummary;
 pub use chains::{
