@@ -12,8 +12,7 @@ use crate::design::{
     make_design, read_outcome, simulate_point, write_design_csv, write_outcome, OUTCOME_FILE,
 };
 use crate::error::Error;
-use crate::inputs::load_inputs;
-use crate::inputs::Inputs;
+use crate::inputs::{load_inputs, Inputs};
 use crate::output::OutputDir;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};

@@ -9,8 +9,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::calibration::FittedData;
-use crate::calibration::{Calibration, Log};
+use crate::calibration::{Calibration, FittedData, Log};
 use crate::chains::chains_at;
 use crate::design::{read_failures, save_failures, simulate_wave, FAILURES_FILE};
 use crate::driver::{drive, Executor, LazySampler, PointResult, Ready, ValidationResult};
