@@ -1,12 +1,14 @@
 //! `bemcal reference`: the reference pages generated from the code, so that they cannot drift
-//! from it: the CLI's (from clap's definitions). A test keeps the committed pages current.
+//! from it: the CLI's (from clap's definitions) and the files' JSON Schemas (from the types that
+//! read them). A test keeps the committed pages current.
 
 use std::path::PathBuf;
 
 use clap::CommandFactory;
 
-/// Write the reference pages generated from the code (docs/reference/cli.md: every command and
-/// flag, from the same definitions as `--help`).
+/// Write the reference pages generated from the code: docs/reference/cli.md (every command and
+/// flag, from the same definitions as `--help`) and the JSON Schema of the model file
+/// (model.schema.json), for editors to complete and check it.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The folder to write into (docs/reference in the repository).
@@ -26,10 +28,25 @@ pub fn cli_markdown() -> String {
     )
 }
 
+/// Every generated page: `(file name, contents)`.
+pub fn pages() -> Vec<(&'static str, String)> {
+    let json =
+        |s: schemars::Schema| serde_json::to_string_pretty(&s).expect("a schema serialises") + "\n";
+    vec![
+        ("cli.md", cli_markdown()),
+        (
+            "model.schema.json",
+            json(bemcal_energyplus::model::model_file_schema()),
+        ),
+    ]
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)?;
-    let path = a.out.join("cli.md");
-    std::fs::write(&path, cli_markdown())?;
-    println!("wrote {}", path.display());
+    for (name, text) in pages() {
+        let path = a.out.join(name);
+        std::fs::write(&path, text)?;
+        println!("wrote {}", path.display());
+    }
     Ok(())
 }

@@ -12,7 +12,7 @@ use crate::{io_err, Error};
 pub const J_PER_KWH: f64 = 3.6e6;
 
 /// A calibration output (e.g. `heating_kwh`) as the sum of EnergyPlus meters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct OutputSpec {
     /// The output's name (`heating_kwh`).
     pub name: String,

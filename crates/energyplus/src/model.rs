@@ -48,7 +48,7 @@ use crate::{io_err, Error};
 /// scaled by one multiplier) or `offset` (the field plus the value: set-points moved by a few
 /// degrees). With `scale` or `offset`, `field = "*"` edits every numeric field of the object
 /// (the values of a `Schedule:Compact`, leaving its `Through:`/`For:`/`Until:` fields).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FieldTarget {
     /// The objects' class.
@@ -64,7 +64,9 @@ pub struct FieldTarget {
 }
 
 /// How a parameter's value enters a field ([`FieldTarget`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Edit {
     /// The field becomes the value.
@@ -121,7 +123,7 @@ fn glob_match(pattern: &str, s: &str) -> bool {
 }
 
 /// A parameter of a user IDF and the fields it sets.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MappedParameter {
     /// The parameter's name.
@@ -139,7 +141,7 @@ pub struct MappedParameter {
 }
 
 /// The `[idf]` form of a model file.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParameterMap {
     /// The year simulated, as a building spec's `year`: a calendar year (`2017`) or twelve
@@ -173,7 +175,7 @@ pub struct ParameterMap {
 }
 
 /// Where the user's IDF is.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IdfRef {
     /// The IDF file, relative to the model file.
@@ -508,4 +510,25 @@ pub fn generated_outputs(spec: &BuildingSpec) -> Vec<OutputSpec> {
         OutputSpec::new("lighting_kwh", &["InteriorLights:Electricity"]),
         OutputSpec::new("equipment_kwh", &["InteriorEquipment:Electricity"]),
     ]
+}
+
+// Only for the schema; `Model::from_toml` reads the files.
+/// A bemcal model file: a generated building's spec, or your own IDF with the map of its
+/// parameters (`[idf]`).
+#[derive(schemars::JsonSchema)]
+#[serde(untagged)]
+#[allow(dead_code)]
+enum ModelFile {
+    /// A generated building.
+    Generated(crate::building::BuildingSpec),
+    /// Your own IDF and the map of its parameters.
+    Mapped(ParameterMap),
+}
+
+/// The JSON Schema of a model file (editors complete and check TOML files against it, for
+/// example through taplo's `#:schema` directive).
+pub fn model_file_schema() -> schemars::Schema {
+    let mut s = schemars::schema_for!(ModelFile);
+    s.insert("title".into(), "bemcal model file".into());
+    s
 }

@@ -9,7 +9,7 @@ use crate::Error;
 
 /// A triangular prior (min, mode, max) as written in model and project files. The density
 /// itself lives in `bemcal-stats`; this is the record.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TriangularPrior {
     /// The lower bound.
     pub min: f64,
@@ -53,7 +53,7 @@ pub struct ParameterDef {
 }
 
 /// A physical constraint `value(lower) + margin <= value(upper)` between two parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Constraint {
     /// The parameter that must stay below.
     pub lower: String,

@@ -328,3 +328,19 @@ mod tests {
         );
     }
 }
+
+impl schemars::JsonSchema for GridYear {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "GridYear".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "The twelve months simulated: a calendar year (2017) or twelve months from the first of another month (\"2017-04\").",
+            "oneOf": [
+                {"type": "integer", "minimum": 1900, "maximum": 2100},
+                {"type": "string", "pattern": "^[0-9]{4}-(0[1-9]|1[0-2])$"}
+            ]
+        })
+    }
+}

@@ -10,7 +10,9 @@ use crate::params::ParameterValues;
 use crate::Error;
 
 /// The HVAC system the generator writes.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum HvacSystem {
     /// VAV with hot-water reheat on the air-handling units (the reference building's system):

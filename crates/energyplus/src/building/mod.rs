@@ -47,7 +47,7 @@ pub const DESIGN_SUPPLY_AIR_C: f64 = 12.8;
 pub const DESIGN_CHILLED_WATER_C: f64 = 6.7;
 
 /// Zoning of each storey.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Zoning {
     /// One thermal zone per floor.
@@ -57,7 +57,7 @@ pub enum Zoning {
 }
 
 /// Where space heating hot water comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum HeatingSource {
     /// Natural-gas hot-water boiler in the building (the reference building has four).
@@ -67,7 +67,7 @@ pub enum HeatingSource {
 }
 
 /// The building description.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BuildingSpec {
     /// The building's name (the IDF's `Building` object).
