@@ -152,6 +152,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{log2}"
     );
     assert!(log2.contains("reusing the one trained earlier"), "{log2}");
+    // The report is where the README says: written by `bemcal calibrate` itself.
+    assert!(out.join("report.html").is_file(), "{log2}");
     // ... but not chains fitted with another held-out period: they saw other hours.
     let e = refused_rerun(dir, &out, &["--holdout", "last 1 month"]);
     assert!(

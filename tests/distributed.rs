@@ -232,8 +232,13 @@ fn distributed_matches_single_process() {
 
     // Both ran to their end short of the target: reported as not converged, by the exit
     // status, the last lines, summary.json and the report's first screen.
-    for (status, log) in [(status, &local_log), (dist_status, &log)] {
+    for ((status, log), out) in [(status, &local_log), (dist_status, &log)]
+        .into_iter()
+        .zip([&local, &dist])
+    {
         assert_eq!(status.code(), Some(NOT_CONVERGED), "{log}");
+        // `bemcal calibrate` writes the report on both paths, converged or not.
+        assert!(out.join("report.html").is_file(), "{log}");
         assert!(log.contains("NOT CONVERGED: max R-hat"), "{log}");
         assert!(log.contains("(target <= 0.5)"), "{log}");
     }

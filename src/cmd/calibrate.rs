@@ -78,6 +78,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
         None => calibrate(&project, &a.out, &log)?,
     };
+    write_report(&project, &a.out);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
         return converged_or_not(&s, &a.out);
@@ -92,6 +93,31 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     print_refinement(&s);
     print_timings(&s, &a.out);
     converged_or_not(&s, &a.out)
+}
+
+/// `report.html` in the output folder, on every path (in process, local workers), with the
+/// pre-calibration's figures where the project's priors come from a pre-calibration folder. A
+/// report that cannot be written is said, and the calibration still stands.
+fn write_report(project: &Project, out: &std::path::Path) {
+    let precal = project
+        .priors
+        .as_ref()
+        .and_then(|p| {
+            project
+                .resolve(p)
+                .parent()
+                .map(std::path::Path::to_path_buf)
+        })
+        .filter(|d| d.join("calendar.csv").is_file());
+    let written = bemcal_report::write_report(out, precal.as_deref())
+        .or_else(|_| bemcal_report::write_report(out, None));
+    match written {
+        Ok(path) => eprintln!("report: {}", path.display()),
+        Err(e) => eprintln!(
+            "report: not written ({e}); `bemcal report {}` tries again",
+            out.display()
+        ),
+    }
 }
 
 /// The meters' year and what ingestion decided.
