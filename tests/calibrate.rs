@@ -821,8 +821,9 @@ fn calibrated_model_reproduces_the_validation(dir: &Path, out: &Path) {
     );
 }
 
-/// A building whose weekend is Friday-Saturday (meters from EnergyPlus with that calendar):
-/// pre-calibration finds the day types in the meters, and with `day_types_file` pointing at its
+/// A building closed on Thursdays and Fridays (meters from EnergyPlus with that calendar):
+/// pre-calibration labels the low days as the days off by what they look like (a calendar
+/// majority called them working days), suggests `day_types_file`, and with it pointing at its
 /// calendar.csv the calibration recovers the weekend schedule and passes Guideline 14; with the
 /// usual Saturday-Sunday rule, EnergyPlus fails Guideline 14 for heating and cooling even at the
 /// true values (a calibration with the rule, when this test still ran one, missed the weekend
@@ -845,7 +846,7 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     while d < end {
         let off = matches!(
             chrono::Datelike::weekday(&d),
-            chrono::Weekday::Fri | chrono::Weekday::Sat
+            chrono::Weekday::Thu | chrono::Weekday::Fri
         );
         calendar.push_str(&format!(
             "{d},{}\n",
@@ -935,6 +936,20 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
         let rows: Vec<&str> = text.lines().skip(1).filter(|l| !l.is_empty()).collect();
         (stamp(rows[0]), stamp(rows[rows.len() - 1]))
     };
+    // Pre-calibration labels the low days as the days off by what they look like (their
+    // calendar says weekday: a majority rule called them working days) and says what to paste.
+    let calendar = std::fs::read_to_string(dir.join("precal/calendar.csv")).unwrap();
+    let thursday = calendar
+        .lines()
+        .find(|l| l.starts_with("2021-04-08,"))
+        .unwrap();
+    assert!(thursday.contains(",weekend,"), "{thursday}");
+    let precal_summary = std::fs::read_to_string(dir.join("precal/summary.txt")).unwrap();
+    assert!(
+        precal_summary.contains("days off on calendar weekdays: Thursday")
+            && precal_summary.contains("calendar.csv\""),
+        "{precal_summary}"
+    );
     let (first, last) = first_and_last(&dir.join("precal/calendar.csv"));
     assert_eq!(
         (first.as_str(), last.as_str()),

@@ -107,7 +107,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let outdoor: Vec<f64> = epw.hours.iter().map(|h| h.dry_bulb_c).collect();
     let result = bemcal_precal::pipeline::run(meters, &outdoor, &opts)?;
     let written = write_outputs(&args.out, &result)?;
-    print!("{}", bemcal_precal::io::summary_text(&result));
+    print!(
+        "{}",
+        bemcal_precal::io::summary_text(&result, &args.out.display().to_string())
+    );
     println!();
     for p in written {
         println!("wrote {}", p.display());

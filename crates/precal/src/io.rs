@@ -100,12 +100,14 @@ pub fn read_priors(path: &Path) -> Result<PriorsFile, PrecalError> {
     toml::from_str(&text).map_err(|e| PrecalError::Invalid(format!("{}: {e}", path.display())))
 }
 
-/// The human-readable summary.
-pub fn summary_text(r: &Precalibration) -> String {
+/// The human-readable summary; `dir` is the pre-calibration folder as the user named it (the
+/// model-file lines it suggests name files in it).
+pub fn summary_text(r: &Precalibration, dir: &str) -> String {
     let mut s = String::new();
     write_meters(&mut s, r);
     write_bases(&mut s, r);
     write_day_types(&mut s, r);
+    write_calendar_advice(&mut s, r, dir);
     write_schedules(&mut s, r);
     write_priors(&mut s, r);
     s
@@ -247,10 +249,24 @@ fn write_day_types(s: &mut String, r: &Precalibration) {
         c.clustering.silhouette,
         sil.join(", ")
     );
+    let _ = writeln!(
+        s,
+        "  labels: {}",
+        match c.label_rule {
+            crate::schedule::LabelRule::Profile =>
+                "by what the days look like (their daytime rise above the night)",
+            crate::schedule::LabelRule::Calendar =>
+                "by the calendar's majority (the profiles do not separate working days from days off)",
+        }
+    );
     for (k, (lab, (wd, off))) in c.cluster_labels.iter().zip(&c.cluster_counts).enumerate() {
+        let rise = c
+            .cluster_rises
+            .get(k)
+            .map_or(String::new(), |r| format!(", daytime rise {r:.2}"));
         let _ = writeln!(
             s,
-            "  cluster {k}: label {}, {wd} calendar weekdays, {off} weekend/holiday days, medoid {}",
+            "  cluster {k}: label {}, {wd} calendar weekdays, {off} weekend/holiday days{rise}, medoid {}",
             lab.as_str(),
             c.days[r.profiles.days[c.clustering.medoids[k]]].date
         );
@@ -265,6 +281,27 @@ fn write_day_types(s: &mut String, r: &Precalibration) {
             d.calendar,
             d.outlier.as_deref().unwrap_or("")
         );
+    }
+}
+
+/// What the day types say about the model's calendar, with the lines to paste.
+fn write_calendar_advice(s: &mut String, r: &Precalibration, dir: &str) {
+    if r.advice.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nCalendar: the day types agree with the model's calendar (weekends and holidays off)."
+        );
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\nCalendar (the day types disagree with the model's calendar; in the model file):"
+    );
+    for a in &r.advice {
+        let _ = writeln!(s, "  # {}", a.evidence);
+        if let Some(p) = &a.paste {
+            let _ = writeln!(s, "  {}", p.line(dir));
+        }
     }
 }
 
@@ -319,7 +356,7 @@ pub fn write_outputs(dir: &Path, r: &Precalibration) -> Result<Vec<PathBuf>, Pre
     put("intervals.csv", intervals_csv(r))?;
     put("priors.toml", priors_toml(&r.priors)?)?;
     put("quality.json", quality_json(r)?)?;
-    put("summary.txt", summary_text(r))?;
+    put("summary.txt", summary_text(r, &dir.display().to_string()))?;
     Ok(written)
 }
 

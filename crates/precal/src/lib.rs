@@ -8,11 +8,13 @@
 //! 2. [`disaggregate`]: heating base (domestic hot water), cooling base (labs, mechanical rooms)
 //!    and electricity base (data center / night base), each an estimate with a `method` string.
 //! 3. [`schedule`] + [`dtw`] + [`cluster`]: normalised daily electricity profiles, pairwise DTW
-//!    with a Sakoe-Chiba band, k-medoids (PAM) day-type clusters labelled by calendar majority,
+//!    with a Sakoe-Chiba band, k-medoids (PAM) day-type clusters labelled by what their days look
+//!    like (the calendar where the profiles do not tell; [`advice`] says what to change),
 //!    per day type and hour box-plot quartiles -> triangular priors -> merged schedule intervals.
 //! 4. [`pipeline::run`] ties them together; [`io`] writes `priors.toml` and the reports.
 #![deny(missing_docs)]
 
+pub mod advice;
 pub mod cluster;
 pub mod disaggregate;
 pub mod dtw;

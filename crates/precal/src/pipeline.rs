@@ -85,6 +85,9 @@ pub struct Precalibration {
     pub priors: PriorsFile,
     /// Decisions worth reporting.
     pub notes: Vec<String>,
+    /// What the day types say about the model's calendar ([`crate::advice`]).
+    #[serde(default)]
+    pub advice: Vec<crate::advice::Suggestion>,
 }
 
 /// A `[[bases]]` entry of the project file that pre-calibration suggests: a load in a meter
@@ -210,6 +213,7 @@ pub fn run(
     let (clusters, _) = cluster_days(&profiles, year, &opts.schedule)?;
     let schedules = day_type_schedules(&profiles, &clusters, &opts.schedule)?;
     let priors = priors_file(&schedules, &dis, &mut notes);
+    let advice = crate::advice::calendar_advice(&clusters);
     Ok(Precalibration {
         meters,
         quality,
@@ -220,6 +224,7 @@ pub fn run(
         schedules,
         priors,
         notes,
+        advice,
     })
 }
 

@@ -9,10 +9,14 @@
 //!   Monday). Values above the quantile give fractions slightly above 1; they are kept.
 //! * **Days** with any missing hour are skipped and reported.
 //! * **Clusters**: pairwise DTW ([`crate::dtw`]) and PAM with k chosen by silhouette
-//!   ([`crate::cluster`]). Each cluster is labelled `weekday` or `weekend` by the majority of its
-//!   days' calendar types (weekends and holidays count as `weekend`; ties go to `weekday`). A
-//!   day type pools all clusters with its label; if no cluster has a label, that day type falls
-//!   back to its calendar days (noted).
+//!   ([`crate::cluster`]). Each cluster is labelled by what its days look like
+//!   ([`label_clusters`]): `weekend` (the building's days off, whatever calendar days they fall
+//!   on) where its days' daytime rise above the night is nearer the lowest cluster's than the
+//!   highest's, `weekday` otherwise, as long as the lowest rise is at most
+//!   [`OFF_DAY_SEPARATION`] of the highest; where the profiles do not separate so, by the
+//!   majority of the days' calendar types (weekends and holidays count as `weekend`; ties go to
+//!   `weekday`), and [`LabelRule::Calendar`] says so. A day type pools all clusters with its
+//!   label; if no cluster has a label, that day type falls back to its calendar days (noted).
 //! * **Outlier days**: days whose calendar type disagrees with their cluster's label, and days
 //!   whose distance to their medoid exceeds Q3 + 1.5 IQR of the distances in their cluster. They
 //!   are reported but kept in the box plots (quartiles are robust to them).
@@ -122,6 +126,61 @@ impl DayLabel {
     }
 }
 
+/// How the clusters got their labels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LabelRule {
+    /// By what the days look like: the clusters' daytime rises separate working days from days
+    /// off.
+    #[default]
+    Profile,
+    /// By the calendar's majority in each cluster: the profiles do not separate working days
+    /// from days off (a weak weekly pattern), so the day types are unreliable.
+    Calendar,
+}
+
+/// The largest ratio of the lowest cluster's daytime rise to the highest's at which the
+/// clusters are taken to separate working days from days off (an office's weekend rises to a
+/// fifth of its weekday at most; a building with no weekly pattern, to nearly all of it).
+pub const OFF_DAY_SEPARATION: f64 = 0.5;
+
+/// Hours of the occupied core (9:00-17:00) and of the night (0:00-5:00) of a daily profile.
+const CORE_HOURS: std::ops::Range<usize> = 9..17;
+const NIGHT_HOURS: std::ops::Range<usize> = 0..5;
+
+/// A day's daytime rise: the mean fraction of the occupied core less the mean of the night.
+/// Working days rise, days off stay near their night (a base load does not rise).
+pub fn daytime_rise(p: &[f64; 24]) -> f64 {
+    let mean = |r: std::ops::Range<usize>| p[r.clone()].iter().sum::<f64>() / r.len() as f64;
+    mean(CORE_HOURS) - mean(NIGHT_HOURS)
+}
+
+/// Each cluster's label from its mean daytime rise (`rises`) and, where the rises do not
+/// separate (see [`OFF_DAY_SEPARATION`]), from its calendar `counts` (working, off days).
+pub fn label_clusters(rises: &[f64], counts: &[(usize, usize)]) -> (Vec<DayLabel>, LabelRule) {
+    let hi = rises.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let lo = rises.iter().copied().fold(f64::INFINITY, f64::min);
+    let separated = rises.len() >= 2 && hi > 0.0 && lo <= OFF_DAY_SEPARATION * hi;
+    if separated {
+        let labels = rises
+            .iter()
+            .map(|&r| match r - lo < hi - r {
+                true => DayLabel::Weekend,
+                false => DayLabel::Weekday,
+            })
+            .collect();
+        return (labels, LabelRule::Profile);
+    }
+    let labels = counts
+        .iter()
+        .map(|&(wd, off)| match off > wd {
+            true => DayLabel::Weekend,
+            false => DayLabel::Weekday,
+        })
+        .collect();
+    (labels, LabelRule::Calendar)
+}
+
 /// Normalised daily profiles of one year.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DailyProfiles {
@@ -195,6 +254,12 @@ pub struct DayTypeClusters {
     pub silhouettes: Vec<(usize, f64)>,
     /// Label of each cluster.
     pub cluster_labels: Vec<DayLabel>,
+    /// How the labels were given.
+    #[serde(default)]
+    pub label_rule: LabelRule,
+    /// Each cluster's mean daytime rise ([`daytime_rise`]), what the labels follow.
+    #[serde(default)]
+    pub cluster_rises: Vec<f64>,
     /// (calendar weekdays, calendar weekends + holidays) per cluster.
     pub cluster_counts: Vec<(usize, usize)>,
     /// Every day of the year, in order.
@@ -219,6 +284,16 @@ fn calendar_counts(
         }
     }
     counts
+}
+
+/// Per cluster, the mean daytime rise of its days' profiles.
+fn cluster_rises(clustering: &Clustering, profiles: &[[f64; 24]]) -> Vec<f64> {
+    let mut sum = vec![(0.0, 0usize); clustering.k];
+    for (p, &c) in profiles.iter().zip(&clustering.labels) {
+        sum[c].0 += daytime_rise(p);
+        sum[c].1 += 1;
+    }
+    sum.iter().map(|&(s, n)| s / n.max(1) as f64).collect()
 }
 
 /// Per cluster, the distance to its medoid beyond which a day is an outlier: Tukey's fence,
@@ -252,7 +327,7 @@ impl DayTypeClusters {
     }
 }
 
-/// Clusters the profiles with DTW + PAM and labels clusters by calendar majority.
+/// Clusters the profiles with DTW + PAM and labels the clusters ([`label_clusters`]).
 pub fn cluster_days(
     profiles: &DailyProfiles,
     year: GridYear,
@@ -282,16 +357,8 @@ pub fn cluster_days(
             .unwrap_or(DayType::Weekday)
     };
     let counts = calendar_counts(&clustering, &profiles.days, cal_type);
-    let cluster_labels: Vec<DayLabel> = counts
-        .iter()
-        .map(|&(wd, off)| {
-            if off > wd {
-                DayLabel::Weekend
-            } else {
-                DayLabel::Weekday
-            }
-        })
-        .collect();
+    let rises = cluster_rises(&clustering, &profiles.profiles);
+    let (cluster_labels, label_rule) = label_clusters(&rises, &counts);
     // Distances to medoids and the per-cluster outlier limit.
     let med_dist: Vec<f64> = (0..n)
         .map(|i| dm.get(i, clustering.medoids[clustering.labels[i]]))
@@ -337,6 +404,8 @@ pub fn cluster_days(
             clustering,
             silhouettes,
             cluster_labels,
+            label_rule,
+            cluster_rises: rises,
             cluster_counts: counts,
             days,
             band,

@@ -141,7 +141,7 @@ fn rsf_precalibration_finds_bases_day_types_and_intervals() {
             .any(|b| b.output == "electricity_kwh" && b.submeter.as_deref() == Some("data_center")),
         "{suggested:?}"
     );
-    let text = bemcal_precal::io::summary_text(&r);
+    let text = bemcal_precal::io::summary_text(&r, "precal");
     assert!(
         text.contains("[[bases]]\n  output = \"electricity_kwh\"\n  submeter = \"data_center\""),
         "{text}"
