@@ -63,6 +63,10 @@ pub struct Suggestion {
 /// The suggestions about the calendar, in the order to read them.
 pub fn calendar_advice(c: &DayTypeClusters) -> Vec<Suggestion> {
     let mut out = weak(c);
+    if c.label_rule == LabelRule::Calendar {
+        // The labels are the calendar's own: nothing to set against it.
+        return out;
+    }
     let clustered: Vec<&DayRecord> = c.days.iter().filter(|d| d.label.is_some()).collect();
     let low_weekdays = moved(&clustered, DayLabel::Weekend, |d| {
         d.calendar == DayType::Weekday
@@ -95,16 +99,17 @@ pub fn calendar_advice(c: &DayTypeClusters) -> Vec<Suggestion> {
 /// Where the clusters are too weak to trust: the rule fell back to the calendar, or the
 /// silhouette is low.
 fn weak(c: &DayTypeClusters) -> Vec<Suggestion> {
-    let rises = c
-        .cluster_rises
-        .iter()
-        .map(|r| format!("{r:.2}"))
-        .collect::<Vec<_>>()
-        .join(", ");
+    let listed = |v: &[f64]| {
+        v.iter()
+            .map(|r| format!("{r:.2}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let (levels, rises) = (listed(&c.cluster_levels), listed(&c.cluster_rises));
     let s = c.clustering.silhouette;
     let why = match (c.label_rule, s < WEAK_SILHOUETTE) {
         (LabelRule::Calendar, _) => format!(
-            "the clusters' daytime rises ({rises} of the peak) do not separate working days from days off"
+            "the clusters' levels ({levels}) and daytime rises ({rises}, of the year's peak) do not separate working days from days off"
         ),
         (LabelRule::Profile, true) => format!("the clusters overlap (silhouette {s:.2})"),
         (LabelRule::Profile, false) => return vec![],
@@ -264,9 +269,11 @@ mod tests {
         let advice = calendar_advice(&c);
         let text: Vec<&str> = advice.iter().map(|s| s.evidence.as_str()).collect();
         assert!(
-            advice.iter().any(|s| s.evidence.contains("Thursday 50 of 50")
-                && s.evidence.contains("Friday 49 of 49")
-                && s.paste == Some(Paste::DayTypesFile)),
+            advice
+                .iter()
+                .any(|s| s.evidence.contains("Thursday 50 of 50")
+                    && s.evidence.contains("Friday 49 of 49")
+                    && s.paste == Some(Paste::DayTypesFile)),
             "{text:?}"
         );
         assert!(text
@@ -308,6 +315,7 @@ mod tests {
         let c = year(|d, _| d.ordinal() % 2 == 0);
         let flat = DayTypeClusters {
             cluster_rises: vec![0.5, 0.45],
+            cluster_levels: vec![0.5, 0.48],
             label_rule: LabelRule::Calendar,
             ..c
         };

@@ -254,16 +254,16 @@ fn write_day_types(s: &mut String, r: &Precalibration) {
         "  labels: {}",
         match c.label_rule {
             crate::schedule::LabelRule::Profile =>
-                "by what the days look like (their daytime rise above the night)",
+                "by what the days look like (their level and daytime rise above the night)",
             crate::schedule::LabelRule::Calendar =>
                 "by the calendar's majority (the profiles do not separate working days from days off)",
         }
     );
     for (k, (lab, (wd, off))) in c.cluster_labels.iter().zip(&c.cluster_counts).enumerate() {
-        let rise = c
-            .cluster_rises
-            .get(k)
-            .map_or(String::new(), |r| format!(", daytime rise {r:.2}"));
+        let rise = match (c.cluster_levels.get(k), c.cluster_rises.get(k)) {
+            (Some(l), Some(r)) => format!(", level {l:.2}, daytime rise {r:.2}"),
+            _ => String::new(),
+        };
         let _ = writeln!(
             s,
             "  cluster {k}: label {}, {wd} calendar weekdays, {off} weekend/holiday days{rise}, medoid {}",
@@ -295,7 +295,7 @@ fn write_calendar_advice(s: &mut String, r: &Precalibration, dir: &str) {
     }
     let _ = writeln!(
         s,
-        "\nCalendar (the day types disagree with the model's calendar; in the model file):"
+        "\nCalendar (what the day types say about the model's calendar; lines for the model file):"
     );
     for a in &r.advice {
         let _ = writeln!(s, "  # {}", a.evidence);

@@ -11,9 +11,9 @@
 //! * **Clusters**: pairwise DTW ([`crate::dtw`]) and PAM with k chosen by silhouette
 //!   ([`crate::cluster`]). Each cluster is labelled by what its days look like
 //!   ([`label_clusters`]): `weekend` (the building's days off, whatever calendar days they fall
-//!   on) where its days' daytime rise above the night is nearer the lowest cluster's than the
-//!   highest's, `weekday` otherwise, as long as the lowest rise is at most
-//!   [`OFF_DAY_SEPARATION`] of the highest; where the profiles do not separate so, by the
+//!   on) where its days' mean level is nearer the lowest cluster's than the highest's,
+//!   `weekday` otherwise, as long as the levels and the daytime rises separate working days
+//!   from days off; where the profiles do not separate so, by the
 //!   majority of the days' calendar types (weekends and holidays count as `weekend`; ties go to
 //!   `weekday`), and [`LabelRule::Calendar`] says so. A day type pools all clusters with its
 //!   label; if no cluster has a label, that day type falls back to its calendar days (noted).
@@ -130,8 +130,8 @@ impl DayLabel {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LabelRule {
-    /// By what the days look like: the clusters' daytime rises separate working days from days
-    /// off.
+    /// By what the days look like: the clusters' levels and daytime rises separate working
+    /// days from days off.
     #[default]
     Profile,
     /// By the calendar's majority in each cluster: the profiles do not separate working days
@@ -139,32 +139,58 @@ pub enum LabelRule {
     Calendar,
 }
 
-/// The largest ratio of the lowest cluster's daytime rise to the highest's at which the
-/// clusters are taken to separate working days from days off (an office's weekend rises to a
-/// fifth of its weekday at most; a building with no weekly pattern, to nearly all of it).
-pub const OFF_DAY_SEPARATION: f64 = 0.5;
+/// The largest ratio of the lowest cluster's mean level to the highest's at which the clusters
+/// are taken to separate working days from days off (the example office's weekends use 0.6 of
+/// its weekdays' energy; a building with no weekly pattern, nearly all of it).
+pub const OFF_DAY_SEPARATION: f64 = 0.85;
+
+/// The least daytime rise (a share of the year's peak) the busiest cluster must show for the
+/// profiles to tell working days at all: an office's working days rise by half the peak or
+/// so; the NREL RSF's electricity less its data center, which follows the heating season,
+/// by 0.07.
+pub const MIN_WORKING_RISE: f64 = 0.15;
 
 /// Hours of the occupied core (9:00-17:00) and of the night (0:00-5:00) of a daily profile.
 const CORE_HOURS: std::ops::Range<usize> = 9..17;
 const NIGHT_HOURS: std::ops::Range<usize> = 0..5;
 
 /// A day's daytime rise: the mean fraction of the occupied core less the mean of the night.
-/// Working days rise, days off stay near their night (a base load does not rise).
+/// Working days rise more than days off (a base load does not rise).
 pub fn daytime_rise(p: &[f64; 24]) -> f64 {
     let mean = |r: std::ops::Range<usize>| p[r.clone()].iter().sum::<f64>() / r.len() as f64;
     mean(CORE_HOURS) - mean(NIGHT_HOURS)
 }
 
-/// Each cluster's label from its mean daytime rise (`rises`) and, where the rises do not
-/// separate (see [`OFF_DAY_SEPARATION`]), from its calendar `counts` (working, off days).
-pub fn label_clusters(rises: &[f64], counts: &[(usize, usize)]) -> (Vec<DayLabel>, LabelRule) {
-    let hi = rises.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let lo = rises.iter().copied().fold(f64::INFINITY, f64::min);
-    let separated = rises.len() >= 2 && hi > 0.0 && lo <= OFF_DAY_SEPARATION * hi;
+/// A day's level: its mean fraction.
+pub fn daily_level(p: &[f64; 24]) -> f64 {
+    p.iter().sum::<f64>() / 24.0
+}
+
+/// Each cluster's label from its mean level and daytime rise. The clusters separate working
+/// days from days off where the busiest rises by at least [`MIN_WORKING_RISE`], the lowest
+/// level is at most [`OFF_DAY_SEPARATION`] of the highest, and the lowest-level cluster rises
+/// less than the highest-level one: then a cluster is `weekend` (days off) where its level is
+/// nearer the lowest than the highest. Elsewhere by the calendar `counts` (working, off days)
+/// of each cluster, and [`LabelRule::Calendar`] says so.
+pub fn label_clusters(
+    levels: &[f64],
+    rises: &[f64],
+    counts: &[(usize, usize)],
+) -> (Vec<DayLabel>, LabelRule) {
+    let arg = |better: fn(f64, f64) -> bool| {
+        (0..levels.len()).fold(0, |b, i| if better(levels[i], levels[b]) { i } else { b })
+    };
+    let (lo, hi) = (arg(|a, b| a < b), arg(|a, b| a > b));
+    let max_rise = rises.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let separated = levels.len() >= 2
+        && max_rise >= MIN_WORKING_RISE
+        && levels[lo] <= OFF_DAY_SEPARATION * levels[hi]
+        && rises[lo] < rises[hi];
     if separated {
-        let labels = rises
+        let (l0, l1) = (levels[lo], levels[hi]);
+        let labels = levels
             .iter()
-            .map(|&r| match r - lo < hi - r {
+            .map(|&l| match l - l0 < l1 - l {
                 true => DayLabel::Weekend,
                 false => DayLabel::Weekday,
             })
@@ -257,9 +283,12 @@ pub struct DayTypeClusters {
     /// How the labels were given.
     #[serde(default)]
     pub label_rule: LabelRule,
-    /// Each cluster's mean daytime rise ([`daytime_rise`]), what the labels follow.
+    /// Each cluster's mean daytime rise ([`daytime_rise`]).
     #[serde(default)]
     pub cluster_rises: Vec<f64>,
+    /// Each cluster's mean level ([`daily_level`]).
+    #[serde(default)]
+    pub cluster_levels: Vec<f64>,
     /// (calendar weekdays, calendar weekends + holidays) per cluster.
     pub cluster_counts: Vec<(usize, usize)>,
     /// Every day of the year, in order.
@@ -286,11 +315,15 @@ fn calendar_counts(
     counts
 }
 
-/// Per cluster, the mean daytime rise of its days' profiles.
-fn cluster_rises(clustering: &Clustering, profiles: &[[f64; 24]]) -> Vec<f64> {
+/// Per cluster, the mean of `f` over its days' profiles.
+fn cluster_means(
+    clustering: &Clustering,
+    profiles: &[[f64; 24]],
+    f: fn(&[f64; 24]) -> f64,
+) -> Vec<f64> {
     let mut sum = vec![(0.0, 0usize); clustering.k];
     for (p, &c) in profiles.iter().zip(&clustering.labels) {
-        sum[c].0 += daytime_rise(p);
+        sum[c].0 += f(p);
         sum[c].1 += 1;
     }
     sum.iter().map(|&(s, n)| s / n.max(1) as f64).collect()
@@ -357,8 +390,9 @@ pub fn cluster_days(
             .unwrap_or(DayType::Weekday)
     };
     let counts = calendar_counts(&clustering, &profiles.days, cal_type);
-    let rises = cluster_rises(&clustering, &profiles.profiles);
-    let (cluster_labels, label_rule) = label_clusters(&rises, &counts);
+    let rises = cluster_means(&clustering, &profiles.profiles, daytime_rise);
+    let levels = cluster_means(&clustering, &profiles.profiles, daily_level);
+    let (cluster_labels, label_rule) = label_clusters(&levels, &rises, &counts);
     // Distances to medoids and the per-cluster outlier limit.
     let med_dist: Vec<f64> = (0..n)
         .map(|i| dm.get(i, clustering.medoids[clustering.labels[i]]))
@@ -406,6 +440,7 @@ pub fn cluster_days(
             cluster_labels,
             label_rule,
             cluster_rises: rises,
+            cluster_levels: levels,
             cluster_counts: counts,
             days,
             band,
