@@ -1,5 +1,6 @@
-//! Attacks on a coordinator on loopback, each a reproduction of issue 21: the coordinator
-//! survives, answers with a short clear error, leaks nothing and stores nothing bad.
+//! Attacks on a coordinator on loopback, each a reproduction of issue 21 or 68: the coordinator
+//! survives, answers with a short clear error, leaks nothing and stores nothing bad; workers are
+//! who their credentials say, and the audit trail records who did what.
 
 mod common;
 
@@ -9,7 +10,7 @@ use std::time::Duration;
 use bemcal_client::client::{submit_project, upload, Client, Connect};
 use bemcal_client::proto::{
     CompleteRequest, FileRef, HealthRequest, HeartbeatRequest, JobResult, JobState, LeaseRequest,
-    RunRequest, RunState, SubmitRequest,
+    ListRunsRequest, RegisterRequest, RunRequest, RunState, SubmitRequest,
 };
 use common::*;
 
@@ -36,6 +37,46 @@ fn client(url: &str, token: &str) -> Client {
     }
     .client()
     .unwrap()
+}
+
+/// Registers a worker named `name` with the enrollment token `enroll`: its id and a client that
+/// carries its own credential.
+async fn register(url: &str, enroll: &str, name: &str) -> (String, Client) {
+    let r = client(url, enroll)
+        .register(RegisterRequest {
+            name: name.into(),
+            protocol: bemcal_client::PROTOCOL,
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    (r.worker_id, client(url, &r.credential))
+}
+
+/// A simulated point's file with the three outputs of [`small`]: `hours` of `value`, and `bad`
+/// at hour 100 when given.
+fn point_file(hours: usize, value: &str, bad: Option<&str>) -> String {
+    let series: Vec<&str> = (0..hours)
+        .map(|h| match (h, bad) {
+            (100, Some(b)) => b,
+            _ => value,
+        })
+        .collect();
+    let s = series.join(",");
+    format!(
+        "{{\"values\": {{}}, \"outputs\": {{\"names\": [\"heating_kwh\", \"cooling_kwh\", \
+         \"electricity_kwh\"], \"series\": [[{s}], [{s}], [{s}]]}}}}"
+    )
+}
+
+/// The coordinator's audit trail in `data`, as `bemcal coordinator audit` prints it.
+fn audit(data: &Path) -> String {
+    let out = run_ok(
+        bemcal()
+            .args(["coordinator", "audit", "--last", "0", "--data"])
+            .arg(data),
+    );
+    String::from_utf8(out.stdout).unwrap()
 }
 
 /// Meters that load: a year of constant hourly readings.
@@ -212,11 +253,11 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
     let (mut proc, url) = start(dir.path());
     let p = small(&dir.path().join("project"), &flat_meters());
     let rt = bemcal_client::runtime().unwrap();
-    rt.block_on(async {
+    let (id1, id2) = rt.block_on(async {
         let mut c = client(&url, TOKEN);
-        let mut w = client(&url, WORKER_TOKEN);
-        // Roles: a worker cannot submit, a client cannot lease.
-        let e = submit_project(&mut w, &p, None, Default::default())
+        let mut enroll = client(&url, WORKER_TOKEN);
+        // Roles: the enrollment token cannot submit, a client cannot register a worker.
+        let e = submit_project(&mut enroll, &p, None, Default::default())
             .await
             .unwrap_err();
         assert!(format!("{e:#}").contains("client token"), "{e:#}");
@@ -224,20 +265,39 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             .await
             .unwrap()
             .run_id;
+        let hello = RegisterRequest {
+            name: "w1".into(),
+            protocol: bemcal_client::PROTOCOL,
+        };
+        let e = c.register(hello).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::PermissionDenied);
+        // Two workers of the same name are two workers, each with its own credential.
+        let (id1, mut w1) = register(&url, WORKER_TOKEN, "w1").await;
+        let (id2, mut w2) = register(&url, WORKER_TOKEN, "w1").await;
+        assert!(id1.starts_with("w1-") && id2.starts_with("w1-") && id1 != id2);
         let lease = |id: &str| LeaseRequest {
             worker_id: id.into(),
             free_slots: 1,
             protocol: bemcal_client::PROTOCOL,
         };
-        let e = c.lease(lease("w1")).await.unwrap_err();
+        // Neither a client nor the enrollment token leases; a worker leases only as itself.
+        for mut other in [c.clone(), enroll.clone()] {
+            let e = other.lease(lease(&id1)).await.unwrap_err();
+            assert_eq!(e.code(), tonic::Code::PermissionDenied, "{e:?}");
+        }
+        let e = w2.lease(lease(&id1)).await.unwrap_err();
         assert_eq!(e.code(), tonic::Code::PermissionDenied);
+        assert!(
+            e.message().contains("not this credential's worker"),
+            "{e:?}"
+        );
         // A worker of another protocol revision (0: built before the field) gets no job, and
         // is told why.
         for old in [0, bemcal_client::PROTOCOL + 1] {
-            let e = w
+            let e = w1
                 .lease(LeaseRequest {
                     protocol: old,
-                    ..lease("w0")
+                    ..lease(&id1)
                 })
                 .await
                 .unwrap_err();
@@ -255,7 +315,7 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         // The design's simulations are queued once the driver has laid out the run.
         let mut job = None;
         for _ in 0..120 {
-            job = w.lease(lease("w1")).await.unwrap().into_inner().job;
+            job = w1.lease(lease(&id1)).await.unwrap().into_inner().job;
             if job.is_some() {
                 break;
             }
@@ -263,30 +323,44 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
         }
         let job = job.expect("no job queued within 30 s");
         let id = job.lease_id;
-        // Another worker can neither heartbeat nor complete the lease.
-        let hb = HeartbeatRequest {
-            worker_id: "w2".into(),
-            lease_id: id,
-        };
-        assert_eq!(
-            w.heartbeat(hb).await.unwrap_err().code(),
-            tonic::Code::PermissionDenied
-        );
+        // Another worker can neither heartbeat nor complete the lease, whether it sends its own
+        // id or the lease holder's.
         let forged = |worker: &str, outputs: Vec<FileRef>, result: JobResult| CompleteRequest {
             worker_id: worker.into(),
             lease_id: id,
             outputs,
             result: Some(result),
         };
-        let e = w
-            .complete(forged("w2", vec![], JobResult::simulated(Some(1.0))))
-            .await
-            .unwrap_err();
-        assert_eq!(e.code(), tonic::Code::PermissionDenied);
+        let Some(bemcal_client::proto::job::Kind::Simulate(s)) = &job.kind else {
+            panic!("the first job is a design simulation");
+        };
+        let year = point_file(8760, "1.5", None);
+        let year_file = FileRef {
+            path: format!("simulations/point_{:03}.json", s.point),
+            sha256: upload(&mut w2, year.as_bytes().to_vec()).await.unwrap(),
+            size: year.len() as u64,
+        };
+        for claimed in [&id2, &id1] {
+            let hb = HeartbeatRequest {
+                worker_id: claimed.clone(),
+                lease_id: id,
+            };
+            let e = w2.heartbeat(hb).await.unwrap_err();
+            assert_eq!(e.code(), tonic::Code::PermissionDenied, "{claimed}: {e:?}");
+            let e = w2
+                .complete(forged(
+                    claimed,
+                    vec![year_file.clone()],
+                    JobResult::simulated(Some(1.0)),
+                ))
+                .await
+                .unwrap_err();
+            assert_eq!(e.code(), tonic::Code::PermissionDenied, "{claimed}: {e:?}");
+        }
         // The lease's own worker cannot hand over what a simulation does not produce: another
         // kind of job's result, or none.
         for result in [JobResult::chains(100), JobResult::default()] {
-            let e = w.complete(forged("w1", vec![], result)).await.unwrap_err();
+            let e = w1.complete(forged(&id1, vec![], result)).await.unwrap_err();
             assert_eq!(e.code(), tonic::Code::InvalidArgument, "{}", e.message());
             assert!(
                 e.message()
@@ -295,28 +369,42 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
                 e.message()
             );
         }
-        let point =
-            "{\"values\": {}, \"outputs\": {\"names\": [\"heating_kwh\"], \"series\": [[1.0]]}}";
-        let sha = upload(&mut w, point.as_bytes().to_vec()).await.unwrap();
-        let Some(bemcal_client::proto::job::Kind::Simulate(s)) = &job.kind else {
-            panic!("the first job is a design simulation");
-        };
-        let file = FileRef {
-            path: format!("simulations/point_{:03}.json", s.point),
-            sha256: sha,
-            size: point.len() as u64,
-        };
-        let e = w
-            .complete(forged("w1", vec![file], JobResult::simulated(Some(1.0))))
-            .await
-            .unwrap_err();
-        assert!(e.message().contains("hours simulated"), "{}", e.message());
+        // Nor a point file that is not a year of finite, plausible hours: a day, a year with
+        // NaN (JSON has none: a worker's serde_json writes null), a negative meter.
+        let bad = [
+            (point_file(24, "1.5", None), "24 hours simulated, not 8760"),
+            (
+                point_file(8760, "1.5", Some("NaN")),
+                "not a simulated point's file",
+            ),
+            (
+                point_file(8760, "1.5", Some("null")),
+                "not a simulated point's file",
+            ),
+            (
+                point_file(8760, "1.5", Some("-5.0")),
+                "hour 100 holds -5 kWh",
+            ),
+        ];
+        for (text, says) in bad {
+            let file = FileRef {
+                sha256: upload(&mut w1, text.as_bytes().to_vec()).await.unwrap(),
+                size: text.len() as u64,
+                ..year_file.clone()
+            };
+            let e = w1
+                .complete(forged(&id1, vec![file], JobResult::simulated(Some(1.0))))
+                .await
+                .unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument, "{says}: {e:?}");
+            assert!(e.message().contains(says), "{says}: {}", e.message());
+        }
         // Nothing forged was recorded: the job is still leased, and its own worker may go on.
         let hb = HeartbeatRequest {
-            worker_id: "w1".into(),
+            worker_id: id1.clone(),
             lease_id: id,
         };
-        assert!(w.heartbeat(hb).await.unwrap().into_inner().ok);
+        assert!(w1.heartbeat(hb.clone()).await.unwrap().into_inner().ok);
         let st = c
             .get_run(RunRequest {
                 run_id: run.clone(),
@@ -324,8 +412,10 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             .await
             .unwrap()
             .into_inner();
+        assert_eq!(st.client, "default");
         let j = st.jobs.iter().find(|j| j.job_id == job.job_id).unwrap();
         assert_eq!(j.state(), JobState::Leased);
+        assert_eq!(j.worker, id1);
         assert!(j.result_json.is_empty());
         // The same project submitted again while its run runs (an interrupted client coming
         // back) is that run, its lease untouched; once the run has ended, a new one.
@@ -333,11 +423,7 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             .await
             .unwrap();
         assert_eq!((again.run_id.as_str(), again.resumed), (run.as_str(), true));
-        let hb = HeartbeatRequest {
-            worker_id: "w1".into(),
-            lease_id: id,
-        };
-        assert!(w.heartbeat(hb).await.unwrap().into_inner().ok);
+        assert!(w1.heartbeat(hb).await.unwrap().into_inner().ok);
         c.cancel(RunRequest {
             run_id: run.clone(),
         })
@@ -347,13 +433,59 @@ fn leases_belong_to_their_worker_and_outputs_are_checked() {
             .await
             .unwrap();
         assert!(after.run_id != run && !after.resumed, "{after:?}");
+        // Nothing forged was cached either: the new run's simulations (the same inputs) all
+        // wait for a worker.
+        let mut jobs = vec![];
+        for _ in 0..120 {
+            jobs = c
+                .get_run(RunRequest {
+                    run_id: after.run_id.clone(),
+                })
+                .await
+                .unwrap()
+                .into_inner()
+                .jobs;
+            if !jobs.is_empty() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+        assert!(!jobs.is_empty(), "the new run laid out no jobs within 30 s");
+        assert!(
+            jobs.iter()
+                .all(|j| !j.cached && j.state() == JobState::Queued),
+            "{jobs:?}"
+        );
         c.cancel(RunRequest {
             run_id: after.run_id,
         })
         .await
         .unwrap();
+        (id1, id2)
     });
     assert!(alive(&mut proc));
+    // The audit trail says who did what: the submissions, the registrations, the lease, and
+    // each refusal with the worker and the reason.
+    let trail = audit(&dir.path().join("data"));
+    let has = |needle: &str| {
+        assert!(
+            trail.lines().any(|l| l.contains(needle)),
+            "no {needle:?} in the audit trail:\n{trail}"
+        )
+    };
+    has("submit client:default run=");
+    has("resume client:default run=");
+    has("cancel client:default run=");
+    has("refuse-register client:default");
+    has("register enroller: worker w1-");
+    has(&format!("lease worker:{id1} run="));
+    has("refuse-lease client:default");
+    has(&format!("refuse-lease worker:{id2}"));
+    has(&format!("refuse-complete worker:{id2} lease="));
+    has(&format!("the lease is worker {id1}'s"));
+    has(&format!("is not this credential's worker ({id2})"));
+    has(&format!("refuse-complete worker:{id1} run="));
+    has("24 hours simulated, not 8760");
 }
 
 #[test]
@@ -388,7 +520,11 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
     let dir = tempfile::tempdir().unwrap();
     let wt = dir.path().join("worker.token");
     std::fs::write(&wt, WORKER_TOKEN).unwrap();
-    // 1,500 bytes a run.
+    // A simulated point of a year, the same size whichever design point it is: two fit in
+    // the run's quota, the third does not.
+    let size = point_file(8760, "0.5", None).len();
+    let quota = size * 5 / 2;
+    let gb = format!("{}", quota as f64 / 1e9);
     let (mut proc, url) = coordinator(
         &dir.path().join("data"),
         "127.0.0.1:0",
@@ -397,24 +533,23 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
             "--worker-token-file",
             wt.to_str().unwrap(),
             "--max-run-gb",
-            "0.0000015",
+            &gb,
         ],
     );
     let p = small(&dir.path().join("project"), &flat_meters());
     let rt = bemcal_client::runtime().unwrap();
     rt.block_on(async {
         let mut c = client(&url, TOKEN);
-        let mut w = client(&url, WORKER_TOKEN);
+        let (id, mut w) = register(&url, WORKER_TOKEN, "w1").await;
         let run = submit_project(&mut c, &p, None, Default::default())
             .await
             .unwrap()
             .run_id;
         let lease = LeaseRequest {
-            worker_id: "w1".into(),
+            worker_id: id.clone(),
             free_slots: 1,
             protocol: bemcal_client::PROTOCOL,
         };
-        // A simulated point of a day (537 bytes): two fit, the third does not.
         let mut completed = 0;
         for _ in 0..240 {
             let Some(job) = w.lease(lease.clone()).await.unwrap().into_inner().job else {
@@ -424,17 +559,13 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
             let Some(bemcal_client::proto::job::Kind::Simulate(s)) = &job.kind else {
                 panic!("the design's simulations come first");
             };
-            let series: Vec<String> = (0..24).map(|h| format!("{}.{h:02}", s.point)).collect();
-            let point = format!(
-                "{{\"values\": {{}}, \"outputs\": {{\"names\": [\"heating_kwh\", \"cooling_kwh\", \
-                 \"electricity_kwh\"], \"series\": [[{0}], [{0}], [{0}]]}}}}",
-                series.join(", ")
-            );
+            let point = point_file(8760, &format!("{}.5", s.point % 10), None);
+            assert_eq!(point.len(), size);
             let sha = upload(&mut w, point.as_bytes().to_vec()).await.unwrap();
             // The size a worker claims is checked against the file's: a quota counts bytes.
             let e = w
                 .complete(CompleteRequest {
-                    worker_id: "w1".into(),
+                    worker_id: id.clone(),
                     lease_id: job.lease_id,
                     outputs: vec![FileRef {
                         path: format!("simulations/point_{:03}.json", s.point),
@@ -452,7 +583,7 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
                 e.message()
             );
             w.complete(CompleteRequest {
-                worker_id: "w1".into(),
+                worker_id: id.clone(),
                 lease_id: job.lease_id,
                 outputs: vec![FileRef {
                     path: format!("simulations/point_{:03}.json", s.point),
@@ -479,7 +610,7 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
         assert_eq!(st.state(), RunState::Failed, "{st:?}");
         assert!(
             st.error
-                .contains("per-run quota of 1500 bytes (--max-run-gb)"),
+                .contains(&format!("per-run quota of {quota} bytes (--max-run-gb)")),
             "{}",
             st.error
         );
@@ -493,4 +624,219 @@ fn a_run_past_its_quota_of_output_bytes_fails_saying_so() {
         assert!(w.lease(lease).await.unwrap().into_inner().job.is_none());
     });
     assert!(alive(&mut proc));
+}
+
+/// Revoking one worker stops that worker alone: its credential is refused within a second, its
+/// lease is given back (not counted as a failure), and the other worker goes on; the operator's
+/// revocation and the refusals are in the audit trail.
+#[test]
+fn a_revoked_worker_is_refused_and_the_others_go_on() {
+    if !have_engine() {
+        eprintln!("skipped: run `make setup` first");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (mut proc, url) = start(dir.path());
+    let data = dir.path().join("data");
+    let p = small(&dir.path().join("project"), &flat_meters());
+    let rt = bemcal_client::runtime().unwrap();
+    let (id1, id2) = rt.block_on(async {
+        let mut c = client(&url, TOKEN);
+        let (id1, mut w1) = register(&url, WORKER_TOKEN, "w1").await;
+        let (id2, mut w2) = register(&url, WORKER_TOKEN, "w2").await;
+        let run = submit_project(&mut c, &p, None, Default::default())
+            .await
+            .unwrap()
+            .run_id;
+        let lease = |id: &str| LeaseRequest {
+            worker_id: id.into(),
+            free_slots: 1,
+            protocol: bemcal_client::PROTOCOL,
+        };
+        let mut job = None;
+        for _ in 0..120 {
+            job = w1.lease(lease(&id1)).await.unwrap().into_inner().job;
+            if job.is_some() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+        let job = job.expect("no job queued within 30 s");
+        let out = run_ok(
+            bemcal()
+                .args(["coordinator", "revoke-worker", "--data"])
+                .arg(&data)
+                .arg(&id1),
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("revoked"));
+        // Within a second or two the coordinator refuses the credential.
+        let hb = HeartbeatRequest {
+            worker_id: id1.clone(),
+            lease_id: job.lease_id,
+        };
+        let mut refused = None;
+        for _ in 0..40 {
+            match w1.heartbeat(hb.clone()).await {
+                Ok(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+                Err(e) => {
+                    refused = Some(e);
+                    break;
+                }
+            }
+        }
+        let e = refused.expect("the revoked worker's heartbeat was still taken after 4 s");
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        assert!(e.message().contains("revoked"), "{e:?}");
+        let e = w1.lease(lease(&id1)).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        // The other worker goes on, and gets the revoked worker's job back among the queued.
+        let mut taken = vec![];
+        for _ in 0..8 {
+            match w2.lease(lease(&id2)).await.unwrap().into_inner().job {
+                Some(j) => taken.push(j.job_id),
+                None => break,
+            }
+        }
+        assert!(
+            taken.contains(&job.job_id),
+            "{taken:?} lacks {}",
+            job.job_id
+        );
+        let st = c
+            .get_run(RunRequest {
+                run_id: run.clone(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(st.state(), RunState::Running, "{}", st.error);
+        c.cancel(RunRequest { run_id: run }).await.unwrap();
+        (id1, id2)
+    });
+    assert!(alive(&mut proc));
+    let workers = run_ok(
+        bemcal()
+            .args(["coordinator", "workers", "--data"])
+            .arg(&data),
+    );
+    let workers = String::from_utf8(workers.stdout).unwrap();
+    let line = |id: &str| {
+        workers
+            .lines()
+            .find(|l| l.starts_with(id))
+            .unwrap_or("")
+            .to_string()
+    };
+    assert!(
+        line(&id1).contains(" ago ") && line(&id1).matches(" ago").count() == 2,
+        "{workers}"
+    );
+    assert!(line(&id2).matches(" ago").count() == 1, "{workers}");
+    let trail = audit(&data);
+    for needle in [
+        format!("revoke operator: worker {id1}"),
+        format!("return worker:{id1}"),
+        "the worker's credential was revoked".to_string(),
+        format!("refuse-revoked worker:{id1}"),
+        format!("lease worker:{id2}"),
+    ] {
+        assert!(trail.contains(&needle), "no {needle:?} in:\n{trail}");
+    }
+}
+
+/// Named clients: each run records its client, each client runs at most its limit (another
+/// client is not held back), the same project of another client is a run of its own, and the
+/// refusal is in the audit trail.
+#[test]
+fn clients_have_names_and_their_own_limits() {
+    if !have_engine() {
+        eprintln!("skipped: run `make setup` first");
+        return;
+    }
+    const ALICE: &str = "alice-token-0123456789abcdef";
+    const BOB: &str = "bob-token-0123456789abcdef";
+    let dir = tempfile::tempdir().unwrap();
+    let tokens = dir.path().join("clients");
+    std::fs::write(&tokens, format!("# the team\nalice {ALICE}\nbob {BOB}\n")).unwrap();
+    let data = dir.path().join("data");
+    let (mut proc, url) = coordinator(
+        &data,
+        "127.0.0.1:0",
+        TOKEN,
+        &[
+            "--client-tokens",
+            tokens.to_str().unwrap(),
+            "--max-runs-per-client",
+            "1",
+        ],
+    );
+    let a = small(&dir.path().join("a"), &flat_meters());
+    let b = small(
+        &dir.path().join("b"),
+        &flat_meters().replace(",10,5,20", ",11,5,20"),
+    );
+    let rt = bemcal_client::runtime().unwrap();
+    rt.block_on(async {
+        let (mut alice, mut bob) = (client(&url, ALICE), client(&url, BOB));
+        let a1 = submit_project(&mut alice, &a, None, Default::default())
+            .await
+            .unwrap();
+        let e = submit_project(&mut alice, &b, None, Default::default())
+            .await
+            .unwrap_err();
+        let msg = format!("{e:#}");
+        assert!(
+            msg.contains("client alice has 1 run(s) running")
+                && msg.contains("--max-runs-per-client 1"),
+            "{msg}"
+        );
+        let b1 = submit_project(&mut bob, &b, None, Default::default())
+            .await
+            .unwrap();
+        // Alice's project again is her run; Bob's project is not hers to resume.
+        let again = submit_project(&mut alice, &a, None, Default::default())
+            .await
+            .unwrap();
+        assert_eq!(
+            again,
+            bemcal_client::client::Submitted {
+                resumed: true,
+                ..a1.clone()
+            }
+        );
+        alice
+            .cancel(RunRequest {
+                run_id: a1.run_id.clone(),
+            })
+            .await
+            .unwrap();
+        let b2 = submit_project(&mut alice, &b, None, Default::default())
+            .await
+            .unwrap();
+        assert!(!b2.resumed && b2.run_id != b1.run_id, "{b2:?}");
+        let runs = alice
+            .list_runs(ListRunsRequest::default())
+            .await
+            .unwrap()
+            .into_inner()
+            .runs;
+        let client_of = |id: &str| runs.iter().find(|r| r.run_id == id).unwrap().client.clone();
+        assert_eq!(client_of(&a1.run_id), "alice");
+        assert_eq!(client_of(&b1.run_id), "bob");
+        assert_eq!(client_of(&b2.run_id), "alice");
+        for (c, r) in [(&mut alice, b2), (&mut bob, b1)] {
+            c.cancel(RunRequest { run_id: r.run_id }).await.unwrap();
+        }
+    });
+    assert!(alive(&mut proc));
+    let trail = audit(&data);
+    for needle in [
+        "submit client:alice run=",
+        "refuse-submit client:alice: project attacked: client alice has 1 run(s) running",
+        "submit client:bob run=",
+        "resume client:alice run=",
+        "cancel client:bob run=",
+    ] {
+        assert!(trail.contains(needle), "no {needle:?} in:\n{trail}");
+    }
 }

@@ -92,7 +92,9 @@ impl proto::ChainSegmentJob {
 ///   drop them and draw the adaptation window).
 /// - 3: a completion's result is a typed `JobResult` (it was JSON text), and a validation's
 ///   Guideline 14 figures are the coordinator's to compute from the job's files.
-pub const PROTOCOL: u32 = 3;
+/// - 4: workers register (`Register`) and call with their own credential; the worker token
+///   alone no longer leases.
+pub const PROTOCOL: u32 = 4;
 
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;

@@ -9,6 +9,7 @@ use std::sync::Mutex;
 use prost::Message;
 use rusqlite::{params, Connection, OptionalExtension};
 
+use crate::audit::Event;
 use crate::now_ms;
 use crate::proto;
 use crate::states::{JobKind, JobState, RunState, Stage};
@@ -97,7 +98,7 @@ CREATE TABLE results (
     r#"
 ALTER TABLE runs ADD COLUMN portfolio TEXT;           -- portfolio id (NULL: a lone run)
 ALTER TABLE runs ADD COLUMN building TEXT;            -- the building's name in its portfolio
-ALTER TABLE runs ADD COLUMN last_lease INTEGER NOT NULL DEFAULT 0; -- id of its latest lease
+ALTER TABLE runs ADD COLUMN last_lease INTEGER NOT NULL DEFAULT 0; -- when it was last served (a sequence)
 CREATE INDEX runs_portfolio ON runs(portfolio);
 CREATE INDEX jobs_cache ON jobs(cache_key, state);
 "#,
@@ -127,6 +128,30 @@ INSERT OR IGNORE INTO run_files (run_id, sha256, size)
     SELECT j.run_id, json_extract(f.value, '$.sha256'), json_extract(f.value, '$.size')
     FROM jobs j, json_each(j.outputs) f
     WHERE j.state = 'done' AND j.cached = 0 AND json_valid(j.outputs);
+"#,
+    r#"
+ALTER TABLE runs ADD COLUMN client TEXT;              -- the client (its token's name) that submitted it
+CREATE INDEX runs_client ON runs(client, state);
+CREATE TABLE workers (                                -- registered workers (docs/cluster.md)
+    id                TEXT PRIMARY KEY,               -- name and a random suffix: leases' worker_id
+    name              TEXT NOT NULL,                  -- the name it registered under
+    credential_sha256 TEXT NOT NULL UNIQUE,           -- its credential's SHA-256 (never the credential)
+    registered_ms     INTEGER NOT NULL,
+    revoked_ms        INTEGER                         -- set: its credential is refused
+);
+CREATE INDEX workers_revoked ON workers(revoked_ms);
+CREATE TABLE audit (                                  -- who did what (crate::audit)
+    id       INTEGER PRIMARY KEY AUTOINCREMENT,
+    ms       INTEGER NOT NULL,
+    actor    TEXT NOT NULL,                           -- client:NAME, worker:ID, enroller, coordinator, operator
+    action   TEXT NOT NULL,                           -- submit, lease, complete, fail, refuse-..., ...
+    run_id   TEXT,
+    job_id   INTEGER,
+    lease_id INTEGER,
+    detail   TEXT NOT NULL DEFAULT ''
+);
+CREATE INDEX audit_run ON audit(run_id, id);
+CREATE INDEX audit_actor ON audit(actor, id);
 "#,
 ];
 
@@ -188,6 +213,9 @@ pub struct RunRow {
     pub portfolio: Option<String>,
     /// Its building's name in that portfolio.
     pub building: Option<String>,
+    /// The client (its token's name) that submitted it; none for runs from before clients had
+    /// names.
+    pub client: Option<String>,
 }
 
 impl RunRow {
@@ -364,7 +392,7 @@ fn parse_files(s: Option<String>) -> Vec<File> {
 /// left from the coordinator's own driver: the one driver keeps that state in the run's
 /// output folder (`chains_summary.json`, `refine.json`).
 const RUN_COLS: &str =
-    "id, name, state, stage, error, bundle, surrogate, summary, created_ms, finished_ms, portfolio, building";
+    "id, name, state, stage, error, bundle, surrogate, summary, created_ms, finished_ms, portfolio, building, client";
 const JOB_COLS: &str =
     "id, run_id, stage, kind, label, spec, state, failures, outputs, result, cached";
 
@@ -391,6 +419,7 @@ fn run_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<RunRow> {
         finished_ms: r.get::<_, Option<i64>>(9)?.map(|v| v as u64),
         portfolio: r.get(10)?,
         building: r.get(11)?,
+        client: r.get(12)?,
     })
 }
 
@@ -432,6 +461,100 @@ pub struct NewJob {
     pub cache_key: Option<String>,
 }
 
+/// A run to record ([`Store::admit_run`]).
+#[derive(Debug, Clone)]
+pub struct NewRun<'a> {
+    /// Its id.
+    pub id: &'a str,
+    /// The project's name.
+    pub name: &'a str,
+    /// The project bundle's files.
+    pub bundle: &'a [File],
+    /// A surrogate given at submission (empty: one is trained).
+    pub surrogate: &'a [File],
+    /// The client that submits it (empty: none named).
+    pub client: &'a str,
+    /// The portfolio it belongs to (empty: a lone run).
+    pub portfolio: &'a str,
+    /// Its building's name in that portfolio.
+    pub building: &'a str,
+}
+
+/// Whether a run was admitted ([`Store::admit_run`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Admission {
+    /// Recorded.
+    Admitted,
+    /// Not recorded: its client already runs this many runs (a portfolio counted once).
+    Refused {
+        /// The client's runs (and portfolios) running.
+        running: u64,
+    },
+}
+
+/// A registered worker ([`Store::workers`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorkerRow {
+    /// Its id (leases' `worker_id`).
+    pub id: String,
+    /// The name it registered under.
+    pub name: String,
+    /// When it registered, ms since the Unix epoch.
+    pub registered_ms: u64,
+    /// When it was revoked, if it was.
+    pub revoked_ms: Option<u64>,
+    /// Its leases active now.
+    pub leases: u64,
+}
+
+/// Which audit events to read ([`Store::audit_events`]).
+#[derive(Debug, Clone, Default)]
+pub struct AuditFilter {
+    /// Only those of this run.
+    pub run: Option<String>,
+    /// Only those of this actor (`client:NAME`, `worker:ID`, ...).
+    pub actor: Option<String>,
+    /// Only the last this many (0: all).
+    pub last: usize,
+}
+
+/// Records `ev` in the audit table inside `tx`, and logs it ([`crate::audit::emit`]).
+fn audit_in(tx: &rusqlite::Transaction<'_>, ev: &Event) -> Result<()> {
+    tx.execute(
+        "INSERT INTO audit (ms, actor, action, run_id, job_id, lease_id, detail)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+        params![
+            ev.ms as i64,
+            ev.actor,
+            ev.action,
+            ev.run,
+            ev.job.map(|j| j as i64),
+            ev.lease.map(|l| l as i64),
+            ev.detail
+        ],
+    )?;
+    crate::audit::emit(ev);
+    Ok(())
+}
+
+/// A fresh lease id: a random 63-bit number (positive as SQLite's integer) no lease has yet.
+fn new_lease_id(tx: &rusqlite::Transaction<'_>) -> Result<i64> {
+    for _ in 0..8 {
+        let b = crate::auth::random_bytes::<8>()
+            .map_err(|e| DbError::Other(format!("no random lease id: {e}")))?;
+        let id = (u64::from_le_bytes(b) >> 1) as i64;
+        let taken: bool = tx.query_row(
+            "SELECT EXISTS (SELECT 1 FROM leases WHERE id = ?1)",
+            [id],
+            |r| r.get(0),
+        )?;
+        if id != 0 && !taken {
+            return Ok(id);
+        }
+    }
+    Err(DbError::Other("no free lease id in 8 draws".into()))
+}
+
 impl Store {
     /// Opens (creating and migrating) the database at `path`.
     pub fn open(path: &Path) -> Result<Store> {
@@ -467,7 +590,8 @@ impl Store {
         f(&mut c)
     }
 
-    /// Records a new run at stage `design`.
+    /// Records a new run at stage `design` (of no named client: runs made by the coordinator's
+    /// own tests and tools).
     pub fn create_run(
         &self,
         id: &str,
@@ -475,20 +599,76 @@ impl Store {
         bundle: &[File],
         surrogate: &[File],
     ) -> Result<()> {
+        let run = NewRun {
+            id,
+            name,
+            bundle,
+            surrogate,
+            client: "",
+            portfolio: "",
+            building: "",
+        };
+        self.admit_run(&run, 0, None).map(|_| ())
+    }
+
+    /// Records `run` at stage `design`, unless its client already has `max_running` runs
+    /// running (0: no limit); a portfolio counts once, however many buildings it has, and a
+    /// building of a portfolio the client is running is always admitted. Decided and recorded
+    /// in one transaction, with `audit` (the submission's event, its run filled in) when given.
+    pub fn admit_run(
+        &self,
+        run: &NewRun<'_>,
+        max_running: u32,
+        audit: Option<Event>,
+    ) -> Result<Admission> {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
+            let client = (!run.client.is_empty()).then_some(run.client);
+            let portfolio = (!run.portfolio.is_empty()).then_some(run.portfolio);
+            if let (Some(client), true) = (client, max_running > 0) {
+                let running: i64 = tx.query_row(
+                    "SELECT COUNT(DISTINCT COALESCE('p:' || portfolio, 'r:' || id)) FROM runs
+                     WHERE client = ?1 AND state = 'running'",
+                    [client],
+                    |r| r.get(0),
+                )?;
+                let in_portfolio: bool = tx.query_row(
+                    "SELECT EXISTS (SELECT 1 FROM runs WHERE client = ?1 AND state = 'running'
+                     AND portfolio = ?2)",
+                    params![client, portfolio],
+                    |r| r.get(0),
+                )?;
+                if running >= max_running as i64 && !in_portfolio {
+                    return Ok(Admission::Refused {
+                        running: running as u64,
+                    });
+                }
+            }
             tx.execute(
-                "INSERT INTO runs (id, name, state, stage, bundle, surrogate, created_ms)
-                 VALUES (?1, ?2, 'running', 'design', ?3, ?4, ?5)",
-                params![id, name, files_json(bundle), files_json(surrogate), now],
+                "INSERT INTO runs (id, name, state, stage, bundle, surrogate, created_ms, client,
+                                   portfolio, building)
+                 VALUES (?1, ?2, 'running', 'design', ?3, ?4, ?5, ?6, ?7, ?8)",
+                params![
+                    run.id,
+                    run.name,
+                    files_json(run.bundle),
+                    files_json(run.surrogate),
+                    now,
+                    client,
+                    portfolio,
+                    portfolio.map(|_| run.building)
+                ],
             )?;
             tx.execute(
                 "INSERT INTO stages (run_id, stage, started_ms) VALUES (?1, 'design', ?2)",
-                params![id, now],
+                params![run.id, now],
             )?;
+            if let Some(ev) = audit {
+                audit_in(&tx, &ev.run(run.id))?;
+            }
             tx.commit()?;
-            Ok(())
+            Ok(Admission::Admitted)
         })
     }
 
@@ -718,7 +898,7 @@ impl Store {
                 "SELECT j.id, COUNT(a.lease_id),
                         COALESCE((SELECT worker_id FROM attempts b WHERE b.job_id = j.id
                                   AND (b.outcome = 'done' OR b.outcome IS NULL)
-                                  ORDER BY b.lease_id DESC LIMIT 1), '')
+                                  ORDER BY b.started_ms DESC LIMIT 1), '')
                  FROM jobs j LEFT JOIN attempts a ON a.job_id = j.id
                  WHERE j.run_id = ?1 GROUP BY j.id ORDER BY j.id",
             )?;
@@ -840,11 +1020,13 @@ impl Store {
             let Some(job) = job else {
                 return Ok(None);
             };
+            // Unguessable: a lease id names no other lease, and a worker cannot work out
+            // another's from its own.
+            let lease = new_lease_id(&tx)?;
             tx.execute(
-                "INSERT INTO leases (job_id, worker_id, granted_ms, expires_ms) VALUES (?1, ?2, ?3, ?4)",
-                params![job.id as i64, worker, now, now + ttl_ms as i64],
+                "INSERT INTO leases (id, job_id, worker_id, granted_ms, expires_ms) VALUES (?1, ?2, ?3, ?4, ?5)",
+                params![lease, job.id as i64, worker, now, now + ttl_ms as i64],
             )?;
-            let lease = tx.last_insert_rowid();
             tx.execute(
                 "INSERT INTO attempts (lease_id, job_id, worker_id, started_ms) VALUES (?1, ?2, ?3, ?4)",
                 params![lease, job.id as i64, worker, now],
@@ -853,9 +1035,19 @@ impl Store {
                 "UPDATE jobs SET state = 'leased', lease_id = ?2 WHERE id = ?1",
                 params![job.id as i64, lease],
             )?;
+            // The order in which runs were last served (lease ids are random, not ordered).
             tx.execute(
-                "UPDATE runs SET last_lease = ?2 WHERE id = ?1",
-                params![job.run_id, lease],
+                "UPDATE runs SET last_lease = (SELECT COALESCE(MAX(last_lease), 0) + 1 FROM runs)
+                 WHERE id = ?1",
+                [&job.run_id],
+            )?;
+            audit_in(
+                &tx,
+                &Event::new(format!("worker:{worker}"), "lease")
+                    .run(&job.run_id)
+                    .job(job.id)
+                    .lease(lease as u64)
+                    .detail(&job.label),
             )?;
             tx.commit()?;
             let mut spec = job.spec;
@@ -940,23 +1132,25 @@ impl Store {
         self.with(|c| {
             let now = now_ms() as i64;
             let tx = c.transaction()?;
-            let row: Option<(i64, String, String, Option<String>, String)> = tx
-                .query_row(
-                    "SELECT j.id, j.state, j.run_id, j.cache_key, r.state FROM leases l
-                     JOIN jobs j ON j.id = l.job_id JOIN runs r ON r.id = j.run_id WHERE l.id = ?1",
-                    [lease as i64],
-                    |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)),
-                )
-                .optional()?;
-            let Some((job, state, run, key, run_state)) = row else {
+            let Some(held) = held_lease(&tx, lease)? else {
                 return Ok((Outcome::Ignored, vec![]));
             };
+            let event = |action: &str, detail: String| held.event(lease, action, detail);
+            let HeldLease {
+                job,
+                ref state,
+                ref run,
+                cache_key: ref key,
+                ref run_state,
+                ref label,
+                ..
+            } = held;
             let fresh = (state == "queued" || state == "leased") && run_state == "running";
             // Over the quota only by what these outputs add: a completion that adds nothing
             // (a simulation reporting EnergyPlus's failure, a file the run already has) is
             // recorded even where a lowered quota is already passed.
             let (before, bytes) = match fresh && max_run_bytes > 0 {
-                true => run_output_bytes(&tx, &run, outputs)?,
+                true => run_output_bytes(&tx, run, outputs)?,
                 false => (0, 0),
             };
             let over = max_run_bytes > 0 && bytes > max_run_bytes && bytes > before;
@@ -972,6 +1166,8 @@ impl Store {
             )?;
             tx.execute("UPDATE leases SET active = 0 WHERE id = ?1", [lease as i64])?;
             if !fresh {
+                let why = format!("{label}: ignored, the job is {state} and its run {run_state}");
+                audit_in(&tx, &event("complete-stale", why))?;
                 tx.commit()?;
                 return Ok((Outcome::Ignored, vec![]));
             }
@@ -981,15 +1177,18 @@ impl Store {
                      bytes, over the coordinator's per-run quota of {max_run_bytes} bytes \
                      (--max-run-gb)"
                 );
-                end_run_in(&tx, &run, RunState::Failed, Some(&msg))?;
+                audit_in(&tx, &event("refuse-complete", format!("{label}: {msg}")))?;
+                end_run_in(&tx, run, RunState::Failed, Some(&msg))?;
                 tx.commit()?;
+                let run = run.clone();
                 return Ok((Outcome::OverQuota { run, bytes }, vec![]));
             }
+            audit_in(&tx, &event("complete", format!("{label}: {result}")))?;
             tx.execute(
                 "UPDATE jobs SET state = 'done', outputs = ?2, result = ?3, finished_ms = ?4, lease_id = NULL WHERE id = ?1",
                 params![job, files_json(outputs), result, now],
             )?;
-            record_run_files(&tx, &run, outputs)?;
+            record_run_files(&tx, run, outputs)?;
             tx.execute(
                 "UPDATE leases SET active = 0 WHERE job_id = ?1",
                 [job],
@@ -1016,7 +1215,7 @@ impl Store {
                 )?;
             }
             tx.commit()?;
-            Ok((Outcome::Recorded(run), shared))
+            Ok((Outcome::Recorded(run.clone()), shared))
         })
     }
 
@@ -1070,6 +1269,178 @@ impl Store {
             }
             tx.commit()?;
             Ok(runs)
+        })
+    }
+
+    /// Records a new worker registered as `name` with the credential whose SHA-256 is
+    /// `credential_sha256`, by `actor` (the enrollment token's holder); returns its id: the
+    /// name and a random suffix, unique.
+    pub fn register_worker(
+        &self,
+        name: &str,
+        credential_sha256: &str,
+        actor: &str,
+    ) -> Result<String> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            for _ in 0..8 {
+                let b = crate::auth::random_bytes::<4>()
+                    .map_err(|e| DbError::Other(format!("no random worker id: {e}")))?;
+                let id = format!("{name}-{}", hex::encode(b));
+                let n = tx.execute(
+                    "INSERT OR IGNORE INTO workers (id, name, credential_sha256, registered_ms)
+                     VALUES (?1, ?2, ?3, ?4)",
+                    params![id, name, credential_sha256, now_ms() as i64],
+                )?;
+                if n == 1 {
+                    audit_in(
+                        &tx,
+                        &Event::new(actor, "register").detail(format!("worker {id} (name {name})")),
+                    )?;
+                    tx.commit()?;
+                    return Ok(id);
+                }
+            }
+            Err(DbError::Other(format!(
+                "no free worker id for {name} in 8 draws"
+            )))
+        })
+    }
+
+    /// Every registered worker's credential: `(SHA-256, worker id, revoked)`.
+    pub fn worker_credentials(&self) -> Result<Vec<(String, String, bool)>> {
+        self.with(|c| {
+            let mut st =
+                c.prepare("SELECT credential_sha256, id, revoked_ms IS NOT NULL FROM workers")?;
+            let rows = st
+                .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Revokes worker `id` (by `actor`): its credential is refused from now on (a running
+    /// coordinator learns of it within a second, [`Store::revoked_since`]). False when there is
+    /// no such worker; a worker revoked already stays revoked since then.
+    pub fn revoke_worker(&self, id: &str, actor: &str) -> Result<bool> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let known: bool = tx.query_row(
+                "SELECT EXISTS (SELECT 1 FROM workers WHERE id = ?1)",
+                [id],
+                |r| r.get(0),
+            )?;
+            if !known {
+                return Ok(false);
+            }
+            tx.execute(
+                "UPDATE workers SET revoked_ms = ?2 WHERE id = ?1 AND revoked_ms IS NULL",
+                params![id, now_ms() as i64],
+            )?;
+            audit_in(
+                &tx,
+                &Event::new(actor, "revoke").detail(format!("worker {id}")),
+            )?;
+            tx.commit()?;
+            Ok(true)
+        })
+    }
+
+    /// Workers revoked at or after `ms`: `(id, when)`.
+    pub fn revoked_since(&self, ms: u64) -> Result<Vec<(String, u64)>> {
+        self.with(|c| {
+            let mut st = c.prepare("SELECT id, revoked_ms FROM workers WHERE revoked_ms >= ?1")?;
+            let rows = st
+                .query_map([ms as i64], |r| Ok((r.get(0)?, r.get::<_, i64>(1)? as u64)))?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// The registered workers, in registration order, with their active leases.
+    pub fn workers(&self) -> Result<Vec<WorkerRow>> {
+        self.with(|c| {
+            let mut st = c.prepare(
+                "SELECT w.id, w.name, w.registered_ms, w.revoked_ms,
+                        (SELECT COUNT(*) FROM leases l WHERE l.worker_id = w.id AND l.active = 1)
+                 FROM workers w ORDER BY w.registered_ms, w.rowid",
+            )?;
+            let rows = st
+                .query_map([], |r| {
+                    Ok(WorkerRow {
+                        id: r.get(0)?,
+                        name: r.get(1)?,
+                        registered_ms: r.get::<_, i64>(2)? as u64,
+                        revoked_ms: r.get::<_, Option<i64>>(3)?.map(|v| v as u64),
+                        leases: r.get::<_, i64>(4)? as u64,
+                    })
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
+    /// Gives back every active lease of `worker` (revoked): their jobs are queued again, not
+    /// counted as failures. Returns the runs that changed.
+    pub fn return_leases_of(&self, worker: &str, max_failures: u32) -> Result<Vec<String>> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            let leases: Vec<i64> = {
+                let mut st =
+                    tx.prepare("SELECT id FROM leases WHERE worker_id = ?1 AND active = 1")?;
+                let rows = st
+                    .query_map([worker], |r| r.get(0))?
+                    .collect::<rusqlite::Result<Vec<i64>>>()?;
+                rows
+            };
+            let mut runs = vec![];
+            for l in leases {
+                let error = "the worker's credential was revoked";
+                if let Outcome::Recorded(r) =
+                    fail_in(&tx, l as u64, error, "returned", max_failures)?
+                {
+                    runs.push(r);
+                }
+            }
+            tx.commit()?;
+            Ok(runs)
+        })
+    }
+
+    /// Records `ev` in the audit trail (and logs it).
+    pub fn audit(&self, ev: &Event) -> Result<()> {
+        self.with(|c| {
+            let tx = c.transaction()?;
+            audit_in(&tx, ev)?;
+            tx.commit()?;
+            Ok(())
+        })
+    }
+
+    /// The audit trail's events that `filter` selects, oldest first.
+    pub fn audit_events(&self, filter: &AuditFilter) -> Result<Vec<Event>> {
+        self.with(|c| {
+            let mut st = c.prepare(
+                "SELECT ms, actor, action, run_id, job_id, lease_id, detail FROM (
+                   SELECT * FROM audit WHERE (?1 IS NULL OR run_id = ?1) AND (?2 IS NULL OR actor = ?2)
+                   ORDER BY id DESC LIMIT ?3)
+                 ORDER BY id",
+            )?;
+            let limit = if filter.last == 0 { -1 } else { filter.last as i64 };
+            let rows = st
+                .query_map(params![filter.run, filter.actor, limit], |r| {
+                    Ok(Event {
+                        ms: r.get::<_, i64>(0)? as u64,
+                        actor: r.get(1)?,
+                        action: r.get(2)?,
+                        run: r.get(3)?,
+                        job: r.get::<_, Option<i64>>(4)?.map(|v| v as u64),
+                        lease: r.get::<_, Option<i64>>(5)?.map(|v| v as u64),
+                        detail: r.get(6)?,
+                    })
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
         })
     }
 
@@ -1170,6 +1541,51 @@ fn sha256s_in(bytes: &[u8], out: &mut std::collections::HashSet<String>) {
     }
 }
 
+/// What a completion of a lease needs to know of it ([`held_lease`]).
+struct HeldLease {
+    job: i64,
+    state: String,
+    run: String,
+    cache_key: Option<String>,
+    run_state: String,
+    worker: String,
+    label: String,
+}
+
+impl HeldLease {
+    /// The audit event of `action` on this lease (`lease`), by its worker.
+    fn event(&self, lease: u64, action: &str, detail: String) -> Event {
+        Event::new(format!("worker:{}", self.worker), action)
+            .run(&self.run)
+            .job(self.job as u64)
+            .lease(lease)
+            .detail(detail)
+    }
+}
+
+/// Lease `lease`'s job, its run and the worker that took it, whatever their states.
+fn held_lease(tx: &rusqlite::Transaction<'_>, lease: u64) -> Result<Option<HeldLease>> {
+    Ok(tx
+        .query_row(
+            "SELECT j.id, j.state, j.run_id, j.cache_key, r.state, l.worker_id, j.label
+             FROM leases l JOIN jobs j ON j.id = l.job_id JOIN runs r ON r.id = j.run_id
+             WHERE l.id = ?1",
+            [lease as i64],
+            |r| {
+                Ok(HeldLease {
+                    job: r.get(0)?,
+                    state: r.get(1)?,
+                    run: r.get(2)?,
+                    cache_key: r.get(3)?,
+                    run_state: r.get(4)?,
+                    worker: r.get(5)?,
+                    label: r.get(6)?,
+                })
+            },
+        )
+        .optional()?)
+}
+
 fn insert_job(tx: &rusqlite::Transaction<'_>, run: &str, j: NewJob) -> Result<()> {
     let now = now_ms() as i64;
     let cached = match &j.cache_key {
@@ -1218,10 +1634,11 @@ fn fail_in(
     max_failures: u32,
 ) -> Result<Outcome> {
     let now = now_ms() as i64;
-    let row: Option<(i64, String, Option<i64>, i64, String, String)> = tx
+    type Row = (i64, String, Option<i64>, i64, String, String, String);
+    let row: Option<Row> = tx
         .query_row(
-            "SELECT j.id, j.state, j.lease_id, j.failures, j.run_id, j.label FROM leases l
-             JOIN jobs j ON j.id = l.job_id WHERE l.id = ?1 AND l.active = 1",
+            "SELECT j.id, j.state, j.lease_id, j.failures, j.run_id, j.label, l.worker_id
+             FROM leases l JOIN jobs j ON j.id = l.job_id WHERE l.id = ?1 AND l.active = 1",
             [lease as i64],
             |r| {
                 Ok((
@@ -1231,6 +1648,7 @@ fn fail_in(
                     r.get(3)?,
                     r.get(4)?,
                     r.get(5)?,
+                    r.get(6)?,
                 ))
             },
         )
@@ -1240,12 +1658,24 @@ fn fail_in(
         "UPDATE attempts SET ended_ms = ?2, outcome = ?3, error = ?4 WHERE lease_id = ?1 AND ended_ms IS NULL",
         params![lease as i64, now, outcome, error],
     )?;
-    let Some((job, state, cur, failures, run, label)) = row else {
+    let Some((job, state, cur, failures, run, label, worker)) = row else {
         return Ok(Outcome::Ignored);
     };
     if state != "leased" || cur != Some(lease as i64) {
         return Ok(Outcome::Ignored);
     }
+    let action = match outcome {
+        "returned" => "return",
+        "lost" => "lost",
+        _ => "fail",
+    };
+    let event = |detail: String| {
+        Event::new(format!("worker:{worker}"), action)
+            .run(&run)
+            .job(job as u64)
+            .lease(lease)
+            .detail(detail)
+    };
     let failures = failures + if outcome == "returned" { 0 } else { 1 };
     if failures >= max_failures as i64 {
         tx.execute(
@@ -1253,12 +1683,25 @@ fn fail_in(
             params![job, failures, error, now],
         )?;
         let reason = format!("{label} failed {failures} times; last error: {error}");
+        audit_in(
+            tx,
+            &event(format!(
+                "{label}: failure {failures} of {max_failures}, the job and its run fail: {error}"
+            )),
+        )?;
         end_run_in(tx, &run, RunState::Failed, Some(&reason))?;
     } else {
         tx.execute(
             "UPDATE jobs SET state = 'queued', failures = ?2, error = ?3, lease_id = NULL WHERE id = ?1",
             params![job, failures, error],
         )?;
+        let detail = match outcome {
+            "returned" => format!("{label}: given back, queued again: {error}"),
+            _ => format!(
+                "{label}: failure {failures} of {max_failures}, queued for a retry: {error}"
+            ),
+        };
+        audit_in(tx, &event(detail))?;
     }
     Ok(Outcome::Recorded(run))
 }
@@ -1493,7 +1936,10 @@ mod tests {
                 .collect::<Vec<_>>(),
             vec![("A".into(), short('x'), 600), ("A".into(), short('y'), 300)]
         );
-        let backfill = MIGRATIONS.last().unwrap();
+        let backfill = MIGRATIONS
+            .iter()
+            .find(|m| m.contains("INSERT OR IGNORE INTO run_files"))
+            .unwrap();
         let backfill = &backfill[backfill.find("INSERT OR IGNORE INTO run_files").unwrap()..];
         s.with(|c| {
             c.execute("DELETE FROM run_files", [])?;
@@ -1508,6 +1954,188 @@ mod tests {
         let after = s.run("A").unwrap().unwrap();
         assert_eq!((after.state, after.stage), (RunState::Failed, a.stage));
         assert_eq!(s.jobs("A", None).unwrap().len(), 5);
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// Lease ids are random 63-bit numbers, not a sequence another worker could guess, and
+    /// each lease records who took it, in the audit trail too.
+    #[test]
+    fn lease_ids_are_unguessable_and_every_lease_is_audited() {
+        let (s, dir) = store("ids");
+        s.create_run("A", "a", &[], &[]).unwrap();
+        s.set_stage("A", Stage::Simulate, jobs(20, |_| None))
+            .unwrap();
+        let ids: Vec<u64> = (0..20)
+            .map(|_| s.lease("w1", 60_000).unwrap().unwrap().lease_id)
+            .collect();
+        let distinct: std::collections::HashSet<_> = ids.iter().collect();
+        assert_eq!(distinct.len(), 20);
+        assert!(ids.iter().all(|&i| i > 0 && i <= i64::MAX as u64));
+        // Not consecutive: at most a couple of neighbours by chance.
+        let steps = ids.windows(2).filter(|w| w[1] == w[0] + 1).count();
+        assert!(steps < 2, "{ids:?}");
+        // Large: a sequence would be below 21.
+        assert!(
+            ids.iter().filter(|&&i| i > 1 << 40).count() >= 19,
+            "{ids:?}"
+        );
+        let (held, job) = s.leased_job(ids[3]).unwrap().unwrap();
+        assert_eq!(held, "w1");
+        s.complete(ids[3], &[], "{\"seconds\":1.0}").unwrap();
+        s.fail(ids[4], "EnergyPlus crashed", false, 3).unwrap();
+        s.fail(ids[5], "shutting down", true, 3).unwrap();
+        let trail = s.audit_events(&AuditFilter::default()).unwrap();
+        let leases = trail.iter().filter(|e| e.action == "lease").count();
+        assert_eq!(leases, 20);
+        let done = trail.iter().find(|e| e.action == "complete").unwrap();
+        assert_eq!(
+            (
+                done.actor.as_str(),
+                done.lease,
+                done.job,
+                done.run.as_deref()
+            ),
+            ("worker:w1", Some(ids[3]), Some(job.id), Some("A"))
+        );
+        let failed = trail.iter().find(|e| e.action == "fail").unwrap();
+        assert!(
+            failed
+                .detail
+                .contains("failure 1 of 3, queued for a retry: EnergyPlus crashed"),
+            "{failed:?}"
+        );
+        let back = trail.iter().find(|e| e.action == "return").unwrap();
+        assert!(back.detail.contains("given back"), "{back:?}");
+        // A filter by run and the last n.
+        let last = s
+            .audit_events(&AuditFilter {
+                run: Some("A".into()),
+                last: 2,
+                ..Default::default()
+            })
+            .unwrap();
+        assert_eq!(
+            last.iter().map(|e| e.action.as_str()).collect::<Vec<_>>(),
+            ["fail", "return"]
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// A worker's id is its name and a random suffix (a second worker of the same name is
+    /// another worker); revoking one marks it alone, gives its leases back and is audited.
+    #[test]
+    fn workers_register_under_their_own_ids_and_one_is_revoked_alone() {
+        let (s, dir) = store("workers");
+        let w1 = s.register_worker("node", "aa", "enroller").unwrap();
+        let w2 = s.register_worker("node", "bb", "enroller").unwrap();
+        assert!(w1.starts_with("node-") && w2.starts_with("node-") && w1 != w2);
+        assert!(
+            s.register_worker("node", "aa", "enroller").is_err(),
+            "one credential, one worker"
+        );
+        s.create_run("A", "a", &[], &[]).unwrap();
+        s.set_stage("A", Stage::Simulate, jobs(2, |_| None))
+            .unwrap();
+        let l1 = s.lease(&w1, 60_000).unwrap().unwrap();
+        let l2 = s.lease(&w2, 60_000).unwrap().unwrap();
+        let t0 = now_ms();
+        assert!(s.revoke_worker(&w1, "operator").unwrap());
+        assert!(!s.revoke_worker("node-nobody", "operator").unwrap());
+        let revoked = s.revoked_since(t0).unwrap();
+        assert_eq!(
+            revoked.iter().map(|r| r.0.as_str()).collect::<Vec<_>>(),
+            [w1.as_str()]
+        );
+        let creds = s.worker_credentials().unwrap();
+        assert!(creds.contains(&("aa".into(), w1.clone(), true)));
+        assert!(creds.contains(&("bb".into(), w2.clone(), false)));
+        assert_eq!(s.return_leases_of(&w1, 3).unwrap(), vec!["A".to_string()]);
+        let by_id = |id: u64| {
+            s.jobs("A", None)
+                .unwrap()
+                .into_iter()
+                .find(|j| j.id == id)
+                .unwrap()
+        };
+        assert_eq!(by_id(l1.job_id).state, JobState::Queued);
+        assert_eq!(
+            by_id(l1.job_id).failures,
+            0,
+            "a revoked worker's job is not a failure"
+        );
+        assert_eq!(by_id(l2.job_id).state, JobState::Leased);
+        let ws = s.workers().unwrap();
+        assert_eq!(ws.len(), 2);
+        assert!(ws[0].revoked_ms.is_some() && ws[0].leases == 0);
+        assert!(ws[1].revoked_ms.is_none() && ws[1].leases == 1);
+        let actions: Vec<(String, String)> = s
+            .audit_events(&AuditFilter::default())
+            .unwrap()
+            .into_iter()
+            .filter(|e| e.action != "lease")
+            .map(|e| (e.actor, e.action))
+            .collect();
+        let w1a = format!("worker:{w1}");
+        assert_eq!(
+            actions,
+            [
+                ("enroller".to_string(), "register".to_string()),
+                ("enroller".into(), "register".into()),
+                ("operator".into(), "revoke".into()),
+                (w1a, "return".into()),
+            ]
+        );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// A client runs at most `max` runs at once, a portfolio counting once; other clients are
+    /// not held back, and a run that ends frees its place.
+    #[test]
+    fn each_client_runs_at_most_its_limit() {
+        let (s, dir) = store("limits");
+        let new = |id: &'static str, client: &'static str, portfolio: &'static str| NewRun {
+            id,
+            name: id,
+            bundle: &[],
+            surrogate: &[],
+            client,
+            portfolio,
+            building: id,
+        };
+        let admit = |r: NewRun<'_>| {
+            s.admit_run(&r, 2, Some(Event::new("client:x", "submit")))
+                .unwrap()
+        };
+        assert_eq!(admit(new("A1", "alice", "")), Admission::Admitted);
+        for b in ["P1", "P2", "P3"] {
+            assert_eq!(admit(new(b, "alice", "campus")), Admission::Admitted);
+        }
+        assert_eq!(
+            admit(new("A2", "alice", "")),
+            Admission::Refused { running: 2 }
+        );
+        assert_eq!(
+            admit(new("Q1", "alice", "other")),
+            Admission::Refused { running: 2 }
+        );
+        assert_eq!(admit(new("B1", "bob", "")), Admission::Admitted);
+        s.end_run("A1", RunState::Cancelled, None).unwrap();
+        assert_eq!(admit(new("A2", "alice", "")), Admission::Admitted);
+        assert_eq!(
+            s.run("A2").unwrap().unwrap().client.as_deref(),
+            Some("alice")
+        );
+        assert_eq!(
+            s.run("P2").unwrap().unwrap().portfolio.as_deref(),
+            Some("campus")
+        );
+        let submits = s
+            .audit_events(&AuditFilter::default())
+            .unwrap()
+            .into_iter()
+            .filter(|e| e.action == "submit")
+            .count();
+        assert_eq!(submits, 6, "each admitted run, none refused");
         std::fs::remove_dir_all(dir).ok();
     }
 }

@@ -55,6 +55,9 @@ pub struct Config {
     /// Most bytes the distinct files one run's jobs produce may take (bytes); the completion
     /// that would pass it is refused and the run fails, saying so. 0: no limit.
     pub max_run_bytes: u64,
+    /// Runs one client may have running at once (a portfolio counts once); a submission past
+    /// it is refused. 0: no limit.
+    pub max_runs_per_client: u32,
 }
 
 impl Default for Config {
@@ -67,6 +70,7 @@ impl Default for Config {
             max_store_bytes: 0,
             max_uploads: 16,
             max_run_bytes: 0,
+            max_runs_per_client: 8,
         }
     }
 }
@@ -85,6 +89,8 @@ pub struct State {
     pub kick: tokio::sync::mpsc::UnboundedSender<String>,
     /// Permits for uploads in progress ([`Config::max_uploads`]).
     pub uploads: tokio::sync::Semaphore,
+    /// The registered workers' credentials, as the token check sees them.
+    pub credentials: crate::auth::WorkerCredentials,
 }
 
 type Result<T> = std::result::Result<T, String>;

@@ -7,6 +7,7 @@
 //! re-exported here under their old paths.
 #![deny(missing_docs)]
 
+pub mod audit;
 pub mod db;
 pub mod driver;
 pub mod metrics;

@@ -1,6 +1,7 @@
-//! Starting the coordinator: the database, the driver, the lease reaper and the gRPC server
-//! (bearer token required, with a separate worker token when given; TLS when a certificate and
-//! key are given).
+//! Starting the coordinator: the database, the driver, the lease reaper (which also applies
+//! workers' revocations) and the gRPC server (named client tokens, the enrollment token workers
+//! register with, and the registered workers' own credentials; TLS when a certificate and key
+//! are given).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -11,7 +12,8 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::transport::{Identity, Server, ServerTlsConfig};
 
 use crate::artifacts::ArtifactDir;
-use crate::auth::CheckToken;
+use crate::audit::Event;
+use crate::auth::{CheckToken, Refusal, WorkerCredentials};
 use crate::db::Store;
 use crate::driver::{spawn_driver, Config, State};
 use crate::proto::coordinator_server::CoordinatorServer;
@@ -25,10 +27,14 @@ pub struct Options {
     pub listen: SocketAddr,
     /// State: `coordinator.db`, `artifacts/`, `runs/`.
     pub data: PathBuf,
-    /// The bearer token of clients (and of workers when `worker_token` is `None`).
-    pub token: String,
-    /// A separate token for workers: leases belong to workers, submissions to clients.
-    pub worker_token: Option<String>,
+    /// The clients' tokens, by name (`(name, token)`); each run records its client's name.
+    pub clients: Vec<(String, String)>,
+    /// The enrollment token: workers register with it and get credentials of their own. It may
+    /// be a client's token (one token for everything: that client also registers workers).
+    pub enroll: String,
+    /// Requests a second one client may make on average, in bursts of up to ten seconds'
+    /// worth (0: no limit; workers are not limited).
+    pub client_rate: f64,
     /// PEM certificate and key: serve TLS.
     pub tls: Option<(PathBuf, PathBuf)>,
     /// Where to serve Prometheus metrics (`GET /metrics`, plain HTTP, no token); `None`: not.
@@ -48,6 +54,10 @@ pub async fn serve(
     let store = Store::open(&opts.data.join("coordinator.db"))?;
     // Workers could not heartbeat while we were down: give their leases a fresh TTL.
     store.refresh_leases(opts.config.lease_ttl_ms)?;
+    let credentials = WorkerCredentials::default();
+    for (sha, id, revoked) in store.worker_credentials()? {
+        credentials.add(&sha, &id, revoked);
+    }
     let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
     let st = Arc::new(State {
         store,
@@ -56,6 +66,7 @@ pub async fn serve(
         config: opts.config.clone(),
         kick: tx,
         uploads: tokio::sync::Semaphore::new(opts.config.max_uploads.max(1)),
+        credentials: credentials.clone(),
     });
     for r in st.store.running_runs()? {
         let _ = st.kick.send(r);
@@ -77,13 +88,13 @@ pub async fn serve(
         ),
     };
     ready(listener.local_addr()?, metrics_addr);
+    let check = CheckToken::with_clients(&opts.clients, Some(&opts.enroll), credentials)
+        .rate_limited(opts.client_rate, opts.client_rate * 10.0)
+        .on_refusal(refusals(st.clone()));
     let svc = CoordinatorServer::new(Service { st })
         .max_decoding_message_size(MAX_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_MESSAGE_BYTES);
-    let svc = InterceptedService::new(
-        svc,
-        CheckToken::with_roles(&opts.token, opts.worker_token.as_deref()),
-    );
+    let svc = InterceptedService::new(svc, check);
     builder(opts.tls.as_ref())?
         .add_service(health_svc)
         .add_service(svc)
@@ -96,18 +107,62 @@ pub async fn serve(
     Ok(())
 }
 
-/// Expired leases, every 500 ms: their jobs go back to the queue (or fail after
-/// `max_failures`), and their runs' drivers are woken.
+/// What the token check refuses: a revoked worker's call is recorded in the audit trail; a
+/// client over its rate and an unknown token are logged only (an unauthenticated caller could
+/// otherwise fill the database).
+fn refusals(st: Arc<State>) -> crate::auth::OnRefusal {
+    Arc::new(move |r: &Refusal| match r {
+        Refusal::Revoked { worker } => {
+            let ev = Event::new(format!("worker:{worker}"), "refuse-revoked")
+                .detail("a call with the revoked worker's credential");
+            if let Err(e) = st.store.audit(&ev) {
+                eprintln!("bemcal-coordinator: audit trail: {e}: {}", ev.text());
+            }
+        }
+        Refusal::RateLimited { client } => crate::audit::emit(
+            &Event::new(format!("client:{client}"), "refuse-rate")
+                .detail("over its request rate (--client-rate)"),
+        ),
+        Refusal::Unknown => crate::audit::emit(
+            &Event::new("unknown", "refuse-token").detail("no token, or a wrong one"),
+        ),
+    })
+}
+
+/// Every 500 ms: expired leases (their jobs go back to the queue, or fail after
+/// `max_failures`), and workers revoked since the last look (`bemcal coordinator
+/// revoke-worker` writes to the database): their credentials are refused from then on and
+/// their leases given back. The runs that changed are woken.
 fn spawn_reaper(reaper: Arc<State>) {
     tokio::spawn(async move {
+        let mut seen = std::collections::HashSet::new();
+        let mut since = 0;
         loop {
             tokio::time::sleep(Duration::from_millis(500)).await;
             let st = reaper.clone();
-            let runs = tokio::task::spawn_blocking(move || st.store.expire(st.config.max_failures))
-                .await
-                .ok()
-                .and_then(|r| r.ok())
-                .unwrap_or_default();
+            let revoked: Vec<(String, u64)> = st
+                .store
+                .revoked_since(since)
+                .unwrap_or_default()
+                .into_iter()
+                .filter(|(id, _)| !seen.contains(id))
+                .collect();
+            for (id, ms) in &revoked {
+                st.credentials.revoke(id);
+                since = since.max(*ms);
+                seen.insert(id.clone());
+            }
+            let runs = tokio::task::spawn_blocking(move || {
+                let mut runs = st.store.expire(st.config.max_failures)?;
+                for (id, _) in revoked {
+                    runs.extend(st.store.return_leases_of(&id, st.config.max_failures)?);
+                }
+                Ok::<_, crate::db::DbError>(runs)
+            })
+            .await
+            .ok()
+            .and_then(|r| r.ok())
+            .unwrap_or_default();
             for r in runs {
                 let _ = reaper.kick.send(r);
             }

@@ -51,8 +51,9 @@ fn tls_coordinator_serves_clients_that_trust_its_ca() {
         let opts = Options {
             listen: "127.0.0.1:0".parse().unwrap(),
             data: dir.path().join("coordinator"),
-            token: TOKEN.into(),
-            worker_token: None,
+            clients: vec![("default".into(), TOKEN.into())],
+            enroll: TOKEN.into(),
+            client_rate: 0.0,
             tls: Some((dir.path().join("tls.crt"), dir.path().join("tls.key"))),
             metrics: None,
             config: Config::default(),

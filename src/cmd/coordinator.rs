@@ -9,29 +9,60 @@ use std::process::{Child, Stdio};
 
 use anyhow::Context;
 use bemcal_calibrate::Summary;
-use bemcal_client::auth::{load_token, load_worker_token, random_token, TOKEN_ENV};
+use bemcal_client::auth::{
+    load_client_tokens, load_token, load_token_if_any, load_worker_token, random_token,
+    DEFAULT_CLIENT, TOKEN_ENV,
+};
 use bemcal_client::client::{self, Connect};
 use bemcal_client::proto::{ListRunsRequest, RunRequest, RunState};
+use bemcal_coordinator::audit::{LogFormat, LogLevel};
+use bemcal_coordinator::db::{AuditFilter, Store};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
 
-/// Serve calibration runs to pull-based workers (state in DATA/coordinator.db).
+/// Serve calibration runs to pull-based workers (state in DATA/coordinator.db); or, with a
+/// subcommand, look after its workers and read its audit trail.
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
+    #[command(subcommand)]
+    pub admin: Option<Admin>,
     /// Address to listen on (port 0: any free port; the bound address is printed).
     #[arg(long, default_value = "127.0.0.1:50051")]
     pub listen: SocketAddr,
     /// State folder (database, artifacts, run folders).
-    #[arg(long)]
-    pub data: PathBuf,
-    /// File with the bearer token (default: env BEMCAL_TOKEN).
+    #[arg(long, required = true)]
+    pub data: Option<PathBuf>,
+    /// File with the bearer token (default: env BEMCAL_TOKEN): the client `default`, and the
+    /// token workers register with when there is no --worker-token-file. Optional with
+    /// --client-tokens.
     #[arg(long)]
     pub token_file: Option<PathBuf>,
-    /// File with a separate token for workers (default: env BEMCAL_WORKER_TOKEN). With it,
-    /// only workers lease, heartbeat, complete and fail jobs, and only clients submit, watch
-    /// and cancel runs; without it the one token serves both.
+    /// File of named client tokens, one `NAME TOKEN` a line (`#` comments): each run records
+    /// the name of the token that submitted it, and the limits apply per name.
+    #[arg(long)]
+    pub client_tokens: Option<PathBuf>,
+    /// File with the enrollment token workers register with (default: env
+    /// BEMCAL_WORKER_TOKEN); each worker then gets a credential of its own, and the token alone
+    /// leases nothing. Without it the --token-file token registers workers.
     #[arg(long)]
     pub worker_token_file: Option<PathBuf>,
+    /// Runs one client may have running at once (a portfolio counts once); a submission past
+    /// it is refused (0: no limit).
+    #[arg(long, default_value_t = 8)]
+    pub max_runs_per_client: u32,
+    /// Requests a second one client may make on average, in bursts of up to ten seconds'
+    /// worth; past it calls are refused until the client slows down (0: no limit; workers are
+    /// not limited).
+    #[arg(long, default_value_t = 0.0)]
+    pub client_rate: f64,
+    /// How the audit events are logged on standard error: text or json (one object a line).
+    #[arg(long, default_value = "text", value_parser = ["text", "json"])]
+    pub log_format: String,
+    /// Which audit events are logged: off, info (all but leases and completions) or debug
+    /// (all). The database's audit table has them all whatever this says.
+    #[arg(long, default_value = "info", value_parser = ["off", "info", "debug"])]
+    pub log_level: String,
     /// TLS certificate (PEM); with --tls-key, serve https.
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -68,6 +99,110 @@ pub struct Args {
     pub metrics_listen: Option<SocketAddr>,
 }
 
+/// Looking after a coordinator's workers and reading its audit trail, from its state folder
+/// (run where the coordinator's data is, e.g. `kubectl exec`; the coordinator may be running).
+#[derive(Debug, clap::Subcommand)]
+pub enum Admin {
+    /// The registered workers: id, name, when registered, whether revoked, leases held.
+    Workers {
+        /// The coordinator's state folder.
+        #[arg(long)]
+        data: PathBuf,
+    },
+    /// Revokes a worker: its credential is refused within a second and its leases are given
+    /// back; the other workers go on.
+    RevokeWorker {
+        /// The coordinator's state folder.
+        #[arg(long)]
+        data: PathBuf,
+        /// The worker's id (as `bemcal coordinator workers` lists it).
+        id: String,
+    },
+    /// The audit trail: submissions, registrations, leases, completions, failures and
+    /// refusals, oldest first.
+    Audit {
+        /// The coordinator's state folder.
+        #[arg(long)]
+        data: PathBuf,
+        /// Only the events of this run.
+        #[arg(long)]
+        run: Option<String>,
+        /// Only the events of this actor (client:NAME, worker:ID, enroller, operator).
+        #[arg(long)]
+        actor: Option<String>,
+        /// Only the last N events (0: all).
+        #[arg(long, default_value_t = 200)]
+        last: usize,
+        /// One JSON object a line instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Opens the coordinator's database in `data` (which must hold one).
+fn open_store(data: &Path) -> anyhow::Result<Store> {
+    let db = data.join("coordinator.db");
+    if !db.is_file() {
+        anyhow::bail!("no coordinator database at {}", db.display());
+    }
+    Store::open(&db).map_err(|e| anyhow::anyhow!("{}: {e}", db.display()))
+}
+
+fn admin(a: Admin) -> anyhow::Result<()> {
+    let ms = |t: u64| {
+        format!(
+            "{:.0} s ago",
+            (bemcal_client::now_ms().saturating_sub(t)) as f64 / 1e3
+        )
+    };
+    match a {
+        Admin::Workers { data } => {
+            let store = open_store(&data)?;
+            println!(
+                "{:<40} {:<24} {:>16} {:>16} {:>6}",
+                "id", "name", "registered", "revoked", "leases"
+            );
+            for w in store.workers()? {
+                println!(
+                    "{:<40} {:<24} {:>16} {:>16} {:>6}",
+                    w.id,
+                    w.name,
+                    ms(w.registered_ms),
+                    w.revoked_ms.map_or("-".into(), ms),
+                    w.leases
+                );
+            }
+        }
+        Admin::RevokeWorker { data, id } => {
+            let store = open_store(&data)?;
+            if !store.revoke_worker(&id, "operator")? {
+                anyhow::bail!(
+                    "no worker {id:?} (bemcal coordinator workers --data {} lists them)",
+                    data.display()
+                );
+            }
+            println!("worker {id} revoked: a running coordinator refuses it within a second");
+        }
+        Admin::Audit {
+            data,
+            run,
+            actor,
+            last,
+            json,
+        } => {
+            let store = open_store(&data)?;
+            let filter = AuditFilter { run, actor, last };
+            for ev in store.audit_events(&filter)? {
+                match json {
+                    true => println!("{}", serde_json::to_string(&ev)?),
+                    false => println!("{}", ev.text()),
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Where the coordinator is and how to authenticate.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ClientArgs {
@@ -96,12 +231,59 @@ impl ClientArgs {
     }
 }
 
-pub fn run(a: Args) -> anyhow::Result<()> {
-    let token = load_token(a.token_file.as_deref())?;
-    let worker_token = load_worker_token(a.worker_token_file.as_deref())?;
-    if worker_token.as_deref() == Some(token.as_str()) {
-        anyhow::bail!("the worker token must differ from the client token");
+/// The named client tokens and the enrollment token of a coordinator's arguments.
+fn tokens(a: &Args) -> anyhow::Result<(Vec<(String, String)>, String)> {
+    let mut clients = match &a.client_tokens {
+        Some(f) => load_client_tokens(f)?,
+        None => vec![],
+    };
+    let token = match a.client_tokens {
+        Some(_) => load_token_if_any(a.token_file.as_deref())?,
+        None => Some(load_token(a.token_file.as_deref())?),
+    };
+    if let Some(t) = &token {
+        if clients.iter().any(|(n, c)| n == DEFAULT_CLIENT || c == t) {
+            anyhow::bail!(
+                "the --client-tokens file names the client {DEFAULT_CLIENT} or holds the \
+                 --token-file token: leave one of them out"
+            );
+        }
+        clients.push((DEFAULT_CLIENT.into(), t.clone()));
     }
+    let worker_token = load_worker_token(a.worker_token_file.as_deref())?;
+    if let Some(w) = &worker_token {
+        if let Some((name, _)) = clients.iter().find(|(_, c)| c == w) {
+            anyhow::bail!("the worker token must differ from the client tokens ({name}'s)");
+        }
+    }
+    let enroll = worker_token.or(token).ok_or_else(|| {
+        anyhow::anyhow!(
+            "workers need a token to register with: give --worker-token-file (or \
+             BEMCAL_WORKER_TOKEN), or a --token-file token"
+        )
+    })?;
+    Ok((clients, enroll))
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    if let Some(admin_cmd) = a.admin {
+        return admin(admin_cmd);
+    }
+    let data = a.data.clone().context("--data is required")?;
+    let (clients, enroll) = tokens(&a)?;
+    if !a.client_rate.is_finite() || a.client_rate < 0.0 {
+        anyhow::bail!("--client-rate must be a number of requests a second, 0 for no limit");
+    }
+    let format = match a.log_format.as_str() {
+        "json" => LogFormat::Json,
+        _ => LogFormat::Text,
+    };
+    let level = match a.log_level.as_str() {
+        "off" => LogLevel::Off,
+        "debug" => LogLevel::Debug,
+        _ => LogLevel::Info,
+    };
+    bemcal_coordinator::audit::set_log(format, level);
     if a.artifact_grace_hours.is_nan() || a.artifact_grace_hours < 0.1 {
         anyhow::bail!("--artifact-grace-hours must be at least 0.1 (uploads need time to be used)");
     }
@@ -116,9 +298,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let opts = Options {
         listen: a.listen,
-        data: a.data,
-        token,
-        worker_token,
+        data,
+        clients,
+        enroll,
+        client_rate: a.client_rate,
         tls: a.tls_cert.zip(a.tls_key),
         metrics: a.metrics_listen,
         config: Config {
@@ -130,6 +313,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             max_uploads: a.max_uploads.max(1),
             // Any quota above 0 is at least a byte (0 is no limit).
             max_run_bytes: ((a.max_run_gb * 1e9).round() as u64).max(u64::from(a.max_run_gb > 0.0)),
+            max_runs_per_client: a.max_runs_per_client,
         },
     };
     let rt = bemcal_client::runtime()?;
@@ -189,6 +373,8 @@ pub(crate) fn start_local(
         .arg(base.join("coordinator"))
         .arg("--chains-per-job")
         .arg(chains_per_job.to_string())
+        // The calibration prints its own progress; the audit trail stays in the database.
+        .args(["--log-level", "off"])
         .env(TOKEN_ENV, &token)
         .stdout(Stdio::piped())
         .spawn()

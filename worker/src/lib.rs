@@ -3,6 +3,10 @@
 //! content-addressed artifacts, fetched once into the cache folder; outputs go back as
 //! artifacts before the job is reported complete.
 //!
+//! At start the worker registers with the coordinator (the token it is given is the enrollment
+//! token) and gets an id and a credential of its own: every later call carries that credential,
+//! so its leases are its own (docs/cluster.md, "Identities and credentials").
+//!
 //! On shutdown (SIGTERM) the worker leases nothing more, lets running jobs finish for up to
 //! `drain` and gives back the leases of those still running after that.
 #![deny(missing_docs)]
@@ -18,7 +22,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use bemcal_client::client::{upload_file, Client, Connect};
-use bemcal_client::proto::{self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest};
+use bemcal_client::proto::{
+    self, CompleteRequest, FailRequest, HeartbeatRequest, LeaseRequest, RegisterRequest,
+};
 use tokio::sync::Semaphore;
 
 use crate::cache::Cache;
@@ -27,13 +33,15 @@ use crate::metrics::{Metrics, Outcome};
 /// How to run a worker.
 #[derive(Debug, Clone)]
 pub struct Options {
-    /// The coordinator: its URL, token and TLS trust.
+    /// The coordinator: its URL, the enrollment token (the coordinator's worker token) and TLS
+    /// trust.
     pub connect: Connect,
     /// Jobs at once.
     pub slots: usize,
     /// Artifact cache and job folders.
     pub cache: PathBuf,
-    /// The name this worker leases under (its leases belong to it).
+    /// The name this worker registers under; the coordinator's id for it is this name and a
+    /// random suffix (its leases belong to that id).
     pub worker_id: String,
     /// How long running jobs may take to finish after a shutdown request.
     pub drain: Duration,
@@ -65,6 +73,54 @@ where
     }
 }
 
+/// Registers with the coordinator as `name` (with the enrollment token of `connect`), retrying
+/// while it is unreachable, until `stopping`: the worker's id and a client that carries its own
+/// credential; `None` when stopped first.
+async fn register(
+    connect: &Connect,
+    name: &str,
+    stopping: &AtomicBool,
+) -> anyhow::Result<Option<(String, Client)>> {
+    let mut enroll = connect.client()?;
+    let mut said = false;
+    while !stopping.load(Ordering::SeqCst) {
+        let r = enroll
+            .register(RegisterRequest {
+                name: name.to_string(),
+                protocol: bemcal_client::PROTOCOL,
+            })
+            .await;
+        let reply = match r {
+            Ok(r) => r.into_inner(),
+            Err(e) if e.code() == tonic::Code::Unimplemented => anyhow::bail!(
+                "the coordinator does not register workers (a release older than this worker's,                  bemcal {}): run workers of the coordinator's release",
+                env!("CARGO_PKG_VERSION")
+            ),
+            Err(e)
+                if matches!(
+                    e.code(),
+                    tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Cancelled
+                ) =>
+            {
+                if !said {
+                    eprintln!("worker {name}: waiting for the coordinator: {}", e.message());
+                    said = true;
+                }
+                tokio::time::sleep(Duration::from_secs(1)).await;
+                continue;
+            }
+            Err(e) => anyhow::bail!("the coordinator refused to register this worker: {}", e.message()),
+        };
+        let own = Connect {
+            token: reply.credential,
+            ..connect.clone()
+        };
+        eprintln!("worker {name}: registered as {}", reply.worker_id);
+        return Ok(Some((reply.worker_id, own.client()?)));
+    }
+    Ok(None)
+}
+
 /// Runs the worker until `shutdown` completes (then drains); `ready` gets the bound address of
 /// the metrics, if served (port 0 = ephemeral).
 pub async fn run(
@@ -72,7 +128,6 @@ pub async fn run(
     ready: impl FnOnce(Option<SocketAddr>),
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
-    let client = opts.connect.client()?;
     let metrics = Metrics::new(opts.slots.max(1));
     let bound = match opts.metrics {
         None => None,
@@ -98,6 +153,10 @@ pub async fn run(
             stopping.store(true, Ordering::SeqCst);
         });
     }
+    let Some((worker_id, client)) = register(&opts.connect, &opts.worker_id, &stopping).await?
+    else {
+        return Ok(());
+    };
     let mut tasks = tokio::task::JoinSet::new();
     while !stopping.load(Ordering::SeqCst) {
         let permit = tokio::select! {
@@ -107,21 +166,26 @@ pub async fn run(
         let mut c = client.clone();
         let reply = c
             .lease(LeaseRequest {
-                worker_id: opts.worker_id.clone(),
+                worker_id: worker_id.clone(),
                 free_slots: (slots.available_permits() + 1) as u32,
                 protocol: bemcal_client::PROTOCOL,
             })
             .await;
         let job = match reply {
             Ok(r) => r.into_inner().job,
+            // A revoked credential, or a coordinator that no longer knows it (its database was
+            // replaced): the worker stops rather than register itself again.
             Err(e) if e.code() == tonic::Code::Unauthenticated => {
-                anyhow::bail!("the coordinator refused the token: {}", e.message())
+                anyhow::bail!(
+                    "the coordinator refused this worker's credential: {}",
+                    e.message()
+                )
             }
             Err(e) if e.code() == tonic::Code::FailedPrecondition => {
                 anyhow::bail!("the coordinator refused this worker: {}", e.message())
             }
             Err(e) => {
-                eprintln!("worker {}: lease: {}", opts.worker_id, e.message());
+                eprintln!("worker {worker_id}: lease: {}", e.message());
                 tokio::time::sleep(Duration::from_secs(1)).await;
                 continue;
             }
@@ -134,7 +198,7 @@ pub async fn run(
         let (client, cache, id, give_back, metrics) = (
             client.clone(),
             cache.clone(),
-            opts.worker_id.clone(),
+            worker_id.clone(),
             give_back.clone(),
             metrics.clone(),
         );
@@ -148,8 +212,13 @@ pub async fn run(
         });
         while tasks.try_join_next().is_some() {}
     }
-    // Draining: let running jobs finish, then give back what is left.
-    let drained = tokio::time::timeout(opts.drain, async {
+    drain(tasks, opts.drain, &give_back).await;
+    Ok(())
+}
+
+/// Draining: lets running jobs finish for up to `patience`, then gives back what is left.
+async fn drain(mut tasks: tokio::task::JoinSet<()>, patience: Duration, give_back: &AtomicBool) {
+    let drained = tokio::time::timeout(patience, async {
         while tasks.join_next().await.is_some() {}
     })
     .await;
@@ -160,7 +229,6 @@ pub async fn run(
         })
         .await;
     }
-    Ok(())
 }
 
 /// Runs one job: heartbeats while it runs, then uploads its outputs and reports; returns how
