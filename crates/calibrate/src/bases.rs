@@ -9,13 +9,15 @@ use crate::error::Error;
 use crate::project::Project;
 
 /// A base load in `summary.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BaseReport {
     /// The calibrated output (and its meter) the base is part of.
     pub output: String,
     /// `submeter data_center` or `constant 102 kWh/h`.
     pub source: String,
     /// Over the hours it is known, kWh.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub annual_kwh: f64,
     /// Hours the meter is compared without it (a sub-meter gap): those hours count as missing.
     pub missing_hours: usize,

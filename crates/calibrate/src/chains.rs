@@ -527,11 +527,13 @@ pub fn extended_target(
 
 /// A chain started in the best optimum's mode instead of its own, which was `nats_below` lower
 /// (`mcmc.restart_below`, [`bemcal_stats::optim::keep_best_modes`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MovedChain {
     /// The chain's index.
     pub chain: usize,
     /// How far its own optimum's log posterior was below the best one's, nats.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub nats_below: f64,
 }
 

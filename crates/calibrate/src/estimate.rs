@@ -19,7 +19,7 @@ pub fn fallback_note(failures: &[String]) -> String {
 
 /// One posterior draw EnergyPlus simulated in validation, and how near Guideline 14's hourly
 /// limits it is.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SimulatedFit {
     /// Its validation label: `calibrated` (the MAP draw) or `predictive_NN`.
     pub label: String,
@@ -34,7 +34,7 @@ pub struct SimulatedFit {
 }
 
 /// How `estimate = "best_simulated"` chose the estimate, for `summary.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct EstimateChoice {
     /// The label of the draw that became the estimate.
     pub chosen: String,
@@ -52,6 +52,12 @@ pub struct EstimateChoice {
 }
 
 impl EstimateChoice {
+    /// Whether the point chosen is one of the output space mapping's (`mapped_NN`), not a
+    /// posterior draw.
+    pub fn chose_mapped(&self) -> bool {
+        is_mapped(&self.chosen)
+    }
+
     /// The choice in a sentence, for the log and (where a predictive draw became the
     /// estimate) `estimate_note`. `map_failure`: why EnergyPlus could not simulate the MAP
     /// draw, if it could not.

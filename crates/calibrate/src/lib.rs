@@ -87,7 +87,7 @@ pub use output::{write_outputs_csv, OutputDir};
 pub use posterior::Drawn;
 pub use project::Project;
 pub use summary::{
-    write_calibrated_model, write_summary, DesignReport, HoldoutReport, ParameterReport, PointNote,
-    Summary, Timings, NOT_CONVERGED_EXIT,
+    summary_schema, write_calibrated_model, write_summary, DesignReport, HoldoutReport,
+    MeasuredHours, ParameterReport, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,
 };
 pub use validation::{next_candidate, Candidate, ValidationStep};

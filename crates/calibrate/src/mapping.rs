@@ -41,7 +41,7 @@ pub const FRACTIONS: [f64; 2] = [0.5, 1.0];
 pub const RECORD: &str = "mapping.json";
 
 /// One step of the search.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MappingStep {
     /// The validation label of the anchor: the point simulated so far that fits best.
     pub anchor: String,
@@ -54,13 +54,15 @@ pub struct MappingStep {
 }
 
 /// A point of a step.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MappedPoint {
     /// Its key in `validation/` ([`FIRST_MAPPED_KEY`] onwards).
     pub key: usize,
     /// Its validation label, `mapped_NN`.
     pub label: String,
     /// Where it lies on the line: 0 the anchor, 1 the mode.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub fraction: f64,
     /// Its calibrated values (physical units, plan order).
     pub values: Vec<f64>,

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 /// Metrics of one model against the meters, per output: ASHRAE Guideline 14 hourly (the
 /// flattened `metrics`) and monthly over the calibration period, and on the held-out period.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct OutputMetrics {
     /// The calibrated output (and its meter).
     pub output: String,
@@ -25,7 +25,7 @@ pub struct OutputMetrics {
 }
 
 /// Guideline 14 of one period, hourly and monthly.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PeriodMetrics {
     /// On the period's hours.
     pub hourly: G14Metrics,

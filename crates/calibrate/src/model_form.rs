@@ -48,7 +48,7 @@ const MONTHS: [&str; 12] = [
 ];
 
 /// What the residuals are grouped by.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Factor {
     /// Hour of the day, local standard time (24 groups).
@@ -62,7 +62,7 @@ pub enum Factor {
 }
 
 /// The model-form record in `summary.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ModelFormReport {
     /// Posterior draws of EnergyPlus the reach is judged with (besides the estimate).
     pub draws: usize,
@@ -75,7 +75,7 @@ pub struct ModelFormReport {
 }
 
 /// One meter's model form, over the calibration period's measured hours.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MeterForm {
     /// The calibrated output (and its meter).
     pub output: String,
@@ -85,6 +85,8 @@ pub struct MeterForm {
     /// The residuals (measured - model, kWh per hour) grouped by each factor.
     pub patterns: Vec<FactorPattern>,
     /// Slope of the residuals on the outdoor dry-bulb temperature, kWh per hour per K.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub temperature_slope_kwh_per_k: f64,
     /// The additive discrepancy fitted to the residuals at the estimate.
     pub discrepancy: Discrepancy,
@@ -103,7 +105,7 @@ pub struct MeterForm {
 /// does not ([`WeatherShare::unlike_the_meters`]) suggests that the weather is not the metered
 /// period's (a typical year cannot match actual meters hour by hour, however the parameters
 /// are set), or that the meter lacks the model's response to it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct WeatherShare {
     /// What the outdoor temperature explains of the meter.
     pub meter: PartialFit,
@@ -151,7 +153,7 @@ impl WeatherShare {
 }
 
 /// The residuals grouped by one factor.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FactorPattern {
     /// What the residuals are grouped by.
     pub factor: Factor,
@@ -164,9 +166,11 @@ pub struct FactorPattern {
 /// The additive discrepancy `delta(hour of day x day kind) + delta(month) + delta(outdoor
 /// temperature band)` fitted to the calibration period's residuals at the estimate
 /// (`validation/discrepancy.csv` has it hourly).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Discrepancy {
     /// Share of the residuals' mean square it removes.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub share: f64,
     /// Guideline 14 of model + discrepancy over the calibration period.
     pub corrected: G14Metrics,
@@ -176,17 +180,23 @@ pub struct Discrepancy {
 }
 
 /// A parameter piled against a prior bound.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PiledParameter {
     /// The calibrated parameter.
     pub name: String,
     /// The prior bound its posterior median lies against.
     pub bound: Bound,
     /// Its posterior median (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub median: f64,
     /// Its prior's minimum (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub prior_min: f64,
     /// Its prior's maximum (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub prior_max: f64,
 }
 

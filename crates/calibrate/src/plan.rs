@@ -176,18 +176,20 @@ impl Plan {
 /// the failed point's whole neighbourhood: between a failure and a success the model's edge is
 /// unknown, and half-way is the nearest-neighbour guess. Learned by the replacement rule
 /// (`InvalidRegion::from_outcome`, in `replacement`).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct InvalidRegion {
     /// One ball per design point EnergyPlus refused (empty: the chains refuse nothing).
     pub balls: Vec<InvalidBall>,
 }
 
 /// One failed point's ball.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct InvalidBall {
     /// The failed point, physical units (plan order).
     pub values: Vec<f64>,
     /// Radius in probability space (`p = F(x)` per parameter).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub radius: f64,
     /// Why EnergyPlus failed there ([`bemcal_energyplus::errfile::failure_reason`]).
     pub reason: String,

@@ -312,9 +312,11 @@ pub struct Drawn {
 }
 
 /// The likelihood's temperature of a round's chains (`summary.json` `temperature`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ChainTemperature {
     /// `T`: the chains sample `p(theta) L(theta)^(1/T)`.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub value: f64,
     /// The refinement round whose recoveries measured it (`mcmc.temperature =
     /// "surrogate_error"`); `None` for a fixed temperature, or before any round.

@@ -68,7 +68,7 @@ impl ChainSummary {
 }
 
 /// The predictive intervals' record in `summary.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PredictiveReport {
     /// Posterior draws EnergyPlus simulated for the intervals.
     pub draws: usize,
@@ -87,7 +87,7 @@ pub struct PredictiveReport {
 }
 
 /// One meter's intervals.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct OutputPredictive {
     /// The calibrated output (and its meter).
     pub output: String,
@@ -98,12 +98,15 @@ pub struct OutputPredictive {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_model: Option<ErrorModel>,
     /// Root mean square residual of EnergyPlus at the estimate over the calibration hours (kWh).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub noise_kwh: f64,
     /// Coverage under each error model (the configured one first).
     pub by_error_model: Vec<ModelCoverage>,
     /// Lag-one autocorrelation of EnergyPlus's residuals at the estimate over the calibration
     /// hours, each standardised by the configured error model's scale.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub residual_phi: f64,
     /// Intervals of daily and monthly totals (the configured error model), with the AR(1)
     /// noise of a sum and as if hours were independent.
@@ -133,9 +136,11 @@ pub struct OutputPredictive {
 /// intervals do where the meter runs: near nominal where the predictive is calibrated and the
 /// idle hours are foreseen (an hour the draws may find running or idle widens its interval
 /// over both).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RunningHours {
     /// Share of the measured calibration hours that read zero.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub idle_in_sample: f64,
     /// The same over the held-out period (absent without one).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -199,12 +204,14 @@ pub const TIE_POINTS: f64 = 2.0;
 /// out of time (`cross_validation_favours`, what `error_model = "auto"` takes), or on the
 /// held-out hours (`held_out_favours`: a check of that choice, not a choice, since a model
 /// chosen on them leaves their coverage no independent check).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Favoured {
     /// The favoured error model.
     pub error_model: ErrorModel,
     /// Its distance from nominal, percentage points over both levels (by cross-validation: the
     /// mean over the months, [`bemcal_stats::predictive::mean_block_miss`]).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub miss_points: f64,
     /// The same for the meter's configured error model (`auto`'s: its choice); `None` where
     /// it was not judged.
@@ -234,7 +241,7 @@ fn favoured(
 /// An error model's hourly intervals judged month by month out of time: each month of the
 /// calibration period by intervals whose noise scales and recalibration never saw it
 /// ([`bemcal_stats::predictive::cross_validated_coverage`]).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CrossValidated {
     /// Months judged.
     pub months: usize,
@@ -243,6 +250,8 @@ pub struct CrossValidated {
     /// The mean over the months of their coverage's distance from nominal, percentage points
     /// over both levels ([`bemcal_stats::predictive::mean_block_miss`]): what
     /// `error_model = "auto"` minimises.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub mean_month_miss_points: f64,
 }
 
@@ -265,7 +274,7 @@ impl CrossValidated {
 }
 
 /// What a total is taken over.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum TotalPeriod {
     /// Each day's total (24 hour slots).
@@ -275,6 +284,14 @@ pub enum TotalPeriod {
 }
 
 impl TotalPeriod {
+    /// Its name, as `summary.json` writes it (`day`, `month`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TotalPeriod::Day => "day",
+            TotalPeriod::Month => "month",
+        }
+    }
+
     /// The hour slots of every day or month of the grid.
     pub fn periods(self, hours: usize) -> Vec<Range<usize>> {
         match self {
@@ -290,7 +307,7 @@ impl TotalPeriod {
 
 /// Coverage of the intervals of one kind of total (`hours` of each [`Coverage`] counts the
 /// periods judged: those whose every hour is measured and in the period judged).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct TotalsCoverage {
     /// What the totals are taken over.
     pub period: TotalPeriod,
@@ -309,7 +326,7 @@ pub struct TotalsCoverage {
 }
 
 /// 50 % and 90 % coverage, in-sample and held out.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PeriodCoverage {
     /// Over the calibration period, one per level.
     pub in_sample: Vec<Coverage>,
@@ -318,7 +335,7 @@ pub struct PeriodCoverage {
 }
 
 /// Coverage of the 50 % and 90 % hourly intervals under one error model.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ModelCoverage {
     /// The error model the intervals use.
     pub error_model: ErrorModel,

@@ -593,7 +593,7 @@ impl Default for RefineSettings {
 }
 
 /// Which posterior statistic becomes the calibrated estimate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Estimate {
     /// The draw with the highest log posterior: a joint point, so it satisfies every
@@ -612,6 +612,18 @@ pub enum Estimate {
     Mean,
     /// Per-parameter posterior median.
     Median,
+}
+
+impl Estimate {
+    /// Its name, as the project file and `summary.json` write it (`best_simulated`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Estimate::Map => "map",
+            Estimate::BestSimulated => "best_simulated",
+            Estimate::Mean => "mean",
+            Estimate::Median => "median",
+        }
+    }
 }
 
 /// Validation.
@@ -711,6 +723,24 @@ impl<'de> Deserialize<'de> for ErrorModelSetting {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let v = String::deserialize(d)?;
         v.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+impl schemars::JsonSchema for ErrorModelSetting {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "ErrorModelSetting".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        use bemcal_stats::predictive::ErrorModel;
+        let names: Vec<&str> = std::iter::once("auto")
+            .chain(ErrorModel::ALL.iter().map(|m| m.as_str()))
+            .collect();
+        schemars::json_schema!({
+            "description": "An error model by name, or \"auto\": the one the calibration period's months favour.",
+            "type": "string",
+            "enum": names
+        })
     }
 }
 

@@ -36,7 +36,7 @@ pub struct RefineLog {
 }
 
 /// One finished round.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RefineRound {
     /// 1-based.
     pub round: u32,
@@ -63,11 +63,19 @@ pub struct RefineRound {
     pub restarted: Vec<(usize, f64)>,
     /// The likelihood's temperature the round's chains ran at (1 in rounds recorded before it
     /// existed; [`crate::surrogate_error::chain_temperature`]).
-    #[serde(default = "crate::posterior::untempered")]
+    #[serde(
+        default = "crate::posterior::untempered",
+        deserialize_with = "bemcal_stats::nan::null_as_nan"
+    )]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub temperature: f64,
     /// How far the round's points were moved from the chains' mean (`refine.spread` when it
     /// ran; 1 in rounds recorded before it existed).
-    #[serde(default = "unmoved")]
+    #[serde(
+        default = "unmoved",
+        deserialize_with = "bemcal_stats::nan::null_as_nan"
+    )]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub spread: f64,
 }
 
@@ -76,7 +84,7 @@ fn unmoved() -> f64 {
 }
 
 /// A posterior draw added as a design point.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct RefinePoint {
     /// Key in `simulations/` (after the hypercube's points).
     pub index: usize,
@@ -85,7 +93,7 @@ pub struct RefinePoint {
 }
 
 /// A posterior draw EnergyPlus could not simulate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FailedPoint {
     /// Calibrated parameter values (physical units, plan order).
     pub values: Vec<f64>,

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::plan::{distance, probabilities, InvalidBall, InvalidRegion, Plan};
 
 /// One simulation of a design slot: the values tried and what came of it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Attempt {
     /// The hypercube slot (its points are saved as `point_{slot:03}`).
     pub slot: usize,
@@ -215,7 +215,7 @@ impl InvalidRegion {
 }
 
 /// Failures of one reason ([`failure_reason`]): how many runs, at which slots.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FailureGroup {
     /// The reason, in a few words ([`failure_reason`]).
     pub reason: String,

@@ -17,26 +17,41 @@ use crate::project::Estimate;
 use crate::replacement::{Attempt, FailureGroup, Outcome};
 
 /// Wall time of each stage, s.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Timings {
     /// The Latin hypercube and its spares.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub design_s: f64,
     /// EnergyPlus at the design points, replacements included.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub simulations_s: f64,
     /// Training sets and surrogate training, every round's.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub training_s: f64,
     /// The chains, every round's, extensions included.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub chains_s: f64,
     /// Summarising the final chains (posterior summary, draws and predictive bands).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub summary_s: f64,
     /// EnergyPlus at the estimate (or its fallbacks), the initial model and the predictive
     /// draws, with Guideline 14.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub validation_s: f64,
     /// Refinement rounds: simulating posterior draws (their retraining is in `training_s`,
     /// their preliminary chains in `chains_s`).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub refinement_s: f64,
     /// The whole calibration.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub total_s: f64,
 }
 
@@ -50,7 +65,7 @@ fn default_year() -> bemcal_weather::grid::GridYear {
 }
 
 /// `summary.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Summary {
     /// The project's name.
     pub project: String,
@@ -81,12 +96,15 @@ pub struct Summary {
     pub posterior: PosteriorSummary,
     /// Model-discrepancy standard deviation per output, kWh (`{output: value}`).
     #[serde(with = "bemcal_named")]
+    #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub sigma_delta_kwh: Vec<(String, f64)>,
     /// AR(1) coefficient of the hourly residuals at the MAP, per output (empty with iid).
     #[serde(default, with = "bemcal_named")]
+    #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub residual_ar1: Vec<(String, f64)>,
     /// The surrogate's held-out error per output, kWh (`{output: value}`).
     #[serde(with = "bemcal_named")]
+    #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
     /// Acceptance rate after burn-in, per chain (of the final chains).
     pub acceptance_rate: Vec<f64>,
@@ -118,6 +136,7 @@ pub struct Summary {
     pub estimate_choice: Option<crate::estimate::EstimateChoice>,
     /// The calibrated parameters at the estimate (`{parameter: value}`, in the model's order).
     #[serde(with = "bemcal_named")]
+    #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub calibrated_values: Vec<(String, f64)>,
     /// Guideline 14 of EnergyPlus at the estimate against the meters, per output.
     pub validation: Vec<OutputMetrics>,
@@ -173,8 +192,17 @@ pub struct Summary {
     pub timings: Timings,
 }
 
+/// The JSON Schema of `summary.json`, from the types that write it and that every reader in
+/// Rust reads it with (`bemcal reference` writes it to `docs/reference/summary.schema.json`).
+/// A number that may be `null` is NaN: a statistic that could not be computed.
+pub fn summary_schema() -> schemars::Schema {
+    let mut s = schemars::schema_for!(Summary);
+    s.insert("title".into(), "bemcal summary.json".into());
+    s
+}
+
 /// The held-out period in `summary.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct HoldoutReport {
     /// As the project wrote it.
     pub period: String,
@@ -182,11 +210,12 @@ pub struct HoldoutReport {
     pub hours: usize,
     /// Per output, the measured hours held out and those left to calibrate with.
     #[serde(with = "bemcal_named")]
+    #[schemars(with = "std::collections::BTreeMap<String, MeasuredHours>")]
     pub measured_hours: Vec<(String, MeasuredHours)>,
 }
 
 /// Measured hours of one meter on either side of the held-out period.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct MeasuredHours {
     /// Measured hours in the held-out period (they judge the model).
     pub held_out: usize,
@@ -219,7 +248,7 @@ impl HoldoutReport {
 
 /// The design stage's record in `summary.json`: which design points EnergyPlus could not
 /// simulate and why, what replaced them, and the Severe messages accepted as usable.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct DesignReport {
     /// Hypercube points (slots).
     pub slots: usize,
@@ -243,7 +272,7 @@ pub struct DesignReport {
 }
 
 /// A Severe message accepted as usable at a design point.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PointNote {
     /// The design point's hypercube slot.
     pub point: usize,
@@ -283,17 +312,23 @@ impl DesignReport {
 }
 
 /// A parameter's prior next to its posterior.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ParameterReport {
     /// The calibrated parameter.
     pub name: String,
     /// Its unit, as the model declares it (empty where it declares none).
     pub unit: String,
     /// Its prior's minimum (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub prior_min: f64,
     /// Its prior's mode (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub prior_mode: f64,
     /// Its prior's maximum (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub prior_max: f64,
 }
 
@@ -460,4 +495,60 @@ fn write_bases_csv(cal: &Calibration) -> Result<(), Error> {
         s.push('\n');
     }
     write_atomic(&cal.out.bases_csv(), s.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The names of the properties under `schema` (every object, definitions included) whose
+    /// schema says `number` alone.
+    fn numbers_that_refuse_null(schema: &serde_json::Value, at: &str, out: &mut Vec<String>) {
+        match schema {
+            serde_json::Value::Object(m) => {
+                if let Some(serde_json::Value::Object(props)) = m.get("properties") {
+                    for (name, p) in props {
+                        if p.get("type") == Some(&serde_json::json!("number")) {
+                            out.push(format!("{at}.{name}"));
+                        }
+                    }
+                }
+                for (k, v) in m {
+                    numbers_that_refuse_null(v, &format!("{at}/{k}"), out);
+                }
+            }
+            serde_json::Value::Array(a) => {
+                a.iter().for_each(|v| numbers_that_refuse_null(v, at, out))
+            }
+            _ => {}
+        }
+    }
+
+    #[test]
+    fn every_number_field_of_summary_json_reads_null_as_nan() {
+        let schema = serde_json::to_value(summary_schema()).unwrap();
+        let mut refused = vec![];
+        numbers_that_refuse_null(&schema, "", &mut refused);
+        assert!(
+            refused.is_empty(),
+            "serde_json writes NaN as null: give these f64 fields \
+             #[serde(deserialize_with = \"bemcal_stats::nan::null_as_nan\")] and \
+             #[schemars(with = \"bemcal_stats::nan::NumberOrNull\")]: {refused:?}"
+        );
+        assert_eq!(schema["title"], "bemcal summary.json");
+        let required = schema["required"].as_array().unwrap();
+        for name in ["outputs", "posterior", "timings"] {
+            assert!(required.contains(&name.into()), "{name}");
+        }
+        let metrics = &schema["$defs"]["OutputMetrics"]["required"];
+        for name in ["output", "nmbe", "cv_rmse"] {
+            assert!(
+                metrics.as_array().unwrap().contains(&name.into()),
+                "a number that may be null stays required: {name}, {metrics}"
+            );
+        }
+        for name in ["holdout", "convergence", "year"] {
+            assert!(!required.contains(&name.into()), "{name}");
+        }
+    }
 }

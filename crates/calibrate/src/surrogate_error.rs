@@ -21,7 +21,7 @@ use crate::project::Temperature;
 use crate::refine::{RefineLog, RefineRound};
 
 /// `summary.json` `surrogate_error`: the intervals with the surrogate's error.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SurrogateError {
     /// The refinement round whose surrogate was tested at its own points.
     pub round: u32,
@@ -32,22 +32,34 @@ pub struct SurrogateError {
 }
 
 /// One parameter's shift and its intervals with it (physical units).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CarriedParameter {
     /// The calibrated parameter.
     pub name: String,
     /// Root mean square of recovered - true over the points: the standard deviation the
     /// surrogate's error adds.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub rms_shift: f64,
     /// 5 % quantile of the shifted draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub q5: f64,
     /// 25 % quantile of the shifted draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub q25: f64,
     /// Median of the shifted draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub median: f64,
     /// 75 % quantile of the shifted draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub q75: f64,
     /// 95 % quantile of the shifted draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub q95: f64,
 }
 

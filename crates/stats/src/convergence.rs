@@ -12,11 +12,15 @@ use serde::{Deserialize, Serialize};
 use crate::summary::PosteriorSummary;
 
 /// The targets a converged posterior meets (Vehtari et al. 2021, section 4).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Targets {
     /// Largest acceptable R-hat (1.01).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub rhat: f64,
     /// Smallest acceptable bulk and tail ESS over all chains together (400).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub ess: f64,
 }
 
@@ -30,36 +34,42 @@ impl Default for Targets {
 }
 
 /// A parameter that misses at least one target, with its figures.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Shortfall {
     /// Parameter name.
     pub parameter: String,
     /// Its R-hat.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub rhat: f64,
     /// Its bulk ESS.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub ess_bulk: f64,
     /// Its tail ESS.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub ess_tail: f64,
 }
 
 /// The verdict on a set of merged chains.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Convergence {
     /// Every parameter meets every target.
     pub converged: bool,
     /// The targets judged against.
     pub targets: Targets,
     /// Largest R-hat over parameters (NaN counts as not converged).
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub max_rhat: f64,
     /// Smallest bulk ESS over parameters.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub min_ess_bulk: f64,
     /// Smallest tail ESS over parameters.
-    #[serde(deserialize_with = "null_as_nan")]
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub min_ess_tail: f64,
     /// The parameters that miss a target, worst R-hat first.
     pub shortfalls: Vec<Shortfall>,
@@ -113,11 +123,6 @@ impl std::fmt::Display for Convergence {
             names.join(", ")
         )
     }
-}
-
-/// JSON writes NaN as `null`; read it back as NaN (a statistic that could not be computed).
-fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Judges `summary` against `targets`. A statistic that could not be computed (NaN: too few

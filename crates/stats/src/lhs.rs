@@ -67,7 +67,9 @@ pub struct LhsOptions {
 }
 
 /// What the constraint repair changed.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema,
+)]
 pub struct RepairReport {
     /// Rows infeasible before repair.
     pub rows_infeasible_before: usize,

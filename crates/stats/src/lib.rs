@@ -23,6 +23,7 @@
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 //! - [`model_form`]: whether a model can reach a meter, residual patterns, an additive
 //!   discrepancy, parameters piled against a prior bound.
+//! - [`nan`]: NaN in JSON records (written as `null`, read back as NaN).
 
 #![deny(missing_docs)]
 
@@ -36,6 +37,7 @@ pub mod likelihood;
 pub mod mcmc;
 pub mod metrics;
 pub mod model_form;
+pub mod nan;
 pub mod optim;
 pub mod predictive;
 pub mod prior;

@@ -25,15 +25,21 @@ pub const MONTHLY_NMBE_LIMIT: f64 = 5.0;
 pub const MONTHLY_CV_RMSE_LIMIT: f64 = 15.0;
 
 /// Guideline 14 metrics of one output.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct G14Metrics {
     /// Hours used (both values present).
     pub n: usize,
     /// Mean of the measured values over those hours.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean_measured: f64,
     /// NMBE, per cent.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub nmbe: f64,
     /// CV-RMSE, per cent.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub cv_rmse: f64,
     /// Whether both hourly criteria are met.
     pub pass: bool,

@@ -44,7 +44,7 @@ pub const BACKFIT_SWEEPS: usize = 25;
 
 /// What a calibrated model makes of one meter, by the hourly Guideline 14 criteria at the
 /// estimate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// `|NMBE| <= 10 %` and `CV-RMSE <= 30 %`.
@@ -55,22 +55,41 @@ pub enum Verdict {
     Shape,
 }
 
+impl Verdict {
+    /// Its name, as `summary.json` writes it (`reached`, `level`, `shape`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Verdict::Reached => "reached",
+            Verdict::Level => "level",
+            Verdict::Shape => "shape",
+        }
+    }
+}
+
 /// A meter's total against the model's, over the hours where both are present.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Reach {
     /// Hours compared.
     pub hours: usize,
     /// The meter's total, kWh.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub measured_kwh: f64,
     /// The model's total at the estimate, kWh.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub estimate_kwh: f64,
     /// The smallest and largest total among the estimate and the posterior draws, kWh.
     pub draws_kwh: [f64; 2],
     /// Whether the meter's total lies within `draws_kwh`: some posterior draw reaches the level.
     pub within_draws: bool,
     /// Hourly NMBE at the estimate, per cent.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub nmbe: f64,
     /// Hourly CV-RMSE at the estimate, per cent.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub cv_rmse: f64,
     /// The verdict.
     pub verdict: Verdict,
@@ -119,23 +138,29 @@ pub fn reach(measured: &[f64], estimate: &[f64], draws: &[Vec<f64>]) -> Result<R
 }
 
 /// One group of hours of a [`Pattern`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Group {
     /// What the group is (`"07"`, `"off day"`, `"Jan"`, `"-12.2..-3.9"`).
     pub label: String,
     /// Hours in the group with a residual.
     pub hours: usize,
     /// Mean residual (measured - simulated), kWh per hour.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean_residual: f64,
     /// Mean measured value, kWh per hour.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean_measured: f64,
 }
 
 /// Residuals grouped by one factor.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Pattern {
     /// Correlation ratio `eta^2 = SS_between / SS_total` in [0, 1]: the share of the
     /// residuals' variance (around their mean) that the group means explain.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub eta_squared: f64,
     /// The groups, in label order; empty groups are left out.
     pub groups: Vec<Group>,
@@ -367,19 +392,27 @@ pub fn additive_discrepancy(
 }
 
 /// What further factors explain of a series beyond some base factors ([`partial_fit`]).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PartialFit {
     /// The coefficient of partial determination: the share of what the base factors leave
     /// that the further factors remove (0..1).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub share: f64,
     /// What the further factors remove, as a root mean square over the fitted hours
     /// (`sqrt((SSE_base - SSE_all) / n)`, the series' unit): the size of the variation they
     /// explain, which a noisy series' share understates.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub explained_rms: f64,
     /// What the base factors leave, as a root mean square (`sqrt(SSE_base / n)`): 0 for a
     /// series the base factors explain entirely (a flat or dead meter).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub base_rms: f64,
     /// The series' mean over the fitted hours.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean: f64,
 }
 
@@ -438,7 +471,7 @@ pub fn partial_fit(
 }
 
 /// Which bound of its prior a parameter is piled against.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Bound {
     /// The prior's minimum.
@@ -471,6 +504,13 @@ mod tests {
 
     fn labels(k: usize) -> Vec<String> {
         (0..k).map(|g| g.to_string()).collect()
+    }
+
+    #[test]
+    fn verdicts_are_named_as_serde_names_them() {
+        for v in [Verdict::Reached, Verdict::Level, Verdict::Shape] {
+            assert_eq!(serde_json::to_value(v).unwrap(), v.as_str());
+        }
     }
 
     #[test]

@@ -51,7 +51,7 @@ use crate::error::{Result, StatsError};
 use crate::normal::norm_cdf;
 
 /// How the noise scale of the predictive distribution is estimated from in-sample residuals.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ErrorModel {
     /// One scale per meter: the root mean square residual.
@@ -738,15 +738,21 @@ pub fn sharpest_within(misses: &[f64], widths: &[f64], tie_points: f64) -> Optio
 }
 
 /// How often one interval level held on a set of hours.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Coverage {
     /// Nominal level (0.9 for a 90 % interval).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub nominal: f64,
     /// Measured hours judged.
     pub hours: usize,
     /// Share of them inside the interval (bounds included).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub fraction: f64,
     /// Mean width of the interval over those hours (meter units).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean_width: f64,
     /// Mean width over the mean measured value of those hours (absent where that mean is 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]

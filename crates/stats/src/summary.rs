@@ -13,59 +13,87 @@ use crate::prior::Prior;
 pub const STRONG_CORRELATION: f64 = 0.8;
 
 /// Summary of one parameter (physical units).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct ParameterSummary {
     /// Parameter name.
     pub name: String,
     /// Unit.
     pub unit: String,
     /// Posterior mean.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub mean: f64,
     /// Posterior standard deviation (`ddof = 1`).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub sd: f64,
     /// Posterior median.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub median: f64,
     /// 5 % quantile.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub q5: f64,
     /// 95 % quantile.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub q95: f64,
     /// Value at the MAP draw (highest log posterior among the draws).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub map: f64,
     /// Rank-normalised split R-hat.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub rhat: f64,
     /// Bulk ESS.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub ess_bulk: f64,
     /// Tail ESS.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub ess_tail: f64,
     /// Posterior 90 % interval width / prior 90 % interval width.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub width_ratio: f64,
 }
 
 /// A pair of strongly correlated parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CorrelatedPair {
     /// First parameter.
     pub a: String,
     /// Second parameter.
     pub b: String,
     /// Pearson correlation over all draws.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub rho: f64,
 }
 
 /// Posterior summary of all parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct PosteriorSummary {
     /// One entry per parameter, in prior order.
     pub parameters: Vec<ParameterSummary>,
     /// The MAP draw (physical units).
     pub map_point: Vec<f64>,
     /// Its log posterior.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub map_log_density: f64,
     /// Pairs with `|rho| > 0.8`.
     pub correlated_pairs: Vec<CorrelatedPair>,
     /// Largest R-hat over parameters.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub max_rhat: f64,
     /// Smallest bulk ESS over parameters.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub min_ess_bulk: f64,
 }
 

@@ -31,7 +31,7 @@ use crate::{WeatherError, HOURS_PER_YEAR};
 use std::path::Path;
 
 /// A quantity a weather station measures, as EnergyPlus takes it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Field {
     /// Dry-bulb air temperature, C.
@@ -151,7 +151,7 @@ pub struct BuildOptions {
 }
 
 /// How one field of the built EPW was obtained, in hours.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct FieldReport {
     /// The field.
     pub field: Field,
@@ -172,7 +172,7 @@ pub struct FieldReport {
 }
 
 /// Where the solar radiation of the built EPW came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SolarSource {
     /// Measured global horizontal, split into direct and diffuse by Erbs et al. (1982).
@@ -182,7 +182,7 @@ pub enum SolarSource {
 }
 
 /// What [`build_epw`] did, for the user and the calibration report.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BuildReport {
     /// Where the measured data came from (the EPW's COMMENTS 2 line).
     pub source: String,
