@@ -96,7 +96,8 @@ pub enum Command {
     Completions(completions::Args),
     /// Many buildings calibrated together: submit, run locally, status, results.
     Portfolio(portfolio::Args),
-    /// Write the reference pages generated from the code (the CLI's, docs/reference/cli.md).
+    /// Write the reference pages generated from the code (docs/reference: the CLI's, and the
+    /// JSON Schemas of the model file and of summary.json).
     Reference(reference::Args),
 }
 
