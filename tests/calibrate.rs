@@ -600,8 +600,18 @@ fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
         .unwrap();
     let log = String::from_utf8_lossy(&run.stderr).into_owned();
     assert!(finished(run.status), "calibrate failed:\n{log}");
-    let summary =
-        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let bytes = std::fs::read(out.join("summary.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    // Issue 67: summary.json is read through the types that write it (the report's, the
+    // coordinator's): a real run's reads back with them and writes the same JSON.
+    let typed: bemcal_calibrate::Summary = serde_json::from_slice(&bytes)
+        .unwrap_or_else(|e| panic!("{}/summary.json: {e}", out.display()));
+    assert_eq!(
+        serde_json::to_value(&typed).unwrap(),
+        summary,
+        "{}/summary.json does not round-trip through bemcal_calibrate::Summary",
+        out.display()
+    );
     (log, summary)
 }
 

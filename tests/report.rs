@@ -143,6 +143,7 @@ fn write_calibration(dir: &Path) {
     };
     let summary = serde_json::json!({
         "project": "synthetic-report-fixture",
+        "year": 2021,
         "outputs": OUTPUTS,
         "parameters": PARAMS.iter().map(|p| serde_json::json!({
             "name": p.0, "unit": p.1, "prior_min": p.2, "prior_mode": p.3, "prior_max": p.4
@@ -155,19 +156,32 @@ fn write_calibration(dir: &Path) {
             "max_rhat": 1.04, "min_ess_bulk": 850.0
         },
         "sigma_delta_kwh": {"heating_kwh": 0.41, "electricity_kwh": 0.39},
-        "sigma_eta_kwh": [["heating_kwh", 1.2], ["electricity_kwh", 0.3]],
+        "residual_ar1": {},
+        "sigma_eta_kwh": {"heating_kwh": 1.2, "electricity_kwh": 0.3},
         "acceptance_rate": [0.24, 0.22, 0.26],
+        "chain_extensions": 0,
+        "temperature": {"value": 1.0, "measured_at_round": null},
         "estimate": "map",
-        "calibrated_values": PARAMS.iter().map(|p| (p.0, p.5)).collect::<Vec<_>>(),
+        "calibrated_values": PARAMS.iter().map(|p| (p.0.to_string(), p.5.into())).collect::<serde_json::Map<_, _>>(),
         "validation": [metric("heating_kwh", 2.1, 14.0), metric("electricity_kwh", -0.4, 6.2)],
         "initial": [metric("heating_kwh", 18.0, 35.0), metric("electricity_kwh", 9.1, 12.0)],
+        "surrogate_at_estimate": [],
         "converged": false,
+        "convergence": {"converged": false, "targets": {"rhat": 1.01, "ess": 400.0},
+            "max_rhat": 1.04, "min_ess_bulk": 850.0, "min_ess_tail": 900.0,
+            "shortfalls": [{"parameter": "infiltration_ach", "rhat": 1.04, "ess_bulk": 850.0, "ess_tail": 900.0}]},
         "design_points": 40,
         "design_repair": {"rows_infeasible_before": 0, "swaps": 0, "resampled_in_stratum": 0, "resampled_outside_stratum": 0},
+        "design": {"slots": 40, "simulated": 40, "failed": [], "reasons": [], "replaced": [], "dropped": [],
+                   "suggestions": [], "notes": [], "invalid_region": {"balls": []}},
         "surrogate_held_out": {"metrics": {"heating_kwh": {"cv_rmse_pct": 9.0, "nmbe_pct": 1.0, "rmse_kwh": 1.2, "mean_kwh": 8.0}}, "points": [3, 7]},
+        "refinement": [],
         "timings": {"design_s": 0.01, "simulations_s": 250.0, "training_s": 300.0, "chains_s": 120.0,
-                    "summary_s": 5.0, "validation_s": 8.0, "total_s": 683.01}
+                    "summary_s": 5.0, "validation_s": 8.0, "refinement_s": 0.0, "total_s": 683.01}
     });
+    // Every field as the writer's types hold it: they read it and write it back unchanged.
+    let read: bemcal_calibrate::Summary = serde_json::from_value(summary.clone()).unwrap();
+    assert_eq!(serde_json::to_value(&read).unwrap(), summary);
     std::fs::write(
         dir.join("summary.json"),
         serde_json::to_string_pretty(&summary).unwrap(),
@@ -413,9 +427,13 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
     let path = cal.join("summary.json");
     let mut summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let carried = |name: &str, q5: f64, q95: f64| {
+        let median = 0.5 * (q5 + q95);
+        serde_json::json!({"name": name, "rms_shift": 0.1, "q5": q5, "q25": 0.5 * (q5 + median),
+            "median": median, "q75": 0.5 * (median + q95), "q95": q95})
+    };
     summary["surrogate_error"] = serde_json::json!({"round": 1, "points": 8, "parameters": [
-        {"name": "cooling_setpoint_occupied", "q5": 21.8, "q95": 23.4},
-        {"name": "infiltration_ach", "q5": 0.4, "q95": 0.6}]});
+        carried("cooling_setpoint_occupied", 21.8, 23.4), carried("infiltration_ach", 0.4, 0.6)]});
     std::fs::write(&path, summary.to_string()).unwrap();
     let stdout = report_cli(&with_truth);
     assert!(

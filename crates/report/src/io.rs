@@ -2,639 +2,18 @@
 //! `bemcal calibrate --out DIR` and the optional pre-calibration folder written by
 //! `bemcal precalibrate --out PDIR`. The rest of the crate is pure (data in, text out).
 //!
-//! The structs mirror the files' formats (`summary.json` is `bemcal_calibrate::Summary`); they are
-//! deliberately lenient (optional sections default to empty) so a report can still be written for
-//! a partial folder, but the files the report cannot do without are required and their absence is
-//! an error naming the file.
+//! `summary.json` is read through the types that write it, [`bemcal_calibrate::Summary`] and
+//! what it holds: a field the writer requires is required here too, and its absence is an
+//! error naming it; a field the writer marks optional (absent from older summaries) takes the
+//! writer's default. The folder's files the report cannot do without are required and their
+//! absence is an error naming the file.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use bemcal_calibrate::Summary;
 
 use crate::error::ReportError;
-
-/// A parameter's triangular prior (`summary.json` `parameters[]`).
-#[derive(Debug, Clone, Deserialize)]
-pub struct PriorInfo {
-    /// Parameter name.
-    pub name: String,
-    /// Unit.
-    #[serde(default)]
-    pub unit: String,
-    /// Lower bound of the triangular prior.
-    pub prior_min: f64,
-    /// Mode of the triangular prior.
-    pub prior_mode: f64,
-    /// Upper bound of the triangular prior.
-    pub prior_max: f64,
-}
-
-/// A parameter's posterior summary (`summary.json` `posterior.parameters[]`).
-#[derive(Debug, Clone, Deserialize)]
-pub struct PosteriorInfo {
-    /// Parameter name.
-    pub name: String,
-    /// Posterior mean.
-    pub mean: f64,
-    /// Posterior standard deviation.
-    pub sd: f64,
-    /// Posterior median.
-    pub median: f64,
-    /// 5 % quantile.
-    pub q5: f64,
-    /// 95 % quantile.
-    pub q95: f64,
-    /// Value at the MAP draw.
-    #[serde(default = "nan")]
-    pub map: f64,
-    /// Rank-normalised split R-hat.
-    #[serde(default = "nan")]
-    pub rhat: f64,
-    /// Bulk effective sample size.
-    #[serde(default = "nan")]
-    pub ess_bulk: f64,
-    /// Tail effective sample size.
-    #[serde(default = "nan")]
-    pub ess_tail: f64,
-    /// Posterior 90 % interval width over the prior's (1 = the data did not inform it).
-    #[serde(default = "nan")]
-    pub width_ratio: f64,
-}
-
-fn nan() -> f64 {
-    f64::NAN
-}
-
-/// A pair of parameters with a strong posterior correlation.
-#[derive(Debug, Clone, Deserialize)]
-pub struct CorrelatedPair {
-    /// First parameter.
-    pub a: String,
-    /// Second parameter.
-    pub b: String,
-    /// Pearson correlation of the draws.
-    pub rho: f64,
-}
-
-/// `summary.json` `posterior`.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PosteriorBlock {
-    /// Per parameter, in prior order.
-    pub parameters: Vec<PosteriorInfo>,
-    /// Pairs with |rho| > 0.8.
-    #[serde(default)]
-    pub correlated_pairs: Vec<CorrelatedPair>,
-    /// Largest R-hat.
-    #[serde(default = "nan")]
-    pub max_rhat: f64,
-    /// Smallest bulk ESS.
-    #[serde(default = "nan")]
-    pub min_ess_bulk: f64,
-}
-
-/// ASHRAE Guideline 14 metrics of one output.
-#[derive(Debug, Clone, Deserialize)]
-pub struct OutputMetrics {
-    /// Output name.
-    pub output: String,
-    /// Hours used.
-    #[serde(default)]
-    pub n: usize,
-    /// Mean of the measured values.
-    #[serde(default = "nan")]
-    pub mean_measured: f64,
-    /// NMBE, %.
-    pub nmbe: f64,
-    /// CV-RMSE, %.
-    pub cv_rmse: f64,
-    /// Monthly Guideline 14 over the calibration period.
-    #[serde(default)]
-    pub monthly: Option<G14Block>,
-    /// Guideline 14 on the held-out period.
-    #[serde(default)]
-    pub held_out: Option<PeriodBlock>,
-}
-
-/// Guideline 14 figures as `summary.json` writes them (`pass` by the criteria of their period).
-#[derive(Debug, Clone, Deserialize)]
-pub struct G14Block {
-    /// Hours or months used.
-    pub n: usize,
-    /// NMBE, %.
-    pub nmbe: f64,
-    /// CV-RMSE, %.
-    pub cv_rmse: f64,
-    /// Whether the criteria are met.
-    pub pass: bool,
-}
-
-/// Guideline 14 of one period, hourly and monthly.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PeriodBlock {
-    /// Hourly.
-    pub hourly: G14Block,
-    /// Monthly.
-    #[serde(default)]
-    pub monthly: Option<G14Block>,
-}
-
-/// `summary.json` `holdout`.
-#[derive(Debug, Clone, Deserialize)]
-pub struct HoldoutBlock {
-    /// As the project wrote it.
-    pub period: String,
-    /// Hour slots held out.
-    pub hours: usize,
-}
-
-/// `summary.json` `predictive`: hourly predictive intervals and their coverage.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PredictiveBlock {
-    /// EnergyPlus runs at posterior draws.
-    pub draws: usize,
-    /// Draws EnergyPlus failed at.
-    #[serde(default)]
-    pub failed: usize,
-    /// Whether the draws carry the surrogate's error.
-    #[serde(default)]
-    pub with_surrogate_error: bool,
-    /// The error model of the intervals file for the meters `[validation] error_model` does
-    /// not name (each meter's is its `by_error_model`'s first).
-    pub error_model: String,
-    /// Per meter.
-    pub outputs: Vec<OutputPredictiveBlock>,
-}
-
-/// One meter's predictive coverage.
-#[derive(Debug, Clone, Deserialize)]
-pub struct OutputPredictiveBlock {
-    /// Meter.
-    pub output: String,
-    /// Under each error model, the configured one first.
-    pub by_error_model: Vec<ModelCoverageBlock>,
-    /// Lag-one autocorrelation of the standardised residuals at the estimate.
-    #[serde(default)]
-    pub residual_phi: f64,
-    /// Intervals of daily and monthly totals.
-    #[serde(default)]
-    pub totals: Vec<TotalsBlock>,
-    /// A meter that reads zero in some hours: the coverage of the hours it runs.
-    #[serde(default)]
-    pub running: Option<RunningBlock>,
-}
-
-/// The coverage of a meter's hourly intervals on the hours it reads above zero.
-#[derive(Debug, Clone, Deserialize)]
-pub struct RunningBlock {
-    /// Share of the measured calibration hours that read zero.
-    pub idle_in_sample: f64,
-    /// The same held out.
-    #[serde(default)]
-    pub idle_held_out: Option<f64>,
-    /// Coverage of the hours above zero.
-    #[serde(flatten)]
-    pub coverage: PeriodCoverageBlock,
-}
-
-/// Coverage of the intervals of one kind of total.
-#[derive(Debug, Clone, Deserialize)]
-pub struct TotalsBlock {
-    /// `day` or `month`.
-    pub period: String,
-    /// With the AR(1) noise of a sum (recalibrated where `before_recalibration` is present).
-    pub ar1: PeriodCoverageBlock,
-    /// The same before recalibration.
-    #[serde(default)]
-    pub before_recalibration: Option<PeriodCoverageBlock>,
-    /// As if the hours' noise were independent.
-    pub independent: PeriodCoverageBlock,
-}
-
-/// 50 % and 90 % coverage, in-sample and held out (of totals: `hours` counts periods).
-#[derive(Debug, Clone, Deserialize)]
-pub struct PeriodCoverageBlock {
-    /// Over the calibration period.
-    pub in_sample: Vec<CoverageBlock>,
-    /// Over the held-out period (empty without).
-    #[serde(default)]
-    pub held_out: Vec<CoverageBlock>,
-}
-
-/// Coverage of the hourly intervals under one error model.
-#[derive(Debug, Clone, Deserialize)]
-pub struct ModelCoverageBlock {
-    /// Its name.
-    pub error_model: String,
-    /// 50 % and 90 % over the calibration hours and the held-out hours (the intervals
-    /// recalibrated on the calibration period, where `before_recalibration` is present).
-    #[serde(flatten)]
-    pub coverage: PeriodCoverageBlock,
-    /// The posterior predictive's own central intervals' coverage, before recalibration
-    /// (absent from a summary written before recalibration).
-    #[serde(default)]
-    pub before_recalibration: Option<PeriodCoverageBlock>,
-    /// The calibration period judged month by month out of time (absent from a summary
-    /// written before it).
-    #[serde(default)]
-    pub cross_validated: Option<CrossValidatedBlock>,
-}
-
-/// An error model's hourly intervals judged month by month out of time: each calibration
-/// month by intervals built without it.
-#[derive(Debug, Clone, Deserialize)]
-pub struct CrossValidatedBlock {
-    /// Months judged.
-    pub months: usize,
-    /// 50 % and 90 % coverage over all of them.
-    pub coverage: Vec<CoverageBlock>,
-    /// The mean over the months of their distance from nominal, percentage points.
-    pub mean_month_miss_points: f64,
-}
-
-/// How often one interval held.
-#[derive(Debug, Clone, Deserialize)]
-pub struct CoverageBlock {
-    /// Nominal level.
-    pub nominal: f64,
-    /// Hours judged.
-    pub hours: usize,
-    /// Share inside.
-    pub fraction: f64,
-    /// Share of PIT inside, where some hours read at an atom (a meter at 0 in hours the draws
-    /// may find idle): the share to hold against nominal.
-    #[serde(default)]
-    pub pit_fraction: Option<f64>,
-    /// Mean width, kWh.
-    pub mean_width: f64,
-}
-
-/// `summary.json` `model_form`: whether the model reaches each meter, and what to change.
-#[derive(Debug, Clone, Deserialize)]
-pub struct ModelFormBlock {
-    /// Per meter.
-    pub meters: Vec<MeterFormBlock>,
-    /// Parameters piled against a prior bound, in words.
-    #[serde(default)]
-    pub parameter_findings: Vec<String>,
-}
-
-/// One meter's model form.
-#[derive(Debug, Clone, Deserialize)]
-pub struct MeterFormBlock {
-    /// Meter.
-    pub output: String,
-    /// Its reach: the verdict and the totals.
-    pub reach: ReachBlock,
-    /// The residuals grouped by each factor.
-    #[serde(default)]
-    pub patterns: Vec<PatternBlock>,
-    /// The additive discrepancy.
-    pub discrepancy: DiscrepancyBlock,
-    /// In words.
-    #[serde(default)]
-    pub findings: Vec<String>,
-}
-
-/// A meter's reach.
-#[derive(Debug, Clone, Deserialize)]
-pub struct ReachBlock {
-    /// Hours compared.
-    #[serde(default)]
-    pub hours: usize,
-    /// `reached`, `level` or `shape`.
-    pub verdict: String,
-    /// Whether a posterior draw reaches the meter's total.
-    pub within_draws: bool,
-    /// The meter's total, kWh.
-    pub measured_kwh: f64,
-    /// The smallest and largest total of the model at the estimate and the draws, kWh.
-    pub draws_kwh: [f64; 2],
-}
-
-/// Residuals grouped by one factor.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PatternBlock {
-    /// `hour_of_day`, `day_kind`, `month` or `outdoor_temperature`.
-    pub factor: String,
-    /// Share of the residuals' variance the grouping explains.
-    pub eta_squared: f64,
-    /// The groups, in order.
-    #[serde(default)]
-    pub groups: Vec<GroupBlock>,
-}
-
-/// One group of hours of a residual pattern.
-#[derive(Debug, Clone, Deserialize)]
-pub struct GroupBlock {
-    /// What the group is (`"07"`, `"-12.2..-3.9"`).
-    pub label: String,
-    /// Mean residual (measured - model), kWh per hour.
-    pub mean_residual: f64,
-}
-
-/// The additive discrepancy's effect.
-#[derive(Debug, Clone, Deserialize)]
-pub struct DiscrepancyBlock {
-    /// Share of the misfit it removes.
-    pub share: f64,
-}
-
-/// Wall time per stage, s (`summary.json` `timings`).
-#[derive(Debug, Clone, Default, Deserialize)]
-#[serde(default)]
-pub struct Timings {
-    /// Latin hypercube.
-    pub design_s: f64,
-    /// EnergyPlus design simulations.
-    pub simulations_s: f64,
-    /// Surrogate training.
-    pub training_s: f64,
-    /// MCMC chains.
-    pub chains_s: f64,
-    /// Posterior summary and predictive bands.
-    pub summary_s: f64,
-    /// Validation simulations.
-    pub validation_s: f64,
-    /// Simulating refinement rounds' posterior draws.
-    pub refinement_s: f64,
-    /// Whole run.
-    pub total_s: f64,
-}
-
-/// `summary.json` `convergence`: the targets, the worst figures, the parameters short.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct ConvergenceBlock {
-    /// The targets (`rhat`, `ess`).
-    #[serde(default)]
-    pub targets: ConvergenceTargets,
-    /// Largest R-hat (null when it could not be computed).
-    #[serde(default)]
-    pub max_rhat: Option<f64>,
-    /// Smallest bulk ESS.
-    #[serde(default)]
-    pub min_ess_bulk: Option<f64>,
-    /// Smallest tail ESS.
-    #[serde(default)]
-    pub min_ess_tail: Option<f64>,
-    /// The parameters short of a target, worst R-hat first.
-    #[serde(default)]
-    pub shortfalls: Vec<Shortfall>,
-}
-
-/// Convergence targets.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct ConvergenceTargets {
-    /// Largest acceptable R-hat.
-    pub rhat: f64,
-    /// Smallest acceptable bulk and tail ESS.
-    pub ess: f64,
-}
-
-/// A parameter short of a convergence target.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct Shortfall {
-    /// Parameter name.
-    pub parameter: String,
-    /// Its R-hat (null when it could not be computed).
-    pub rhat: Option<f64>,
-    /// Its bulk ESS.
-    pub ess_bulk: Option<f64>,
-    /// Its tail ESS.
-    pub ess_tail: Option<f64>,
-}
-
-/// `summary.json` `design`: the design points EnergyPlus could not simulate.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct DesignBlock {
-    /// Hypercube points.
-    #[serde(default)]
-    pub slots: usize,
-    /// Failed runs: slot, values (calibration order) and error text.
-    #[serde(default)]
-    pub failed: Vec<FailedRun>,
-    /// Failures grouped by reason.
-    #[serde(default)]
-    pub reasons: Vec<FailureGroup>,
-    /// Slots simulated at a spare point.
-    #[serde(default)]
-    pub replaced: Vec<usize>,
-    /// Slots left without a point.
-    #[serde(default)]
-    pub dropped: Vec<usize>,
-    /// What a user could change.
-    #[serde(default)]
-    pub suggestions: Vec<String>,
-    /// Severe messages accepted as usable.
-    #[serde(default)]
-    pub notes: Vec<PointNote>,
-}
-
-/// A failed EnergyPlus run of the design.
-#[derive(Debug, Clone, Deserialize)]
-pub struct FailedRun {
-    /// The design slot it was run for.
-    pub slot: usize,
-    /// The parameter values EnergyPlus was given.
-    pub values: Vec<f64>,
-    /// EnergyPlus's error lines.
-    #[serde(default)]
-    pub error: Option<String>,
-}
-
-/// Failures of one reason.
-#[derive(Debug, Clone, Deserialize)]
-pub struct FailureGroup {
-    /// The reason, as EnergyPlus's messages are classified.
-    pub reason: String,
-    /// Failed runs with it.
-    pub count: usize,
-    /// Their design points.
-    pub points: Vec<usize>,
-}
-
-/// A usable Severe message of a design point.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PointNote {
-    /// The design point.
-    pub point: usize,
-    /// EnergyPlus's message.
-    pub message: String,
-}
-
-impl PosteriorBlock {
-    /// The posterior of the `k`-th prior, `name`: found by name, else by position (summaries
-    /// whose rows carry no names).
-    pub fn of(&self, k: usize, name: &str) -> Option<&PosteriorInfo> {
-        self.parameters
-            .iter()
-            .find(|x| x.name == name)
-            .or(self.parameters.get(k))
-    }
-}
-
-/// `summary.json` `temperature`: the chains sampled `p(theta) L(theta)^(1/T)`.
-#[derive(Debug, Clone, Copy, Deserialize)]
-pub struct Temperature {
-    /// `T`.
-    pub value: f64,
-    /// The refinement round whose surrogate error measured it, if measured.
-    #[serde(default)]
-    pub measured_at_round: Option<u32>,
-}
-
-/// How `estimate = "best_simulated"` chose the estimate.
-#[derive(Debug, Clone, Deserialize)]
-pub struct EstimateChoice {
-    /// The label of the point chosen (`calibrated`: the MAP draw; `predictive_NN`; `mapped_NN`,
-    /// a point of the output space mapping).
-    pub chosen: String,
-    /// Every draw simulated, with its ratio to the limits.
-    #[serde(default)]
-    pub candidates: Vec<SimulatedFit>,
-}
-
-impl EstimateChoice {
-    /// Whether the point chosen is one of the output space mapping's (`mapped_NN`), not a
-    /// posterior draw.
-    pub fn chose_mapped(&self) -> bool {
-        self.chosen.starts_with("mapped_")
-    }
-}
-
-/// One draw EnergyPlus simulated in validation.
-#[derive(Debug, Clone, Deserialize)]
-pub struct SimulatedFit {
-    /// Its validation label.
-    pub label: String,
-    /// Its worst fitted meter's ratio to Guideline 14's hourly limits (`None`: no metrics).
-    #[serde(default)]
-    pub limit_ratio: Option<f64>,
-    /// The same for the monthly limits (`None`: no monthly figures, or an older summary).
-    #[serde(default)]
-    pub monthly_limit_ratio: Option<f64>,
-}
-
-/// `summary.json` as written by `bemcal calibrate`.
-#[derive(Debug, Clone, Deserialize)]
-pub struct Summary {
-    /// Project name.
-    #[serde(default)]
-    pub project: String,
-    /// Calibrated outputs (meters).
-    pub outputs: Vec<String>,
-    /// Outputs whose meters were compared but not fitted (`fit = false`).
-    #[serde(default)]
-    pub not_fitted: Vec<String>,
-    /// Priors, in calibration order.
-    pub parameters: Vec<PriorInfo>,
-    /// Posterior summary.
-    pub posterior: PosteriorBlock,
-    /// Estimated model-discrepancy sd per output, kWh.
-    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
-    pub sigma_delta_kwh: Vec<(String, f64)>,
-    /// Surrogate error sd per output, kWh.
-    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
-    pub sigma_eta_kwh: Vec<(String, f64)>,
-    /// Acceptance rate per chain.
-    #[serde(default)]
-    pub acceptance_rate: Vec<f64>,
-    /// Which point estimate was validated (`best_simulated`, `map`, `mean`, `median`).
-    #[serde(default)]
-    pub estimate: serde_json::Value,
-    /// Why the estimate is not the statistic's own point, if it is not.
-    #[serde(default)]
-    pub estimate_note: Option<String>,
-    /// With `best_simulated`: the draw chosen (`estimate_choice.chosen`) among those simulated.
-    #[serde(default)]
-    pub estimate_choice: Option<EstimateChoice>,
-    /// The calibrated parameter values.
-    #[serde(default, deserialize_with = "bemcal_named::deserialize")]
-    pub calibrated_values: Vec<(String, f64)>,
-    /// G14 metrics of the calibrated model.
-    #[serde(default)]
-    pub validation: Vec<OutputMetrics>,
-    /// G14 metrics of the initial model (prior modes).
-    #[serde(default)]
-    pub initial: Vec<OutputMetrics>,
-    /// G14 metrics of the surrogate's prediction at the estimate.
-    #[serde(default)]
-    pub surrogate_at_estimate: Vec<OutputMetrics>,
-    /// The held-out period, if any.
-    #[serde(default)]
-    pub holdout: Option<HoldoutBlock>,
-    /// Hourly predictive intervals from EnergyPlus at posterior draws.
-    #[serde(default)]
-    pub predictive: Option<PredictiveBlock>,
-    /// Whether the model reaches each meter.
-    #[serde(default)]
-    pub model_form: Option<ModelFormBlock>,
-    /// Whether every R-hat and ESS criterion was met.
-    #[serde(default)]
-    pub converged: bool,
-    /// The verdict behind `converged` (absent in summaries written before it existed).
-    #[serde(default)]
-    pub convergence: Option<ConvergenceBlock>,
-    /// Number of design points.
-    #[serde(default)]
-    pub design_points: usize,
-    /// What EnergyPlus made of the design (failed runs, replacements, usable warnings).
-    #[serde(default)]
-    pub design: DesignBlock,
-    /// Surrogate held-out metrics (free form).
-    #[serde(default)]
-    pub surrogate_held_out: serde_json::Value,
-    /// Surrogate refinement rounds.
-    #[serde(default)]
-    pub refinement: Vec<RefineRound>,
-    /// The intervals with the surrogate's error (absent without a refinement round).
-    #[serde(default)]
-    pub surrogate_error: Option<SurrogateErrorBlock>,
-    /// The likelihood's temperature of the final chains (`mcmc.temperature`), if tempered.
-    #[serde(default)]
-    pub temperature: Option<Temperature>,
-    /// Stage timings.
-    #[serde(default)]
-    pub timings: Timings,
-}
-
-/// `summary.json` `surrogate_error`: the intervals with the surrogate's error carried in.
-#[derive(Debug, Clone, Deserialize)]
-pub struct SurrogateErrorBlock {
-    /// The refinement round whose points measured it.
-    pub round: u32,
-    /// EnergyPlus points recovered.
-    pub points: usize,
-    /// Per parameter.
-    pub parameters: Vec<CarriedInterval>,
-}
-
-/// One parameter's interval with the surrogate's error.
-#[derive(Debug, Clone, Deserialize)]
-pub struct CarriedInterval {
-    /// Parameter name.
-    pub name: String,
-    /// 5 % quantile.
-    pub q5: f64,
-    /// 95 % quantile.
-    pub q95: f64,
-}
-
-/// A surrogate refinement round (`summary.json` `refinement`).
-#[derive(Debug, Clone, Deserialize)]
-pub struct RefineRound {
-    /// 1-based.
-    pub round: u32,
-    /// Posterior draws added to the training set (free form: index, values).
-    #[serde(default)]
-    pub points: Vec<serde_json::Value>,
-    /// Posterior draws EnergyPlus failed on.
-    #[serde(default)]
-    pub failed: Vec<serde_json::Value>,
-    /// The round's surrogate against EnergyPlus at the added draws.
-    #[serde(default)]
-    pub surrogate_error: Vec<OutputMetrics>,
-}
 
 /// The prefix of the noise scales' columns in `draws.csv` (`sigma_delta_<output>`).
 const NOISE_PREFIX: &str = "sigma_delta_";
@@ -890,7 +269,12 @@ pub fn read_summary(path: &Path) -> Result<Summary, ReportError> {
         "the calibration summary written by `bemcal calibrate`",
     )?;
     let text = read_text(path)?;
-    serde_json::from_str(&text).map_err(|e| parse_err(path, e.to_string()))
+    serde_json::from_str(&text).map_err(|e| {
+        parse_err(
+            path,
+            format!("{e} (not a summary.json as this bemcal's `bemcal calibrate` writes it)"),
+        )
+    })
 }
 
 /// Reads a synthetic run's hidden true values, as `bemcal synthesize --truth FILE` writes them:
@@ -1262,6 +646,111 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// The crate's fixture `summary.json` (`tests/fixtures/summary.json`): every section filled,
+/// as `bemcal calibrate` writes it.
+#[cfg(test)]
+pub(crate) mod fixture {
+    /// Its text.
+    pub const SUMMARY: &str = include_str!("../tests/fixtures/summary.json");
+
+    /// Read through the writer's types.
+    pub fn summary() -> bemcal_calibrate::Summary {
+        serde_json::from_str(SUMMARY).unwrap_or_else(|e| panic!("the fixture summary: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod summary_tests {
+    use super::*;
+
+    /// [`read_summary`] of `value` written as a file; an error with the folder written as `DIR`.
+    fn read(value: &serde_json::Value) -> Result<Summary, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("summary.json");
+        std::fs::write(&p, serde_json::to_string_pretty(value).unwrap()).unwrap();
+        read_summary(&p).map_err(|e| {
+            e.to_string()
+                .replace(&dir.path().display().to_string(), "DIR")
+        })
+    }
+
+    fn fixture_value() -> serde_json::Value {
+        serde_json::from_str(fixture::SUMMARY).unwrap()
+    }
+
+    /// The fixture without the field at `path` (object keys and array indices).
+    fn without(path: &[&str]) -> serde_json::Value {
+        let mut v = fixture_value();
+        let (last, parents) = path.split_last().unwrap();
+        let mut at = &mut v;
+        for k in parents {
+            at = match k.parse::<usize>() {
+                Ok(i) => &mut at[i],
+                Err(_) => &mut at[*k],
+            };
+        }
+        let removed = at.as_object_mut().unwrap().remove(*last);
+        assert!(removed.is_some(), "the fixture has no {path:?}");
+        v
+    }
+
+    #[test]
+    fn the_fixture_round_trips_through_the_writers_types() {
+        let v = fixture_value();
+        let s = read(&v).unwrap();
+        assert_eq!(serde_json::to_value(&s).unwrap(), v);
+    }
+
+    #[test]
+    fn a_required_field_missing_is_refused_with_its_name() {
+        for path in [
+            &["outputs"][..],
+            &["posterior", "parameters", "1", "rhat"],
+            &["validation", "0", "cv_rmse"],
+            &["predictive", "outputs", "0", "noise_kwh"],
+            &["model_form", "meters", "0", "reach", "verdict"],
+            &["design_repair", "swaps"],
+            &["timings", "total_s"],
+        ] {
+            let e = read(&without(path)).unwrap_err();
+            let field = path.last().unwrap();
+            assert!(
+                e.starts_with("DIR/summary.json: ")
+                    && e.contains(&format!("missing field `{field}`")),
+                "{path:?}: {e}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_field_the_writer_marks_optional_may_be_missing() {
+        for path in [
+            &["holdout"][..],
+            &["predictive"],
+            &["convergence"],
+            &["timings", "refinement_s"],
+            &["predictive", "outputs", "0", "running"],
+            &["estimate_choice", "candidates", "0", "monthly_limit_ratio"],
+        ] {
+            let s = read(&without(path)).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+            assert_eq!(s.outputs, ["heating_kwh", "electricity_kwh"]);
+        }
+        let s = read(&without(&["temperature"])).unwrap();
+        assert_eq!(s.temperature.value, 1.0, "the writer's default");
+    }
+
+    #[test]
+    fn a_statistic_that_could_not_be_computed_reads_back_as_nan() {
+        let mut v = fixture_value();
+        v["posterior"]["parameters"][0]["rhat"] = serde_json::Value::Null;
+        v["validation"][1]["nmbe"] = serde_json::Value::Null;
+        let s = read(&v).unwrap();
+        assert!(s.posterior.parameters[0].rhat.is_nan());
+        assert!(s.validation[1].metrics.nmbe.is_nan());
+        assert_eq!(serde_json::to_value(&s).unwrap(), v);
+    }
 }
 
 #[cfg(test)]

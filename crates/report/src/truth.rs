@@ -26,8 +26,10 @@
 
 use std::collections::BTreeMap;
 
+use bemcal_calibrate::Summary;
+
 use crate::analysis::{mean_sd, quantile, triangular_cdf};
-use crate::io::{Draws, Summary};
+use crate::io::Draws;
 use crate::recovery::{in_prior_tails, Miss, Reason, Recovery, TruthRow};
 
 /// The truth of each parameter of `summary` that `truth` names, against its posterior; the

@@ -1,17 +1,21 @@
 //! The report's first screen after its header: the banners (not converged, out of reach), the
 //! warnings and the design points EnergyPlus could not simulate.
 
-use super::{esc, fit::g14_pass, g, ESS_LIMIT, RHAT_LIMIT};
-use crate::informed::{uninformed, why_uninformed};
 use std::fmt::Write as _;
 
+use bemcal_calibrate::Summary;
+use bemcal_stats::model_form::Verdict;
+
+use super::{esc, fit::g14_pass, g, ESS_LIMIT, RHAT_LIMIT};
+use crate::informed::{uninformed, why_uninformed};
+
 /// A banner on the first screen naming the meters no posterior draw of the model reaches.
-pub(super) fn out_of_reach_banner(s: &crate::io::Summary) -> String {
+pub(super) fn out_of_reach_banner(s: &Summary) -> String {
     let out: Vec<&str> = s
         .model_form
         .iter()
         .flat_map(|m| &m.meters)
-        .filter(|o| o.reach.verdict == "level" && !o.reach.within_draws)
+        .filter(|o| o.reach.verdict == Verdict::Level && !o.reach.within_draws)
         .map(|o| o.output.as_str())
         .collect();
     if out.is_empty() {
@@ -32,42 +36,50 @@ pub(super) fn out_of_reach_banner(s: &crate::io::Summary) -> String {
 }
 
 /// The first screen's banner of a calibration whose chains missed a convergence target.
-pub(super) fn not_converged_banner(s: &crate::io::Summary) -> String {
-    let num = |x: Option<f64>, d: usize| x.map_or("n/a".to_string(), |v| format!("{v:.d$}"));
-    let detail = match &s.convergence {
-        Some(c) => {
-            let short: Vec<String> = c
-                .shortfalls
-                .iter()
-                .take(8)
-                .map(|p| {
-                    format!(
-                        "{} (R-hat {}, ESS {} / {})",
-                        esc(&p.parameter),
-                        num(p.rhat, 3),
-                        num(p.ess_bulk, 0),
-                        num(p.ess_tail, 0)
-                    )
-                })
-                .collect();
-            format!(
-                "max R-hat {} (target &le; {}), min bulk / tail ESS {} / {} (target &ge; {}); \
-                 {} parameter(s) short: {}{}.",
-                num(c.max_rhat, 3),
-                c.targets.rhat,
-                num(c.min_ess_bulk, 0),
-                num(c.min_ess_tail, 0),
-                c.targets.ess,
-                c.shortfalls.len(),
-                short.join(", "),
-                if c.shortfalls.len() > 8 {
-                    ", &hellip;"
-                } else {
-                    ""
-                }
-            )
+pub(super) fn not_converged_banner(s: &Summary) -> String {
+    let num = |x: f64, d: usize| {
+        if x.is_nan() {
+            "n/a".to_string()
+        } else {
+            format!("{x:.d$}")
         }
-        None => format!("max R-hat {:.3}.", s.posterior.max_rhat),
+    };
+    let c = &s.convergence;
+    // A verdict that missed its targets names a parameter short of them; none: a summary
+    // written before the verdict was recorded (the writer's default).
+    let detail = if c.shortfalls.is_empty() {
+        format!("max R-hat {:.3}.", s.posterior.max_rhat)
+    } else {
+        let short: Vec<String> = c
+            .shortfalls
+            .iter()
+            .take(8)
+            .map(|p| {
+                format!(
+                    "{} (R-hat {}, ESS {} / {})",
+                    esc(&p.parameter),
+                    num(p.rhat, 3),
+                    num(p.ess_bulk, 0),
+                    num(p.ess_tail, 0)
+                )
+            })
+            .collect();
+        format!(
+            "max R-hat {} (target &le; {}), min bulk / tail ESS {} / {} (target &ge; {}); \
+             {} parameter(s) short: {}{}.",
+            num(c.max_rhat, 3),
+            c.targets.rhat,
+            num(c.min_ess_bulk, 0),
+            num(c.min_ess_tail, 0),
+            c.targets.ess,
+            c.shortfalls.len(),
+            short.join(", "),
+            if c.shortfalls.len() > 8 {
+                ", &hellip;"
+            } else {
+                ""
+            }
+        )
     };
     format!(
         "<div class=\"banner\" id=\"not-converged\"><b>Not converged.</b> {detail} The chains \
@@ -80,7 +92,7 @@ pub(super) fn not_converged_banner(s: &crate::io::Summary) -> String {
 
 /// Warnings: R-hat, bulk ESS, uninformed parameters, correlated pairs, acceptance rates,
 /// Guideline 14 failures and design runs EnergyPlus could not simulate.
-pub(super) fn warnings(s: &crate::io::Summary) -> String {
+pub(super) fn warnings(s: &Summary) -> String {
     let post = &s.posterior;
     let mut h = String::new();
     let mut warn: Vec<String> = vec![];
@@ -112,7 +124,7 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
         .map(|p| format!("<b>{}</b> ({:.0} %)", esc(&p.name), 100.0 * p.width_ratio))
         .collect();
     if !barely.is_empty() {
-        let t = s.temperature.map_or(1.0, |t| t.value);
+        let t = s.temperature.value;
         warn.push(format!(
             "{} Their intervals against the prior's: {}.",
             esc(&why_uninformed(barely.len(), post.parameters.len(), t)),
@@ -145,8 +157,8 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
             warn.push(format!(
                 "Output <b>{}</b>: the calibrated model fails ASHRAE Guideline 14 (NMBE {:.1} %, CV-RMSE {:.1} %).{not_fitted}",
                 esc(&m.output),
-                m.nmbe,
-                m.cv_rmse
+                m.metrics.nmbe,
+                m.metrics.cv_rmse
             ));
         }
     }
@@ -178,14 +190,14 @@ pub(super) fn warnings(s: &crate::io::Summary) -> String {
 
 /// Where a point of the output space mapping became the estimate (not a posterior draw), the
 /// note that says so and which parameters lie outside the posterior's intervals there.
-fn mapped_estimate_note(s: &crate::io::Summary) -> Option<&str> {
+fn mapped_estimate_note(s: &Summary) -> Option<&str> {
     s.estimate_choice.as_ref()?.chose_mapped().then_some(())?;
     s.estimate_note.as_deref()
 }
 
 /// The design points EnergyPlus could not simulate (where the model is not valid), the
 /// suggestions and the Severe messages accepted; nothing when there are none.
-pub(super) fn design_failures(s: &crate::io::Summary) -> String {
+pub(super) fn design_failures(s: &Summary) -> String {
     let d = &s.design;
     if d.failed.is_empty() && d.notes.is_empty() {
         return String::new();
@@ -244,20 +256,16 @@ calibration order.</p>",
 mod tests {
     use super::*;
 
-    fn summary(chosen: &str) -> crate::io::Summary {
-        serde_json::from_value(serde_json::json!({
-            "outputs": ["heating_kwh"],
-            "parameters": [],
-            "posterior": {"parameters": [], "correlated_pairs": []},
-            "acceptance_rate": [],
-            "validation": [],
-            "converged": true,
-            "design_points": 20,
-            "estimate": "best_simulated",
-            "estimate_note": "output space mapping from predictive_04 found mapped_02 ... It is not a posterior draw: 12 parameter(s) lie outside",
-            "estimate_choice": {"chosen": chosen, "candidates": []},
-        }))
-        .unwrap_or_else(|e| panic!("{e}"))
+    /// The fixture summary with the estimate `chosen` by `best_simulated`.
+    fn summary(chosen: &str) -> Summary {
+        let mut s = crate::io::fixture::summary();
+        s.estimate_note = Some(
+            "output space mapping from predictive_04 found mapped_02 ... It is not a posterior \
+             draw: 12 parameter(s) lie outside"
+                .into(),
+        );
+        s.estimate_choice.as_mut().unwrap().chosen = chosen.into();
+        s
     }
 
     #[test]

@@ -4,20 +4,28 @@
 
 use std::fmt::Write as _;
 
+use bemcal_calibrate::model_form::{Factor, ModelFormReport};
+use bemcal_calibrate::predictive::{PeriodCoverage, PredictiveReport};
+use bemcal_calibrate::{OutputMetrics, Summary};
+use bemcal_stats::metrics::G14Metrics;
+use bemcal_stats::model_form::Verdict;
+use bemcal_stats::predictive::Coverage;
+
 use super::{esc, f, figure, g, legend, G14_CV_RMSE_LIMIT, G14_NMBE_LIMIT};
 use crate::analysis;
 use crate::error::ReportError;
-use crate::io::{CalibrationData, Hourly, OutputMetrics};
+use crate::io::{CalibrationData, Hourly};
 use crate::plots::{self, HourlyView};
 
 pub(super) fn g14_pass(m: &OutputMetrics) -> bool {
-    m.nmbe.abs() <= G14_NMBE_LIMIT && m.cv_rmse <= G14_CV_RMSE_LIMIT
+    m.metrics.nmbe.abs() <= G14_NMBE_LIMIT && m.metrics.cv_rmse <= G14_CV_RMSE_LIMIT
 }
 
 fn pass_cell(m: Option<&OutputMetrics>) -> String {
     match m {
         None => "<td>&ndash;</td><td>&ndash;</td><td>&ndash;</td>".into(),
-        Some(m) => {
+        Some(o) => {
+            let m = &o.metrics;
             let nm = if m.nmbe.abs() <= G14_NMBE_LIMIT {
                 ""
             } else {
@@ -28,7 +36,7 @@ fn pass_cell(m: Option<&OutputMetrics>) -> String {
             } else {
                 " class=\"flag\""
             };
-            let p = if g14_pass(m) {
+            let p = if g14_pass(o) {
                 "<td class=\"pass\">pass</td>"
             } else {
                 "<td class=\"fail\">fail</td>"
@@ -43,7 +51,7 @@ fn pass_cell(m: Option<&OutputMetrics>) -> String {
 }
 
 /// Guideline 14 cells of one block: NMBE, CV-RMSE and pass/fail by its own period's criteria.
-fn block_cells(b: Option<&crate::io::G14Block>) -> String {
+fn block_cells(b: Option<&G14Metrics>) -> String {
     match b {
         None => "<td>&ndash;</td><td>&ndash;</td><td>&ndash;</td>".into(),
         Some(b) => format!(
@@ -61,7 +69,7 @@ fn block_cells(b: Option<&crate::io::G14Block>) -> String {
 
 /// Goodness of fit (the reference's Table 5): Guideline 14 hourly metrics per output, initial,
 /// calibrated and surrogate at the estimate, with the discrepancy and surrogate error.
-pub(super) fn goodness_of_fit(s: &crate::io::Summary) -> String {
+pub(super) fn goodness_of_fit(s: &Summary) -> String {
     let mut h = String::new();
     let _ = write!(
         h,
@@ -79,7 +87,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
         let i = s.initial.iter().find(|m| &m.output == o);
         let c = s.validation.iter().find(|m| &m.output == o);
         let sur = s.surrogate_at_estimate.iter().find(|m| &m.output == o);
-        let n = c.or(i).map_or(0, |m| m.n);
+        let n = c.or(i).map_or(0, |m| m.metrics.n);
         let _ = write!(
             h,
             "<tr><td class=\"l\">{}{}</td><td>{n}</td>{}{}{}<td>{}</td><td>{}</td></tr>",
@@ -101,7 +109,7 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
 }
 
 /// The calibrated model monthly, and on the held-out period (hours that fitted nothing).
-pub(super) fn monthly_and_held_out(s: &crate::io::Summary) -> String {
+pub(super) fn monthly_and_held_out(s: &Summary) -> String {
     let mut h = String::new();
     let held = s.holdout.as_ref();
     let _ = write!(
@@ -138,7 +146,7 @@ pub(super) fn monthly_and_held_out(s: &crate::io::Summary) -> String {
 }
 
 /// Coverage of the hourly predictive intervals, per meter and error model.
-pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
+pub(super) fn predictive_coverage(s: &Summary) -> String {
     let Some(p) = &s.predictive else {
         return String::new();
     };
@@ -174,7 +182,7 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
         },
         p.failed
     );
-    let pct = |c: Option<&crate::io::CoverageBlock>| {
+    let pct = |c: Option<&Coverage>| {
         c.map_or("&ndash;".to_string(), |c| match c.pit_fraction {
             Some(pit) => format!("{:.1} % (PIT {:.1} %)", c.fraction * 100.0, pit * 100.0),
             None => format!("{:.1} %", c.fraction * 100.0),
@@ -182,19 +190,18 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
     };
     for o in &p.outputs {
         for m in &o.by_error_model {
-            let before =
-                |of: fn(&crate::io::PeriodCoverageBlock) -> &Vec<crate::io::CoverageBlock>| {
-                    m.before_recalibration
-                        .as_ref()
-                        .map_or("&ndash;".into(), |b| {
-                            format!("{} / {}", pct(of(b).first()), pct(of(b).get(1)))
-                        })
-                };
+            let before = |of: fn(&PeriodCoverage) -> &Vec<Coverage>| {
+                m.before_recalibration
+                    .as_ref()
+                    .map_or("&ndash;".into(), |b| {
+                        format!("{} / {}", pct(of(b).first()), pct(of(b).get(1)))
+                    })
+            };
             let _ = write!(
                 h,
                 "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&o.output),
-                esc(&m.error_model),
+                esc(m.error_model.as_str()),
                 pct(m.coverage.in_sample.first()),
                 pct(m.coverage.in_sample.get(1)),
                 pct(m.coverage.held_out.first()),
@@ -237,10 +244,7 @@ pub(super) fn predictive_coverage(s: &crate::io::Summary) -> String {
 
 /// Coverage of the intervals of daily and monthly totals: with the AR(1) noise of a sum, and
 /// as if hours were independent (too narrow where residuals are autocorrelated).
-fn totals_coverage(
-    p: &crate::io::PredictiveBlock,
-    pct: &dyn Fn(Option<&crate::io::CoverageBlock>) -> String,
-) -> String {
+fn totals_coverage(p: &PredictiveReport, pct: &dyn Fn(Option<&Coverage>) -> String) -> String {
     if p.outputs.iter().all(|o| o.totals.is_empty()) {
         return String::new();
     }
@@ -263,7 +267,7 @@ fn totals_coverage(
                 "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td>\
                  <td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&o.output),
-                esc(&t.period),
+                esc(t.period.as_str()),
                 f(o.residual_phi, 2),
                 pct(t.ar1.in_sample.first()),
                 pct(t.ar1.in_sample.get(1)),
@@ -283,7 +287,7 @@ fn totals_coverage(
 
 /// Whether the calibrated model reaches each meter: the verdict, the share of the residuals'
 /// variance each grouping explains, and the findings in words (`summary.json` `model_form`).
-pub(super) fn model_form(s: &crate::io::Summary) -> Result<String, ReportError> {
+pub(super) fn model_form(s: &Summary) -> Result<String, ReportError> {
     let Some(m) = &s.model_form else {
         return Ok(String::new());
     };
@@ -299,16 +303,16 @@ pub(super) fn model_form(s: &crate::io::Summary) -> Result<String, ReportError> 
          <th>day kind</th><th>month</th><th>outdoor T</th><th>discrepancy removes</th></tr>",
     );
     for o in &m.meters {
-        let eta = |factor: &str| {
+        let eta = |factor: Factor| {
             o.patterns
                 .iter()
                 .find(|p| p.factor == factor)
-                .map_or("&ndash;".to_string(), |p| f(p.eta_squared, 2))
+                .map_or("&ndash;".to_string(), |p| f(p.pattern.eta_squared, 2))
         };
-        let verdict = match (o.reach.verdict.as_str(), o.reach.within_draws) {
-            ("reached", _) => "<span class=\"pass\">reached</span>".to_string(),
-            ("level", false) => "<span class=\"fail\">out of reach</span>".to_string(),
-            (v, _) => format!("<span class=\"fail\">{} missed</span>", esc(v)),
+        let verdict = match (o.reach.verdict, o.reach.within_draws) {
+            (Verdict::Reached, _) => "<span class=\"pass\">reached</span>".to_string(),
+            (Verdict::Level, false) => "<span class=\"fail\">out of reach</span>".to_string(),
+            (v, _) => format!("<span class=\"fail\">{} missed</span>", esc(v.as_str())),
         };
         let _ = write!(
             h,
@@ -318,10 +322,10 @@ pub(super) fn model_form(s: &crate::io::Summary) -> Result<String, ReportError> 
             g(o.reach.measured_kwh / 1000.0),
             g(o.reach.draws_kwh[0] / 1000.0),
             g(o.reach.draws_kwh[1] / 1000.0),
-            eta("hour_of_day"),
-            eta("day_kind"),
-            eta("month"),
-            eta("outdoor_temperature"),
+            eta(Factor::HourOfDay),
+            eta(Factor::DayKind),
+            eta(Factor::Month),
+            eta(Factor::OutdoorTemperature),
             100.0 * o.discrepancy.share,
         );
     }
@@ -341,20 +345,21 @@ pub(super) fn model_form(s: &crate::io::Summary) -> Result<String, ReportError> 
 
 /// The residual patterns by hour of day and by outdoor temperature band, every meter in % of
 /// its mean (a group's x: its hour, or its band's middle).
-fn residual_figures(m: &crate::io::ModelFormBlock) -> Result<String, ReportError> {
+fn residual_figures(m: &ModelFormReport) -> Result<String, ReportError> {
     let x_of = |label: &str| -> Option<f64> {
         match label.split_once("..") {
             Some((lo, hi)) => Some(0.5 * (lo.parse::<f64>().ok()? + hi.parse::<f64>().ok()?)),
             None => label.parse().ok(),
         }
     };
-    let lines = |factor: &str| -> Vec<(&str, Vec<(f64, f64)>)> {
+    let lines = |factor: Factor| -> Vec<(&str, Vec<(f64, f64)>)> {
         m.meters
             .iter()
             .filter_map(|o| {
                 let mean = o.reach.measured_kwh / o.reach.hours.max(1) as f64;
                 let p = o.patterns.iter().find(|p| p.factor == factor)?;
                 let pts = p
+                    .pattern
                     .groups
                     .iter()
                     .filter_map(|g| Some((x_of(&g.label)?, 100.0 * g.mean_residual / mean)))
@@ -364,7 +369,7 @@ fn residual_figures(m: &crate::io::ModelFormBlock) -> Result<String, ReportError
             })
             .collect()
     };
-    let (by_hour, by_temperature) = (lines("hour_of_day"), lines("outdoor_temperature"));
+    let (by_hour, by_temperature) = (lines(Factor::HourOfDay), lines(Factor::OutdoorTemperature));
     if by_hour.is_empty() {
         return Ok(String::new());
     }
@@ -497,8 +502,8 @@ pub(super) fn hourly_fit(cal: &CalibrationData) -> Result<String, ReportError> {
             missing,
             m.map_or(String::new(), |m| format!(
                 " &middot; calibrated NMBE {:.1} %, CV-RMSE {:.1} % ({})",
-                m.nmbe,
-                m.cv_rmse,
+                m.metrics.nmbe,
+                m.metrics.cv_rmse,
                 if g14_pass(m) {
                     "<span class=\"pass\">pass</span>"
                 } else {
@@ -537,7 +542,7 @@ pub(super) fn hourly_fit(cal: &CalibrationData) -> Result<String, ReportError> {
 }
 
 /// The surrogate on held-out design points; nothing when summary.json has no metrics.
-pub(super) fn surrogate_on_held_out(s: &crate::io::Summary) -> String {
+pub(super) fn surrogate_on_held_out(s: &Summary) -> String {
     let Some(ms) = s
         .surrogate_held_out
         .get("metrics")

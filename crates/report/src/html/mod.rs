@@ -7,7 +7,9 @@
 use std::fmt::Write as _;
 
 use crate::error::ReportError;
-use crate::io::{CalibrationData, PrecalData, Summary};
+use bemcal_calibrate::Summary;
+
+use crate::io::{CalibrationData, PrecalData};
 
 mod first_screen;
 mod fit;
@@ -223,11 +225,7 @@ fn header(cal: &CalibrationData) -> String {
 
 /// Which point the estimate is: the setting, and with `best_simulated` which draw and why.
 fn estimate_label(s: &Summary) -> String {
-    let setting = match &s.estimate {
-        serde_json::Value::String(x) => x.clone(),
-        serde_json::Value::Null => "?".into(),
-        v => v.to_string(),
-    };
+    let setting = s.estimate.as_str().to_string();
     let Some(c) = &s.estimate_choice else {
         return setting;
     };

@@ -3,6 +3,9 @@
 
 use std::fmt::Write as _;
 
+use bemcal_calibrate::{ParameterReport, Summary};
+use bemcal_stats::summary::{ParameterSummary, PosteriorSummary};
+
 use super::{duration, esc, f, figure, g, legend, ESS_LIMIT, RHAT_LIMIT};
 use crate::analysis;
 use crate::error::ReportError;
@@ -13,7 +16,7 @@ use crate::recovery;
 
 /// The estimated parameters (the reference's Table 4): prior, posterior and estimate per
 /// parameter (with the surrogate error carried in, where measured), and the correlated pairs.
-pub(super) fn parameters_table(s: &crate::io::Summary) -> String {
+pub(super) fn parameters_table(s: &Summary) -> String {
     let mut h = String::new();
     h.push_str("<h2 id=\"parameters\">Estimated parameters</h2>");
     let carried = s.surrogate_error.as_ref();
@@ -28,7 +31,7 @@ pub(super) fn parameters_table(s: &crate::io::Summary) -> String {
             c.points, c.round
         );
     }
-    if let Some(t) = s.temperature.filter(|t| t.value != 1.0) {
+    if let Some(t) = Some(s.temperature).filter(|t| t.value != 1.0) {
         let why = match t.measured_at_round {
             Some(r) => format!(
                 "measured from the surrogate's error at the EnergyPlus points of refinement \
@@ -63,6 +66,19 @@ pub(super) fn parameters_table(s: &crate::io::Summary) -> String {
     h
 }
 
+/// The posterior of the `k`-th prior, `name`: found by name, else by position (summaries whose
+/// rows carry no names).
+fn posterior_of<'a>(
+    post: &'a PosteriorSummary,
+    k: usize,
+    name: &str,
+) -> Option<&'a ParameterSummary> {
+    post.parameters
+        .iter()
+        .find(|x| x.name == name)
+        .or(post.parameters.get(k))
+}
+
 /// ` class="flag"` where a diagnostic misses its limit.
 fn flag(missed: bool) -> &'static str {
     if missed {
@@ -75,7 +91,7 @@ fn flag(missed: bool) -> &'static str {
 /// One row of the parameters table: the prior, the posterior's summary and diagnostics (each
 /// flagged past its limit), the interval with the surrogate's error where it is carried, and
 /// the estimate.
-fn parameter_row(s: &crate::io::Summary, k: usize, p: &crate::io::PriorInfo) -> String {
+fn parameter_row(s: &Summary, k: usize, p: &ParameterReport) -> String {
     let mut h = String::new();
     let carried = s.surrogate_error.as_ref();
     let est = s
@@ -96,7 +112,7 @@ fn parameter_row(s: &crate::io::Summary, k: usize, p: &crate::io::PriorInfo) -> 
         g(p5),
         g(p95)
     );
-    let Some(q) = s.posterior.of(k, &p.name) else {
+    let Some(q) = posterior_of(&s.posterior, k, &p.name) else {
         let cols = if carried.is_some() { 8 } else { 7 };
         let _ = write!(h, "<td colspan=\"{cols}\">no posterior summary</td></tr>");
         return h;
@@ -130,7 +146,7 @@ fn parameter_row(s: &crate::io::Summary, k: usize, p: &crate::io::PriorInfo) -> 
 
 /// The pairs of parameters whose posterior correlation exceeds 0.8 in magnitude (empty when
 /// there are none).
-fn correlated_pairs_table(post: &crate::io::PosteriorBlock) -> String {
+fn correlated_pairs_table(post: &PosteriorSummary) -> String {
     let mut h = String::new();
     if post.correlated_pairs.is_empty() {
         return h;
@@ -272,7 +288,7 @@ pub(super) fn prior_vs_posterior(cal: &CalibrationData) -> Result<String, Report
         "<p class=\"sub\">Light blue band: posterior 90 % interval.</p><div class=\"grid\">",
     );
     for (k, p) in s.parameters.iter().enumerate() {
-        let q = post.of(k, &p.name);
+        let q = posterior_of(post, k, &p.name);
         let chains = cal
             .draws
             .column(&p.name)
@@ -348,7 +364,7 @@ pub(super) fn chain_plots(cal: &CalibrationData) -> Result<String, ReportError> 
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            let r = post.of(k, &p.name).map_or(f64::NAN, |q| q.rhat);
+            let r = posterior_of(post, k, &p.name).map_or(f64::NAN, |q| q.rhat);
             (p.name.clone(), p.unit.clone(), r)
         })
         .collect();
@@ -378,7 +394,7 @@ pub(super) fn chain_plots(cal: &CalibrationData) -> Result<String, ReportError> 
 }
 
 /// The run: wall time per stage.
-pub(super) fn run_timings(s: &crate::io::Summary) -> String {
+pub(super) fn run_timings(s: &Summary) -> String {
     let mut h = String::new();
     let t = &s.timings;
     h.push_str("<h2 id=\"run\">Run</h2><h3>Timings per stage</h3><table><tr><th class=\"l\">stage</th><th>wall time</th><th>share</th></tr>");
@@ -413,7 +429,7 @@ pub(super) fn run_timings(s: &crate::io::Summary) -> String {
 
 /// Surrogate refinement: each round's surrogate against EnergyPlus at the draws it added;
 /// nothing without refinement rounds.
-pub(super) fn refinement(s: &crate::io::Summary) -> String {
+pub(super) fn refinement(s: &Summary) -> String {
     if s.refinement.is_empty() {
         return String::new();
     }
@@ -443,8 +459,8 @@ draws in EnergyPlus, adds them to the training set and retrains; shown is the ro
                 "<td>{}</td>",
                 m.map_or("-".to_string(), |m| format!(
                     "{} / {}",
-                    f(m.nmbe, 1),
-                    f(m.cv_rmse, 1)
+                    f(m.metrics.nmbe, 1),
+                    f(m.metrics.cv_rmse, 1)
                 ))
             );
         }
@@ -455,7 +471,7 @@ draws in EnergyPlus, adds them to the training set and retrains; shown is the ro
 }
 
 /// The acceptance rate per chain.
-pub(super) fn acceptance_rates(s: &crate::io::Summary) -> String {
+pub(super) fn acceptance_rates(s: &Summary) -> String {
     let mut h = String::new();
     h.push_str("<h3>Acceptance rate per chain</h3><table><tr>");
     for k in 0..s.acceptance_rate.len() {
