@@ -572,17 +572,55 @@ pub(crate) fn surrogate_metrics_at(
     Ok(metrics)
 }
 
+/// Mean and sample standard deviation of the finite values of `s` by stats's rule
+/// ([`bemcal_stats::diagnostics::mean`], [`sd`](bemcal_stats::diagnostics::sd)); without
+/// values the empty sum (-0) for both, and `(x, 0)` with one, which the noise scales take as
+/// they are.
 fn mean_sd(s: &[f64]) -> (f64, f64) {
     let v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
-    let n = v.len().max(1) as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0).max(1.0);
-    (m, var.sqrt())
+    match v[..] {
+        [] => (-0.0, -0.0),
+        [x] => (x, 0.0),
+        _ => (
+            bemcal_stats::diagnostics::mean(&v),
+            bemcal_stats::diagnostics::sd(&v),
+        ),
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_noise_scales_take_stats_mean_and_sd_bit_for_bit() {
+        // What this file computed before it called stats's mean and sd (issue 67): the
+        // likelihood's noise scales, and so the draws, must not move.
+        fn before(s: &[f64]) -> (f64, f64) {
+            let v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
+            let n = v.len().max(1) as f64;
+            let m = v.iter().sum::<f64>() / n;
+            let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0).max(1.0);
+            (m, var.sqrt())
+        }
+        let series: Vec<f64> = (0..5000u64)
+            .map(|i| match i % 97 {
+                13 => f64::NAN,
+                41 => f64::INFINITY,
+                _ => ((i * 2654435761) % 1000003) as f64 / 7919.0 - 40.0,
+            })
+            .collect();
+        let bits = |(m, s): (f64, f64)| (m.to_bits(), s.to_bits());
+        for n in [0, 1, 2, 3, 14, 97, 1000, 5000] {
+            assert_eq!(
+                bits(mean_sd(&series[..n])),
+                bits(before(&series[..n])),
+                "{n}"
+            );
+        }
+        assert_eq!(mean_sd(&[f64::NAN, 2.5]), (2.5, 0.0));
+        assert_eq!(mean_sd(&[]), (0.0, 0.0), "-0 == 0");
+    }
 
     #[test]
     fn preliminary_rounds_take_the_refine_kernel_and_the_final_round_the_mcmc_one() {

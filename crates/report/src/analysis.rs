@@ -51,26 +51,12 @@ pub fn triangular_cdf(min: f64, mode: f64, max: f64, x: f64) -> f64 {
     }
 }
 
-/// Mean and sample standard deviation (`n - 1`) of `values`, all of them (filter first);
-/// the sd is NaN below two values.
-pub fn mean_sd(values: &[f64]) -> (f64, f64) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let var = values.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
-    (mean, var.sqrt())
-}
-
-/// Quantile `q` in [0, 1] of finite values (linear interpolation); NaN if none.
+/// Quantile `q` in [0, 1] of the finite values of `values` by the calibration's one rule,
+/// [`bemcal_stats::diagnostics::quantile`] (numpy's linear interpolation); NaN if there are
+/// none, or for `q` outside [0, 1].
 pub fn quantile(values: &[f64], q: f64) -> f64 {
-    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let pos = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
+    let finite: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    bemcal_stats::diagnostics::quantile(&finite, q)
 }
 
 /// Histogram of `values` on `bins` equal bins over `[lo, hi]`, normalised to a density
@@ -111,7 +97,7 @@ pub fn kde(values: &[f64], grid: &[f64]) -> Vec<f64> {
     let step = v.len().div_ceil(4000);
     let v: Vec<f64> = v.iter().step_by(step).copied().collect();
     let n = v.len() as f64;
-    let (_, sd) = mean_sd(&v);
+    let sd = bemcal_stats::diagnostics::sd(&v);
     let iqr = quantile(&v, 0.75) - quantile(&v, 0.25);
     let spread = if iqr > 0.0 { sd.min(iqr / 1.34) } else { sd };
     let h = 0.9 * spread * n.powf(-0.2);

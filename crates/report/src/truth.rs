@@ -27,8 +27,9 @@
 use std::collections::BTreeMap;
 
 use bemcal_calibrate::Summary;
+use bemcal_stats::diagnostics::{mean, sd};
 
-use crate::analysis::{mean_sd, quantile, triangular_cdf};
+use crate::analysis::{quantile, triangular_cdf};
 use crate::io::Draws;
 use crate::recovery::{in_prior_tails, Miss, Reason, Recovery, TruthRow};
 
@@ -127,7 +128,7 @@ fn combination_inside(
     if xa.len() < 2 || xa.len() != xb.len() {
         return None;
     }
-    let ((ma, sa), (mb, sb)) = (mean_sd(&xa), mean_sd(&xb));
+    let ((ma, sa), (mb, sb)) = ((mean(&xa), sd(&xa)), (mean(&xb), sd(&xb)));
     if !(sa > 0.0 && sb > 0.0) {
         return None;
     }
