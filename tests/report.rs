@@ -466,6 +466,43 @@ fn a_synthetic_truth_is_shown_beside_the_posterior_with_each_miss_explained() {
     );
 }
 
+/// Issue 67: the Python reader (python/bemcal/results.py, `bemcal.load`) reads summary.json by
+/// keys, as a dict; every key it reads must be one the JSON Schema of summary.json has
+/// (docs/reference/summary.schema.json, generated from the writer's types and kept current by
+/// the binary's unit test), at the same place. tests/python/check_summary_keys.py runs
+/// `bemcal.load` on the fixture folder with a summary.json of every section (the report
+/// crate's fixture, whose parameters and outputs are this file's) and looks each path up.
+#[test]
+fn the_python_reader_reads_only_keys_of_the_summary_schema() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let python = repo.join(".venv/bin/python");
+    if !python.exists() {
+        eprintln!(
+            "SKIPPED the_python_reader_reads_only_keys_of_the_summary_schema: no .venv \
+             (make setup)"
+        );
+        return;
+    }
+    let (_tmp, cal, _pre) = fixture();
+    std::fs::write(
+        cal.join("summary.json"),
+        include_str!("../crates/report/tests/fixtures/summary.json"),
+    )
+    .unwrap();
+    let out = Command::new(&python)
+        .arg(repo.join("tests/python/check_summary_keys.py"))
+        .arg(repo.join("docs/reference/summary.schema.json"))
+        .arg(&cal)
+        .env("PYTHONPATH", repo.join("python"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{text}");
+    for path in ["validation.[].held_out.monthly.nmbe", "parameters.[].prior_mode"] {
+        assert!(text.contains(path), "{path} was not read: {text}");
+    }
+}
+
 #[test]
 fn report_renders_in_headless_chromium() {
     let chromium = Path::new("/usr/bin/chromium");
