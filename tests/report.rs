@@ -498,7 +498,10 @@ fn the_python_reader_reads_only_keys_of_the_summary_schema() {
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{text}");
-    for path in ["validation.[].held_out.monthly.nmbe", "parameters.[].prior_mode"] {
+    for path in [
+        "validation.[].held_out.monthly.nmbe",
+        "parameters.[].prior_mode",
+    ] {
         assert!(text.contains(path), "{path} was not read: {text}");
     }
 }
