@@ -153,7 +153,10 @@ fn a_panic_prints_a_short_message_and_keeps_the_details() {
         .unwrap();
     assert_eq!(out.status.code(), Some(101));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("internal error") && err.contains("please report"), "{err}");
+    assert!(
+        err.contains("internal error") && err.contains("please report"),
+        "{err}"
+    );
     assert!(err.len() < 600 && !err.contains("RUST_BACKTRACE"), "{err}");
     let logs: Vec<_> = std::fs::read_dir(dir.path().join("bemcal"))
         .unwrap()
@@ -162,5 +165,8 @@ fn a_panic_prints_a_short_message_and_keeps_the_details() {
     assert_eq!(logs.len(), 1);
     let details = std::fs::read_to_string(logs[0].path()).unwrap();
     assert!(err.contains(&logs[0].path().display().to_string()), "{err}");
-    assert!(details.contains("backtrace") && details.contains("--version"), "{details}");
+    assert!(
+        details.contains("backtrace") && details.contains("--version"),
+        "{details}"
+    );
 }

@@ -14,7 +14,7 @@ use crate::surrogate::{Surrogate, SurrogateError, SurrogateMeta};
 pub const PYTHON_VAR: &str = "BEMCAL_PYTHON";
 
 /// The trainer package, `(relative path, contents)`.
-pub const TRAINER_FILES: [(&str, &str); 8] = [
+pub const TRAINER_FILES: [(&str, &str); 9] = [
     (
         "bemcal_train/__init__.py",
         include_str!("../../../python/bemcal_train/__init__.py"),
@@ -42,6 +42,10 @@ pub const TRAINER_FILES: [(&str, &str); 8] = [
     (
         "bemcal_train/fused.py",
         include_str!("../../../python/bemcal_train/fused.py"),
+    ),
+    (
+        "bemcal_train/pretrain.py",
+        include_str!("../../../python/bemcal_train/pretrain.py"),
     ),
     (
         "bemcal_train/train.py",
