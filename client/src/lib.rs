@@ -14,6 +14,7 @@ pub mod metrics;
 use serde::{Deserialize, Serialize};
 
 /// Generated protocol types, client and server (package `bemcal.v1`).
+#[allow(clippy::too_many_lines)]
 pub mod proto {
     tonic::include_proto!("bemcal.v1");
 }

@@ -418,49 +418,7 @@ pub fn assess(
         // An energy meter does not read below zero: its intervals are those of max(0, Y).
         let meter = inp.meter(k);
         let non_negative = !meter.iter().any(|v| *v < 0.0);
-        let floor = non_negative.then_some(0.0);
-        // Every error model's intervals, in the order of `ErrorModel::ALL`.
-        let mut judged = vec![];
-        for model in ErrorModel::ALL {
-            // Each draw's noise is the error model's scale of its own residuals.
-            let noise = (sims.iter())
-                .map(|s| model.scales(&inp.measured[k], s, &fit))
-                .collect::<Result<Vec<_>, _>>()?;
-            let (posterior, central) = bounded(&sims, &noise, None, non_negative)?;
-            let calibration = Some((inp.measured[k].as_slice(), fit.as_slice()));
-            let (iv, levels) = bounded(&sims, &noise, calibration, non_negative)?;
-            let recalibrated = Judge {
-                iv: &iv,
-                levels: &levels,
-                centers: &sims,
-                scales: &noise,
-                floor,
-            };
-            let own = Judge {
-                iv: &posterior,
-                levels: &central,
-                ..recalibrated
-            };
-            let blocks = cross_validated_coverage(
-                &sims,
-                &inp.measured[k],
-                &fit,
-                &months,
-                model,
-                &LEVELS,
-                floor,
-            )?;
-            let coverage = ModelCoverage {
-                error_model: model,
-                coverage: in_and_out(inp, k, &fit, |m, hours| recalibrated.coverage(m, hours)),
-                levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
-                before_recalibration: Some(in_and_out(inp, k, &fit, |m, hours| {
-                    own.coverage(m, hours)
-                })),
-                cross_validated: CrossValidated::of(&blocks),
-            };
-            judged.push((coverage, noise, iv));
-        }
+        let mut judged = judge_error_models(inp, k, &sims, &fit, &months, non_negative)?;
         let cross_validation_favours = favoured(
             (judged.iter().map(|j| &j.0)).map(|m| {
                 let cv = m.cross_validated.as_ref();
@@ -535,6 +493,63 @@ pub fn assess(
         held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
         outputs,
     }))
+}
+
+/// Every error model's intervals for output `k`, in the order of [`ErrorModel::ALL`]: its
+/// coverage (recalibrated, before recalibration, cross-validated by month), the noise scales of
+/// each draw (`sims`) and the recalibrated intervals.
+#[allow(clippy::type_complexity)]
+fn judge_error_models(
+    inp: &crate::inputs::Inputs,
+    k: usize,
+    sims: &[Vec<f64>],
+    fit: &[bool],
+    months: &[Range<usize>],
+    non_negative: bool,
+) -> Result<Vec<(ModelCoverage, Vec<Vec<f64>>, Intervals)>, Error> {
+    let floor = non_negative.then_some(0.0);
+    let mut judged = vec![];
+    for model in ErrorModel::ALL {
+        // Each draw's noise is the error model's scale of its own residuals.
+        let noise = (sims.iter())
+            .map(|s| model.scales(&inp.measured[k], s, fit))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (posterior, central) = bounded(sims, &noise, None, non_negative)?;
+        let calibration = Some((inp.measured[k].as_slice(), fit));
+        let (iv, levels) = bounded(sims, &noise, calibration, non_negative)?;
+        let recalibrated = Judge {
+            iv: &iv,
+            levels: &levels,
+            centers: sims,
+            scales: &noise,
+            floor,
+        };
+        let own = Judge {
+            iv: &posterior,
+            levels: &central,
+            ..recalibrated
+        };
+        let blocks = cross_validated_coverage(
+            sims,
+            &inp.measured[k],
+            fit,
+            months,
+            model,
+            &LEVELS,
+            floor,
+        )?;
+        let coverage = ModelCoverage {
+            error_model: model,
+            coverage: in_and_out(inp, k, fit, |m, hours| recalibrated.coverage(m, hours)),
+            levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
+            before_recalibration: Some(in_and_out(inp, k, fit, |m, hours| {
+                own.coverage(m, hours)
+            })),
+            cross_validated: CrossValidated::of(&blocks),
+        };
+        judged.push((coverage, noise, iv));
+    }
+    Ok(judged)
 }
 
 /// The intervals at [`LEVELS`] of the mixture of `centers` with their noise `scales` (per
