@@ -1,8 +1,10 @@
 //! The typed states of runs and jobs. They are text only in the database (each type converts
 //! itself at the SQL boundary, [`rusqlite::ToSql`] / [`rusqlite::types::FromSql`]) and on the
 //! wire (the proto's enums, each with its `From`), and users read the same words: a run's or a
-//! job's state is stored as its wire value's `word()` (`proto::RunState::word`), so the words
-//! are listed once, in the client crate.
+//! job's state is stored as its wire value's `word()` (`proto::RunState::word`, derived in the
+//! client crate from the proto's names), so no list of these words is written anywhere. A run's
+//! stage is stored as its name, [`Stage::as_str`] (calibrate's, the one list of stage words),
+//! and goes on the wire as the proto's stage of that word ([`wire_stage`]).
 
 use crate::proto;
 
@@ -69,7 +71,7 @@ macro_rules! words {
 }
 
 /// Declares an enum that has a twin on the wire (`proto::$name`, the same variants): its
-/// `From`, and its stored word, the wire value's `word()` (one list of words, the client's).
+/// `From`, and its stored word, the wire value's `word()` (derived from the proto's names).
 macro_rules! wire_words {
     ($(#[$m:meta])* $name:ident { $($(#[$vm:meta])* $v:ident,)+ }) => {
         stored_enum!($(#[$m])* $name { $($(#[$vm])* $v,)+ });
@@ -146,19 +148,12 @@ words! {
     }
 }
 
-/// The wire's stage (a function: both types are other crates').
+/// The wire's stage (a function: both types are other crates'): the proto's value with the
+/// stage's word (`proto::Stage::word`, derived from the proto's names; the words themselves are
+/// [`Stage::as_str`]'s). A stage the proto lacks would go as `unspecified`: the unit test
+/// `each_stage_is_its_wire_stage` fails first.
 pub fn wire_stage(s: Stage) -> proto::Stage {
-    match s {
-        Stage::Design => proto::Stage::Design,
-        Stage::Simulate => proto::Stage::Simulate,
-        Stage::Train => proto::Stage::Train,
-        Stage::Chains => proto::Stage::Chains,
-        Stage::Merge => proto::Stage::Merge,
-        Stage::Refine => proto::Stage::Refine,
-        Stage::Validate => proto::Stage::Validate,
-        Stage::Summary => proto::Stage::Summary,
-        Stage::Done => proto::Stage::Done,
-    }
+    proto::Stage::from_word(s.as_str()).unwrap_or(proto::Stage::Unspecified)
 }
 
 /// The wire's state of a run's current stage: the run's own.
@@ -177,11 +172,24 @@ impl From<RunState> for proto::StageState {
 mod tests {
     use super::*;
 
+    /// Both ways, no stage missed: each calibration stage has a wire stage of its word, and
+    /// each wire stage but `unspecified` is a calibration stage's.
     #[test]
-    fn the_wire_shows_each_state_with_its_stored_word() {
+    fn each_stage_is_its_wire_stage() {
         for s in Stage::ALL {
+            assert_ne!(wire_stage(*s), proto::Stage::Unspecified, "{s}");
             assert_eq!(wire_stage(*s).word(), s.as_str());
         }
+        let wire: Vec<proto::Stage> = proto::Stage::values().skip(1).collect();
+        assert_eq!(wire.len(), Stage::ALL.len());
+        for w in wire {
+            let s: Stage = w.word().parse().unwrap();
+            assert_eq!(wire_stage(s), w);
+        }
+    }
+
+    #[test]
+    fn the_wire_shows_each_state_with_its_stored_word() {
         for s in RunState::ALL {
             assert_eq!(proto::RunState::from(*s).word(), s.as_str());
             assert_eq!(proto::StageState::from(*s).word(), s.as_str());

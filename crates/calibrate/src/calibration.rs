@@ -16,6 +16,7 @@ use crate::inputs::{load_inputs, Inputs};
 use crate::output::OutputDir;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};
+use crate::sequence::Stage;
 
 /// Progress messages.
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);
@@ -129,7 +130,7 @@ impl Calibration {
     /// design stage has not finished.
     pub fn settled_design(&self) -> Result<(Outcome, Design), Error> {
         let outcome = read_outcome(&self.simulations_dir()).ok_or_else(|| Error::Stage {
-            stage: "design",
+            stage: Stage::Design.as_str(),
             message: format!(
                 "no settled design in {}",
                 self.simulations_dir().join(OUTCOME_FILE).display()

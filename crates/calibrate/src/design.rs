@@ -13,6 +13,7 @@ use crate::error::Error;
 use crate::output::read_record;
 use crate::plan::Plan;
 use crate::replacement::{self, Attempt, Outcome, Policy, Step};
+use crate::sequence::Stage;
 use bemcal_energyplus::errfile::failure_reason;
 
 /// Draws the design.
@@ -99,7 +100,7 @@ pub fn simulate_design(
             }
             Step::Failed(message) => {
                 return Err(Error::Stage {
-                    stage: "design",
+                    stage: Stage::Design.as_str(),
                     message,
                 })
             }

@@ -273,7 +273,7 @@ fn design_points(
             }
             Step::Failed(message) => {
                 return Err(Error::Stage {
-                    stage: "design",
+                    stage: Stage::Design.as_str(),
                     message,
                 })
             }

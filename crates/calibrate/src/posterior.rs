@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Error;
 use crate::output::read_record;
 use crate::plan::Plan;
+use crate::sequence::Stage;
 use bemcal_energyplus::Model;
 
 /// Bounds of `ln sigma_delta` in hyperparameter mode: one sampled dimension per fitted
@@ -369,7 +370,7 @@ pub fn run_chains(
     progress: &dyn Fn(u64, u64),
 ) -> Result<Checkpoint, Error> {
     let saved = read_record::<Checkpoint>(path).map_err(|e| Error::Stage {
-        stage: "chains",
+        stage: Stage::Chains.as_str(),
         message: format!("checkpoint {} is unreadable: {e}", path.display()),
     })?;
     let mut ck = match saved {
@@ -386,7 +387,7 @@ pub fn run_chains(
     };
     if !same_temperature(ck.temperature, post.temperature) {
         return Err(Error::Stage {
-            stage: "chains",
+            stage: Stage::Chains.as_str(),
             message: format!(
                 "{} holds chains that sampled the likelihood at temperature {}, this run's is {} \
                  (mcmc.temperature, the refinement rounds or the rule that measures it \
@@ -427,7 +428,7 @@ fn same_space(post: &Posterior<'_>, states: &[Chain]) -> Result<(), Error> {
     match states.iter().find(|s| s.dim() != post.dim()) {
         None => Ok(()),
         Some(s) => Err(Error::Stage {
-            stage: "chains",
+            stage: Stage::Chains.as_str(),
             message: format!(
                 "saved chains have {} dimensions, this run samples {} (mcmc.sigma_delta, the \
                  meters fitted or the parameters calibrated changed): delete chains.json and \

@@ -59,7 +59,11 @@ impl Stage {
         Stage::Done,
     ];
 
-    /// The stage's name: `design`, `simulate`, ... (the coordinator's SQL and its replies).
+    /// The stage's name: `design`, `simulate`, ... (the coordinator's SQL and its replies,
+    /// `bemcal status`, errors). The one list of the stage words: the wire's stage
+    /// (`proto::Stage` in `proto/bemcal.proto`, `STAGE_` and the word in upper case) is found
+    /// by its word, derived from its proto name, so a new stage is a variant here (and in
+    /// [`Stage::ALL`]) and a value there; a coordinator test checks the two lists agree.
     pub fn as_str(self) -> &'static str {
         match self {
             Stage::Design => "design",
