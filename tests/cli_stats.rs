@@ -125,6 +125,26 @@ fn diagnose_matches_library() {
     let table = bemcal(&["diagnose", "--draws", &p]);
     assert!(table.status.success());
     assert!(String::from_utf8_lossy(&table.stdout).contains("ess_tail"));
+
+    // The same draws with chains numbered from 1, as CmdStan writes them: the same diagnosis,
+    // and a note on stderr (stdout stays JSON).
+    let cmdstan: String = csv
+        .lines()
+        .enumerate()
+        .map(|(i, l)| match (i, l.split_once(',')) {
+            (0, _) | (_, None) => format!("{l}\n"),
+            (_, Some((c, rest))) => format!("{},{rest}\n", c.parse::<u32>().unwrap() + 1),
+        })
+        .collect();
+    let q = write(&dir, "cmdstan.csv", &cmdstan);
+    let from_one = bemcal(&["diagnose", "--draws", &q, "--json"]);
+    assert!(from_one.status.success());
+    assert_eq!(from_one.stdout, out.stdout);
+    let err = String::from_utf8_lossy(&from_one.stderr);
+    assert!(
+        err.contains("numbered from 1 (as CmdStan numbers them)"),
+        "{err}"
+    );
 }
 
 #[test]

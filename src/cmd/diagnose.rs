@@ -36,6 +36,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // One reader of draws files for diagnose, simulate --draw and the report: strict about
     // missing and infinite draws, chain numbering and equal lengths.
     let draws = bemcal_report::io::read_draws(&args.draws)?;
+    if let Some(note) = draws.numbering.note() {
+        eprintln!("note: {}: {note}", args.draws.display());
+    }
     let len = draws.len();
     let mut rows = Vec::new();
     for (k, name) in draws.columns.iter().enumerate() {

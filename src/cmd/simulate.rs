@@ -198,17 +198,24 @@ fn draw_values(
     draws: &bemcal_report::io::Draws,
     (chain, draw): (usize, u64),
 ) -> anyhow::Result<Vec<(String, f64)>> {
-    draws.parameters_at(chain, draw).with_context(|| {
-        let numbers = draws.numbers.get(chain).unwrap_or(&draws.numbers[0]);
-        let first = numbers.first().copied().unwrap_or_default();
-        let last = numbers.last().copied().unwrap_or_default();
-        format!(
-            "no draw {chain}:{draw}: the file has chains 0 to {} and draws {first} to {last} per \
-             chain ({} each)",
-            draws.chains.len() - 1,
-            draws.len()
-        )
-    })
+    // CHAIN as the file numbers its chains (from 1 in CmdStan's).
+    let offset = draws.numbering.first();
+    let index = chain.checked_sub(offset);
+    index
+        .and_then(|c| draws.parameters_at(c, draw))
+        .with_context(|| {
+            let numbers = index
+                .and_then(|c| draws.numbers.get(c))
+                .unwrap_or(&draws.numbers[0]);
+            let first = numbers.first().copied().unwrap_or_default();
+            let last = numbers.last().copied().unwrap_or_default();
+            format!(
+                "no draw {chain}:{draw}: the file has chains {offset} to {} and draws {first} to \
+             {last} per chain ({} each)",
+                draws.chains.len() - 1 + offset,
+                draws.len()
+            )
+        })
 }
 
 #[cfg(test)]
@@ -233,6 +240,18 @@ sigma_delta_heating_kwh,log_posterior,accept_stat__,stepsize__,n_leapfrog__,dive
         let which = parse_draw(which).map_err(shown)?;
         let draws = bemcal_report::io::read_draws(&p).map_err(|e| shown(e.into()))?;
         draw_values(&draws, which).map_err(shown)
+    }
+
+    /// CHAIN is the file's own chain number: from 1 in a CmdStan-numbered file.
+    #[test]
+    fn a_draw_of_a_file_numbered_from_one_is_named_as_the_file_numbers_it() {
+        let from_one = "chain,draw,a\n1,0,1.0\n1,1,2.0\n2,0,3.0\n2,1,4.0\n";
+        assert_eq!(
+            draw_of(from_one, "2:1").unwrap(),
+            vec![("a".to_string(), 4.0)]
+        );
+        let e = draw_of(from_one, "0:0").unwrap_err();
+        assert!(e.contains("chains 1 to 2"), "{e}");
     }
 
     #[test]

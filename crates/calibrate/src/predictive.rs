@@ -529,22 +529,13 @@ fn judge_error_models(
             levels: &central,
             ..recalibrated
         };
-        let blocks = cross_validated_coverage(
-            sims,
-            &inp.measured[k],
-            fit,
-            months,
-            model,
-            &LEVELS,
-            floor,
-        )?;
+        let blocks =
+            cross_validated_coverage(sims, &inp.measured[k], fit, months, model, &LEVELS, floor)?;
         let coverage = ModelCoverage {
             error_model: model,
             coverage: in_and_out(inp, k, fit, |m, hours| recalibrated.coverage(m, hours)),
             levels: levels.bounds.iter().map(|&(lo, hi)| [lo, hi]).collect(),
-            before_recalibration: Some(in_and_out(inp, k, fit, |m, hours| {
-                own.coverage(m, hours)
-            })),
+            before_recalibration: Some(in_and_out(inp, k, fit, |m, hours| own.coverage(m, hours))),
             cross_validated: CrossValidated::of(&blocks),
         };
         judged.push((coverage, noise, iv));

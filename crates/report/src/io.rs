@@ -31,6 +31,41 @@ pub struct Draws {
     pub chains: Vec<Vec<Vec<f64>>>,
     /// `numbers[c][i]` = the `draw` number of chain `c`'s `i`-th draw (increasing).
     pub numbers: Vec<Vec<u64>>,
+    /// How the file numbered its chains (`chains[0]` is always the first).
+    pub numbering: ChainNumbering,
+}
+
+/// How a draws file numbers its chains: bemcal and ArviZ from 0, CmdStan and R's posterior
+/// package from 1. A file whose chains start at 1 (no chain 0, chains 1..=m present) is read
+/// as chains 0..m and said so ([`ChainNumbering::note`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ChainNumbering {
+    /// Chains 0, 1, ... (bemcal, ArviZ).
+    #[default]
+    FromZero,
+    /// Chains 1, 2, ... (CmdStan, R's posterior package), read as 0, 1, ...
+    FromOne,
+}
+
+impl ChainNumbering {
+    /// The file's number of its first chain (0 or 1).
+    pub fn first(self) -> usize {
+        match self {
+            ChainNumbering::FromZero => 0,
+            ChainNumbering::FromOne => 1,
+        }
+    }
+
+    /// What a reader should be told, where the file's numbering is not bemcal's.
+    pub fn note(self) -> Option<&'static str> {
+        match self {
+            ChainNumbering::FromZero => None,
+            ChainNumbering::FromOne => Some(
+                "chains are numbered from 1 (as CmdStan numbers them): chain 1 is read as the \
+                 first chain",
+            ),
+        }
+    }
 }
 
 impl Draws {
@@ -294,7 +329,7 @@ pub fn read_truth(path: &Path) -> Result<BTreeMap<String, f64>, ReportError> {
 }
 
 /// Reads `draws.csv` (or any draws file with `chain,draw,<column>...`), strictly: chains are
-/// numbered 0, 1, ... and equally long, each chain's draw numbers appear once, and every value is
+/// numbered 0, 1, ... (or 1, 2, ... as CmdStan numbers them: [`ChainNumbering`]) and equally long, each chain's draw numbers appear once, and every value is
 /// a finite number (a missing or infinite draw would print as a mean beside an R-hat computed from
 /// ranks as if nothing were wrong). Errors name the line and column and quote an excerpt.
 pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
@@ -368,16 +403,24 @@ pub fn read_draws(path: &Path) -> Result<Draws, ReportError> {
 /// draw order.
 fn in_draw_order(
     path: &Path,
-    rows: Vec<Vec<(u64, Vec<f64>)>>,
+    mut rows: Vec<Vec<(u64, Vec<f64>)>>,
     columns: Vec<String>,
 ) -> Result<Draws, ReportError> {
     if rows.is_empty() {
         return Err(parse_err(path, "no draws: the file has a header only"));
     }
+    let numbering = if rows.len() > 1 && rows[0].is_empty() && !rows[1].is_empty() {
+        rows.remove(0);
+        ChainNumbering::FromOne
+    } else {
+        ChainNumbering::FromZero
+    };
+    let first = numbering.first();
     if rows[0].is_empty() {
         return Err(parse_err(
             path,
-            "chain 0 has no draws: chains are numbered from 0 (as bemcal and ArviZ number them)",
+            "chain 0 has no draws: chains are numbered from 0 (as bemcal and ArviZ number them) \
+             or from 1 (as CmdStan does)",
         ));
     }
     let len = rows.iter().map(Vec::len).max().unwrap_or(0);
@@ -388,9 +431,11 @@ fn in_draw_order(
             return Err(parse_err(
                 path,
                 format!(
-                    "chain {c} has {} draws, another {len}; chains must be numbered 0, 1, ... \
-                     and equally long",
-                    chain.len()
+                    "chain {} has {} draws, another {len}; chains must be numbered {first}, \
+                     {}, ... and equally long",
+                    c + first,
+                    chain.len(),
+                    first + 1
                 ),
             ));
         }
@@ -398,7 +443,7 @@ fn in_draw_order(
         if let Some(w) = chain.windows(2).find(|w| w[0].0 == w[1].0) {
             return Err(parse_err(
                 path,
-                format!("chain {c} has draw {} twice", w[0].0),
+                format!("chain {} has draw {} twice", c + first, w[0].0),
             ));
         }
         numbers.push(chain.iter().map(|(d, _)| *d).collect());
@@ -412,6 +457,7 @@ fn in_draw_order(
         columns,
         chains,
         numbers,
+        numbering,
     })
 }
 
@@ -809,6 +855,19 @@ mod draws_tests {
         assert!(Draws::is_sampler_statistic("accept_stat__"));
     }
 
+    /// CmdStan and R's posterior package number chains from 1: read as the same chains, said.
+    #[test]
+    fn chains_numbered_from_one_are_read_as_the_same_chains() {
+        let from_one = read("chain,draw,a\n1,1,0.1\n1,2,0.2\n2,1,0.3\n2,2,0.4\n").unwrap();
+        let from_zero = read("chain,draw,a\n0,1,0.1\n0,2,0.2\n1,1,0.3\n1,2,0.4\n").unwrap();
+        assert_eq!(from_one.chains, from_zero.chains);
+        assert_eq!(from_one.numbers, from_zero.numbers);
+        assert_eq!(from_one.numbering, ChainNumbering::FromOne);
+        assert_eq!(from_zero.numbering, ChainNumbering::FromZero);
+        assert!(from_one.numbering.note().unwrap().contains("CmdStan"));
+        assert_eq!(from_zero.numbering.note(), None);
+    }
+
     #[test]
     fn draws_files_that_would_mislead_a_diagnosis_are_refused() {
         let refused = |text: &str, want: &str| {
@@ -839,8 +898,13 @@ mod draws_tests {
             "line 2, column 'chain': expected a whole number",
         );
         refused(
-            "chain,draw,a\n1,0,1\n2,0,1\n",
+            "chain,draw,a\n2,0,1\n3,0,1\n",
             "chain 0 has no draws: chains are numbered from 0",
+        );
+        // Numbered from 1, one chain short: named as the file numbers it.
+        refused(
+            "chain,draw,a\n1,0,1\n1,1,2\n3,0,3\n3,1,4\n",
+            "chain 2 has 0 draws, another 2; chains must be numbered 1, 2, ...",
         );
         refused("chain,draw,a\n", "no draws: the file has a header only");
         refused("chain,draw\n0,0\n", "no columns besides chain and draw");

@@ -148,6 +148,7 @@ mod tests {
             columns: columns.iter().map(|(n, _)| n.to_string()).collect(),
             chains: vec![columns.iter().map(|(_, v)| v.clone()).collect()],
             numbers: vec![(0..columns[0].1.len() as u64).collect()],
+            numbering: Default::default(),
         }
     }
 
