@@ -10,7 +10,8 @@
 # example's truth (the Makefile's QUICK_TRUTH). Byte-identical: draws.csv, chains.json,
 # chains_summary.json, design.csv, posterior_predictive.csv, refine.json,
 # validation/calibrated.csv, calibrated.idf. summary.json is compared without its timings.
-# Exit 0 when every file matches, 1 when one differs (named).
+# Exit 0 when every file matches, 1 when one differs (named). BEFORE_BIN / AFTER_BIN: use these
+# binaries (built from those commits) instead of building them.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BEFORE=$(git rev-parse --short "${1:?usage: scripts/same_draws.sh BEFORE [AFTER]}")
@@ -39,8 +40,8 @@ run() {  # commit binary
   [ -f "$dir/out/summary.json" ] || "$2" calibrate "$dir/quick.toml" --local-workers 2 --out "$dir/out" || [ $? -eq 3 ]
 }
 
-B_AFTER=$(build "$AFTER")
-B_BEFORE=$(build "$BEFORE")
+B_AFTER=${AFTER_BIN:-$(build "$AFTER")}
+B_BEFORE=${BEFORE_BIN:-$(build "$BEFORE")}
 if [ ! -f "$WORK/meters.csv" ]; then
   # shellcheck disable=SC2086
   "$B_AFTER" synthesize --model examples/office/small.toml --weather "$EPW" $TRUTH \
