@@ -16,7 +16,7 @@ use crate::inputs::{load_inputs, Inputs};
 use crate::output::OutputDir;
 use crate::project::Project;
 use crate::replacement::{Attempt, Outcome, Policy};
-use crate::sequence::Stage;
+use crate::stage::Stage;
 
 /// Progress messages.
 pub type Log<'a> = &'a (dyn Fn(&str) + Sync);

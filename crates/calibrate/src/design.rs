@@ -13,7 +13,7 @@ use crate::error::Error;
 use crate::output::read_record;
 use crate::plan::Plan;
 use crate::replacement::{self, Attempt, Outcome, Policy, Step};
-use crate::sequence::Stage;
+use crate::stage::Stage;
 use bemcal_energyplus::errfile::failure_reason;
 
 /// Draws the design.

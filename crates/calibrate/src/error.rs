@@ -33,7 +33,7 @@ pub enum Error {
     /// A stage could not go on with what the earlier stages left.
     #[error("{stage}: {}", bemcal_excerpt::shorten(.message))]
     Stage {
-        /// The stage: a [`crate::sequence::Stage`]'s name (`Stage::Design.as_str()`,
+        /// The stage: a [`crate::stage::Stage`]'s name (`Stage::Design.as_str()`,
         /// `Stage::Chains.as_str()`) or a finer step's ("training set", "surrogate",
         /// "refinement", "validation").
         stage: &'static str,

@@ -18,7 +18,7 @@
 //!    EnergyPlus run's key), [`output`] (the folder's layout and the one reader of what a run
 //!    settled, [`output::read_record`]), [`project`], [`submitted`], [`plan`], [`metrics`]
 //!    (Guideline 14 and [`best_simulated`]), [`mapping`], [`estimate`], [`replacement`],
-//!    [`bases`].
+//!    [`bases`], [`stage`] (the stages' names).
 //! 2. The stages' work, in the order the data flows: `inputs`, [`design`], `calibration`,
 //!    [`posterior`], `chains`, [`refine`], [`surrogate_error`], `chain_summary`, `validation`,
 //!    [`predictive`], [`model_form`], `summary`.
@@ -40,6 +40,7 @@ pub mod output;
 pub mod plan;
 pub mod project;
 pub mod replacement;
+pub mod stage;
 pub mod submitted;
 
 // 2. The stages' work.

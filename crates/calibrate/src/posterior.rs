@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Error;
 use crate::output::read_record;
 use crate::plan::Plan;
-use crate::sequence::Stage;
+use crate::stage::Stage;
 use bemcal_energyplus::Model;
 
 /// Bounds of `ln sigma_delta` in hyperparameter mode: one sampled dimension per fitted
