@@ -1,5 +1,6 @@
 //! Mutation fuzzing of every parser a user or a client feeds: meters CSV, EPW, ISD-lite, IDF,
-//! project and model TOML, priors.toml, draws.csv and the protocol's messages (decoded, and
+//! the IDF screen, project and model TOML, priors.toml, draws.csv, the portfolio manifest and
+//! the protocol's messages (decoded, and
 //! those that decode sent through a coordinator's handlers). Each starts from
 //! a real input (the NREL RSF 2011 meters, a TMY3 file, the 2017 ISD-lite data, the bundled
 //! examples) and applies seeded random mutations (bytes flipped, ranges cut or repeated, huge
@@ -122,6 +123,31 @@ fn mutate(rng: &mut ChaCha8Rng, input: &[u8]) -> Vec<u8> {
 /// parse.
 fn fuzz(name: &str, seed_input: &[u8], parse: impl Fn(&[u8]) -> Result<(), String>) {
     parse(seed_input).unwrap_or_else(|e| panic!("{name}: the seed input does not parse: {e}"));
+    mutations(name, seed_input, parse);
+}
+
+/// As [`fuzz`], from a seed input that must be refused with a message containing `why` (a
+/// check whose refusal is the point: its mutations explore both the refusals and, where a
+/// mutation breaks the refused part, the acceptance).
+fn fuzz_refused(
+    name: &str,
+    seed_input: &[u8],
+    why: &str,
+    parse: impl Fn(&[u8]) -> Result<(), String>,
+) {
+    match parse(seed_input) {
+        Ok(()) => panic!("{name}: the seed input is accepted"),
+        Err(e) => assert!(
+            e.contains(why),
+            "{name}: the seed is refused for another reason: {e}"
+        ),
+    }
+    mutations(name, seed_input, parse);
+}
+
+/// The mutations of [`fuzz`]; prints the inputs tried, accepted and refused and the wall time.
+fn mutations(name: &str, seed_input: &[u8], parse: impl Fn(&[u8]) -> Result<(), String>) {
+    let started = std::time::Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(seed() ^ name.len() as u64);
     let (mut refused, mut accepted) = (0, 0);
     for i in 0..iterations() {
@@ -148,7 +174,11 @@ fn fuzz(name: &str, seed_input: &[u8], parse: impl Fn(&[u8]) -> Result<(), Strin
             }
         }
     }
-    eprintln!("{name}: {accepted} accepted, {refused} refused");
+    eprintln!(
+        "{name}: {} inputs, {accepted} accepted, {refused} refused, 0 crashes, {:.1} s",
+        accepted + refused,
+        started.elapsed().as_secs_f64()
+    );
 }
 
 /// A parser under test: the input's bytes -> accepted, or refused with a message.
@@ -217,8 +247,33 @@ fn parser(name: &str) -> Option<Parse> {
                 .map(|_| ())
                 .map_err(|e| e.to_string())
         }),
+        "idf_screen" | "idf_screen_accepted" => {
+            let idd = screen_idd();
+            Box::new(move |b| {
+                let source = Path::new("model.idf");
+                let idf = bemcal_energyplus::idf::Idf::parse(&text(b), source)
+                    .map_err(|e| e.to_string())?;
+                bemcal_energyplus::screen::screen(&idf, &idd, source).map_err(|e| e.to_string())
+            })
+        }
+        "portfolio_manifest" => Box::new(|b| {
+            bemcal_coordinator::portfolio::parse_manifest(&text(b), Path::new("portfolio.toml"))
+                .map(|_| ())
+                .map_err(|e| format!("{e:#}"))
+        }),
         _ => return None,
     })
+}
+
+/// The data dictionary the IDF screen reads its file fields from: the engine's, or where no
+/// EnergyPlus is found, `Schedule:File`'s fields as the 25.2 IDD declares them.
+fn screen_idd() -> bemcal_energyplus::idd::Idd {
+    match bemcal_energyplus::Engine::locate() {
+        Ok(engine) => bemcal_energyplus::idd::Idd::read(&engine.idd()).unwrap(),
+        Err(_) => bemcal_energyplus::idd::Idd::parse(
+            "Schedule:File,\n  A1, \\field Name\n  A2, \\field Schedule Type Limits Name\n  A3, \\field File Name\n",
+        ),
+    }
 }
 
 /// Why each `PARSER-refused-...` case must be refused: a part of the parser's message, so that
@@ -228,6 +283,10 @@ const REFUSED_FOR: &[(&str, &str)] = &[
     ("epw-refused-duplicated-hour", "a duplicated hour"),
     ("epw-refused-time-zone-99", "time zone 99"),
     ("idf-refused-unterminated-object", "not terminated by ';'"),
+    (
+        "idf_screen-refused-multi-byte-class",
+        "objects that run code",
+    ),
     ("meters-refused-duplicated-stamp", "duplicate hour"),
     ("meters-refused-empty", "empty file"),
     ("meters-refused-header-only", "no data rows"),
@@ -336,6 +395,45 @@ fn isd_lite() {
 fn idf() {
     let seed_input = b"! A small model\nVersion, 25.2;\nBuilding,\n  Office,  !- Name\n  0,       !- North Axis\n  City,    !- Terrain\n  0.04, 0.4, FullExterior, 25, 6;\nLights,\n  L1, Zone1, Sched, Watts/Area, , 10.0, , 0, 0.42, 0.18, 1;\nSchedule:Compact,\n  Sched, Fraction, Through: 12/31, For: AllDays, Until: 24:00, 1.0;\n";
     fuzz("idf", seed_input, parser("idf").unwrap());
+}
+
+/// The IDF screen on a real model (the own-IDF example, 75 kB) with a `Schedule:File` inside
+/// its run folder: from that model with a `PythonPlugin:Instance` at its end (refused; its
+/// mutations reach the refusal and every object's class and file-field checks before it), then
+/// from the model without it (accepted; its mutations reach the file-field check's refusals
+/// and the acceptance).
+#[test]
+fn idf_screen() {
+    let mut accepted = std::fs::read(common::repo().join("examples/own-idf/building.idf")).unwrap();
+    accepted.extend_from_slice(
+        b"\nSchedule:File,\n    Occupancy File,           !- Name\n    Fraction,                 !- Schedule Type Limits Name\n    occupancy.csv,            !- File Name\n    1,                        !- Column Number\n    0;                        !- Rows to Skip at Top\n",
+    );
+    let mut refused = accepted.clone();
+    refused.extend_from_slice(
+        b"\nPythonPlugin:Instance,\n    Steal,                    !- Name\n    No,                       !- Run During Warmup Days\n    environ,                  !- Python Module Name\n    Plugin;                   !- Plugin Class Name\n",
+    );
+    fuzz_refused(
+        "idf_screen",
+        &refused,
+        "PythonPlugin:Instance 'Steal'",
+        parser("idf_screen").unwrap(),
+    );
+    fuzz(
+        "idf_screen_accepted",
+        &accepted,
+        parser("idf_screen_accepted").unwrap(),
+    );
+}
+
+/// The portfolio manifest (`bemcal portfolio submit|run MANIFEST.toml`) of three buildings.
+#[test]
+fn portfolio_manifest() {
+    let seed_input = b"# A campus\nname = \"campus\"\n\n[[building]]\nname = \"north\"\nproject = \"north/project.toml\"\n\n[[building]]\nname = \"south-annex_2\"\nproject = \"south/project.toml\"\n\n[[building]]\nname = \"library.old\"\nproject = \"../library/project.toml\"\n";
+    fuzz(
+        "portfolio_manifest",
+        seed_input,
+        parser("portfolio_manifest").unwrap(),
+    );
 }
 
 #[test]

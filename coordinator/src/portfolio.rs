@@ -41,8 +41,13 @@ pub struct Manifest {
 pub fn load_manifest(path: &Path) -> anyhow::Result<Manifest> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-    let mut m: Manifest =
-        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    parse_manifest(&text, path)
+}
+
+/// Parses a manifest's text read from `path` (its folder resolves the project paths). An error
+/// names the file and line and quotes at most an excerpt of the input.
+pub fn parse_manifest(text: &str, path: &Path) -> anyhow::Result<Manifest> {
+    let mut m: Manifest = bemcal_energyplus::parse_toml(text, path)?;
     if m.buildings.is_empty() {
         anyhow::bail!("{}: no [[building]] entries", path.display());
     }
@@ -60,7 +65,7 @@ pub fn load_manifest(path: &Path) -> anyhow::Result<Manifest> {
                 "{}: building {} has name {:?}: use 1-100 of A-Z a-z 0-9 - _ . (it names a folder)",
                 path.display(),
                 i + 1,
-                b.name
+                bemcal_client::excerpt(&b.name, 100)
             );
         }
         b.project = base.join(&b.project);
@@ -70,7 +75,7 @@ pub fn load_manifest(path: &Path) -> anyhow::Result<Manifest> {
             anyhow::bail!(
                 "{}: building name {:?} is used twice",
                 path.display(),
-                b.name
+                bemcal_client::excerpt(&b.name, 100)
             );
         }
     }

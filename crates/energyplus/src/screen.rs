@@ -98,8 +98,12 @@ pub fn outside_run_folder(path: &str) -> Option<&'static str> {
     None
 }
 
+/// Compares bytes: a class name is the submitter's text, with any character where the prefix
+/// ends (slicing the `str` there panicked on a multi-byte one, found by `tests/fuzz.rs`).
 fn starts_with_ignore_case(s: &str, prefix: &str) -> bool {
-    s.len() >= prefix.len() && s[..prefix.len()].eq_ignore_ascii_case(prefix)
+    s.as_bytes()
+        .get(..prefix.len())
+        .is_some_and(|head| head.eq_ignore_ascii_case(prefix.as_bytes()))
 }
 
 fn what(o: &IdfObject) -> String {
@@ -144,6 +148,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("(ExternalInterface*)"), "{e}");
+    }
+
+    #[test]
+    fn a_class_with_a_multi_byte_character_where_a_prefix_ends_is_screened() {
+        check("Pipe:Adiabat\u{e9}, P1;\nPipe:Adiabatic:X\u{e9}, P2;\n").unwrap();
+        assert!(check("Lights, L1;\nPythonPlugin:\u{e9}, y;\n").is_err());
     }
 
     #[test]
