@@ -268,7 +268,11 @@ pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
 /// Loads everything a calibration needs and checks it fits together.
 pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let engine = Engine::locate()?;
-    let runner = Runner::new(engine, RunOptions::default())?;
+    let options = RunOptions {
+        limits: project.simulation.limits(),
+        ..RunOptions::default()
+    };
+    let runner = Runner::new(engine, options)?;
     let model = load_model(project, &runner)?;
     let plan = Plan::new(&model, &project.calibrate, &project.fixed)?;
     let calendar = model.calendar();

@@ -33,6 +33,10 @@
 //! burn_in = 150
 //! [refine]                             # default: 2 rounds of 8 posterior draws
 //! rounds = 2
+//! [simulation]                         # limits of each EnergyPlus run (these: defaults)
+//! timeout_s = 900
+//! memory_gib = 8
+//! max_output_gib = 2
 //! ```
 //! Relative paths are relative to the project file.
 
@@ -96,6 +100,9 @@ pub struct Project {
     /// `[validation]`: the estimate, the held-out period and the predictive intervals.
     #[serde(default)]
     pub validation: ValidationSettings,
+    /// `[simulation]`: the limits of each EnergyPlus run (wall time, memory, output size).
+    #[serde(default)]
+    pub simulation: SimulationSettings,
     /// Folder of the project file (set on load).
     #[serde(skip)]
     pub base: PathBuf,
@@ -240,6 +247,75 @@ impl Default for DesignSettings {
             parallel: 2,
             replacements: 2,
             min_success: 0.8,
+        }
+    }
+}
+
+/// `[simulation]`: the limits of every EnergyPlus process the calibration starts (design
+/// points, refinement draws, the estimate's, the validation's and the predictive runs), on
+/// this machine and on a coordinator's workers alike (they read the submitted project file).
+/// A run past a limit is a failed simulation whose reason names the limit, and the failed
+/// points take it from there: the design point is replaced by a spare (`[design]
+/// replacements`), a refinement draw is left out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulationSettings {
+    /// Wall-clock limit of one EnergyPlus run, s (default 900; its ExpandObjects gets at most
+    /// 120 of them). BuildStockBatch added the same per-model limit after whole jobs timed out
+    /// on a few slow models.
+    pub timeout_s: f64,
+    /// Address-space limit of one run, GiB (default 8; the example's 20-zone building maps
+    /// under 1).
+    pub memory_gib: f64,
+    /// Largest file one run may write, GiB (default 2; the 20-zone building writes about 30
+    /// MB in all).
+    pub max_output_gib: f64,
+}
+
+impl Default for SimulationSettings {
+    fn default() -> Self {
+        let l = bemcal_energyplus::confine::Limits::default();
+        SimulationSettings {
+            timeout_s: l.wall.as_secs_f64(),
+            memory_gib: l.memory_bytes.map_or(8.0, |b| b as f64 / GIB),
+            max_output_gib: l.output_bytes.map_or(2.0, |b| b as f64 / GIB),
+        }
+    }
+}
+
+/// Bytes in a GiB.
+const GIB: f64 = (1u64 << 30) as f64;
+
+impl SimulationSettings {
+    /// Longest wall-time limit accepted, s (a week).
+    pub const MAX_TIMEOUT_S: f64 = 7.0 * 24.0 * 3600.0;
+    /// Largest memory or output limit accepted, GiB.
+    pub const MAX_GIB: f64 = 1024.0 * 1024.0;
+
+    /// Checks the `[simulation]` settings: each limit positive, finite and at most a week
+    /// ([`Self::MAX_TIMEOUT_S`]) or [`Self::MAX_GIB`].
+    pub fn check(&self) -> Result<(), String> {
+        for (key, v, most, unit) in [
+            ("timeout_s", self.timeout_s, Self::MAX_TIMEOUT_S, "s"),
+            ("memory_gib", self.memory_gib, Self::MAX_GIB, "GiB"),
+            ("max_output_gib", self.max_output_gib, Self::MAX_GIB, "GiB"),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= most) {
+                return Err(format!(
+                    "simulation.{key} = {v}: expected a positive, finite limit of at most \
+                     {most} {unit}"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The limits of one EnergyPlus process (checked settings: [`Self::check`]).
+    pub fn limits(&self) -> bemcal_energyplus::confine::Limits {
+        bemcal_energyplus::confine::Limits {
+            wall: std::time::Duration::from_secs_f64(self.timeout_s),
+            memory_bytes: Some((self.memory_gib * GIB) as u64),
+            output_bytes: Some((self.max_output_gib * GIB) as u64),
         }
     }
 }
@@ -868,6 +944,7 @@ impl Project {
             );
         }
         self.surrogate.check()?;
+        self.simulation.check()?;
         let most = crate::keys::FIRST_MAPPED_KEY - crate::keys::FIRST_PREDICTIVE_KEY;
         if self.validation.predictive_draws > most {
             return Err(format!(
@@ -1557,6 +1634,35 @@ mod tests {
             ),
             "{e}"
         );
+    }
+
+    #[test]
+    fn simulation_limits_default_to_900_s_8_gib_2_gib_and_are_checked() {
+        use bemcal_energyplus::confine::Limits;
+        let p = project("").unwrap();
+        assert_eq!(p.simulation.limits(), Limits::default());
+        let p = project("[simulation]\ntimeout_s = 30\nmemory_gib = 0.5\nmax_output_gib = 1.5\n")
+            .unwrap();
+        let l = p.simulation.limits();
+        assert_eq!(l.wall, std::time::Duration::from_secs(30));
+        assert_eq!(l.memory_bytes, Some(512 << 20));
+        assert_eq!(l.output_bytes, Some(3 << 29));
+        for (bad, key) in [
+            ("timeout_s = 0", "simulation.timeout_s = 0"),
+            ("timeout_s = -5", "simulation.timeout_s = -5"),
+            ("timeout_s = nan", "simulation.timeout_s = NaN"),
+            ("timeout_s = 1e9", "simulation.timeout_s = 1000000000"),
+            ("memory_gib = inf", "simulation.memory_gib = inf"),
+            ("max_output_gib = 0.0", "simulation.max_output_gib = 0"),
+        ] {
+            let e = project(&format!("[simulation]\n{bad}\n")).unwrap_err();
+            assert!(
+                e.contains(key) && e.contains("positive, finite"),
+                "{bad}: {e}"
+            );
+        }
+        let e = project("[simulation]\ntimeout = 30\n").unwrap_err();
+        assert!(e.contains("unknown field `timeout`"), "{e}");
     }
 
     #[test]

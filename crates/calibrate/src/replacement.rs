@@ -291,8 +291,8 @@ pub fn suggestions(priors: &[Triangular], names: &[String], failed: &[Attempt]) 
             "coil sizing failed: size HVAC at fixed design conditions (generated models do) or \
              narrow the priors of the supply-air / chilled-water temperatures and set-points"
         } else if l.contains("time limit") {
-            "EnergyPlus ran out of time: a larger model needs a longer limit, or fewer time \
-             steps per hour"
+            "EnergyPlus ran out of time: a larger model needs a longer limit ([simulation] \
+             timeout_s, default 900 s), or fewer time steps per hour"
         } else if l.contains("expected number") || l.contains("out of range") {
             "a parameter value is outside what EnergyPlus accepts for its field: narrow that \
              parameter's prior to the field's range"

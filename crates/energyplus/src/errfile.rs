@@ -206,10 +206,19 @@ pub fn kind(first_line: &str) -> String {
 
 /// Why a simulation failed, in a few words that group alike failures: the [`kind`] of the
 /// first EnergyPlus message in a failed run's error text (as [`crate::Error`] displays it, or as
-/// it comes back from a worker), "EnergyPlus time limit", or the text's first line.
+/// it comes back from a worker), "EnergyPlus time limit of S s ([simulation] timeout_s)", the
+/// limit a run stopped at (without its folder), or the text's first line.
 pub fn failure_reason(error_text: &str) -> String {
-    if error_text.contains("exceeded its time limit") {
-        return "EnergyPlus time limit".into();
+    if let Some((_, after)) = error_text.split_once("exceeded its time limit") {
+        return match after
+            .strip_prefix(" of ")
+            .and_then(|t| t.split_once(" s"))
+            .map(|(secs, _)| secs)
+            .filter(|secs| secs.len() <= 24)
+        {
+            Some(secs) => format!("EnergyPlus time limit of {secs} s ([simulation] timeout_s)"),
+            None => "EnergyPlus time limit ([simulation] timeout_s)".into(),
+        };
     }
     if let Some(line) = error_text.lines().find(|l| {
         let t = l.trim_start();
@@ -220,7 +229,12 @@ pub fn failure_reason(error_text: &str) -> String {
     let first = error_text.lines().next().unwrap_or_default();
     // "EnergyPlus failed in DIR: message": the message without the run's own folder.
     match first.split_once(": ") {
-        Some((head, rest)) if head.starts_with("EnergyPlus failed in") => rest.to_string(),
+        Some((head, rest))
+            if head.starts_with("EnergyPlus failed in")
+                || head.starts_with("EnergyPlus stopped in") =>
+        {
+            rest.chars().take(160).collect()
+        }
         _ => first.chars().take(160).collect(),
     }
 }
@@ -297,7 +311,20 @@ mod tests {
         );
         assert!(is_model_failure(&shown));
         let late = "EnergyPlus exceeded its time limit of 900 s in /tmp/x";
-        assert_eq!(failure_reason(late), "EnergyPlus time limit");
+        assert_eq!(
+            failure_reason(late),
+            "EnergyPlus time limit of 900 s ([simulation] timeout_s)"
+        );
         assert!(!is_model_failure(late));
+        let stopped = |dir: &str| {
+            failure_reason(&format!(
+                "EnergyPlus stopped in {dir}: it wrote a file past its output limit of 2048 MB"
+            ))
+        };
+        assert_eq!(stopped("/a/point_001"), stopped("/b/point_002"));
+        assert_eq!(
+            stopped("/a"),
+            "it wrote a file past its output limit of 2048 MB"
+        );
     }
 }

@@ -81,12 +81,14 @@ pub enum Error {
         details: Vec<String>,
     },
     /// EnergyPlus exceeded its time limit and was killed.
-    #[error("EnergyPlus exceeded its time limit of {seconds} s in {dir}")]
+    #[error(
+        "EnergyPlus exceeded its time limit of {seconds} s in {dir} (a project's [simulation] timeout_s sets it)"
+    )]
     Timeout {
         /// The run's folder.
         dir: PathBuf,
         /// The limit, s.
-        seconds: u64,
+        seconds: f64,
     },
     /// EnergyPlus ended by a signal: past its output or memory limit, or killed.
     #[error("EnergyPlus stopped in {dir}: {message}")]

@@ -283,7 +283,7 @@ fn run_with_timeout(mut cmd: Command, dir: &Path, limits: &Limits) -> Result<i32
                 let _ = child.wait();
                 return Err(Error::Timeout {
                     dir: dir.into(),
-                    seconds: limits.wall.as_secs(),
+                    seconds: limits.wall.as_secs_f64(),
                 });
             }
             None => std::thread::sleep(Duration::from_millis(20)),
