@@ -21,7 +21,8 @@ spec, values, climate, floor area), ``cases/<key>.npy`` float16 [8760, 5] and
 Command line::
 
     python -m bemcal_train.pretrain curve --corpus DIR --heldout DIR --sizes 100,200 --out DIR
-    python -m bemcal_train.pretrain train --corpus DIR --cases N --out DIR
+    python -m bemcal_train.pretrain train --corpus DIR --cases N --out DIR [--inputs foldable]
+    python -m bemcal_train.pretrain fold --pretrained DIR --dataset DIR --building FILE --hidden H --out DIR
 """
 
 import argparse
@@ -54,6 +55,14 @@ DESCRIPTORS = [
 ]
 HOURLY = ["dry_bulb_c", "rel_humidity_pct", "wind_speed_m_s", "global_horizontal_wh_m2",
           "off_day", "hour_sin", "hour_cos", "schedule", "occupied"]
+# The foldable inputs (``--inputs foldable``): the schedule as a static 24-hour profile per day
+# type (the value of the interval covering each hour), the hourly inputs those of today's
+# surrogate (data.hourly_features, time features hour+schedule), so that the network folds
+# into today's per-building surrogate (``fold``).
+PROFILE = [f"weekday_h{h:02d}" for h in range(24)] + [f"weekend_h{h:02d}" for h in range(24)]
+HOURLY_FOLDABLE = ["dry_bulb_c", "rel_humidity_pct", "wind_speed_m_s", "global_horizontal_wh_m2",
+                   "day_type", "hour_sin", "hour_cos", "offday_hour_sin", "offday_hour_cos"]
+INPUTS = ("conditioned", "foldable")
 CALIBRATED_METERS = ["heating_kwh", "cooling_kwh", "electricity_kwh"]
 
 
@@ -121,12 +130,45 @@ def schedule_hours(spec, values, off_day):
     return np.stack([sched, occupied.astype(np.float64)], axis=1)
 
 
+def profile_names(spec):
+    """The schedule parameter covering each hour of a working day and of a day off (PROFILE
+    order): ``schedule_weekday_NN`` / ``schedule_weekend_NN`` from the spec's boundaries."""
+    names = []
+    for bounds, prefix in ((spec["weekday_boundaries"], "schedule_weekday"),
+                           (spec["weekend_boundaries"], "schedule_weekend")):
+        start = 0
+        for i, end in enumerate(bounds):
+            names += [f"{prefix}_{i + 1:02d}"] * (end - start)
+            start = end
+    return names
+
+
+def static_features(spec, values, area, inputs):
+    """A case's static inputs: descriptors, engineering parameters and, for the foldable
+    inputs, the 48-hour schedule profile."""
+    out = describe(spec) + engineering(values, area)
+    if inputs == "foldable":
+        out += [values[n] for n in profile_names(spec)]
+    return out
+
+
+def hourly_foldable(w):
+    """The foldable hourly inputs of a climate before normalisation, [T, 9]: the five raw weather
+    columns (day type as its code) and the hour+schedule time features of data.time_features."""
+    T = w.shape[0]
+    ang = 2 * np.pi * (np.arange(T) % 24) / 24
+    off = (w[:, 4] != 0).astype(np.float64)
+    return np.concatenate([w[:, :5], np.stack([np.sin(ang), np.cos(ang), off * np.sin(ang),
+                                                off * np.cos(ang)], axis=1)], axis=1)
+
+
 class Corpus:
     """Cases as arrays: static features [N, S], per-case hourly schedule [N, T, 2], each case's
     climate index, climates' weather [C, T, 7] and targets [N, T, n_out] (Wh/m2)."""
 
-    def __init__(self, folder, rows, climates=None):
+    def __init__(self, folder, rows, climates=None, inputs="conditioned"):
         self.rows = rows
+        self.inputs = inputs
         names = sorted({r["climate"] for r in rows})
         self.climates = climates if climates is not None else {}
         for c in names:
@@ -134,7 +176,7 @@ class Corpus:
                 self.climates[c] = np.load(os.path.join(folder, "weather", f"{c}.npy")).astype(np.float64)
         with open(os.path.join(folder, "corpus.json")) as f:
             self.outputs = json.load(f)["outputs"]
-        self.static = np.array([describe(r["spec"]) + engineering(r["values"], r["floor_area_m2"])
+        self.static = np.array([static_features(r["spec"], r["values"], r["floor_area_m2"], inputs)
                                 for r in rows])
         self.climate = [r["climate"] for r in rows]
         self.sched = np.stack([schedule_hours(r["spec"], r["values"], self.climates[r["climate"]][:, 4] != 0)
@@ -144,8 +186,11 @@ class Corpus:
 
     def weather_hourly(self, climate):
         """A climate's hourly inputs before normalisation: its five features (day type as an
-        off-day flag) and the hour of day, [T, 7]."""
+        off-day flag) and the hour of day, [T, 7]; for the foldable inputs, [T, 9]
+        (``hourly_foldable``)."""
         w = self.climates[climate]
+        if self.inputs == "foldable":
+            return hourly_foldable(w)
         T = w.shape[0]
         ang = 2 * np.pi * (np.arange(T) % 24) / 24
         return np.concatenate([w[:, :4], (w[:, 4:5] != 0).astype(np.float64),
@@ -162,6 +207,15 @@ class Normaliser:
             return
         s = corpus.static
         self.static_mean, self.static_std = s.mean(0), np.where(s.std(0) > 1e-9, s.std(0), 1.0)
+        self.y_scale = np.maximum(np.quantile(corpus.y.reshape(-1, corpus.y.shape[2]), 0.999, axis=0), 1e-6)
+        if corpus.inputs == "foldable":
+            # The weather's five columns normalised (over the corpus's climates); the time
+            # features as they are.
+            h = np.concatenate([corpus.weather_hourly(c) for c in sorted(set(corpus.climate))])
+            mean, std = h.mean(0), np.where(h.std(0) > 1e-9, h.std(0), 1.0)
+            mean[5:], std[5:] = 0.0, 1.0
+            self.hourly_mean, self.hourly_std = mean, std
+            return
         h = np.concatenate([np.concatenate([corpus.weather_hourly(c), np.zeros((corpus.y.shape[1], 2))], 1)
                             for c in sorted(set(corpus.climate))])
         sc = corpus.sched.reshape(-1, 2)
@@ -171,7 +225,6 @@ class Normaliser:
         # The hour-of-day and off-day columns stay as they are.
         mean[4:7], std[4:7] = 0.0, 1.0
         self.hourly_mean, self.hourly_std = mean, std
-        self.y_scale = np.maximum(np.quantile(corpus.y.reshape(-1, corpus.y.shape[2]), 0.999, axis=0), 1e-6)
 
     def state(self):
         return {k: np.asarray(v).tolist() for k, v in self.__dict__.items()}
@@ -184,6 +237,16 @@ class Windows:
     def __init__(self, corpus, norm, device):
         cl = sorted(corpus.climates)
         self.ci = torch.as_tensor([cl.index(c) for c in corpus.climate], device=device)
+        self.foldable = corpus.inputs == "foldable"
+        if self.foldable:
+            self.w = torch.as_tensor(np.stack([(corpus.weather_hourly(c) - norm.hourly_mean) / norm.hourly_std
+                                               for c in cl]), dtype=torch.float32, device=device)  # [C, T, 9]
+            self.s = torch.as_tensor((corpus.static - norm.static_mean) / norm.static_std,
+                                     dtype=torch.float32, device=device)
+            self.y = torch.as_tensor(corpus.y / norm.y_scale, dtype=torch.float32, device=device)
+            self.widx = torch.as_tensor(window_index(corpus.y.shape[1]), device=device)
+            self.n_features = self.s.shape[1] + 9
+            return
         self.w = torch.as_tensor(np.stack([(np.concatenate([corpus.weather_hourly(c), np.zeros((corpus.y.shape[1], 2))], 1)
                                             - norm.hourly_mean) / norm.hourly_std for c in cl])[..., :7],
                                  dtype=torch.float32, device=device)  # [C, T, 7]
@@ -197,7 +260,10 @@ class Windows:
 
     def batch(self, case, hour):
         h = self.widx[hour]  # [B, 3]
-        w = self.w[self.ci[case][:, None], h]  # [B, 3, 7]
+        w = self.w[self.ci[case][:, None], h]  # [B, 3, 7] ([B, 3, 9] foldable)
+        if self.foldable:
+            s = self.s[case].unsqueeze(1).expand(-1, LOOKBACK, -1)
+            return torch.cat([s, w], dim=2), self.y[case, hour]
         sc = self.sched[case[:, None], h]  # [B, 3, 2]
         s = self.s[case].unsqueeze(1).expand(-1, LOOKBACK, -1)
         return torch.cat([s, w, sc], dim=2), self.y[case, hour]
@@ -278,7 +344,7 @@ def fit(model, win, cases, epochs, hours_per_case, lr, seed, log=None, held=None
 def pretrain(corpus_dir, n_cases, args, log=print):
     """The conditioned network on the first ``n_cases`` finished cases of a corpus."""
     rows = read_index(corpus_dir)[:n_cases]
-    corpus = Corpus(corpus_dir, rows)
+    corpus = Corpus(corpus_dir, rows, inputs=args.inputs)
     norm = Normaliser(corpus)
     win = Windows(corpus, norm, "cpu")
     torch.manual_seed(args.seed)
@@ -291,9 +357,12 @@ def pretrain(corpus_dir, n_cases, args, log=print):
 def card(corpus, norm, args, seconds):
     """The model card's training part: the corpus, its ranges, the normalisation."""
     spec = np.array([describe(r["spec"]) for r in corpus.rows])
+    foldable = corpus.inputs == "foldable"
     return {"format": "bemcal-pretrained-surrogate", "format_version": 1,
             "model": {"kind": "lstm", "lookback": LOOKBACK, "layers": args.layers, "hidden": args.hidden},
-            "inputs": {"static": DESCRIPTORS + ENGINEERING, "hourly": HOURLY},
+            "inputs": {"kind": corpus.inputs,
+                       "static": DESCRIPTORS + ENGINEERING + (PROFILE if foldable else []),
+                       "hourly": HOURLY_FOLDABLE if foldable else HOURLY},
             "outputs": corpus.outputs, "output_unit": "Wh/m2 per hour",
             "corpus": {"cases": len(corpus.rows), "climates": sorted(set(corpus.climate)),
                        "descriptor_ranges": {n: [float(spec[:, k].min()), float(spec[:, k].max())]
@@ -304,7 +373,7 @@ def card(corpus, norm, args, seconds):
                          "torch_version": torch.__version__}}
 
 
-def heldout_buildings(heldout_dir, norm, climates):
+def heldout_buildings(heldout_dir, norm, climates, inputs="conditioned"):
     """The held-out corpus grouped by building: (rows, Corpus) of each building's points."""
     rows = read_index(heldout_dir)
     by = {}
@@ -313,7 +382,7 @@ def heldout_buildings(heldout_dir, norm, climates):
     out = []
     for b, rs in sorted(by.items()):
         rs.sort(key=lambda r: r["point"])
-        out.append((b, Corpus(heldout_dir, rs, dict(climates))))
+        out.append((b, Corpus(heldout_dir, rs, dict(climates), inputs)))
     return out
 
 
@@ -404,7 +473,7 @@ def curve(args):
         model, norm, corpus, secs = pretrain(args.corpus, n, args, log)
         print(f"pretrained on {n} cases in {secs:.0f} s", flush=True)
         rows = {}
-        for b, hc in heldout_buildings(args.heldout, norm, corpus.climates):
+        for b, hc in heldout_buildings(args.heldout, norm, corpus.climates, args.inputs):
             pts = len(hc.rows)
             test = list(range(pts - test_n, pts))
             win = Windows(hc, norm, "cpu")
@@ -460,10 +529,154 @@ def table(results):
     return "\n".join(lines)
 
 
+FOLD_VERDICT = "pretrained.json"
+"""What ``fold`` decided, in its output folder: ``{"admitted": true, ...}`` with the folded
+``weights.pt`` beside it, or ``{"admitted": false, "reason": ...}``."""
+
+
+def admission(card, meta, building, hidden, layers, time_features):
+    """Why the pretrained network cannot start this building's surrogate, or None: its inputs
+    must be foldable, the building inside the corpus's descriptor ranges, every calibrated
+    parameter one it knows, every meter one it predicts, and the surrogate's shape its own."""
+    if card.get("format") != "bemcal-pretrained-surrogate":
+        return "card.json is not a bemcal pretrained surrogate's"
+    if card["inputs"].get("kind") != "foldable":
+        return "the pretrained network takes the schedule hour by hour (inputs 'conditioned'), " \
+               "which today's surrogate cannot hold; pretrain it with --inputs foldable"
+    if time_features != "hour+schedule":
+        return f"the surrogate's time features are '{time_features}'; the pretrained network's are hour+schedule"
+    m = card["model"]
+    if (m["hidden"], m["layers"]) != (hidden, layers):
+        return f"the surrogate is {layers} x {hidden}, the pretrained network {m['layers']} x {m['hidden']}"
+    missing = [o for o in meta["output_names"] if o not in card["outputs"]]
+    if missing:
+        return f"the pretrained network does not predict {', '.join(missing)} (it predicts {', '.join(card['outputs'])})"
+    spec = building["spec"]
+    ranges = card["corpus"]["descriptor_ranges"]
+    for name, v in zip(DESCRIPTORS, describe(spec)):
+        lo, hi = ranges[name]
+        if not lo - 1e-9 * max(1.0, abs(lo)) <= v <= hi + 1e-9 * max(1.0, abs(hi)):
+            return f"the building's {name} {v:.4g} is outside the corpus's {lo:.4g} to {hi:.4g}"
+    known = set(ENGINEERING) | set(profile_names(spec))
+    unknown = [p["name"] for p in meta["params"] if p["name"] not in known]
+    if unknown:
+        return f"parameter {unknown[0]} is not one the pretrained network knows"
+    return None
+
+
+def folded(model, card, norm, meta, building, weather):
+    """Today's surrogate (``Surrogate(n_params + 9, ...)``, inputs of data.hourly_features with
+    hour+schedule) equal to the pretrained network on this building: layer 1's static part
+    becomes the parameters' part and a bias (the static inputs are affine in the normalised
+    parameters), its weather part is re-normalised to the dataset's weather statistics, and the
+    head keeps the building's meters, in kWh at the scale it returns. Exact up to rounding."""
+    from .data import weather_stats
+
+    spec, area = building["spec"], building["floor_area_m2"]
+    params = meta["params"]
+    lo = {p["name"]: p["min"] for p in params}
+    hi = {p["name"]: p["max"] for p in params}
+
+    def static(values):
+        return np.array(static_features(spec, values, area, "foldable"))
+
+    base = dict(building["values"], **lo)
+    s0 = static(base)
+    S = np.stack([static(dict(base, **{p["name"]: hi[p["name"]]})) - s0 for p in params], axis=1)
+    sd_s = np.asarray(norm.static_std)
+    z0 = (s0 - np.asarray(norm.static_mean)) / sd_s
+    sd = model.state_dict()
+    W = sd["lstm.weight_ih_l0"].double().numpy()
+    n_static = len(s0)
+    Ws, Wh = W[:, :n_static], W[:, n_static:]
+    m_d, sd_d = weather_stats(weather)
+    mean_c, std_c = np.asarray(norm.hourly_mean), np.asarray(norm.hourly_std)
+    W_p = Ws @ (S / sd_s[:, None])
+    W_w = Wh[:, :5] * (sd_d / std_c[:5])[None, :]
+    bias = Ws @ z0 + Wh[:, :5] @ ((m_d - mean_c[:5]) / std_c[:5])
+    out = {k: v.clone() for k, v in sd.items()}
+    out["lstm.weight_ih_l0"] = torch.as_tensor(np.concatenate([W_p, W_w, Wh[:, 5:]], axis=1), dtype=torch.float32)
+    out["lstm.bias_ih_l0"] = sd["lstm.bias_ih_l0"] + torch.as_tensor(bias, dtype=torch.float32)
+    rows = [card["outputs"].index(o) for o in meta["output_names"]]
+    out["head.weight"] = sd["head.weight"][rows]
+    out["head.bias"] = sd["head.bias"][rows]
+    m = card["model"]
+    net = Surrogate(len(params) + 9, len(rows), m["hidden"], m["layers"])
+    net.load_state_dict(out)
+    scale = np.asarray(norm.y_scale)[rows] * area / 1000.0  # Wh/m2 -> kWh of the building
+    return net, scale
+
+
+def fold(args):
+    """``fold``: the pretrained network as the warm start of one building's surrogate (the
+    calibration's ``[surrogate] pretrained``), or the reason it cannot be."""
+    from .data import load_dataset, hourly_features, normalise_params, weather_stats
+    from .train import save_weights
+
+    with open(os.path.join(args.pretrained, "card.json")) as f:
+        card = json.load(f)
+    with open(args.building) as f:
+        building = json.load(f)
+    ds = load_dataset(args.dataset)
+    meta = ds["meta"]
+    os.makedirs(args.out, exist_ok=True)
+    verdict = os.path.join(args.out, FOLD_VERDICT)
+    reason = admission(card, meta, building, args.hidden, args.layers, args.time_features)
+    if reason:
+        with open(verdict, "w") as f:
+            json.dump({"admitted": False, "reason": reason}, f)
+        print(f"pretrained surrogate not used: {reason}", flush=True)
+        return
+    norm = Normaliser(state=card["normalisation"])
+    n_static = len(card["inputs"]["static"])
+    model = Surrogate(n_static + 9, len(card["outputs"]), card["model"]["hidden"], card["model"]["layers"])
+    model.load_state_dict(torch.load(os.path.join(args.pretrained, "weights.pt"), map_location="cpu",
+                                     weights_only=True))
+    net, scale = folded(model, card, norm, meta, building, ds["weather"])
+    # The check: the folded network and the pretrained one give the same kWh at the design points.
+    names = [p["name"] for p in meta["params"]]
+    m_d, sd_d = weather_stats(ds["weather"])
+    hourly = hourly_features(ds["weather"], m_d, sd_d, "hour+schedule")
+    p_norm = normalise_params(ds["params"], meta["params"])
+    idx = torch.as_tensor(window_index(hourly.shape[0])[:: max(1, hourly.shape[0] // 500)])
+    worst = 0.0
+    for i in range(min(len(p_norm), 3)):
+        x = np.concatenate([np.broadcast_to(p_norm[i], (hourly.shape[0], len(names))), hourly], axis=1)
+        xt = torch.as_tensor(x, dtype=torch.float32)[idx]
+        values = dict(building["values"], **dict(zip(names, ds["params"][i])))
+        static = (np.array(static_features(building["spec"], values, building["floor_area_m2"], "foldable"))
+                  - norm.static_mean) / norm.static_std
+        hc = (hourly_foldable(ds["weather"]) - norm.hourly_mean) / norm.hourly_std
+        xc = np.concatenate([np.broadcast_to(static, (hc.shape[0], len(static))), hc], axis=1)
+        xc = torch.as_tensor(xc, dtype=torch.float32)[idx]
+        with torch.no_grad():
+            a = net(xt).numpy() * scale
+            rows = [card["outputs"].index(o) for o in meta["output_names"]]
+            b = model(xc).numpy()[:, rows] * np.asarray(norm.y_scale)[rows] * building["floor_area_m2"] / 1000.0
+        worst = max(worst, float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-9)))
+    if worst > 1e-3:
+        raise SystemExit(f"the folded network differs from the pretrained one by {worst:.2e} (relative)")
+    save_weights(net, scale, meta["output_names"], len(names) + 9, os.path.join(args.out, "weights.pt"))
+    with open(verdict, "w") as f:
+        json.dump({"admitted": True, "pretrained": os.path.abspath(args.pretrained),
+                   "corpus_cases": card["corpus"]["cases"], "fold_error": worst}, f)
+    print(f"pretrained surrogate folded ({card['corpus']['cases']} corpus cases; "
+          f"largest difference {worst:.1e} of the largest output)", flush=True)
+
+
 def parser():
     ap = argparse.ArgumentParser(prog="python -m bemcal_train.pretrain", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command", required=True)
+    f = sub.add_parser("fold", help="the pretrained network as the warm start of one building's surrogate")
+    f.add_argument("--pretrained", required=True, help="folder with card.json and weights.pt (train's --out)")
+    f.add_argument("--dataset", required=True, help="the building's training set (bemcal's dataset/)")
+    f.add_argument("--building", required=True, help="JSON: spec, floor_area_m2, values of every parameter")
+    f.add_argument("--hidden", type=int, required=True)
+    f.add_argument("--layers", type=int, default=2)
+    f.add_argument("--time-features", default="hour+schedule")
+    f.add_argument("--out", required=True)
+    f.add_argument("--threads", type=int, default=0)
     for name in ("curve", "train"):
         p = sub.add_parser(name)
         p.add_argument("--corpus", required=True)
@@ -478,6 +691,10 @@ def parser():
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=0)
         p.add_argument("--verbose", action="store_true")
+        p.add_argument("--inputs", choices=INPUTS, default="conditioned",
+                       help="conditioned: the schedule's value at each hour as an input; foldable: "
+                            "its 48-hour profile as static inputs, so that the network folds into "
+                            "today's per-building surrogate")
         if name == "curve":
             p.add_argument("--heldout", required=True)
             p.add_argument("--sizes", default="100,200,400,800")
@@ -497,6 +714,8 @@ def main(argv=None):
         torch.set_num_threads(args.threads)
     if args.command == "curve":
         curve(args)
+    elif args.command == "fold":
+        fold(args)
     else:
         model, norm, corpus, secs = pretrain(args.corpus, args.cases, args, print)
         os.makedirs(args.out, exist_ok=True)

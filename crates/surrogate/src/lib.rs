@@ -6,6 +6,8 @@
 //! * [`train()`]: runs `python -m bemcal_train` (LSTM, lookback 3, 2 x 128, ReLU, linear head),
 //!   which writes the ONNX graphs and `surrogate.json` ([`SurrogateMeta`]).
 //! * [`surrogate`]: [`Surrogate::load`] and [`Evaluator`], the per-proposal hot path.
+//! * [`pretrained`]: the family's pretrained network folded onto one building, the warm start
+//!   of its surrogate.
 //! * [`predict`]: CSV output of an evaluation.
 //! * [`parity`]: the trainer's PyTorch outputs, against which every trained surrogate's graphs
 //!   are checked.
@@ -14,6 +16,7 @@
 pub mod dataset;
 pub mod parity;
 pub mod predict;
+pub mod pretrained;
 pub mod surrogate;
 pub mod train;
 

@@ -212,7 +212,7 @@ pub fn find_python() -> Option<PathBuf> {
     bemcal_pyenv::find_venv().map(|v| bemcal_pyenv::python(&v))
 }
 
-fn runtime(msg: String) -> SurrogateError {
+pub(crate) fn runtime(msg: String) -> SurrogateError {
     SurrogateError::Runtime(msg)
 }
 
@@ -221,14 +221,15 @@ pub fn write_trainer(dir: &Path) -> std::io::Result<()> {
     bemcal_pyenv::write_package(dir, &TRAINER_FILES)
 }
 
-/// Trains a surrogate on `dataset_dir` (written by [`crate::TrainingSet::write`]) into
-/// `out_dir` by running `python -m bemcal_train`; returns the validated metadata.
-pub fn train(
-    dataset_dir: &Path,
+/// `python -m MODULE` of the embedded trainer package (written to a temporary folder, kept
+/// alive by the returned guard), with `out_dir` created: the command, the Python it runs and
+/// the guard.
+pub(crate) fn trainer_command(
+    python: Option<PathBuf>,
+    module: &str,
     out_dir: &Path,
-    opts: &TrainOptions,
-) -> Result<TrainReport, SurrogateError> {
-    let python = opts.python.clone().or_else(find_python).ok_or_else(|| {
+) -> Result<(std::process::Command, PathBuf, tempfile::TempDir), SurrogateError> {
+    let python = python.or_else(find_python).ok_or_else(|| {
         runtime(format!(
             "no Python environment found for training (set {PYTHON_VAR} or {}); {}",
             bemcal_pyenv::VENV_VAR,
@@ -245,8 +246,21 @@ pub fn train(
     })?;
     let mut cmd = bemcal_pyenv::child_command(&python);
     cmd.arg("-m")
-        .arg("bemcal_train")
-        .arg("--dataset")
+        .arg(module)
+        .env("PYTHONPATH", pkg.path())
+        .env("PYTHONDONTWRITEBYTECODE", "1");
+    Ok((cmd, python, pkg))
+}
+
+/// Trains a surrogate on `dataset_dir` (written by [`crate::TrainingSet::write`]) into
+/// `out_dir` by running `python -m bemcal_train`; returns the validated metadata.
+pub fn train(
+    dataset_dir: &Path,
+    out_dir: &Path,
+    opts: &TrainOptions,
+) -> Result<TrainReport, SurrogateError> {
+    let (mut cmd, python, _pkg) = trainer_command(opts.python.clone(), "bemcal_train", out_dir)?;
+    cmd.arg("--dataset")
         .arg(dataset_dir)
         .arg("--out")
         .arg(out_dir)
@@ -263,8 +277,6 @@ pub fn train(
     if let Some(init) = &opts.init {
         cmd.arg("--init").arg(init);
     }
-    cmd.env("PYTHONPATH", pkg.path())
-        .env("PYTHONDONTWRITEBYTECODE", "1");
     // PyTorch's OpenMP (libgomp, in its Linux wheels) threads spin about 300,000 times at
     // each barrier before they sleep: two trainings on one host with more threads than cores
     // then burn their time slices waiting on each other. Two 8-epoch trainings of 2 threads

@@ -1,0 +1,161 @@
+//! The pretrained surrogate as the start of one building's surrogate (issue 66).
+//!
+//! A network pretrained on the building family's corpus (`python -m bemcal_train.pretrain
+//! train --inputs foldable`: a folder with `card.json` and `weights.pt`) takes the building's
+//! descriptors, its engineering parameters and its schedule as a 48-hour profile as static
+//! inputs, and today's hourly inputs. Those static inputs are affine in the calibrated
+//! parameters, so the network *folds* exactly into today's surrogate shape for one building
+//! (`pretrain.fold`): the trainer then fine-tunes it from there (a warm start) instead of
+//! from a random start, and every graph, the chains and their gradient stay as they are.
+//!
+//! [`fold`] asks the trainer to fold; it answers with a [`FoldVerdict`]: admitted, or refused
+//! with the reason (a building outside the corpus's ranges, a parameter or meter the network
+//! does not know, another surrogate shape), in which case the surrogate is trained from a
+//! random start as before.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::surrogate::SurrogateError;
+use crate::train::{runtime, trainer_command};
+
+/// The file in the fold's folder that says what it decided.
+pub const VERDICT_FILE: &str = "pretrained.json";
+
+/// What [`fold`] decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "admitted")]
+pub enum FoldVerdict {
+    /// Folded: the folder holds `weights.pt`, the warm start of the building's surrogate.
+    #[serde(rename = "true")]
+    Admitted {
+        /// The pretrained folder.
+        pretrained: PathBuf,
+        /// Cases of the corpus it was pretrained on.
+        corpus_cases: usize,
+        /// Largest difference between the folded and the pretrained network's outputs at the
+        /// building's first design points, relative to the largest output (rounding only).
+        fold_error: f64,
+    },
+    /// Not used, and why.
+    #[serde(rename = "false")]
+    Refused {
+        /// Why (names the descriptor, parameter, meter or setting).
+        reason: String,
+    },
+}
+
+/// What [`fold`] needs of the building: its generated spec (serialised as the model file's
+/// building), its floor area and the value of every parameter (the fixed ones as they stay).
+#[derive(Debug, Clone, Serialize)]
+pub struct Building<'a, S: Serialize> {
+    /// The generator's building spec.
+    pub spec: &'a S,
+    /// Conditioned floor area, m2.
+    pub floor_area_m2: f64,
+    /// Every parameter's value (the calibrated ones are replaced by the design points').
+    pub values: &'a std::collections::BTreeMap<String, f64>,
+}
+
+/// Folds the pretrained network in `pretrained` onto the building of the training set in
+/// `dataset_dir` (described by `building`), for a surrogate of `hidden` units a layer and
+/// `time_features`, into `out_dir`; the verdict is also written there ([`VERDICT_FILE`]).
+pub fn fold<S: Serialize>(
+    pretrained: &Path,
+    dataset_dir: &Path,
+    building: &Building<'_, S>,
+    hidden: usize,
+    time_features: &str,
+    out_dir: &Path,
+    python: Option<PathBuf>,
+) -> Result<FoldVerdict, SurrogateError> {
+    let (mut cmd, python, _pkg) = trainer_command(python, "bemcal_train.pretrain", out_dir)?;
+    let building_file = out_dir.join("building.json");
+    let json = serde_json::to_string_pretty(building)
+        .map_err(|e| runtime(format!("cannot write the building for the fold: {e}")))?;
+    std::fs::write(&building_file, json)
+        .map_err(|e| runtime(format!("cannot write {}: {e}", building_file.display())))?;
+    let _ = std::fs::remove_file(out_dir.join(VERDICT_FILE));
+    cmd.arg("fold")
+        .arg("--pretrained")
+        .arg(pretrained)
+        .arg("--dataset")
+        .arg(dataset_dir)
+        .arg("--building")
+        .arg(&building_file)
+        .args(["--hidden", &hidden.to_string()])
+        .args(["--time-features", time_features])
+        .arg("--out")
+        .arg(out_dir);
+    let out = cmd
+        .output()
+        .map_err(|e| runtime(format!("cannot start {}: {e}", python.display())))?;
+    if !out.status.success() {
+        let log = String::from_utf8_lossy(&out.stderr);
+        let tail: Vec<&str> = log.lines().rev().take(20).collect();
+        return Err(runtime(format!(
+            "folding the pretrained surrogate in {} failed:\n{}",
+            pretrained.display(),
+            tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+        )));
+    }
+    read_verdict(out_dir)
+}
+
+/// The verdict a fold left in `dir`.
+pub fn read_verdict(dir: &Path) -> Result<FoldVerdict, SurrogateError> {
+    let path = dir.join(VERDICT_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|e| SurrogateError::Metadata {
+        path: path.clone(),
+        message: format!("cannot read: {e}"),
+    })?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| SurrogateError::Metadata {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+    // The trainer writes `admitted` as a JSON boolean; the tag reads strings.
+    let mut value = value;
+    if let Some(b) = value.get("admitted").and_then(serde_json::Value::as_bool) {
+        value["admitted"] = serde_json::Value::String(b.to_string());
+    }
+    serde_json::from_value(value).map_err(|e| SurrogateError::Metadata {
+        path,
+        message: e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_verdicts_read_as_the_trainer_writes_them() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join(VERDICT_FILE),
+            r#"{"admitted": false, "reason": "the building's storeys 9 is outside the corpus's 1 to 6"}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            read_verdict(dir.path()).unwrap(),
+            FoldVerdict::Refused {
+                reason: "the building's storeys 9 is outside the corpus's 1 to 6".into()
+            }
+        );
+        std::fs::write(
+            dir.path().join(VERDICT_FILE),
+            r#"{"admitted": true, "pretrained": "/p", "corpus_cases": 200, "fold_error": 1e-7}"#,
+        )
+        .unwrap();
+        assert_eq!(
+            read_verdict(dir.path()).unwrap(),
+            FoldVerdict::Admitted {
+                pretrained: "/p".into(),
+                corpus_cases: 200,
+                fold_error: 1e-7
+            }
+        );
+    }
+}
