@@ -1232,3 +1232,88 @@ fn cross_validation_by_month(dir: &Path, out: &Path) {
         }
     }
 }
+
+/// A simulation past its wall-time limit (`[simulation] timeout_s`) is a recorded failure
+/// whose reason names the limit, and the failed-points machinery takes it from there, through
+/// `bemcal calibrate` on the local path. Deterministic: at 0.05 s no EnergyPlus run of the
+/// small model can finish (one takes about 1.5 s), so every run fails. (1) The 3 design points
+/// and the spares tried for them are each killed at the limit: every failure is recorded in
+/// `simulations/failures.json` with the limit in it, and the calibration ends (exit status 1)
+/// with the design error grouping them all under the limit and naming the setting. (2) Run
+/// again, nothing is simulated again: the failures are kept and give the same error. (3) With
+/// the limit back at its default the failures at the lower limit no longer hold: the 3 points
+/// are simulated again and the calibration runs to its end with all 3.
+#[test]
+fn a_simulation_past_its_time_limit_is_a_recorded_failure() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, out) = (tmp.path(), tmp.path().join("out"));
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
+    synthesize(dir, &[]);
+    let project = common::small_project("time-limited", 3);
+    std::fs::write(
+        dir.join("project.toml"),
+        format!("{project}[simulation]\ntimeout_s = 0.05\n"),
+    )
+    .unwrap();
+    let stopped = |what: &str| {
+        let run = bemcal()
+            .arg("calibrate")
+            .arg(dir.join("project.toml"))
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let log = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert_eq!(run.status.code(), Some(1), "{what}:\n{log}");
+        let failures: Vec<serde_json::Value> =
+            serde_json::from_slice(&std::fs::read(out.join("simulations/failures.json")).unwrap())
+                .unwrap();
+        let n = failures.len();
+        for words in [
+            "only 0 of 3 design points could be simulated".to_string(),
+            format!("; {n} EnergyPlus run(s) failed"),
+            format!("{n} x EnergyPlus time limit of 0.05 s ([simulation] timeout_s)"),
+            "a longer limit ([simulation] timeout_s, default 900 s)".to_string(),
+        ] {
+            assert!(log.contains(&words), "{what}: no '{words}' in:\n{log}");
+        }
+        (log, failures)
+    };
+
+    let (log, failures) = stopped("the first run");
+    let n = failures.len();
+    for f in &failures {
+        let e = f["error"].as_str().unwrap();
+        assert!(e.contains("exceeded its time limit of 0.05 s"), "{e}");
+    }
+    let slots: std::collections::BTreeSet<u64> = failures
+        .iter()
+        .map(|f| f["slot"].as_u64().unwrap())
+        .collect();
+    assert_eq!(slots.len(), 3, "every slot failed: {failures:?}");
+    assert!(n > 3, "spares were tried: {failures:?}");
+    let failed_now = "EnergyPlus failed (EnergyPlus time limit of 0.05 s";
+    assert_eq!(log.matches(failed_now).count(), n, "{log}");
+
+    let (log, again) = stopped("the rerun");
+    assert_eq!(again, failures);
+    assert!(
+        !log.contains("EnergyPlus failed ("),
+        "simulated again:\n{log}"
+    );
+    let kept = "failed in an earlier run (EnergyPlus time limit of 0.05 s";
+    assert_eq!(log.matches(kept).count(), n, "{log}");
+
+    std::fs::write(dir.join("project.toml"), &project).unwrap();
+    let (log, summary) = calibrate(dir, &out);
+    let retried = "failed in an earlier run at a lower limit (EnergyPlus time limit of 0.05 s";
+    assert_eq!(log.matches(retried).count(), n, "{log}");
+    assert!(!log.contains("), not repeated"), "{log}");
+    assert!(log.contains("simulations: 3 run ("), "{log}");
+    assert_eq!(summary["design"]["simulated"], 3, "{}", summary["design"]);
+    assert_eq!(summary["design"]["failed"], serde_json::json!([]));
+}

@@ -277,7 +277,9 @@ impl Leased<'_> {
     }
 
     /// Hash of everything a simulation depends on besides the parameter values: the bundle's
-    /// files except the project file and the meters, and the weather file's content.
+    /// files except the project file and the meters, the weather file's content, and the
+    /// project's `[simulation]` limits where they are not the defaults (a run stopped at a
+    /// limit is cached with its failure, which another project's higher limit would not have).
     fn inputs_hash(&mut self, cal: &Calibration) -> std::result::Result<String, Error> {
         if let Some(h) = &self.inputs_hash {
             return Ok(h.clone());
@@ -289,6 +291,13 @@ impl Leased<'_> {
             "simulation revision {}\n",
             bemcal_energyplus::SIMULATION_REVISION
         ));
+        let limits = &cal.project.simulation;
+        if *limits != bemcal_calibrate::project::SimulationSettings::default() {
+            h.update(format!(
+                "limits {} s {} GiB {} GiB\n",
+                limits.timeout_s, limits.memory_gib, limits.max_output_gib
+            ));
+        }
         for f in &self.r.bundle {
             if f.path != bundle::PROJECT_FILE && Path::new(&f.path) != meters {
                 h.update(format!("{} {}\n", f.path, f.sha256));

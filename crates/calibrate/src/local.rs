@@ -7,6 +7,8 @@
 use std::path::Path;
 use std::time::Instant;
 
+use bemcal_energyplus::confine::{limit_raised, Limits};
+use bemcal_energyplus::errfile::failure_reason;
 use rayon::prelude::*;
 
 use crate::calibration::{Calibration, FittedData, Log};
@@ -152,6 +154,23 @@ pub fn stage_seconds(t: &mut Timings, stage: Stage) -> Option<&mut f64> {
     }
 }
 
+/// The failures of an earlier run of the folder that still hold: one that stopped at a limit
+/// the project has raised since (`[simulation]`; [`limit_raised`]) is left out, so that its
+/// point is simulated again.
+fn still_failed(known: Vec<Attempt>, limits: &Limits, log: Log<'_>) -> Vec<Attempt> {
+    let (raised, kept): (Vec<Attempt>, Vec<Attempt>) = known
+        .into_iter()
+        .partition(|a| limit_raised(a.error.as_deref().unwrap_or_default(), limits));
+    for a in &raised {
+        log(&format!(
+            "design point {}: failed in an earlier run at a lower limit ({}), simulated again",
+            a.slot,
+            failure_reason(a.error.as_deref().unwrap_or_default())
+        ));
+    }
+    kept
+}
+
 impl Executor for InProcess<'_> {
     fn enter(&mut self, stage: Stage) -> Result<(), Error> {
         if let Some((s, t)) = self.stage.take() {
@@ -175,7 +194,7 @@ impl Executor for InProcess<'_> {
         let dir = cal.simulations_dir();
         // A failed design point is remembered; a failed refinement draw is only left out.
         let known = match round {
-            0 => read_failures(&dir),
+            0 => still_failed(read_failures(&dir), cal.inputs.runner.limits(), log),
             _ => vec![],
         };
         let progress = |done: usize, n: usize| match round {
@@ -212,7 +231,8 @@ impl Executor for InProcess<'_> {
                 r => format!("refinement round {r}: "),
             },
             ran.seconds.len(),
-            ran.seconds.iter().sum::<f64>() / ran.seconds.len().max(1) as f64,
+            // (An empty f64 sum is -0.0: "0 run (-0.0 s each)" otherwise.)
+            ran.seconds.iter().sum::<f64>().max(0.0) / ran.seconds.len().max(1) as f64,
             ran.reused,
             ran.not_repeated
         ));

@@ -124,6 +124,30 @@ fn apply_namespace(cmd: &mut Command) {
 #[cfg(not(target_os = "linux"))]
 fn apply_namespace(_cmd: &mut Command) {}
 
+/// Whether a run that failed with `error_text` (as [`crate::Error`] displays it, or as a worker
+/// sent it back) stopped at a limit that `limits` raises: its wall-time, output or memory
+/// limit was lower than `limits`' (read from the message: "time limit of S s", "output limit
+/// of N MB", "memory limit is N MB"). Such a failure says nothing about the model, so a rerun
+/// with the higher limit simulates the point again instead of keeping the failure. (A run whose
+/// ExpandObjects, capped at 120 s, timed out under a longer limit reads as raised too.)
+pub fn limit_raised(error_text: &str, limits: &Limits) -> bool {
+    let number_after = |marker: &str, unit: &str| -> Option<f64> {
+        let (_, rest) = error_text.split_once(marker)?;
+        rest.split_once(unit)?.0.trim().parse::<f64>().ok()
+    };
+    let mb = |bytes: Option<u64>| bytes.map_or(f64::INFINITY, |b| (b >> 20) as f64);
+    if let Some(s) = number_after("exceeded its time limit of ", " s") {
+        return s < limits.wall.as_secs_f64();
+    }
+    if let Some(m) = number_after("past its output limit of ", " MB") {
+        return m < mb(limits.output_bytes);
+    }
+    if let Some(m) = number_after("its memory limit is ", " MB") {
+        return m < mb(limits.memory_bytes);
+    }
+    false
+}
+
 /// Why a confined process that ended by `signal` ended, where a limit explains it.
 pub fn signal_reason(signal: i32, limits: &Limits) -> String {
     #[cfg(target_os = "linux")]
@@ -148,4 +172,47 @@ pub fn signal_reason(signal: i32, limits: &Limits) -> String {
     }
     let _ = limits;
     format!("killed by signal {signal}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_failure_at_a_lower_limit_is_raised_by_a_higher_one_only() {
+        let limits = Limits::default();
+        let timeout = |s: f64| {
+            crate::Error::Timeout {
+                dir: "/x/point_001".into(),
+                seconds: s,
+            }
+            .to_string()
+        };
+        assert!(limit_raised(&timeout(0.05), &limits));
+        assert!(!limit_raised(&timeout(900.0), &limits));
+        assert!(!limit_raised(&timeout(1200.0), &limits));
+        let tight = Limits {
+            output_bytes: Some(256 << 10),
+            memory_bytes: Some(512 << 20),
+            ..limits
+        };
+        let stopped = |signal| {
+            format!(
+                "EnergyPlus stopped in /x: {}",
+                signal_reason(signal, &tight)
+            )
+        };
+        #[cfg(target_os = "linux")]
+        {
+            assert!(limit_raised(&stopped(libc::SIGXFSZ), &limits));
+            assert!(!limit_raised(&stopped(libc::SIGXFSZ), &tight));
+            assert!(limit_raised(&stopped(libc::SIGKILL), &limits));
+            assert!(!limit_raised(&stopped(libc::SIGKILL), &tight));
+        }
+        let _ = stopped;
+        assert!(!limit_raised(
+            "EnergyPlus failed in /x: results invalid: 1 message",
+            &limits
+        ));
+    }
 }
