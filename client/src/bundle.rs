@@ -78,6 +78,12 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
             m.insert("file".into(), n.into());
         }
     }
+    if let Some(sur) = doc.get_mut("surrogate").and_then(|v| v.as_table_mut()) {
+        if let Some(f) = str_at(sur, "pretrained") {
+            let n = files.place_folder(&f, &PRETRAINED_FILES)?;
+            sur.insert("pretrained".into(), n.into());
+        }
+    }
     doc.insert("model".into(), model_name.clone().into());
     files.beside_model(&model_name)?;
     let mut out = vec![(
@@ -94,6 +100,11 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
     }
     Ok(out)
 }
+
+/// The files of a pretrained surrogate's folder (`[surrogate] pretrained`) that travel: those
+/// of `bemcal_surrogate::pretrained::FILES` (the client does not depend on it; a test in the
+/// CLI holds the two lists equal).
+pub const PRETRAINED_FILES: [&str; 2] = ["card.json", "weights.pt"];
 
 /// The files of a bundle being collected: each one's name in the bundle and where it is read.
 struct Collector<'a> {
@@ -119,6 +130,25 @@ impl Collector<'_> {
         };
         self.check(p, &src)?;
         self.files.insert(name.clone(), src);
+        Ok(name)
+    }
+
+    /// Adds `files` of the folder a project names as `p` and returns the folder's name in the
+    /// bundle: `p` itself when it is a safe relative path, else `files/N-<folder name>`.
+    fn place_folder(&mut self, p: &str, files: &[&str]) -> anyhow::Result<String> {
+        let src = if Path::new(p).is_absolute() {
+            PathBuf::from(p)
+        } else {
+            self.base.join(p)
+        };
+        let name = match safe_relative(p) {
+            Ok(_) => p.trim_end_matches('/').to_string(),
+            Err(_) => format!("files/{}-{}", self.files.len(), bundle_stem(&src)),
+        };
+        for f in files {
+            self.check(&format!("{p}/{f}"), &src.join(f))?;
+            self.files.insert(format!("{name}/{f}"), src.join(f));
+        }
         Ok(name)
     }
 
@@ -301,6 +331,58 @@ mod tests {
         )
         .unwrap();
         p
+    }
+
+    #[test]
+    fn a_pretrained_surrogate_travels_as_its_two_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path().join("project");
+        std::fs::create_dir_all(d.join("pre")).unwrap();
+        let outside = dir.path().join("family");
+        std::fs::create_dir_all(&outside).unwrap();
+        for f in PRETRAINED_FILES {
+            std::fs::write(d.join("pre").join(f), f).unwrap();
+            std::fs::write(outside.join(f), f).unwrap();
+        }
+        std::fs::write(d.join("model.toml"), "").unwrap();
+        let project = |pre: &str| {
+            let p = d.join("project.toml");
+            std::fs::write(
+                &p,
+                format!("model = \"model.toml\"\n[surrogate]\npretrained = \"{pre}\"\n"),
+            )
+            .unwrap();
+            p
+        };
+        let names = |b: &[(String, Vec<u8>)]| b.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+        let inside = collect(&project("pre"), Policy::default()).unwrap();
+        assert_eq!(
+            names(&inside),
+            [
+                "project.toml",
+                "model.toml",
+                "pre/card.json",
+                "pre/weights.pt"
+            ]
+        );
+        // Outside the folder: refused without the option, renamed into files/ with it.
+        let e = collect(&project("../family"), Policy::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("'../family/card.json' is outside the project's folder"),
+            "{e}"
+        );
+        let allowed = Policy {
+            allow_outside: true,
+        };
+        let b = collect(&project("../family"), allowed).unwrap();
+        assert_eq!(
+            names(&b)[1..3],
+            ["files/1-family/card.json", "files/1-family/weights.pt"]
+        );
+        let text = String::from_utf8(b[0].1.clone()).unwrap();
+        assert!(text.contains("pretrained = \"files/1-family\""), "{text}");
     }
 
     #[test]

@@ -56,3 +56,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     println!("{}", s.run_id);
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    /// What the bundle sends of a pretrained surrogate's folder is what a fold reads, and what
+    /// a worker checks of a submitted project.
+    #[test]
+    fn the_pretrained_files_that_travel_are_those_a_fold_reads() {
+        assert_eq!(
+            bemcal_client::bundle::PRETRAINED_FILES,
+            bemcal_surrogate::pretrained::FILES
+        );
+    }
+}

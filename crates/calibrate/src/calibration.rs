@@ -223,6 +223,19 @@ impl Calibration {
     /// see [`Calibration::warm_start`]; then at most `surrogate.warm_epochs` epochs).
     pub fn train(&self, init: Option<&Path>) -> Result<(), Error> {
         let sp = &self.project.surrogate;
+        // The first training starts from the pretrained network where one is given and it
+        // covers this building (crate::pretrained); a refinement round's from the last weights.
+        let init = match (init, &sp.pretrained) {
+            (Some(dir), _) => Some(dir.to_path_buf()),
+            (None, Some(pretrained)) => crate::pretrained::start(
+                &self.inputs,
+                sp,
+                &self.project.resolve(pretrained),
+                &self.out.dataset(),
+                &self.out.pretrained(),
+            )?,
+            (None, None) => None,
+        };
         let opts = TrainOptions {
             epochs: match init {
                 Some(_) => sp.epochs.min(sp.warm_epochs),
@@ -234,7 +247,7 @@ impl Calibration {
             time_features: sp.time_features.parse().map_err(Error::Config)?,
             threads: sp.threads,
             quiet: true,
-            init: init.map(Path::to_path_buf),
+            init,
             hidden: sp.hidden,
             lr: sp.lr,
             lr_schedule: sp.lr_schedule,

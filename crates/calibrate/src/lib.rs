@@ -19,7 +19,8 @@
 //!    settled, [`output::read_record`]), [`project`], [`submitted`], [`plan`], [`metrics`]
 //!    (Guideline 14 and [`best_simulated`]), [`mapping`], [`estimate`], [`replacement`],
 //!    [`bases`], [`stage`] (the stages' names).
-//! 2. The stages' work, in the order the data flows: `inputs`, [`design`], `calibration`,
+//! 2. The stages' work, in the order the data flows: `inputs`, [`design`], `pretrained`,
+//!    `calibration`,
 //!    [`posterior`], `chains`, [`refine`], [`surrogate_error`], `chain_summary`, `validation`,
 //!    [`predictive`], [`model_form`], `summary`.
 //! 3. The driver: [`sequence`] (its rules), [`driver`], `local` (the in-process executor),
@@ -52,6 +53,7 @@ mod inputs;
 pub mod model_form;
 pub mod posterior;
 pub mod predictive;
+mod pretrained;
 pub mod refine;
 mod summary;
 pub mod surrogate_error;

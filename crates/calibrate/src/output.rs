@@ -93,6 +93,12 @@ impl OutputDir {
         self.root.join("surrogate")
     }
 
+    /// Folder of the pretrained surrogate folded onto this building, and the verdict
+    /// (`[surrogate] pretrained`; [`crate::pretrained`]).
+    pub fn pretrained(&self) -> PathBuf {
+        self.root.join("pretrained")
+    }
+
     /// `refine/round_R/` (1-based): a refinement round's chains and the surrogate they used.
     pub fn refine_round(&self, round: u32) -> PathBuf {
         self.root.join("refine").join(format!("round_{round}"))

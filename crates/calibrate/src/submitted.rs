@@ -28,6 +28,9 @@ pub enum SubmittedFile {
     MeasuredWeather,
     /// A file the model names: its IDF, a holidays or a day-types file.
     ModelInput,
+    /// A file of the pretrained surrogate's folder (`[surrogate] pretrained`): its card or
+    /// its weights (the family's network: about 100 kB at 64 units, 400 kB at 128).
+    Pretrained,
 }
 
 impl SubmittedFile {
@@ -38,6 +41,7 @@ impl SubmittedFile {
             SubmittedFile::Weather => 64 * MIB,
             SubmittedFile::Meters => 512 * MIB,
             SubmittedFile::MeasuredWeather | SubmittedFile::ModelInput => 256 * MIB,
+            SubmittedFile::Pretrained => 64 * MIB,
         }
     }
 
@@ -50,6 +54,7 @@ impl SubmittedFile {
             SubmittedFile::Meters => "meters file",
             SubmittedFile::MeasuredWeather => "measured weather file",
             SubmittedFile::ModelInput => "model's input file",
+            SubmittedFile::Pretrained => "pretrained surrogate's file",
         }
     }
 }
@@ -110,6 +115,12 @@ impl Project {
             .map_err(|e| refuse(format!("the project's folder: {e}")))?;
         for (kind, f) in p.named_files() {
             file_inside(&root, &p.base, f, kind).map_err(&refuse)?;
+        }
+        if let Some(dir) = &p.surrogate.pretrained {
+            for f in bemcal_surrogate::pretrained::FILES {
+                file_inside(&root, &p.base, &dir.join(f), SubmittedFile::Pretrained)
+                    .map_err(&refuse)?;
+            }
         }
         let model = file_inside(&root, &p.base, &p.model, SubmittedFile::Model).map_err(&refuse)?;
         let text = std::fs::read_to_string(&model).map_err(|e| refuse(format!("model: {e}")))?;

@@ -106,6 +106,10 @@ pub struct Summary {
     #[serde(with = "bemcal_named")]
     #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub sigma_eta_kwh: Vec<(String, f64)>,
+    /// How the surrogate's first training started, where `[surrogate] pretrained` named a
+    /// pretrained network: from it, or from random weights and why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surrogate_start: Option<crate::pretrained::SurrogateStart>,
     /// Acceptance rate after burn-in, per chain (of the final chains).
     pub acceptance_rate: Vec<f64>,
     /// Times the final chains were extended because a convergence target was missed.
@@ -379,6 +383,7 @@ pub fn write_summary(
             .cloned()
             .zip(chains.sigma_eta.iter().copied())
             .collect(),
+        surrogate_start: crate::pretrained::read_start(&cal.out.pretrained()),
         acceptance_rate: chains.acceptance.clone(),
         chain_extensions: chains.extensions,
         temperature: chains.temperature,

@@ -20,6 +20,10 @@ use serde::{Deserialize, Serialize};
 use crate::surrogate::SurrogateError;
 use crate::train::{runtime, trainer_command};
 
+/// The files of a pretrained surrogate's folder: what a fold reads, and what travels with a
+/// submitted project.
+pub const FILES: [&str; 2] = ["card.json", "weights.pt"];
+
 /// The file in the fold's folder that says what it decided.
 pub const VERDICT_FILE: &str = "pretrained.json";
 
@@ -103,6 +107,17 @@ pub fn fold<S: Serialize>(
     read_verdict(out_dir)
 }
 
+/// Writes `verdict` into `dir` as the trainer does (for a verdict reached without it).
+pub fn write_verdict(dir: &Path, verdict: &FoldVerdict) -> Result<(), SurrogateError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| runtime(format!("cannot create {}: {e}", dir.display())))?;
+    let mut value = serde_json::to_value(verdict).map_err(|e| runtime(e.to_string()))?;
+    value["admitted"] = serde_json::Value::Bool(matches!(verdict, FoldVerdict::Admitted { .. }));
+    let path = dir.join(VERDICT_FILE);
+    std::fs::write(&path, value.to_string())
+        .map_err(|e| runtime(format!("cannot write {}: {e}", path.display())))
+}
+
 /// The verdict a fold left in `dir`.
 pub fn read_verdict(dir: &Path) -> Result<FoldVerdict, SurrogateError> {
     let path = dir.join(VERDICT_FILE);
@@ -149,13 +164,18 @@ mod tests {
             r#"{"admitted": true, "pretrained": "/p", "corpus_cases": 200, "fold_error": 1e-7}"#,
         )
         .unwrap();
-        assert_eq!(
-            read_verdict(dir.path()).unwrap(),
-            FoldVerdict::Admitted {
-                pretrained: "/p".into(),
-                corpus_cases: 200,
-                fold_error: 1e-7
-            }
-        );
+        let admitted = FoldVerdict::Admitted {
+            pretrained: "/p".into(),
+            corpus_cases: 200,
+            fold_error: 1e-7,
+        };
+        assert_eq!(read_verdict(dir.path()).unwrap(), admitted);
+        let refused = FoldVerdict::Refused {
+            reason: "an own IDF".into(),
+        };
+        write_verdict(dir.path(), &refused).unwrap();
+        assert_eq!(read_verdict(dir.path()).unwrap(), refused);
+        write_verdict(dir.path(), &admitted).unwrap();
+        assert_eq!(read_verdict(dir.path()).unwrap(), admitted);
     }
 }

@@ -1,0 +1,102 @@
+//! The first training's start from the building family's pretrained surrogate (`[surrogate]
+//! pretrained`, issue 66): the network folded onto this building
+//! ([`bemcal_surrogate::pretrained`]) is the warm start the trainer fine-tunes, or, where it
+//! cannot be (an own IDF, a building outside the corpus's ranges, a parameter or meter it does
+//! not know, another surrogate shape), the surrogate starts from random weights as before and
+//! the reason is recorded. The verdict lives in the output folder's `pretrained/pretrained.json`
+//! (`OutputDir::pretrained`); [`read_start`] gives it to the summary.
+
+use std::path::{Path, PathBuf};
+
+use bemcal_surrogate::pretrained::{self as fold, Building, FoldVerdict};
+use serde::{Deserialize, Serialize};
+
+use crate::error::Error;
+use crate::inputs::Inputs;
+use crate::project::SurrogateSettings;
+
+/// How the surrogate's first training started, where `[surrogate] pretrained` names a
+/// pretrained network (`summary.json`'s `surrogate_start`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "snake_case", tag = "from")]
+pub enum SurrogateStart {
+    /// The pretrained network folded onto the building, then fine-tuned on its design points.
+    Pretrained {
+        /// The pretrained folder.
+        pretrained: String,
+        /// Cases of the corpus it was pretrained on.
+        corpus_cases: usize,
+    },
+    /// Random weights: the pretrained network could not start this building's surrogate.
+    Scratch {
+        /// Why.
+        reason: String,
+    },
+}
+
+/// Folds the pretrained network of `settings.pretrained` (resolved by the caller: `dir`)
+/// onto the building of `inp`, whose training set is `dataset`, into `out`: the warm start's
+/// folder, or None when it cannot start this building's surrogate (the reason written there).
+pub fn start(
+    inp: &Inputs,
+    settings: &SurrogateSettings,
+    dir: &Path,
+    dataset: &Path,
+    out: &Path,
+) -> Result<Option<PathBuf>, Error> {
+    let verdict = match inp.model.spec() {
+        None => {
+            let v = FoldVerdict::Refused {
+                reason: "the model is an own IDF; the pretrained network knows the generated \
+                         building family only"
+                    .into(),
+            };
+            fold::write_verdict(out, &v)?;
+            v
+        }
+        Some(spec) => {
+            // Every parameter's value: the fixed ones as the plan keeps them, the calibrated
+            // at their prior modes (the design points replace them in the fold).
+            let mut values = inp.plan.fixed.clone();
+            for (name, prior) in inp.plan.calibrated.iter().zip(&inp.plan.priors) {
+                values.insert(name.clone(), prior.mode());
+            }
+            let building = Building {
+                spec,
+                floor_area_m2: spec.floor_area_m2(),
+                values: &values,
+            };
+            let time_features = &settings.time_features;
+            fold::fold(
+                dir,
+                dataset,
+                &building,
+                settings.hidden,
+                time_features,
+                out,
+                None,
+            )?
+        }
+    };
+    Ok(match verdict {
+        FoldVerdict::Admitted { .. } => Some(out.to_path_buf()),
+        FoldVerdict::Refused { .. } => None,
+    })
+}
+
+/// The start recorded in the fold's folder `dir` (`OutputDir::pretrained`), if a pretrained
+/// network was asked for.
+pub fn read_start(dir: &Path) -> Option<SurrogateStart> {
+    let verdict = fold::read_verdict(dir).ok()?;
+    Some(match verdict {
+        FoldVerdict::Admitted {
+            pretrained,
+            corpus_cases,
+            ..
+        } => SurrogateStart::Pretrained {
+            pretrained: pretrained.display().to_string(),
+            corpus_cases,
+        },
+        FoldVerdict::Refused { reason } => SurrogateStart::Scratch { reason },
+    })
+}

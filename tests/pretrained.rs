@@ -1,0 +1,145 @@
+//! The pretrained surrogate's path through `bemcal calibrate` (issue 66), with real
+//! EnergyPlus, PyTorch and ONNX Runtime: a tiny corpus of the small model's family built by
+//! `bemcal corpus`, a tiny network pretrained on it (`bemcal_train.pretrain train --inputs
+//! foldable`), then the small calibration with `[surrogate] pretrained`: folded onto the
+//! building and fine-tuned where the building is inside the corpus's ranges, and trained from
+//! random weights, with the reason, where it is not.
+
+mod common;
+
+use std::path::Path;
+
+use common::{bemcal, finished, golden_epw, have_engine, repo, run_ok, small_model, small_project};
+
+/// The small model's family as a corpus manifest: its one-storey 20 x 15 m box, its
+/// envelope, system and occupied hours fixed, every parameter drawn over its widened prior.
+const MANIFEST: &str = r#"
+name = "small-family"
+seed = 3
+cases = 6
+points_per_building = 1
+timesteps_per_hour = 1
+[spec]
+storeys = [1, 1]
+length_m = [20.0, 20.0]
+aspect = [1.3333333333333333, 1.3333333333333333]
+floor_to_floor_m = [3.96, 3.96]
+window_to_wall = [0.33, 0.33]
+zoning = ["one_per_floor"]
+heating_source = ["boiler"]
+hvac = ["vav_reheat"]
+occupied_start = [7, 7]
+occupied_end = [19, 19]
+merge_boundaries = 0.0
+[[climates]]
+name = "Golden"
+weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
+"#;
+
+/// A project folder for the small calibration with `pretrained = "../pretrained"` and
+/// `model` as its model; meters synthesised at known values.
+fn project(dir: &Path, model: &str) -> std::path::PathBuf {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("model.toml"), model).unwrap();
+    let text = small_project("pretrained-start", 6).replace(
+        "hidden = 32\n",
+        "hidden = 32\npretrained = \"../pretrained\"\n",
+    );
+    assert!(text.contains("pretrained = "));
+    std::fs::write(dir.join("project.toml"), text).unwrap();
+    run_ok(
+        bemcal()
+            .args(["synthesize", "--model"])
+            .arg(dir.join("model.toml"))
+            .arg("--weather")
+            .arg(golden_epw())
+            .args(["--set", "lighting_power_density=12.5"])
+            .args(["--set", "cooling_setpoint_occupied=22.5"])
+            .arg("--out")
+            .arg(dir.join("meters.csv")),
+    );
+    dir.join("project.toml")
+}
+
+fn calibrate(project: &Path, out: &Path) -> serde_json::Value {
+    let o = bemcal()
+        .arg("calibrate")
+        .arg(project)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(finished(o.status), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside() {
+    if !have_engine() {
+        eprintln!("skipping: no Python environment (make setup)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path();
+    std::fs::write(root.join("family.toml"), MANIFEST).unwrap();
+    run_ok(
+        bemcal()
+            .arg("corpus")
+            .arg(root.join("family.toml"))
+            .arg("--out")
+            .arg(root.join("corpus"))
+            .args(["--parallel", "2"]),
+    );
+    let pretrain = std::process::Command::new(repo().join(".venv/bin/python"))
+        .args([
+            "-m",
+            "bemcal_train.pretrain",
+            "train",
+            "--inputs",
+            "foldable",
+        ])
+        .arg("--corpus")
+        .arg(root.join("corpus"))
+        .args(["--cases", "6", "--epochs", "3", "--hours-per-case", "500"])
+        .args(["--hidden", "32", "--threads", "1", "--out"])
+        .arg(root.join("pretrained"))
+        .env("PYTHONPATH", repo().join("python"))
+        .output()
+        .unwrap();
+    assert!(
+        pretrain.status.success(),
+        "{}",
+        String::from_utf8_lossy(&pretrain.stderr)
+    );
+
+    // Inside the family: folded (exactly, up to rounding), then fine-tuned by the trainer.
+    let inside = project(&root.join("inside"), &small_model());
+    let summary = calibrate(&inside, &root.join("inside/out"));
+    assert_eq!(
+        summary["surrogate_start"]["from"], "pretrained",
+        "{summary}"
+    );
+    assert_eq!(summary["surrogate_start"]["corpus_cases"], 6);
+    let verdict: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("inside/out/pretrained/pretrained.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(verdict["admitted"], true, "{verdict}");
+    assert!(verdict["fold_error"].as_f64().unwrap() < 1e-3, "{verdict}");
+    assert!(summary["sigma_eta_kwh"]["heating_kwh"]
+        .as_f64()
+        .unwrap()
+        .is_finite());
+
+    // Outside it (a longer footprint than any the corpus holds): from random weights, and why.
+    let longer = small_model().replace("footprint_m = [20.0, 15.0]", "footprint_m = [30.0, 15.0]");
+    assert_ne!(longer, small_model());
+    let outside = project(&root.join("outside"), &longer);
+    let summary = calibrate(&outside, &root.join("outside/out"));
+    assert_eq!(summary["surrogate_start"]["from"], "scratch", "{summary}");
+    let reason = summary["surrogate_start"]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("length_m 30 is outside the corpus's 20 to 20"),
+        "{reason}"
+    );
+}
