@@ -97,7 +97,7 @@ pub enum Command {
     /// Many buildings calibrated together: submit, run locally, status, results.
     Portfolio(portfolio::Args),
     /// Write the reference pages generated from the code (docs/reference: the CLI's, and the
-    /// JSON Schemas of the model file and of summary.json).
+    /// JSON Schemas of the project file, the model file and summary.json).
     Reference(reference::Args),
 }
 

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 use clap::CommandFactory;
 
 /// Write the reference pages generated from the code: docs/reference/cli.md (every command and
-/// flag, from the same definitions as `--help`), the JSON Schema of the model file
-/// (model.schema.json), for editors to complete and check it, and that of a calibration's
-/// summary.json (summary.schema.json), from the types that write and read it.
+/// flag, from the same definitions as `--help`), the JSON Schemas of the project file
+/// (project.schema.json) and the model file (model.schema.json), for editors to complete and
+/// check them, and that of a calibration's summary.json (summary.schema.json), from the types
+/// that write and read it.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The folder to write into (docs/reference in the repository).
@@ -38,6 +39,10 @@ pub fn pages() -> Vec<(&'static str, String)> {
         (
             "model.schema.json",
             json(bemcal_energyplus::model::model_file_schema()),
+        ),
+        (
+            "project.schema.json",
+            json(bemcal_calibrate::project_schema()),
         ),
         (
             "summary.schema.json",

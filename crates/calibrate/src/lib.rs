@@ -88,7 +88,7 @@ pub use metrics::{
 };
 pub use output::{write_outputs_csv, OutputDir};
 pub use posterior::Drawn;
-pub use project::Project;
+pub use project::{project_schema, Project};
 pub use summary::{
     summary_schema, write_calibrated_model, write_summary, DesignReport, HoldoutReport,
     MeasuredHours, ParameterReport, PointNote, Summary, Timings, NOT_CONVERGED_EXIT,

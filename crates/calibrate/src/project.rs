@@ -50,7 +50,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::Error;
 
 /// A calibration project.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Project {
     /// The calibration's name, for the summary and the calibrated model (default
@@ -111,6 +111,17 @@ pub struct Project {
     pub path: PathBuf,
 }
 
+/// The JSON Schema of a project file, from the types that read it (`bemcal reference` writes
+/// it to `docs/reference/project.schema.json`; editors complete and check TOML files against
+/// it, for example through taplo's `#:schema` directive). Relative paths are relative to the
+/// project file. Checks across settings (`burn_in` below `iterations`, a `[fixed]` value inside
+/// its prior, ...) are the loader's: the schema says which keys and values a file may have.
+pub fn project_schema() -> schemars::Schema {
+    let mut s = schemars::schema_for!(Project);
+    s.insert("title".into(), "bemcal project file".into());
+    s
+}
+
 fn default_name() -> String {
     "calibration".into()
 }
@@ -120,7 +131,7 @@ fn default_name() -> String {
 /// Guideline 14 validation), so the meter is used whole and the model is not bent to reach a
 /// load it cannot have. Fixed, not calibrated: a measured sub-meter is data, and a constant
 /// from pre-calibration (its base-load estimates) is the user's stated knowledge.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Base {
     /// The model output whose meter holds the load (`electricity_kwh`).
@@ -135,7 +146,7 @@ pub struct Base {
 
 /// `[measured_weather]`: the observations an EPW of the metered year is built from
 /// (`bemcal_weather::measured`), either NOAA ISD-lite files or a CSV with a column map.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeasuredWeather {
     /// NOAA ISD-lite station-year files (UTC; gzipped or not).
@@ -219,7 +230,7 @@ impl MeasuredWeather {
 }
 
 /// Design points.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DesignSettings {
     /// Number of Latin hypercube points (reference: 20).
@@ -257,7 +268,7 @@ impl Default for DesignSettings {
 /// A run past a limit is a failed simulation whose reason names the limit, and the failed
 /// points take it from there: the design point is replaced by a spare (`[design]
 /// replacements`), a refinement draw is left out.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimulationSettings {
     /// Wall-clock limit of one EnergyPlus run, s (default 900; its ExpandObjects gets at most
@@ -321,7 +332,7 @@ impl SimulationSettings {
 }
 
 /// Surrogate training.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SurrogateSettings {
     /// Maximum epochs (reference: 200), with early stopping.
@@ -336,6 +347,7 @@ pub struct SurrogateSettings {
     /// schedule hour from the weather). Measured on an 8-point design of the small model, held-out
     /// CV-RMSE heating / cooling / electricity: none 34 / 18 / 10 %, hour 23 / 20 / 4 %,
     /// hour+schedule 18 / 13 / 4 %.
+    #[schemars(extend("enum" = ["hour+schedule", "hour", "none"]))]
     pub time_features: String,
     /// Threads for training and evaluation.
     pub threads: usize,
@@ -392,7 +404,7 @@ impl Default for SurrogateSettings {
 }
 
 /// How the model-inadequacy variance is treated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SigmaDeltaMode {
     /// The default. Each output's total variance sigma_k^2 is unknown and integrated out
@@ -411,7 +423,7 @@ pub enum SigmaDeltaMode {
 }
 
 /// Hourly residual model (with `sigma_delta = "marginal"`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Residuals {
     /// AR(1) residuals per output, phi profiled (the default). Hourly residuals of a building
@@ -430,7 +442,7 @@ pub enum Residuals {
 /// and tail ESS >= 400 and extended while short of them. The reference's random-walk
 /// Metropolis stays available (`kernel = "mh"`, `start = "prior"`, with `iterations` in
 /// thousands: the reference used 10,000 and 2,000 burn-in).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct McmcSettings {
     /// Number of chains (default 4).
@@ -559,6 +571,22 @@ impl<'de> Deserialize<'de> for Temperature {
     }
 }
 
+impl schemars::JsonSchema for Temperature {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "Temperature".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "The likelihood's temperature T >= 1: the chains sample p(theta) L(theta)^(1/T). A number (1: the posterior itself, the default), or \"surrogate_error\": measured for each round's chains from the last refinement round's recoveries (needs refine.rounds >= 1 and refine.points >= 2).",
+            "anyOf": [
+                {"type": "number", "minimum": 1},
+                {"type": "string", "const": "surrogate_error"}
+            ]
+        })
+    }
+}
+
 impl McmcSettings {
     /// The convergence targets ([`bemcal_stats::convergence`]).
     pub fn targets(&self) -> Targets {
@@ -570,7 +598,9 @@ impl McmcSettings {
 }
 
 /// The chains' transition kernel.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Kernel {
     /// Random-walk (and independence) Metropolis-Hastings (the reference's Algorithm 1).
@@ -581,7 +611,7 @@ pub enum Kernel {
 }
 
 /// Where chains start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ChainStart {
     /// Each chain's prior draw is first optimised (BFGS, finite differences through the
@@ -633,7 +663,7 @@ impl Default for McmcSettings {
 /// demo, the 20-point surrogate differed from EnergyPlus at the MAP by +24.7 / -9.7 / -8.1 %
 /// (heating / cooling / electricity); 7 posterior draws added and one retraining brought that
 /// to -4.0 / -0.7 / -1.2 %.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RefineSettings {
     /// Refinement rounds (default 2; 0: the reference's one-shot design).
@@ -712,7 +742,7 @@ impl Estimate {
 }
 
 /// Validation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ValidationSettings {
     /// Which posterior point becomes the calibrated estimate: `best_simulated` (default),
@@ -825,6 +855,27 @@ impl schemars::JsonSchema for ErrorModelSetting {
             "description": "An error model by name, or \"auto\": the one the calibration period's months favour.",
             "type": "string",
             "enum": names
+        })
+    }
+}
+
+impl schemars::JsonSchema for ErrorModels {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "ErrorModels".into()
+    }
+
+    fn json_schema(g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        let one = g.subschema_for::<ErrorModelSetting>();
+        schemars::json_schema!({
+            "description": "One error model for every meter (\"level\", \"auto\"), or a table by output with an optional `default`, the setting of the outputs it does not name (`{ default = \"auto\", heating_kwh = \"hour_of_day\" }`; default \"auto\").",
+            "anyOf": [
+                one,
+                {
+                    "type": "object",
+                    "properties": {"default": one},
+                    "additionalProperties": one
+                }
+            ]
         })
     }
 }
@@ -1455,6 +1506,200 @@ mod tests {
             assert!(model.is_file(), "{name}: model {:?}", p.model);
             p.check_model(&spec_model(&model))
                 .unwrap_or_else(|e| panic!("{name}: {e}"));
+        }
+    }
+
+    /// Where `value` breaks `schema` (a node of the schema `root`), by keys: a key the schema
+    /// does not allow (`additionalProperties: false`, from `deny_unknown_fields`), a required
+    /// key missing, a value of another type or outside an `enum` / `const`; each error is the
+    /// key path `at` and what is wrong. Follows `$ref`, `anyOf` / `oneOf` (one branch must
+    /// pass), `allOf`, `properties`, `additionalProperties` and `items`.
+    fn schema_errors(
+        root: &serde_json::Value,
+        schema: &serde_json::Value,
+        value: &serde_json::Value,
+        at: &str,
+    ) -> Vec<String> {
+        use serde_json::Value;
+        let mut errors = vec![];
+        if let Some(r) = schema.get("$ref").and_then(Value::as_str) {
+            let name = r.strip_prefix("#/$defs/").expect("a local $ref");
+            errors.extend(schema_errors(root, &root["$defs"][name], value, at));
+        }
+        for key in ["anyOf", "oneOf"] {
+            if let Some(branches) = schema.get(key).and_then(Value::as_array) {
+                let tried: Vec<Vec<String>> = (branches.iter())
+                    .map(|b| schema_errors(root, b, value, at))
+                    .collect();
+                if !tried.iter().any(Vec::is_empty) {
+                    let fewest = tried.into_iter().min_by_key(Vec::len).unwrap_or_default();
+                    errors.push(format!("{at}: no branch of {key} fits: {fewest:?}"));
+                }
+            }
+        }
+        for b in schema
+            .get("allOf")
+            .and_then(Value::as_array)
+            .into_iter()
+            .flatten()
+        {
+            errors.extend(schema_errors(root, b, value, at));
+        }
+        if let Some(types) = schema.get("type") {
+            let fits = |t: &Value| match t.as_str() {
+                Some("object") => value.is_object(),
+                Some("array") => value.is_array(),
+                Some("string") => value.is_string(),
+                Some("boolean") => value.is_boolean(),
+                Some("integer") => value.is_i64() || value.is_u64(),
+                Some("number") => value.is_number(),
+                Some("null") => value.is_null(),
+                _ => false,
+            };
+            let fit = match types {
+                Value::Array(ts) => ts.iter().any(fits),
+                t => fits(t),
+            };
+            if !fit {
+                errors.push(format!("{at}: {value} is not of type {types}"));
+                return errors;
+            }
+        }
+        if let Some(names) = schema.get("enum").and_then(Value::as_array) {
+            if !names.contains(value) {
+                errors.push(format!("{at}: {value} is none of {names:?}"));
+            }
+        }
+        if let Some(c) = schema.get("const") {
+            if c != value {
+                errors.push(format!("{at}: {value} is not {c}"));
+            }
+        }
+        match value {
+            Value::Object(table) => {
+                let properties = schema.get("properties").and_then(Value::as_object);
+                for required in schema
+                    .get("required")
+                    .and_then(Value::as_array)
+                    .into_iter()
+                    .flatten()
+                {
+                    let name = required.as_str().unwrap();
+                    if !table.contains_key(name) {
+                        errors.push(format!("{at}: required key {name} missing"));
+                    }
+                }
+                for (k, v) in table {
+                    let path = if at.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{at}.{k}")
+                    };
+                    match (
+                        properties.and_then(|p| p.get(k)),
+                        schema.get("additionalProperties"),
+                    ) {
+                        (Some(sub), _) => errors.extend(schema_errors(root, sub, v, &path)),
+                        (None, Some(Value::Bool(false))) => {
+                            errors.push(format!("{path}: a key the schema does not allow"))
+                        }
+                        (None, Some(sub @ Value::Object(_))) => {
+                            errors.extend(schema_errors(root, sub, v, &path))
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            Value::Array(items) => {
+                if let Some(sub) = schema.get("items") {
+                    for (i, v) in items.iter().enumerate() {
+                        errors.extend(schema_errors(root, sub, v, &format!("{at}[{i}]")));
+                    }
+                }
+            }
+            _ => {}
+        }
+        errors
+    }
+
+    /// The errors of the project file `text` against [`project_schema`].
+    fn project_schema_errors(text: &str) -> Vec<String> {
+        let schema = serde_json::to_value(project_schema()).unwrap();
+        let toml: toml::Value = toml::from_str(text).unwrap();
+        let value = serde_json::to_value(toml).unwrap();
+        schema_errors(&schema, &schema, &value, "")
+    }
+
+    #[test]
+    fn the_shipped_example_projects_fit_the_project_schema() {
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+        for name in [
+            "office/project.toml",
+            "office/quick.toml",
+            "rsf/project.toml",
+            "own-idf/project.toml",
+        ] {
+            let text = std::fs::read_to_string(examples.join(name)).unwrap();
+            let errors = project_schema_errors(&text);
+            assert!(errors.is_empty(), "{name}: {errors:#?}");
+        }
+        let schema = serde_json::to_value(project_schema()).unwrap();
+        assert_eq!(schema["title"], "bemcal project file");
+        assert_eq!(schema["additionalProperties"], false);
+        // The check fails where the loader does: a misspelt key, a value of no enum, a
+        // required key missing; and passes the hand-written forms.
+        let base = "model = \"m.toml\"\nweather = \"w.epw\"\n[meters]\nfile = \"m.csv\"\n";
+        for (extra, error) in [
+            (
+                "[mcmc]\nchain = 4\n",
+                "mcmc.chain: a key the schema does not allow",
+            ),
+            (
+                "[mcmc]\nkernel = \"nuts\"\n",
+                "mcmc.kernel: no branch of oneOf fits",
+            ),
+            (
+                "[[meters.columns]]\ncolumn = \"h\"\nrole = \"heating\"\nunits = \"kW\"\n",
+                "meters.columns[0].units: a key the schema does not allow",
+            ),
+            (
+                "[simulation]\ntimeout = 30\n",
+                "simulation.timeout: a key the schema does not allow",
+            ),
+            (
+                "[mcmc]\ntemperature = \"hot\"\n",
+                "mcmc.temperature: no branch of anyOf fits",
+            ),
+            (
+                "[validation]\nerror_model = { heating_kwh = \"hourly\" }\n",
+                "validation.error_model: no branch of anyOf fits",
+            ),
+        ] {
+            let errors = project_schema_errors(&format!("{base}{extra}"));
+            assert!(
+                errors.iter().any(|e| e.starts_with(error)),
+                "{extra}: {errors:#?}"
+            );
+            assert!(project(extra).is_err(), "{extra}");
+        }
+        let errors = project_schema_errors("weather = \"w.epw\"\n[meters]\n");
+        assert!(
+            errors
+                .iter()
+                .any(|e| e.contains("required key model missing")),
+            "{errors:?}"
+        );
+        for extra in [
+            "[mcmc]\ntemperature = 20\n",
+            "[mcmc]\ntemperature = \"surrogate_error\"\n",
+            "[validation]\nerror_model = \"level\"\nholdout = [\"oct\", \"nov\"]\n",
+            "[validation]\nerror_model = { default = \"auto\", heating_kwh = \"hour_of_day\" }\n",
+            "[measured_weather]\ncsv = \"w.csv\"\ntime_zone = \"America/Denver\"\nyear = \"2017-04\"\ncolumns = [{ column = \"p\", field = \"pressure\", unit = \"mbar\" }]\n",
+            "[surrogate]\ntime_features = \"hour\"\nlr_schedule = \"cosine\"\n",
+        ] {
+            let errors = project_schema_errors(&format!("{base}{extra}"));
+            assert!(errors.is_empty(), "{extra}: {errors:#?}");
+            project(extra).unwrap_or_else(|e| panic!("{extra}: {e}"));
         }
     }
 

@@ -91,7 +91,17 @@ impl std::str::FromStr for TimeFeatures {
 }
 
 /// How the learning rate moves over a training.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum LrSchedule {
     /// The same rate throughout (the reference).

@@ -113,7 +113,9 @@ impl Field {
 }
 
 /// How an observation's time stamp relates to what it measured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Stamp {
     /// A value at that instant (synoptic observations such as ISD-lite): it goes to the EPW

@@ -38,7 +38,7 @@ pub enum HoldoutPart {
 }
 
 /// A held-out period: the union of its parts.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(try_from = "HoldoutText", into = "HoldoutText")]
 pub struct Holdout {
     /// The parts, in the order written.
@@ -47,7 +47,7 @@ pub struct Holdout {
 }
 
 /// How a held-out period is written in a project: one string or a list of strings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum HoldoutText {
     /// `holdout = "last 3 months"`.

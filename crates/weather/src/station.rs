@@ -178,8 +178,38 @@ impl<'de> Deserialize<'de> for TimeBasis {
     }
 }
 
+impl schemars::JsonSchema for TimeBasis {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "TimeBasis".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "The time in which the time stamps are written: \"utc\" (or \"UTC\"), \"local_standard\" (the site's standard time all year, as EPW files are), or an IANA zone (\"America/Denver\"), local clock time with its daylight saving.",
+            "type": "string",
+            "examples": ["utc", "local_standard", "America/Denver"]
+        })
+    }
+}
+
+/// [`Unit`]'s schema takes its aliases too (serde's `alias`, which the derive leaves out).
+fn unit_aliases(schema: &mut schemars::Schema) {
+    let alias = schemars::json_schema!({
+        "type": "string",
+        "const": "mbar",
+        "description": "Millibar (hectopascal, `hPa`)."
+    })
+    .to_value();
+    if let Some(variants) = schema.get_mut("oneOf").and_then(|v| v.as_array_mut()) {
+        variants.push(alias);
+    } else if let Some(names) = schema.get_mut("enum").and_then(|v| v.as_array_mut()) {
+        names.push("mbar".into());
+    }
+}
+
 /// A unit a weather CSV column may be in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+#[schemars(transform = unit_aliases)]
 pub enum Unit {
     /// Degrees Celsius.
     #[serde(rename = "C")]
@@ -288,7 +318,7 @@ impl Unit {
 }
 
 /// One column of a weather CSV: its header, the field it measures and its unit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct CsvColumn {
     /// The column's header.
     pub column: String,

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::DEFAULT_TIMESTAMP_FORMAT;
 
 /// What a meter measures.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(from = "String", into = "String")]
 pub enum MeterRole {
     /// Total heating (space heating + domestic hot water).
@@ -177,8 +177,24 @@ impl From<EnergyUnit> for String {
     }
 }
 
+impl schemars::JsonSchema for EnergyUnit {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "EnergyUnit".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "Unit of the values (power units are means over the hour): W, kW, MW, Wh, kWh, MWh, therm, kBtu, MMBtu, MJ, GJ, ton, ton_h; read in any case, spaces, '-' and '_' ignored (also therms, thm, tons, tr, ton-hour, trh).",
+            "type": "string",
+            "examples": ["kW", "kWh", "W", "Wh", "MW", "MWh", "therm", "kBtu", "MMBtu", "MJ", "GJ", "ton", "ton_h"]
+        })
+    }
+}
+
 /// Whether a timestamp marks the start or the end of its hour.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum HourConvention {
     /// Detect (see the module docs).
@@ -191,7 +207,9 @@ pub enum HourConvention {
 }
 
 /// How the file's clock relates to local standard time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum DstHandling {
     /// Detect from the spring skip / autumn repeat (see the module docs).
@@ -204,7 +222,9 @@ pub enum DstHandling {
 }
 
 /// What to do when two rows fall into the same hour slot (other than a DST repeat).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum DuplicatePolicy {
     /// Reject the file, naming both lines.
@@ -221,7 +241,9 @@ pub enum DuplicatePolicy {
 }
 
 /// What to do with a negative reading.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum NegativePolicy {
     /// Reject the file, naming line and column.
@@ -236,7 +258,7 @@ pub enum NegativePolicy {
 }
 
 /// One meter column of the CSV.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeterColumn {
     /// Column header in the CSV (matched after trimming, case-sensitive first, then
@@ -284,7 +306,7 @@ fn is_fitted(fit: &bool) -> bool {
 /// role = "heating"
 /// unit = "kW"
 /// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeterSpec {
     /// The CSV file (relative paths are relative to the project file). Optional when given on
