@@ -22,6 +22,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub mod cells;
+
 use crate::error::{Result, StatsError};
 
 /// Noise standard deviations of one output, in that output's units.
@@ -138,6 +140,11 @@ impl GaussianLikelihood {
     pub fn n_outputs(&self) -> usize {
         self.n_outputs
     }
+    /// Whether each observation is present, row-major `hours x outputs`.
+    pub fn observed_mask(&self) -> &[bool] {
+        &self.present
+    }
+
     /// Observed (unmasked) hours per output.
     pub fn n_observed(&self) -> &[usize] {
         &self.n_obs
@@ -456,6 +463,28 @@ struct Ar1Sums {
 }
 
 impl Ar1Sums {
+    /// The sums of a residual series, `None` at unobserved hours (which end a run).
+    fn of(r: &[Option<f64>]) -> Ar1Sums {
+        let mut a = Ar1Sums::default();
+        let mut prev: Option<f64> = None;
+        for v in r {
+            match (v, prev) {
+                (Some(v), Some(p)) => {
+                    a.rr += v * v;
+                    a.rp += v * p;
+                    a.pp += p * p;
+                }
+                (Some(v), None) => {
+                    a.first += v * v;
+                    a.runs += 1.0;
+                }
+                (None, _) => {}
+            }
+            prev = *v;
+        }
+        a
+    }
+
     /// `S(phi) = rr - 2 phi rp + phi^2 pp + (1 - phi^2) first`.
     fn s(&self, phi: f64) -> f64 {
         self.rr - 2.0 * phi * self.rp + phi * phi * self.pp + (1.0 - phi * phi) * self.first
