@@ -72,6 +72,7 @@ impl Sampler<'_> {
         };
         let (sigma_delta_kwh, residual_ar1) =
             noise_summary(&post, eval, inp, &noise, draws, &posterior.map_point)?;
+        let discrepancy_carried = discrepancy_carried(cal, &post, eval, &posterior.map_point)?;
         write_posterior_predictive(cal, &post, eval, &theta_draws)?;
         let estimate = point_estimate(&posterior, cal.project.validation.estimate);
         let surrogate_at_estimate = surrogate_metrics_at(inp, eval, &estimate)?;
@@ -89,6 +90,7 @@ impl Sampler<'_> {
             posterior,
             sigma_delta_kwh,
             residual_ar1,
+            discrepancy_carried,
             estimate,
             surrogate_at_estimate,
             fallbacks,
@@ -222,6 +224,26 @@ fn noise_summary(
             .collect()
     };
     Ok((fitted(sigma_delta_kwh), fitted(residual_ar1)))
+}
+
+/// What the likelihood's discrepancy carries at the MAP point `map_point` (physical values), per
+/// fitted meter, with `discrepancy_cells.csv` written; empty without the term.
+fn discrepancy_carried(
+    cal: &Calibration,
+    post: &Posterior<'_>,
+    eval: &mut Evaluator,
+    map_point: &[f64],
+) -> Result<Vec<crate::carried::Carried>, Error> {
+    let Some(cells) = post.cells else {
+        return Ok(vec![]);
+    };
+    let y = eval.evaluate(map_point)?;
+    let flat = y.as_slice().expect("contiguous prediction");
+    let Some((meters, table)) = crate::carried::carried(post, &cal.inputs.outputs, flat) else {
+        return Ok(vec![]);
+    };
+    crate::carried::write_cells_csv(&cal.out.discrepancy_cells_csv(), &meters, &table, cells)?;
+    Ok(meters)
 }
 
 /// `posterior_predictive.csv`: the surrogate's 5 / 50 / 95 % bands (plus the bases) from
@@ -404,6 +426,10 @@ pub struct ChainSummary {
     /// Profile AR(1) coefficient of each output's residuals at the MAP (AR(1) mode).
     #[serde(default)]
     pub residual_ar1: Vec<(String, f64)>,
+    /// What the likelihood's model-form discrepancy carries at the MAP, per fitted meter
+    /// (`mcmc.discrepancy`; empty without it).
+    #[serde(default)]
+    pub discrepancy_carried: Vec<crate::carried::Carried>,
     /// The calibrated estimate (calibrated parameters, physical units).
     pub estimate: Vec<f64>,
     /// Guideline 14 of the surrogate at the estimate against the meters.
@@ -555,6 +581,7 @@ pub(crate) mod tests {
             .unwrap_or_else(|e| panic!("{e}")),
             sigma_delta_kwh: vec![],
             residual_ar1: vec![],
+            discrepancy_carried: vec![],
             estimate: vec![0.0],
             surrogate_at_estimate: vec![],
             fallbacks: (1..=fallbacks).map(|k| vec![k as f64]).collect(),

@@ -5,6 +5,7 @@ use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::chain::Chain;
 use bemcal_stats::convergence::{draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
+use bemcal_stats::likelihood::cells::Cells;
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
 use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig, Optimum};
@@ -16,7 +17,9 @@ use crate::error::Error;
 use crate::inputs::Inputs;
 use crate::metrics::OutputMetrics;
 use crate::posterior::{advance_chains, ChainTemperature, Drawn, Posterior, SigmaDeltaBox};
-use crate::project::{ChainStart, Kernel, McmcSettings, Residuals, SigmaDeltaMode};
+use crate::project::{
+    ChainStart, DiscrepancyTerm, Kernel, McmcSettings, Residuals, SigmaDeltaMode,
+};
 
 /// Everything the chains need: the bound surrogate, the likelihood and the noise model.
 pub struct Sampler<'c> {
@@ -35,6 +38,8 @@ pub struct Sampler<'c> {
     pub sigma_box: SigmaDeltaBox,
     /// The surrogate's held-out RMSE per output, kWh (its part of the likelihood's noise).
     pub sigma_eta: Vec<f64>,
+    /// The calendar cells of the model-form discrepancy (`mcmc.discrepancy`), if any.
+    pub cells: Option<Cells>,
     /// The surrogate's held-out metrics (its metadata's `held_out`), as JSON.
     pub held_out: serde_json::Value,
     /// The likelihood's temperature of the chains this sampler runs (1 until
@@ -85,6 +90,7 @@ impl Calibration {
             noise,
             sigma_box: SigmaDeltaBox::new(&sd, &inp.fitted),
             sigma_eta,
+            cells: discrepancy_cells(self.project.mcmc.discrepancy, inp),
             held_out: serde_json::to_value(&meta.held_out).unwrap_or_default(),
             temperature: ChainTemperature::ONE,
         })
@@ -116,14 +122,15 @@ impl Sampler<'_> {
 
     /// The posterior over the unit space.
     pub fn posterior(&self) -> Posterior<'_> {
+        let m = &self.cal.project.mcmc;
         Posterior {
             plan: &self.cal.inputs.plan,
             model: &self.cal.inputs.model,
             likelihood: &self.likelihood,
-            sigma_box: (self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Sampled)
-                .then_some(&self.sigma_box),
-            marginal: self.cal.project.mcmc.sigma_delta == SigmaDeltaMode::Marginal,
-            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+            sigma_box: (m.sigma_delta == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
+            marginal: m.sigma_delta == SigmaDeltaMode::Marginal,
+            ar1: m.residuals == Residuals::Ar1,
+            cells: self.cells.as_ref(),
             temperature: self.temperature.value,
         }
     }
@@ -200,14 +207,15 @@ impl Sampler<'_> {
 
     /// The posterior and the evaluator, borrowed together.
     pub fn split(&mut self) -> (Posterior<'_>, &mut Evaluator) {
-        let mode = self.cal.project.mcmc.sigma_delta;
+        let m = &self.cal.project.mcmc;
         let post = Posterior {
             plan: &self.cal.inputs.plan,
             model: &self.cal.inputs.model,
             likelihood: &self.likelihood,
-            sigma_box: (mode == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
-            marginal: mode == SigmaDeltaMode::Marginal,
-            ar1: self.cal.project.mcmc.residuals == Residuals::Ar1,
+            sigma_box: (m.sigma_delta == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
+            marginal: m.sigma_delta == SigmaDeltaMode::Marginal,
+            ar1: m.residuals == Residuals::Ar1,
+            cells: self.cells.as_ref(),
             temperature: self.temperature.value,
         };
         (post, &mut self.evaluator)
@@ -347,6 +355,22 @@ impl Sampler<'_> {
     pub fn advance(&mut self, states: &mut [Chain], n: u64) -> Result<Vec<Draws>, Error> {
         let (post, eval) = self.split();
         advance_chains(&post, eval, states, n)
+    }
+}
+
+/// The discrepancy's calendar cells over the calibration's hour slots: hour of day x the
+/// day's kind (the calendar the model runs) x meteorological season.
+pub fn discrepancy_cells(discrepancy: DiscrepancyTerm, inp: &Inputs) -> Option<Cells> {
+    match discrepancy {
+        DiscrepancyTerm::None => None,
+        DiscrepancyTerm::HourDaySeason => {
+            let f = &inp.features;
+            let off: Vec<bool> = f.day_type.iter().map(|d| d.is_off_day()).collect();
+            let month: Vec<u32> = (0..off.len())
+                .map(bemcal_weather::grid::slot_month)
+                .collect();
+            Some(Cells::hour_kind_season(&off, &month))
+        }
     }
 }
 

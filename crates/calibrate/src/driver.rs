@@ -902,6 +902,9 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
             t.value
         ));
     }
+    for c in &chains.discrepancy_carried {
+        log(&format!("chains: {}", c.finding()));
+    }
     log(&format!("posterior: {}", chains.convergence));
 }
 

@@ -120,6 +120,12 @@ impl OutputDir {
         self.root.join("draws.csv")
     }
 
+    /// `discrepancy_cells.csv`: the likelihood's model-form discrepancy per calendar cell at
+    /// the MAP draw (`mcmc.discrepancy`; [`crate::carried`]).
+    pub fn discrepancy_cells_csv(&self) -> PathBuf {
+        self.root.join("discrepancy_cells.csv")
+    }
+
     /// `draws_with_surrogate_error.csv`: the draws with the surrogate's error added
     /// ([`crate::surrogate_error`]).
     pub fn draws_with_surrogate_error_csv(&self) -> PathBuf {

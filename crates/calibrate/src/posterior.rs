@@ -9,6 +9,7 @@
 use std::path::Path;
 
 use bemcal_stats::chain::Chain;
+use bemcal_stats::likelihood::cells::Cells;
 use bemcal_stats::likelihood::{ln_prior_log_sigma_delta, GaussianLikelihood, SigmaPrior};
 use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws};
 use bemcal_surrogate::Evaluator;
@@ -93,6 +94,9 @@ pub struct Posterior<'a> {
     pub marginal: bool,
     /// With `marginal`: AR(1) residuals (phi profiled) instead of independent ones.
     pub ar1: bool,
+    /// With `marginal`: the calendar cells of a model-form discrepancy integrated out
+    /// ([`bemcal_stats::likelihood::cells`]).
+    pub cells: Option<&'a Cells>,
     /// The likelihood's temperature `T >= 1` ([`crate::project::Temperature`]): `ln L / T`.
     pub temperature: f64,
 }
@@ -140,6 +144,11 @@ impl Posterior<'_> {
     /// the temperature.
     pub fn ln_likelihood(&self, u: &[f64], predicted: &[f32]) -> f64 {
         let ln_l = match self.sigma_box {
+            None if self.marginal && self.cells.is_some() => {
+                let cells = self.cells.expect("checked");
+                self.likelihood
+                    .log_marginal_cells(predicted, cells, self.ar1)
+            }
             None if self.marginal && self.ar1 => self.likelihood.log_marginal_sigma_ar1(predicted),
             None if self.marginal => self.likelihood.log_marginal_sigma(predicted),
             None => self.likelihood.log_likelihood(predicted),
@@ -229,6 +238,11 @@ impl Posterior<'_> {
                     &mut cflat[b * per..(b + 1) * per],
                 );
                 let ln_l = match (self.marginal, self.ar1) {
+                    (true, ar1) if self.cells.is_some() => {
+                        let cells = self.cells.expect("checked");
+                        self.likelihood
+                            .log_marginal_cells_gradient(y, cells, ar1, g)
+                    }
                     (true, true) => self.likelihood.log_marginal_sigma_ar1_gradient(y, g),
                     (true, false) => self.likelihood.log_marginal_sigma_gradient(y, g),
                     (false, _) => self.likelihood.log_likelihood_gradient(y, g),

@@ -436,6 +436,22 @@ pub enum Residuals {
     Iid,
 }
 
+/// A model-form discrepancy in the likelihood (with `sigma_delta = "marginal"`).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum DiscrepancyTerm {
+    /// None (the default): the residuals are the hourly error alone.
+    #[default]
+    None,
+    /// A random effect per meter and calendar cell (hour of day x working or off day x
+    /// meteorological season, 192 cells), its scale measured from the residuals and
+    /// integrated out ([`bemcal_stats::likelihood::cells`]): what the model misses by hour,
+    /// day kind and season is carried there instead of bending the parameters.
+    HourDaySeason,
+}
+
 /// The chains. The defaults are the sampler that converges on the paper-size problem: HMC
 /// through the surrogate's gradient from BFGS optima (`kernel = "hmc"`, `start =
 /// "optimised"`, 4 x 500 iterations with 150 burn-in), judged against R-hat <= 1.01 and bulk
@@ -461,6 +477,8 @@ pub struct McmcSettings {
     pub sigma_delta: SigmaDeltaMode,
     /// Residual model of the marginal likelihood: `ar1` (default) or `iid` (the reference).
     pub residuals: Residuals,
+    /// A model-form discrepancy with structure: `none` (default) or `hour_day_season`.
+    pub discrepancy: DiscrepancyTerm,
     /// `sigma_delta` as a fraction of the measured sd when fixed.
     pub sigma_delta_fraction: f64,
     /// Measurement error `sigma_y` as a fraction of each output's measured mean.
@@ -637,6 +655,7 @@ impl Default for McmcSettings {
             seed: 7,
             sigma_delta: SigmaDeltaMode::Marginal,
             residuals: Residuals::Ar1,
+            discrepancy: DiscrepancyTerm::None,
             sigma_delta_fraction: 0.2,
             sigma_y_fraction: 0.02,
             initial_sd: 0.02,
@@ -1375,6 +1394,13 @@ impl McmcSettings {
         }
         if self.residuals == Residuals::Ar1 && self.sigma_delta != SigmaDeltaMode::Marginal {
             return Err("mcmc.residuals = \"ar1\" needs mcmc.sigma_delta = \"marginal\"".into());
+        }
+        if self.discrepancy != DiscrepancyTerm::None && self.sigma_delta != SigmaDeltaMode::Marginal
+        {
+            return Err(
+                "mcmc.discrepancy = \"hour_day_season\" needs mcmc.sigma_delta = \"marginal\""
+                    .into(),
+            );
         }
         if self.segment == 0 {
             return Err("mcmc.segment must be at least 1".into());

@@ -102,6 +102,10 @@ pub struct Summary {
     #[serde(default, with = "bemcal_named")]
     #[schemars(with = "std::collections::BTreeMap<String, f64>")]
     pub residual_ar1: Vec<(String, f64)>,
+    /// What the likelihood's model-form discrepancy (`mcmc.discrepancy`) carries at the MAP,
+    /// per fitted meter; absent without it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub discrepancy_carried: Vec<crate::carried::Carried>,
     /// The surrogate's held-out error per output, kWh (`{output: value}`).
     #[serde(with = "bemcal_named")]
     #[schemars(with = "std::collections::BTreeMap<String, f64>")]
@@ -377,6 +381,7 @@ pub fn write_summary(
         posterior: chains.posterior.clone(),
         sigma_delta_kwh: chains.sigma_delta_kwh.clone(),
         residual_ar1: chains.residual_ar1.clone(),
+        discrepancy_carried: chains.discrepancy_carried.clone(),
         sigma_eta_kwh: inp
             .outputs
             .iter()
