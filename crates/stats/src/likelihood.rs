@@ -401,25 +401,7 @@ impl GaussianLikelihood {
                     grad[t * stride + k] = 0.0;
                     continue;
                 };
-                let prev = if t > 0 { r[t - 1] } else { None };
-                let next = r.get(t + 1).copied().flatten();
-                let mut ds = 0.0;
-                let (mut drp, mut dd) = (0.0, 0.0);
-                match prev {
-                    Some(p) => {
-                        ds += 2.0 * (rt - phi * p);
-                        drp += p;
-                    }
-                    None => {
-                        ds += 2.0 * (1.0 - phi * phi) * rt;
-                        dd -= 2.0 * rt;
-                    }
-                }
-                if let Some(q) = next {
-                    ds -= 2.0 * phi * (q - phi * rt);
-                    drp += q;
-                    dd += 2.0 * rt;
-                }
+                let (ds, drp, dd) = ar1_partials(&r, t, rt, phi);
                 let mut dl = -0.5 * n / ss * ds;
                 if free {
                     let dphi = (drp - phi * dd) / den;
@@ -550,6 +532,31 @@ pub fn ln_prior_log_sigma_delta(log_sigma: f64, scale: f64, family: SigmaPrior) 
         SigmaPrior::HalfCauchy => (2.0 / std::f64::consts::PI).ln() - scale.ln() - (z * z).ln_1p(),
     };
     ln_p_sigma + log_sigma
+}
+
+/// The partial derivatives, in the hour `t` whose residual is `rt`, of the AR(1) innovation sum
+/// of squares at a fixed phi, of the lag-1 cross product and of the end-point correction of
+/// phi's profile estimate (the sums behind [`Ar1Sums`]); gaps end a run.
+pub(crate) fn ar1_partials(r: &[Option<f64>], t: usize, rt: f64, phi: f64) -> (f64, f64, f64) {
+    let prev = if t > 0 { r[t - 1] } else { None };
+    let next = r.get(t + 1).copied().flatten();
+    let (mut ds, mut drp, mut dd) = (0.0, 0.0, 0.0);
+    match prev {
+        Some(p) => {
+            ds += 2.0 * (rt - phi * p);
+            drp += p;
+        }
+        None => {
+            ds += 2.0 * (1.0 - phi * phi) * rt;
+            dd -= 2.0 * rt;
+        }
+    }
+    if let Some(q) = next {
+        ds -= 2.0 * phi * (q - phi * rt);
+        drp += q;
+        dd += 2.0 * rt;
+    }
+    (ds, drp, dd)
 }
 
 #[cfg(test)]

@@ -332,24 +332,7 @@ fn within_gradient(w: &[Option<f64>], s: &CellSplit, runs: f64, ar1: bool) -> Ve
     (0..w.len())
         .map(|t| {
             let Some(wt) = w[t] else { return 0.0 };
-            let prev = if t > 0 { w[t - 1] } else { None };
-            let next = w.get(t + 1).copied().flatten();
-            let (mut ds, mut drp, mut dd) = (0.0, 0.0, 0.0);
-            match prev {
-                Some(p) => {
-                    ds += 2.0 * (wt - phi * p);
-                    drp += p;
-                }
-                None => {
-                    ds += 2.0 * (1.0 - phi * phi) * wt;
-                    dd -= 2.0 * wt;
-                }
-            }
-            if let Some(q) = next {
-                ds -= 2.0 * phi * (q - phi * wt);
-                drp += q;
-                dd += 2.0 * wt;
-            }
+            let (ds, drp, dd) = super::ar1_partials(w, t, wt, phi);
             let mut dl = -0.5 * df / ss * ds;
             if free {
                 dl -= runs * phi / (1.0 - phi * phi) * (drp - phi * dd) / den;
