@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use bemcal_calibrate::synth::{measurements, SynthOptions};
+use bemcal_calibrate::synth::{measurements, InjectedBias, SynthOptions};
 use bemcal_energyplus::params::parse_assignments;
 
 use super::common;
@@ -35,6 +35,12 @@ pub struct Args {
     /// Missing hours, START:END (hours of the year); default 15 July - 15 August.
     #[arg(long)]
     pub gap: Option<String>,
+    /// A known model-form error, METER=AMPLITUDE: adds AMPLITUDE x the meter's annual mean x an
+    /// hour-of-day x season pattern (1 in 9-17 h, 0.3 otherwise; x0.5 Dec-Feb, x1.5 Jun-Aug) to
+    /// the meter column METER (e.g. `electricity_kwh=0.2`) before the noise: a building the model
+    /// cannot be, with the difference known (`[mcmc] discrepancy` must carry it).
+    #[arg(long, value_name = "METER=AMPLITUDE")]
+    pub bias: Option<String>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 42)]
     pub seed: u64,
@@ -70,6 +76,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         let (s, e) = g.split_once(':').context("--gap expects START:END")?;
         opts.gap = Some((s.parse()?, e.parse()?));
     }
+    if let Some(b) = &a.bias {
+        opts.bias = Some(injected_bias(b, &r.outputs, common::model_year(&model))?);
+    }
     let m = measurements(&r.outputs, &opts);
     common::write_hourly_csv(&a.out, common::model_year(&model), &m)?;
     if let Some(p) = &a.truth {
@@ -77,4 +86,36 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     println!("wrote {} (EnergyPlus {:.1} s)", a.out.display(), r.seconds);
     Ok(())
+}
+
+/// `--bias METER=AMPLITUDE` against the simulated meters' column names.
+fn injected_bias(
+    spec: &str,
+    outputs: &bemcal_energyplus::HourlyOutputs,
+    year: bemcal_weather::grid::GridYear,
+) -> anyhow::Result<InjectedBias> {
+    let (meter, amplitude) = spec
+        .split_once('=')
+        .with_context(|| format!("--bias expects METER=AMPLITUDE, got {spec:?}"))?;
+    let amplitude: f64 = amplitude
+        .trim()
+        .parse()
+        .with_context(|| format!("--bias {spec:?}: AMPLITUDE must be a number"))?;
+    let j = outputs
+        .names
+        .iter()
+        .position(|n| n == meter.trim())
+        .with_context(|| {
+            format!(
+                "--bias {spec:?}: no meter column {:?}; the model writes {}",
+                meter.trim(),
+                outputs.names.join(", ")
+            )
+        })?;
+    Ok(InjectedBias::hour_season(
+        j,
+        amplitude,
+        year,
+        outputs.hours(),
+    ))
 }
