@@ -599,6 +599,7 @@ impl Leased<'_> {
             draws,
             temperature,
             target,
+            likelihood: None,
         })
     }
 

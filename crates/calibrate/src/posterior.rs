@@ -102,6 +102,22 @@ pub struct Posterior<'a> {
 }
 
 impl Posterior<'_> {
+    /// The likelihood's form in words (its error model and discrepancy term; not its
+    /// temperature, which checkpoints record apart): what chains resumed from a checkpoint
+    /// must have sampled.
+    pub fn form(&self) -> String {
+        let errors = match (self.sigma_box, self.marginal, self.ar1) {
+            (Some(_), _, _) => "sigma_delta sampled",
+            (None, true, true) => "sigma_delta marginal, AR(1) residuals",
+            (None, true, false) => "sigma_delta marginal, independent residuals",
+            (None, false, _) => "sigma_delta fixed",
+        };
+        match self.cells {
+            Some(_) => format!("{errors}, hour x day kind x season discrepancy"),
+            None => errors.to_string(),
+        }
+    }
+
     /// Dimension of the sampled space.
     pub fn dim(&self) -> usize {
         self.plan.calibrated.len() + self.sigma_box.map_or(0, SigmaDeltaBox::len)
@@ -302,6 +318,11 @@ pub struct Checkpoint {
     /// ([`bemcal_stats::chain::readapt`]).
     #[serde(default)]
     pub target: u64,
+    /// The likelihood's form the chains sampled ([`Posterior::form`]): chains are resumed only
+    /// under the same one. `None` in checkpoints written before it was recorded, and in the
+    /// coordinator's merged chains (its chain jobs are keyed by their settings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub likelihood: Option<String>,
 }
 
 impl Checkpoint {
@@ -396,9 +417,22 @@ pub fn run_chains(
                 states,
                 temperature: post.temperature,
                 target: iterations,
+                likelihood: Some(post.form()),
             }
         }
     };
+    if let Some(form) = ck.likelihood.as_ref().filter(|f| **f != post.form()) {
+        return Err(Error::Stage {
+            stage: Stage::Chains.as_str(),
+            message: format!(
+                "{} holds chains that sampled another likelihood ({form}) than this run's ({}; \
+                 mcmc.sigma_delta, residuals or discrepancy changed): delete it and \
+                 chains_summary.json to start the chains again",
+                path.display(),
+                post.form()
+            ),
+        });
+    }
     if !same_temperature(ck.temperature, post.temperature) {
         return Err(Error::Stage {
             stage: Stage::Chains.as_str(),
