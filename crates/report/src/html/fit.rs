@@ -343,6 +343,48 @@ pub(super) fn model_form(s: &Summary) -> Result<String, ReportError> {
     Ok(h)
 }
 
+/// What the likelihood's model-form discrepancy (`[mcmc] discrepancy`) carried at the MAP draw,
+/// per meter: its size against the meter, the level it adds, the hourly error left within its
+/// cells and the cells where it is largest (`summary.json` `discrepancy_carried`).
+pub(super) fn discrepancy_carried(s: &Summary) -> String {
+    if s.discrepancy_carried.is_empty() {
+        return String::new();
+    }
+    let mut h = String::from(
+        "<h3 id=\"discrepancy\">What the model cannot be: the discrepancy the chains carried</h3>\
+         <p class=\"sub\">The likelihood's model-form term (<code>[mcmc] discrepancy = \
+         \"hour_day_season\"</code>): per meter, an effect for each hour of day &times; working \
+         or off day &times; season, shrunk towards zero by a scale the meters estimate, so that \
+         the parameters are not bent to fit what the model cannot represent. At the MAP draw; \
+         <code>discrepancy_cells.csv</code> has every cell.</p><table><tr>\
+         <th class=\"l\">meter</th><th>carried, kWh/h RMS</th><th>% of the meter's mean</th>\
+         <th>level, kWh/h</th><th>hourly error left, kWh</th><th class=\"l\">largest cells</th></tr>",
+    );
+    for c in &s.discrepancy_carried {
+        let cells: Vec<String> = c
+            .largest
+            .iter()
+            .map(|e| {
+                let kind = if e.off_day { "off" } else { "working" };
+                format!("{:02}:00 {kind} {} {:+.2}", e.hour, esc(&e.season), e.kwh)
+            })
+            .collect();
+        let _ = write!(
+            h,
+            "<tr><td class=\"l\">{}</td><td>{}</td><td>{:.1} %</td><td>{:+.2}</td><td>{}</td>\
+             <td class=\"l\">{}</td></tr>",
+            esc(&c.meter),
+            g(c.rms_kwh),
+            c.rms_percent_of_mean,
+            c.mean_kwh,
+            g(c.within_sd_kwh),
+            cells.join(", ")
+        );
+    }
+    h.push_str("</table>\n");
+    h
+}
+
 /// The residual patterns by hour of day and by outdoor temperature band, every meter in % of
 /// its mean (a group's x: its hour, or its band's middle).
 fn residual_figures(m: &ModelFormReport) -> Result<String, ReportError> {

@@ -18,8 +18,8 @@ mod precal;
 
 use first_screen::{design_failures, not_converged_banner, out_of_reach_banner, warnings};
 use fit::{
-    goodness_of_fit, held_out_weeks, hourly_fit, model_form, monthly_and_held_out,
-    predictive_coverage, surrogate_on_held_out,
+    discrepancy_carried, goodness_of_fit, held_out_weeks, hourly_fit, model_form,
+    monthly_and_held_out, predictive_coverage, surrogate_on_held_out,
 };
 use posterior::{
     acceptance_rates, chain_plots, parameters_table, prior_vs_posterior, refinement, run_timings,
@@ -161,6 +161,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     h.push_str(&monthly_and_held_out(s));
     h.push_str(&predictive_coverage(s));
     h.push_str(&model_form(s)?);
+    h.push_str(&discrepancy_carried(s));
     h.push_str(&held_out_weeks(cal)?);
     h.push_str(&parameters_table(s));
     h.push_str(&truth_table(cal));
