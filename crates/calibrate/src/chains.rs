@@ -363,13 +363,17 @@ impl Sampler<'_> {
 pub fn discrepancy_cells(discrepancy: DiscrepancyTerm, inp: &Inputs) -> Option<Cells> {
     match discrepancy {
         DiscrepancyTerm::None => None,
-        DiscrepancyTerm::HourDaySeason => {
+        DiscrepancyTerm::HourDaySeason | DiscrepancyTerm::HourDaySeasonFree => {
             let f = &inp.features;
             let off: Vec<bool> = f.day_type.iter().map(|d| d.is_off_day()).collect();
             let month: Vec<u32> = (0..off.len())
                 .map(bemcal_weather::grid::slot_month)
                 .collect();
-            Some(Cells::hour_kind_season(&off, &month))
+            let cells = Cells::hour_kind_season(&off, &month);
+            Some(match discrepancy {
+                DiscrepancyTerm::HourDaySeasonFree => cells.free_levels(),
+                _ => cells,
+            })
         }
     }
 }

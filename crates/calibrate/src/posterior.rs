@@ -113,6 +113,7 @@ impl Posterior<'_> {
             (None, false, _) => "sigma_delta fixed",
         };
         match self.cells {
+            Some(c) if c.is_free() => format!("{errors}, hour x day kind x season free levels"),
             Some(_) => format!("{errors}, hour x day kind x season discrepancy"),
             None => errors.to_string(),
         }

@@ -450,6 +450,11 @@ pub enum DiscrepancyTerm {
     /// integrated out ([`bemcal_stats::likelihood::cells`]): what the model misses by hour,
     /// day kind and season is carried there instead of bending the parameters.
     HourDaySeason,
+    /// The same cells with each cell's level free (a fixed effect): the parameters learn only
+    /// from what varies within the cells (the weather's day-to-day swings), which a misfit by
+    /// hour, day kind and season cannot reach; wider intervals, and the meters' levels by cell
+    /// no longer inform the parameters ([`bemcal_stats::likelihood::cells::Cells::free_levels`]).
+    HourDaySeasonFree,
 }
 
 /// The chains. The defaults are the sampler that converges on the paper-size problem: HMC
@@ -477,7 +482,8 @@ pub struct McmcSettings {
     pub sigma_delta: SigmaDeltaMode,
     /// Residual model of the marginal likelihood: `ar1` (default) or `iid` (the reference).
     pub residuals: Residuals,
-    /// A model-form discrepancy with structure: `none` (default) or `hour_day_season`.
+    /// A model-form discrepancy with structure: `none` (default), `hour_day_season` (pooled
+    /// cell effects) or `hour_day_season_free` (free cell levels).
     pub discrepancy: DiscrepancyTerm,
     /// `sigma_delta` as a fraction of the measured sd when fixed.
     pub sigma_delta_fraction: f64,
@@ -1398,8 +1404,7 @@ impl McmcSettings {
         if self.discrepancy != DiscrepancyTerm::None && self.sigma_delta != SigmaDeltaMode::Marginal
         {
             return Err(
-                "mcmc.discrepancy = \"hour_day_season\" needs mcmc.sigma_delta = \"marginal\""
-                    .into(),
+                "mcmc.discrepancy (a model-form term) needs mcmc.sigma_delta = \"marginal\"".into(),
             );
         }
         if self.segment == 0 {

@@ -25,6 +25,13 @@
 //! O(n) per evaluation, gradient included. (Treating within and between as independent is
 //! exact for independent errors; with AR(1) errors it neglects the correlation between cell
 //! means of adjacent hours, which enters only the between part's scale.)
+//!
+//! The pooled term still prefers parameters that shrink the cell means: a misfit shaped like a
+//! parameter's own effect (a working-hours block on the electricity, like the equipment
+//! density's) bends that parameter as much as without the term (measured, docs/benchmarks.md).
+//! [`Cells::free_levels`] drops the between part: each cell's level is free (a fixed effect,
+//! the limit `tau -> infinity`), and the parameters learn only from what varies within cells,
+//! which a cell-shaped misfit cannot reach: `ln p = ln Γ((n-C)/2) - (n-C)/2 ln(π S_W)`.
 
 use super::{Ar1Sums, GaussianLikelihood};
 use crate::error::{Result, StatsError};
@@ -37,6 +44,7 @@ pub const SEASONS: usize = 4;
 pub struct Cells {
     cell: Vec<usize>,
     n_cells: usize,
+    free: bool,
 }
 
 impl Cells {
@@ -50,7 +58,11 @@ impl Cells {
                 "hour {t}: cell {c} of {n_cells}"
             )));
         }
-        Ok(Cells { cell, n_cells })
+        Ok(Cells {
+            cell,
+            n_cells,
+            free: false,
+        })
     }
 
     /// Hour of day x day kind (working or off) x meteorological season, 192 cells, for hour
@@ -70,7 +82,20 @@ impl Cells {
         Cells {
             cell,
             n_cells: 48 * SEASONS,
+            free: false,
         }
+    }
+
+    /// The same cells with each cell's level free (module docs): the between-cell part leaves
+    /// the likelihood and the discrepancy is each cell's mean residual, unshrunk.
+    pub fn free_levels(mut self) -> Cells {
+        self.free = true;
+        self
+    }
+
+    /// Whether each cell's level is free ([`Cells::free_levels`]).
+    pub fn is_free(&self) -> bool {
+        self.free
     }
 
     /// Number of hours.
@@ -111,6 +136,8 @@ pub struct CellSplit {
     pub within_ss: f64,
     /// The within deviations' AR(1) coefficient (0 with independent errors).
     pub phi: f64,
+    /// Whether each cell's level is free ([`Cells::free_levels`]): no between part.
+    pub free: bool,
 }
 
 impl CellSplit {
@@ -140,6 +167,9 @@ impl CellSplit {
     /// `n_c tau^2 / (sigma_e^2 + n_c tau^2)` (the best linear unbiased predictor of a random
     /// effect; Searle et al. 1992, Sec. 3.9).
     pub fn discrepancy(&self) -> Vec<f64> {
+        if self.free {
+            return self.mean.clone();
+        }
         let (tau2, s2) = (self.discrepancy_variance(), self.within_variance());
         self.mean
             .iter()
@@ -167,7 +197,10 @@ impl CellSplit {
         };
         let within = ln_scale(self.within_df() as f64, self.within_ss)
             + 0.5 * runs * (1.0 - self.phi * self.phi).ln();
-        within + ln_scale(self.cells as f64, self.between_ss)
+        match self.free {
+            true => within,
+            false => within + ln_scale(self.cells as f64, self.between_ss),
+        }
     }
 }
 
@@ -240,7 +273,10 @@ impl GaussianLikelihood {
                     *g /= s.count[c] as f64;
                 }
             }
-            let b = s.cells as f64 / s.between_ss.max(f64::MIN_POSITIVE);
+            let b = match s.free {
+                true => 0.0,
+                false => s.cells as f64 / s.between_ss.max(f64::MIN_POSITIVE),
+            };
             for t in 0..self.n_hours {
                 let c = cells.cell(t);
                 let d_r = match r[t] {
@@ -301,6 +337,7 @@ fn split(r: &[Option<f64>], cells: &Cells, ar1: bool) -> (CellSplit, f64) {
         between_ss,
         within_ss,
         phi,
+        free: cells.is_free(),
     };
     (split, runs)
 }
@@ -377,24 +414,32 @@ mod tests {
 
     #[test]
     fn the_gradient_matches_finite_differences_for_both_error_models() {
-        let (lik, pred, cells) = case();
-        for ar1 in [false, true] {
+        let (lik, pred, pooled) = case();
+        for (cells, ar1) in [(pooled.clone(), false), (pooled.clone(), true)]
+            .into_iter()
+            .chain([
+                (pooled.clone().free_levels(), false),
+                (pooled.free_levels(), true),
+            ])
+        {
+            let cells = &cells;
             let mut grad = vec![0f32; pred.len()];
-            let lp = lik.log_marginal_cells_gradient(&pred, &cells, ar1, &mut grad);
-            assert!((lp - lik.log_marginal_cells(&pred, &cells, ar1)).abs() < 1e-9);
+            let lp = lik.log_marginal_cells_gradient(&pred, cells, ar1, &mut grad);
+            assert!((lp - lik.log_marginal_cells(&pred, cells, ar1)).abs() < 1e-9);
             for i in [0, 1, 47, 200, 201, 999, 1001, 2 * 500 + 1, 2 * 100] {
                 let h = 1e-2f32;
                 let mut up = pred.clone();
                 up[i] += h;
                 let mut dn = pred.clone();
                 dn[i] -= h;
-                let fd = (lik.log_marginal_cells(&up, &cells, ar1)
-                    - lik.log_marginal_cells(&dn, &cells, ar1))
+                let fd = (lik.log_marginal_cells(&up, cells, ar1)
+                    - lik.log_marginal_cells(&dn, cells, ar1))
                     / (2.0 * f64::from(h));
                 let g = f64::from(grad[i]);
                 assert!(
                     (fd - g).abs() <= 1e-3 * (1.0 + g.abs()),
-                    "ar1 {ar1}, entry {i}: analytic {g}, finite difference {fd}"
+                    "free {}, ar1 {ar1}, entry {i}: analytic {g}, finite difference {fd}",
+                    cells.is_free()
                 );
             }
         }
