@@ -802,7 +802,8 @@ impl Executor for Leased<'_> {
         if short {
             return Ok(Ready::Pending);
         }
-        let ck = self.merged(&groups, iterations)?;
+        let mut ck = self.merged(&groups, iterations)?;
+        ck.likelihood = Some(cal.project.mcmc.likelihood_form());
         if round.is_final() {
             let bytes = serde_json::to_vec(&ck).map_err(ex)?;
             bemcal_calibrate::write_atomic(&cal.out.chains_checkpoint(), &bytes)?;

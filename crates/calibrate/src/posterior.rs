@@ -106,17 +106,12 @@ impl Posterior<'_> {
     /// temperature, which checkpoints record apart): what chains resumed from a checkpoint
     /// must have sampled.
     pub fn form(&self) -> String {
-        let errors = match (self.sigma_box, self.marginal, self.ar1) {
-            (Some(_), _, _) => "sigma_delta sampled",
-            (None, true, true) => "sigma_delta marginal, AR(1) residuals",
-            (None, true, false) => "sigma_delta marginal, independent residuals",
-            (None, false, _) => "sigma_delta fixed",
-        };
-        match self.cells {
-            Some(c) if c.is_free() => format!("{errors}, hour x day kind x season free levels"),
-            Some(_) => format!("{errors}, hour x day kind x season discrepancy"),
-            None => errors.to_string(),
-        }
+        likelihood_form(
+            self.sigma_box.is_some(),
+            self.marginal,
+            self.ar1,
+            self.cells.map(Cells::is_free),
+        )
     }
 
     /// Dimension of the sampled space.
@@ -303,6 +298,23 @@ impl Posterior<'_> {
     }
 }
 
+/// The likelihood's form in words ([`Posterior::form`]): `sigma_delta` sampled, marginal or
+/// fixed; AR(1) or independent residuals (with marginal); the discrepancy's cells, `Some(free)`
+/// ([`crate::project::McmcSettings::likelihood_form`] gives it from the settings).
+pub fn likelihood_form(sampled: bool, marginal: bool, ar1: bool, cells: Option<bool>) -> String {
+    let errors = match (sampled, marginal, ar1) {
+        (true, _, _) => "sigma_delta sampled",
+        (false, true, true) => "sigma_delta marginal, AR(1) residuals",
+        (false, true, false) => "sigma_delta marginal, independent residuals",
+        (false, false, _) => "sigma_delta fixed",
+    };
+    match cells {
+        Some(true) => format!("{errors}, hour x day kind x season free levels"),
+        Some(false) => format!("{errors}, hour x day kind x season discrepancy"),
+        None => errors.to_string(),
+    }
+}
+
 /// Checkpoint of all chains: states and the draws so far.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Checkpoint {
@@ -320,8 +332,7 @@ pub struct Checkpoint {
     #[serde(default)]
     pub target: u64,
     /// The likelihood's form the chains sampled ([`Posterior::form`]): chains are resumed only
-    /// under the same one. `None` in checkpoints written before it was recorded, and in the
-    /// coordinator's merged chains (its chain jobs are keyed by their settings).
+    /// under the same one. `None` in checkpoints written before it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub likelihood: Option<String>,
 }

@@ -612,6 +612,21 @@ impl schemars::JsonSchema for Temperature {
 }
 
 impl McmcSettings {
+    /// The form of the likelihood these settings sample ([`crate::posterior::likelihood_form`],
+    /// what a chains checkpoint records).
+    pub fn likelihood_form(&self) -> String {
+        crate::posterior::likelihood_form(
+            self.sigma_delta == SigmaDeltaMode::Sampled,
+            self.sigma_delta == SigmaDeltaMode::Marginal,
+            self.residuals == Residuals::Ar1,
+            match self.discrepancy {
+                DiscrepancyTerm::None => None,
+                DiscrepancyTerm::HourDaySeason => Some(false),
+                DiscrepancyTerm::HourDaySeasonFree => Some(true),
+            },
+        )
+    }
+
     /// The convergence targets ([`bemcal_stats::convergence`]).
     pub fn targets(&self) -> Targets {
         Targets {
