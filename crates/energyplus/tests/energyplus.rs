@@ -853,16 +853,21 @@ fn the_own_idf_examples_map_edits_its_objects() {
     }
 }
 
-/// The process of the EnergyPlus run in `dir`, found by its working folder.
+/// The process of the EnergyPlus run in `dir`, found by its working folder. Not this test's own
+/// binary (`energyplus-HASH`): a child between fork and exec still runs it, with this process's
+/// environment (a race that failed the environment test once).
 fn process_in(dir: &std::path::Path) -> Option<u32> {
     let want = dir.canonicalize().ok()?;
+    let this = std::env::current_exe().ok();
     for entry in std::fs::read_dir("/proc").ok()?.flatten() {
         let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
             continue;
         };
         let cwd = std::fs::read_link(entry.path().join("cwd")).ok();
         let exe = std::fs::read_link(entry.path().join("exe")).ok();
-        let is_energyplus = exe.is_some_and(|e| e.to_string_lossy().contains("energyplus"));
+        let is_energyplus = exe.is_some_and(|e| {
+            e.to_string_lossy().contains("energyplus") && this.as_deref() != Some(e.as_path())
+        });
         if is_energyplus && cwd.as_deref() == Some(want.as_path()) {
             return Some(pid);
         }
