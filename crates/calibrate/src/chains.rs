@@ -361,21 +361,18 @@ impl Sampler<'_> {
 /// The discrepancy's calendar cells over the calibration's hour slots: hour of day x the
 /// day's kind (the calendar the model runs) x meteorological season.
 pub fn discrepancy_cells(discrepancy: DiscrepancyTerm, inp: &Inputs) -> Option<Cells> {
-    match discrepancy {
-        DiscrepancyTerm::None => None,
-        DiscrepancyTerm::HourDaySeason | DiscrepancyTerm::HourDaySeasonFree => {
-            let f = &inp.features;
-            let off: Vec<bool> = f.day_type.iter().map(|d| d.is_off_day()).collect();
-            let month: Vec<u32> = (0..off.len())
-                .map(bemcal_weather::grid::slot_month)
-                .collect();
-            let cells = Cells::hour_kind_season(&off, &month);
-            Some(match discrepancy {
-                DiscrepancyTerm::HourDaySeasonFree => cells.free_levels(),
-                _ => cells,
-            })
-        }
-    }
+    let free = discrepancy.free_levels()?;
+    let off: Vec<bool> = inp
+        .features
+        .day_type
+        .iter()
+        .map(|d| d.is_off_day())
+        .collect();
+    let month: Vec<u32> = (0..off.len())
+        .map(bemcal_weather::grid::slot_month)
+        .collect();
+    let cells = Cells::hour_kind_season(&off, &month);
+    Some(if free { cells.free_levels() } else { cells })
 }
 
 /// Output `name` of `o` when it has `n_h` hours.

@@ -420,6 +420,7 @@ pub fn run_chains(
         stage: Stage::Chains.as_str(),
         message: format!("checkpoint {} is unreadable: {e}", path.display()),
     })?;
+    let form = post.form();
     let mut ck = match saved {
         Some(ck) => ck,
         None => {
@@ -429,19 +430,18 @@ pub fn run_chains(
                 states,
                 temperature: post.temperature,
                 target: iterations,
-                likelihood: Some(post.form()),
+                likelihood: Some(form.clone()),
             }
         }
     };
-    if let Some(form) = ck.likelihood.as_ref().filter(|f| **f != post.form()) {
+    if let Some(saved) = ck.likelihood.as_ref().filter(|f| **f != form) {
         return Err(Error::Stage {
             stage: Stage::Chains.as_str(),
             message: format!(
-                "{} holds chains that sampled another likelihood ({form}) than this run's ({}; \
-                 mcmc.sigma_delta, residuals or discrepancy changed): delete it and \
+                "{} holds chains that sampled another likelihood ({saved}) than this run's \
+                 ({form}; mcmc.sigma_delta, residuals or discrepancy changed): delete it and \
                  chains_summary.json to start the chains again",
                 path.display(),
-                post.form()
             ),
         });
     }

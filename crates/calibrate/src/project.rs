@@ -457,6 +457,17 @@ pub enum DiscrepancyTerm {
     HourDaySeasonFree,
 }
 
+impl DiscrepancyTerm {
+    /// `None` without a term; with one, whether its cells' levels are free.
+    pub fn free_levels(self) -> Option<bool> {
+        match self {
+            DiscrepancyTerm::None => None,
+            DiscrepancyTerm::HourDaySeason => Some(false),
+            DiscrepancyTerm::HourDaySeasonFree => Some(true),
+        }
+    }
+}
+
 /// The chains. The defaults are the sampler that converges on the paper-size problem: HMC
 /// through the surrogate's gradient from BFGS optima (`kernel = "hmc"`, `start =
 /// "optimised"`, 4 x 500 iterations with 150 burn-in), judged against R-hat <= 1.01 and bulk
@@ -619,11 +630,7 @@ impl McmcSettings {
             self.sigma_delta == SigmaDeltaMode::Sampled,
             self.sigma_delta == SigmaDeltaMode::Marginal,
             self.residuals == Residuals::Ar1,
-            match self.discrepancy {
-                DiscrepancyTerm::None => None,
-                DiscrepancyTerm::HourDaySeason => Some(false),
-                DiscrepancyTerm::HourDaySeasonFree => Some(true),
-            },
+            self.discrepancy.free_levels(),
         )
     }
 
