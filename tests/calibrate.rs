@@ -45,10 +45,10 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     write_project(dir);
-    synthesize(dir, &TRUTH);
+    common::synthesize(dir, &TRUTH, &[]);
 
     let out = dir.join("out");
-    let (log, summary) = calibrate(dir, &out);
+    let (log, summary) = common::calibrate(dir, &out);
 
     // Recovery: the estimate lies within 5 % of the prior range of the truth, and the truth lies
     // in the 90 % posterior interval widened by 3 % of the prior range. The widening is the
@@ -200,7 +200,7 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
         "{e}"
     );
     std::fs::remove_file(out.join("chains.json")).unwrap();
-    let (log3, summary) = calibrate(dir, &out);
+    let (log3, summary) = common::calibrate(dir, &out);
     // Dual averaging aims at 0.7 over a 30-iteration burn-in; 50 draws after it scatter around
     // that (0.48-0.84 seen on one machine): a broken kernel sits near 0.
     for a in summary["acceptance_rate"].as_array().unwrap() {
@@ -530,24 +530,6 @@ fn held_out_period_is_judged_and_never_fitted(dir: &Path, out: &Path, summary: &
     );
 }
 
-/// `DIR/meters.csv`: EnergyPlus on `DIR/model.toml` (Golden TMY3) at `truth` (the other
-/// parameters at their prior modes), with `synthesize`'s noise and gap.
-fn synthesize(dir: &Path, truth: &[(&str, f64)]) {
-    let mut synth = bemcal();
-    synth
-        .args(["synthesize", "--model"])
-        .arg(dir.join("model.toml"))
-        .arg("--weather")
-        // The weather as a project names it: `bundled:FILE` works on every command.
-        .arg(GOLDEN_BUNDLED)
-        .arg("--out")
-        .arg(dir.join("meters.csv"));
-    for (k, v) in truth {
-        synth.arg("--set").arg(format!("{k}={v}"));
-    }
-    run_ok(&mut synth);
-}
-
 /// One step of output space mapping (`Sampler::mapped_mode`, what validation runs where
 /// EnergyPlus fits no posterior draw), from the initial model (the prior modes, simulated by
 /// validation): EnergyPlus at the mapped point fits the meters better than at the anchor and
@@ -588,33 +570,6 @@ fn output_space_mapping_moves_towards_the_meters(dir: &Path, out: &Path) {
     }
 }
 
-/// `bemcal calibrate DIR/project.toml --out OUT`, which must run to its end (converged or
-/// not, [`finished`]): its log and summary.json.
-fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
-    let run = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&run.stderr).into_owned();
-    assert!(finished(run.status), "calibrate failed:\n{log}");
-    let bytes = std::fs::read(out.join("summary.json")).unwrap();
-    let summary: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
-    // Issue 67: summary.json is read through the types that write it (the report's, the
-    // coordinator's): a real run's reads back with them and writes the same JSON.
-    let typed: bemcal_calibrate::Summary = serde_json::from_slice(&bytes)
-        .unwrap_or_else(|e| panic!("{}/summary.json: {e}", out.display()));
-    assert_eq!(
-        serde_json::to_value(&typed).unwrap(),
-        summary,
-        "{}/summary.json does not round-trip through bemcal_calibrate::Summary",
-        out.display()
-    );
-    (log, summary)
-}
-
 /// `bemcal calibrate DIR/project.toml ARGS --out OUT`, which must be refused (exit status 1)
 /// before it runs anything: its error output.
 fn refused_rerun(dir: &Path, out: &Path, args: &[&str]) -> String {
@@ -633,13 +588,7 @@ fn refused_rerun(dir: &Path, out: &Path, args: &[&str]) -> String {
 
 /// A parameter's prior range and its calibrated value in summary.json.
 fn range_and_estimate(summary: &serde_json::Value, name: &str) -> (f64, f64) {
-    let r = summary["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap();
-    let range = r["prior_max"].as_f64().unwrap() - r["prior_min"].as_f64().unwrap();
+    let range = common::prior_range(summary, name);
     let estimate = summary["calibrated_values"][name]
         .as_f64()
         .unwrap_or_else(|| panic!("no calibrated value of {name}"));
@@ -690,7 +639,7 @@ fn check_loads_everything_and_runs_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     write_project(dir);
-    synthesize(dir, &[]);
+    common::synthesize(dir, &[], &[]);
     let before: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().file_name())
@@ -935,7 +884,7 @@ fn the_meters_day_type_calendar_recovers_a_moved_weekend() {
     project = project.replace("points = 10\n", "points = 8\n");
     assert!(project.contains("points = 8\n"));
     std::fs::write(dir.join("project.toml"), &project).unwrap();
-    let (log, cal) = calibrate(dir, &dir.join("out-cal"));
+    let (log, cal) = common::calibrate(dir, &dir.join("out-cal"));
     // The year from April, as pre-calibration inferred it and as the outputs list it.
     let quality: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("precal/quality.json")).unwrap()).unwrap();
@@ -1252,7 +1201,7 @@ fn a_simulation_past_its_time_limit_is_a_recorded_failure() {
     let tmp = tempfile::tempdir().unwrap();
     let (dir, out) = (tmp.path(), tmp.path().join("out"));
     std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
-    synthesize(dir, &[]);
+    common::synthesize(dir, &[], &[]);
     let project = common::small_project("time-limited", 3);
     std::fs::write(
         dir.join("project.toml"),
@@ -1309,7 +1258,7 @@ fn a_simulation_past_its_time_limit_is_a_recorded_failure() {
     assert_eq!(log.matches(kept).count(), n, "{log}");
 
     std::fs::write(dir.join("project.toml"), &project).unwrap();
-    let (log, summary) = calibrate(dir, &out);
+    let (log, summary) = common::calibrate(dir, &out);
     let retried = "failed in an earlier run at a lower limit (EnergyPlus time limit of 0.05 s";
     assert_eq!(log.matches(retried).count(), n, "{log}");
     assert!(!log.contains("), not repeated"), "{log}");

@@ -9,7 +9,7 @@
 use std::path::Path;
 
 mod common;
-use common::{bemcal, finished, have_engine, run_ok};
+use common::{bemcal, have_engine};
 
 const TRUTH: [(&str, f64); 2] = [
     ("lighting_power_density", 12.5),
@@ -30,11 +30,11 @@ fn the_discrepancy_carries_an_injected_pattern_that_bends_the_parameters_without
     let dir = tmp.path();
     std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     std::fs::write(dir.join("project.toml"), project(false)).unwrap();
-    synthesize(dir);
+    common::synthesize(dir, &TRUTH, &["--bias", BIAS]);
 
     // Without the term: the same design, surrogate and chains settings.
     let out = dir.join("out");
-    let without = calibrate(dir, &out);
+    let (_, without) = common::calibrate(dir, &out);
     // The folder's chains sampled the likelihood without the term: not resumed with it.
     std::fs::write(dir.join("project.toml"), project(true)).unwrap();
     let refused = bemcal()
@@ -59,7 +59,7 @@ fn the_discrepancy_carries_an_injected_pattern_that_bends_the_parameters_without
     std::fs::copy(out.join("design.csv"), out2.join("design.csv")).unwrap();
     common::copy_dir(&out.join("simulations"), &out2.join("simulations"));
     common::copy_dir(&out.join("surrogate"), &out2.join("surrogate"));
-    let with = calibrate(dir, &out2);
+    let (_, with) = common::calibrate(dir, &out2);
     let out = out2;
 
     // As in tests/calibrate.rs, the intervals are widened by 3 % of the prior range: the
@@ -67,7 +67,7 @@ fn the_discrepancy_carries_an_injected_pattern_that_bends_the_parameters_without
     // systematic error the chains' interval does not hold.
     let (mut held_without, mut held_with) = (0, 0);
     for (name, truth) in TRUTH {
-        let slack = 0.03 * prior_range(&with, name);
+        let slack = 0.03 * common::prior_range(&with, name);
         let (a, b) = (interval(&without, name), interval(&with, name));
         eprintln!(
             "{name}: truth {truth}; without the term 90 % [{:.3}, {:.3}], with it [{:.3}, {:.3}] (+- {slack:.3})",
@@ -120,51 +120,6 @@ fn project(discrepancy: bool) -> String {
         "[mcmc]\nchains = 2\niterations = 300\nburn_in = 100\nsegment = 100\n",
         &format!("[mcmc]\n{term}chains = 2\niterations = 600\nburn_in = 200\nsegment = 500\n"),
     )
-}
-
-/// `DIR/meters.csv`: EnergyPlus at [`TRUTH`], plus [`BIAS`], noise and a gap.
-fn synthesize(dir: &Path) {
-    let mut synth = bemcal();
-    synth
-        .args(["synthesize", "--model"])
-        .arg(dir.join("model.toml"))
-        .args(["--weather", "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"])
-        .args(["--bias", BIAS])
-        .arg("--out")
-        .arg(dir.join("meters.csv"));
-    for (k, v) in TRUTH {
-        synth.arg("--set").arg(format!("{k}={v}"));
-    }
-    run_ok(&mut synth);
-}
-
-/// `bemcal calibrate DIR/project.toml --out OUT`, run to its end: its summary.json.
-fn calibrate(dir: &Path, out: &Path) -> serde_json::Value {
-    let run = bemcal()
-        .arg("calibrate")
-        .arg(dir.join("project.toml"))
-        .arg("--out")
-        .arg(out)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&run.stderr).into_owned();
-    assert!(finished(run.status), "calibrate failed:\n{log}");
-    eprintln!(
-        "{}",
-        log.lines().rev().take(30).collect::<Vec<_>>().join("\n")
-    );
-    serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap()
-}
-
-/// A parameter's prior range (max - min) in summary.json.
-fn prior_range(summary: &serde_json::Value, name: &str) -> f64 {
-    let p = summary["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap();
-    p["prior_max"].as_f64().unwrap() - p["prior_min"].as_f64().unwrap()
 }
 
 /// A parameter's 90 % posterior interval in summary.json.

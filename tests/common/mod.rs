@@ -380,3 +380,60 @@ pub fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+/// `DIR/meters.csv`: EnergyPlus on `DIR/model.toml` (Golden TMY3) at `truth` (the other
+/// parameters at their prior modes), with `synthesize`'s noise and gap, and `extra` arguments (`--bias ...`).
+pub fn synthesize(dir: &Path, truth: &[(&str, f64)], extra: &[&str]) {
+    let mut synth = bemcal();
+    synth
+        .args(["synthesize", "--model"])
+        .arg(dir.join("model.toml"))
+        .arg("--weather")
+        // The weather as a project names it: `bundled:FILE` works on every command.
+        .arg("bundled:USA_CO_Golden-NREL.724666_TMY3.epw")
+        .args(extra)
+        .arg("--out")
+        .arg(dir.join("meters.csv"));
+    for (k, v) in truth {
+        synth.arg("--set").arg(format!("{k}={v}"));
+    }
+    run_ok(&mut synth);
+}
+
+/// `bemcal calibrate DIR/project.toml --out OUT`, which must run to its end (converged or
+/// not, [`finished`]): its log and summary.json.
+pub fn calibrate(dir: &Path, out: &Path) -> (String, serde_json::Value) {
+    let run = bemcal()
+        .arg("calibrate")
+        .arg(dir.join("project.toml"))
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert!(finished(run.status), "calibrate failed:\n{log}");
+    let bytes = std::fs::read(out.join("summary.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+    // Issue 67: summary.json is read through the types that write it (the report's, the
+    // coordinator's): a real run's reads back with them and writes the same JSON.
+    let typed: bemcal_calibrate::Summary = serde_json::from_slice(&bytes)
+        .unwrap_or_else(|e| panic!("{}/summary.json: {e}", out.display()));
+    assert_eq!(
+        serde_json::to_value(&typed).unwrap(),
+        summary,
+        "{}/summary.json does not round-trip through bemcal_calibrate::Summary",
+        out.display()
+    );
+    (log, summary)
+}
+
+/// A parameter's prior range (max - min) in summary.json.
+pub fn prior_range(summary: &serde_json::Value, name: &str) -> f64 {
+    let p = summary["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap();
+    p["prior_max"].as_f64().unwrap() - p["prior_min"].as_f64().unwrap()
+}
