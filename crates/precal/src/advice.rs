@@ -21,6 +21,14 @@ pub const MOVED_MIN_DAYS: usize = 4;
 /// Silhouettes below this make the day types weak, whatever the labels.
 pub const WEAK_SILHOUETTE: f64 = 0.5;
 
+/// A run of days off holding at least this many calendar weekdays (none of a weekday name
+/// already moved) is a break: a school's holidays, a closure between Christmas and New Year.
+pub const BREAK_MIN_WEEKDAYS: usize = 3;
+
+/// A cluster whose mean level lies at least this share of the span from both the lowest and
+/// the highest cluster's is a third kind of day (a Saturday half-day, a term's quieter weeks).
+pub const THIRD_KIND_MARGIN: f64 = 0.25;
+
 /// A line to paste into the model file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "key", content = "value")]
@@ -92,7 +100,113 @@ pub fn calendar_advice(c: &DayTypeClusters) -> Vec<Suggestion> {
             paste: Some(Paste::DayTypesFile),
         });
     }
+    let moved_names: Vec<Weekday> = WEEK
+        .into_iter()
+        .filter(|&wd| low_weekdays.iter().any(|m| m.starts_with(weekday_name(wd))))
+        .collect();
+    out.extend(breaks(&clustered, &moved_names));
     out.extend(holidays(&clustered));
+    out.extend(third_kinds(c, &clustered));
+    out
+}
+
+/// The days of the week, Monday first.
+const WEEK: [Weekday; 7] = [
+    Weekday::Mon,
+    Weekday::Tue,
+    Weekday::Wed,
+    Weekday::Thu,
+    Weekday::Fri,
+    Weekday::Sat,
+    Weekday::Sun,
+];
+
+/// Runs of consecutive days off holding at least [`BREAK_MIN_WEEKDAYS`] calendar weekdays (a
+/// school's breaks, a Christmas closure), which no weekday name explains: weekdays named in
+/// `moved` (already said) neither count nor end a run; a working day, a skipped day or a gap in
+/// the dates ends it.
+fn breaks(days: &[&DayRecord], moved: &[Weekday]) -> Option<Suggestion> {
+    let mut sorted: Vec<&DayRecord> = days.to_vec();
+    sorted.sort_by_key(|d| d.date);
+    let mut runs: Vec<(NaiveDate, NaiveDate, usize)> = vec![];
+    let mut run: Option<(NaiveDate, NaiveDate, usize)> = None;
+    let mut close = |run: &mut Option<(NaiveDate, NaiveDate, usize)>| {
+        if let Some(r) = run.take().filter(|r| r.2 >= BREAK_MIN_WEEKDAYS) {
+            runs.push(r);
+        }
+    };
+    for d in sorted {
+        let contiguous = run.is_some_and(|r| r.1.succ_opt() == Some(d.date));
+        if !contiguous || d.label != Some(DayLabel::Weekend) {
+            close(&mut run);
+        }
+        if d.label != Some(DayLabel::Weekend) {
+            continue;
+        }
+        let counts = d.calendar == DayType::Weekday && !moved.contains(&d.date.weekday());
+        let r = run.get_or_insert((d.date, d.date, 0));
+        r.1 = d.date;
+        r.2 += usize::from(counts);
+    }
+    close(&mut run);
+    if runs.is_empty() {
+        return None;
+    }
+    let listed: Vec<String> = runs
+        .iter()
+        .map(|(a, b, n)| format!("{a} to {b} ({n} weekdays)"))
+        .collect();
+    Some(Suggestion {
+        evidence: format!(
+            "days off in runs of calendar weekdays (breaks or closures): {}",
+            listed.join(", ")
+        ),
+        paste: Some(Paste::DayTypesFile),
+    })
+}
+
+/// Clusters whose level lies between the working days' and the days off's, at least
+/// [`THIRD_KIND_MARGIN`] of the span from each (a Saturday half-day): the model takes two day
+/// types, so these days run the schedule of their label, and widen its priors.
+fn third_kinds(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
+    let levels = &c.cluster_levels;
+    let (lo, hi) = levels
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &l| {
+            (a.min(l), b.max(l))
+        });
+    let mut out = vec![];
+    for (k, &level) in levels.iter().enumerate() {
+        let at = (level - lo) / (hi - lo);
+        if !(THIRD_KIND_MARGIN..=1.0 - THIRD_KIND_MARGIN).contains(&at) {
+            continue;
+        }
+        let members: Vec<&DayRecord> = days
+            .iter()
+            .copied()
+            .filter(|d| d.cluster == Some(k))
+            .collect();
+        let Some(label) = c.cluster_labels.get(k) else {
+            continue;
+        };
+        let names = weekday_shares(days, |_| true, |d| d.cluster == Some(k));
+        let which = match (names.is_empty(), members.first(), members.last()) {
+            (false, _, _) => names.join(", "),
+            (true, Some(a), Some(b)) => format!("from {} to {}", a.date, b.date),
+            _ => continue,
+        };
+        out.push(Suggestion {
+            evidence: format!(
+                "a third kind of day: cluster {k}, {} days ({which}), at a level of {level:.2} \
+                 between the days off's {lo:.2} and the working days' {hi:.2}: the model takes two \
+                 day types, so these days run the '{}' schedule and widen its priors; \
+                 calendar.csv's cluster column lists them, to label as the building runs them",
+                members.len(),
+                label.as_str()
+            ),
+            paste: None,
+        });
+    }
     out
 }
 
@@ -132,21 +246,24 @@ fn moved(
     label: DayLabel,
     of_kind: impl Fn(&DayRecord) -> bool,
 ) -> Vec<String> {
+    weekday_shares(days, of_kind, |d| d.label == Some(label))
+}
+
+/// Per weekday name, the days among those `of_kind` that are `member`s, where they are at least
+/// [`MOVED_SHARE`] of that weekday's days of that kind and at least [`MOVED_MIN_DAYS`].
+fn weekday_shares(
+    days: &[&DayRecord],
+    of_kind: impl Fn(&DayRecord) -> bool,
+    member: impl Fn(&DayRecord) -> bool,
+) -> Vec<String> {
     let mut out = vec![];
-    for wd in [
-        Weekday::Mon,
-        Weekday::Tue,
-        Weekday::Wed,
-        Weekday::Thu,
-        Weekday::Fri,
-        Weekday::Sat,
-        Weekday::Sun,
-    ] {
-        let these: Vec<_> = days
+    for wd in WEEK {
+        let these: Vec<&DayRecord> = days
             .iter()
+            .copied()
             .filter(|d| d.date.weekday() == wd && of_kind(d))
             .collect();
-        let n = these.iter().filter(|d| d.label == Some(label)).count();
+        let n = these.iter().filter(|d| member(d)).count();
         if n >= MOVED_MIN_DAYS && n as f64 >= MOVED_SHARE * these.len() as f64 {
             out.push(format!("{} {n} of {}", weekday_name(wd), these.len()));
         }
@@ -226,6 +343,15 @@ mod tests {
 
     /// A year of profiles of 2021 where `works(date, calendar day type)` says which days work.
     fn year(works: impl Fn(NaiveDate, DayType) -> bool) -> DayTypeClusters {
+        year_of_peaks(|d, t| works(d, t).then_some(0.9), Some(2))
+    }
+
+    /// A year of profiles of 2021 where `peak(date, calendar day type)` gives each day's daytime
+    /// level (None: a flat day off), clustered into `k` (None: by silhouette).
+    fn year_of_peaks(
+        peak: impl Fn(NaiveDate, DayType) -> Option<f64>,
+        k: Option<usize>,
+    ) -> DayTypeClusters {
         let y = GridYear::calendar(2021);
         let cal = Calendar::new(y, Holidays::UsFederal);
         let mut profiles = vec![];
@@ -233,7 +359,8 @@ mod tests {
             let date = y.day_date(d);
             let t = cal.day_type(date.month(), date.day()).unwrap();
             let wobble = 0.01 * ((d * 7919) % 5) as f64;
-            profiles.push(profile(works(date, t), 0.9, wobble));
+            let p = peak(date, t);
+            profiles.push(profile(p.is_some(), p.unwrap_or(0.0), wobble));
         }
         let p = DailyProfiles {
             days: (0..365).collect(),
@@ -243,10 +370,77 @@ mod tests {
             scale_method: "test".into(),
         };
         let opts = ScheduleOptions {
-            k: Some(2),
+            k,
             ..ScheduleOptions::default()
         };
         cluster_days(&p, y, &opts).unwrap().0
+    }
+
+    #[test]
+    fn a_schools_break_is_said() {
+        // An ordinary office, closed from 14 June to 27 August (a school's summer) and from 27 to
+        // 31 December.
+        let break_ = |d: NaiveDate| {
+            let md = (d.month(), d.day());
+            ((6, 14)..=(8, 27)).contains(&md) || ((12, 27)..=(12, 31)).contains(&md)
+        };
+        let c = year(|d, t| t == DayType::Weekday && !break_(d));
+        assert_eq!(c.label_rule, LabelRule::Profile);
+        let advice = calendar_advice(&c);
+        let text: Vec<&str> = advice.iter().map(|s| s.evidence.as_str()).collect();
+        // No weekday name holds the breaks (Monday 11 of 51): a run of days off does. The summer
+        // runs from the Saturday before to the Sunday after, its 55 weekdays less Juneteenth
+        // (observed on Friday 18 June) and Independence Day (Monday 5 July), holidays already;
+        // the winter from Christmas (observed on Friday 24 December) to the year's end (New
+        // Year's Day observed on Friday 31 December).
+        let b = advice
+            .iter()
+            .find(|s| {
+                s.evidence
+                    .starts_with("days off in runs of calendar weekdays")
+            })
+            .unwrap_or_else(|| panic!("{text:?}"));
+        assert!(
+            b.evidence.ends_with(
+                "2021-06-12 to 2021-08-29 (53 weekdays), 2021-12-24 to 2021-12-31 (4 weekdays)"
+            ),
+            "{}",
+            b.evidence
+        );
+        assert_eq!(b.paste, Some(Paste::DayTypesFile));
+        assert!(
+            !text
+                .iter()
+                .any(|t| t.contains("days off on calendar weekdays:")),
+            "{text:?}"
+        );
+    }
+
+    #[test]
+    fn a_saturday_half_day_is_a_third_kind() {
+        // Working weekdays at 0.9, Saturdays at 0.6, Sundays and holidays off: the silhouette
+        // finds the three kinds, and the model's two day types cannot hold them.
+        let c = year_of_peaks(
+            |d, t| match (t, d.weekday()) {
+                (DayType::Weekday, _) => Some(0.9),
+                (DayType::Weekend, Weekday::Sat) => Some(0.6),
+                _ => None,
+            },
+            None,
+        );
+        assert_eq!(c.clustering.k, 3, "{:?}", c.silhouettes);
+        let advice = calendar_advice(&c);
+        let text: Vec<&str> = advice.iter().map(|s| s.evidence.as_str()).collect();
+        let third = advice
+            .iter()
+            .find(|s| s.evidence.starts_with("a third kind of day"))
+            .unwrap_or_else(|| panic!("{text:?}"));
+        assert!(
+            third.evidence.contains("Saturday 5") && third.evidence.contains("'weekday' schedule"),
+            "{}",
+            third.evidence
+        );
+        assert!(third.paste.is_none());
     }
 
     #[test]

@@ -297,10 +297,18 @@ fn write_calendar_advice(s: &mut String, r: &Precalibration, dir: &str) {
         s,
         "\nCalendar (what the day types say about the model's calendar; lines for the model file):"
     );
+    let mut pasted: Vec<String> = vec![];
     for a in &r.advice {
         let _ = writeln!(s, "  # {}", a.evidence);
-        if let Some(p) = &a.paste {
-            let _ = writeln!(s, "  {}", p.line(dir));
+        match a.paste.as_ref().map(|p| p.line(dir)) {
+            Some(line) if pasted.contains(&line) => {
+                let _ = writeln!(s, "  # (the line above: {line})");
+            }
+            Some(line) => {
+                let _ = writeln!(s, "  {line}");
+                pasted.push(line);
+            }
+            None => {}
         }
     }
 }
