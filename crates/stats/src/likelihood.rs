@@ -23,6 +23,7 @@
 use serde::{Deserialize, Serialize};
 
 pub mod cells;
+pub mod intervals;
 
 use crate::error::{Result, StatsError};
 

@@ -1,0 +1,611 @@
+//! Utility bills (issue 69): a meter read as a table of billing periods, one row per bill, as
+//! utilities and ENERGY STAR Portfolio Manager export them.
+//!
+//! # Rules (documented behaviour)
+//!
+//! * **Columns** (header names in any case): `start`, `end`, `quantity`; optional `unit`,
+//!   `demand_kw` (the billed peak demand) and `estimated` (`true`/`yes`/`y`/`1`/`e`/`estimated`:
+//!   an estimated read; empty or `false`/`no`/`n`/`0`/`a`/`actual`: an actual one).
+//! * **Dates** `2021-01-14` or `01/14/2021`. A bill runs from the start of its `start` day to the
+//!   start of the day after its `end` ([`BillEnd::Inclusive`], the default: the end date is the
+//!   last day billed), or to the start of its `end` day ([`BillEnd::Exclusive`]: the end date is
+//!   the next read date, the start of the next bill).
+//! * **Units**: the energy units of hourly meters ([`EnergyUnit`]'s energy units: kWh, MWh,
+//!   therm, kBtu, MMBtu, MJ, GJ, ...) and gas volumes ([`GasVolume`]: m3, ft3, ccf, mcf) with
+//!   the gas's calorific value (`calorific_value_kwh_per_m3`, gross). A power unit (kW) is
+//!   refused: a bill's quantity is energy. The `unit` column overrides the spec's unit per row.
+//! * **Refused**, naming the file and line: a date or number that does not parse, an end before
+//!   the start, a negative quantity, a bill overlapping the one before it (in date order), a
+//!   volume without a calorific value.
+//! * **Noted** (the bill is kept): a gap between two bills (days no bill covers), an estimated
+//!   read.
+
+use std::path::{Path, PathBuf};
+
+use chrono::{Duration, NaiveDate};
+use serde::{Deserialize, Serialize};
+
+use bemcal_weather::grid::{is_leap_day, GridYear};
+
+use super::spec::{EnergyUnit, MeterRole};
+use crate::PrecalError;
+
+/// What a bill's end date means.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum BillEnd {
+    /// The end date is the last day billed (the bill runs to the start of the next day).
+    #[default]
+    Inclusive,
+    /// The end date is the next read date: the bill runs to the start of that day.
+    Exclusive,
+}
+
+/// A gas volume unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GasVolume {
+    /// Cubic metre.
+    M3,
+    /// Cubic foot (0.028316846592 m3).
+    Ft3,
+    /// Hundred cubic feet.
+    Ccf,
+    /// Thousand cubic feet.
+    Mcf,
+}
+
+impl GasVolume {
+    /// Cubic metres in one unit.
+    pub fn to_m3(self) -> f64 {
+        const FT3: f64 = 0.028_316_846_592;
+        match self {
+            GasVolume::M3 => 1.0,
+            GasVolume::Ft3 => FT3,
+            GasVolume::Ccf => 100.0 * FT3,
+            GasVolume::Mcf => 1000.0 * FT3,
+        }
+    }
+}
+
+/// The unit of a bill's quantity: energy, or a gas volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BillUnit {
+    /// An energy unit (not a power unit).
+    Energy(EnergyUnit),
+    /// A gas volume, converted with the calorific value.
+    Volume(GasVolume),
+}
+
+impl std::str::FromStr for BillUnit {
+    type Err = String;
+    fn from_str(s: &str) -> Result<BillUnit, String> {
+        let key: String = s
+            .chars()
+            .filter(|c| !matches!(c, ' ' | '_' | '-'))
+            .flat_map(char::to_lowercase)
+            .collect();
+        let volume = match key.as_str() {
+            "m3" | "m³" | "cubicmetre" | "cubicmeter" | "cubicmetres" | "cubicmeters" => {
+                Some(GasVolume::M3)
+            }
+            "ft3" | "cf" | "cuft" | "cubicfeet" | "cubicfoot" => Some(GasVolume::Ft3),
+            "ccf" | "hcf" => Some(GasVolume::Ccf),
+            "mcf" => Some(GasVolume::Mcf),
+            _ => None,
+        };
+        if let Some(v) = volume {
+            return Ok(BillUnit::Volume(v));
+        }
+        let energy: EnergyUnit = s.parse()?;
+        if energy.is_power() {
+            return Err(format!(
+                "'{s}' is a power unit: a bill's quantity is energy (kWh, therm, MMBtu, GJ, ...) or a gas volume (m3, ft3, ccf, mcf)"
+            ));
+        }
+        Ok(BillUnit::Energy(energy))
+    }
+}
+
+/// A meter read as bills. Sits in the project file as `[[meters.bills]]`:
+///
+/// ```toml
+/// [[meters.bills]]
+/// file = "gas_bills.csv"
+/// role = "heating"
+/// unit = "ccf"
+/// calorific_value_kwh_per_m3 = 10.8
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BillSpec {
+    /// The bills CSV (relative paths are relative to the project file).
+    pub file: PathBuf,
+    /// What the bills meter.
+    pub role: MeterRole,
+    /// Unit of the quantities where the file has no `unit` column (or a row leaves it empty).
+    #[serde(default)]
+    pub unit: Option<String>,
+    /// Gross calorific value of the gas, kWh per m3 (natural gas: about 10.5-11.5), for volume
+    /// units.
+    #[serde(default)]
+    pub calorific_value_kwh_per_m3: Option<f64>,
+    /// What the end date means.
+    #[serde(default)]
+    pub end: BillEnd,
+}
+
+/// One bill.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Bill {
+    /// 1-based line in the file (the header is line 1).
+    pub line: u64,
+    /// The first day billed.
+    pub start: NaiveDate,
+    /// The day after the last day billed (the period is `start..end`).
+    pub end: NaiveDate,
+    /// The quantity in kWh.
+    pub kwh: f64,
+    /// The billed peak demand, kW.
+    pub demand_kw: Option<f64>,
+    /// An estimated read.
+    pub estimated: bool,
+}
+
+impl Bill {
+    /// Days billed.
+    pub fn days(&self) -> i64 {
+        (self.end - self.start).num_days()
+    }
+
+    /// The grid's hour slots the bill covers, in time order (29 February, which the grid
+    /// leaves out, gives none), or `None` where a day of the bill lies outside the year: the
+    /// model simulates one year, so such a bill cannot be compared.
+    pub fn hours(&self, year: GridYear) -> Option<Vec<usize>> {
+        let mut out = Vec::with_capacity(24 * self.days().max(0) as usize);
+        for day in self.start.iter_days().take_while(|d| *d < self.end) {
+            if is_leap_day(day) && year.spans(day) {
+                continue;
+            }
+            for h in 0..24 {
+                out.push(year.slot_of(day.and_hms_opt(h, 0, 0)?)?);
+            }
+        }
+        Some(out)
+    }
+}
+
+/// A meter's bills, in date order, with what was noted reading them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BillTable {
+    /// What the bills meter.
+    pub role: MeterRole,
+    /// The file.
+    pub path: PathBuf,
+    /// The bills in date order.
+    pub bills: Vec<Bill>,
+    /// Gaps and estimated reads.
+    pub notes: Vec<String>,
+}
+
+/// Reads a bills CSV ([module rules](self)).
+pub fn read_bills(path: &Path, spec: &BillSpec) -> Result<BillTable, PrecalError> {
+    let text = std::fs::read_to_string(path).map_err(|source| PrecalError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_bills(&text, path, spec)
+}
+
+/// The column indices of the bills table.
+struct Columns {
+    start: usize,
+    end: usize,
+    quantity: usize,
+    unit: Option<usize>,
+    demand: Option<usize>,
+    estimated: Option<usize>,
+}
+
+fn columns(headers: &csv::StringRecord, path: &Path) -> Result<Columns, PrecalError> {
+    let find = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h.trim().eq_ignore_ascii_case(name))
+    };
+    let need = |name: &str| {
+        find(name).ok_or_else(|| PrecalError::MeterFile {
+            path: path.to_path_buf(),
+            message: format!(
+                "no '{name}' column: a bills file has the columns start, end, quantity (and optionally unit, demand_kw, estimated); the header is: {}",
+                bemcal_excerpt::excerpt(&headers.iter().collect::<Vec<_>>().join(","), 120)
+            ),
+        })
+    };
+    Ok(Columns {
+        start: need("start")?,
+        end: need("end")?,
+        quantity: need("quantity")?,
+        unit: find("unit"),
+        demand: find("demand_kw"),
+        estimated: find("estimated"),
+    })
+}
+
+fn parse_date(s: &str) -> Option<NaiveDate> {
+    NaiveDate::parse_from_str(s, "%Y-%m-%d")
+        .or_else(|_| NaiveDate::parse_from_str(s, "%m/%d/%Y"))
+        .ok()
+}
+
+fn parse_flag(s: &str) -> Option<bool> {
+    match s.to_ascii_lowercase().as_str() {
+        "true" | "yes" | "y" | "1" | "e" | "estimated" => Some(true),
+        "" | "false" | "no" | "n" | "0" | "a" | "actual" => Some(false),
+        _ => None,
+    }
+}
+
+/// kWh per unit of `unit`, with the spec's calorific value for a volume.
+fn kwh_per_unit(unit: BillUnit, spec: &BillSpec) -> Result<f64, String> {
+    match unit {
+        BillUnit::Energy(e) => Ok(e.to_kwh()),
+        BillUnit::Volume(v) => match spec.calorific_value_kwh_per_m3 {
+            Some(cv) if cv.is_finite() && cv > 0.0 => Ok(v.to_m3() * cv),
+            Some(cv) => Err(format!("calorific_value_kwh_per_m3 = {cv}: expected a positive number")),
+            None => Err(
+                "a gas volume needs the gas's calorific value: set calorific_value_kwh_per_m3 (natural gas: about 10.5-11.5 kWh per m3) in [[meters.bills]]"
+                    .into(),
+            ),
+        },
+    }
+}
+
+/// Parses a bills CSV's text ([module rules](self)); `path` names the file in errors.
+pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable, PrecalError> {
+    let err = |line: u64, column: &str, message: String| PrecalError::Meter {
+        path: path.to_path_buf(),
+        line,
+        column: column.to_string(),
+        message,
+    };
+    let default_unit = spec
+        .unit
+        .as_deref()
+        .map(|u| u.parse::<BillUnit>())
+        .transpose()
+        .map_err(|m| PrecalError::MeterFile {
+            path: path.to_path_buf(),
+            message: format!("[[meters.bills]] unit: {m}"),
+        })?;
+    let mut rdr = csv::ReaderBuilder::new()
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let headers = rdr.headers().map_err(|e| PrecalError::MeterFile {
+        path: path.to_path_buf(),
+        message: format!("cannot read the header line: {e}"),
+    })?;
+    let col = columns(headers, path)?;
+    let mut bills = vec![];
+    for rec in rdr.records() {
+        let rec = rec.map_err(|e| {
+            let line = e.position().map_or(0, |p| p.line());
+            err(line, "", format!("malformed CSV: {e}"))
+        })?;
+        let line = rec.position().map_or(0, |p| p.line());
+        if rec.iter().all(str::is_empty) {
+            continue;
+        }
+        let field = |i: usize| rec.get(i).unwrap_or("");
+        let date = |i: usize, name: &str| {
+            parse_date(field(i)).ok_or_else(|| {
+                err(
+                    line,
+                    name,
+                    format!(
+                        "'{}' is not a date (expected 2021-01-14 or 01/14/2021)",
+                        bemcal_excerpt::excerpt(field(i), 40)
+                    ),
+                )
+            })
+        };
+        let start = date(col.start, "start")?;
+        let last = date(col.end, "end")?;
+        let end = match spec.end {
+            BillEnd::Inclusive => last + Duration::days(1),
+            BillEnd::Exclusive => last,
+        };
+        if end <= start {
+            return Err(err(
+                line,
+                "end",
+                format!("the bill ends ({last}) before it starts ({start})"),
+            ));
+        }
+        let quantity: f64 = field(col.quantity).parse().map_err(|_| {
+            err(
+                line,
+                "quantity",
+                format!(
+                    "'{}' is not a number",
+                    bemcal_excerpt::excerpt(field(col.quantity), 40)
+                ),
+            )
+        })?;
+        if !(quantity.is_finite() && quantity >= 0.0) {
+            return Err(err(
+                line,
+                "quantity",
+                format!("{quantity}: expected a quantity of 0 or more"),
+            ));
+        }
+        let unit = match col.unit.map(field).filter(|u| !u.is_empty()) {
+            Some(u) => u.parse::<BillUnit>().map_err(|m| err(line, "unit", m))?,
+            None => default_unit.ok_or_else(|| {
+                err(
+                    line,
+                    "unit",
+                    "no unit: give a unit column or unit = \"...\" in [[meters.bills]]".into(),
+                )
+            })?,
+        };
+        let factor = kwh_per_unit(unit, spec).map_err(|m| err(line, "unit", m))?;
+        let demand_kw = match col.demand.map(field).filter(|d| !d.is_empty()) {
+            None => None,
+            Some(d) => Some(
+                d.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| {
+                        err(
+                            line,
+                            "demand_kw",
+                            format!("'{}' is not a demand in kW", bemcal_excerpt::excerpt(d, 40)),
+                        )
+                    })?,
+            ),
+        };
+        let estimated = match col.estimated.map(field) {
+            None => false,
+            Some(e) => parse_flag(e).ok_or_else(|| {
+                err(
+                    line,
+                    "estimated",
+                    format!(
+                        "'{}': expected true/false, yes/no, E/A (estimated/actual)",
+                        bemcal_excerpt::excerpt(e, 40)
+                    ),
+                )
+            })?,
+        };
+        bills.push(Bill {
+            line,
+            start,
+            end,
+            kwh: quantity * factor,
+            demand_kw,
+            estimated,
+        });
+    }
+    if bills.is_empty() {
+        return Err(PrecalError::MeterFile {
+            path: path.to_path_buf(),
+            message: "no bills: the file has a header and no rows".into(),
+        });
+    }
+    bills.sort_by_key(|b| b.start);
+    let notes = check_periods(&bills, path)?;
+    Ok(BillTable {
+        role: spec.role.clone(),
+        path: path.to_path_buf(),
+        bills,
+        notes,
+    })
+}
+
+/// Overlaps refused; gaps and estimated reads noted. `bills` in date order.
+fn check_periods(bills: &[Bill], path: &Path) -> Result<Vec<String>, PrecalError> {
+    let mut notes = vec![];
+    for w in bills.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if b.start < a.end {
+            return Err(PrecalError::Meter {
+                path: path.to_path_buf(),
+                line: b.line,
+                column: "start".into(),
+                message: format!(
+                    "the bill from {} overlaps the bill of line {} ({} to {}): each day belongs to one bill",
+                    b.start,
+                    a.line,
+                    a.start,
+                    a.end - Duration::days(1)
+                ),
+            });
+        }
+        if b.start > a.end {
+            notes.push(format!(
+                "no bill covers {} to {} ({} days, between lines {} and {})",
+                a.end,
+                b.start - Duration::days(1),
+                (b.start - a.end).num_days(),
+                a.line,
+                b.line
+            ));
+        }
+    }
+    let estimated: Vec<String> = bills
+        .iter()
+        .filter(|b| b.estimated)
+        .map(|b| {
+            format!(
+                "{} to {} (line {})",
+                b.start,
+                b.end - Duration::days(1),
+                b.line
+            )
+        })
+        .collect();
+    if !estimated.is_empty() {
+        notes.push(format!("estimated reads: {}", estimated.join(", ")));
+    }
+    Ok(notes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bemcal_weather::grid::CUM_DAYS;
+
+    fn spec(unit: Option<&str>) -> BillSpec {
+        BillSpec {
+            file: "bills.csv".into(),
+            role: MeterRole::Heating,
+            unit: unit.map(str::to_string),
+            calorific_value_kwh_per_m3: None,
+            end: BillEnd::Inclusive,
+        }
+    }
+
+    fn parse(text: &str, spec: &BillSpec) -> Result<BillTable, PrecalError> {
+        parse_bills(text, Path::new("bills.csv"), spec)
+    }
+
+    #[test]
+    fn irregular_periods_in_any_energy_unit() {
+        let t = parse(
+            "Start,End,Quantity,Unit,Estimated\n\
+             2021-01-05,2021-02-03,120,therm,\n\
+             2021-02-04,2021-03-08,3.2,MMBtu,E\n\
+             03/09/2021,04/06/2021,2500,kWh,no\n",
+            &spec(None),
+        )
+        .unwrap();
+        assert_eq!(t.bills.len(), 3);
+        assert_eq!(t.bills[0].days(), 30);
+        assert_eq!(t.bills[1].days(), 33);
+        assert!((t.bills[0].kwh - 120.0 * 29.307_107).abs() < 1e-6);
+        assert!((t.bills[1].kwh - 3.2 * 293.071_07).abs() < 1e-6);
+        assert_eq!(
+            t.bills[2].start,
+            NaiveDate::from_ymd_opt(2021, 3, 9).unwrap()
+        );
+        assert!(t.bills[1].estimated && !t.bills[2].estimated);
+        assert_eq!(
+            t.notes,
+            vec!["estimated reads: 2021-02-04 to 2021-03-08 (line 3)".to_string()]
+        );
+    }
+
+    #[test]
+    fn a_bill_covers_the_grid_hours_of_its_days() {
+        let t = parse(
+            "start,end,quantity\n2024-02-20,2024-03-05,1\n2021-12-20,2022-01-19,1\n2022-03-20,2022-04-10,1\n",
+            &spec(Some("kWh")),
+        )
+        .unwrap();
+        // 15 days across 29 February 2024: the grid has 14 of them.
+        let leap = t.bills[2].hours(GridYear::calendar(2024)).unwrap();
+        assert_eq!(leap.len(), 14 * 24);
+        // A year from April 2021: a bill across the year end is whole, in time order (slots of
+        // late December, then of January), and one past the year's end cannot be compared.
+        let y = GridYear::starting(2021, 4).unwrap();
+        let winter = t.bills[0].hours(y).unwrap();
+        assert_eq!(winter.len(), 31 * 24);
+        assert_eq!(winter[0], (CUM_DAYS[11] + 19) * 24);
+        assert_eq!(winter[12 * 24], 0);
+        assert_eq!(t.bills[1].hours(y), None);
+        assert_eq!(
+            t.bills[1].hours(GridYear::calendar(2022)).map(|h| h.len()),
+            Some(22 * 24)
+        );
+    }
+
+    #[test]
+    fn gas_volumes_need_a_calorific_value() {
+        let text = "start,end,quantity\n2021-01-05,2021-02-03,100\n";
+        let e = parse(text, &spec(Some("ccf"))).unwrap_err().to_string();
+        assert!(
+            e.contains("bills.csv:2") && e.contains("calorific_value_kwh_per_m3"),
+            "{e}"
+        );
+        let mut s = spec(Some("ccf"));
+        s.calorific_value_kwh_per_m3 = Some(10.5);
+        let t = parse(text, &s).unwrap();
+        // 100 ccf = 283.17 m3 = 2,973.3 kWh at 10.5 kWh/m3.
+        assert!(
+            (t.bills[0].kwh - 2973.27).abs() < 0.01,
+            "{}",
+            t.bills[0].kwh
+        );
+        let e = parse(text, &spec(Some("kW"))).unwrap_err().to_string();
+        assert!(e.contains("power unit"), "{e}");
+    }
+
+    #[test]
+    fn overlaps_are_refused_and_gaps_noted_with_their_lines() {
+        let e = parse(
+            "start,end,quantity\n2021-01-05,2021-02-03,1\n2021-02-01,2021-03-02,1\n",
+            &spec(Some("kWh")),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("bills.csv:3") && e.contains("overlaps the bill of line 2"),
+            "{e}"
+        );
+        let t = parse(
+            "start,end,quantity\n2021-01-05,2021-02-03,1\n2021-02-10,2021-03-02,1\n",
+            &spec(Some("kWh")),
+        )
+        .unwrap();
+        assert_eq!(
+            t.notes,
+            vec![
+                "no bill covers 2021-02-04 to 2021-02-09 (6 days, between lines 2 and 3)"
+                    .to_string()
+            ]
+        );
+        // Read dates (exclusive ends): each bill ends where the next starts, no gap.
+        let mut s = spec(Some("kWh"));
+        s.end = BillEnd::Exclusive;
+        let t = parse(
+            "start,end,quantity\n2021-01-05,2021-02-04,1\n2021-02-04,2021-03-05,1\n",
+            &s,
+        )
+        .unwrap();
+        assert!(t.notes.is_empty() && t.bills[0].days() == 30);
+    }
+
+    #[test]
+    fn bad_fields_name_line_and_column() {
+        let cases = [
+            ("2021-13-05,2021-02-03,1", "column 'start'", "not a date"),
+            (
+                "2021-01-05,2021-01-03,1",
+                "column 'end'",
+                "before it starts",
+            ),
+            ("2021-01-05,2021-02-03,-4", "column 'quantity'", "0 or more"),
+            (
+                "2021-01-05,2021-02-03,lots",
+                "column 'quantity'",
+                "not a number",
+            ),
+        ];
+        for (row, column, what) in cases {
+            let e = parse(&format!("start,end,quantity\n{row}\n"), &spec(Some("kWh")))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("bills.csv:2") && e.contains(column) && e.contains(what),
+                "{row}: {e}"
+            );
+        }
+        let e = parse("from,to,usage\n", &spec(Some("kWh")))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no 'start' column"), "{e}");
+    }
+}
