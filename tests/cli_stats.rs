@@ -190,3 +190,83 @@ fn a_panic_prints_a_short_message_and_keeps_the_details() {
         "{details}"
     );
 }
+
+/// `bemcal metrics --bills`: each bill against the simulation's total over its days, Guideline
+/// 14's monthly criteria on the bills; a bill the simulation does not cover is listed, not
+/// compared; a bad bills file names its line.
+#[test]
+fn metrics_on_bills() {
+    let dir = tempfile::tempdir().unwrap();
+    // 1 kWh of heating an hour from 1 January to 31 March 2021.
+    let mut sim = String::from("timestamp,heating_kwh\n");
+    let start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1)
+        .unwrap()
+        .and_hms_opt(0, 0, 0)
+        .unwrap();
+    for h in 0..90 * 24 {
+        let t = start + chrono::Duration::hours(h);
+        sim.push_str(&format!("{},1\n", t.format("%Y-%m-%dT%H:%M")));
+    }
+    let s = write(&dir, "s.csv", &sim);
+    // 30 days (720 kWh simulated), 33 days (792), and a bill past the simulation's end.
+    let b = write(
+        &dir,
+        "gas.csv",
+        "start,end,quantity,unit,estimated\n\
+         2021-01-05,2021-02-03,700,kWh,\n\
+         2021-02-04,2021-03-08,800,kWh,E\n\
+         2021-03-09,2021-04-06,500,kWh,\n",
+    );
+    let out = bemcal(&[
+        "metrics",
+        "--simulated",
+        &s,
+        "--bills",
+        &format!("heating_kwh={b}"),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stderr).contains("estimated reads: 2021-02-04"));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let row = &v[0];
+    assert_eq!(row["resolution"], "bills");
+    assert_eq!(row["n"], 2);
+    // Residuals -20 and +8 kWh on a mean of 750: NMBE -12 / 750, CV-RMSE sqrt(464) / 750.
+    assert!(
+        (row["nmbe_percent"].as_f64().unwrap() + 1.6).abs() < 1e-9,
+        "{row}"
+    );
+    assert!(
+        (row["cv_rmse_percent"].as_f64().unwrap() - 464f64.sqrt() / 7.5).abs() < 1e-9,
+        "{row}"
+    );
+    assert_eq!(row["pass"], true);
+    assert_eq!(row["bills"][1]["simulated_kwh"], 792.0);
+    assert_eq!(row["bills"][1]["days"], 33);
+    assert!(row["bills"][2]["simulated_kwh"].is_null());
+
+    let overlap = write(
+        &dir,
+        "bad.csv",
+        "start,end,quantity\n2021-01-05,2021-02-03,700\n2021-02-01,2021-03-08,800\n",
+    );
+    let out = bemcal(&[
+        "metrics",
+        "--simulated",
+        &s,
+        "--bills",
+        &format!("heating_kwh={overlap}"),
+        "--bill-unit",
+        "therm",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("bad.csv:3") && err.contains("overlaps the bill of line 2"),
+        "{err}"
+    );
+}

@@ -1,9 +1,12 @@
 //! `bemcal metrics`: ASHRAE Guideline 14 NMBE and CV-RMSE of simulated against measured hourly
-//! series (p = 1, hourly criteria |NMBE| <= 10 %, CV-RMSE <= 30 %).
+//! series (p = 1, hourly criteria |NMBE| <= 10 %, CV-RMSE <= 30 %), and against utility bills
+//! (`--bills OUTPUT=FILE`: each bill's total, the monthly criteria |NMBE| <= 5 %,
+//! CV-RMSE <= 15 % on the bills).
 //!
-//! Both CSVs have a `timestamp` column and output columns such as `heating_kwh`; rows are
+//! The CSVs have a `timestamp` column and output columns such as `heating_kwh`; rows are
 //! matched by timestamp, every output present in both files is compared, and an empty or
-//! `NaN` cell is a missing hour.
+//! `NaN` cell is a missing hour. A bill is compared where the simulated file has every hour of
+//! every day it covers (29 February aside, which simulations leave out).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -14,8 +17,24 @@ use anyhow::{bail, Context};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Measured hourly series (CSV with a `timestamp` column).
+    #[arg(long, required_unless_present = "bills")]
+    pub measured: Option<PathBuf>,
+    /// Utility bills of an output, OUTPUT=FILE (`heating_kwh=gas_bills.csv`; repeatable): a
+    /// CSV of `start`, `end`, `quantity` (optionally `unit`, `demand_kw`, `estimated`), as
+    /// `[[meters.bills]]` reads it.
+    #[arg(long, value_name = "OUTPUT=FILE")]
+    pub bills: Vec<String>,
+    /// Unit of the bills' quantities where the file has no `unit` column (kWh, therm, MMBtu,
+    /// GJ, ..., or a gas volume: m3, ft3, ccf, mcf).
     #[arg(long)]
-    pub measured: PathBuf,
+    pub bill_unit: Option<String>,
+    /// kWh per m3 of gas, for bills in volumes.
+    #[arg(long)]
+    pub calorific_value: Option<f64>,
+    /// The bills' end dates are read dates (the start of the next bill), not the last day
+    /// billed.
+    #[arg(long)]
+    pub bill_end_exclusive: bool,
     /// Simulated hourly series (CSV with a `timestamp` column).
     #[arg(long)]
     pub simulated: PathBuf,
@@ -113,14 +132,33 @@ pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
     bemcal_excerpt::excerpt(s, 40)
 }
 
-/// Metrics of one output.
+/// Metrics of one output, hourly or on its bills.
 #[derive(Debug, serde::Serialize)]
 struct Row {
     output: String,
+    /// `hourly` or `bills`.
+    resolution: &'static str,
+    /// Hours, or bills compared.
     n: usize,
     nmbe_percent: f64,
     cv_rmse_percent: f64,
     pass: bool,
+    /// Each bill, with `resolution = "bills"`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    bills: Vec<BillRow>,
+}
+
+/// One bill against the simulation.
+#[derive(Debug, serde::Serialize)]
+struct BillRow {
+    start: chrono::NaiveDate,
+    /// The last day billed.
+    end: chrono::NaiveDate,
+    days: i64,
+    measured_kwh: f64,
+    /// None: the simulation lacks a day of the bill.
+    simulated_kwh: Option<f64>,
+    estimated: bool,
 }
 
 /// An ISO 8601 local timestamp, `YYYY-MM-DDTHH:MM[:SS]` (or with a space for `T`).
@@ -164,8 +202,79 @@ fn row_times(t: &Table, col: usize) -> anyhow::Result<Vec<chrono::NaiveDateTime>
 
 /// Run `bemcal metrics`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let meas = Table::read(&args.measured)?;
     let sim = Table::read(&args.simulated)?;
+    let st = sim.column("timestamp")?;
+    let sim_times = row_times(&sim, st)?;
+    let mut results = match &args.measured {
+        Some(m) => hourly(&Table::read(m)?, &sim, &sim_times)?,
+        None => vec![],
+    };
+    for b in &args.bills {
+        results.push(on_bills(&args, b, &sim, &sim_times)?);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        print_table(&results);
+    }
+    Ok(())
+}
+
+fn print_table(results: &[Row]) {
+    for (resolution, limits) in [
+        ("hourly", "|NMBE| <= 10 %, CV-RMSE <= 30 %"),
+        ("bills", "on the bills: |NMBE| <= 5 %, CV-RMSE <= 15 %"),
+    ] {
+        let rows: Vec<&Row> = results
+            .iter()
+            .filter(|r| r.resolution == resolution)
+            .collect();
+        if rows.is_empty() {
+            continue;
+        }
+        println!(
+            "{:<24} {:>7} {:>9} {:>11}  pass ({limits})",
+            "output",
+            if resolution == "hourly" { "n" } else { "bills" },
+            "NMBE %",
+            "CV-RMSE %"
+        );
+        for r in rows {
+            println!(
+                "{:<24} {:>7} {:>9.2} {:>11.2}  {}",
+                r.output,
+                r.n,
+                r.nmbe_percent,
+                r.cv_rmse_percent,
+                if r.pass { "yes" } else { "no" }
+            );
+            for b in &r.bills {
+                println!(
+                    "  {} to {} ({:>2} days{}): measured {:>10.1} kWh, simulated {}",
+                    b.start,
+                    b.end,
+                    b.days,
+                    if b.estimated { ", estimated" } else { "" },
+                    b.measured_kwh,
+                    b.simulated_kwh.map_or(
+                        "(the simulation lacks a day of it)".into(),
+                        |s| format!(
+                            "{s:>10.1} kWh ({:+.1} %)",
+                            100.0 * (s - b.measured_kwh) / b.measured_kwh
+                        )
+                    )
+                );
+            }
+        }
+    }
+}
+
+/// Guideline 14 of every output both files have, hour by hour.
+fn hourly(
+    meas: &Table,
+    sim: &Table,
+    sim_times: &[chrono::NaiveDateTime],
+) -> anyhow::Result<Vec<Row>> {
     let (mt, st) = (meas.column("timestamp")?, sim.column("timestamp")?);
     let outputs: Vec<(usize, usize)> = meas
         .header
@@ -184,14 +293,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     // Rows are matched by time, not by text: `2021-01-01T00:00` (EnergyPlus validation CSVs)
     // and `2021-01-01T00:00:00` (`bemcal predict`) are the same hour.
-    let sim_rows: HashMap<chrono::NaiveDateTime, usize> = row_times(&sim, st)?
-        .into_iter()
-        .enumerate()
-        .map(|(k, t)| (t, k))
-        .collect();
+    let sim_rows: HashMap<chrono::NaiveDateTime, usize> =
+        sim_times.iter().enumerate().map(|(k, t)| (*t, k)).collect();
     // A measured hour written twice would be compared twice (counted twice in n, NMBE and
     // CV-RMSE), so it is refused like a simulated one.
-    let meas_times = row_times(&meas, mt)?;
+    let meas_times = row_times(meas, mt)?;
     // Hours only one file has are left out of every figure: say how many, so that files of
     // different years (a calendar year against twelve months from April) are not compared
     // over a part of the year unnoticed.
@@ -229,31 +335,92 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         })?;
         results.push(Row {
             output: name,
+            resolution: "hourly",
             n: m.n,
             nmbe_percent: m.nmbe,
             cv_rmse_percent: m.cv_rmse,
             pass: m.pass,
+            bills: vec![],
         });
     }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
-    } else {
-        println!(
-            "{:<24} {:>7} {:>9} {:>11}  pass (|NMBE| <= 10 %, CV-RMSE <= 30 %)",
-            "output", "n", "NMBE %", "CV-RMSE %"
-        );
-        for r in &results {
-            println!(
-                "{:<24} {:>7} {:>9.2} {:>11.2}  {}",
-                r.output,
-                r.n,
-                r.nmbe_percent,
-                r.cv_rmse_percent,
-                if r.pass { "yes" } else { "no" }
-            );
+    Ok(results)
+}
+
+/// Guideline 14 of one output's bills (`OUTPUT=FILE`) against the simulation's totals over
+/// each bill's days.
+fn on_bills(
+    args: &Args,
+    arg: &str,
+    sim: &Table,
+    sim_times: &[chrono::NaiveDateTime],
+) -> anyhow::Result<Row> {
+    use bemcal_precal::meters::{bill_totals, read_bills, BillEnd, BillSpec, MeterRole};
+    let (output, file) = arg
+        .split_once('=')
+        .with_context(|| format!("--bills {}: expected OUTPUT=FILE", excerpt(arg)))?;
+    let j = sim.column(output)?;
+    let spec = BillSpec {
+        file: file.into(),
+        role: MeterRole::from(output.trim_end_matches("_kwh").to_string()),
+        unit: args.bill_unit.clone(),
+        calorific_value_kwh_per_m3: args.calorific_value,
+        end: match args.bill_end_exclusive {
+            true => BillEnd::Exclusive,
+            false => BillEnd::Inclusive,
+        },
+    };
+    let table = read_bills(std::path::Path::new(file), &spec)?;
+    for n in &table.notes {
+        eprintln!("note: {file}: {n}");
+    }
+    // Each day's simulated total, where the simulation has its 24 hours.
+    let mut days: HashMap<chrono::NaiveDate, (f64, usize)> = HashMap::new();
+    for ((line, f), t) in sim.rows.iter().zip(sim_times) {
+        let v = sim.number(*line, j, &f[j])?;
+        if v.is_finite() {
+            let d = days.entry(t.date()).or_default();
+            d.0 += v;
+            d.1 += 1;
         }
     }
-    Ok(())
+    let totals = bill_totals(&table.bills, |d| {
+        days.get(&d).filter(|(_, n)| *n == 24).map(|(s, _)| *s)
+    });
+    let (y, yhat): (Vec<f64>, Vec<f64>) = table
+        .bills
+        .iter()
+        .zip(&totals)
+        .filter_map(|(b, s)| s.map(|s| (b.kwh, s)))
+        .unzip();
+    let m = bemcal_stats::metrics::g14_totals(&y, &yhat).with_context(|| {
+        format!(
+            "{output}: {} of {} bills in {file} lie inside {}'s days",
+            y.len(),
+            table.bills.len(),
+            sim.path.display()
+        )
+    })?;
+    Ok(Row {
+        output: output.to_string(),
+        resolution: "bills",
+        n: m.n,
+        nmbe_percent: m.nmbe,
+        cv_rmse_percent: m.cv_rmse,
+        pass: m.pass,
+        bills: table
+            .bills
+            .iter()
+            .zip(totals)
+            .map(|(b, s)| BillRow {
+                start: b.start,
+                end: b.end - chrono::Duration::days(1),
+                days: b.days(),
+                measured_kwh: b.kwh,
+                simulated_kwh: s,
+                estimated: b.estimated,
+            })
+            .collect(),
+    })
 }
 
 #[cfg(test)]
@@ -289,8 +456,12 @@ mod tests {
         std::fs::write(&m, measured).unwrap();
         std::fs::write(&s, simulated).unwrap();
         run(Args {
-            measured: m,
+            measured: Some(m),
             simulated: s,
+            bills: vec![],
+            bill_unit: None,
+            calorific_value: None,
+            bill_end_exclusive: false,
             json: true,
         })
         .map_err(|e| {

@@ -142,7 +142,14 @@ pub fn g14_monthly(measured: &[f64], simulated: &[f64], months: &[u32]) -> Resul
         }
     }
     let (y, s): (Vec<f64>, Vec<f64>) = totals.into_values().unzip();
-    let m = g14(&y, &s)?;
+    g14_totals(&y, &s)
+}
+
+/// Guideline 14 of totals over periods of about a month (monthly totals, utility bills): the
+/// same NMBE and CV-RMSE (`n` = periods, `p` = 1), judged by the monthly criteria
+/// (`|NMBE| <= 5 %`, `CV-RMSE <= 15 %`).
+pub fn g14_totals(measured: &[f64], simulated: &[f64]) -> Result<G14Metrics> {
+    let m = g14(measured, simulated)?;
     Ok(G14Metrics {
         pass: m.nmbe.abs() <= MONTHLY_NMBE_LIMIT && m.cv_rmse <= MONTHLY_CV_RMSE_LIMIT,
         ..m
@@ -188,11 +195,7 @@ pub fn g14_of_totals(parts: &[G14Metrics]) -> Result<G14Metrics> {
         .collect();
     let y: Vec<f64> = totals.iter().map(|t| t.0).collect();
     let s: Vec<f64> = totals.iter().map(|t| t.1).collect();
-    let m = g14(&y, &s)?;
-    Ok(G14Metrics {
-        pass: m.nmbe.abs() <= MONTHLY_NMBE_LIMIT && m.cv_rmse <= MONTHLY_CV_RMSE_LIMIT,
-        ..m
-    })
+    g14_totals(&y, &s)
 }
 
 #[cfg(test)]

@@ -358,6 +358,22 @@ fn observed(d: NaiveDate) -> NaiveDate {
     }
 }
 
+impl schemars::JsonSchema for Holidays {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "Holidays".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "Holidays, run on the weekend schedule: \"us_federal\", \"uk\" (England and Wales), \"none\", or a list of dates.",
+            "oneOf": [
+                {"type": "string", "enum": ["us_federal", "uk", "uk_england_wales", "none"]},
+                {"type": "array", "items": {"type": "string", "format": "date"}}
+            ]
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -466,21 +482,5 @@ mod tests {
         assert_eq!(listed.day_type(1, 1), Some(DayType::Weekday));
         assert_eq!(none.day_type(1, 1), Some(DayType::Weekday));
         assert_eq!(cal.day_type(2, 30), None);
-    }
-}
-
-impl schemars::JsonSchema for Holidays {
-    fn schema_name() -> std::borrow::Cow<'static, str> {
-        "Holidays".into()
-    }
-
-    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        schemars::json_schema!({
-            "description": "Holidays, run on the weekend schedule: \"us_federal\", \"uk\" (England and Wales), \"none\", or a list of dates.",
-            "oneOf": [
-                {"type": "string", "enum": ["us_federal", "uk", "uk_england_wales", "none"]},
-                {"type": "array", "items": {"type": "string", "format": "date"}}
-            ]
-        })
     }
 }

@@ -232,6 +232,22 @@ pub fn slot_month(t: usize) -> u32 {
     CUM_DAYS.iter().rposition(|&c| c <= d).unwrap_or(0).min(11) as u32 + 1
 }
 
+impl schemars::JsonSchema for GridYear {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "GridYear".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "The twelve months simulated: a calendar year (2017) or twelve months from the first of another month (\"2017-04\").",
+            "oneOf": [
+                {"type": "integer", "minimum": 1900, "maximum": 2100},
+                {"type": "string", "pattern": "^[0-9]{4}-(0[1-9]|1[0-2])$"}
+            ]
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -326,21 +342,5 @@ mod tests {
             serde_json::from_str::<GridYear>("2017").unwrap(),
             GridYear::calendar(2017)
         );
-    }
-}
-
-impl schemars::JsonSchema for GridYear {
-    fn schema_name() -> std::borrow::Cow<'static, str> {
-        "GridYear".into()
-    }
-
-    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        schemars::json_schema!({
-            "description": "The twelve months simulated: a calendar year (2017) or twelve months from the first of another month (\"2017-04\").",
-            "oneOf": [
-                {"type": "integer", "minimum": 1900, "maximum": 2100},
-                {"type": "string", "pattern": "^[0-9]{4}-(0[1-9]|1[0-2])$"}
-            ]
-        })
     }
 }

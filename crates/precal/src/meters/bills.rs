@@ -198,6 +198,23 @@ pub fn read_bills(path: &Path, spec: &BillSpec) -> Result<BillTable, PrecalError
     parse_bills(&text, path, spec)
 }
 
+/// Each bill's total of a daily series (`daily`: a date's total, None where the series lacks
+/// the day): the sum over the bill's days, 29 February left out as the grid leaves it; None
+/// where a day of the bill is lacking, so that no bill is compared over part of its period.
+pub fn bill_totals(bills: &[Bill], daily: impl Fn(NaiveDate) -> Option<f64>) -> Vec<Option<f64>> {
+    bills
+        .iter()
+        .map(|b| {
+            b.start
+                .iter_days()
+                .take_while(|d| *d < b.end)
+                .filter(|d| !is_leap_day(*d))
+                .map(&daily)
+                .sum()
+        })
+        .collect()
+}
+
 /// The column indices of the bills table.
 struct Columns {
     start: usize,
@@ -520,6 +537,19 @@ mod tests {
             t.bills[1].hours(GridYear::calendar(2022)).map(|h| h.len()),
             Some(22 * 24)
         );
+    }
+
+    #[test]
+    fn a_bills_total_needs_every_day() {
+        let t = parse(
+            "start,end,quantity\n2024-02-20,2024-03-05,1\n2024-03-06,2024-03-10,1\n",
+            &spec(Some("kWh")),
+        )
+        .unwrap();
+        let daily =
+            |d: NaiveDate| (d < NaiveDate::from_ymd_opt(2024, 3, 8).unwrap()).then_some(2.0);
+        // 15 days less 29 February; the second bill lacks 8 to 10 March.
+        assert_eq!(bill_totals(&t.bills, daily), vec![Some(28.0), None]);
     }
 
     #[test]
