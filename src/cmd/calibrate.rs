@@ -237,7 +237,7 @@ fn print_guideline14(s: &bemcal_calibrate::Summary) {
             .find(|i| i.output == v.output);
         println!(
             "{:<18} {:>22} {:>6.1} % / {:5.1} % {:4} {:>22}",
-            v.output,
+            v.label(),
             metrics_pair(init),
             v.metrics.nmbe,
             v.metrics.cv_rmse,
@@ -336,7 +336,7 @@ fn print_held_out(s: &bemcal_calibrate::Summary) {
         let h = v.held_out.as_ref();
         println!(
             "{:<18} {:>28} {:>28} {:>28}",
-            v.output,
+            v.label(),
             pm(v.monthly.as_ref()),
             pm(h.map(|h| &h.hourly)),
             pm(h.and_then(|h| h.monthly.as_ref()))

@@ -324,7 +324,8 @@ impl FittedData {
 }
 
 /// The first 16 hex digits of the SHA-256 of what the likelihood fits: each fitted meter's
-/// name and its hourly series less its base (NaN where missing, excluded or held out). A
+/// name and its hourly series less its base (NaN where missing, excluded or held out), and
+/// its bills (hours and totals less the base) where it is read as bills. A
 /// changed meter file, `exclude` period, base or meter time zone changes it. Deterministic:
 /// the path from the files to these series has no parallel sums and no hash-ordered maps;
 /// values enter rounded to 9 significant digits, in text, so the fingerprint does not depend
@@ -341,6 +342,15 @@ pub(crate) fn readings_fingerprint(inputs: &crate::inputs::Inputs) -> String {
             }
         }
         h.update(b"\n");
+        if let Some(b) = &inputs.bills[k] {
+            // The bills fitted: their hours and totals less the base.
+            for r in b.readings(&inputs.bases[k]) {
+                let (first, last) = (r.hours[0], r.hours[r.hours.len() - 1]);
+                h.update(
+                    format!("bill {first}..{last} {};{:.8e}\n", r.hours.len(), r.total).as_bytes(),
+                );
+            }
+        }
     }
     h.finalize()[..8]
         .iter()

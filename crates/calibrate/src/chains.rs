@@ -6,6 +6,7 @@ use bemcal_stats::chain::Chain;
 use bemcal_stats::convergence::{draws_for_ess, Convergence};
 use bemcal_stats::hmc::{self, HmcConfig, HmcState};
 use bemcal_stats::likelihood::cells::Cells;
+use bemcal_stats::likelihood::intervals::IntervalLikelihood;
 use bemcal_stats::likelihood::{GaussianLikelihood, OutputNoise};
 use bemcal_stats::mcmc::{chains_at_optima, dispersed_starts, ChainState, Draws, MhConfig};
 use bemcal_stats::optim::{maximise_batch, maximise_batch_with_gradient, BfgsConfig, Optimum};
@@ -30,6 +31,8 @@ pub struct Sampler<'c> {
     /// The Gaussian likelihood of each meter less its base over the calibration period, given
     /// the surrogate (reference Eq. 7).
     pub likelihood: GaussianLikelihood,
+    /// The bills' likelihoods of the billed outputs ([`crate::bills`]).
+    pub bills: Vec<IntervalLikelihood>,
     /// Per output, the likelihood's noise sds, kWh: sigma_y and sigma_delta from `[mcmc]`'s
     /// fractions of the meter's mean and sd, sigma_eta from the surrogate.
     pub noise: Vec<OutputNoise>,
@@ -82,11 +85,20 @@ impl Calibration {
             })
             .collect();
         let likelihood = GaussianLikelihood::new(&observed, &noise)?;
+        let bills = inp.bill_likelihoods()?;
+        if !bills.is_empty() && m.sigma_delta != SigmaDeltaMode::Marginal {
+            return Err(Error::Config(
+                "[[meters.bills]] needs mcmc.sigma_delta = \"marginal\" (the default): a bill's \
+                 error scale is integrated out"
+                    .into(),
+            ));
+        }
         let sd: Vec<f64> = stats.iter().map(|(_, s)| s.max(1e-9)).collect();
         Ok(Sampler {
             cal: self,
             evaluator: surrogate.bind(&inp.features)?,
             likelihood,
+            bills,
             noise,
             sigma_box: SigmaDeltaBox::new(&sd, &inp.fitted),
             sigma_eta,
@@ -127,6 +139,7 @@ impl Sampler<'_> {
             plan: &self.cal.inputs.plan,
             model: &self.cal.inputs.model,
             likelihood: &self.likelihood,
+            bills: &self.bills,
             sigma_box: (m.sigma_delta == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
             marginal: m.sigma_delta == SigmaDeltaMode::Marginal,
             ar1: m.residuals == Residuals::Ar1,
@@ -212,6 +225,7 @@ impl Sampler<'_> {
             plan: &self.cal.inputs.plan,
             model: &self.cal.inputs.model,
             likelihood: &self.likelihood,
+            bills: &self.bills,
             sigma_box: (m.sigma_delta == SigmaDeltaMode::Sampled).then_some(&self.sigma_box),
             marginal: m.sigma_delta == SigmaDeltaMode::Marginal,
             ar1: m.residuals == Residuals::Ar1,
@@ -281,7 +295,8 @@ impl Sampler<'_> {
                     observed[h * names.len() + k] = *v;
                 }
             }
-            recovered.push(self.untempered_mode(&observed, x)?);
+            let bills = self.bills_with_totals(|b| b.sums(&observed));
+            recovered.push(self.untempered_mode(&observed, bills, x)?);
         }
         Ok(recovered)
     }
@@ -306,22 +321,46 @@ impl Sampler<'_> {
         let n_h = self.cal.inputs.features.len();
         let surrogate = self.predict(&[anchor.to_vec()])?.remove(0);
         let mut observed = self.cal.inputs.likelihood_observations();
+        let mut shift = vec![0.0; observed.len()];
         for (k, name) in names.iter().enumerate() {
             let e = hourly_output(eplus, name, n_h).ok_or_else(|| Error::Stage {
                 stage: "validation",
                 message: format!("the anchor's run has no {n_h}-hour output {name}"),
             })?;
             for h in 0..n_h {
-                observed[h * names.len() + k] -= e[h] - surrogate[k][h];
+                shift[h * names.len() + k] = e[h] - surrogate[k][h];
             }
         }
-        self.untempered_mode(&observed, anchor)
+        for (o, d) in observed.iter_mut().zip(&shift) {
+            *o -= d;
+        }
+        let bills = self.bills_with_totals(|b| {
+            let totals = b.readings().iter().map(|r| r.total);
+            totals.zip(b.sums(&shift)).map(|(t, d)| t - d).collect()
+        });
+        self.untempered_mode(&observed, bills, anchor)
+    }
+
+    /// The bills' likelihoods with each bill's total replaced by `totals(bill likelihood)`.
+    fn bills_with_totals(
+        &self,
+        totals: impl Fn(&IntervalLikelihood) -> Vec<f64>,
+    ) -> Vec<IntervalLikelihood> {
+        self.bills
+            .iter()
+            .map(|b| b.with_totals(&totals(b)))
+            .collect()
     }
 
     /// The posterior's mode at temperature 1 with `observed` (hours x outputs, row-major) in
     /// place of the meters (the same missing hours and error model), by BFGS from `start`
     /// (physical calibrated values).
-    fn untempered_mode(&mut self, observed: &[f64], start: &[f64]) -> Result<Vec<f64>, Error> {
+    fn untempered_mode(
+        &mut self,
+        observed: &[f64],
+        bills: Vec<IntervalLikelihood>,
+        start: &[f64],
+    ) -> Result<Vec<f64>, Error> {
         let cfg = BfgsConfig {
             max_iterations: self.cal.project.mcmc.optimiser_iterations,
             hessian: false,
@@ -331,6 +370,7 @@ impl Sampler<'_> {
         let (post, eval) = self.split();
         let post = Posterior {
             likelihood: &likelihood,
+            bills: &bills,
             temperature: 1.0,
             ..post
         };

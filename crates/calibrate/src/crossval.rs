@@ -211,6 +211,14 @@ pub fn cross_validate(
              [validation]"
         )));
     }
+    if !project.meters.bills.is_empty() {
+        return Err(Error::Config(
+            "cross-validation by month judges hourly meters month by month: a project with \
+             [[meters.bills]] is not cross-validated yet (hold bills out with [validation] \
+             holdout instead)"
+                .into(),
+        ));
+    }
     let base = out.join("all");
     log("cross-validation: the calibration on every month (all/)");
     let all = calibrate(project, &base, log)?;

@@ -9,6 +9,7 @@ use bemcal_precal::meters::{read_meters, MeterData, MeterRole};
 use bemcal_precal::pipeline::PriorsFile;
 use bemcal_weather::{Epw, HourlyFeatures};
 
+use crate::bills::BilledMeter;
 use crate::error::{write_atomic, Error};
 use crate::plan::Plan;
 use crate::project::{excerpt, Project};
@@ -48,6 +49,9 @@ pub struct Inputs {
     pub bases: Vec<Vec<f64>>,
     /// What each base is, for the summary.
     pub base_reports: Vec<crate::bases::BaseReport>,
+    /// Per output, its bills where its meter is read as bills (`[[meters.bills]]`; its
+    /// hourly `measured` is then missing throughout).
+    pub bills: Vec<Option<BilledMeter>>,
 }
 
 /// The hours of a held-out period and the meters' values in them: they check the calibration
@@ -116,6 +120,19 @@ impl Inputs {
                 .map(|((m, o), &out)| if out { *o } else { *m })
                 .collect(),
         }
+    }
+
+    /// The bills' likelihoods of the billed outputs that are fitted
+    /// ([`crate::bills::BilledMeter::likelihood`]).
+    pub fn bill_likelihoods(
+        &self,
+    ) -> Result<Vec<bemcal_stats::likelihood::intervals::IntervalLikelihood>, Error> {
+        let (n_h, n_out) = (self.features.len(), self.outputs.len());
+        (0..n_out)
+            .filter(|&k| self.fitted[k])
+            .filter_map(|k| Some((k, self.bills[k].as_ref()?)))
+            .map(|(k, b)| b.likelihood(k, n_out, n_h, &self.bases[k]))
+            .collect()
     }
 
     /// Per hour slot, whether it belongs to the calibration period (not held out).
@@ -286,14 +303,31 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         Some(calendar.year),
         Some(epw.location.time_zone_h),
     )?;
-    let (outputs, mut measured) = metered_outputs(project, &model, &data)?;
+    let billed = read_bills(project, calendar.year)?;
+    let (outputs, mut measured, mut bills) = metered_outputs(project, &model, &data, billed)?;
     let fitted = fitted_outputs(project, &outputs)?;
-    let held_out = hold_out(project, &data, &outputs, &mut measured)?;
+    let held_out = hold_out(project, &data, &outputs, &mut measured, &bills)?;
+    if let Some(h) = &held_out {
+        bills
+            .iter_mut()
+            .flatten()
+            .for_each(|b| b.hold_out(&h.hours));
+    }
+    let mut meter_notes = data.notes.clone();
+    meter_notes.extend(bills.iter().flatten().flat_map(|b| {
+        b.table
+            .notes
+            .iter()
+            .map(|n| format!("{}: {n}", b.table.path.display()))
+            .chain(b.notes.iter().cloned())
+    }));
     // A fitted meter with no reading left (every hour excluded or missing) would add nothing
     // to the likelihood: the chains would sample the prior without a word.
-    if let Some(k) =
-        (0..outputs.len()).find(|&k| fitted[k] && !measured[k].iter().any(|v| v.is_finite()))
-    {
+    let no_reading = |k: usize| match &bills[k] {
+        Some(b) => b.calibration_bills() == 0,
+        None => !measured[k].iter().any(|v| v.is_finite()),
+    };
+    if let Some(k) = (0..outputs.len()).find(|&k| fitted[k] && no_reading(k)) {
         return Err(project.error_at(
             &["meters", "columns"],
             format!(
@@ -312,38 +346,100 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
         measured_weather,
         features,
         year: calendar.year,
-        meter_notes: data.notes.clone(),
+        meter_notes,
         outputs,
         measured,
         fitted,
         held_out,
         bases,
         base_reports,
+        bills,
     })
+}
+
+/// The project's bills (`[[meters.bills]]`), read and placed on the grid of `year`, by role.
+fn read_bills(project: &Project, year: GridYear) -> Result<Vec<BilledMeter>, Error> {
+    let mut out: Vec<BilledMeter> = vec![];
+    for spec in &project.meters.bills {
+        let table = bemcal_precal::meters::read_bills(&project.resolve(&spec.file), spec)?;
+        if let Some(other) = out.iter().find(|b| b.table.role == spec.role) {
+            return Err(project.error_at(
+                &["meters", "bills"],
+                format!(
+                    "two bills files for role '{}' ({} and {}): give one file per meter",
+                    spec.role,
+                    other.table.path.display(),
+                    spec.file.display()
+                ),
+            ));
+        }
+        out.push(BilledMeter::on_grid(table, year)?);
+    }
+    Ok(out)
 }
 
 /// The model's outputs that have a meter (in the model's order) and each meter's readings;
 /// an output `[outputs]` names must have its meter, and at least one output must.
+type Metered = (Vec<String>, Vec<Vec<f64>>, Vec<Option<BilledMeter>>);
+
+/// The model's outputs that have a meter, hourly or billed (in the model's order), each hourly
+/// meter's readings (missing throughout for a billed one) and each billed one's bills; a role
+/// read both ways is refused.
 fn metered_outputs(
     project: &Project,
     model: &Model,
     data: &MeterData,
-) -> Result<(Vec<String>, Vec<Vec<f64>>), Error> {
-    let mut outputs = vec![];
-    let mut measured = vec![];
+    mut billed: Vec<BilledMeter>,
+) -> Result<Metered, Error> {
+    let (mut outputs, mut measured, mut bills) = (vec![], vec![], vec![]);
     let roles = project.output_roles();
     for o in model.outputs() {
-        if let Some(role) = roles.get(&o.name) {
-            if let Some(s) = data.get(&MeterRole::from(role.clone())) {
+        let Some(role) = roles.get(&o.name).map(|r| MeterRole::from(r.clone())) else {
+            continue;
+        };
+        let bill = billed.iter().position(|b| b.table.role == role);
+        match (data.get(&role), bill) {
+            (Some(_), Some(_)) => {
+                return Err(project.error_at(
+                    &["meters", "bills"],
+                    format!(
+                        "role '{role}' is read both from {} and as bills: a meter is read one way",
+                        project.meters_file().display()
+                    ),
+                ))
+            }
+            (Some(s), None) => {
                 outputs.push(o.name.clone());
                 measured.push(s.values.clone());
+                bills.push(None);
             }
+            (None, Some(i)) => {
+                outputs.push(o.name.clone());
+                measured.push(vec![
+                    f64::NAN;
+                    data.series.first().map_or(8760, |s| s.values.len())
+                ]);
+                bills.push(Some(billed.swap_remove(i)));
+            }
+            (None, None) => {}
         }
+    }
+    if let Some(b) = billed.first() {
+        return Err(project.error_at(
+            &["meters", "bills"],
+            format!(
+                "bills of role '{}' ({}): no model output has that role (outputs: {})",
+                b.table.role,
+                b.table.path.display(),
+                roles.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        ));
     }
     // Checked at load against listed columns; with columns detected from the headers, a role
     // that `[outputs]` names explicitly must be among those found.
     for (name, role) in &project.outputs {
-        if data.get(&MeterRole::from(role.clone())).is_none() {
+        let billed = project.meters.bills.iter().any(|b| b.role.name() == role);
+        if data.get(&MeterRole::from(role.clone())).is_none() && !billed {
             return Err(project.error_at(
                 &["outputs", name],
                 format!(
@@ -371,7 +467,7 @@ fn metered_outputs(
                 .collect::<Vec<_>>()
         )));
     }
-    Ok((outputs, measured))
+    Ok((outputs, measured, bills))
 }
 
 /// The project's held-out period (`[validation] holdout`), taken out of `measured`: those
@@ -381,6 +477,7 @@ fn hold_out(
     data: &MeterData,
     outputs: &[String],
     measured: &mut [Vec<f64>],
+    bills: &[Option<BilledMeter>],
 ) -> Result<Option<HeldOut>, Error> {
     Ok(match &project.validation.holdout {
         None => None,
@@ -388,9 +485,9 @@ fn hold_out(
             let at = |m: String| project.error_at(&["validation", "holdout"], m);
             let hours = data.held_out_hours(h).map_err(at)?;
             let held = HeldOut::split(h.to_string(), hours, measured);
-            if let Some(k) = measured
-                .iter()
-                .position(|m| !m.iter().any(|v| v.is_finite()))
+            // A billed meter's bills are held out in load_inputs, whole.
+            if let Some(k) = (0..measured.len())
+                .find(|&k| bills[k].is_none() && !measured[k].iter().any(|v| v.is_finite()))
             {
                 return Err(at(format!(
                     "holdout '{h}' holds out every measured hour of {}: nothing is left to calibrate it with",

@@ -32,6 +32,7 @@
 
 // 1. Settings, records and rules.
 pub mod bases;
+pub mod bills;
 pub mod carried;
 mod error;
 pub mod estimate;

@@ -12,6 +12,11 @@ use serde::{Deserialize, Serialize};
 pub struct OutputMetrics {
     /// The calibrated output (and its meter).
     pub output: String,
+    /// The resolution of the figures: `hourly`, or `bills` for a meter read as bills (then
+    /// `n` counts bills, `pass` is by the monthly criteria, and the monthly figures are the
+    /// same bills').
+    #[serde(default, skip_serializing_if = "Resolution::is_hourly")]
+    pub resolution: Resolution,
     /// Hourly Guideline 14 over the calibration period: hours, measured mean (kWh), NMBE and
     /// CV-RMSE (%), pass.
     #[serde(flatten)]
@@ -22,6 +27,26 @@ pub struct OutputMetrics {
     /// On the held-out period (`[validation] holdout`): hours that did not fit the model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<PeriodMetrics>,
+}
+
+/// The resolution of a meter's Guideline 14 figures: the data's own.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Resolution {
+    /// Hour by hour (and monthly totals of the same hours).
+    #[default]
+    Hourly,
+    /// Bill by bill, by the monthly criteria.
+    Bills,
+}
+
+impl Resolution {
+    /// Hourly.
+    pub fn is_hourly(&self) -> bool {
+        *self == Resolution::Hourly
+    }
 }
 
 /// Guideline 14 of one period, hourly and monthly.
@@ -35,10 +60,28 @@ pub struct PeriodMetrics {
 }
 
 impl OutputMetrics {
+    /// The output's name as tables print it: `heating_kwh (bills)` for a meter read as bills.
+    pub fn label(&self) -> String {
+        match self.resolution {
+            Resolution::Hourly => self.output.clone(),
+            Resolution::Bills => format!("{} (bills)", self.output),
+        }
+    }
+
+    /// How near the figures are to their limits: the hourly ones, or the monthly criteria for
+    /// bills ([`Resolution`]).
+    pub fn limit_ratio(&self) -> f64 {
+        match self.resolution {
+            Resolution::Hourly => self.metrics.hourly_limit_ratio(),
+            Resolution::Bills => self.metrics.monthly_limit_ratio(),
+        }
+    }
+
     /// Hourly metrics alone (pooled comparisons that are not a period of the meters).
     pub fn hourly(output: &str, metrics: G14Metrics) -> OutputMetrics {
         OutputMetrics {
             output: output.to_string(),
+            resolution: Resolution::Hourly,
             metrics,
             monthly: None,
             held_out: None,
@@ -52,7 +95,7 @@ impl OutputMetrics {
 pub fn limit_ratio(metrics: &[OutputMetrics], fitted: &[bool]) -> f64 {
     (metrics.iter().zip(fitted))
         .filter(|(_, f)| **f)
-        .map(|(m, _)| m.metrics.hourly_limit_ratio())
+        .map(|(m, _)| m.limit_ratio())
         .reduce(f64::max)
         .unwrap_or(f64::INFINITY)
 }
@@ -337,6 +380,7 @@ pub(crate) mod tests {
     /// Hourly Guideline 14 figures of one output (no monthly ones, nothing held out).
     pub(crate) fn metrics(output: &str, nmbe: f64, cv_rmse: f64) -> OutputMetrics {
         OutputMetrics {
+            resolution: Resolution::Hourly,
             output: output.into(),
             metrics: bemcal_stats::metrics::G14Metrics {
                 n: 8760,

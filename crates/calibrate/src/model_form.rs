@@ -325,7 +325,8 @@ pub fn report(
     let mut meters = vec![];
     let mut columns: Vec<(String, Vec<f64>)> = vec![];
     for (k, name) in inp.outputs.iter().enumerate() {
-        let Some(sim) = at_estimate.get(name) else {
+        // A meter read as bills has no hours to find a form in.
+        let Some(sim) = at_estimate.get(name).filter(|_| inp.bills[k].is_none()) else {
             continue;
         };
         let model = inp.with_base(k, sim);

@@ -10,6 +10,7 @@ use std::path::Path;
 
 use bemcal_stats::chain::Chain;
 use bemcal_stats::likelihood::cells::Cells;
+use bemcal_stats::likelihood::intervals::IntervalLikelihood;
 use bemcal_stats::likelihood::{ln_prior_log_sigma_delta, GaussianLikelihood, SigmaPrior};
 use bemcal_stats::mcmc::{run_segment_batch, ChainState, Draws};
 use bemcal_surrogate::Evaluator;
@@ -88,6 +89,8 @@ pub struct Posterior<'a> {
     pub model: &'a Model,
     /// The meters' likelihood given the surrogate's prediction.
     pub likelihood: &'a GaussianLikelihood,
+    /// The bills' likelihoods, one per billed output ([`crate::bills`]), added to it.
+    pub bills: &'a [IntervalLikelihood],
     /// Sampled `ln sigma_delta` dimensions (hyperparameter mode).
     pub sigma_box: Option<&'a SigmaDeltaBox>,
     /// Integrate each output's variance out (Jeffreys prior) instead of fixing it.
@@ -170,7 +173,12 @@ impl Posterior<'_> {
                 self.likelihood.log_likelihood_with_delta(predicted, &sd)
             }
         };
-        ln_l / self.temperature
+        let bills: f64 = self
+            .bills
+            .iter()
+            .map(|b| b.log_marginal_sigma(predicted))
+            .sum();
+        (ln_l + bills) / self.temperature
     }
 
     /// Log posterior of several unit-space points with one batched surrogate call.
@@ -259,7 +267,12 @@ impl Posterior<'_> {
                     (true, false) => self.likelihood.log_marginal_sigma_gradient(y, g),
                     (false, _) => self.likelihood.log_likelihood_gradient(y, g),
                 };
-                out[i].0 += ln_l / self.temperature;
+                let mut bills = 0.0;
+                for b in self.bills {
+                    bills += b.log_marginal_sigma(y);
+                    b.add_log_marginal_sigma_gradient(y, g);
+                }
+                out[i].0 += (ln_l + bills) / self.temperature;
                 if self.temperature != 1.0 {
                     let w = (1.0 / self.temperature) as f32;
                     g.iter_mut().for_each(|v| *v *= w);

@@ -411,6 +411,10 @@ pub fn assess(
     let error_models = &cal.project.validation.error_model;
     let months = TotalPeriod::Month.periods(fit.len());
     for (k, name) in inp.outputs.iter().enumerate() {
+        if inp.bills[k].is_some() {
+            // Hourly intervals need hourly readings: a meter read as bills has none.
+            continue;
+        }
         let setting = error_models.of(name);
         let series = |o: &HourlyOutputs| inp.with_base(k, o.get(name).expect("model output"));
         let sims: Vec<Vec<f64>> = runs.iter().map(series).collect();

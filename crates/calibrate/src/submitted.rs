@@ -133,7 +133,7 @@ impl Project {
     }
 
     /// Every input file the project names, as written (relative to its folder), with its
-    /// kind: the model, the priors, the weather unless `bundled:`, the meters and the measured
+    /// kind: the model, the priors, the weather unless `bundled:`, the meters (and their bills) and the measured
     /// weather. The model's own files are [`bemcal_energyplus::Model::named_files`].
     pub fn named_files(&self) -> Vec<(SubmittedFile, &Path)> {
         use SubmittedFile::*;
@@ -143,6 +143,7 @@ impl Project {
             files.push((Weather, Path::new(&self.weather)));
         }
         files.extend(self.meters.file.as_deref().map(|f| (Meters, f)));
+        files.extend(self.meters.bills.iter().map(|b| (Meters, b.file.as_path())));
         if let Some(m) = &self.measured_weather {
             files.extend(m.csv.as_deref().map(|f| (MeasuredWeather, f)));
             files.extend(m.isd_lite.iter().map(|f| (MeasuredWeather, f.as_path())));

@@ -13,7 +13,7 @@ use crate::design::{saved_outputs, simulate_point};
 use crate::error::Error;
 use crate::inputs::Inputs;
 use crate::keys::candidate_key;
-use crate::metrics::{OutputMetrics, PeriodMetrics};
+use crate::metrics::{OutputMetrics, PeriodMetrics, Resolution};
 use crate::output::write_outputs_csv;
 
 /// A point to validate the calibration at: the estimate (`rank` 0) or the `rank`-th fallback.
@@ -115,10 +115,30 @@ impl Inputs {
     /// hourly and monthly over the calibration period, and over the held-out period if any.
     pub fn metrics(&self, k: usize, name: &str, sim: &[f64]) -> Result<OutputMetrics, Error> {
         let sim = self.with_base(k, sim);
+        if let Some(b) = &self.bills[k] {
+            // The bills are the meter's own resolution: its figures, monthly too.
+            let on_bills = b.metrics(&sim, false).ok_or_else(|| {
+                Error::Config(format!(
+                    "{name}: Guideline 14 on bills needs two bills in the calibration period, it has {}",
+                    b.calibration_bills()
+                ))
+            })?;
+            return Ok(OutputMetrics {
+                output: name.to_string(),
+                resolution: Resolution::Bills,
+                metrics: on_bills,
+                monthly: Some(on_bills),
+                held_out: b.metrics(&sim, true).map(|m| PeriodMetrics {
+                    hourly: m,
+                    monthly: Some(m),
+                }),
+            });
+        }
         let months = months_of_hours(sim.len());
         let monthly = |meter: &[f64]| g14_monthly(meter, &sim, &months).ok();
         Ok(OutputMetrics {
             output: name.to_string(),
+            resolution: Resolution::Hourly,
             metrics: g14(&self.measured[k], &sim)?,
             monthly: monthly(&self.measured[k]),
             held_out: self.held_out.as_ref().and_then(|h| {

@@ -344,6 +344,10 @@ pub struct MeterSpec {
     /// The meter columns; empty = detect from the headers ([`detect_columns`](super::detect_columns)).
     #[serde(default)]
     pub columns: Vec<MeterColumn>,
+    /// Meters read as utility bills, one file each ([`super::bills`]): the calibration fits
+    /// each bill's total; a role read as bills has no column.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bills: Vec<super::bills::BillSpec>,
 }
 
 fn default_format() -> String {
@@ -367,6 +371,7 @@ impl Default for MeterSpec {
             negative: NegativePolicy::Error,
             flat_run_hours: default_flat(),
             columns: Vec::new(),
+            bills: Vec::new(),
         }
     }
 }

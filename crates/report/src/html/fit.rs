@@ -92,10 +92,12 @@ LSTM at the estimate (where it fits the meters and EnergyPlus does not, the surr
             h,
             "<tr><td class=\"l\">{}{}</td><td>{n}</td>{}{}{}<td>{}</td><td>{}</td></tr>",
             esc(o),
-            if s.not_fitted.contains(o) {
-                " (not fitted)"
-            } else {
-                ""
+            match (s.not_fitted.contains(o), c.map(|c| c.resolution)) {
+                (true, _) => " (not fitted)",
+                (false, Some(bemcal_calibrate::metrics::Resolution::Bills)) => {
+                    " (bills: n counts bills, judged by the monthly limits)"
+                }
+                _ => "",
             },
             pass_cell(i),
             pass_cell(c),
@@ -135,7 +137,7 @@ pub(super) fn monthly_and_held_out(s: &Summary) -> String {
         let _ = write!(
             h,
             "<tr><td class=\"l\">{}</td>{}{}{}</tr>",
-            esc(&m.output),
+            esc(&m.label()),
             block_cells(m.monthly.as_ref()),
             block_cells(p.map(|p| &p.hourly)),
             block_cells(p.and_then(|p| p.monthly.as_ref()))

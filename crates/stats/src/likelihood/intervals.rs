@@ -136,6 +136,33 @@ impl IntervalLikelihood {
             .collect()
     }
 
+    /// Each reading's sum of the output's column of `values` (`hours x outputs`, row-major, as
+    /// the predictions): EnergyPlus's totals over the readings' hours, or a correction's.
+    pub fn sums(&self, values: &[f64]) -> Vec<f64> {
+        self.readings
+            .iter()
+            .map(|r| {
+                r.hours
+                    .iter()
+                    .map(|&t| values[t * self.n_outputs + self.output])
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// The same readings and weights with other totals (one per reading, in order).
+    ///
+    /// # Panics
+    /// If `totals` does not have one value per reading.
+    pub fn with_totals(&self, totals: &[f64]) -> IntervalLikelihood {
+        assert_eq!(totals.len(), self.readings.len(), "one total per reading");
+        let mut out = self.clone();
+        for (r, &t) in out.readings.iter_mut().zip(totals) {
+            r.total = t;
+        }
+        out
+    }
+
     /// `Q = sum_b r_b^2 / w_b` and the residuals.
     fn weighted_ssr(&self, predicted: &[f32]) -> (f64, Vec<f64>) {
         let r: Vec<f64> = self

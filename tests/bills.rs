@@ -1,0 +1,169 @@
+//! Issue 69: a meter read as utility bills beside hourly meters. The small model's heating is
+//! given as twelve bills of irregular periods (28 to 34 days, in therms, one an estimated read),
+//! summed from the same noisy synthetic hours as the hourly cooling and electricity meters; the
+//! heating set-point, which the heating meter carries, is identified from the bills. Real
+//! EnergyPlus, PyTorch and ONNX Runtime; skipped (with a message) when the Python environment is
+//! missing.
+
+use std::path::Path;
+
+mod common;
+use common::have_engine;
+
+const TRUTH: [(&str, f64); 2] = [
+    ("lighting_power_density", 12.5),
+    ("heating_setpoint_occupied", 22.5),
+];
+
+/// Days of each bill from 1 January 2021: read dates a month apart, give or take.
+const BILL_DAYS: [i64; 12] = [30, 33, 29, 31, 32, 28, 30, 34, 29, 31, 30, 28];
+
+/// The hourly meters without their heating column, and the heating as bills in therms.
+fn split_heating(dir: &Path) {
+    let text = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let heating = header.iter().position(|h| *h == "heating_kwh").unwrap();
+    let keep = |r: &[&str]| -> String {
+        (r.iter().enumerate())
+            .filter(|(i, _)| *i != heating)
+            .map(|(_, v)| *v)
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let mut hourly = keep(&header) + "\n";
+    let mut daily: std::collections::BTreeMap<String, f64> = Default::default();
+    for l in lines {
+        let r: Vec<&str> = l.split(',').collect();
+        hourly += &(keep(&r) + "\n");
+        *daily.entry(r[0][..10].to_string()).or_default() += r[heating].parse::<f64>().unwrap();
+    }
+    std::fs::write(dir.join("meters.csv"), hourly).unwrap();
+    let mut bills = String::from("start,end,quantity,estimated\n");
+    let mut start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
+    for (i, days) in BILL_DAYS.iter().enumerate() {
+        let end = start + chrono::Duration::days(*days - 1);
+        let kwh: f64 = (start.iter_days().take(*days as usize))
+            .map(|d| daily[&d.to_string()])
+            .sum();
+        let estimated = if i == 2 { "E" } else { "" };
+        bills += &format!("{start},{end},{:.3},{estimated}\n", kwh / 29.307_107);
+        start = end + chrono::Duration::days(1);
+    }
+    std::fs::write(dir.join("gas_bills.csv"), bills).unwrap();
+}
+
+fn project() -> String {
+    let text = common::small_project("bills", 10)
+        .replace(
+            "calibrate = [\"lighting_power_density\", \"cooling_setpoint_occupied\"]",
+            "calibrate = [\"lighting_power_density\", \"heating_setpoint_occupied\"]",
+        )
+        .replace(
+            "[[meters.columns]]\ncolumn = \"heating_kwh\"\nrole = \"heating\"\nunit = \"kWh\"\n",
+            "",
+        )
+        .replace(
+            "[surrogate]\nepochs = 3\nthreads = 1\nhidden = 32\n",
+            "[surrogate]\nepochs = 25\npatience = 6\nthreads = 2\nhidden = 64\n",
+        )
+        .replace(
+            "[mcmc]\nchains = 2\niterations = 300\nburn_in = 100\nsegment = 100\n",
+            "[mcmc]\nchains = 2\niterations = 600\nburn_in = 200\nsegment = 500\n",
+        )
+        .replace(
+            "[validation]\n",
+            "[validation]\nholdout = \"last 2 months\"\n",
+        )
+        .replace(
+            "[refine]\nrounds = 0\n",
+            "[refine]\nrounds = 1\npoints = 4\niterations = 40\nburn_in = 20\n",
+        )
+        .replace("[mcmc]\n", "[mcmc]\ntemperature = \"surrogate_error\"\n");
+    assert!(!text.contains("column = \"heating_kwh\"") && text.contains("heating_setpoint"));
+    text + "[[meters.bills]]\nfile = \"gas_bills.csv\"\nrole = \"heating\"\nunit = \"therm\"\n"
+}
+
+/// A parameter's 90 % posterior interval in summary.json.
+fn interval(summary: &serde_json::Value, name: &str) -> (f64, f64) {
+    let p = summary["posterior"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap();
+    (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap())
+}
+
+#[test]
+fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let _machine = common::whole_machine();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
+    std::fs::write(dir.join("project.toml"), project()).unwrap();
+    common::synthesize(dir, &TRUTH, &["--gap", "0:0"]);
+    split_heating(dir);
+
+    let out = dir.join("out");
+    let (log, summary) = common::calibrate(dir, &out);
+    // The estimated read is noted; the bills of November and December are held out whole,
+    // with the one of 4 October - 3 November that reaches into them: 9 bills fit, 3 check.
+    let notes = summary["meter_notes"].to_string();
+    assert!(
+        notes.contains("gas_bills.csv: estimated reads: 2021-03-05 to 2021-04-02 (line 4)"),
+        "{notes}"
+    );
+    let heating = summary["validation"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v["output"] == "heating_kwh")
+        .unwrap_or_else(|| panic!("{}", summary["validation"]));
+    assert_eq!(heating["resolution"], "bills", "{heating}");
+    assert_eq!(heating["n"], 9, "{heating}");
+    assert_eq!(heating["held_out"]["hourly"]["n"], 3, "{heating}");
+    eprintln!("heating on its bills at the estimate: {heating}");
+    // The surrogate of ten design points over-predicts the monthly heating near the truth by
+    // about 5 % (EnergyPlus at the untempered posterior's set-point of 21.5 C matched the bills),
+    // which bills, unlike hours, cannot tell from a lower set-point: the refinement round's
+    // EnergyPlus recoveries (through the bills' likelihood) measure that error and temper the
+    // likelihood, so the intervals hold the truth (measured: heating set-point [19.18, 22.87],
+    // 0.61 of the prior; untempered [20.93, 22.04] missed it; hourly heating [22.54, 22.61]).
+    // The 3 % allowance as in tests/calibrate.rs.
+    for (name, truth, narrower_than) in
+        [(TRUTH[0].0, TRUTH[0].1, 0.5), (TRUTH[1].0, TRUTH[1].1, 0.9)]
+    {
+        let (lo, hi) = interval(&summary, name);
+        let range = common::prior_range(&summary, name);
+        let slack = 0.03 * range;
+        eprintln!(
+            "{name}: truth {truth}, 90 % [{lo:.3}, {hi:.3}], width {:.2} of the prior's",
+            (hi - lo) / range
+        );
+        assert!(
+            lo - slack <= truth && truth <= hi + slack,
+            "{name}: truth {truth} outside [{lo}, {hi}] +- {slack}\n{log}"
+        );
+        assert!(
+            (hi - lo) < narrower_than * range,
+            "{name}: [{lo}, {hi}] of {range}\n{log}"
+        );
+    }
+    let t = &summary["temperature"];
+    eprintln!("temperature: {t}");
+    // The hourly meters are judged hourly as before.
+    let electricity = summary["validation"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v["output"] == "electricity_kwh")
+        .unwrap();
+    assert!(electricity.get("resolution").is_none(), "{electricity}");
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains("heating_kwh (bills"), "the report names the bills");
+}
