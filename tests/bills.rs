@@ -18,39 +18,47 @@ const TRUTH: [(&str, f64); 2] = [
 /// Days of each bill from 1 January 2021: read dates a month apart, give or take.
 const BILL_DAYS: [i64; 12] = [30, 33, 29, 31, 32, 28, 30, 34, 29, 31, 30, 28];
 
-/// The hourly meters without their heating column, and the heating as bills in therms.
-fn split_heating(dir: &Path) {
+/// The hourly meters without the `billed` columns, each of those as bills (`FILE_bills.csv`,
+/// in `unit` = kWh / `per_unit`), one an estimated read.
+fn to_bills(dir: &Path, billed: &[(&str, &str, f64)]) {
     let text = std::fs::read_to_string(dir.join("meters.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let heating = header.iter().position(|h| *h == "heating_kwh").unwrap();
+    let cols: Vec<usize> = (billed.iter())
+        .map(|(c, _, _)| header.iter().position(|h| h == c).unwrap())
+        .collect();
     let keep = |r: &[&str]| -> String {
         (r.iter().enumerate())
-            .filter(|(i, _)| *i != heating)
+            .filter(|(i, _)| !cols.contains(i))
             .map(|(_, v)| *v)
             .collect::<Vec<_>>()
             .join(",")
     };
     let mut hourly = keep(&header) + "\n";
-    let mut daily: std::collections::BTreeMap<String, f64> = Default::default();
+    let mut daily: Vec<std::collections::BTreeMap<String, f64>> =
+        vec![Default::default(); cols.len()];
     for l in lines {
         let r: Vec<&str> = l.split(',').collect();
         hourly += &(keep(&r) + "\n");
-        *daily.entry(r[0][..10].to_string()).or_default() += r[heating].parse::<f64>().unwrap();
+        for (d, &c) in daily.iter_mut().zip(&cols) {
+            *d.entry(r[0][..10].to_string()).or_default() += r[c].parse::<f64>().unwrap();
+        }
     }
     std::fs::write(dir.join("meters.csv"), hourly).unwrap();
-    let mut bills = String::from("start,end,quantity,estimated\n");
-    let mut start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
-    for (i, days) in BILL_DAYS.iter().enumerate() {
-        let end = start + chrono::Duration::days(*days - 1);
-        let kwh: f64 = (start.iter_days().take(*days as usize))
-            .map(|d| daily[&d.to_string()])
-            .sum();
-        let estimated = if i == 2 { "E" } else { "" };
-        bills += &format!("{start},{end},{:.3},{estimated}\n", kwh / 29.307_107);
-        start = end + chrono::Duration::days(1);
+    for ((column, unit, per_unit), daily) in billed.iter().zip(&daily) {
+        let mut bills = format!("start,end,quantity,unit,estimated\n");
+        let mut start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
+        for (i, days) in BILL_DAYS.iter().enumerate() {
+            let end = start + chrono::Duration::days(*days - 1);
+            let kwh: f64 = (start.iter_days().take(*days as usize))
+                .map(|d| daily[&d.to_string()])
+                .sum();
+            let estimated = if i == 2 { "E" } else { "" };
+            bills += &format!("{start},{end},{:.3},{unit},{estimated}\n", kwh / per_unit);
+            start = end + chrono::Duration::days(1);
+        }
+        std::fs::write(dir.join(format!("{column}_bills.csv")), bills).unwrap();
     }
-    std::fs::write(dir.join("gas_bills.csv"), bills).unwrap();
 }
 
 fn project() -> String {
@@ -81,7 +89,7 @@ fn project() -> String {
         )
         .replace("[mcmc]\n", "[mcmc]\ntemperature = \"surrogate_error\"\n");
     assert!(!text.contains("column = \"heating_kwh\"") && text.contains("heating_setpoint"));
-    text + "[[meters.bills]]\nfile = \"gas_bills.csv\"\nrole = \"heating\"\nunit = \"therm\"\n"
+    text + "[[meters.bills]]\nfile = \"heating_kwh_bills.csv\"\nrole = \"heating\"\n"
 }
 
 /// A parameter's 90 % posterior interval in summary.json.
@@ -107,7 +115,7 @@ fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
     std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
     std::fs::write(dir.join("project.toml"), project()).unwrap();
     common::synthesize(dir, &TRUTH, &["--gap", "0:0"]);
-    split_heating(dir);
+    to_bills(dir, &[("heating_kwh", "therm", 29.307_107)]);
 
     let out = dir.join("out");
     let (log, summary) = common::calibrate(dir, &out);
@@ -115,7 +123,7 @@ fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
     // with the one of 4 October - 3 November that reaches into them: 9 bills fit, 3 check.
     let notes = summary["meter_notes"].to_string();
     assert!(
-        notes.contains("gas_bills.csv: estimated reads: 2021-03-05 to 2021-04-02 (line 4)"),
+        notes.contains("heating_kwh_bills.csv: estimated reads: 2021-03-05 to 2021-04-02 (line 4)"),
         "{notes}"
     );
     let heating = summary["validation"]
@@ -165,5 +173,53 @@ fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
         .unwrap();
     assert!(electricity.get("resolution").is_none(), "{electricity}");
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
-    assert!(report.contains("heating_kwh (bills"), "the report names the bills");
+    assert!(
+        report.contains("heating_kwh (bills"),
+        "the report names the bills"
+    );
+}
+
+/// A building with bills alone (no hourly meter at all: no `[meters] file`), in three units:
+/// the calibration runs to its end and judges each meter on its bills.
+#[test]
+fn a_project_of_bills_alone_calibrates() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("model.toml"), common::small_model()).unwrap();
+    let head = common::small_project("bills-alone", 8);
+    let (head, tail) = head.split_once("[meters]\n").unwrap();
+    let tail = &tail[tail.find("[design]").unwrap()..];
+    let mut project = format!("{head}{tail}");
+    for (role, unit) in [
+        ("heating", "MMBtu"),
+        ("cooling", "kWh"),
+        ("electricity", "MWh"),
+    ] {
+        project += &format!(
+            "[[meters.bills]]\nfile = \"{role}_kwh_bills.csv\"\nrole = \"{role}\"\nunit = \"{unit}\"\n"
+        );
+    }
+    std::fs::write(dir.join("project.toml"), &project).unwrap();
+    common::synthesize(dir, &[("lighting_power_density", 12.5)], &["--gap", "0:0"]);
+    to_bills(
+        dir,
+        &[
+            ("heating_kwh", "MMBtu", 293.071_07),
+            ("cooling_kwh", "kWh", 1.0),
+            ("electricity_kwh", "MWh", 1000.0),
+        ],
+    );
+    std::fs::remove_file(dir.join("meters.csv")).unwrap();
+    let (log, summary) = common::calibrate(dir, &dir.join("out"));
+    let validation = summary["validation"].as_array().unwrap();
+    assert_eq!(validation.len(), 3, "{log}");
+    for v in validation {
+        assert_eq!(v["resolution"], "bills", "{v}");
+        assert_eq!(v["n"], 12, "{v}");
+    }
+    eprintln!("{}", summary["validation"]);
 }

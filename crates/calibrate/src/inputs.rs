@@ -296,13 +296,21 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let (weather_path, measured_weather) = weather_for(project, runner.engine(), calendar.year)?;
     let epw = Epw::read(&weather_path)?;
     let features = HourlyFeatures::from_epw(&epw, &calendar);
-    let meters_path = project.meters_file();
-    let data = read_meters(
-        &meters_path,
-        &project.meters,
-        Some(calendar.year),
-        Some(epw.location.time_zone_h),
-    )?;
+    let data = match project.meters_file() {
+        Some(path) => read_meters(
+            &path,
+            &project.meters,
+            Some(calendar.year),
+            Some(epw.location.time_zone_h),
+        )?,
+        // Bills alone: no hourly meter; the year is the model's.
+        None => MeterData {
+            year: calendar.year,
+            source: Default::default(),
+            series: vec![],
+            notes: vec![],
+        },
+    };
     let billed = read_bills(project, calendar.year)?;
     let (outputs, mut measured, mut bills) = metered_outputs(project, &model, &data, billed)?;
     let fitted = fitted_outputs(project, &outputs)?;
@@ -404,7 +412,7 @@ fn metered_outputs(
                     &["meters", "bills"],
                     format!(
                         "role '{role}' is read both from {} and as bills: a meter is read one way",
-                        project.meters_file().display()
+                        project.meters_name()
                     ),
                 ))
             }
@@ -446,7 +454,7 @@ fn metered_outputs(
                     "[outputs] {} = \"{}\": {} has no meter of role '{}' (it has: {})",
                     excerpt(name),
                     excerpt(role),
-                    project.meters_file().display(),
+                    project.meters_name(),
                     excerpt(role),
                     data.series
                         .iter()

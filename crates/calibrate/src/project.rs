@@ -1059,8 +1059,11 @@ impl Project {
                 self.validation.predictive_draws
             ));
         }
-        if self.meters.file.is_none() {
-            return Err("[meters] needs file = \"...\"".into());
+        if self.meters.file.is_none() && self.meters.bills.is_empty() {
+            return Err(
+                "[meters] needs file = \"...\" (hourly or sub-hourly meters) or [[meters.bills]] (utility bills)"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -1340,8 +1343,14 @@ impl Project {
     }
 
     /// The meters CSV.
-    pub fn meters_file(&self) -> PathBuf {
-        self.resolve(self.meters.file.as_deref().expect("validated"))
+    pub fn meters_file(&self) -> Option<PathBuf> {
+        self.meters.file.as_deref().map(|f| self.resolve(f))
+    }
+
+    /// The meters file as messages name it (`the bills` for a project of bills alone).
+    pub(crate) fn meters_name(&self) -> String {
+        self.meters_file()
+            .map_or("the bills".into(), |p| p.display().to_string())
     }
 
     /// Model output -> meter role, with the defaults for the three main outputs.

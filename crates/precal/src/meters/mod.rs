@@ -105,14 +105,17 @@ impl MeterData {
     }
 
     /// The hour slots of a held-out period (`[validation] holdout`) on this grid: an hour is
-    /// measured when any series has a value there. Pre-calibration and the calibration both
+    /// measured when any series has a value there (every hour, without a series). Pre-calibration and the calibration both
     /// ask this, so that `last N months` names the same months for both.
     pub fn held_out_hours(
         &self,
         holdout: &bemcal_weather::period::Holdout,
     ) -> Result<Vec<bool>, String> {
-        let n = self.series.first().map_or(0, |s| s.values.len());
-        let present = |h: usize| self.series.iter().any(|s| s.values[h].is_finite());
+        // Without a series (a project of bills alone) every hour of the year counts.
+        let n = self.series.first().map_or(HOURS, |s| s.values.len());
+        let present = |h: usize| {
+            self.series.is_empty() || self.series.iter().any(|s| s.values[h].is_finite())
+        };
         holdout.hours(self.year, n, &present)
     }
 
