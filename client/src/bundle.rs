@@ -77,6 +77,15 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
             let n = files.place(&f)?;
             m.insert("file".into(), n.into());
         }
+        // `[[meters.bills]]`: each bills file travels too.
+        if let Some(list) = m.get_mut("bills").and_then(|v| v.as_array_mut()) {
+            for b in list.iter_mut().filter_map(|b| b.as_table_mut()) {
+                if let Some(f) = str_at(b, "file") {
+                    let n = files.place(&f)?;
+                    b.insert("file".into(), n.into());
+                }
+            }
+        }
     }
     if let Some(sur) = doc.get_mut("surrogate").and_then(|v| v.as_table_mut()) {
         if let Some(f) = str_at(sur, "pretrained") {
@@ -275,6 +284,30 @@ pub fn materialize(files: &[File], store: &ArtifactDir, dir: &Path) -> Result<Pa
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bills_files_travel_with_the_project() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::write(d.join("model.toml"), "storeys = 1\n").unwrap();
+        std::fs::write(d.join("gas.csv"), "start,end,quantity\n").unwrap();
+        std::fs::write(
+            d.join("p.toml"),
+            "model = \"model.toml\"\n[[meters.bills]]\nfile = \"gas.csv\"\nrole = \"heating\"\n",
+        )
+        .unwrap();
+        let files = collect(
+            &d.join("p.toml"),
+            Policy {
+                allow_outside: false,
+            },
+        )
+        .unwrap();
+        let (name, bytes) = files.iter().find(|(n, _)| n.ends_with("gas.csv")).unwrap();
+        assert_eq!(bytes, b"start,end,quantity\n");
+        let project = String::from_utf8(files[0].1.clone()).unwrap();
+        assert!(project.contains(&format!("file = \"{name}\"")), "{project}");
+    }
 
     #[test]
     fn measured_weather_and_calendar_files_travel_with_the_project() {

@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use bemcal_precal::io::{write_outputs, PrecalProject};
 use bemcal_precal::meters::{read_meters, MeterSpec};
 use bemcal_weather::Epw;
@@ -70,11 +69,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => PrecalProject::default(),
     };
     let spec = project.meters.clone().unwrap_or_else(MeterSpec::default);
-    let meters_path = args
-        .meters
-        .clone()
-        .or_else(|| spec.file.clone())
-        .context("no meters file: pass --meters or set [meters] file in the project")?;
+    let meters_path = match (args.meters.clone().or_else(|| spec.file.clone()), spec.bills.is_empty()) {
+        (Some(p), _) => p,
+        (None, true) => anyhow::bail!("no meters file: pass --meters or set [meters] file in the project"),
+        // Day types, schedules and bases come from hourly readings, which bills do not have.
+        (None, false) => anyhow::bail!(
+            "the project's meters are bills alone ([[meters.bills]]): pre-calibration reads hourly \
+             or sub-hourly meters (day types, schedule priors, bases), so with bills alone the \
+             calibration keeps the model's default priors: calibrate without a priors file"
+        ),
+    };
     let epw = Epw::read(&super::common::resolve_weather_ref(&args.weather)?)?;
     let year = args.year.or(project.year);
     let mut meters = read_meters(&meters_path, &spec, year, Some(epw.location.time_zone_h))?;
