@@ -72,7 +72,7 @@ def table(out, cases):
             widths.append((p["q95"] - p["q5"]) / (prior["prior_max"] - prior["prior_min"]))
         m = json.load(open(out / case / "metrics.json"))
         fmt = lambda res: ", ".join(f"{r['nmbe_percent']:.1f} / {r['cv_rmse_percent']:.1f}"
-                                    for r in m if r["resolution"] == res)
+                                    for r in m if r["resolution"] == res and r["output"] in METERS)
         rhat = s["posterior"].get("max_rhat", float("nan"))
         print(f"| {case} | {held} of {len(widths)} | {statistics.median(widths):.2f} | {rhat:.3f} |"
               f" {s['temperature']['value']:.1f} | {fmt('hourly')} | {fmt('bills')} |")

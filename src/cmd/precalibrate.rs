@@ -69,9 +69,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => PrecalProject::default(),
     };
     let spec = project.meters.clone().unwrap_or_else(MeterSpec::default);
-    let meters_path = match (args.meters.clone().or_else(|| spec.file.clone()), spec.bills.is_empty()) {
+    let meters_path = match (
+        args.meters.clone().or_else(|| spec.file.clone()),
+        spec.bills.is_empty(),
+    ) {
         (Some(p), _) => p,
-        (None, true) => anyhow::bail!("no meters file: pass --meters or set [meters] file in the project"),
+        (None, true) => {
+            anyhow::bail!("no meters file: pass --meters or set [meters] file in the project")
+        }
         // Day types, schedules and bases come from hourly readings, which bills do not have.
         (None, false) => anyhow::bail!(
             "the project's meters are bills alone ([[meters.bills]]): pre-calibration reads hourly \

@@ -30,7 +30,10 @@ pub(crate) fn bases_of(
     data: &bemcal_precal::meters::MeterData,
 ) -> Result<(Vec<Vec<f64>>, Vec<BaseReport>), Error> {
     // The grid's hours (every hour of the year for a project of bills alone).
-    let hours = data.series.first().map_or(bemcal_precal::meters::HOURS, |s| s.values.len());
+    let hours = data
+        .series
+        .first()
+        .map_or(bemcal_precal::meters::HOURS, |s| s.values.len());
     let mut bases = vec![vec![0.0; hours]; outputs.len()];
     let mut reports = vec![];
     for b in &project.bases {

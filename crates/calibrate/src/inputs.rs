@@ -425,7 +425,11 @@ fn metered_outputs(
                 outputs.push(o.name.clone());
                 measured.push(vec![
                     f64::NAN;
-                    data.series.first().map_or(bemcal_precal::meters::HOURS, |s| s.values.len())
+                    data.series
+                        .first()
+                        .map_or(bemcal_precal::meters::HOURS, |s| s
+                            .values
+                            .len())
                 ]);
                 bills.push(Some(billed.swap_remove(i)));
             }

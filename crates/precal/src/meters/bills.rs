@@ -281,12 +281,6 @@ fn kwh_per_unit(unit: BillUnit, spec: &BillSpec) -> Result<f64, String> {
 
 /// Parses a bills CSV's text ([module rules](self)); `path` names the file in errors.
 pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable, PrecalError> {
-    let err = |line: u64, column: &str, message: String| PrecalError::Meter {
-        path: path.to_path_buf(),
-        line,
-        column: column.to_string(),
-        message,
-    };
     let default_unit = spec
         .unit
         .as_deref()
@@ -309,102 +303,11 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
             let line = e.position().map_or(0, |p| p.line());
-            err(line, "", format!("malformed CSV: {e}"))
+            row_err(path, line, "", format!("malformed CSV: {e}"))
         })?;
-        let line = rec.position().map_or(0, |p| p.line());
-        if rec.iter().all(str::is_empty) {
-            continue;
+        if !rec.iter().all(str::is_empty) {
+            bills.push(parse_row(&rec, &col, spec, default_unit, path)?);
         }
-        let field = |i: usize| rec.get(i).unwrap_or("");
-        let date = |i: usize, name: &str| {
-            parse_date(field(i)).ok_or_else(|| {
-                err(
-                    line,
-                    name,
-                    format!(
-                        "'{}' is not a date (expected 2021-01-14 or 01/14/2021)",
-                        bemcal_excerpt::excerpt(field(i), 40)
-                    ),
-                )
-            })
-        };
-        let start = date(col.start, "start")?;
-        let last = date(col.end, "end")?;
-        let end = match spec.end {
-            BillEnd::Inclusive => last + Duration::days(1),
-            BillEnd::Exclusive => last,
-        };
-        if end <= start {
-            return Err(err(
-                line,
-                "end",
-                format!("the bill ends ({last}) before it starts ({start})"),
-            ));
-        }
-        let quantity: f64 = field(col.quantity).parse().map_err(|_| {
-            err(
-                line,
-                "quantity",
-                format!(
-                    "'{}' is not a number",
-                    bemcal_excerpt::excerpt(field(col.quantity), 40)
-                ),
-            )
-        })?;
-        if !(quantity.is_finite() && quantity >= 0.0) {
-            return Err(err(
-                line,
-                "quantity",
-                format!("{quantity}: expected a quantity of 0 or more"),
-            ));
-        }
-        let unit = match col.unit.map(field).filter(|u| !u.is_empty()) {
-            Some(u) => u.parse::<BillUnit>().map_err(|m| err(line, "unit", m))?,
-            None => default_unit.ok_or_else(|| {
-                err(
-                    line,
-                    "unit",
-                    "no unit: give a unit column or unit = \"...\" in [[meters.bills]]".into(),
-                )
-            })?,
-        };
-        let factor = kwh_per_unit(unit, spec).map_err(|m| err(line, "unit", m))?;
-        let demand_kw = match col.demand.map(field).filter(|d| !d.is_empty()) {
-            None => None,
-            Some(d) => Some(
-                d.parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite() && *v >= 0.0)
-                    .ok_or_else(|| {
-                        err(
-                            line,
-                            "demand_kw",
-                            format!("'{}' is not a demand in kW", bemcal_excerpt::excerpt(d, 40)),
-                        )
-                    })?,
-            ),
-        };
-        let estimated = match col.estimated.map(field) {
-            None => false,
-            Some(e) => parse_flag(e).ok_or_else(|| {
-                err(
-                    line,
-                    "estimated",
-                    format!(
-                        "'{}': expected true/false, yes/no, E/A (estimated/actual)",
-                        bemcal_excerpt::excerpt(e, 40)
-                    ),
-                )
-            })?,
-        };
-        bills.push(Bill {
-            line,
-            start,
-            end,
-            kwh: quantity * factor,
-            demand_kw,
-            estimated,
-        });
     }
     if bills.is_empty() {
         return Err(PrecalError::MeterFile {
@@ -419,6 +322,108 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         path: path.to_path_buf(),
         bills,
         notes,
+    })
+}
+
+fn row_err(path: &Path, line: u64, column: &str, message: String) -> PrecalError {
+    PrecalError::Meter {
+        path: path.to_path_buf(),
+        line,
+        column: column.to_string(),
+        message,
+    }
+}
+
+/// One row of the bills table: a bill in kWh.
+fn parse_row(
+    rec: &csv::StringRecord,
+    col: &Columns,
+    spec: &BillSpec,
+    default_unit: Option<BillUnit>,
+    path: &Path,
+) -> Result<Bill, PrecalError> {
+    let line = rec.position().map_or(0, |p| p.line());
+    let err = |column: &str, message: String| row_err(path, line, column, message);
+    let field = |i: usize| rec.get(i).unwrap_or("");
+    let quoted = |s: &str| bemcal_excerpt::excerpt(s, 40).into_owned();
+    let date = |i: usize, name: &str| {
+        parse_date(field(i)).ok_or_else(|| {
+            err(
+                name,
+                format!(
+                    "'{}' is not a date (expected 2021-01-14 or 01/14/2021)",
+                    quoted(field(i))
+                ),
+            )
+        })
+    };
+    let start = date(col.start, "start")?;
+    let last = date(col.end, "end")?;
+    let end = match spec.end {
+        BillEnd::Inclusive => last + Duration::days(1),
+        BillEnd::Exclusive => last,
+    };
+    if end <= start {
+        return Err(err(
+            "end",
+            format!("the bill ends ({last}) before it starts ({start})"),
+        ));
+    }
+    let quantity: f64 = field(col.quantity).parse().map_err(|_| {
+        err(
+            "quantity",
+            format!("'{}' is not a number", quoted(field(col.quantity))),
+        )
+    })?;
+    if !(quantity.is_finite() && quantity >= 0.0) {
+        return Err(err(
+            "quantity",
+            format!("{quantity}: expected a quantity of 0 or more"),
+        ));
+    }
+    let unit = match col.unit.map(field).filter(|u| !u.is_empty()) {
+        Some(u) => u.parse::<BillUnit>().map_err(|m| err("unit", m))?,
+        None => default_unit.ok_or_else(|| {
+            err(
+                "unit",
+                "no unit: give a unit column or unit = \"...\" in [[meters.bills]]".into(),
+            )
+        })?,
+    };
+    let factor = kwh_per_unit(unit, spec).map_err(|m| err("unit", m))?;
+    let demand_kw = match col.demand.map(field).filter(|d| !d.is_empty()) {
+        None => None,
+        Some(d) => Some(
+            d.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v >= 0.0)
+                .ok_or_else(|| {
+                    err(
+                        "demand_kw",
+                        format!("'{}' is not a demand in kW", quoted(d)),
+                    )
+                })?,
+        ),
+    };
+    let estimated = match col.estimated.map(field) {
+        None => false,
+        Some(e) => parse_flag(e).ok_or_else(|| {
+            err(
+                "estimated",
+                format!(
+                    "'{}': expected true/false, yes/no, E/A (estimated/actual)",
+                    quoted(e)
+                ),
+            )
+        })?,
+    };
+    Ok(Bill {
+        line,
+        start,
+        end,
+        kwh: quantity * factor,
+        demand_kw,
+        estimated,
     })
 }
 
