@@ -46,7 +46,7 @@ fn to_bills(dir: &Path, billed: &[(&str, &str, f64)]) {
     }
     std::fs::write(dir.join("meters.csv"), hourly).unwrap();
     for ((column, unit, per_unit), daily) in billed.iter().zip(&daily) {
-        let mut bills = format!("start,end,quantity,unit,estimated\n");
+        let mut bills = String::from("start,end,quantity,unit,estimated\n");
         let mut start = chrono::NaiveDate::from_ymd_opt(2021, 1, 1).unwrap();
         for (i, days) in BILL_DAYS.iter().enumerate() {
             let end = start + chrono::Duration::days(*days - 1);
@@ -92,17 +92,6 @@ fn project() -> String {
     text + "[[meters.bills]]\nfile = \"heating_kwh_bills.csv\"\nrole = \"heating\"\n"
 }
 
-/// A parameter's 90 % posterior interval in summary.json.
-fn interval(summary: &serde_json::Value, name: &str) -> (f64, f64) {
-    let p = summary["posterior"]["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap();
-    (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap())
-}
-
 #[test]
 fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
     if !have_engine() {
@@ -146,7 +135,7 @@ fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
     for (name, truth, narrower_than) in
         [(TRUTH[0].0, TRUTH[0].1, 0.5), (TRUTH[1].0, TRUTH[1].1, 0.9)]
     {
-        let (lo, hi) = interval(&summary, name);
+        let (lo, hi) = common::interval(&summary, name);
         let range = common::prior_range(&summary, name);
         let slack = 0.03 * range;
         eprintln!(

@@ -68,7 +68,10 @@ fn the_discrepancy_carries_an_injected_pattern_that_bends_the_parameters_without
     let (mut held_without, mut held_with) = (0, 0);
     for (name, truth) in TRUTH {
         let slack = 0.03 * common::prior_range(&with, name);
-        let (a, b) = (interval(&without, name), interval(&with, name));
+        let (a, b) = (
+            common::interval(&without, name),
+            common::interval(&with, name),
+        );
         eprintln!(
             "{name}: truth {truth}; without the term 90 % [{:.3}, {:.3}], with it [{:.3}, {:.3}] (+- {slack:.3})",
             a.0, a.1, b.0, b.1
@@ -120,17 +123,6 @@ fn project(discrepancy: bool) -> String {
         "[mcmc]\nchains = 2\niterations = 300\nburn_in = 100\nsegment = 100\n",
         &format!("[mcmc]\n{term}chains = 2\niterations = 600\nburn_in = 200\nsegment = 500\n"),
     )
-}
-
-/// A parameter's 90 % posterior interval in summary.json.
-fn interval(summary: &serde_json::Value, name: &str) -> (f64, f64) {
-    let p = summary["posterior"]["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap();
-    (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap())
 }
 
 /// Pearson correlation of `discrepancy_cells.csv`'s electricity column with the injected

@@ -437,3 +437,14 @@ pub fn prior_range(summary: &serde_json::Value, name: &str) -> f64 {
         .unwrap();
     p["prior_max"].as_f64().unwrap() - p["prior_min"].as_f64().unwrap()
 }
+
+/// A parameter's 90 % posterior interval in summary.json.
+pub fn interval(summary: &serde_json::Value, name: &str) -> (f64, f64) {
+    let p = summary["posterior"]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap();
+    (p["q5"].as_f64().unwrap(), p["q95"].as_f64().unwrap())
+}

@@ -314,13 +314,7 @@ pub fn load_inputs(project: &Project) -> Result<Inputs, Error> {
     let billed = read_bills(project, calendar.year)?;
     let (outputs, mut measured, mut bills) = metered_outputs(project, &model, &data, billed)?;
     let fitted = fitted_outputs(project, &outputs)?;
-    let held_out = hold_out(project, &data, &outputs, &mut measured, &bills)?;
-    if let Some(h) = &held_out {
-        bills
-            .iter_mut()
-            .flatten()
-            .for_each(|b| b.hold_out(&h.hours));
-    }
+    let held_out = hold_out(project, &data, &outputs, &mut measured, &mut bills)?;
     let mut meter_notes = data.notes.clone();
     meter_notes.extend(bills.iter().flatten().flat_map(|b| {
         b.table
@@ -482,14 +476,14 @@ fn metered_outputs(
     Ok((outputs, measured, bills))
 }
 
-/// The project's held-out period (`[validation] holdout`), taken out of `measured`: those
-/// hours never enter the likelihood. Refused where it holds out every reading of a meter.
+/// The project's held-out period (`[validation] holdout`), taken out of `measured` and the
+/// bills: those hours never enter the likelihood. Refused where it holds out every reading of a meter.
 fn hold_out(
     project: &Project,
     data: &MeterData,
     outputs: &[String],
     measured: &mut [Vec<f64>],
-    bills: &[Option<BilledMeter>],
+    bills: &mut [Option<BilledMeter>],
 ) -> Result<Option<HeldOut>, Error> {
     Ok(match &project.validation.holdout {
         None => None,
@@ -497,7 +491,11 @@ fn hold_out(
             let at = |m: String| project.error_at(&["validation", "holdout"], m);
             let hours = data.held_out_hours(h).map_err(at)?;
             let held = HeldOut::split(h.to_string(), hours, measured);
-            // A billed meter's bills are held out in load_inputs, whole.
+            // A billed meter's bills are held out whole where they touch the period.
+            bills
+                .iter_mut()
+                .flatten()
+                .for_each(|b| b.hold_out(&held.hours));
             if let Some(k) = (0..measured.len())
                 .find(|&k| bills[k].is_none() && !measured[k].iter().any(|v| v.is_finite()))
             {

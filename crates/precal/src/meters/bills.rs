@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use bemcal_weather::grid::{is_leap_day, GridYear};
 
 use super::spec::{EnergyUnit, MeterRole};
+use super::{file_err, row_err};
 use crate::PrecalError;
 
 /// What a bill's end date means.
@@ -232,12 +233,14 @@ fn columns(headers: &csv::StringRecord, path: &Path) -> Result<Columns, PrecalEr
             .position(|h| h.trim().eq_ignore_ascii_case(name))
     };
     let need = |name: &str| {
-        find(name).ok_or_else(|| PrecalError::MeterFile {
-            path: path.to_path_buf(),
-            message: format!(
-                "no '{name}' column: a bills file has the columns start, end, quantity (and optionally unit, demand_kw, estimated); the header is: {}",
-                bemcal_excerpt::excerpt(&headers.iter().collect::<Vec<_>>().join(","), 120)
-            ),
+        find(name).ok_or_else(|| {
+            file_err(
+                path,
+                format!(
+                    "no '{name}' column: a bills file has the columns start, end, quantity (and optionally unit, demand_kw, estimated); the header is: {}",
+                    bemcal_excerpt::excerpt(&headers.iter().collect::<Vec<_>>().join(","), 120)
+                ),
+            )
         })
     };
     Ok(Columns {
@@ -286,18 +289,14 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         .as_deref()
         .map(|u| u.parse::<BillUnit>())
         .transpose()
-        .map_err(|m| PrecalError::MeterFile {
-            path: path.to_path_buf(),
-            message: format!("[[meters.bills]] unit: {m}"),
-        })?;
+        .map_err(|m| file_err(path, format!("[[meters.bills]] unit: {m}")))?;
     let mut rdr = csv::ReaderBuilder::new()
         .flexible(true)
         .trim(csv::Trim::All)
         .from_reader(text.as_bytes());
-    let headers = rdr.headers().map_err(|e| PrecalError::MeterFile {
-        path: path.to_path_buf(),
-        message: format!("cannot read the header line: {e}"),
-    })?;
+    let headers = rdr
+        .headers()
+        .map_err(|e| file_err(path, format!("cannot read the header line: {e}")))?;
     let col = columns(headers, path)?;
     let mut bills = vec![];
     for rec in rdr.records() {
@@ -310,10 +309,10 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         }
     }
     if bills.is_empty() {
-        return Err(PrecalError::MeterFile {
-            path: path.to_path_buf(),
-            message: "no bills: the file has a header and no rows".into(),
-        });
+        return Err(file_err(
+            path,
+            "no bills: the file has a header and no rows".into(),
+        ));
     }
     bills.sort_by_key(|b| b.start);
     let notes = check_periods(&bills, path)?;
@@ -323,15 +322,6 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         bills,
         notes,
     })
-}
-
-fn row_err(path: &Path, line: u64, column: &str, message: String) -> PrecalError {
-    PrecalError::Meter {
-        path: path.to_path_buf(),
-        line,
-        column: column.to_string(),
-        message,
-    }
 }
 
 /// One row of the bills table: a bill in kWh.
@@ -433,18 +423,18 @@ fn check_periods(bills: &[Bill], path: &Path) -> Result<Vec<String>, PrecalError
     for w in bills.windows(2) {
         let (a, b) = (&w[0], &w[1]);
         if b.start < a.end {
-            return Err(PrecalError::Meter {
-                path: path.to_path_buf(),
-                line: b.line,
-                column: "start".into(),
-                message: format!(
+            return Err(row_err(
+                path,
+                b.line,
+                "start",
+                format!(
                     "the bill from {} overlaps the bill of line {} ({} to {}): each day belongs to one bill",
                     b.start,
                     a.line,
                     a.start,
                     a.end - Duration::days(1)
                 ),
-            });
+            ));
         }
         if b.start > a.end {
             notes.push(format!(
