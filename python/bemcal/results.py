@@ -66,6 +66,11 @@ class Calibration:
     #: The sampled noise scales (``sigma_delta_<output>``), where the calibration sampled them;
     #: in the ``posterior`` group beside the parameters.
     noise: List[str] = field(default_factory=list)
+    #: Retrofit measures' savings (``bemcal savings``; empty before it ran): a tidy DataFrame
+    #: with columns measure, output, weather (calibration / typical), month (NaN: the year;
+    #: 1-12), n (draws), median_kwh, q5_kwh, q25_kwh, q75_kwh, q95_kwh (the 90 % and 50 %
+    #: credible intervals), median_pct, at_estimate_kwh (the year's) and warning.
+    savings: pd.DataFrame = field(default_factory=lambda: savings_frame({}))
 
     def __repr__(self) -> str:
         return (
@@ -103,6 +108,7 @@ def load(out_dir: Union[str, Path]) -> Calibration:
         converged=bool(summary.get("converged", False)),
         parameters=parameters,
         noise=noise,
+        savings=savings_frame(summary),
     )
 
 
@@ -283,6 +289,40 @@ def metrics_frame(summary: dict) -> pd.DataFrame:
     columns = [
         "model", "output", "period", "resolution", "n", "mean_measured", "nmbe_pct",
         "cv_rmse_pct", "passes",
+    ]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def savings_frame(summary: dict) -> pd.DataFrame:
+    """``summary.json``'s ``savings`` as one tidy table: a row per measure, output, weather
+    and period (the year, then each month)."""
+    rows = []
+    for m in (summary.get("savings") or {}).get("measures") or []:
+        for o in m.get("outputs") or []:
+            periods = [(float("nan"), o["savings_kwh"], o.get("savings_percent"))]
+            periods += [(float(k + 1), s, None) for k, s in enumerate(o.get("monthly_kwh") or [])]
+            for month, s, pct in periods:
+                (q5, q95), (q25, q75) = s["interval_90"], s["interval_50"]
+                rows.append(
+                    dict(
+                        measure=m["measure"],
+                        output=o["output"],
+                        weather=o["weather"],
+                        month=month,
+                        n=o["n"],
+                        median_kwh=s["median"],
+                        q5_kwh=q5,
+                        q25_kwh=q25,
+                        q75_kwh=q75,
+                        q95_kwh=q95,
+                        median_pct=pct["median"] if pct else float("nan"),
+                        at_estimate_kwh=o["at_estimate_kwh"] if pct else float("nan"),
+                        warning=o.get("warning"),
+                    )
+                )
+    columns = [
+        "measure", "output", "weather", "month", "n", "median_kwh", "q5_kwh", "q25_kwh",
+        "q75_kwh", "q95_kwh", "median_pct", "at_estimate_kwh", "warning",
     ]
     return pd.DataFrame(rows, columns=columns)
 

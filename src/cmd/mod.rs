@@ -23,6 +23,7 @@ pub mod predict;
 pub mod reference;
 pub mod report;
 pub mod results;
+pub mod savings;
 pub mod simulate;
 pub mod status;
 pub mod submit;
@@ -76,6 +77,8 @@ pub enum Command {
     Metrics(metrics::Args),
     /// A self-contained HTML report of a calibration folder (DIR/report.html).
     Report(report::Args),
+    /// Retrofit measures' savings with credible intervals, from a finished calibration.
+    Savings(savings::Args),
     /// Serve calibration runs to gRPC workers (state in SQLite).
     Coordinator(coordinator::Args),
     /// Pull and run jobs from a coordinator.
@@ -130,6 +133,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Diagnose(a) => diagnose::run(a),
         Command::Metrics(a) => metrics::run(a),
         Command::Report(a) => report::run(a),
+        Command::Savings(a) => savings::run(a),
         Command::Design(a) => design::run(a),
         Command::Check(a) => check::run(a),
         Command::Calibrate(a) => calibrate::run(a),

@@ -18,11 +18,13 @@
 //!    EnergyPlus run's key), [`output`] (the folder's layout and the one reader of what a run
 //!    settled, [`output::read_record`]), [`project`], [`submitted`], [`plan`], [`metrics`]
 //!    (Guideline 14 and [`best_simulated`]), [`mapping`], [`estimate`], [`replacement`],
-//!    [`bases`], [`stage`] (the stages' names).
+//!    [`bases`], [`stage`] (the stages' names), [`measures`] (retrofit measures and their
+//!    savings' records).
 //! 2. The stages' work, in the order the data flows: `inputs`, [`design`], `pretrained`,
 //!    `calibration`,
 //!    [`posterior`], `chains`, [`refine`], [`surrogate_error`], `chain_summary`, `validation`,
-//!    [`predictive`], [`model_form`], `summary`.
+//!    [`predictive`], [`model_form`], `summary`, and after a finished calibration
+//!    [`savings`] (retrofit measures' savings over posterior draws).
 //! 3. The driver: [`sequence`] (its rules), [`driver`], `local` (the in-process executor),
 //!    [`crossval`].
 //!
@@ -38,6 +40,7 @@ mod error;
 pub mod estimate;
 pub mod keys;
 pub mod mapping;
+pub mod measures;
 pub mod metrics;
 pub mod output;
 pub mod plan;
@@ -57,6 +60,7 @@ pub mod posterior;
 pub mod predictive;
 mod pretrained;
 pub mod refine;
+pub mod savings;
 mod summary;
 pub mod surrogate_error;
 mod validation;

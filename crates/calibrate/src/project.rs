@@ -103,6 +103,10 @@ pub struct Project {
     /// `[simulation]`: the limits of each EnergyPlus run (wall time, memory, output size).
     #[serde(default)]
     pub simulation: SimulationSettings,
+    /// `[[measures]]`: retrofit measures whose savings `bemcal savings` estimates over the
+    /// posterior draws of a finished calibration.
+    #[serde(default)]
+    pub measures: Vec<crate::measures::Measure>,
     /// Folder of the project file (set on load).
     #[serde(skip)]
     pub base: PathBuf,
@@ -1059,6 +1063,17 @@ impl Project {
                 self.validation.predictive_draws
             ));
         }
+        let mut folders = std::collections::BTreeSet::new();
+        for m in &self.measures {
+            m.check()?;
+            if !folders.insert(m.folder()) {
+                return Err(format!(
+                    "measure '{}': another measure has the same name (letters and digits, \
+                     case aside): give each its own",
+                    bemcal_excerpt::excerpt(&m.name, 60)
+                ));
+            }
+        }
         if self.meters.file.is_none() && self.meters.bills.is_empty() {
             return Err(
                 "[meters] needs file = \"...\" (hourly or sub-hourly meters) or [[meters.bills]] (utility bills)"
@@ -1088,9 +1103,20 @@ impl Project {
     /// every column's role is compared with a model output or is a base.
     pub fn check_model(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
         self.check_fixed(model)?;
+        self.check_measures(model)?;
         let outputs: Vec<&str> = model.outputs().iter().map(|o| o.name.as_str()).collect();
         self.check_outputs(&outputs)?;
         self.check_meter_roles(&outputs)
+    }
+
+    /// `[[measures]]`: every parameter a measure edits is the model's.
+    fn check_measures(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
+        let all: Vec<String> = model.parameters().iter().map(|p| p.name.clone()).collect();
+        for m in &self.measures {
+            m.check_model(model, &all, &Default::default())
+                .map_err(|message| self.error_at(&["measures"], message))?;
+        }
+        Ok(())
     }
 
     /// `[fixed]`: each a parameter of the model, finite, inside its prior, and together

@@ -198,6 +198,9 @@ pub struct Summary {
     pub refinement: Vec<crate::refine::RefineRound>,
     /// Wall time of each stage, s.
     pub timings: Timings,
+    /// Retrofit measures' savings over posterior draws (`bemcal savings`; absent until run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub savings: Option<crate::measures::SavingsReport>,
 }
 
 /// The JSON Schema of `summary.json`, from the types that write it and that every reader in
@@ -422,6 +425,7 @@ pub fn write_summary(
         surrogate_held_out: chains.held_out.clone(),
         refinement: cal.refine_log()?.rounds,
         timings,
+        savings: None,
     };
     write_calibrated_model(cal, &chains.estimate)?;
     write_bases_csv(cal)?;

@@ -23,6 +23,8 @@
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
 //! - [`model_form`]: whether a model can reach a meter, residual patterns, an additive
 //!   discrepancy, parameters piled against a prior bound.
+//! - [`savings`]: a retrofit measure's savings over posterior draws, their intervals and what
+//!   drives their width.
 //! - [`nan`]: NaN in JSON records (written as `null`, read back as NaN).
 
 #![deny(missing_docs)]
@@ -41,6 +43,7 @@ pub mod nan;
 pub mod optim;
 pub mod predictive;
 pub mod prior;
+pub mod savings;
 pub mod summary;
 pub mod surrogate_error;
 
