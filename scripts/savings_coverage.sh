@@ -14,7 +14,7 @@
 #
 # The design's EnergyPlus runs and the first surrogate do not depend on the truth: the first
 # run makes them and the others start from copies (as scripts/coverage.sh). Short settings (a
-# 32-unit surrogate, 4 chains x 240 draws, no extension, no predictive intervals) keep a truth
+# 32-unit surrogate, 4 chains x 140 draws, no extension, no predictive intervals) keep a truth
 # to a few minutes on 2 cores: the savings' intervals are what is judged.
 #
 #   K=30           truths
@@ -64,14 +64,14 @@ parallel = 2
 [surrogate]
 epochs = 25
 patience = 6
-warm_epochs = 12
+warm_epochs = 8
 threads = 2
 hidden = 32
 [mcmc]
 chains = 4
-iterations = 300
+iterations = 200
 burn_in = 60
-segment = 300
+segment = 200
 max_extensions = 0
 [refine]
 rounds = 1

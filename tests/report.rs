@@ -179,6 +179,11 @@ fn write_calibration(dir: &Path) {
         "timings": {"design_s": 0.01, "simulations_s": 250.0, "training_s": 300.0, "chains_s": 120.0,
                     "summary_s": 5.0, "validation_s": 8.0, "refinement_s": 0.0, "total_s": 683.01}
     });
+    // Savings of a measure (`bemcal savings`), as a real run wrote them.
+    let mut summary = summary;
+    let real: serde_json::Value =
+        serde_json::from_str(include_str!("../crates/report/tests/fixtures/summary.json")).unwrap();
+    summary["savings"] = real["savings"].clone();
     // Every field as the writer's types hold it: they read it and write it back unchanged.
     let read: bemcal_calibrate::Summary = serde_json::from_value(summary.clone()).unwrap();
     assert_eq!(serde_json::to_value(&read).unwrap(), summary);
@@ -297,6 +302,7 @@ fn report_is_self_contained_with_every_section_and_figure() {
         "fit",
         "run",
         "precal",
+        "savings",
     ] {
         assert!(html.contains(&format!("id=\"{id}\"")), "no section {id}");
     }

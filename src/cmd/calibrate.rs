@@ -98,7 +98,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 /// `report.html` in the output folder, on every path (in process, local workers), with the
 /// pre-calibration's figures where the project's priors come from a pre-calibration folder. A
 /// report that cannot be written is said, and the calibration still stands.
-fn write_report(project: &Project, out: &std::path::Path) {
+pub(super) fn write_report(project: &Project, out: &std::path::Path) {
     let precal = project
         .priors
         .as_ref()

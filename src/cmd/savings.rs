@@ -52,6 +52,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let cal = Calibration::load(project, &a.out)?;
     let report =
         bemcal_calibrate::savings::estimate_savings(&cal, &measures, a.draws, parallel, &log)?;
+    super::calibrate::write_report(&cal.project, &a.out);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

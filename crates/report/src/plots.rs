@@ -603,6 +603,74 @@ pub fn monthly_totals(
     })
 }
 
+/// A measure's monthly savings (`months`: January to December, each the median and the ends of
+/// the 50 % and 90 % credible intervals over posterior draws): a bar at the median, a thick
+/// whisker over the 50 % interval and a thin one over the 90 %; the zero line.
+pub fn monthly_savings(
+    months: &[bemcal_stats::savings::Spread],
+    unit: &str,
+) -> Result<String, PlotError> {
+    const NAMES: [&str; 12] = [
+        "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
+    ];
+    let ends = months
+        .iter()
+        .flat_map(|m| [m.interval_90[0], m.interval_90[1], 0.0])
+        .filter(|v| v.is_finite());
+    let (lo, hi) = ends.fold((0.0f64, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    let (lo, hi) = pad(lo, hi.max(lo + 1e-9), 0.08);
+    render(540, 240, |root| {
+        let mut c = ChartBuilder::on(root)
+            .margin(8)
+            .margin_right(16)
+            .x_label_area_size(30)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.5..12.5, lo..hi)?;
+        c.configure_mesh()
+            .light_line_style(LIGHT_MESH)
+            .bold_line_style(BOLD_MESH)
+            .disable_x_mesh()
+            .x_labels(12)
+            .y_labels(5)
+            .x_label_formatter(&|v: &f64| {
+                let p = v.round() as usize;
+                if (1..=12).contains(&p) {
+                    NAMES[p - 1].to_string()
+                } else {
+                    String::new()
+                }
+            })
+            .y_label_formatter(&|v| tick(*v))
+            .y_desc(unit)
+            .label_style((FONT, 11))
+            .axis_desc_style((FONT, 11))
+            .draw()?;
+        c.draw_series(months.iter().enumerate().map(|(k, m)| {
+            let x = k as f64 + 1.0;
+            Rectangle::new(
+                [(x - 0.3, 0.0), (x + 0.3, m.median)],
+                POSTERIOR.mix(0.45).filled(),
+            )
+        }))?;
+        for (k, m) in months.iter().enumerate() {
+            let x = k as f64 + 1.0;
+            c.draw_series(LineSeries::new(
+                [(x, m.interval_90[0]), (x, m.interval_90[1])],
+                MEASURED.stroke_width(1),
+            ))?;
+            c.draw_series(LineSeries::new(
+                [(x, m.interval_50[0]), (x, m.interval_50[1])],
+                MEASURED.stroke_width(4),
+            ))?;
+        }
+        c.draw_series(LineSeries::new(
+            [(0.5, 0.0), (12.5, 0.0)],
+            PRIOR.stroke_width(1),
+        ))?;
+        Ok(())
+    })
+}
+
 /// A chart with `f64` axes on an SVG area.
 type XyChart<'a, 'b> =
     ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;

@@ -15,6 +15,7 @@ mod first_screen;
 mod fit;
 mod posterior;
 mod precal;
+mod savings;
 
 use first_screen::{design_failures, not_converged_banner, out_of_reach_banner, warnings};
 use fit::{
@@ -26,6 +27,7 @@ use posterior::{
     truth_table,
 };
 use precal::precal_section;
+use savings::savings_section;
 
 /// ASHRAE Guideline 14 hourly NMBE limit, % (absolute value).
 pub const G14_NMBE_LIMIT: f64 = 10.0;
@@ -154,7 +156,11 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
         h.push_str(&not_converged_banner(s));
     }
     h.push_str(&out_of_reach_banner(s));
-    h.push_str(&nav(precal.is_some(), cal.truth.is_some()));
+    h.push_str(&nav(
+        precal.is_some(),
+        cal.truth.is_some(),
+        s.savings.is_some(),
+    ));
     h.push_str(&warnings(s));
     h.push_str(&design_failures(s));
     h.push_str(&goodness_of_fit(s));
@@ -165,6 +171,7 @@ pub fn build(cal: &CalibrationData, precal: Option<&PrecalData>) -> Result<Strin
     h.push_str(&held_out_weeks(cal)?);
     h.push_str(&parameters_table(s));
     h.push_str(&truth_table(cal));
+    h.push_str(&savings_section(s)?);
     h.push_str(&prior_vs_posterior(cal)?);
     h.push_str(&chain_plots(cal)?);
     h.push_str(&hourly_fit(cal)?);
@@ -273,9 +280,9 @@ fn estimate_label(s: &Summary) -> String {
     format!("{setting} ({why})")
 }
 
-/// The navigation bar: a link to each section (the truth's and the pre-calibration's where
-/// there are).
-fn nav(with_precal: bool, with_truth: bool) -> String {
+/// The navigation bar: a link to each section (the truth's, the savings' and the
+/// pre-calibration's where there are).
+fn nav(with_precal: bool, with_truth: bool, with_savings: bool) -> String {
     let mut h = String::new();
     h.push_str(
         "<nav><a href=\"#warnings\">Warnings</a><a href=\"#metrics\">Goodness of fit</a>\
@@ -283,6 +290,9 @@ fn nav(with_precal: bool, with_truth: bool) -> String {
     );
     if with_truth {
         h.push_str("<a href=\"#truth\">Truth</a>");
+    }
+    if with_savings {
+        h.push_str("<a href=\"#savings\">Savings</a>");
     }
     h.push_str(
         "<a href=\"#prior-posterior\">Prior vs posterior</a>\
