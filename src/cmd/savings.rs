@@ -26,6 +26,11 @@ pub struct Args {
     /// runs per measure and weather, one of them shared by every measure).
     #[arg(long, default_value_t = 30)]
     pub draws: usize,
+    /// Posterior draws the surrogate evaluates, corrected onto EnergyPlus's at --draws (the
+    /// metered outputs of measures inside the surrogate's training range; 0, the default:
+    /// EnergyPlus alone; the surrogate route is new and its coverage not yet measured).
+    #[arg(long, default_value_t = 0)]
+    pub surrogate_draws: usize,
     /// EnergyPlus processes at once (default: the project's `[design] parallel`).
     #[arg(long)]
     pub parallel: Option<usize>,
@@ -50,8 +55,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let t0 = std::time::Instant::now();
     let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
     let cal = Calibration::load(project, &a.out)?;
-    let report =
-        bemcal_calibrate::savings::estimate_savings(&cal, &measures, a.draws, parallel, &log)?;
+    let opts = bemcal_calibrate::savings::SavingsOptions {
+        draws: a.draws,
+        surrogate_draws: a.surrogate_draws,
+        parallel,
+    };
+    let report = bemcal_calibrate::savings::estimate_savings(&cal, &measures, opts, &log)?;
     super::calibrate::write_report(&cal.project, &a.out);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

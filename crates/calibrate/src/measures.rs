@@ -255,6 +255,9 @@ impl SavingsWeather {
 pub enum SavingsMethod {
     /// EnergyPlus at every posterior draw, with and without the measure.
     Energyplus,
+    /// The surrogate at many posterior draws, corrected onto EnergyPlus at a few (the metered
+    /// outputs under the calibration's weather; the others by EnergyPlus alone).
+    SurrogateCorrected,
 }
 
 /// `summary.json`'s `savings`: every measure's savings over posterior draws.
@@ -283,6 +286,9 @@ pub struct MeasureSavings {
     pub method: SavingsMethod,
     /// Why that method.
     pub method_note: String,
+    /// The posterior draws the surrogate simulated (0: EnergyPlus alone).
+    #[serde(default)]
+    pub surrogate_draws: usize,
     /// Parameters the measure takes outside their prior's support at some draw (the
     /// surrogate's training range).
     pub beyond_prior: Vec<String>,
@@ -322,6 +328,10 @@ pub struct OutputSavings {
     /// missed at the estimate), or none.
     #[serde(default)]
     pub warning: Option<String>,
+    /// With the surrogate: the line from its annual savings to EnergyPlus's at EnergyPlus's
+    /// draws, through which its draws were corrected.
+    #[serde(default)]
+    pub correction: Option<bemcal_stats::savings::Correction>,
 }
 
 /// A parameter whose posterior spread drives a saving's interval.

@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 
 use bemcal_energyplus::params::ParameterValues;
 use bemcal_energyplus::HourlyOutputs;
-use bemcal_stats::savings::{savings, savings_percent, spread, variance_shares};
+use bemcal_stats::savings::{
+    corrected, correction, residuals, savings, savings_percent, spread, variance_shares, Correction,
+};
 use bemcal_weather::grid::slot_month;
 use rayon::prelude::*;
 
@@ -29,16 +31,27 @@ use crate::summary::Summary;
 /// A parameter explaining at least this share of a saving's variance is named as a driver.
 pub const DRIVER_SHARE: f64 = 0.1;
 
-/// Simulates `measures` at `draws` posterior draws of the finished calibration in `cal.out`
-/// (with `parallel` EnergyPlus processes), writes `savings` into its `summary.json` and returns
-/// it.
+/// What `bemcal savings` simulates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SavingsOptions {
+    /// Posterior draws EnergyPlus simulates with and without each measure.
+    pub draws: usize,
+    /// Posterior draws the surrogate evaluates, corrected onto EnergyPlus's (0: EnergyPlus
+    /// alone).
+    pub surrogate_draws: usize,
+    /// EnergyPlus processes at once.
+    pub parallel: usize,
+}
+
+/// Simulates `measures` over posterior draws of the finished calibration in `cal.out` (as
+/// `opts` says), writes `savings` into its `summary.json` and returns it.
 pub fn estimate_savings(
     cal: &Calibration,
     measures: &[Measure],
-    draws: usize,
-    parallel: usize,
+    opts: SavingsOptions,
     log: Log<'_>,
 ) -> Result<SavingsReport, Error> {
+    let (draws, parallel) = (opts.draws, opts.parallel);
     let inp = &cal.inputs;
     let plan = &inp.plan;
     if measures.is_empty() {
@@ -109,9 +122,20 @@ pub fn estimate_savings(
         measures: measures.len(),
         runs: simulate_all(cal, &jobs, parallel, log)?,
     };
-    let out = (measures.iter().enumerate())
-        .map(|(j, m)| simulated.measure(j, m, notes_of[j].clone()))
-        .collect();
+    let mut surrogate = match opts.surrogate_draws {
+        0 => None,
+        n => SurrogateSide::load(cal, n, &rows, log)?,
+    };
+    let mut out = vec![];
+    for (j, m) in measures.iter().enumerate() {
+        let mut ms = simulated.measure(j, m, notes_of[j].clone());
+        if let Some(side) = surrogate.as_mut() {
+            if ms.beyond_prior.is_empty() && ms.notes.is_empty() {
+                side.correct(&simulated, j, m, &mut ms)?;
+            }
+        }
+        out.push(ms);
+    }
     let report = SavingsReport {
         draws: rows.len(),
         draws_file,
@@ -186,12 +210,191 @@ impl Simulated<'_> {
             edits: m.describe(),
             method: SavingsMethod::Energyplus,
             method_note: method_note(&beyond_prior, &notes),
+            surrogate_draws: 0,
             beyond_prior,
             notes,
             failed,
             outputs,
         }
     }
+}
+
+/// The surrogate's side: the calibration's last surrogate bound to its weather, many posterior
+/// draws, and its energy without any measure there and at EnergyPlus's draws.
+struct SurrogateSide {
+    evaluator: bemcal_surrogate::Evaluator,
+    many: Vec<Vec<f64>>,
+    /// `[draw][output]`, the outputs in the calibration's order (its metered ones).
+    base_many: Vec<Vec<Periods>>,
+    base_few: Vec<Vec<Periods>>,
+}
+
+impl SurrogateSide {
+    /// The surrogate of `cal.out` at `n` evenly spaced draws and at `few` (EnergyPlus's);
+    /// `None`, said in the log, where it cannot serve (none, or of other parameters).
+    fn load(
+        cal: &Calibration,
+        n: usize,
+        few: &[Vec<f64>],
+        log: Log<'_>,
+    ) -> Result<Option<SurrogateSide>, Error> {
+        let inp = &cal.inputs;
+        let dir = cal.surrogate_dir();
+        let loaded = bemcal_surrogate::Surrogate::load(&dir, cal.project.surrogate.threads);
+        let surrogate = match loaded {
+            Ok(s) => s,
+            Err(e) => {
+                log(&format!("savings: EnergyPlus alone (no surrogate: {e})"));
+                return Ok(None);
+            }
+        };
+        let names: Vec<&str> = surrogate
+            .meta()
+            .params
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect();
+        if names != inp.plan.calibrated || surrogate.meta().output_names() != inp.outputs {
+            log("savings: EnergyPlus alone (the surrogate is of other parameters or outputs)");
+            return Ok(None);
+        }
+        let mut evaluator = surrogate.bind(&inp.features)?;
+        let (_, many) = posterior_draws(cal, n)?;
+        let base_many = surrogate_periods(&mut evaluator, &many)?;
+        let base_few = surrogate_periods(&mut evaluator, few)?;
+        Ok(Some(SurrogateSide {
+            evaluator,
+            many,
+            base_many,
+            base_few,
+        }))
+    }
+
+    /// Replaces measure `j`'s metered outputs under the calibration's weather by the
+    /// surrogate's draws corrected onto EnergyPlus's at the draws both simulated.
+    fn correct(
+        &mut self,
+        sim: &Simulated<'_>,
+        j: usize,
+        m: &Measure,
+        ms: &mut MeasureSavings,
+    ) -> Result<(), Error> {
+        let cal = sim.cal;
+        let plan = &cal.inputs.plan;
+        let pairs = sim.pairs(0, j);
+        let ok: Vec<usize> = (0..sim.rows.len())
+            .filter(|&i| pairs[i].0.is_ok() && pairs[i].1.is_ok())
+            .collect();
+        if ok.len() < 2 {
+            return Ok(());
+        }
+        let edit = |x: &Vec<f64>| {
+            let after = m.apply(&plan.values(x));
+            plan.calibrated
+                .iter()
+                .map(|n| after[n])
+                .collect::<Vec<f64>>()
+        };
+        let after_many = surrogate_periods(
+            &mut self.evaluator,
+            &self.many.iter().map(edit).collect::<Vec<_>>(),
+        )?;
+        let few: Vec<Vec<f64>> = ok.iter().map(|&i| edit(&sim.rows[i])).collect();
+        let after_few = surrogate_periods(&mut self.evaluator, &few)?;
+        let mut r2 = vec![];
+        for (k, name) in cal.inputs.outputs.iter().enumerate() {
+            let Some(slot) = (ms.outputs.iter())
+                .position(|o| &o.output == name && o.weather == SavingsWeather::Calibration)
+            else {
+                continue;
+            };
+            let ep = |i: usize, with: bool| {
+                let run = if with { &pairs[i].1 } else { &pairs[i].0 };
+                let o = run.as_ref().expect("ok draws only");
+                periods(o.get(name).unwrap_or(&[]).iter().copied())
+            };
+            let at = |v: &[Vec<Periods>], p: usize| v.iter().map(|x| x[k][p]).collect::<Vec<f64>>();
+            let base_few: Vec<Vec<Periods>> =
+                ok.iter().map(|&i| self.base_few[i].clone()).collect();
+            let mut d = PerDraw {
+                base: vec![[0.0; 13]; self.many.len()],
+                after: vec![[0.0; 13]; self.many.len()],
+                params: self.many.clone(),
+            };
+            let mut annual = None;
+            for p in 0..13 {
+                let ep_base: Vec<f64> = ok.iter().map(|&i| ep(i, false)[p]).collect();
+                let ep_after: Vec<f64> = ok.iter().map(|&i| ep(i, true)[p]).collect();
+                let base = corrected_onto(&at(&base_few, p), &ep_base, &at(&self.base_many, p)).0;
+                let s_few = savings(&at(&base_few, p), &at(&after_few, p));
+                let s_many = savings(&at(&self.base_many, p), &at(&after_many, p));
+                let (saved, line) = corrected_onto(&s_few, &savings(&ep_base, &ep_after), &s_many);
+                for (di, (b, s)) in base.iter().zip(&saved).enumerate() {
+                    d.base[di][p] = *b;
+                    d.after[di][p] = b - s;
+                }
+                if p == 0 {
+                    annual = Some(line);
+                }
+            }
+            let at_estimate = ms.outputs[slot].at_estimate_kwh;
+            if let Some(mut o) = summarise(
+                cal,
+                sim.summary,
+                SavingsWeather::Calibration,
+                name,
+                &d,
+                at_estimate,
+            ) {
+                o.correction = annual;
+                r2.push(format!("{name} {:.2}", annual.map_or(f64::NAN, |c| c.r2)));
+                ms.outputs[slot] = o;
+            }
+        }
+        ms.method = SavingsMethod::SurrogateCorrected;
+        ms.surrogate_draws = self.many.len();
+        ms.method_note = format!(
+            "the surrogate at {} posterior draws, corrected onto EnergyPlus at {} (the share of \
+             EnergyPlus's annual savings the line explains: {}); outputs without a meter by \
+             EnergyPlus alone",
+            self.many.len(),
+            ok.len(),
+            r2.join(", ")
+        );
+        Ok(())
+    }
+}
+
+/// The surrogate's savings at many draws corrected onto EnergyPlus's (`few_energyplus`) at
+/// the draws where both simulated (`few_surrogate`), and the line.
+fn corrected_onto(
+    few_surrogate: &[f64],
+    few_energyplus: &[f64],
+    many: &[f64],
+) -> (Vec<f64>, Correction) {
+    let line = correction(few_surrogate, few_energyplus);
+    let r = residuals(&line, few_surrogate, few_energyplus);
+    (corrected(&line, many, &r), line)
+}
+
+/// The surrogate's energy per output over the year and each month at each of `xs`.
+fn surrogate_periods(
+    evaluator: &mut bemcal_surrogate::Evaluator,
+    xs: &[Vec<f64>],
+) -> Result<Vec<Vec<Periods>>, Error> {
+    let mut out = Vec::with_capacity(xs.len());
+    for chunk in xs.chunks(8) {
+        let y = evaluator.evaluate_batch(chunk)?;
+        let (b, h, k) = y.dim();
+        for i in 0..b {
+            out.push(
+                (0..k)
+                    .map(|o| periods((0..h).map(|t| f64::from(y[[i, t, o]]))))
+                    .collect(),
+            );
+        }
+    }
+    Ok(out)
 }
 
 /// Every job's run (reloaded where cached), in order; a failed run is its reason.
@@ -315,6 +518,26 @@ fn estimate_point(summary: &Summary, calibrated: &[String]) -> Result<Vec<f64>, 
         .collect()
 }
 
+/// An output's energy over the year (index 0) and each month (1-12: January to December), kWh.
+pub type Periods = [f64; 13];
+
+/// The year's and each month's totals of an hourly series on the 8,760-slot grid.
+pub fn periods(hours: impl IntoIterator<Item = f64>) -> Periods {
+    let mut p = [0.0; 13];
+    for (t, v) in hours.into_iter().enumerate() {
+        p[0] += v;
+        p[slot_month(t) as usize] += v;
+    }
+    p
+}
+
+/// One output's energy at each draw without and with a measure, and the draws' parameters.
+struct PerDraw {
+    base: Vec<Periods>,
+    after: Vec<Periods>,
+    params: Vec<Vec<f64>>,
+}
+
 /// One output's savings per weather from the pairs (without, with) of every point (the draws,
 /// then the estimate).
 fn output_savings(
@@ -334,69 +557,58 @@ fn output_savings(
     let mut out = vec![];
     for spec in cal.inputs.model.outputs() {
         let name = &spec.name;
-        let annual = |o: &HourlyOutputs| o.get(name).map_or(f64::NAN, |h| h.iter().sum());
-        let monthly = |o: &HourlyOutputs| monthly_totals(o.get(name).unwrap_or(&[]));
-        let base: Vec<f64> = ok
-            .iter()
-            .map(|&i| annual(pairs[i].0.as_ref().unwrap()))
-            .collect();
-        let after: Vec<f64> = ok
-            .iter()
-            .map(|&i| annual(pairs[i].1.as_ref().unwrap()))
-            .collect();
-        let s = savings(&base, &after);
-        let (Some(savings_kwh), Some(savings_pct), Some(baseline)) = (
-            spread(&s),
-            spread(&savings_percent(&base, &after)),
-            spread(&base),
-        ) else {
-            continue;
+        let of = |o: &HourlyOutputs| periods(o.get(name).unwrap_or(&[]).iter().copied());
+        let d = PerDraw {
+            base: ok
+                .iter()
+                .map(|&i| of(pairs[i].0.as_ref().unwrap()))
+                .collect(),
+            after: ok
+                .iter()
+                .map(|&i| of(pairs[i].1.as_ref().unwrap()))
+                .collect(),
+            params: ok.iter().map(|&i| rows[i].clone()).collect(),
         };
-        let months_b: Vec<[f64; 12]> = ok
-            .iter()
-            .map(|&i| monthly(pairs[i].0.as_ref().unwrap()))
-            .collect();
-        let months_a: Vec<[f64; 12]> = ok
-            .iter()
-            .map(|&i| monthly(pairs[i].1.as_ref().unwrap()))
-            .collect();
-        let monthly_kwh = (0..12)
-            .filter_map(|m| {
-                let b: Vec<f64> = months_b.iter().map(|x| x[m]).collect();
-                let a: Vec<f64> = months_a.iter().map(|x| x[m]).collect();
-                spread(&savings(&b, &a))
-            })
-            .collect();
         let at_estimate_kwh = match &pairs[n] {
-            (Ok(b), Ok(a)) => annual(b) - annual(a),
+            (Ok(b), Ok(a)) => of(b)[0] - of(a)[0],
             _ => f64::NAN,
         };
-        let params: Vec<Vec<f64>> = (0..cal.inputs.plan.calibrated.len())
-            .map(|k| ok.iter().map(|&i| rows[i][k]).collect())
-            .collect();
-        out.push(OutputSavings {
-            output: name.clone(),
-            weather,
-            n: ok.len(),
-            baseline_kwh: baseline.median,
-            savings_kwh,
-            savings_percent: savings_pct,
-            at_estimate_kwh,
-            monthly_kwh,
-            drivers: drivers(cal, summary, &variance_shares(&params, &s)),
-            warning: warning(cal, summary, name),
-        });
+        out.extend(summarise(cal, summary, weather, name, &d, at_estimate_kwh));
     }
     out
 }
 
-/// January to December totals of an hourly series on the 8,760-slot grid.
-fn monthly_totals(hours: &[f64]) -> [f64; 12] {
-    let mut m = [0.0; 12];
-    for (t, v) in hours.iter().enumerate() {
-        m[slot_month(t) as usize - 1] += v;
-    }
-    m
+/// A saving's figures from its per-draw energies.
+fn summarise(
+    cal: &Calibration,
+    summary: &Summary,
+    weather: SavingsWeather,
+    name: &str,
+    d: &PerDraw,
+    at_estimate_kwh: f64,
+) -> Option<OutputSavings> {
+    let period = |p: usize, of: &[Periods]| of.iter().map(|x| x[p]).collect::<Vec<f64>>();
+    let (base, after) = (period(0, &d.base), period(0, &d.after));
+    let s = savings(&base, &after);
+    let monthly_kwh = (1..13)
+        .filter_map(|p| spread(&savings(&period(p, &d.base), &period(p, &d.after))))
+        .collect();
+    let params: Vec<Vec<f64>> = (0..cal.inputs.plan.calibrated.len())
+        .map(|k| d.params.iter().map(|x| x[k]).collect())
+        .collect();
+    Some(OutputSavings {
+        output: name.to_string(),
+        weather,
+        n: base.len(),
+        baseline_kwh: spread(&base)?.median,
+        savings_kwh: spread(&s)?,
+        savings_percent: spread(&savings_percent(&base, &after))?,
+        at_estimate_kwh,
+        monthly_kwh,
+        drivers: drivers(cal, summary, &variance_shares(&params, &s)),
+        warning: warning(cal, summary, name),
+        correction: None,
+    })
 }
 
 /// The parameters explaining [`DRIVER_SHARE`] or more of a saving's variance, largest first.
@@ -517,10 +729,11 @@ mod tests {
     }
 
     #[test]
-    fn monthly_totals_follow_the_grid() {
-        let m = monthly_totals(&vec![1.0; 8760]);
-        assert_eq!(m[0], 31.0 * 24.0);
-        assert_eq!(m[1], 28.0 * 24.0);
-        assert_eq!(m.iter().sum::<f64>(), 8760.0);
+    fn periods_follow_the_grid() {
+        let p = periods(vec![1.0; 8760]);
+        assert_eq!(p[0], 8760.0);
+        assert_eq!(p[1], 31.0 * 24.0);
+        assert_eq!(p[2], 28.0 * 24.0);
+        assert_eq!(p[1..].iter().sum::<f64>(), 8760.0);
     }
 }

@@ -9,6 +9,12 @@
 //! the share of the savings' variance each parameter explains alone across the draws: the squared
 //! Pearson correlation (a first-order sensitivity, Saltelli et al. 2008, "Global Sensitivity
 //! Analysis", Sec. 1.2.5: for a linear response the shares of independent inputs sum to 1).
+//!
+//! Where a surrogate gives the savings at many draws and EnergyPlus at a few, EnergyPlus's are
+//! regressed on the surrogate's at the few ([`Correction`], the regression form of control
+//! variates: Glasserman 2004, "Monte Carlo Methods in Financial Engineering", Sec. 4.1), and
+//! the many are mapped through the fit with the fit's residuals added back in turn
+//! ([`corrected`]): the spread keeps what the surrogate misses at EnergyPlus's draws.
 
 use serde::{Deserialize, Serialize};
 
@@ -77,6 +83,74 @@ pub fn variance_shares(parameters: &[Vec<f64>], savings: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// A straight line from the surrogate's savings to EnergyPlus's at the same draws.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Correction {
+    /// EnergyPlus at a surrogate saving of 0 (kWh).
+    pub intercept: f64,
+    /// EnergyPlus per unit of the surrogate's saving.
+    pub slope: f64,
+    /// The share of EnergyPlus's variance over the draws the line explains (NaN where
+    /// EnergyPlus's savings do not vary).
+    pub r2: f64,
+}
+
+/// The least-squares line of `energyplus` on `surrogate` (the same draws). Under four draws,
+/// or where the surrogate's savings do not vary, the slope is 1 and the line a shift by the
+/// mean difference.
+pub fn correction(surrogate: &[f64], energyplus: &[f64]) -> Correction {
+    let n = surrogate.len().min(energyplus.len());
+    let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len().max(1) as f64;
+    let (s, e) = (&surrogate[..n], &energyplus[..n]);
+    let (ms, me) = (mean(s), mean(e));
+    let sxx: f64 = s.iter().map(|x| (x - ms) * (x - ms)).sum();
+    let sxy: f64 = s.iter().zip(e).map(|(x, y)| (x - ms) * (y - me)).sum();
+    let syy: f64 = e.iter().map(|y| (y - me) * (y - me)).sum();
+    let scale = ms.abs().max(me.abs()).max(1e-12);
+    let slope = if n >= 4 && sxx > (1e-12 * scale).powi(2) * n as f64 {
+        sxy / sxx
+    } else {
+        1.0
+    };
+    let intercept = me - slope * ms;
+    let rss: f64 = s
+        .iter()
+        .zip(e)
+        .map(|(x, y)| (y - intercept - slope * x).powi(2))
+        .sum();
+    Correction {
+        intercept,
+        slope,
+        r2: if syy > 0.0 { 1.0 - rss / syy } else { f64::NAN },
+    }
+}
+
+/// EnergyPlus's savings less the line at the same draws.
+pub fn residuals(c: &Correction, surrogate: &[f64], energyplus: &[f64]) -> Vec<f64> {
+    surrogate
+        .iter()
+        .zip(energyplus)
+        .map(|(x, y)| y - c.intercept - c.slope * x)
+        .collect()
+}
+
+/// The surrogate's savings at many draws through the line, draw `d` with residual
+/// `d mod residuals.len()` added (none where there are none).
+pub fn corrected(c: &Correction, surrogate: &[f64], residuals: &[f64]) -> Vec<f64> {
+    surrogate
+        .iter()
+        .enumerate()
+        .map(|(d, x)| {
+            let r = if residuals.is_empty() {
+                0.0
+            } else {
+                residuals[d % residuals.len()]
+            };
+            c.intercept + c.slope * x + r
+        })
+        .collect()
+}
+
 /// Whether `truth` lies inside `interval` (both ends included).
 pub fn covers(interval: [f64; 2], truth: f64) -> bool {
     interval[0] <= truth && truth <= interval[1]
@@ -111,6 +185,30 @@ mod tests {
         let s = spread(&savings(&[5.0, 7.0, 9.0], &[5.0, 7.0, 9.0])).unwrap();
         assert_eq!((s.median, s.interval_90), (0.0, [0.0, 0.0]));
         assert!(covers(s.interval_90, 0.0));
+    }
+
+    #[test]
+    fn a_surrogate_that_is_off_by_a_line_is_corrected_onto_energyplus() {
+        // EnergyPlus = 100 + 0.8 x surrogate, with residuals +-1 at the few draws.
+        let s_few = [10.0, 20.0, 30.0, 40.0, 50.0, 60.0];
+        let e_few: Vec<f64> = (s_few.iter().enumerate())
+            .map(|(i, x)| 100.0 + 0.8 * x + if i % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let c = correction(&s_few, &e_few);
+        assert!(
+            (c.slope - 0.8).abs() < 0.05 && (c.intercept - 100.0).abs() < 2.5,
+            "{c:?}"
+        );
+        assert!(c.r2 > 0.99, "{c:?}");
+        let r = residuals(&c, &s_few, &e_few);
+        assert!(r.iter().sum::<f64>().abs() < 1e-9);
+        let many: Vec<f64> = (0..100).map(|d| 10.0 + 0.5 * f64::from(d)).collect();
+        let fixed = corrected(&c, &many, &r);
+        assert!((fixed[0] - (c.intercept + c.slope * 10.0 + r[0])).abs() < 1e-12);
+        assert!((fixed[7] - (c.intercept + c.slope * many[7] + r[1])).abs() < 1e-12);
+        // Too few draws, or a constant surrogate: a shift by the mean difference.
+        let shift = correction(&[5.0, 5.0, 5.0, 5.0], &[7.0, 8.0, 9.0, 8.0]);
+        assert_eq!((shift.slope, shift.intercept), (1.0, 3.0));
     }
 
     #[test]
