@@ -310,6 +310,8 @@ pub struct OutputSavings {
     /// Draws with both simulations.
     pub n: usize,
     /// The annual energy without the measure: median over the draws, kWh.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub baseline_kwh: f64,
     /// The annual saving, kWh (positive: the measure saves).
     pub savings_kwh: Spread,
@@ -341,6 +343,8 @@ pub struct Driver {
     pub parameter: String,
     /// The share of the savings' variance over the draws it explains alone (squared
     /// correlation).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub share: f64,
     /// Its posterior 90 % interval's width over its prior's (near 1: the meters did not
     /// identify it).

@@ -38,6 +38,34 @@ impl schemars::JsonSchema for NumberOrNull {
     }
 }
 
+/// Reads a pair of numbers (an interval's ends), each `null` as NaN.
+pub fn null_as_nan_pair<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 2], D::Error> {
+    let [a, b] = <[Option<f64>; 2]>::deserialize(d)?;
+    Ok([a.unwrap_or(f64::NAN), b.unwrap_or(f64::NAN)])
+}
+
+/// The JSON Schema of a `[f64; 2]` field read by [`null_as_nan_pair`].
+pub struct PairOfNumberOrNull;
+
+impl schemars::JsonSchema for PairOfNumberOrNull {
+    fn inline_schema() -> bool {
+        true
+    }
+
+    fn schema_name() -> Cow<'static, str> {
+        "PairOfNumberOrNull".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "type": "array",
+            "items": {"type": ["number", "null"], "format": "double"},
+            "minItems": 2,
+            "maxItems": 2
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[derive(serde::Serialize, serde::Deserialize)]
@@ -54,5 +82,20 @@ mod tests {
         assert_eq!(serde_json::from_str::<R>(r#"{"x":2.5}"#).unwrap().x, 2.5);
         let e = serde_json::from_str::<R>("{}").err().unwrap().to_string();
         assert!(e.contains("missing field `x`"), "{e}");
+    }
+
+    #[derive(serde::Serialize, serde::Deserialize)]
+    struct P {
+        #[serde(deserialize_with = "super::null_as_nan_pair")]
+        x: [f64; 2],
+    }
+
+    #[test]
+    fn an_interval_with_a_nan_end_round_trips() {
+        let text = serde_json::to_string(&P { x: [1.0, f64::NAN] }).unwrap();
+        assert_eq!(text, r#"{"x":[1.0,null]}"#);
+        let back = serde_json::from_str::<P>(&text).unwrap().x;
+        assert_eq!(back[0], 1.0);
+        assert!(back[1].is_nan());
     }
 }

@@ -25,10 +25,16 @@ use crate::summary::correlation;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Spread {
     /// The draws' median.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub median: f64,
     /// Central 50 % interval (25 % and 75 % quantiles).
+    #[serde(deserialize_with = "crate::nan::null_as_nan_pair")]
+    #[schemars(with = "crate::nan::PairOfNumberOrNull")]
     pub interval_50: [f64; 2],
     /// Central 90 % interval (5 % and 95 % quantiles).
+    #[serde(deserialize_with = "crate::nan::null_as_nan_pair")]
+    #[schemars(with = "crate::nan::PairOfNumberOrNull")]
     pub interval_90: [f64; 2],
 }
 
@@ -87,11 +93,17 @@ pub fn variance_shares(parameters: &[Vec<f64>], savings: &[f64]) -> Vec<f64> {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Correction {
     /// EnergyPlus at a surrogate saving of 0 (kWh).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub intercept: f64,
     /// EnergyPlus per unit of the surrogate's saving.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub slope: f64,
     /// The share of EnergyPlus's variance over the draws the line explains (NaN where
     /// EnergyPlus's savings do not vary).
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub r2: f64,
 }
 
