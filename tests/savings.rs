@@ -2,7 +2,8 @@
 //! (`bemcal savings`). The small model's two-parameter calibration, then three measures over its
 //! posterior draws with EnergyPlus: a cooling set-point raised 1 K (against EnergyPlus at the
 //! hidden truth), a set-point beyond the prior (the surrogate's training range), and LED
-//! lighting; bad measures refused with the file and the reason. Real EnergyPlus, PyTorch and
+//! lighting, then the surrogate's route for the measures inside its range; bad measures refused
+//! with the file and the reason. Real EnergyPlus, PyTorch and
 //! ONNX Runtime; skipped (with a message) when the Python environment is missing.
 
 use std::path::Path;
@@ -160,6 +161,46 @@ fn savings_come_with_intervals_from_the_posterior() {
     // 3 measures x 5 outputs x (the year + 12 months).
     assert_eq!(rows, "195", "{text}");
     assert_eq!(pct, "40.0", "{text}");
+
+    // The surrogate route: 40 draws of the surrogate corrected onto EnergyPlus at the 6 it
+    // already ran (cached: no new EnergyPlus run but the estimate's), for the measures inside
+    // its training range; the set-point beyond the prior stays with EnergyPlus.
+    let run = run_ok(
+        bemcal()
+            .arg("savings")
+            .arg(dir.join("project.toml"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--draws", "6", "--surrogate-draws", "40", "--json"]),
+    );
+    let savings: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let method = |name: &str| {
+        let m = (savings["measures"].as_array().unwrap().iter())
+            .find(|m| m["measure"] == name)
+            .unwrap();
+        (m["method"].clone(), m["surrogate_draws"].clone())
+    };
+    assert_eq!(
+        method("cooling set-point +1 K"),
+        ("surrogate_corrected".into(), 40.into())
+    );
+    assert_eq!(
+        method("cooling set-point 27 C"),
+        ("energyplus".into(), 0.into())
+    );
+    let cooling = row(&savings, "cooling set-point +1 K", "cooling_kwh");
+    let median = cooling["savings_kwh"]["median"].as_f64().unwrap();
+    let [lo, hi] = [0, 1].map(|i| cooling["savings_kwh"]["interval_90"][i].as_f64().unwrap());
+    eprintln!("cooling +1 K by the surrogate: {median:.0} [{lo:.0}, {hi:.0}]");
+    assert_eq!(cooling["n"], 40, "{cooling}");
+    assert!(cooling["correction"]["slope"].is_number(), "{cooling}");
+    assert!(
+        (median - truth).abs() < 0.2 * truth && lo <= median && median <= hi,
+        "{truth} against {cooling}"
+    );
+    // Outputs without a meter are EnergyPlus's alone: the lighting still saves nothing.
+    let lights = row(&savings, "cooling set-point +1 K", "lighting_kwh");
+    assert_eq!(lights["savings_kwh"]["interval_90"], serde_json::json!([0.0, 0.0]));
 }
 
 #[test]
