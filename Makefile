@@ -173,10 +173,10 @@ bills: setup
 	scripts/bills_vs_hourly.sh
 
 # Savings intervals against true savings over K synthetic calibrations of the small model (issue
-# 70): `make savings-coverage` (K=30 truths, DRAWS=16 posterior draws each; a few minutes per
+# 70): `make savings-coverage` (K=30 truths, DRAWS=20 posterior draws each; a few minutes per
 # truth on 2 cores). `make savings-coverage TEMPERATURE=surrogate_error OUT=...`: every run with
 # the measured temperature.
-DRAWS ?= 16
+DRAWS ?= 20
 savings-coverage: setup
 	K=$(if $(filter command line environment,$(origin K)),$(K),30) DRAWS=$(DRAWS) bash scripts/savings_coverage.sh
 

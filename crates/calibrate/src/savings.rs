@@ -695,6 +695,29 @@ fn method_note(beyond_prior: &[String], not_calibrated: &[String]) -> String {
     }
 }
 
+/// Which of `draws` savings end the 90 % interval, and how often a further posterior draw
+/// falls inside ([`bemcal_stats::savings::interval_rank`]).
+fn interval_note(draws: usize) -> String {
+    let (k, inside) = bemcal_stats::savings::interval_rank(draws, 0.9);
+    let ends = if k == 1 {
+        "the smallest and largest".to_string()
+    } else {
+        format!("the {k}th smallest and largest")
+    };
+    let mut note = format!(
+        "the 90 % interval's ends are {ends} of {draws} draws' savings: a further posterior \
+         draw falls inside with probability {:.0} %",
+        100.0 * inside
+    );
+    if inside < 0.9 {
+        note.push_str(
+            " (fewer than 19 draws cannot make a 90 % interval: give --draws 19 or more, or \
+             --surrogate-draws)",
+        );
+    }
+    note
+}
+
 /// How the model's errors and the chains' temperature enter the savings.
 fn report_notes(summary: &Summary, draws: usize) -> Vec<String> {
     let mut notes = vec![
@@ -703,9 +726,7 @@ fn report_notes(summary: &Summary, draws: usize) -> Vec<String> {
          same in both and cancels; the intervals carry the parameters' posterior spread, not a \
          model-form error that changes with the measure"
             .to_string(),
-        format!(
-            "the 90 % interval's ends are the 5 % and 95 % quantiles of {draws} draws' savings"
-        ),
+        interval_note(draws),
     ];
     let t = summary.temperature.value;
     if t > 1.0 {
