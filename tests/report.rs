@@ -290,6 +290,12 @@ fn report_is_self_contained_with_every_section_and_figure() {
     let (_tmp, _path, html) = build_report();
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.len() < 3_000_000, "report is {} bytes", html.len());
+    // How much the posterior learned, under the first line: the fixture's width ratios are
+    // 0.12, 0.12 and 0.95, at T = 1.
+    assert!(
+        html.contains("How much it learned: the posterior learned 2 of 3 parameters (67 %"),
+        "no learned line"
+    );
     for bad in ["http://", "https://", "<script", "<link", "@import", "<img"] {
         assert!(!html.contains(bad), "report references {bad}");
     }

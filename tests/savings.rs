@@ -200,7 +200,10 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     // Outputs without a meter are EnergyPlus's alone: the lighting still saves nothing.
     let lights = row(&savings, "cooling set-point +1 K", "lighting_kwh");
-    assert_eq!(lights["savings_kwh"]["interval_90"], serde_json::json!([0.0, 0.0]));
+    assert_eq!(
+        lights["savings_kwh"]["interval_90"],
+        serde_json::json!([0.0, 0.0])
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use bemcal_calibrate::project::ErrorModelSetting;
 use bemcal_calibrate::{calibrate, Project};
-use bemcal_report::informed::{uninformed, why_uninformed};
+use bemcal_report::informed::{how_much_learned, uninformed, why_uninformed};
 
 /// Run design points, training, chains and validation for a project; write summary.json,
 /// draws.csv, the surrogate and the validation runs under --out.
@@ -172,6 +172,8 @@ fn print_posterior(s: &bemcal_calibrate::Summary) {
         );
     }
     let params = &s.posterior.parameters;
+    let ratios: Vec<f64> = params.iter().map(|p| p.width_ratio).collect();
+    println!("{}", how_much_learned(&ratios, t));
     let barely = params.iter().filter(|p| uninformed(p.width_ratio)).count();
     if barely > 0 {
         println!("note: {}", why_uninformed(barely, params.len(), t));

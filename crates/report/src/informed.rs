@@ -10,6 +10,37 @@
 /// Width ratio (posterior 90 % interval / prior's) above this: the data barely informed it.
 pub const WIDTH_RATIO_LIMIT: f64 = 0.9;
 
+/// Width ratio below this: the posterior learned the parameter (its 90 % interval is narrower
+/// than half the prior's). The share of such parameters, beside the temperature, is how much a
+/// calibration learned, reported beside Guideline 14.
+pub const LEARNED_LIMIT: f64 = 0.5;
+
+/// Whether a posterior-to-prior width ratio says the posterior learned the parameter.
+pub fn learned(width_ratio: f64) -> bool {
+    width_ratio < LEARNED_LIMIT
+}
+
+/// How much the posterior learned: how many of the parameters' posterior-to-prior width ratios
+/// are under [`LEARNED_LIMIT`], and the likelihood's temperature `t` (1: the posterior itself).
+pub fn how_much_learned(width_ratios: &[f64], t: f64) -> String {
+    let n = width_ratios.iter().filter(|w| learned(**w)).count();
+    let total = width_ratios.len();
+    let share = if total == 0 {
+        0.0
+    } else {
+        100.0 * n as f64 / total as f64
+    };
+    let tempered = if t > 1.0 {
+        format!("tempered by T = {t:.1}")
+    } else {
+        "T = 1".to_string()
+    };
+    format!(
+        "the posterior learned {n} of {total} parameters ({share:.0} %: 90 % interval narrower \
+         than half the prior's), the likelihood {tempered}"
+    )
+}
+
 /// Whether a posterior-to-prior width ratio says the meters barely informed the parameter.
 pub fn uninformed(width_ratio: f64) -> bool {
     width_ratio > WIDTH_RATIO_LIMIT
@@ -45,6 +76,17 @@ mod tests {
         assert!(!uninformed(WIDTH_RATIO_LIMIT));
         assert!(uninformed(0.91));
         assert!(!uninformed(f64::NAN));
+    }
+
+    #[test]
+    fn learned_is_narrower_than_half_the_prior() {
+        assert!(learned(0.49) && !learned(0.5) && !learned(f64::NAN));
+        assert_eq!(
+            how_much_learned(&[0.1, 0.3, 0.95], 1.0),
+            "the posterior learned 2 of 3 parameters (67 %: 90 % interval narrower than half \
+             the prior's), the likelihood T = 1"
+        );
+        assert!(how_much_learned(&[0.8], 651.7).ends_with("0 of 1 parameters (0 %: 90 % interval narrower than half the prior's), the likelihood tempered by T = 651.7"));
     }
 
     #[test]

@@ -17,6 +17,7 @@ mod posterior;
 mod precal;
 mod savings;
 
+use crate::informed::how_much_learned;
 use first_screen::{design_failures, not_converged_banner, out_of_reach_banner, warnings};
 use fit::{
     discrepancy_carried, goodness_of_fit, held_out_weeks, hourly_fit, model_form,
@@ -227,6 +228,14 @@ fn header(cal: &CalibrationData) -> String {
         n_draws,
         s.design_points,
         esc(&estimate_label(s))
+    );
+    let ratios: Vec<f64> = (s.posterior.parameters.iter())
+        .map(|p| p.width_ratio)
+        .collect();
+    let _ = writeln!(
+        h,
+        "<p class=\"sub\" id=\"learned\">How much it learned: {}.</p>",
+        esc(&how_much_learned(&ratios, s.temperature.value))
     );
     h
 }
