@@ -26,6 +26,9 @@ set = { cooling_setpoint_occupied = 27.0 }
 [[measures]]
 name = "LED lighting"
 scale = { lighting_power_density = 0.6 }
+[[measures]]
+name = "air-side economizer"
+building = { economizer = true }
 "#;
 
 fn project() -> String {
@@ -133,6 +136,29 @@ fn savings_come_with_intervals_from_the_posterior() {
         .as_str()
         .unwrap()
         .contains("outside its prior"));
+    // An economizer, a building edit: EnergyPlus simulates it, and it saves cooling (Golden's
+    // dry air cools for free much of the year) but no lighting.
+    let economizer = (savings["measures"].as_array().unwrap().iter())
+        .find(|m| m["measure"] == "air-side economizer")
+        .unwrap();
+    assert_eq!(economizer["method"], "energyplus", "{economizer}");
+    assert_eq!(
+        economizer["edits"],
+        serde_json::json!(["economizer = true"])
+    );
+    assert!(
+        (economizer["method_note"].as_str().unwrap()).contains("edits the building"),
+        "{economizer}"
+    );
+    let free = row(&savings, "air-side economizer", "cooling_kwh");
+    let [lo, hi] = [0, 1].map(|i| free["savings_kwh"]["interval_90"][i].as_f64().unwrap());
+    eprintln!("economizer: cooling saving [{lo:.0}, {hi:.0}] kWh");
+    assert!(lo > 0.0 && lo <= hi, "{free}");
+    let lights = row(&savings, "air-side economizer", "lighting_kwh");
+    assert_eq!(
+        lights["savings_kwh"]["interval_90"],
+        serde_json::json!([0.0, 0.0])
+    );
     // LED lighting x 0.6 saves 40 % of the lighting at every draw.
     let led = row(&savings, "LED lighting", "lighting_kwh");
     let pct = led["savings_percent"]["median"].as_f64().unwrap();
@@ -158,8 +184,8 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     let text = String::from_utf8_lossy(&py.stdout);
     let (rows, pct) = text.trim().split_once(' ').unwrap();
-    // 3 measures x 5 outputs x (the year + 12 months).
-    assert_eq!(rows, "195", "{text}");
+    // 4 measures x 5 outputs x (the year + 12 months).
+    assert_eq!(rows, "260", "{text}");
     assert_eq!(pct, "40.0", "{text}");
 
     // The surrogate route: 40 draws of the surrogate corrected onto EnergyPlus at the 6 it
@@ -186,6 +212,10 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     assert_eq!(
         method("cooling set-point 27 C"),
+        ("energyplus".into(), 0.into())
+    );
+    assert_eq!(
+        method("air-side economizer"),
         ("energyplus".into(), 0.into())
     );
     let cooling = row(&savings, "cooling set-point +1 K", "cooling_kwh");
@@ -233,6 +263,14 @@ fn bad_measures_are_refused_with_the_file_and_the_reason() {
             "[[measures]]\nname = \"LED\"\nscale = { lighting_power_density = 0.6 }\n\
              [[measures]]\nname = \"led\"\nscale = { lighting_power_density = 0.5 }\n",
             "another measure has the same name",
+        ),
+        (
+            "[[measures]]\nname = \"taller\"\nbuilding = { storeys = 2 }\n",
+            "building.storeys: not a field a measure may edit",
+        ),
+        (
+            "[[measures]]\nname = \"doas\"\nbuilding = { hvac = \"doas_fan_coil\" }\n",
+            "the edits change the model's parameters",
         ),
     ] {
         std::fs::write(dir.join("project.toml"), base.clone() + measure).unwrap();

@@ -13,6 +13,9 @@
 //! [[measures]]
 //! name = "new glazing"
 //! set = { window_glass_conductivity = 0.01, shgc = 0.35 }
+//! [[measures]]
+//! name = "air-side economizer"
+//! building = { economizer = true }             # a generated building's spec fields
 //! ```
 
 use std::collections::BTreeMap;
@@ -36,6 +39,13 @@ pub struct Measure {
     /// Parameters shifted by an amount (the parameter's unit) from each draw's value.
     #[serde(default)]
     pub offset: BTreeMap<String, f64>,
+    /// Fields of a generated building's spec, in the model file's form (`occupied_hours =
+    /// [8, 18]`, `economizer = true`; [`bemcal_energyplus::BuildingSpec::MEASURE_FIELDS`]),
+    /// the same in every draw. EnergyPlus simulates such a measure: the surrogate never saw
+    /// the building otherwise.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    #[schemars(with = "BTreeMap<String, serde_json::Value>")]
+    pub building: BTreeMap<String, serde_json::Value>,
 }
 
 /// How a measure edits one parameter.
@@ -85,8 +95,9 @@ impl Measure {
         v
     }
 
-    /// The edits as a reader says them: `lighting_power_density x 0.6`.
+    /// The edits as a reader says them: `lighting_power_density x 0.6`, `economizer = true`.
     pub fn describe(&self) -> Vec<String> {
+        let building = self.building.iter().map(|(n, v)| format!("{n} = {v}"));
         self.edits()
             .into_iter()
             .map(|(n, e)| match e {
@@ -94,7 +105,37 @@ impl Measure {
                 Edit::Scale(f) => format!("{n} x {f}"),
                 Edit::Offset(d) => format!("{n} {d:+}"),
             })
+            .chain(building)
             .collect()
+    }
+
+    /// The model its runs simulate: the calibration's, with the measure's building edits
+    /// where it has any ([`bemcal_energyplus::Model::with_building_edits`]).
+    pub fn model(
+        &self,
+        model: &bemcal_energyplus::Model,
+    ) -> Result<bemcal_energyplus::Model, String> {
+        if self.building.is_empty() {
+            return Ok(model.clone());
+        }
+        let who = format!("measure '{}'", bemcal_excerpt::excerpt(&self.name, 60));
+        model
+            .with_building_edits(&self.building)
+            .map_err(|e| format!("{who}: {e}"))
+    }
+
+    /// The folder of its runs under `savings/<weather>/`: [`Measure::folder`], and for a
+    /// measure with building edits a key of those edits, since a run is reloaded by its
+    /// parameter values alone and the same values then simulate another building.
+    pub fn runs_folder(&self) -> String {
+        if self.building.is_empty() {
+            return self.folder();
+        }
+        use sha2::Digest;
+        let text = serde_json::to_string(&self.building).unwrap_or_default();
+        let digest = sha2::Sha256::digest(text.as_bytes());
+        let key: String = digest[..4].iter().map(|b| format!("{b:02x}")).collect();
+        format!("{}-{key}", self.folder())
     }
 
     /// The folder of its runs under `savings/`: the name in lower case, runs of other
@@ -121,10 +162,10 @@ impl Measure {
             ));
         }
         let edits = self.edits();
-        if edits.is_empty() {
+        if edits.is_empty() && self.building.is_empty() {
             return Err(format!(
                 "{who} names nothing: give set = {{ NAME = VALUE }}, scale = {{ NAME = FACTOR }} \
-                 or offset = {{ NAME = AMOUNT }}"
+                 or offset = {{ NAME = AMOUNT }} of parameters, or building = {{ FIELD = VALUE }}"
             ));
         }
         let mut seen = std::collections::BTreeSet::new();
@@ -156,10 +197,11 @@ impl Measure {
         Ok(())
     }
 
-    /// Checks against the model and the calibration: every parameter named is the model's, and
-    /// a `set` of a parameter the calibration held fixed differs from its value. Returns the
-    /// notes a reader needs: the parameters the measure edits that the calibration did not
-    /// calibrate (their value is the same in every draw, as the calibration held it).
+    /// Checks against the model and the calibration: every parameter named is the model's, a
+    /// `set` of a parameter the calibration held fixed differs from its value, and the
+    /// building edits apply ([`Measure::model`]). Returns the notes a reader needs: the
+    /// parameters the measure edits that the calibration did not calibrate (their value is the
+    /// same in every draw, as the calibration held it) and the building edits.
     pub fn check_model(
         &self,
         model: &bemcal_energyplus::Model,
@@ -168,6 +210,16 @@ impl Measure {
     ) -> Result<Vec<String>, String> {
         let who = format!("measure '{}'", bemcal_excerpt::excerpt(&self.name, 60));
         let mut notes = vec![];
+        if !self.building.is_empty() {
+            self.model(model)?;
+            let fields: Vec<&str> = self.building.keys().map(String::as_str).collect();
+            notes.push(format!(
+                "it edits the building ({}), the same in every draw: its interval carries the \
+                 calibrated parameters' uncertainty under the edited building, none of the \
+                 edit's own",
+                fields.join(", ")
+            ));
+        }
         for (name, edit) in self.edits() {
             if !model.parameters().iter().any(|p| p.name == name) {
                 let known: Vec<&str> = model.parameters().iter().map(|p| p.name.as_str()).collect();
@@ -292,7 +344,8 @@ pub struct MeasureSavings {
     /// Parameters the measure takes outside their prior's support at some draw (the
     /// surrogate's training range).
     pub beyond_prior: Vec<String>,
-    /// The parameters it edits that the calibration did not calibrate.
+    /// What its edits leave out of the interval: the parameters it edits that the calibration
+    /// did not calibrate, and its building edits.
     pub notes: Vec<String>,
     /// Draws whose simulation with or without the measure failed, with the reason (left out).
     pub failed: Vec<String>,
@@ -407,6 +460,20 @@ mod tests {
             .unwrap_err();
         assert!(e.contains("0 or more"), "{e}");
         assert!(toml::from_str::<Measure>("name = \"x\"\nmultiply = { lpd = 2.0 }").is_err());
+    }
+
+    #[test]
+    fn a_building_measure_names_its_edits_and_keys_its_runs_by_them() {
+        let m = measure("name = \"Economizer\"\nbuilding = { economizer = true }");
+        m.check().unwrap();
+        assert_eq!(m.describe(), ["economizer = true"]);
+        let other = measure("name = \"Economizer\"\nbuilding = { occupied_hours = [8, 18] }");
+        assert!(m.runs_folder().starts_with("economizer-"));
+        assert_ne!(m.runs_folder(), other.runs_folder());
+        let v: ParameterValues = [("lpd".to_string(), 10.0)].into_iter().collect();
+        assert_eq!(m.apply(&v), v);
+        let plain = measure("name = \"LED\"\nscale = { lpd = 0.6 }");
+        assert_eq!(plain.runs_folder(), "led");
     }
 
     #[test]

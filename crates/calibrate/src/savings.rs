@@ -94,14 +94,18 @@ pub fn estimate_savings(
         let typical = crate::inputs::resolve_weather(&cal.project, inp.runner.engine())?;
         weathers.push((SavingsWeather::Typical, typical));
     }
+    let models = (measures.iter())
+        .map(|m| m.model(&inp.model))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|message| cal.project.error_at(&["measures"], message))?;
     let root = cal.out.join("savings");
-    let mut jobs: Vec<(PathBuf, &Path, usize, ParameterValues)> = vec![];
+    let mut jobs: Vec<Job<'_>> = vec![];
     for (w, path) in &weathers {
         for (i, v) in points.iter().enumerate() {
-            jobs.push((root.join(w.as_str()).join("baseline"), path, i, v.clone()));
-            for m in measures {
-                let dir = root.join(w.as_str()).join(m.folder());
-                jobs.push((dir, path, i, m.apply(v)));
+            let dir = root.join(w.as_str());
+            jobs.push((dir.join("baseline"), path, &inp.model, i, v.clone()));
+            for (m, model) in measures.iter().zip(&models) {
+                jobs.push((dir.join(m.runs_folder()), path, model, i, m.apply(v)));
             }
         }
     }
@@ -209,7 +213,7 @@ impl Simulated<'_> {
             measure: m.name.clone(),
             edits: m.describe(),
             method: SavingsMethod::Energyplus,
-            method_note: method_note(&beyond_prior, &notes),
+            method_note: method_note(m, &beyond_prior, &notes),
             surrogate_draws: 0,
             beyond_prior,
             notes,
@@ -397,10 +401,20 @@ fn surrogate_periods(
     Ok(out)
 }
 
+/// A savings run: its folder, weather, model (the measure's building), key and parameter
+/// values.
+type Job<'a> = (
+    PathBuf,
+    &'a Path,
+    &'a bemcal_energyplus::Model,
+    usize,
+    ParameterValues,
+);
+
 /// Every job's run (reloaded where cached), in order; a failed run is its reason.
 fn simulate_all(
     cal: &Calibration,
-    jobs: &[(PathBuf, &Path, usize, ParameterValues)],
+    jobs: &[Job<'_>],
     parallel: usize,
     log: Log<'_>,
 ) -> Result<Vec<Result<HourlyOutputs, String>>, Error> {
@@ -412,12 +426,10 @@ fn simulate_all(
     let done = std::sync::atomic::AtomicUsize::new(0);
     Ok(pool.install(|| {
         jobs.par_iter()
-            .map(|(dir, weather, i, values)| {
+            .map(|(dir, weather, model, i, values)| {
                 let r = std::fs::create_dir_all(dir)
                     .map_err(|e| Error::io(dir, e))
-                    .and_then(|()| {
-                        simulate_point(&inp.runner, &inp.model, values, weather, dir, *i)
-                    })
+                    .and_then(|()| simulate_point(&inp.runner, model, values, weather, dir, *i))
                     .map(|(o, _)| o)
                     .map_err(|e| bemcal_excerpt::shorten(&e.to_string()).into_owned());
                 let n = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
@@ -675,10 +687,15 @@ fn beyond_prior(
         .collect()
 }
 
-/// Why EnergyPlus simulates the measure: it leaves the surrogate's training range (a prior's
-/// support, or a parameter the surrogate held fixed), or the surrogate route is not built.
-fn method_note(beyond_prior: &[String], not_calibrated: &[String]) -> String {
-    if !beyond_prior.is_empty() {
+/// Why EnergyPlus simulates the measure: it leaves the surrogate's training range (the
+/// building, a prior's support, or a parameter the surrogate held fixed), or the surrogate
+/// route was not asked for.
+fn method_note(m: &Measure, beyond_prior: &[String], not_calibrated: &[String]) -> String {
+    if !m.building.is_empty() {
+        "EnergyPlus at every draw: the measure edits the building, which the surrogate was \
+         trained with fixed"
+            .into()
+    } else if !beyond_prior.is_empty() {
         format!(
             "EnergyPlus at every draw: the measure takes {} outside its prior, the surrogate's \
              training range",
@@ -689,8 +706,8 @@ fn method_note(beyond_prior: &[String], not_calibrated: &[String]) -> String {
          with fixed"
             .into()
     } else {
-        "EnergyPlus at every draw (a surrogate route corrected by EnergyPlus at a few draws is \
-         not built yet)"
+        "EnergyPlus at every draw (--surrogate-draws N adds the surrogate at N draws, corrected \
+         onto EnergyPlus at these)"
             .into()
     }
 }

@@ -319,6 +319,60 @@ impl Model {
         &self.outputs
     }
 
+    /// The same model with a retrofit measure's edits of its building spec
+    /// ([`BuildingSpec::edited`]): the parameters, their priors and the outputs stay the
+    /// calibration's, so that a posterior draw's values mean the same in both. Refused for an
+    /// own IDF (its measures edit the `[idf]` map's parameters) and where the edit would
+    /// change the parameters or the outputs (another HVAC system's, say).
+    pub fn with_building_edits(
+        &self,
+        edits: &std::collections::BTreeMap<String, serde_json::Value>,
+    ) -> Result<Model, String> {
+        let Source::Generated(spec) = &self.source else {
+            return Err(
+                "building: an own IDF's building is its IDF; edit its objects \
+                        through the [idf] map's parameters (set, scale, offset)"
+                    .into(),
+            );
+        };
+        let edited = Model::generated(spec.edited(edits)?);
+        let names =
+            |m: &Model| -> Vec<String> { m.parameters.iter().map(|p| p.name.clone()).collect() };
+        if names(&edited) != names(self) {
+            let (now, then) = (names(self), names(&edited));
+            let lost: Vec<&str> = now
+                .iter()
+                .filter(|n| !then.contains(n))
+                .map(String::as_str)
+                .collect();
+            let new: Vec<&str> = then
+                .iter()
+                .filter(|n| !now.contains(n))
+                .map(String::as_str)
+                .collect();
+            return Err(format!(
+                "building: the edits change the model's parameters (without: {}; new: {}), \
+                 so a posterior draw would not carry over",
+                bemcal_excerpt::shorten(&lost.join(", ")),
+                bemcal_excerpt::shorten(&new.join(", "))
+            ));
+        }
+        if edited.outputs != self.outputs {
+            return Err(
+                "building: the edits change the model's outputs (their meters), \
+                        so savings could not be compared output by output"
+                    .into(),
+            );
+        }
+        Ok(Model {
+            source: edited.source,
+            parameters: self.parameters.clone(),
+            constraints: self.constraints.clone(),
+            outputs: self.outputs.clone(),
+            path: self.path.clone(),
+        })
+    }
+
     /// The building spec, for a generated model.
     pub fn spec(&self) -> Option<&BuildingSpec> {
         match &self.source {

@@ -309,6 +309,50 @@ impl BuildingSpec {
         Ok(spec)
     }
 
+    /// The spec with a retrofit measure's edits of its fields (`occupied_hours = [8, 18]`,
+    /// `economizer = true`), each a field of [`BuildingSpec::MEASURE_FIELDS`] in the spec
+    /// file's own form, checked as a spec file's fields are. Refused: other fields (the
+    /// building's geometry, calendar and simulation settings are not what a retrofit changes),
+    /// a value of the wrong form, and edits that leave the spec as it was.
+    pub fn edited(
+        &self,
+        edits: &std::collections::BTreeMap<String, serde_json::Value>,
+    ) -> Result<BuildingSpec, String> {
+        let mut value = serde_json::to_value(self).map_err(|e| e.to_string())?;
+        let fields = value
+            .as_object_mut()
+            .ok_or("a building spec serialises to a table")?;
+        for (key, v) in edits {
+            if !Self::MEASURE_FIELDS.contains(&key.as_str()) {
+                return Err(format!(
+                    "building.{}: not a field a measure may edit (the building's geometry, \
+                     calendar and simulation settings stay the calibration's); it may edit {}",
+                    bemcal_excerpt::excerpt(key, 40),
+                    Self::MEASURE_FIELDS.join(", ")
+                ));
+            }
+            fields.insert(key.clone(), v.clone());
+        }
+        let mut spec: BuildingSpec = serde_json::from_value(value)
+            .map_err(|e| format!("building: {}", bemcal_excerpt::shorten(&e.to_string())))?;
+        spec.observed_day_types = self.observed_day_types.clone();
+        spec.validate().map_err(|e| format!("building: {e}"))?;
+        if spec == *self {
+            return Err("building: the edits leave the building as it is".into());
+        }
+        Ok(spec)
+    }
+
+    /// The fields a retrofit measure may edit ([`BuildingSpec::edited`]): operation and
+    /// systems, and the windows.
+    pub const MEASURE_FIELDS: [&'static str; 5] = [
+        "occupied_hours",
+        "window_to_wall",
+        "hvac",
+        "heat_recovery_effectiveness",
+        "economizer",
+    ];
+
     /// Checks geometry, schedule boundaries and prior overrides.
     pub fn validate(&self) -> Result<(), String> {
         self.check_fields().map_err(|(_, message)| message)
@@ -1066,6 +1110,46 @@ mod tests {
         let p = s.parameters();
         assert_eq!(p.len(), 38, "16 engineering + 12 weekday + 10 weekend");
         assert_eq!(s.zone_names().len(), 20);
+    }
+
+    /// A retrofit measure's building edits: operation and systems change, the parameters and
+    /// outputs stay (so that a posterior draw carries over); geometry, a value of the wrong
+    /// form, an edit to the same value and a change of the parameters are refused.
+    #[test]
+    fn a_measure_edits_the_building_it_may() {
+        let spec = BuildingSpec::from_toml(
+            "storeys = 1\nfootprint_m = [20.0, 15.0]\nzoning = \"one_per_floor\"\n",
+            std::path::Path::new("m.toml"),
+        )
+        .unwrap();
+        let model = crate::Model::generated(spec.clone());
+        let edits = |text: &str| -> std::collections::BTreeMap<String, serde_json::Value> {
+            toml::from_str(text).unwrap()
+        };
+        let edited = model
+            .with_building_edits(&edits("economizer = true\noccupied_hours = [8, 18]"))
+            .unwrap();
+        let e = edited.spec().unwrap();
+        assert!(e.economizer && e.occupied_hours == [8, 18]);
+        assert_eq!(edited.parameters(), model.parameters());
+        let v = complete_values(model.parameters(), &Default::default()).unwrap();
+        let idf = e.to_idf(&v).unwrap();
+        let ahus: Vec<_> = idf.of_class("HVACTemplate:System:VAV").collect();
+        assert!(!ahus.is_empty() && ahus.iter().all(|o| o.fields[28] == "DifferentialDryBulb"));
+        let err = |text: &str| model.with_building_edits(&edits(text)).unwrap_err();
+        let e = err("storeys = 2");
+        assert!(
+            e.contains("building.storeys: not a field a measure may edit"),
+            "{e}"
+        );
+        let e = err("economizer = \"yes\"");
+        assert!(e.starts_with("building: ") && e.contains("boolean"), "{e}");
+        let e = err("window_to_wall = 1.5");
+        assert!(e.starts_with("building: ") && e.contains("window"), "{e}");
+        let e = err("occupied_hours = [7, 19]");
+        assert!(e.contains("leave the building as it is"), "{e}");
+        let e = err("hvac = \"doas_fan_coil\"");
+        assert!(e.contains("change the model's parameters"), "{e}");
     }
 
     /// `minimum_system_timestep_minutes` writes `ConvergenceLimits` only when set, and is
