@@ -7,7 +7,9 @@ For run k (OUT/truth-k): savings.json (`bemcal savings --json`) and true_savings
 at the hidden truth with and without each measure). Per measure and meter, and in all: the
 share of true savings inside the 90 % and 50 % intervals, the mean 90 % width (kWh, and over the
 true saving's size), the error of the saving at the estimate and of the median. Outputs a measure
-cannot touch (a true saving of exactly 0 with a [0, 0] interval) are counted apart.
+cannot touch (a true saving of exactly 0 with a [0, 0] interval) are counted apart. Beside it,
+how much each posterior learned (summary.json): the temperature T of its chains and the share of
+parameters whose 90 % interval is narrower than half the prior's.
 """
 import json
 import os
@@ -18,6 +20,7 @@ out, k = sys.argv[1], int(sys.argv[2])
 rows = defaultdict(list)  # (measure, output) -> [(truth, q05, q25, q75, q95, at_estimate, median)]
 zero = defaultdict(int)
 runs = 0
+learned = []  # (T, parameters narrower than half the prior's, parameters)
 for i in range(1, k + 1):
     d = os.path.join(out, f"truth-{i}")
     try:
@@ -26,6 +29,13 @@ for i in range(1, k + 1):
     except (OSError, ValueError):
         continue
     runs += 1
+    try:
+        summary = json.load(open(os.path.join(d, "calibration", "summary.json")))
+        ratios = [p["width_ratio"] for p in summary["posterior"]["parameters"]]
+        t_value = (summary.get("temperature") or {}).get("value") or 1.0
+        learned.append((float(t_value), sum(r is not None and r < 0.5 for r in ratios), len(ratios)))
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
     for m in s["measures"]:
         for o in m["outputs"]:
             if o["weather"] != "calibration":
@@ -55,6 +65,13 @@ def line(label, rs):
 
 
 print(f"{runs} runs with savings and true savings")
+if learned:
+    ts = sorted(t for t, _, _ in learned)
+    narrowed = sum(a for _, a, _ in learned)
+    total = sum(b for _, _, b in learned)
+    print(f"how much the posteriors learned: temperature T median {ts[len(ts) // 2]:.3g} "
+          f"(range {ts[0]:.3g}-{ts[-1]:.3g}); {narrowed} of {total} parameters "
+          f"({100 * narrowed / max(1, total):.0f} %) with a 90 % interval narrower than half the prior's")
 print(f"{'measure / output':<48} {'n':>4} {'in 90 %':>13} {'in 50 %':>13} {'width90':>9} {'w/|t|':>7}"
       f" {'|truth|':>9} {'err est':>9} {'err med':>9}")
 tot = [0, 0, 0]

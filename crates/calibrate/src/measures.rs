@@ -406,6 +406,21 @@ pub struct Driver {
     pub width_ratio: f64,
     /// The measurement that would narrow it.
     pub would_narrow: String,
+    /// Parameters strongly correlated with it in the posterior
+    /// (`PosteriorSummary::correlated_pairs`): the meters constrain a combination of them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moves_with: Vec<Partner>,
+}
+
+/// A parameter a driver moves with in the posterior.
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Partner {
+    /// The other calibrated parameter.
+    pub parameter: String,
+    /// Their Pearson correlation over the posterior draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub correlation: f64,
 }
 
 #[cfg(test)]

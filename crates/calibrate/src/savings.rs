@@ -22,7 +22,7 @@ use crate::calibration::{Calibration, Log};
 use crate::design::simulate_point;
 use crate::error::{write_atomic, Error};
 use crate::measures::{
-    what_would_narrow, Driver, Measure, MeasureSavings, OutputSavings, SavingsMethod,
+    what_would_narrow, Driver, Measure, MeasureSavings, OutputSavings, Partner, SavingsMethod,
     SavingsReport, SavingsWeather,
 };
 use crate::output::read_record;
@@ -30,6 +30,11 @@ use crate::summary::Summary;
 
 /// A parameter explaining at least this share of a saving's variance is named as a driver.
 pub const DRIVER_SHARE: f64 = 0.1;
+
+/// A driver explaining at least this share of a saving's variance, strongly correlated in the
+/// posterior with another parameter (`PosteriorSummary::correlated_pairs`), makes the saving
+/// rest on a split the meters do not make: said in its warning ([`split_warning`]).
+pub const SPLIT_SHARE: f64 = 0.5;
 
 /// What `bemcal savings` simulates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -608,6 +613,7 @@ fn summarise(
     let params: Vec<Vec<f64>> = (0..cal.inputs.plan.calibrated.len())
         .map(|k| d.params.iter().map(|x| x[k]).collect())
         .collect();
+    let drivers = drivers(cal, summary, &variance_shares(&params, &s));
     Some(OutputSavings {
         output: name.to_string(),
         weather,
@@ -617,8 +623,11 @@ fn summarise(
         savings_percent: spread(&savings_percent(&base, &after))?,
         at_estimate_kwh,
         monthly_kwh,
-        drivers: drivers(cal, summary, &variance_shares(&params, &s)),
-        warning: warning(cal, summary, name),
+        drivers: drivers.clone(),
+        warning: [warning(cal, summary, name), split_warning(&drivers)]
+            .into_iter()
+            .flatten()
+            .reduce(|a, b| format!("{a}; {b}")),
         correction: None,
     })
 }
@@ -635,10 +644,53 @@ fn drivers(cal: &Calibration, summary: &Summary, shares: &[f64]) -> Vec<Driver> 
                 .find(|p| &p.name == name)
                 .map_or(f64::NAN, |p| p.width_ratio),
             would_narrow: what_would_narrow(name).to_string(),
+            moves_with: (summary.posterior.correlated_pairs.iter())
+                .filter_map(|c| {
+                    let other = if &c.a == name {
+                        &c.b
+                    } else if &c.b == name {
+                        &c.a
+                    } else {
+                        return None;
+                    };
+                    Some(Partner {
+                        parameter: other.clone(),
+                        correlation: c.rho,
+                    })
+                })
+                .collect(),
         })
         .collect();
     d.sort_by(|a, b| b.share.total_cmp(&a.share));
     d
+}
+
+/// Where a saving rests on a split the meters do not make: its main driver (a share of
+/// [`SPLIT_SHARE`] or more) strongly correlated in the posterior with another parameter. The
+/// meters then constrain a combination of the two; where the chains put each one along it is
+/// the prior's and the surrogate's doing, and the surrogate's small errors can pin it too
+/// tightly (measured: `make savings-coverage`, lighting against equipment on one electricity
+/// meter, docs/benchmarks.md).
+fn split_warning(drivers: &[Driver]) -> Option<String> {
+    let d = drivers
+        .iter()
+        .find(|d| d.share >= SPLIT_SHARE && !d.moves_with.is_empty())?;
+    let with: Vec<String> = (d.moves_with.iter())
+        .map(|p| {
+            format!(
+                "{} (posterior correlation {:+.2})",
+                p.parameter, p.correlation
+            )
+        })
+        .collect();
+    Some(format!(
+        "it rests on {}, tied to {}: the meters constrain them together, not apart, so \
+         the split is not the meters' finding and this interval is likely too narrow; {} \
+         would separate them",
+        d.parameter,
+        with.join(" and "),
+        d.would_narrow
+    ))
 }
 
 /// Why an output's savings may not be trusted as they stand: no meter, a meter that checked
@@ -758,6 +810,46 @@ fn report_notes(summary: &Summary, draws: usize) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A saving driven by a parameter the posterior ties to another warns that the split is
+    /// not the meters'; a minor driver, or one on its own, does not.
+    #[test]
+    fn a_saving_on_a_split_the_meters_do_not_make_is_warned() {
+        let driver = |name: &str, share: f64, partner: Option<(&str, f64)>| Driver {
+            parameter: name.into(),
+            share,
+            width_ratio: 0.1,
+            would_narrow: what_would_narrow(name).into(),
+            moves_with: partner
+                .map(|(p, r)| Partner {
+                    parameter: p.into(),
+                    correlation: r,
+                })
+                .into_iter()
+                .collect(),
+        };
+        let led = [driver(
+            "lighting_power_density",
+            0.98,
+            Some(("equipment_power_density", -0.99)),
+        )];
+        let w = split_warning(&led).unwrap();
+        assert!(
+            w.contains("equipment_power_density (posterior correlation -0.99)")
+                && w.contains("likely too narrow")
+                && w.contains("lighting sub-meter"),
+            "{w}"
+        );
+        let minor = [
+            driver("cooling_setpoint_occupied", 0.8, None),
+            driver(
+                "lighting_power_density",
+                0.2,
+                Some(("equipment_power_density", -0.99)),
+            ),
+        ];
+        assert_eq!(split_warning(&minor), None);
+    }
 
     #[test]
     fn evenly_spaced_draws_cover_the_chains() {
