@@ -31,12 +31,27 @@ pub struct Args {
     /// EnergyPlus alone; the surrogate route is new and its coverage not yet measured).
     #[arg(long, default_value_t = 0)]
     pub surrogate_draws: usize,
+    /// Two parameters the posterior ties together (the meters constrain a combination of
+    /// them): `priors` draws each draw's split between them again from their priors along
+    /// that combination, so that a saving resting on one carries that uncertainty; `chains`
+    /// keeps the chains' split (which a surrogate's small errors can pin too tightly).
+    #[arg(long, value_enum, default_value_t = SplitArg::Priors)]
+    pub split: SplitArg,
     /// EnergyPlus processes at once (default: the project's `[design] parallel`).
     #[arg(long)]
     pub parallel: Option<usize>,
     /// Print the savings as JSON (summary.json's `savings`) instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--split`: how two parameters the posterior ties together are split at each draw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitArg {
+    /// Drawn again from their priors along the combination the meters constrain.
+    Priors,
+    /// The chains' draws as they are.
+    Chains,
 }
 
 /// Run `bemcal savings`.
@@ -59,6 +74,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         draws: a.draws,
         surrogate_draws: a.surrogate_draws,
         parallel,
+        split: match a.split {
+            SplitArg::Priors => bemcal_calibrate::savings::Split::Priors,
+            SplitArg::Chains => bemcal_calibrate::savings::Split::Chains,
+        },
     };
     let report = bemcal_calibrate::savings::estimate_savings(&cal, &measures, opts, &log)?;
     super::calibrate::write_report(&cal.project, &a.out);

@@ -323,6 +323,10 @@ pub struct SavingsReport {
     pub draws_file: String,
     /// How the model's errors enter the savings.
     pub notes: Vec<String>,
+    /// Pairs of parameters tied in the posterior whose split was drawn again from their priors
+    /// at each draw (`bemcal savings --split priors`, the default); empty where none.
+    #[serde(default)]
+    pub split_redrawn: Vec<RedrawnSplit>,
     /// One per measure, in the project's order.
     pub measures: Vec<MeasureSavings>,
 }
@@ -410,6 +414,23 @@ pub struct Driver {
     /// (`PosteriorSummary::correlated_pairs`): the meters constrain a combination of them.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub moves_with: Vec<Partner>,
+}
+
+/// A pair of parameters tied in the posterior, and the line along which each draw's split
+/// between them was drawn again from their priors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct RedrawnSplit {
+    /// The first parameter.
+    pub a: String,
+    /// The second.
+    pub b: String,
+    /// Their Pearson correlation over the posterior draws.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub correlation: f64,
+    /// The line's unit direction in (a, b), the parameters' own units: the major axis of
+    /// their posterior draws.
+    pub direction: [f64; 2],
 }
 
 /// A parameter a driver moves with in the posterior.

@@ -7,6 +7,12 @@
 //! Runs are cached under `savings/<weather>/<measure>/point_NNN.json` by their parameter
 //! values ([`crate::design::simulate_point`]), so a rerun, another measure or more draws
 //! simulate only what is new. A draw whose simulation fails is left out with its reason.
+//!
+//! Two parameters the posterior ties together (`PosteriorSummary::correlated_pairs`) are a
+//! combination the meters constrain, not each one: by default ([`Split::Priors`]) each draw's
+//! split between them is drawn again from their priors along that line
+//! ([`bemcal_stats::split`]), so that a saving resting on one of them carries the split's
+//! uncertainty instead of the chains' (which a surrogate's small errors can pin wrongly).
 
 use std::path::{Path, PathBuf};
 
@@ -22,8 +28,8 @@ use crate::calibration::{Calibration, Log};
 use crate::design::simulate_point;
 use crate::error::{write_atomic, Error};
 use crate::measures::{
-    what_would_narrow, Driver, Measure, MeasureSavings, OutputSavings, Partner, SavingsMethod,
-    SavingsReport, SavingsWeather,
+    what_would_narrow, Driver, Measure, MeasureSavings, OutputSavings, Partner, RedrawnSplit,
+    SavingsMethod, SavingsReport, SavingsWeather,
 };
 use crate::output::read_record;
 use crate::summary::Summary;
@@ -46,7 +52,23 @@ pub struct SavingsOptions {
     pub surrogate_draws: usize,
     /// EnergyPlus processes at once.
     pub parallel: usize,
+    /// How two parameters the posterior ties together are split at each draw.
+    pub split: Split,
 }
+
+/// How a saving treats two parameters the posterior ties together (`bemcal savings --split`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Split {
+    /// Each draw's split between them drawn again from their priors along the line the meters
+    /// constrain ([`bemcal_stats::split::redraw_on_line`]): the default.
+    #[default]
+    Priors,
+    /// The chains' draws as they are.
+    Chains,
+}
+
+/// The seed of the splits' redraws: the same draws on a rerun, so that cached runs serve.
+const SPLIT_SEED: u64 = 70;
 
 /// Simulates `measures` over posterior draws of the finished calibration in `cal.out` (as
 /// `opts` says), writes `savings` into its `summary.json` and returns it.
@@ -87,7 +109,9 @@ pub fn estimate_savings(
                 cal.out.display()
             ))
         })?;
+    let lines = split_lines(cal, &summary, opts.split)?;
     let (draws_file, rows) = posterior_draws(cal, draws)?;
+    let rows = redraw_splits(cal, &lines, rows, SPLIT_SEED);
     let estimate = estimate_point(&summary, &plan.calibrated)?;
     let points: Vec<ParameterValues> = rows
         .iter()
@@ -130,10 +154,11 @@ pub fn estimate_savings(
         weathers: weathers.iter().map(|(w, _)| *w).collect(),
         measures: measures.len(),
         runs: simulate_all(cal, &jobs, parallel, log)?,
+        lines: &lines,
     };
     let mut surrogate = match opts.surrogate_draws {
         0 => None,
-        n => SurrogateSide::load(cal, n, &rows, log)?,
+        n => SurrogateSide::load(cal, n, &rows, &lines, log)?,
     };
     let mut out = vec![];
     for (j, m) in measures.iter().enumerate() {
@@ -145,10 +170,13 @@ pub fn estimate_savings(
         }
         out.push(ms);
     }
+    let mut notes = report_notes(&summary, rows.len());
+    notes.extend(lines.iter().map(split_note));
     let report = SavingsReport {
         draws: rows.len(),
         draws_file,
-        notes: report_notes(&summary, rows.len()),
+        notes,
+        split_redrawn: lines,
         measures: out,
     };
     summary.savings = Some(report.clone());
@@ -173,6 +201,8 @@ struct Simulated<'a> {
     weathers: Vec<SavingsWeather>,
     measures: usize,
     runs: Vec<Result<HourlyOutputs, String>>,
+    /// The pairs whose split was drawn again.
+    lines: &'a [RedrawnSplit],
 }
 
 impl Simulated<'_> {
@@ -208,6 +238,7 @@ impl Simulated<'_> {
             outputs.extend(output_savings(
                 self.cal,
                 self.summary,
+                self.lines,
                 *w,
                 self.rows,
                 &pairs,
@@ -245,6 +276,7 @@ impl SurrogateSide {
         cal: &Calibration,
         n: usize,
         few: &[Vec<f64>],
+        lines: &[RedrawnSplit],
         log: Log<'_>,
     ) -> Result<Option<SurrogateSide>, Error> {
         let inp = &cal.inputs;
@@ -269,6 +301,7 @@ impl SurrogateSide {
         }
         let mut evaluator = surrogate.bind(&inp.features)?;
         let (_, many) = posterior_draws(cal, n)?;
+        let many = redraw_splits(cal, lines, many, SPLIT_SEED + 1);
         let base_many = surrogate_periods(&mut evaluator, &many)?;
         let base_few = surrogate_periods(&mut evaluator, few)?;
         Ok(Some(SurrogateSide {
@@ -350,6 +383,7 @@ impl SurrogateSide {
             if let Some(mut o) = summarise(
                 cal,
                 sim.summary,
+                sim.lines,
                 SavingsWeather::Calibration,
                 name,
                 &d,
@@ -445,6 +479,83 @@ fn simulate_all(
             })
             .collect()
     }))
+}
+
+/// The lines along which the draws' splits are drawn again: under [`Split::Priors`], every
+/// pair of calibrated parameters the posterior ties together, with the major axis of their
+/// draws ([`bemcal_stats::split::ridge_direction`], over all the draws).
+fn split_lines(
+    cal: &Calibration,
+    summary: &Summary,
+    split: Split,
+) -> Result<Vec<RedrawnSplit>, Error> {
+    if split == Split::Chains || summary.posterior.correlated_pairs.is_empty() {
+        return Ok(vec![]);
+    }
+    let (_, all) = posterior_draws(cal, usize::MAX)?;
+    let at = |name: &str| cal.inputs.plan.calibrated.iter().position(|c| c == name);
+    let column = |k: usize| all.iter().map(|r| r[k]).collect::<Vec<f64>>();
+    Ok((summary.posterior.correlated_pairs.iter())
+        .filter_map(|c| {
+            let (a, b) = (at(&c.a)?, at(&c.b)?);
+            let direction = bemcal_stats::split::ridge_direction(&column(a), &column(b))?;
+            Some(RedrawnSplit {
+                a: c.a.clone(),
+                b: c.b.clone(),
+                correlation: c.rho,
+                direction,
+            })
+        })
+        .collect())
+}
+
+/// `rows` with each line's split drawn again at every draw (one uniform number per draw and
+/// line from `seed`); a draw the model's constraints would refuse keeps its own.
+fn redraw_splits(
+    cal: &Calibration,
+    lines: &[RedrawnSplit],
+    rows: Vec<Vec<f64>>,
+    seed: u64,
+) -> Vec<Vec<f64>> {
+    use rand::{Rng, SeedableRng};
+    if lines.is_empty() {
+        return rows;
+    }
+    let plan = &cal.inputs.plan;
+    let at = |name: &str| plan.calibrated.iter().position(|c| c == name);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    rows.into_iter()
+        .map(|mut x| {
+            for l in lines {
+                let u: f64 = rng.random();
+                let (Some(a), Some(b)) = (at(&l.a), at(&l.b)) else {
+                    continue;
+                };
+                let (xa, xb) = bemcal_stats::split::redraw_on_line(
+                    (x[a], x[b]),
+                    l.direction,
+                    (&plan.priors[a], &plan.priors[b]),
+                    u,
+                );
+                let mut y = x.clone();
+                (y[a], y[b]) = (xa, xb);
+                if plan.feasible(&cal.inputs.model, &y) {
+                    x = y;
+                }
+            }
+            x
+        })
+        .collect()
+}
+
+/// What a redrawn split means, for the report's notes.
+fn split_note(l: &RedrawnSplit) -> String {
+    format!(
+        "{} and {} are tied in the posterior (correlation {:+.2}): the meters constrain a \
+         combination of them, and each draw's split between them was drawn again from their \
+         priors along it (bemcal savings --split chains keeps the chains')",
+        l.a, l.b, l.correlation
+    )
 }
 
 /// `k` evenly spaced rows of the posterior draws (the calibrated parameters, in the plan's
@@ -560,6 +671,7 @@ struct PerDraw {
 fn output_savings(
     cal: &Calibration,
     summary: &Summary,
+    lines: &[RedrawnSplit],
     weather: SavingsWeather,
     rows: &[Vec<f64>],
     pairs: &[Pair<'_>],
@@ -590,7 +702,15 @@ fn output_savings(
             (Ok(b), Ok(a)) => of(b)[0] - of(a)[0],
             _ => f64::NAN,
         };
-        out.extend(summarise(cal, summary, weather, name, &d, at_estimate_kwh));
+        out.extend(summarise(
+            cal,
+            summary,
+            lines,
+            weather,
+            name,
+            &d,
+            at_estimate_kwh,
+        ));
     }
     out
 }
@@ -599,6 +719,7 @@ fn output_savings(
 fn summarise(
     cal: &Calibration,
     summary: &Summary,
+    lines: &[RedrawnSplit],
     weather: SavingsWeather,
     name: &str,
     d: &PerDraw,
@@ -624,7 +745,7 @@ fn summarise(
         at_estimate_kwh,
         monthly_kwh,
         drivers: drivers.clone(),
-        warning: [warning(cal, summary, name), split_warning(&drivers)]
+        warning: [warning(cal, summary, name), split_warning(&drivers, lines)]
             .into_iter()
             .flatten()
             .reduce(|a, b| format!("{a}; {b}")),
@@ -666,12 +787,13 @@ fn drivers(cal: &Calibration, summary: &Summary, shares: &[f64]) -> Vec<Driver> 
 }
 
 /// Where a saving rests on a split the meters do not make: its main driver (a share of
-/// [`SPLIT_SHARE`] or more) strongly correlated in the posterior with another parameter. The
-/// meters then constrain a combination of the two; where the chains put each one along it is
-/// the prior's and the surrogate's doing, and the surrogate's small errors can pin it too
-/// tightly (measured: `make savings-coverage`, lighting against equipment on one electricity
-/// meter, docs/benchmarks.md).
-fn split_warning(drivers: &[Driver]) -> Option<String> {
+/// [`SPLIT_SHARE`] or more) tied in the posterior to another parameter. The meters then
+/// constrain a combination of the two. Where its split was drawn again from the priors
+/// (`lines`), the interval carries that uncertainty and the warning says what would narrow it;
+/// where the chains' split stands, the surrogate's small errors can pin it too tightly
+/// (measured: `make savings-weather`, lighting against equipment on one electricity meter,
+/// docs/benchmarks.md), and the warning says the interval is likely too narrow.
+fn split_warning(drivers: &[Driver], lines: &[RedrawnSplit]) -> Option<String> {
     let d = drivers
         .iter()
         .find(|d| d.share >= SPLIT_SHARE && !d.moves_with.is_empty())?;
@@ -683,12 +805,23 @@ fn split_warning(drivers: &[Driver]) -> Option<String> {
             )
         })
         .collect();
+    let redrawn = d.moves_with.iter().all(|p| {
+        lines.iter().any(|l| {
+            (l.a == d.parameter && l.b == p.parameter) || (l.b == d.parameter && l.a == p.parameter)
+        })
+    });
+    let consequence = if redrawn {
+        "so each draw's split was drawn from their priors along that combination and the \
+         interval carries the priors' uncertainty of it"
+    } else {
+        "so the split is not the meters' finding and this interval is likely too narrow"
+    };
     Some(format!(
-        "it rests on {}, tied to {}: the meters constrain them together, not apart, so \
-         the split is not the meters' finding and this interval is likely too narrow; {} \
+        "it rests on {}, tied to {}: the meters constrain them together, not apart, {}; {} \
          would separate them",
         d.parameter,
         with.join(" and "),
+        consequence,
         d.would_narrow
     ))
 }
@@ -833,13 +966,21 @@ mod tests {
             0.98,
             Some(("equipment_power_density", -0.99)),
         )];
-        let w = split_warning(&led).unwrap();
+        let w = split_warning(&led, &[]).unwrap();
         assert!(
             w.contains("equipment_power_density (posterior correlation -0.99)")
                 && w.contains("likely too narrow")
                 && w.contains("lighting sub-meter"),
             "{w}"
         );
+        let line = RedrawnSplit {
+            a: "equipment_power_density".into(),
+            b: "lighting_power_density".into(),
+            correlation: -0.99,
+            direction: [0.7, -0.7],
+        };
+        let w = split_warning(&led, &[line]).unwrap();
+        assert!(w.contains("drawn from their priors"), "{w}");
         let minor = [
             driver("cooling_setpoint_occupied", 0.8, None),
             driver(
@@ -848,7 +989,7 @@ mod tests {
                 Some(("equipment_power_density", -0.99)),
             ),
         ];
-        assert_eq!(split_warning(&minor), None);
+        assert_eq!(split_warning(&minor, &[]), None);
     }
 
     #[test]

@@ -25,6 +25,8 @@
 //!   discrepancy, parameters piled against a prior bound.
 //! - [`savings`]: a retrofit measure's savings over posterior draws, their intervals and what
 //!   drives their width.
+//! - [`split`]: two parameters the meters constrain together, and their split drawn again
+//!   from the priors.
 //! - [`nan`]: NaN in JSON records (written as `null`, read back as NaN).
 
 #![deny(missing_docs)]
@@ -44,6 +46,7 @@ pub mod optim;
 pub mod predictive;
 pub mod prior;
 pub mod savings;
+pub mod split;
 pub mod summary;
 pub mod surrogate_error;
 
