@@ -81,34 +81,8 @@ pub fn estimate_savings(
     let (draws, parallel) = (opts.draws, opts.parallel);
     let inp = &cal.inputs;
     let plan = &inp.plan;
-    if measures.is_empty() {
-        return Err(cal.project.error_at(
-            &["measures"],
-            "no measures: add [[measures]] to the project (a name and set, scale or offset \
-             of parameters)"
-                .into(),
-        ));
-    }
-    let mut notes_of = vec![];
-    for m in measures {
-        m.check()
-            .and_then(|()| m.check_model(&inp.model, &plan.calibrated, &plan.fixed))
-            .map(|n| notes_of.push(n))
-            .map_err(|message| cal.project.error_at(&["measures"], message))?;
-    }
-    let mut summary: Summary = read_record(&cal.out.summary_json())
-        .map_err(|e| Error::Input {
-            path: cal.out.summary_json(),
-            line: e.line(),
-            message: format!("not a calibration's summary.json: {e}"),
-        })?
-        .ok_or_else(|| {
-            Error::Config(format!(
-                "no finished calibration in {}: savings need its summary.json and draws.csv \
-                 (run bemcal calibrate first)",
-                cal.out.display()
-            ))
-        })?;
+    let notes_of = check_measures(cal, measures)?;
+    let mut summary = finished_summary(cal)?;
     let lines = split_lines(cal, &summary, opts.split)?;
     let (draws_file, rows) = posterior_draws(cal, draws)?;
     let rows = redraw_splits(cal, &lines, rows, SPLIT_SEED);
@@ -183,6 +157,44 @@ pub fn estimate_savings(
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
     write_atomic(&cal.out.summary_json(), &json)?;
     Ok(report)
+}
+
+/// Each measure checked against the model and the calibration (the first refused: an error
+/// at the project's `measures`), with the notes a reader needs ([`Measure::check_model`]).
+fn check_measures(cal: &Calibration, measures: &[Measure]) -> Result<Vec<Vec<String>>, Error> {
+    let (inp, plan) = (&cal.inputs, &cal.inputs.plan);
+    if measures.is_empty() {
+        return Err(cal.project.error_at(
+            &["measures"],
+            "no measures: add [[measures]] to the project (a name and set, scale or offset \
+             of parameters, or building fields)"
+                .into(),
+        ));
+    }
+    (measures.iter())
+        .map(|m| {
+            m.check()
+                .and_then(|()| m.check_model(&inp.model, &plan.calibrated, &plan.fixed))
+                .map_err(|message| cal.project.error_at(&["measures"], message))
+        })
+        .collect()
+}
+
+/// The finished calibration's `summary.json`, or why there is none to estimate savings from.
+fn finished_summary(cal: &Calibration) -> Result<Summary, Error> {
+    read_record(&cal.out.summary_json())
+        .map_err(|e| Error::Input {
+            path: cal.out.summary_json(),
+            line: e.line(),
+            message: format!("not a calibration's summary.json: {e}"),
+        })?
+        .ok_or_else(|| {
+            Error::Config(format!(
+                "no finished calibration in {}: savings need its summary.json and draws.csv \
+                 (run bemcal calibrate first)",
+                cal.out.display()
+            ))
+        })
 }
 
 /// A point's runs without and with a measure (a failed run: its reason).
