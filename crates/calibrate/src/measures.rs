@@ -324,8 +324,8 @@ pub struct SavingsReport {
     /// How the model's errors enter the savings.
     pub notes: Vec<String>,
     /// Pairs of parameters tied in the posterior whose split was drawn again from their priors
-    /// at each draw (`bemcal savings --split priors`, the default); empty where none.
-    #[serde(default)]
+    /// at each draw (`bemcal savings --split priors`, the default); left out where none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub split_redrawn: Vec<RedrawnSplit>,
     /// One per measure, in the project's order.
     pub measures: Vec<MeasureSavings>,
