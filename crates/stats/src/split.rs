@@ -14,7 +14,7 @@
 //! Pure: no I/O.
 
 use crate::prior::Triangular;
-use crate::summary::correlation;
+use crate::summary::centred_sums;
 
 /// Grid points along the line on which the priors' density is summed (inverse-CDF sampling
 /// of a discretised density).
@@ -24,15 +24,9 @@ pub const LINE_GRID: usize = 512;
 /// 2 x 2 covariance, in the parameters' own units), oriented with a positive first component;
 /// `None` where either does not vary.
 pub fn ridge_direction(a: &[f64], b: &[f64]) -> Option<[f64; 2]> {
-    let n = a.len().min(b.len()) as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        saa += (x - ma) * (x - ma);
-        sbb += (y - mb) * (y - mb);
-        sab += (x - ma) * (y - mb);
-    }
-    if !(saa > 0.0 && sbb > 0.0 && correlation(a, b).is_finite()) {
+    let (saa, sbb, sab) = centred_sums(a, b);
+    // Both vary and all is finite: where their correlation is a number.
+    if !(saa > 0.0 && sbb > 0.0 && (sab / (saa * sbb).sqrt()).is_finite()) {
         return None;
     }
     // The larger eigenvalue of [[saa, sab], [sab, sbb]] and its eigenvector.

@@ -192,15 +192,22 @@ pub fn summarize(priors: &[Prior], chains: &[Draws]) -> Result<PosteriorSummary>
 
 /// Pearson correlation of two equally long series (NaN if either is constant).
 pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
+    let (sxx, syy, sxy) = centred_sums(x, y);
+    sxy / (sxx * syy).sqrt()
+}
+
+/// The centred sums of squares and products of two equally long series: `(sum (x - mean
+/// x)^2, sum (y - mean y)^2, sum (x - mean x)(y - mean y))`, their covariance matrix times n.
+pub fn centred_sums(x: &[f64], y: &[f64]) -> (f64, f64, f64) {
     let n = x.len() as f64;
     let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
     for (a, b) in x.iter().zip(y) {
         sxy += (a - mx) * (b - my);
         sxx += (a - mx) * (a - mx);
         syy += (b - my) * (b - my);
     }
-    sxy / (sxx * syy).sqrt()
+    (sxx, syy, sxy)
 }
 
 /// Hourly posterior predictive bands.
