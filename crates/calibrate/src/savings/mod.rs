@@ -34,6 +34,12 @@ use crate::measures::{
 use crate::output::read_record;
 use crate::summary::Summary;
 
+mod split;
+mod surrogate;
+
+use split::{redraw_splits, split_lines, split_note, split_warning};
+use surrogate::SurrogateSide;
+
 /// A parameter explaining at least this share of a saving's variance is named as a driver.
 pub const DRIVER_SHARE: f64 = 0.1;
 
@@ -92,9 +98,9 @@ pub fn estimate_savings(
     let plan = &inp.plan;
     let notes_of = check_measures(cal, measures)?;
     let mut summary = finished_summary(cal)?;
-    let lines = split_lines(cal, &summary, opts.split)?;
-    let (draws_file, rows) = posterior_draws(cal, draws)?;
-    let rows = redraw_splits(cal, &lines, rows, SPLIT_SEED);
+    let posterior = PosteriorDraws::read(cal)?;
+    let lines = split_lines(cal, &summary, &posterior.rows, opts.split);
+    let rows = redraw_splits(cal, &lines, posterior.evenly(draws), SPLIT_SEED);
     let estimate = estimate_point(&summary, &plan.calibrated)?;
     let points: Vec<ParameterValues> = rows
         .iter()
@@ -141,7 +147,7 @@ pub fn estimate_savings(
     };
     let mut surrogate = match opts.surrogate_draws {
         0 => None,
-        n => SurrogateSide::load(cal, n, &rows, &lines, log)?,
+        n => SurrogateSide::load(cal, posterior.evenly(n), &rows, &lines, log)?,
     };
     let mut out = vec![];
     for (j, m) in measures.iter().enumerate() {
@@ -157,7 +163,7 @@ pub fn estimate_savings(
     notes.extend(lines.iter().map(split_note));
     let report = SavingsReport {
         draws: rows.len(),
-        draws_file,
+        draws_file: posterior.file,
         notes,
         split_redrawn: lines,
         measures: out,
@@ -280,187 +286,6 @@ impl Simulated<'_> {
     }
 }
 
-/// The surrogate's side: the calibration's last surrogate bound to its weather, many posterior
-/// draws, and its energy without any measure there and at EnergyPlus's draws.
-struct SurrogateSide {
-    evaluator: bemcal_surrogate::Evaluator,
-    many: Vec<Vec<f64>>,
-    /// `[draw][output]`, the outputs in the calibration's order (its metered ones).
-    base_many: Vec<Vec<Periods>>,
-    base_few: Vec<Vec<Periods>>,
-}
-
-impl SurrogateSide {
-    /// The surrogate of `cal.out` at `n` evenly spaced draws and at `few` (EnergyPlus's);
-    /// `None`, said in the log, where it cannot serve (none, or of other parameters).
-    fn load(
-        cal: &Calibration,
-        n: usize,
-        few: &[Vec<f64>],
-        lines: &[RedrawnSplit],
-        log: Log<'_>,
-    ) -> Result<Option<SurrogateSide>, Error> {
-        let inp = &cal.inputs;
-        let dir = cal.surrogate_dir();
-        let loaded = bemcal_surrogate::Surrogate::load(&dir, cal.project.surrogate.threads);
-        let surrogate = match loaded {
-            Ok(s) => s,
-            Err(e) => {
-                log(&format!("savings: EnergyPlus alone (no surrogate: {e})"));
-                return Ok(None);
-            }
-        };
-        let names: Vec<&str> = surrogate
-            .meta()
-            .params
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect();
-        if names != inp.plan.calibrated || surrogate.meta().output_names() != inp.outputs {
-            log("savings: EnergyPlus alone (the surrogate is of other parameters or outputs)");
-            return Ok(None);
-        }
-        let mut evaluator = surrogate.bind(&inp.features)?;
-        let (_, many) = posterior_draws(cal, n)?;
-        let many = redraw_splits(cal, lines, many, SPLIT_SEED + 1);
-        let base_many = surrogate_periods(&mut evaluator, &many)?;
-        let base_few = surrogate_periods(&mut evaluator, few)?;
-        Ok(Some(SurrogateSide {
-            evaluator,
-            many,
-            base_many,
-            base_few,
-        }))
-    }
-
-    /// Replaces measure `j`'s metered outputs under the calibration's weather by the
-    /// surrogate's draws corrected onto EnergyPlus's at the draws both simulated.
-    fn correct(
-        &mut self,
-        sim: &Simulated<'_>,
-        j: usize,
-        m: &Measure,
-        ms: &mut MeasureSavings,
-    ) -> Result<(), Error> {
-        let cal = sim.cal;
-        let plan = &cal.inputs.plan;
-        let pairs = sim.pairs(0, j);
-        let ok: Vec<usize> = (0..sim.rows.len())
-            .filter(|&i| pairs[i].0.is_ok() && pairs[i].1.is_ok())
-            .collect();
-        if ok.len() < 2 {
-            return Ok(());
-        }
-        let edit = |x: &Vec<f64>| {
-            let after = m.apply(&plan.values(x));
-            plan.calibrated
-                .iter()
-                .map(|n| after[n])
-                .collect::<Vec<f64>>()
-        };
-        let after_many = surrogate_periods(
-            &mut self.evaluator,
-            &self.many.iter().map(edit).collect::<Vec<_>>(),
-        )?;
-        let few: Vec<Vec<f64>> = ok.iter().map(|&i| edit(&sim.rows[i])).collect();
-        let after_few = surrogate_periods(&mut self.evaluator, &few)?;
-        let mut r2 = vec![];
-        for (k, name) in cal.inputs.outputs.iter().enumerate() {
-            let Some(slot) = (ms.outputs.iter())
-                .position(|o| &o.output == name && o.weather == SavingsWeather::Calibration)
-            else {
-                continue;
-            };
-            let ep = |i: usize, with: bool| {
-                let run = if with { &pairs[i].1 } else { &pairs[i].0 };
-                let o = run.as_ref().expect("ok draws only");
-                periods(o.get(name).unwrap_or(&[]).iter().copied())
-            };
-            let at = |v: &[Vec<Periods>], p: usize| v.iter().map(|x| x[k][p]).collect::<Vec<f64>>();
-            let base_few: Vec<Vec<Periods>> =
-                ok.iter().map(|&i| self.base_few[i].clone()).collect();
-            let mut d = PerDraw {
-                base: vec![[0.0; 13]; self.many.len()],
-                after: vec![[0.0; 13]; self.many.len()],
-                params: self.many.clone(),
-            };
-            let mut annual = None;
-            for p in 0..13 {
-                let ep_base: Vec<f64> = ok.iter().map(|&i| ep(i, false)[p]).collect();
-                let ep_after: Vec<f64> = ok.iter().map(|&i| ep(i, true)[p]).collect();
-                let base = corrected_onto(&at(&base_few, p), &ep_base, &at(&self.base_many, p)).0;
-                let s_few = savings(&at(&base_few, p), &at(&after_few, p));
-                let s_many = savings(&at(&self.base_many, p), &at(&after_many, p));
-                let (saved, line) = corrected_onto(&s_few, &savings(&ep_base, &ep_after), &s_many);
-                for (di, (b, s)) in base.iter().zip(&saved).enumerate() {
-                    d.base[di][p] = *b;
-                    d.after[di][p] = b - s;
-                }
-                if p == 0 {
-                    annual = Some(line);
-                }
-            }
-            let at_estimate = ms.outputs[slot].at_estimate_kwh;
-            if let Some(mut o) = summarise(
-                cal,
-                sim.summary,
-                sim.lines,
-                SavingsWeather::Calibration,
-                name,
-                &d,
-                at_estimate,
-            ) {
-                o.correction = annual;
-                r2.push(format!("{name} {:.2}", annual.map_or(f64::NAN, |c| c.r2)));
-                ms.outputs[slot] = o;
-            }
-        }
-        ms.method = SavingsMethod::SurrogateCorrected;
-        ms.surrogate_draws = self.many.len();
-        ms.method_note = format!(
-            "the surrogate at {} posterior draws, corrected onto EnergyPlus at {} (the share of \
-             EnergyPlus's annual savings the line explains: {}); outputs without a meter by \
-             EnergyPlus alone",
-            self.many.len(),
-            ok.len(),
-            r2.join(", ")
-        );
-        Ok(())
-    }
-}
-
-/// The surrogate's savings at many draws corrected onto EnergyPlus's (`few_energyplus`) at
-/// the draws where both simulated (`few_surrogate`), and the line.
-fn corrected_onto(
-    few_surrogate: &[f64],
-    few_energyplus: &[f64],
-    many: &[f64],
-) -> (Vec<f64>, Correction) {
-    let line = correction(few_surrogate, few_energyplus);
-    let r = residuals(&line, few_surrogate, few_energyplus);
-    (corrected(&line, many, &r), line)
-}
-
-/// The surrogate's energy per output over the year and each month at each of `xs`.
-fn surrogate_periods(
-    evaluator: &mut bemcal_surrogate::Evaluator,
-    xs: &[Vec<f64>],
-) -> Result<Vec<Vec<Periods>>, Error> {
-    let mut out = Vec::with_capacity(xs.len());
-    for chunk in xs.chunks(8) {
-        let y = evaluator.evaluate_batch(chunk)?;
-        let (b, h, k) = y.dim();
-        for i in 0..b {
-            out.push(
-                (0..k)
-                    .map(|o| periods((0..h).map(|t| f64::from(y[[i, t, o]]))))
-                    .collect(),
-            );
-        }
-    }
-    Ok(out)
-}
-
 /// A savings run: its folder, weather, model (the measure's building), key and parameter
 /// values.
 type Job<'a> = (
@@ -502,143 +327,75 @@ fn simulate_all(
     }))
 }
 
-/// The lines along which the draws' splits are drawn again: under [`Split::Priors`], every
-/// pair of calibrated parameters the posterior ties together, with the major axis of their
-/// draws ([`bemcal_stats::split::ridge_direction`], over all the draws).
-fn split_lines(
-    cal: &Calibration,
-    summary: &Summary,
-    split: Split,
-) -> Result<Vec<RedrawnSplit>, Error> {
-    if split == Split::Chains || summary.posterior.correlated_pairs.is_empty() {
-        return Ok(vec![]);
-    }
-    let (_, all) = posterior_draws(cal, usize::MAX)?;
-    let at = |name: &str| cal.inputs.plan.calibrated.iter().position(|c| c == name);
-    let column = |k: usize| all.iter().map(|r| r[k]).collect::<Vec<f64>>();
-    Ok((summary.posterior.correlated_pairs.iter())
-        .filter(|c| c.rho.abs() >= SPLIT_CORRELATION)
-        .filter_map(|c| {
-            let (a, b) = (at(&c.a)?, at(&c.b)?);
-            let direction = bemcal_stats::split::ridge_direction(&column(a), &column(b))?;
-            Some(RedrawnSplit {
-                a: c.a.clone(),
-                b: c.b.clone(),
-                correlation: c.rho,
-                direction,
-            })
-        })
-        .collect())
-}
-
-/// `rows` with each line's split drawn again at every draw (one uniform number per draw and
-/// line from `seed`); a draw the model's constraints would refuse keeps its own.
-fn redraw_splits(
-    cal: &Calibration,
-    lines: &[RedrawnSplit],
-    rows: Vec<Vec<f64>>,
-    seed: u64,
-) -> Vec<Vec<f64>> {
-    use rand::{Rng, SeedableRng};
-    if lines.is_empty() {
-        return rows;
-    }
-    let plan = &cal.inputs.plan;
-    let at = |name: &str| plan.calibrated.iter().position(|c| c == name);
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    rows.into_iter()
-        .map(|mut x| {
-            for l in lines {
-                let u: f64 = rng.random();
-                let (Some(a), Some(b)) = (at(&l.a), at(&l.b)) else {
-                    continue;
-                };
-                let (xa, xb) = bemcal_stats::split::redraw_on_line(
-                    (x[a], x[b]),
-                    l.direction,
-                    (&plan.priors[a], &plan.priors[b]),
-                    u,
-                );
-                let mut y = x.clone();
-                (y[a], y[b]) = (xa, xb);
-                if plan.feasible(&cal.inputs.model, &y) {
-                    x = y;
-                }
-            }
-            x
-        })
-        .collect()
-}
-
-/// What a redrawn split means, for the report's notes.
-fn split_note(l: &RedrawnSplit) -> String {
-    format!(
-        "{} and {} are tied in the posterior (correlation {:+.2}): the meters constrain a \
-         combination of them, and each draw's split between them was drawn again from their \
-         priors along it (bemcal savings --split chains keeps the chains')",
-        l.a, l.b, l.correlation
-    )
-}
-
-/// `k` evenly spaced rows of the posterior draws (the calibrated parameters, in the plan's
-/// order): from `draws_with_surrogate_error.csv` where the calibration carried the surrogate's
+/// The calibration's posterior draws of the calibrated parameters (in the plan's order), read
+/// once: from `draws_with_surrogate_error.csv` where the calibration carried the surrogate's
 /// error into its draws (as its predictive intervals do), else `draws.csv`.
-fn posterior_draws(cal: &Calibration, k: usize) -> Result<(String, Vec<Vec<f64>>), Error> {
-    let with_error = cal.out.draws_with_surrogate_error_csv();
-    let path = if with_error.is_file() {
-        with_error
-    } else {
-        cal.out.draws_csv()
-    };
-    let file = path
-        .file_name()
-        .map(|f| f.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let bad = |line: usize, message: String| Error::Input {
-        path: path.clone(),
-        line,
-        message,
-    };
-    let mut reader =
-        csv::Reader::from_path(&path).map_err(|e| bad(0, format!("cannot read: {e}")))?;
-    let header = reader.headers().map_err(|e| bad(1, e.to_string()))?.clone();
-    let columns: Vec<usize> = (cal.inputs.plan.calibrated.iter())
-        .map(|n| {
-            header.iter().position(|h| h == n).ok_or_else(|| {
-                bad(
-                    1,
-                    format!(
+struct PosteriorDraws {
+    /// The file's name.
+    file: String,
+    /// Every draw, in the file's order.
+    rows: Vec<Vec<f64>>,
+}
+
+impl PosteriorDraws {
+    fn read(cal: &Calibration) -> Result<PosteriorDraws, Error> {
+        let with_error = cal.out.draws_with_surrogate_error_csv();
+        let path = if with_error.is_file() {
+            with_error
+        } else {
+            cal.out.draws_csv()
+        };
+        let file = path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let bad = |line: usize, message: String| Error::Input {
+            path: path.clone(),
+            line,
+            message,
+        };
+        let mut reader =
+            csv::Reader::from_path(&path).map_err(|e| bad(0, format!("cannot read: {e}")))?;
+        let header = reader.headers().map_err(|e| bad(1, e.to_string()))?.clone();
+        let columns: Vec<usize> = (cal.inputs.plan.calibrated.iter())
+            .map(|n| {
+                header.iter().position(|h| h == n).ok_or_else(|| {
+                    bad(
+                        1,
+                        format!(
                         "no column '{n}': the draws are of another calibration than the project's"
                     ),
-                )
+                    )
+                })
             })
-        })
-        .collect::<Result<_, _>>()?;
-    let mut rows = vec![];
-    for (r, record) in reader.records().enumerate() {
-        let record = record.map_err(|e| bad(r + 2, e.to_string()))?;
-        let row = columns
-            .iter()
-            .map(|&c| record.get(c).and_then(|v| v.trim().parse::<f64>().ok()))
-            .collect::<Option<Vec<f64>>>()
-            .ok_or_else(|| {
-                bad(
-                    r + 2,
-                    "expected a number in every parameter's column".into(),
-                )
-            })?;
-        rows.push(row);
+            .collect::<Result<_, _>>()?;
+        let mut rows = vec![];
+        for (r, record) in reader.records().enumerate() {
+            let record = record.map_err(|e| bad(r + 2, e.to_string()))?;
+            let row = columns
+                .iter()
+                .map(|&c| record.get(c).and_then(|v| v.trim().parse::<f64>().ok()))
+                .collect::<Option<Vec<f64>>>()
+                .ok_or_else(|| {
+                    bad(
+                        r + 2,
+                        "expected a number in every parameter's column".into(),
+                    )
+                })?;
+            rows.push(row);
+        }
+        if rows.is_empty() {
+            return Err(bad(0, "no draws".into()));
+        }
+        Ok(PosteriorDraws { file, rows })
     }
-    if rows.is_empty() {
-        return Err(bad(0, "no draws".into()));
+
+    /// `k` evenly spaced draws ([`evenly`]).
+    fn evenly(&self, k: usize) -> Vec<Vec<f64>> {
+        (evenly(self.rows.len(), k).into_iter())
+            .map(|i| self.rows[i].clone())
+            .collect()
     }
-    Ok((
-        file,
-        evenly(rows.len(), k)
-            .into_iter()
-            .map(|i| rows[i].clone())
-            .collect(),
-    ))
 }
 
 /// `k` indices spread evenly over `0..n` (all of them where `k >= n`).
@@ -807,46 +564,6 @@ fn drivers(cal: &Calibration, summary: &Summary, shares: &[f64]) -> Vec<Driver> 
         .collect();
     d.sort_by(|a, b| b.share.total_cmp(&a.share));
     d
-}
-
-/// Where a saving rests on a split the meters do not make: its main driver (a share of
-/// [`SPLIT_SHARE`] or more) tied in the posterior to another parameter. The meters then
-/// constrain a combination of the two. Where its split was drawn again from the priors
-/// (`lines`), the interval carries that uncertainty and the warning says what would narrow it;
-/// where the chains' split stands, the surrogate's small errors can pin it too tightly
-/// (measured: `make savings-weather`, lighting against equipment on one electricity meter,
-/// docs/benchmarks.md), and the warning says the interval is likely too narrow.
-fn split_warning(drivers: &[Driver], lines: &[RedrawnSplit]) -> Option<String> {
-    let d = drivers
-        .iter()
-        .find(|d| d.share >= SPLIT_SHARE && !d.moves_with.is_empty())?;
-    let with: Vec<String> = (d.moves_with.iter())
-        .map(|p| {
-            format!(
-                "{} (posterior correlation {:+.2})",
-                p.parameter, p.correlation
-            )
-        })
-        .collect();
-    let redrawn = d.moves_with.iter().all(|p| {
-        lines.iter().any(|l| {
-            (l.a == d.parameter && l.b == p.parameter) || (l.b == d.parameter && l.a == p.parameter)
-        })
-    });
-    let consequence = if redrawn {
-        "so each draw's split was drawn from their priors along that combination and the \
-         interval carries the priors' uncertainty of it"
-    } else {
-        "so the split is not the meters' finding and this interval is likely too narrow"
-    };
-    Some(format!(
-        "it rests on {}, tied to {}: the meters constrain them together, not apart, {}; {} \
-         would separate them",
-        d.parameter,
-        with.join(" and "),
-        consequence,
-        d.would_narrow
-    ))
 }
 
 /// Why an output's savings may not be trusted as they stand: no meter, a meter that checked
