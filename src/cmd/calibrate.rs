@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use bemcal_calibrate::project::ErrorModelSetting;
 use bemcal_calibrate::{calibrate, Project};
-use bemcal_report::informed::{how_much_learned, uninformed, why_uninformed};
+use bemcal_report::informed::{how_much_learned, uninformed, what_bills_say, why_uninformed};
 
 /// Run design points, training, chains and validation for a project; write summary.json,
 /// draws.csv, the surrogate and the validation runs under --out.
@@ -178,6 +178,9 @@ fn print_posterior(s: &bemcal_calibrate::Summary) {
     if barely > 0 {
         println!("note: {}", why_uninformed(barely, params.len(), t));
     }
+    if let Some(note) = what_bills_say(&s.billed_outputs()) {
+        println!("note: {note}");
+    }
 }
 
 /// The intervals with the surrogate's error, when a refinement round measured it.
@@ -246,6 +249,11 @@ fn print_guideline14(s: &bemcal_calibrate::Summary) {
             if v.metrics.pass { "pass" } else { "FAIL" },
             metrics_pair(sur)
         );
+    }
+    for v in &s.validation {
+        if let Some(d) = &v.demand {
+            println!("{}", d.sentence(&v.output));
+        }
     }
     if let Some(note) = &s.estimate_note {
         println!("estimate: {note}");

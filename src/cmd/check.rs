@@ -36,7 +36,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for note in &inp.meter_notes {
         println!("  meters: {note}");
     }
-    for (name, series) in inp.outputs.iter().zip(&inp.measured) {
+    for ((name, series), bills) in inp.outputs.iter().zip(&inp.measured).zip(&inp.bills) {
+        if let Some(b) = bills {
+            let fitted = (b.compared.iter().zip(&b.held_out)).filter(|(_, out)| !**out);
+            println!(
+                "  bills for {name}: {} of {} in the calibration period, {:.0} kWh over them",
+                b.calibration_bills(),
+                b.table.bills.len(),
+                fitted.map(|((i, _), _)| b.table.bills[*i].kwh).sum::<f64>()
+            );
+            continue;
+        }
         let known = series.iter().filter(|v| v.is_finite()).count();
         println!(
             "  meter for {name}: {known} of {} hours measured (calibration period), {:.0} kWh over them",

@@ -35,6 +35,10 @@ pub struct Args {
     /// billed.
     #[arg(long)]
     pub bill_end_exclusive: bool,
+    /// What the bills' estimated reads are taken for: merge (joined with the next actual read,
+    /// which trued them up), drop (the meter failed) or fit (as measured).
+    #[arg(long, default_value = "merge", value_parser = estimated_reads)]
+    pub bill_estimated: bemcal_precal::meters::EstimatedReads,
     /// Simulated hourly series (CSV with a `timestamp` column).
     #[arg(long)]
     pub simulated: PathBuf,
@@ -162,6 +166,12 @@ struct BillRow {
 }
 
 /// An ISO 8601 local timestamp, `YYYY-MM-DDTHH:MM[:SS]` (or with a space for `T`).
+/// `--bill-estimated`: the project file's `estimated = "..."` words.
+fn estimated_reads(s: &str) -> Result<bemcal_precal::meters::EstimatedReads, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_string()))
+        .map_err(|_| format!("'{s}': expected merge, drop or fit"))
+}
+
 fn parse_timestamp(path: &Path, line: usize, v: &str) -> anyhow::Result<chrono::NaiveDateTime> {
     let v = v.trim();
     for f in [
@@ -368,6 +378,7 @@ fn on_bills(
             true => BillEnd::Exclusive,
             false => BillEnd::Inclusive,
         },
+        estimated: args.bill_estimated,
     };
     let table = read_bills(std::path::Path::new(file), &spec)?;
     for n in &table.notes {
@@ -462,6 +473,7 @@ mod tests {
             bill_unit: None,
             calorific_value: None,
             bill_end_exclusive: false,
+            bill_estimated: Default::default(),
             json: true,
         })
         .map_err(|e| {

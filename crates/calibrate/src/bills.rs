@@ -16,6 +16,7 @@ use bemcal_stats::metrics::{g14_totals, G14Metrics};
 use bemcal_weather::grid::GridYear;
 
 use crate::error::Error;
+use crate::metrics::DemandMetrics;
 
 /// The AR(1) coefficient of the hourly errors summed over a bill. With the scale integrated
 /// out it sets only the bills' relative weights, which for bills of similar length hardly
@@ -124,6 +125,21 @@ impl BilledMeter {
             .collect()
     }
 
+    /// The billed peak demands of the calibration period against the peak hour of `sim` (with
+    /// its base, kWh an hour) over each bill ([`DemandMetrics`]); None under two bills with a
+    /// demand.
+    pub fn demand(&self, sim: &[f64]) -> Option<DemandMetrics> {
+        let (y, s): (Vec<f64>, Vec<f64>) = (self.compared.iter().zip(&self.held_out))
+            .filter(|(_, &out)| !out)
+            .filter_map(|((i, hours), _)| {
+                let billed = self.table.bills[*i].demand_kw?;
+                let peak = hours.iter().map(|&t| sim[t]).fold(f64::NAN, f64::max);
+                Some((billed, peak))
+            })
+            .unzip();
+        DemandMetrics::of(&y, &s)
+    }
+
     /// Guideline 14 of the hourly simulation `sim` (with its base) on the bills of the
     /// calibration period or the held-out one; None under two bills.
     pub fn metrics(&self, sim: &[f64], held_out: bool) -> Option<G14Metrics> {
@@ -148,10 +164,11 @@ mod tests {
             unit: Some("kWh".into()),
             calorific_value_kwh_per_m3: None,
             end: BillEnd::Inclusive,
+            estimated: Default::default(),
         };
         let table = parse_bills(
-            "start,end,quantity\n2020-12-10,2021-01-09,100\n2021-01-10,2021-02-08,300\n\
-             2021-02-09,2021-03-10,200\n2021-03-11,2021-04-09,150\n",
+            "start,end,quantity,demand_kw\n2020-12-10,2021-01-09,100,\n2021-01-10,2021-02-08,300,2\n\
+             2021-02-09,2021-03-10,200,1\n2021-03-11,2021-04-09,150,1\n",
             std::path::Path::new("gas.csv"),
             &spec,
         )
@@ -182,6 +199,13 @@ mod tests {
             (g.nmbe - (12.0 - 88.0) / 250.0 * 100.0).abs() < 1e-9,
             "{g:?}"
         );
+        // Billed demand against the peak hour (0.5 kWh on 20 January), over the two bills of
+        // the calibration period: residuals 1.5 and 0.6.
+        let mut sim = sim;
+        sim[19 * 24 + 12] = 0.5;
+        let d = m.demand(&sim).unwrap();
+        assert_eq!((d.bills, d.mean_measured_kw), (2, 1.5));
+        assert!((d.nmbe - 2.1 / 1.5 * 100.0).abs() < 1e-9, "{d:?}");
         // The likelihood's readings less a base of 0.1 kWh an hour.
         let l = m.likelihood(0, 1, 8760, &vec![0.1; 8760]).unwrap();
         assert_eq!(l.readings().len(), 2);

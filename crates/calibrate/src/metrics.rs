@@ -27,6 +27,56 @@ pub struct OutputMetrics {
     /// On the held-out period (`[validation] holdout`): hours that did not fit the model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<PeriodMetrics>,
+    /// Bills only: the billed peak demand against the model's peak hour of each bill, over the
+    /// calibration period's bills that state one (absent without two).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub demand: Option<DemandMetrics>,
+}
+
+/// Billed peak demand against the model's peak hour of each bill (issue 69): NMBE and CV-RMSE
+/// as Guideline 14 defines them for energy, over bills. No verdict: Guideline 14 sets no
+/// criterion for demand, and a bill's demand is usually the peak of 15 minutes where the
+/// model's is the mean of its peak hour, which reads lower by the load's swing within the hour.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct DemandMetrics {
+    /// Bills that state a demand.
+    pub bills: usize,
+    /// Mean billed demand, kW.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub mean_measured_kw: f64,
+    /// NMBE, per cent (positive: the model's peaks are lower).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub nmbe: f64,
+    /// CV-RMSE, per cent.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub cv_rmse: f64,
+}
+
+impl DemandMetrics {
+    /// The billed demands `measured` (kW) against the model's peak hours `simulated` (kWh in
+    /// the hour = kW); None under two bills or with a zero mean.
+    pub fn of(measured: &[f64], simulated: &[f64]) -> Option<DemandMetrics> {
+        let m = bemcal_stats::metrics::g14(measured, simulated).ok()?;
+        Some(DemandMetrics {
+            bills: m.n,
+            mean_measured_kw: m.mean_measured,
+            nmbe: m.nmbe,
+            cv_rmse: m.cv_rmse,
+        })
+    }
+
+    /// One line for the report and the CLI.
+    pub fn sentence(&self, output: &str) -> String {
+        format!(
+            "{output}: billed peak demand over {} bills (mean {:.0} kW) against the model's peak \
+             hour of each bill: NMBE {:.1} %, CV-RMSE {:.1} % (no Guideline 14 criterion; a \
+             demand billed on 15 minutes reads above an hour's mean)",
+            self.bills, self.mean_measured_kw, self.nmbe, self.cv_rmse
+        )
+    }
 }
 
 /// The resolution of a meter's Guideline 14 figures: the data's own.
@@ -85,6 +135,7 @@ impl OutputMetrics {
             metrics,
             monthly: None,
             held_out: None,
+            demand: None,
         }
     }
 }
@@ -391,6 +442,7 @@ pub(crate) mod tests {
             },
             monthly: None,
             held_out: None,
+            demand: None,
         }
     }
 }

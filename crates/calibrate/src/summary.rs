@@ -203,6 +203,16 @@ pub struct Summary {
     pub savings: Option<crate::measures::SavingsReport>,
 }
 
+impl Summary {
+    /// The outputs read as bills, with how many bills judge each (the validation's).
+    pub fn billed_outputs(&self) -> Vec<(&str, usize)> {
+        (self.validation.iter())
+            .filter(|v| v.resolution == crate::metrics::Resolution::Bills)
+            .map(|v| (v.output.as_str(), v.metrics.n))
+            .collect()
+    }
+}
+
 /// The JSON Schema of `summary.json`, from the types that write it and that every reader in
 /// Rust reads it with (`bemcal reference` writes it to `docs/reference/summary.schema.json`).
 /// A number that may be `null` is NaN: a statistic that could not be computed.

@@ -132,6 +132,7 @@ impl Inputs {
                     hourly: m,
                     monthly: Some(m),
                 }),
+                demand: b.demand(&sim),
             });
         }
         let months = months_of_hours(sim.len());
@@ -147,6 +148,7 @@ impl Inputs {
                     monthly: monthly(&h.measured[k]),
                 })
             }),
+            demand: None,
         })
     }
 }

@@ -19,6 +19,15 @@
 //!   volume without a calorific value.
 //! * **Noted** (the bill is kept): a gap between two bills (days no bill covers), an estimated
 //!   read.
+//! * **Estimated reads** ([`EstimatedReads`], `estimated = ...` in the spec): an estimated read
+//!   is the utility's guess, not a measurement. Where a read was missed and the meter kept
+//!   counting, the next actual read trues it up: the estimated bill and the bill after it,
+//!   together, hold what the meter measured, while each alone holds the guess and its
+//!   correction. So by default ([`EstimatedReads::Merge`]) an estimated bill is joined to the
+//!   bills after it up to and including the next actual one, where they follow day after day;
+//!   one with no actual read after it (the last bill, or a gap next) is not compared. Where the
+//!   meter itself failed (no true-up follows), [`EstimatedReads::Drop`] leaves estimated bills
+//!   out; [`EstimatedReads::Fit`] takes them as measured. Every join and drop is noted.
 
 use std::path::{Path, PathBuf};
 
@@ -42,6 +51,22 @@ pub enum BillEnd {
     Inclusive,
     /// The end date is the next read date: the bill runs to the start of that day.
     Exclusive,
+}
+
+/// What an estimated read is taken for ([module rules](self)).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum EstimatedReads {
+    /// A missed read that the next actual read trued up: joined to the bills after it up to and
+    /// including the next actual one (not compared where none follows day after day).
+    #[default]
+    Merge,
+    /// The meter failed and nothing trued it up: left out.
+    Drop,
+    /// Taken as measured.
+    Fit,
 }
 
 /// A gas volume unit.
@@ -135,6 +160,10 @@ pub struct BillSpec {
     /// What the end date means.
     #[serde(default)]
     pub end: BillEnd,
+    /// What an estimated read is taken for: `"merge"` (the default: joined with the next actual
+    /// read, which trued it up), `"drop"` (the meter failed: left out) or `"fit"` (as measured).
+    #[serde(default)]
+    pub estimated: EstimatedReads,
 }
 
 /// One bill.
@@ -315,7 +344,23 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         ));
     }
     bills.sort_by_key(|b| b.start);
-    let notes = check_periods(&bills, path)?;
+    let mut notes = check_periods(&bills, path)?;
+    let bills = match spec.estimated {
+        EstimatedReads::Fit => bills,
+        rule => {
+            let (bills, said) = settle_estimated(bills, rule);
+            notes.extend(said);
+            bills
+        }
+    };
+    if bills.is_empty() {
+        return Err(file_err(
+            path,
+            "no bills left: every bill is an estimated read without an actual read after it \
+             (`estimated = \"fit\"` takes estimated reads as measured)"
+                .into(),
+        ));
+    }
     Ok(BillTable {
         role: spec.role.clone(),
         path: path.to_path_buf(),
@@ -465,6 +510,66 @@ fn check_periods(bills: &[Bill], path: &Path) -> Result<Vec<String>, PrecalError
     Ok(notes)
 }
 
+/// The estimated reads of `bills` (date order, no overlaps) joined to the next actual read
+/// ([`EstimatedReads::Merge`]) or left out ([`EstimatedReads::Drop`]), with a note of each.
+/// A joined bill keeps the first bill's line, sums the quantities and takes the larger demand.
+fn settle_estimated(bills: Vec<Bill>, rule: EstimatedReads) -> (Vec<Bill>, Vec<String>) {
+    let lines = |run: &[Bill]| {
+        let list: Vec<String> = run.iter().map(|b| b.line.to_string()).collect();
+        match list.len() {
+            1 => format!("line {}", list[0]),
+            _ => format!("lines {}", list.join(", ")),
+        }
+    };
+    let mut out: Vec<Bill> = Vec::with_capacity(bills.len());
+    let mut notes = vec![];
+    // Estimated bills waiting, day after day, for the actual read that trues them up.
+    let mut run: Vec<Bill> = vec![];
+    let mut dropped: Vec<String> = vec![];
+    for b in bills {
+        if run.last().is_some_and(|last| last.end != b.start) {
+            dropped.push(format!("{} (a gap follows)", lines(&run)));
+            run.clear();
+        }
+        if b.estimated && rule == EstimatedReads::Drop {
+            dropped.push(format!("line {}", b.line));
+        } else if b.estimated {
+            run.push(b);
+        } else if run.is_empty() {
+            out.push(b);
+        } else {
+            run.push(b);
+            let first = &run[0];
+            let joined = Bill {
+                line: first.line,
+                start: first.start,
+                end: run[run.len() - 1].end,
+                kwh: run.iter().map(|b| b.kwh).sum(),
+                demand_kw: run.iter().filter_map(|b| b.demand_kw).reduce(f64::max),
+                estimated: false,
+            };
+            notes.push(format!(
+                "estimated reads joined to the actual read after them: {} as one bill, {} to {}",
+                lines(&run),
+                joined.start,
+                joined.end - Duration::days(1)
+            ));
+            run.clear();
+            out.push(joined);
+        }
+    }
+    if !run.is_empty() {
+        dropped.push(format!("{} (no actual read after it)", lines(&run)));
+    }
+    if !dropped.is_empty() {
+        notes.push(format!(
+            "estimated reads not compared: {}",
+            dropped.join("; ")
+        ));
+    }
+    (out, notes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -477,6 +582,7 @@ mod tests {
             unit: unit.map(str::to_string),
             calorific_value_kwh_per_m3: None,
             end: BillEnd::Inclusive,
+            estimated: EstimatedReads::Fit,
         }
     }
 
@@ -508,6 +614,70 @@ mod tests {
             t.notes,
             vec!["estimated reads: 2021-02-04 to 2021-03-08 (line 3)".to_string()]
         );
+    }
+
+    /// A missed read trued up at the next actual read: only the two together are measured.
+    #[test]
+    fn estimated_reads_are_joined_to_the_actual_read_after_them_or_dropped() {
+        let text = "start,end,quantity,demand_kw,estimated\n\
+                    2021-01-05,2021-02-03,100,40,\n\
+                    2021-02-04,2021-03-08,90,35,E\n\
+                    2021-03-09,2021-04-06,130,50,E\n\
+                    2021-04-07,2021-05-05,80,30,\n\
+                    2021-05-06,2021-06-04,60,20,E\n\
+                    2021-06-10,2021-07-08,70,25,\n\
+                    2021-07-09,2021-08-06,75,25,E\n";
+        let mut s = spec(Some("kWh"));
+        s.estimated = EstimatedReads::Merge;
+        let t = parse(text, &s).unwrap();
+        let got: Vec<(u64, i64, f64, Option<f64>, bool)> = t
+            .bills
+            .iter()
+            .map(|b| (b.line, b.days(), b.kwh, b.demand_kw, b.estimated))
+            .collect();
+        // Lines 3-5 are one bill of 33 + 29 + 29 days; line 6 has a gap after it, line 8 no
+        // read after it: neither is compared.
+        assert_eq!(
+            got,
+            vec![
+                (2, 30, 100.0, Some(40.0), false),
+                (3, 91, 300.0, Some(50.0), false),
+                (7, 29, 70.0, Some(25.0), false),
+            ]
+        );
+        assert_eq!(
+            t.notes[2..],
+            [
+                "estimated reads joined to the actual read after them: lines 3, 4, 5 as one bill, 2021-02-04 to 2021-05-05".to_string(),
+                "estimated reads not compared: line 6 (a gap follows); line 8 (no actual read after it)".to_string(),
+            ],
+            "{:?}",
+            t.notes
+        );
+        s.estimated = EstimatedReads::Drop;
+        let t = parse(text, &s).unwrap();
+        let lines: Vec<u64> = t.bills.iter().map(|b| b.line).collect();
+        assert_eq!(lines, vec![2, 5, 7]);
+        assert_eq!(
+            t.notes.last().unwrap(),
+            "estimated reads not compared: line 3; line 4; line 6; line 8"
+        );
+        // Only estimated reads, nothing after them: refused, with the way out.
+        let e = parse(
+            "start,end,quantity,estimated\n2021-01-05,2021-02-03,100,E\n",
+            &{
+                let mut s = spec(Some("kWh"));
+                s.estimated = EstimatedReads::Merge;
+                s
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("estimated = \"fit\""), "{e}");
+        // The spec's form.
+        let s: BillSpec =
+            toml::from_str("file = \"b.csv\"\nrole = \"heating\"\nestimated = \"drop\"\n").unwrap();
+        assert_eq!(s.estimated, EstimatedReads::Drop);
     }
 
     #[test]

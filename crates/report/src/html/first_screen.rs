@@ -7,7 +7,7 @@ use bemcal_calibrate::Summary;
 use bemcal_stats::model_form::Verdict;
 
 use super::{esc, fit::g14_pass, g, ESS_LIMIT, RHAT_LIMIT};
-use crate::informed::{uninformed, why_uninformed};
+use crate::informed::{uninformed, what_bills_say, why_uninformed};
 
 /// A banner on the first screen naming the meters no posterior draw of the model reaches.
 pub(super) fn out_of_reach_banner(s: &Summary) -> String {
@@ -130,6 +130,9 @@ pub(super) fn warnings(s: &Summary) -> String {
             esc(&why_uninformed(barely.len(), post.parameters.len(), t)),
             barely.join(", ")
         ));
+    }
+    if let Some(note) = what_bills_say(&s.billed_outputs()) {
+        warn.push(esc(&note));
     }
     for c in &post.correlated_pairs {
         warn.push(format!(

@@ -144,6 +144,9 @@ pub(super) fn monthly_and_held_out(s: &Summary) -> String {
         );
     }
     h.push_str("</table>\n");
+    for (m, d) in (s.validation.iter()).filter_map(|m| Some((m, m.demand.as_ref()?))) {
+        let _ = writeln!(h, "<p class=\"sub\">{}</p>", esc(&d.sentence(&m.output)));
+    }
     h
 }
 
