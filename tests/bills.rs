@@ -91,6 +91,7 @@ fn project() -> String {
             "[validation]\n",
             "[validation]\nholdout = \"last 2 months\"\n",
         )
+        .replace("predictive_draws = 0", "predictive_draws = 4")
         .replace(
             "[refine]\nrounds = 0\n",
             "[refine]\nrounds = 1\npoints = 4\niterations = 40\nburn_in = 20\n",
@@ -172,6 +173,27 @@ fn bills_beside_hourly_meters_identify_what_the_heating_carries() {
     }
     let t = &summary["temperature"];
     eprintln!("temperature: {t}");
+    // Predictive intervals per bill: the 9 fitted bills and the 3 held out, each bill's
+    // interval around its own measured total's neighbourhood.
+    let p = &summary["predictive"]["bills"][0];
+    eprintln!(
+        "bills' predictive: in sample {}, held out {}",
+        p["in_sample"], p["held_out"]
+    );
+    assert_eq!(p["output"], "heating_kwh", "{p}");
+    assert_eq!(p["bills"].as_array().unwrap().len(), 12, "{p}");
+    let shares = p["in_sample"].as_array().unwrap();
+    assert!(
+        shares.iter().all(|s| s.as_f64().unwrap().is_finite()),
+        "{p}"
+    );
+    assert!(p["held_out"].is_array(), "{p}");
+    for b in p["bills"].as_array().unwrap() {
+        let q: Vec<f64> = (b["quantiles"].as_array().unwrap().iter())
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert!(q.windows(2).all(|w| w[0] <= w[1]) && q[0] < q[4], "{b}");
+    }
     // The hourly meters are judged hourly as before.
     let electricity = summary["validation"]
         .as_array()

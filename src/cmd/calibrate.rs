@@ -458,6 +458,9 @@ fn print_predictive(p: &bemcal_calibrate::predictive::PredictiveReport) {
         );
     }
     print_totals(p, &cov);
+    for b in &p.bills {
+        println!("{}", b.sentence());
+    }
 }
 
 /// The coverage of the hours a meter runs, and how many hours read zero: `running (reads

@@ -13,7 +13,9 @@
 use bemcal_precal::meters::BillTable;
 use bemcal_stats::likelihood::intervals::{IntervalLikelihood, IntervalReading};
 use bemcal_stats::metrics::{g14_totals, G14Metrics};
+use bemcal_stats::predictive::{ar1_sum_variance, reading_quantiles};
 use bemcal_weather::grid::GridYear;
+use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::metrics::DemandMetrics;
@@ -22,6 +24,68 @@ use crate::metrics::DemandMetrics;
 /// out it sets only the bills' relative weights, which for bills of similar length hardly
 /// differ (hourly residuals of building models run at 0.8-0.95).
 pub const BILL_AR1: f64 = 0.9;
+
+/// The levels of a bill's predictive interval: the 90 % and 50 % central intervals and the
+/// median.
+const LEVELS: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 0.95];
+
+/// One meter's predictive intervals per bill (issue 69), in `summary.json`'s `predictive`:
+/// EnergyPlus at the posterior draws the validation simulated, each bill's total plus the
+/// error of a bill at the scale of that draw's own residuals over the calibration period's
+/// bills ([`bemcal_stats::predictive::reading_quantiles`]).
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct BillsPredictive {
+    /// The calibrated output (and its meter).
+    pub output: String,
+    /// Share of the calibration period's bills inside their 50 % and 90 % intervals.
+    pub in_sample: [f64; 2],
+    /// The same for the held-out bills, where there are any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<[f64; 2]>,
+    /// Each compared bill.
+    pub bills: Vec<BillInterval>,
+}
+
+impl BillsPredictive {
+    /// One line for the report and the CLI.
+    pub fn sentence(&self) -> String {
+        let count = |held_out: bool| self.bills.iter().filter(|b| b.held_out == held_out).count();
+        let held = self.held_out.map_or(String::new(), |h| {
+            format!(
+                "; the {} held-out bills {:.0} / {:.0} %",
+                count(true),
+                100.0 * h[0],
+                100.0 * h[1]
+            )
+        });
+        format!(
+            "{} (bills): the 50 % / 90 % intervals of a bill (EnergyPlus's total at each draw, \
+             plus a bill's error at the scale of that draw's own residuals) hold {:.0} / {:.0} % \
+             of the calibration period's {} bills{held}",
+            self.output,
+            100.0 * self.in_sample[0],
+            100.0 * self.in_sample[1],
+            count(false)
+        )
+    }
+}
+
+/// One bill's predictive interval.
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct BillInterval {
+    /// The first day billed (`YYYY-MM-DD`).
+    pub start: String,
+    /// The last day billed.
+    pub end: String,
+    /// Held out (it touches the held-out period).
+    pub held_out: bool,
+    /// The bill, kWh.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub measured_kwh: f64,
+    /// The 5, 25, 50, 75 and 95 % quantiles, kWh.
+    pub quantiles: [f64; 5],
+}
 
 /// One output's bills on the grid.
 #[derive(Debug, Clone)]
@@ -140,6 +204,55 @@ impl BilledMeter {
         DemandMetrics::of(&y, &s)
     }
 
+    /// Predictive intervals of every compared bill from `sims`, EnergyPlus's hours (with the
+    /// output's base) at each posterior draw ([`BillsPredictive`]); None under three bills in
+    /// the calibration period.
+    pub fn predictive(&self, output: &str, sims: &[Vec<f64>]) -> Option<BillsPredictive> {
+        let totals: Vec<Vec<f64>> = (sims.iter())
+            .map(|sim| {
+                (self.compared.iter())
+                    .map(|(_, hours)| hours.iter().map(|&t| sim[t]).sum())
+                    .collect()
+            })
+            .collect();
+        let measured: Vec<f64> = (self.compared.iter())
+            .map(|(i, _)| self.table.bills[*i].kwh)
+            .collect();
+        let weights: Vec<f64> = (self.compared.iter())
+            .map(|(_, h)| ar1_sum_variance(&vec![1.0; h.len()], BILL_AR1))
+            .collect();
+        let fitted: Vec<bool> = self.held_out.iter().map(|h| !h).collect();
+        let q = reading_quantiles(&totals, &measured, &weights, &fitted, &LEVELS)?;
+        let bills: Vec<BillInterval> = (self.compared.iter().zip(&self.held_out).zip(q))
+            .map(|(((i, _), &held_out), q)| {
+                let b = &self.table.bills[*i];
+                BillInterval {
+                    start: b.start.to_string(),
+                    end: (b.end - chrono::Duration::days(1)).to_string(),
+                    held_out,
+                    measured_kwh: b.kwh,
+                    quantiles: [q[0], q[1], q[2], q[3], q[4]],
+                }
+            })
+            .collect();
+        let inside = |held_out: bool| -> Option<[f64; 2]> {
+            let of: Vec<&BillInterval> = bills.iter().filter(|b| b.held_out == held_out).collect();
+            let share = |lo: usize, hi: usize| {
+                let n = of.iter().filter(|b| {
+                    b.quantiles[lo] <= b.measured_kwh && b.measured_kwh <= b.quantiles[hi]
+                });
+                n.count() as f64 / of.len() as f64
+            };
+            (!of.is_empty()).then(|| [share(1, 3), share(0, 4)])
+        };
+        Some(BillsPredictive {
+            output: output.to_string(),
+            in_sample: inside(false)?,
+            held_out: inside(true),
+            bills,
+        })
+    }
+
     /// Guideline 14 of the hourly simulation `sim` (with its base) on the bills of the
     /// calibration period or the held-out one; None under two bills.
     pub fn metrics(&self, sim: &[f64], held_out: bool) -> Option<G14Metrics> {
@@ -206,6 +319,8 @@ mod tests {
         let d = m.demand(&sim).unwrap();
         assert_eq!((d.bills, d.mean_measured_kw), (2, 1.5));
         assert!((d.nmbe - 2.1 / 1.5 * 100.0).abs() < 1e-9, "{d:?}");
+        // Predictive intervals need three bills in the calibration period: two here.
+        assert!(m.predictive("heating", &[sim.clone()]).is_none());
         // The likelihood's readings less a base of 0.1 kWh an hour.
         let l = m.likelihood(0, 1, 8760, &vec![0.1; 8760]).unwrap();
         assert_eq!(l.readings().len(), 2);

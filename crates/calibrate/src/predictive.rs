@@ -84,6 +84,9 @@ pub struct PredictiveReport {
     pub held_out: Option<String>,
     /// Each meter's intervals.
     pub outputs: Vec<OutputPredictive>,
+    /// Each meter read as bills: its intervals per bill.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bills: Vec<crate::bills::BillsPredictive>,
 }
 
 /// One meter's intervals.
@@ -407,12 +410,17 @@ pub fn assess(
     };
     let fit = inp.calibration_hours();
     let mut outputs = vec![];
+    let mut bills = vec![];
     let mut columns: Vec<(String, Vec<f64>)> = vec![];
     let error_models = &cal.project.validation.error_model;
     let months = TotalPeriod::Month.periods(fit.len());
     for (k, name) in inp.outputs.iter().enumerate() {
-        if inp.bills[k].is_some() {
-            // Hourly intervals need hourly readings: a meter read as bills has none.
+        if let Some(b) = &inp.bills[k] {
+            // Hourly intervals need hourly readings: a meter read as bills has its bills'.
+            let sims: Vec<Vec<f64>> = (runs.iter())
+                .map(|o| inp.with_base(k, o.get(name).expect("model output")))
+                .collect();
+            bills.extend(b.predictive(name, &sims));
             continue;
         }
         let setting = error_models.of(name);
@@ -496,6 +504,7 @@ pub fn assess(
         error_model: error_models.default,
         held_out: inp.held_out.as_ref().map(|h| h.period.clone()),
         outputs,
+        bills,
     }))
 }
 

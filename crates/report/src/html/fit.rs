@@ -243,6 +243,9 @@ pub(super) fn predictive_coverage(s: &Summary) -> String {
         }
     }
     h.push_str("</table>\n");
+    for b in &p.bills {
+        let _ = writeln!(h, "<p class=\"sub\">{}</p>", esc(&b.sentence()));
+    }
     h.push_str(&totals_coverage(p, &pct));
     h
 }
