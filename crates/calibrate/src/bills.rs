@@ -32,7 +32,8 @@ const LEVELS: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 0.95];
 /// One meter's predictive intervals per bill (issue 69), in `summary.json`'s `predictive`:
 /// EnergyPlus at the posterior draws the validation simulated, each bill's total plus the
 /// error of a bill at the scale of that draw's own residuals over the calibration period's
-/// bills ([`bemcal_stats::predictive::reading_quantiles`]).
+/// bills ([`bemcal_stats::predictive::reading_quantiles`]), bounded below by zero for a meter
+/// that never reads below it.
 #[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BillsPredictive {
     /// The calibrated output (and its meter).
@@ -222,7 +223,12 @@ impl BilledMeter {
             .map(|(_, h)| ar1_sum_variance(&vec![1.0; h.len()], BILL_AR1))
             .collect();
         let fitted: Vec<bool> = self.held_out.iter().map(|h| !h).collect();
-        let q = reading_quantiles(&totals, &measured, &weights, &fitted, &LEVELS)?;
+        let mut q = reading_quantiles(&totals, &measured, &weights, &fitted, &LEVELS)?;
+        // An energy meter does not read below zero: the intervals are those of max(0, Y), as
+        // the hourly meters' are.
+        if measured.iter().all(|m| *m >= 0.0) {
+            q.iter_mut().flatten().for_each(|x| *x = x.max(0.0));
+        }
         let bills: Vec<BillInterval> = (self.compared.iter().zip(&self.held_out).zip(q))
             .map(|(((i, _), &held_out), q)| {
                 let b = &self.table.bills[*i];
