@@ -332,4 +332,60 @@ mod tests {
         assert_eq!(l.readings().len(), 2);
         assert!((l.readings()[0].total - (300.0 - 72.0)).abs() < 1e-9);
     }
+
+    /// Four bills fitted and one held out; two draws 20 % apart: each bill's interval spans
+    /// both draws' totals and their noise, the shares count the bills inside, and an interval
+    /// of a meter that never reads below zero starts at zero at the lowest.
+    #[test]
+    fn each_bill_gets_an_interval_from_the_draws_and_their_own_residuals() {
+        let spec = BillSpec {
+            file: "gas.csv".into(),
+            role: MeterRole::Heating,
+            unit: Some("kWh".into()),
+            calorific_value_kwh_per_m3: None,
+            end: BillEnd::Inclusive,
+            estimated: Default::default(),
+        };
+        let table = parse_bills(
+            "start,end,quantity\n2021-01-01,2021-01-30,720\n2021-01-31,2021-03-01,740\n\
+             2021-03-02,2021-03-31,690\n2021-04-01,2021-04-30,0\n2021-05-01,2021-05-30,730\n",
+            std::path::Path::new("gas.csv"),
+            &spec,
+        )
+        .unwrap();
+        let mut m = BilledMeter::on_grid(table, GridYear::calendar(2021)).unwrap();
+        let held: Vec<bool> = (0..8760).map(|t| t >= 120 * 24).collect();
+        m.hold_out(&held);
+        let draws = [vec![1.0; 8760], vec![1.2; 8760]];
+        let p = m.predictive("heating_kwh", &draws).unwrap();
+        assert_eq!(p.bills.len(), 5);
+        assert_eq!(p.bills[4].held_out as u8 + p.bills[0].held_out as u8, 1);
+        for b in &p.bills {
+            let q = b.quantiles;
+            assert!(q.windows(2).all(|w| w[0] <= w[1]), "{b:?}");
+            assert!(q[0] >= 0.0, "{b:?}");
+        }
+        // 30 days at 1 and 1.2 kWh an hour: 720 and 864 kWh, the median between them.
+        let q = p.bills[0].quantiles;
+        assert!(
+            q[0] < 720.0 && 864.0 < q[4] && 720.0 < q[2] && q[2] < 864.0,
+            "{q:?}"
+        );
+        // The April bill of 0 lies inside the 90 % interval only through its lower bound 0.
+        let april = &p.bills[3];
+        assert_eq!(april.measured_kwh, 0.0);
+        assert!(april.quantiles[0] == 0.0, "{april:?}");
+        // Shares are of the 4 fitted bills and the 1 held out.
+        assert!(p
+            .in_sample
+            .iter()
+            .all(|s| (0.0..=1.0).contains(s) && (s * 4.0).fract() == 0.0));
+        assert!(p.held_out.is_some());
+        assert!(
+            p.sentence()
+                .contains("of the calibration period's 4 bills; the 1 held-out bills"),
+            "{}",
+            p.sentence()
+        );
+    }
 }
