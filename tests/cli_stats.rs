@@ -212,10 +212,10 @@ fn metrics_on_bills() {
     let b = write(
         &dir,
         "gas.csv",
-        "start,end,quantity,unit,estimated\n\
-         2021-01-05,2021-02-03,700,kWh,\n\
-         2021-02-04,2021-03-08,800,kWh,E\n\
-         2021-03-09,2021-04-06,500,kWh,\n",
+        "start,end,quantity,unit,estimated,demand_kw\n\
+         2021-01-05,2021-02-03,700,kWh,,1.5\n\
+         2021-02-04,2021-03-08,800,kWh,E,1.2\n\
+         2021-03-09,2021-04-06,500,kWh,,\n",
     );
     let out = bemcal(&[
         "metrics",
@@ -252,6 +252,14 @@ fn metrics_on_bills() {
     assert_eq!(row["bills"][1]["simulated_kwh"], 792.0);
     assert_eq!(row["bills"][1]["days"], 33);
     assert!(row["bills"][2]["simulated_kwh"].is_null());
+    // Billed demand against the simulation's peak hour (1 kWh): residuals 0.5 and 0.2 on a
+    // mean of 1.35.
+    assert_eq!(row["bills"][0]["simulated_peak_kw"], 1.0);
+    assert_eq!(row["demand"]["bills"], 2, "{row}");
+    assert!(
+        (row["demand"]["nmbe"].as_f64().unwrap() - 0.7 / 1.35 * 100.0).abs() < 1e-9,
+        "{row}"
+    );
 
     let overlap = write(
         &dir,

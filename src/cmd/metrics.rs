@@ -150,6 +150,10 @@ struct Row {
     /// Each bill, with `resolution = "bills"`.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     bills: Vec<BillRow>,
+    /// The bills' billed peak demand against the simulation's peak hour of each bill, where
+    /// two or more state one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    demand: Option<bemcal_calibrate::metrics::DemandMetrics>,
 }
 
 /// One bill against the simulation.
@@ -163,6 +167,12 @@ struct BillRow {
     /// None: the simulation lacks a day of the bill.
     simulated_kwh: Option<f64>,
     estimated: bool,
+    /// The billed peak demand, kW.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    demand_kw: Option<f64>,
+    /// The simulation's peak hour over the bill's days (kWh in the hour = kW).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    simulated_peak_kw: Option<f64>,
 }
 
 /// An ISO 8601 local timestamp, `YYYY-MM-DDTHH:MM[:SS]` (or with a space for `T`).
@@ -258,6 +268,9 @@ fn print_table(results: &[Row]) {
                 r.cv_rmse_percent,
                 if r.pass { "yes" } else { "no" }
             );
+            if let Some(d) = &r.demand {
+                println!("  {}", d.sentence(&r.output));
+            }
             for b in &r.bills {
                 println!(
                     "  {} to {} ({:>2} days{}): measured {:>10.1} kWh, simulated {}",
@@ -351,6 +364,7 @@ fn hourly(
             cv_rmse_percent: m.cv_rmse,
             pass: m.pass,
             bills: vec![],
+            demand: None,
         });
     }
     Ok(results)
@@ -384,19 +398,29 @@ fn on_bills(
     for n in &table.notes {
         eprintln!("note: {file}: {n}");
     }
-    // Each day's simulated total, where the simulation has its 24 hours.
-    let mut days: HashMap<chrono::NaiveDate, (f64, usize)> = HashMap::new();
+    // Each day's simulated total and peak hour, where the simulation has its 24 hours.
+    let mut days: HashMap<chrono::NaiveDate, (f64, usize, f64)> = HashMap::new();
     for ((line, f), t) in sim.rows.iter().zip(sim_times) {
         let v = sim.number(*line, j, &f[j])?;
         if v.is_finite() {
-            let d = days.entry(t.date()).or_default();
+            let d = days.entry(t.date()).or_insert((0.0, 0, f64::NEG_INFINITY));
             d.0 += v;
             d.1 += 1;
+            d.2 = d.2.max(v);
         }
     }
-    let totals = bill_totals(&table.bills, |d| {
-        days.get(&d).filter(|(_, n)| *n == 24).map(|(s, _)| *s)
-    });
+    let whole = |d: chrono::NaiveDate| days.get(&d).filter(|(_, n, _)| *n == 24);
+    let totals = bill_totals(&table.bills, |d| whole(d).map(|(s, _, _)| *s));
+    let peaks: Vec<Option<f64>> = (table.bills.iter())
+        .map(|b| {
+            (b.start.iter_days().take_while(|d| *d < b.end))
+                .map(|d| whole(d).map(|(_, _, p)| *p))
+                .try_fold(f64::NEG_INFINITY, |a, p| p.map(|p| a.max(p)))
+        })
+        .collect();
+    let (billed, peak): (Vec<f64>, Vec<f64>) = (table.bills.iter().zip(&peaks))
+        .filter_map(|(b, p)| Some((b.demand_kw?, (*p)?)))
+        .unzip();
     let (y, yhat): (Vec<f64>, Vec<f64>) = table
         .bills
         .iter()
@@ -418,19 +442,19 @@ fn on_bills(
         nmbe_percent: m.nmbe,
         cv_rmse_percent: m.cv_rmse,
         pass: m.pass,
-        bills: table
-            .bills
-            .iter()
-            .zip(totals)
-            .map(|(b, s)| BillRow {
+        bills: (table.bills.iter().zip(totals).zip(peaks))
+            .map(|((b, s), p)| BillRow {
                 start: b.start,
                 end: b.end - chrono::Duration::days(1),
                 days: b.days(),
                 measured_kwh: b.kwh,
                 simulated_kwh: s,
                 estimated: b.estimated,
+                demand_kw: b.demand_kw,
+                simulated_peak_kw: p.filter(|_| b.demand_kw.is_some()),
             })
             .collect(),
+        demand: bemcal_calibrate::metrics::DemandMetrics::of(&billed, &peak),
     })
 }
 
