@@ -378,7 +378,9 @@ fn on_bills(
     sim: &Table,
     sim_times: &[chrono::NaiveDateTime],
 ) -> anyhow::Result<Row> {
-    use bemcal_precal::meters::{bill_totals, read_bills, BillEnd, BillSpec, MeterRole};
+    use bemcal_precal::meters::{
+        bill_peaks, bill_totals, read_bills, BillEnd, BillSpec, MeterRole,
+    };
     let (output, file) = arg
         .split_once('=')
         .with_context(|| format!("--bills {}: expected OUTPUT=FILE", excerpt(arg)))?;
@@ -411,13 +413,7 @@ fn on_bills(
     }
     let whole = |d: chrono::NaiveDate| days.get(&d).filter(|(_, n, _)| *n == 24);
     let totals = bill_totals(&table.bills, |d| whole(d).map(|(s, _, _)| *s));
-    let peaks: Vec<Option<f64>> = (table.bills.iter())
-        .map(|b| {
-            (b.start.iter_days().take_while(|d| *d < b.end))
-                .map(|d| whole(d).map(|(_, _, p)| *p))
-                .try_fold(f64::NEG_INFINITY, |a, p| p.map(|p| a.max(p)))
-        })
-        .collect();
+    let peaks = bill_peaks(&table.bills, |d| whole(d).map(|(_, _, p)| *p));
     let (billed, peak): (Vec<f64>, Vec<f64>) = (table.bills.iter().zip(&peaks))
         .filter_map(|(b, p)| Some((b.demand_kw?, (*p)?)))
         .unzip();

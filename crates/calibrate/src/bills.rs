@@ -11,9 +11,9 @@
 //!   CV-RMSE 15 %): the data's own resolution ([`OutputMetrics::resolution`]).
 
 use bemcal_precal::meters::BillTable;
-use bemcal_stats::likelihood::intervals::{IntervalLikelihood, IntervalReading};
+use bemcal_stats::likelihood::intervals::{sum_weight, IntervalLikelihood, IntervalReading};
 use bemcal_stats::metrics::{g14_totals, G14Metrics};
-use bemcal_stats::predictive::{ar1_sum_variance, reading_quantiles};
+use bemcal_stats::predictive::reading_quantiles;
 use bemcal_weather::grid::GridYear;
 use serde::{Deserialize, Serialize};
 
@@ -220,7 +220,7 @@ impl BilledMeter {
             .map(|(i, _)| self.table.bills[*i].kwh)
             .collect();
         let weights: Vec<f64> = (self.compared.iter())
-            .map(|(_, h)| ar1_sum_variance(&vec![1.0; h.len()], BILL_AR1))
+            .map(|(_, h)| sum_weight(h.len(), BILL_AR1))
             .collect();
         let fitted: Vec<bool> = self.held_out.iter().map(|h| !h).collect();
         let mut q = reading_quantiles(&totals, &measured, &weights, &fitted, &LEVELS)?;
@@ -276,7 +276,8 @@ mod tests {
     use bemcal_precal::meters::bills::parse_bills;
     use bemcal_precal::meters::{BillEnd, BillSpec, MeterRole};
 
-    fn meter() -> BilledMeter {
+    /// The bills of `csv` (in kWh) on the grid of 2021.
+    fn meter_of(csv: &str) -> BilledMeter {
         let spec = BillSpec {
             file: "gas.csv".into(),
             role: MeterRole::Heating,
@@ -285,14 +286,15 @@ mod tests {
             end: BillEnd::Inclusive,
             estimated: Default::default(),
         };
-        let table = parse_bills(
+        let table = parse_bills(csv, std::path::Path::new("gas.csv"), &spec).unwrap();
+        BilledMeter::on_grid(table, GridYear::calendar(2021)).unwrap()
+    }
+
+    fn meter() -> BilledMeter {
+        meter_of(
             "start,end,quantity,demand_kw\n2020-12-10,2021-01-09,100,\n2021-01-10,2021-02-08,300,2\n\
              2021-02-09,2021-03-10,200,1\n2021-03-11,2021-04-09,150,1\n",
-            std::path::Path::new("gas.csv"),
-            &spec,
         )
-        .unwrap();
-        BilledMeter::on_grid(table, GridYear::calendar(2021)).unwrap()
     }
 
     #[test]
@@ -338,22 +340,10 @@ mod tests {
     /// of a meter that never reads below zero starts at zero at the lowest.
     #[test]
     fn each_bill_gets_an_interval_from_the_draws_and_their_own_residuals() {
-        let spec = BillSpec {
-            file: "gas.csv".into(),
-            role: MeterRole::Heating,
-            unit: Some("kWh".into()),
-            calorific_value_kwh_per_m3: None,
-            end: BillEnd::Inclusive,
-            estimated: Default::default(),
-        };
-        let table = parse_bills(
+        let mut m = meter_of(
             "start,end,quantity\n2021-01-01,2021-01-30,720\n2021-01-31,2021-03-01,740\n\
              2021-03-02,2021-03-31,690\n2021-04-01,2021-04-30,0\n2021-05-01,2021-05-30,730\n",
-            std::path::Path::new("gas.csv"),
-            &spec,
-        )
-        .unwrap();
-        let mut m = BilledMeter::on_grid(table, GridYear::calendar(2021)).unwrap();
+        );
         let held: Vec<bool> = (0..8760).map(|t| t >= 120 * 24).collect();
         m.hold_out(&held);
         let draws = [vec![1.0; 8760], vec![1.2; 8760]];

@@ -232,17 +232,32 @@ pub fn read_bills(path: &Path, spec: &BillSpec) -> Result<BillTable, PrecalError
 /// the day): the sum over the bill's days, 29 February left out as the grid leaves it; None
 /// where a day of the bill is lacking, so that no bill is compared over part of its period.
 pub fn bill_totals(bills: &[Bill], daily: impl Fn(NaiveDate) -> Option<f64>) -> Vec<Option<f64>> {
-    bills
-        .iter()
+    (bills.iter())
+        .map(|b| grid_days(b).map(&daily).sum())
+        .collect()
+}
+
+/// Each bill's peak of a daily series of peaks (`daily_peak`: a date's highest hour, None where
+/// the series lacks the day), over the same days as [`bill_totals`]: None where a day is
+/// lacking.
+pub fn bill_peaks(
+    bills: &[Bill],
+    daily_peak: impl Fn(NaiveDate) -> Option<f64>,
+) -> Vec<Option<f64>> {
+    (bills.iter())
         .map(|b| {
-            b.start
-                .iter_days()
-                .take_while(|d| *d < b.end)
-                .filter(|d| !is_leap_day(*d))
-                .map(&daily)
-                .sum()
+            grid_days(b)
+                .map(&daily_peak)
+                .try_fold(f64::NEG_INFINITY, |a, p| p.map(|p| a.max(p)))
         })
         .collect()
+}
+
+/// A bill's days as the grid counts them: 29 February left out.
+fn grid_days(b: &Bill) -> impl Iterator<Item = NaiveDate> + '_ {
+    (b.start.iter_days())
+        .take_while(|d| *d < b.end)
+        .filter(|d| !is_leap_day(*d))
 }
 
 /// The column indices of the bills table.
@@ -532,7 +547,7 @@ fn settle_estimated(bills: Vec<Bill>, rule: EstimatedReads) -> (Vec<Bill>, Vec<S
             run.clear();
         }
         if b.estimated && rule == EstimatedReads::Drop {
-            dropped.push(format!("line {}", b.line));
+            dropped.push(lines(std::slice::from_ref(&b)));
         } else if b.estimated {
             run.push(b);
         } else if run.is_empty() {

@@ -53,7 +53,9 @@ pub mod bills;
 mod quality;
 mod spec;
 
-pub use bills::{bill_totals, read_bills, Bill, BillEnd, BillSpec, BillTable, EstimatedReads};
+pub use bills::{
+    bill_peaks, bill_totals, read_bills, Bill, BillEnd, BillSpec, BillTable, EstimatedReads,
+};
 pub use quality::{
     quality, run_hours, zero_run_in_off_season, FlatRun, Gap, MeterQuality, ZERO_RUN_MIN_HOURS,
 };

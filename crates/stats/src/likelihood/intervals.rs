@@ -36,6 +36,12 @@ pub struct IntervalReading {
     pub total: f64,
 }
 
+/// `w_b`: the variance of the sum of `hours` consecutive errors of an AR(1) process with
+/// coefficient `phi` and unit innovation scale, in units of `sigma^2` (module docs).
+pub fn sum_weight(hours: usize, phi: f64) -> f64 {
+    ar1_sum_variance(&vec![1.0; hours], phi)
+}
+
 /// The likelihood of one output's interval readings given hourly predictions laid out as the
 /// hourly likelihood's (`hours x outputs`, row-major).
 #[derive(Debug, Clone, PartialEq)]
@@ -97,7 +103,7 @@ impl IntervalLikelihood {
         }
         let weights = readings
             .iter()
-            .map(|r| ar1_sum_variance(&vec![1.0; r.hours.len()], phi))
+            .map(|r| sum_weight(r.hours.len(), phi))
             .collect();
         Ok(IntervalLikelihood {
             output,
@@ -274,7 +280,7 @@ mod tests {
 
     #[test]
     fn autocorrelated_hours_widen_a_sum() {
-        let w = |n: usize, phi: f64| ar1_sum_variance(&vec![1.0; n], phi);
+        let w = sum_weight;
         assert_eq!(w(720, 0.0), 720.0);
         // A 30-day bill of hours correlated 0.9: about (1 + phi) / (1 - phi) = 19 times.
         let ratio = w(720, 0.9) / w(720, 0.0);
