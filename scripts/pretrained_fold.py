@@ -22,8 +22,9 @@ import torch
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "python"))
 from bemcal_train import pretrain as P  # noqa: E402
-from bemcal_train.data import hourly_features, normalise_params, weather_stats, window_index  # noqa: E402
-from bemcal_train.model import Surrogate  # noqa: E402
+from bemcal_train.data import (hourly_features, normalise_params, schedule_columns, weather_stats,  # noqa: E402
+                               window_index)
+from bemcal_train.model import ScheduledSurrogate, Surrogate  # noqa: E402
 
 HO = os.path.join(os.environ.get("CORPUS", os.path.expanduser("~/.cache/bemcal/corpus")), "heldout")
 PRE = os.path.expanduser(os.environ.get("PRETRAINED", "~/.cache/bemcal/pretrained-foldable-200"))
@@ -61,10 +62,16 @@ def evaluate(sdir, train_ds, rows, names, weather, y):
     saved = torch.load(os.path.join(sdir, "weights.pt"), weights_only=True)
     with open(os.path.join(train_ds, "dataset.json")) as f:
         meta = json.load(f)
-    net = Surrogate(saved["n_features"], len(saved["output_names"]), HIDDEN, 2)
-    net.load_state_dict(saved["state_dict"])
     m, s = weather_stats(np.load(os.path.join(train_ds, "weather.npy")))
     hourly = hourly_features(weather, m, s, "hour+schedule")
+    table = saved.get("schedule")
+    if table is None:
+        net = Surrogate(saved["n_features"], len(saved["output_names"]), HIDDEN, 2)
+    else:  # the conditioned network folded: the schedule's hourly inputs beside
+        hourly = np.concatenate([hourly, schedule_columns(weather, table)], axis=1)
+        net = ScheduledSurrogate(saved["n_features"], len(saved["output_names"]), HIDDEN, 2, table["params"],
+                                 saved["state_dict"]["sched_width"].tolist())
+    net.load_state_dict(saved["state_dict"])
     idx = torch.as_tensor(window_index(hourly.shape[0]))
     preds = []
     for r in rows:

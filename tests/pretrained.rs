@@ -1,8 +1,10 @@
 //! The pretrained surrogate's path through `bemcal calibrate` (issue 66), with real
 //! EnergyPlus, PyTorch and ONNX Runtime: a tiny corpus of the small model's family built by
-//! `bemcal corpus`, a tiny network pretrained on it (`bemcal_train.pretrain train --inputs
-//! foldable`), then the small calibration with `[surrogate] pretrained`: folded onto the
-//! building and fine-tuned where the building is inside the corpus's ranges, and trained from
+//! `bemcal corpus`, a tiny network pretrained on it (`bemcal_train.pretrain train`, the
+//! schedule's value hour by hour among its inputs), then the small calibration with
+//! `[surrogate] pretrained` and a schedule interval among its parameters: folded onto the
+//! building (the schedule as hourly inputs, the graphs and their gradient checked against
+//! PyTorch) and fine-tuned where the building is inside the corpus's ranges, and trained from
 //! random weights, with the reason, where it is not.
 
 mod common;
@@ -41,11 +43,16 @@ weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
 fn project(dir: &Path, model: &str) -> std::path::PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("model.toml"), model).unwrap();
-    let text = small_project("pretrained-start", 6).replace(
-        "hidden = 32\n",
-        "hidden = 32\npretrained = \"../pretrained\"\n",
-    );
-    assert!(text.contains("pretrained = "));
+    let text = small_project("pretrained-start", 6)
+        .replace(
+            "hidden = 32\n",
+            "hidden = 32\npretrained = \"../pretrained\"\n",
+        )
+        .replace(
+            "\"cooling_setpoint_occupied\"]",
+            "\"cooling_setpoint_occupied\", \"schedule_weekday_06\"]",
+        );
+    assert!(text.contains("pretrained = ") && text.contains("schedule_weekday_06"));
     std::fs::write(dir.join("project.toml"), text).unwrap();
     run_ok(
         bemcal()
@@ -91,13 +98,7 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
             .args(["--parallel", "2"]),
     );
     let pretrain = std::process::Command::new(repo().join(".venv/bin/python"))
-        .args([
-            "-m",
-            "bemcal_train.pretrain",
-            "train",
-            "--inputs",
-            "foldable",
-        ])
+        .args(["-m", "bemcal_train.pretrain", "train"])
         .arg("--corpus")
         .arg(root.join("corpus"))
         .args(["--cases", "6", "--epochs", "3", "--hours-per-case", "500"])
@@ -126,6 +127,32 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
     .unwrap();
     assert_eq!(verdict["admitted"], true, "{verdict}");
     assert!(verdict["fold_error"].as_f64().unwrap() < 1e-3, "{verdict}");
+    assert_eq!(verdict["inputs"], "conditioned", "{verdict}");
+    // The schedule interval the calibration varies is an hourly input of the folded surrogate,
+    // and its graphs (the fused one and its gradient) agree with PyTorch.
+    let meta: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("inside/out/surrogate/surrogate.json")).unwrap(),
+    )
+    .unwrap();
+    let params: Vec<&str> = meta["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    let k = params
+        .iter()
+        .position(|&p| p == "schedule_weekday_06")
+        .unwrap();
+    assert_eq!(
+        meta["schedule_inputs"]["params"],
+        serde_json::json!([k]),
+        "{meta}"
+    );
+    for check in ["fused_vs_torch", "vjp_vs_torch"] {
+        let err = meta["onnxruntime_check"][check].as_f64().unwrap();
+        assert!(err < 1e-4, "{check} {err}");
+    }
     assert!(summary["sigma_eta_kwh"]["heating_kwh"]
         .as_f64()
         .unwrap()

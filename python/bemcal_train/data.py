@@ -95,6 +95,41 @@ def hourly_features(weather, mean, std, mode):
     return np.concatenate([w, time_features(weather, mode)], axis=1)
 
 
+SCHEDULE_COLUMNS = ["off_day", "occupied", "schedule_fixed"]
+"""The schedule inputs' first hourly columns (a ``ScheduledSurrogate``'s), before one indicator
+per calibrated schedule parameter."""
+
+
+def schedule_column_names(table, param_names):
+    """Names of ``schedule_columns``'s columns."""
+    return SCHEDULE_COLUMNS + [f"schedule_is_{param_names[i]}" for i in table["params"]]
+
+
+def schedule_columns(weather, table):
+    """The schedule's hourly inputs, [n_hours, 3 + K], from the building's schedule table
+    (``surrogate.json``'s ``schedule_inputs``, written by ``pretrain fold``): per hour, the
+    off-day flag (day type code != 0), the occupied flag, the value of the schedule interval
+    covering the hour where it is fixed (0 where it is calibrated), and one indicator per
+    calibrated schedule parameter (``table["params"]``, K of them) covering the hour. Hour of
+    day ``t mod 24``; off days run the off-day table. Identical to the Rust runtime's
+    ``SurrogateMeta::hourly_inputs``."""
+    n = weather.shape[0]
+    k = len(table["params"])
+    out = np.zeros((n, 3 + k))
+    off = weather[:, 4] != 0
+    h = np.arange(n) % 24
+    for kind, rows in (("working", ~off), ("off", off)):
+        day = table[kind]
+        interval = np.asarray(day["interval"])[h[rows]]
+        out[rows, 0] = 1.0 if kind == "off" else 0.0
+        out[rows, 1] = np.asarray(day["occupied"], dtype=np.float64)[h[rows]]
+        out[rows, 2] = np.where(interval < 0, np.asarray(day["fixed"], dtype=np.float64)[h[rows]], 0.0)
+        idx = np.nonzero(rows)[0]
+        cal = interval >= 0
+        out[idx[cal], 3 + interval[cal]] = 1.0
+    return out
+
+
 def window_index(n_hours):
     """[n_hours, LOOKBACK] hour indices of each window (t-2, t-1, t), clamped at 0."""
     t = np.arange(n_hours)[:, None] + np.arange(-(LOOKBACK - 1), 1)[None, :]

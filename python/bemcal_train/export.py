@@ -79,7 +79,30 @@ def build_fast(model, n_params, n_hourly, scale, nonnegative):
         helper.make_node("MatMul", ["p", "w_p"], ["pp"], name="param_projection"),
         helper.make_node("Add", ["pp", "b_ih0"], ["pb"]),
         helper.make_node("Concat", ["pb", "b_hh0"], ["bias0"], axis=1),
-        helper.make_node("LSTM", ["xw", "w_0", "r_0", "bias0"], ["y0", "", ""], hidden_size=H),
+    ]
+    x0 = "xw"
+    if hasattr(model, "sched_params") and model.sched_params.shape[0] > 0:
+        # ScheduledSurrogate: the schedule term q = m . (width * p[sched_params]) as one more
+        # input column (the LSTM's last weight column is its).
+        k = model.sched_params.shape[0]
+        inits += [
+            numpy_helper.from_array(model.sched_params.cpu().numpy().astype(np.int64), "sched_idx"),
+            numpy_helper.from_array(f32(model.sched_width.cpu().numpy()[None]), "sched_width"),
+            numpy_helper.from_array(np.array([n_hourly - k], dtype=np.int64), "sched_start"),
+            numpy_helper.from_array(np.array([n_hourly], dtype=np.int64), "sched_end"),
+            numpy_helper.from_array(np.array([2], dtype=np.int64), "axis2"),
+        ]
+        nodes += [
+            helper.make_node("Gather", ["p", "sched_idx"], ["sched_sel"], axis=1),
+            helper.make_node("Mul", ["sched_sel", "sched_width"], ["sched_pb"]),
+            helper.make_node("Transpose", ["sched_pb"], ["sched_pbt"]),
+            helper.make_node("Slice", ["xw", "sched_start", "sched_end", "axis2"], ["sched_m"]),
+            helper.make_node("MatMul", ["sched_m", "sched_pbt"], ["sched_q"]),
+            helper.make_node("Concat", ["xw", "sched_q"], ["xwq"], axis=2),
+        ]
+        x0 = "xwq"
+    nodes += [
+        helper.make_node("LSTM", [x0, "w_0", "r_0", "bias0"], ["y0", "", ""], hidden_size=H),
         helper.make_node("Squeeze", ["y0", "axis1"], ["x1"]),
     ]
     x = "x1"

@@ -128,7 +128,12 @@ def _forward(model, n_params, scale, nonnegative, int8, chunk):
     pbs = [pb + f"_{k}" for k in "ifgo"]
     g.nodes.append(helper.make_node("Split", [pb, splits], pbs, name="pb_split", axis=1))
     pbg = dict(zip("ifgo", pbs))
-    a0 = {k: g.gemm("xc", blk(w0[:, n_params:], k), "a0", None, pbg[k]) for k in "ifgo"}
+    sched = schedule_term(g, model, n_params, w0)
+    n_in = w0.shape[1] - (sched is not None)  # the LSTM's inputs less the schedule term
+    if sched is not None:  # C = W_p . p + b + q w_q, q per row (ScheduledSurrogate)
+        pbg = {k: g.op("Add", [pbg[k], g.op("MatMul", [sched["q"], g.init(g.name("wq"), blk(sched["w"], k).T)])])
+               for k in "ifgo"}
+    a0 = {k: g.gemm("xc", blk(w0[:, n_params:n_in], k), "a0", None, pbg[k]) for k in "ifgo"}
     r0 = sd["weight_hh_l0"]
     # step 1 (zero state)
     h, rec = cell({k: g.op(ACT[k], [a0[k]]) for k in "igo"}, None)
@@ -176,10 +181,30 @@ def _forward(model, n_params, scale, nonnegative, int8, chunk):
     z = g.gemm(g.op("Relu", [hr]), wfc, "head", None, g.init("b_fc", bfc))
     g.nodes.append(helper.make_node("Relu" if nonnegative else "Identity", [z], ["yc"], name="out"))
     weights = {"w0": w0[:, :n_params], "r0": r0, "w1": w1, "wr1": wr1, "wfc": wfc}
-    return g, {"t": t, "hr": hr, "z": z, "H": H, "R": R, "n_out": len(s), "weights": weights}
+    return g, {"t": t, "hr": hr, "z": z, "H": H, "R": R, "n_out": len(s), "weights": weights, "sched": sched}
 
 
-_OUTER = ("w_p", "b_0", "split4")
+def schedule_term(g, model, n_params, w0):
+    """A ``ScheduledSurrogate``'s schedule term in the chunk body, or None for today's surrogate:
+    ``pb_sched`` = width * p[sched_params] [1, K] per proposal (outside the Scan), the
+    indicators ``m`` [R, K] (the last K columns of ``xc``) and ``q = m . pb_sched^T`` [R, 1];
+    ``w`` [4H, 1] its LSTM weight column (the last)."""
+    if not hasattr(model, "sched_params") or model.sched_params.shape[0] == 0:
+        return None
+    idx = model.sched_params.cpu().numpy().astype(np.int64)
+    width = model.sched_width.cpu().numpy().astype(np.float64)
+    k, n_hourly = len(idx), w0.shape[1] - 1 - n_params
+    g.init("sched_idx", idx, np.int64)
+    g.init("sched_width", width[None])
+    sel = g.op("Gather", ["p", "sched_idx"], base="pb_sched_sel", axis=1)
+    pbt = g.op("Transpose", [g.op("Mul", [sel, "sched_width"], base="pb_sched")], base="pb_sched_t")
+    m = g.op("Slice", ["xc", g.init(g.name("s"), [n_hourly - k], np.int64), g.init(g.name("e"), [n_hourly], np.int64),
+                       g.init(g.name("a"), [1], np.int64)], base="sched_m")
+    q = g.op("MatMul", [m, pbt], base="sched_q")
+    return {"m": m, "q": q, "w": w0[:, -1:], "k": k, "idx": idx, "width": width}
+
+
+_OUTER = ("w_p", "b_0", "split4", "sched_idx", "sched_width")
 
 
 def _split_outer(g):
@@ -289,34 +314,54 @@ def build_fused_vjp(model, n_params, n_hourly, scale, nonnegative, chunk=CHUNK):
         dc = unprev(dc_prev)
     # layer 1, last step first; d pb = sum over rows and steps of the gate gradients
     dpb = {k: None for k in "ifgo"}
-    dh_rec, dc = None, None
+    dh_rec, dc, dq = None, None, None
+    sched = f["sched"]
     for s in reversed(range(LOOKBACK)):
         da, dc_prev = cell_back(t[1][s], add(dl1[s], dh_rec), dc)
         for k, v in da.items():
             dpb[k] = add(dpb[k], g.op("ReduceSum", [v, axis0], keepdims=1))
+        if sched is not None:
+            dq = add(dq, through(da, sched["w"]))  # [R, 1]
         if s > 0:
             dh_rec = unprev(through(da, W["r0"]))
             dc = unprev(dc_prev)
     gpb = g.op("Concat", [dpb[k] for k in "ifgo"], axis=1)  # f: from steps 2 and 3
     g.nodes.append(helper.make_node("Identity", [gpb], ["gc"], name="gc"))
+    body_out = [helper.make_tensor_value_info("gc", TensorProto.FLOAT, [1, 4 * H])]
+    if sched is not None:  # d q / d pb_sched = m: the chunk's [1, K] = dq^T . m
+        gq = g.op("MatMul", [g.op("Transpose", [dq]), sched["m"]])
+        g.nodes.append(helper.make_node("Identity", [gq], ["gqc"], name="gqc"))
+        body_out.append(helper.make_tensor_value_info("gqc", TensorProto.FLOAT, [1, sched["k"]]))
     outer, body_nodes, outer_inits, body_inits = _split_outer(g)
     body_nodes = [n for n in body_nodes if n.name != "out"]  # yc is not a body output here
     body = helper.make_graph(
         body_nodes, "chunk_vjp",
         [helper.make_tensor_value_info("xc", TensorProto.FLOAT, [R, n_hourly]),
          helper.make_tensor_value_info("vc", TensorProto.FLOAT, [chunk, n_out])],
-        [helper.make_tensor_value_info("gc", TensorProto.FLOAT, [1, 4 * H])], initializer=body_inits)
-    scan = helper.make_node("Scan", ["xw", "v"], ["gpb_chunks"], name="chunks", body=body, num_scan_inputs=2)
+        body_out, initializer=body_inits)
+    scan_out = ["gpb_chunks"] + (["gq_chunks"] if sched is not None else [])
+    scan = helper.make_node("Scan", ["xw", "v"], scan_out, name="chunks", body=body, num_scan_inputs=2)
     tail = [
         helper.make_node("ReduceSum", ["gpb_chunks", "axes01"], ["gpb_sum"], keepdims=0, name="sum_chunks"),
         helper.make_node("Unsqueeze", ["gpb_sum", "axes0_outer"], ["gpb_row"], name="row"),
-        helper.make_node("MatMul", ["gpb_row", "w_pT"], ["g"], name="to_params"),
+        helper.make_node("MatMul", ["gpb_row", "w_pT"], ["g_lin" if sched is not None else "g"], name="to_params"),
     ]
     outer_inits = outer_inits + [
         numpy_helper.from_array(np.array([0, 1], dtype=np.int64), "axes01"),
         numpy_helper.from_array(np.array([0], dtype=np.int64), "axes0_outer"),
         numpy_helper.from_array(np.ascontiguousarray(W["w0"], dtype=np.float32), "w_pT"),
     ]
+    if sched is not None:  # g += (sum_chunks gq * width) scattered onto the schedule parameters
+        n_params = W["w0"].shape[1]
+        E = np.zeros((sched["k"], n_params))
+        E[np.arange(sched["k"]), sched["idx"]] = sched["width"]
+        tail += [
+            helper.make_node("ReduceSum", ["gq_chunks", "axes01"], ["gq_sum"], keepdims=0, name="sum_gq"),
+            helper.make_node("Unsqueeze", ["gq_sum", "axes0_outer"], ["gq_row"], name="gq_row"),
+            helper.make_node("MatMul", ["gq_row", "sched_scatter"], ["g_sched"], name="sched_to_params"),
+            helper.make_node("Add", ["g_lin", "g_sched"], ["g"], name="g"),
+        ]
+        outer_inits.append(numpy_helper.from_array(E.astype(np.float32), "sched_scatter"))
     graph = helper.make_graph(
         outer + [scan] + tail, "bemcal_surrogate_vjp",
         [helper.make_tensor_value_info("p", TensorProto.FLOAT, [1, n_params]),

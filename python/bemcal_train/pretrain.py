@@ -23,6 +23,10 @@ Command line::
     python -m bemcal_train.pretrain curve --corpus DIR --heldout DIR --sizes 100,200 --out DIR
     python -m bemcal_train.pretrain train --corpus DIR --cases N --out DIR [--inputs foldable]
     python -m bemcal_train.pretrain fold --pretrained DIR --dataset DIR --building FILE --hidden H --out DIR
+
+``fold`` turns the network into one building's surrogate, exactly: a ``ScheduledSurrogate``
+(model.py) for the conditioned inputs, whose schedule table (``schedule_table``) the runtime
+turns into hourly inputs; today's ``Surrogate`` for the foldable ones.
 """
 
 import argparse
@@ -540,9 +544,8 @@ def admission(card, meta, building, hidden, layers, time_features):
     parameter one it knows, every meter one it predicts, and the surrogate's shape its own."""
     if card.get("format") != "bemcal-pretrained-surrogate":
         return "card.json is not a bemcal pretrained surrogate's"
-    if card["inputs"].get("kind") != "foldable":
-        return "the pretrained network takes the schedule hour by hour (inputs 'conditioned'), " \
-               "which today's surrogate cannot hold; pretrain it with --inputs foldable"
+    if card["inputs"].get("kind") not in INPUTS:
+        return f"the pretrained network's inputs '{card['inputs'].get('kind')}' are none of {', '.join(INPUTS)}"
     if time_features != "hour+schedule":
         return f"the surrogate's time features are '{time_features}'; the pretrained network's are hour+schedule"
     m = card["model"]
@@ -607,10 +610,112 @@ def folded(model, card, norm, meta, building, weather):
     return net, scale
 
 
+def schedule_table(spec, values, params):
+    """The building's schedule as the runtime's hourly inputs take it (``data.schedule_columns``,
+    ``surrogate.json``'s ``schedule_inputs``): for working days and days off, each hour's
+    schedule interval, as an index into ``params`` (the surrogate's calibrated schedule
+    parameters, by their position among all its parameters) or, where that interval is fixed,
+    its value; and the occupied hours (working days between the spec's occupied hours, as the
+    corpus's ``schedule_hours``)."""
+    names = [p["name"] for p in params]
+    hours = profile_names(spec)
+    cal = sorted({names.index(n) for n in hours if n in names})
+    a, b = spec["occupied_hours"]
+    table = {"params": cal}
+    for kind, part in (("working", hours[:24]), ("off", hours[24:])):
+        table[kind] = {
+            "interval": [cal.index(names.index(n)) if n in names else -1 for n in part],
+            "fixed": [0.0 if n in names else float(values[n]) for n in part],
+            "occupied": [int(kind == "working" and a <= h < b) for h in range(24)],
+        }
+    return table
+
+
+def folded_conditioned(model, card, norm, meta, building, weather):
+    """A ``ScheduledSurrogate`` equal to the conditioned pretrained network on this building,
+    and its schedule table: layer 1's static part (descriptors, engineering parameters) becomes
+    the parameters' part and a bias as in ``folded``; its hourly part maps onto the runtime's
+    hourly inputs (weather re-normalised, off-day and occupied flags), and the schedule's
+    value, ``fixed(t) + sum_k m_k(t) (min_k + width_k p_k)``, onto the fixed-value and indicator
+    columns (affine) and the schedule term ``q`` (the bilinear rest). Exact up to rounding."""
+    from .data import weather_stats
+    from .model import ScheduledSurrogate
+
+    spec, area = building["spec"], building["floor_area_m2"]
+    params = meta["params"]
+    lo = {p["name"]: p["min"] for p in params}
+    hi = {p["name"]: p["max"] for p in params}
+    table = schedule_table(spec, building["values"], params)
+
+    def static(values):
+        return np.array(static_features(spec, values, area, "conditioned"))
+
+    base = dict(building["values"], **lo)
+    s0 = static(base)
+    S = np.stack([static(dict(base, **{p["name"]: hi[p["name"]]})) - s0 for p in params], axis=1)
+    sd_s = np.asarray(norm.static_std)
+    z0 = (s0 - np.asarray(norm.static_mean)) / sd_s
+    sd = model.state_dict()
+    W = sd["lstm.weight_ih_l0"].double().numpy()
+    n_static = len(s0)
+    Ws, Wh = W[:, :n_static], W[:, n_static:]  # Wh: HOURLY order
+    m_d, sd_d = weather_stats(weather)
+    mean_c, std_c = np.asarray(norm.hourly_mean), np.asarray(norm.hourly_std)
+    k = len(table["params"])
+    zero = np.zeros((W.shape[0], 1))
+    w_sched = Wh[:, 7:8] / std_c[7]
+    w_occ = Wh[:, 8:9] / std_c[8]
+    lo_k = np.array([params[i]["min"] for i in table["params"]])
+    cols = [Ws @ (S / sd_s[:, None]),                      # parameters
+            Wh[:, :4] * (sd_d[:4] / std_c[:4])[None, :],   # weather, the dataset's normalisation
+            zero,                                          # day type code
+            Wh[:, 5:7],                                    # hour sin, cos
+            zero, zero,                                    # off-day hour sin, cos
+            Wh[:, 4:5],                                    # off_day
+            w_occ,                                         # occupied
+            w_sched,                                       # schedule_fixed
+            w_sched * lo_k[None, :],                       # the indicators: the minimum
+            w_sched]                                       # q: width * p
+    bias = Ws @ z0 + Wh[:, :4] @ ((m_d[:4] - mean_c[:4]) / std_c[:4]) \
+        - Wh[:, 7] * mean_c[7] / std_c[7] - Wh[:, 8] * mean_c[8] / std_c[8]
+    out = {kk: v.clone() for kk, v in sd.items()}
+    out["lstm.weight_ih_l0"] = torch.as_tensor(np.concatenate(cols, axis=1), dtype=torch.float32)
+    out["lstm.bias_ih_l0"] = sd["lstm.bias_ih_l0"] + torch.as_tensor(bias, dtype=torch.float32)
+    rows = [card["outputs"].index(o) for o in meta["output_names"]]
+    out["head.weight"] = sd["head.weight"][rows]
+    out["head.bias"] = sd["head.bias"][rows]
+    m = card["model"]
+    width = [params[i]["max"] - params[i]["min"] for i in table["params"]]
+    n_features = len(params) + 9 + 3 + k
+    net = ScheduledSurrogate(n_features, len(rows), m["hidden"], m["layers"], table["params"], width)
+    out["sched_params"] = net.sched_params
+    out["sched_width"] = net.sched_width
+    net.load_state_dict(out)
+    scale = np.asarray(norm.y_scale)[rows] * area / 1000.0  # Wh/m2 -> kWh of the building
+    return net, scale, table
+
+
+def pretrained_inputs(card, norm, building, values, weather):
+    """The pretrained network's input rows [T, F] for the building at parameter ``values``."""
+    spec, area = building["spec"], building["floor_area_m2"]
+    kind = card["inputs"]["kind"]
+    st = (np.array(static_features(spec, values, area, kind)) - norm.static_mean) / norm.static_std
+    if kind == "foldable":
+        hc = (hourly_foldable(weather) - norm.hourly_mean) / norm.hourly_std
+    else:
+        T = weather.shape[0]
+        ang = 2 * np.pi * (np.arange(T) % 24) / 24
+        off = weather[:, 4] != 0
+        h = np.concatenate([weather[:, :4], off[:, None].astype(np.float64), np.sin(ang)[:, None],
+                            np.cos(ang)[:, None], schedule_hours(spec, values, off)], axis=1)
+        hc = (h - norm.hourly_mean) / norm.hourly_std
+    return np.concatenate([np.broadcast_to(st, (hc.shape[0], len(st))), hc], axis=1)
+
+
 def fold(args):
     """``fold``: the pretrained network as the warm start of one building's surrogate (the
     calibration's ``[surrogate] pretrained``), or the reason it cannot be."""
-    from .data import load_dataset, hourly_features, normalise_params, weather_stats
+    from .data import load_dataset, hourly_features, normalise_params, schedule_columns, weather_stats
     from .train import save_weights
 
     with open(os.path.join(args.pretrained, "card.json")) as f:
@@ -629,14 +734,21 @@ def fold(args):
         return
     norm = Normaliser(state=card["normalisation"])
     n_static = len(card["inputs"]["static"])
-    model = Surrogate(n_static + 9, len(card["outputs"]), card["model"]["hidden"], card["model"]["layers"])
+    n_hourly = len(card["inputs"]["hourly"])
+    model = Surrogate(n_static + n_hourly, len(card["outputs"]), card["model"]["hidden"], card["model"]["layers"])
     model.load_state_dict(torch.load(os.path.join(args.pretrained, "weights.pt"), map_location="cpu",
                                      weights_only=True))
-    net, scale = folded(model, card, norm, meta, building, ds["weather"])
+    schedule = None
+    if card["inputs"]["kind"] == "foldable":
+        net, scale = folded(model, card, norm, meta, building, ds["weather"])
+    else:
+        net, scale, schedule = folded_conditioned(model, card, norm, meta, building, ds["weather"])
     # The check: the folded network and the pretrained one give the same kWh at the design points.
     names = [p["name"] for p in meta["params"]]
     m_d, sd_d = weather_stats(ds["weather"])
     hourly = hourly_features(ds["weather"], m_d, sd_d, "hour+schedule")
+    if schedule is not None:
+        hourly = np.concatenate([hourly, schedule_columns(ds["weather"], schedule)], axis=1)
     p_norm = normalise_params(ds["params"], meta["params"])
     idx = torch.as_tensor(window_index(hourly.shape[0])[:: max(1, hourly.shape[0] // 500)])
     worst = 0.0
@@ -644,11 +756,8 @@ def fold(args):
         x = np.concatenate([np.broadcast_to(p_norm[i], (hourly.shape[0], len(names))), hourly], axis=1)
         xt = torch.as_tensor(x, dtype=torch.float32)[idx]
         values = dict(building["values"], **dict(zip(names, ds["params"][i])))
-        static = (np.array(static_features(building["spec"], values, building["floor_area_m2"], "foldable"))
-                  - norm.static_mean) / norm.static_std
-        hc = (hourly_foldable(ds["weather"]) - norm.hourly_mean) / norm.hourly_std
-        xc = np.concatenate([np.broadcast_to(static, (hc.shape[0], len(static))), hc], axis=1)
-        xc = torch.as_tensor(xc, dtype=torch.float32)[idx]
+        xc = torch.as_tensor(pretrained_inputs(card, norm, building, values, ds["weather"]),
+                             dtype=torch.float32)[idx]
         with torch.no_grad():
             a = net(xt).numpy() * scale
             rows = [card["outputs"].index(o) for o in meta["output_names"]]
@@ -656,10 +765,12 @@ def fold(args):
         worst = max(worst, float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-9)))
     if worst > 1e-3:
         raise SystemExit(f"the folded network differs from the pretrained one by {worst:.2e} (relative)")
-    save_weights(net, scale, meta["output_names"], len(names) + 9, os.path.join(args.out, "weights.pt"))
+    save_weights(net, scale, meta["output_names"], hourly.shape[1] + len(names),
+                 os.path.join(args.out, "weights.pt"), schedule)
     with open(verdict, "w") as f:
         json.dump({"admitted": True, "pretrained": os.path.abspath(args.pretrained),
-                   "corpus_cases": card["corpus"]["cases"], "fold_error": worst}, f)
+                   "corpus_cases": card["corpus"]["cases"], "fold_error": worst,
+                   "inputs": card["inputs"]["kind"]}, f)
     print(f"pretrained surrogate folded ({card['corpus']['cases']} corpus cases; "
           f"largest difference {worst:.1e} of the largest output)", flush=True)
 

@@ -10,11 +10,11 @@ import torch
 
 from . import FORMAT, FORMAT_VERSION, LOOKBACK
 from .adam import Adam
-from .data import (hourly_features, load_dataset, normalise_params, time_feature_names,
-                   weather_stats, window_index)
+from .data import (hourly_features, load_dataset, normalise_params, schedule_column_names,
+                   schedule_columns, time_feature_names, weather_stats, window_index)
 from .export import export_all, run_onnx, vjp_check
 from .fused import CHUNK
-from .model import Denormalised, Surrogate
+from .model import Denormalised, ScheduledSurrogate, Surrogate
 
 
 def pick_device(name):
@@ -76,23 +76,42 @@ def metrics(pred_kwh, true_kwh, names):
 WEIGHTS = "weights.pt"
 
 
-def save_weights(model, scale, names, n_features, path):
-    """The trained weights and the output scale they predict in (for a later warm start)."""
-    torch.save({"state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-                "scale": [float(s) for s in scale], "output_names": list(names),
-                "n_features": int(n_features)}, path)
+def save_weights(model, scale, names, n_features, path, schedule=None):
+    """The trained weights and the output scale they predict in (for a later warm start); a
+    ``ScheduledSurrogate``'s schedule table (``schedule``) with them."""
+    saved = {"state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+             "scale": [float(s) for s in scale], "output_names": list(names),
+             "n_features": int(n_features)}
+    if schedule is not None:
+        saved["schedule"] = schedule
+    torch.save(saved, path)
 
 
-def warm_start(model, init_dir, scale, n_features, names):
-    """Loads ``init_dir/weights.pt`` into ``model``. The head is rescaled by old / new output
-    scale so that the warm-started model predicts the same kWh as the one it came from (the
-    scale, each output's maximum over the training points, can grow as points are added)."""
+def read_init(init_dir):
+    """``init_dir/weights.pt`` as ``save_weights`` wrote it."""
     path = os.path.join(init_dir, WEIGHTS)
     try:
-        saved = torch.load(path, map_location="cpu", weights_only=True)
+        return torch.load(path, map_location="cpu", weights_only=True)
     except FileNotFoundError:
         raise SystemExit(f"--init {init_dir}: no {WEIGHTS} there (a surrogate trained before warm "
                          f"starts existed); train from scratch instead")
+
+
+def build_model(n_features, names, args, schedule, specs):
+    """Today's surrogate, or a ``ScheduledSurrogate`` where the warm start carries a schedule
+    table (the pretrained network folded onto the building)."""
+    if schedule is None:
+        return Surrogate(n_features, len(names), args.hidden, args.layers)
+    width = [specs[i]["max"] - specs[i]["min"] for i in schedule["params"]]
+    return ScheduledSurrogate(n_features, len(names), args.hidden, args.layers, schedule["params"], width)
+
+
+def warm_start(model, saved, init_dir, scale, n_features, names):
+    """Loads the weights ``read_init`` read from ``init_dir`` into ``model``. The head is
+    rescaled by old / new output scale so that the warm-started model predicts the same kWh as
+    the one it came from (the scale, each output's maximum over the training points, can grow
+    as points are added)."""
+    path = os.path.join(init_dir, WEIGHTS)
     if saved["output_names"] != list(names) or saved["n_features"] != n_features:
         raise SystemExit(f"--init {path}: trained for outputs {saved['output_names']} and "
                          f"{saved['n_features']} features, this dataset has {list(names)} and {n_features}")
@@ -137,8 +156,13 @@ def train(args):
     split = meta["split"]
     train_pts, held_pts = list(split["train"]), list(split["held_out"])
 
+    init = getattr(args, "init", None)
+    saved = read_init(init) if init else None
+    sched_table = saved.get("schedule") if saved else None
     mean, std = weather_stats(ds["weather"])
     hourly = hourly_features(ds["weather"], mean, std, args.time_features)
+    if sched_table is not None:
+        hourly = np.concatenate([hourly, schedule_columns(ds["weather"], sched_table)], axis=1)
     p_norm = normalise_params(ds["params"], specs)
     outputs = ds["outputs"]
     nonnegative = bool(np.all(outputs >= 0))
@@ -149,10 +173,9 @@ def train(args):
     win = Windows(p_norm, hourly, outputs / scale, device)
 
     n_features = n_params + hourly.shape[1]
-    model = Surrogate(n_features, len(names), args.hidden, args.layers).to(device)
-    init = getattr(args, "init", None)
+    model = build_model(n_features, names, args, sched_table, specs).to(device)
     if init:
-        warm_start(model, init, scale, n_features, names)
+        warm_start(model, saved, init, scale, n_features, names)
     opt = Adam(model.parameters(), lr=args.lr)
     T = hourly.shape[0]
     tr_point = torch.as_tensor(np.repeat(train_pts, T), device=device)
@@ -207,7 +230,7 @@ def train(args):
 
     os.makedirs(args.out, exist_ok=True)
     model = model.cpu().eval()
-    save_weights(model, scale, names, n_features, os.path.join(args.out, WEIGHTS))
+    save_weights(model, scale, names, n_features, os.path.join(args.out, WEIGHTS), sched_table)
     files = export_all(model, n_params, hourly.shape[1], scale, nonnegative, args.out)
 
     # Parity fixture: a few windows of the first held-out point, and its whole year.
@@ -261,6 +284,8 @@ def train(args):
         json.dump(parity, f)
 
     hourly_names = list(meta["weather_features"]) + time_feature_names(args.time_features)
+    if sched_table is not None:
+        hourly_names += schedule_column_names(sched_table, [p["name"] for p in specs])
     info = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -280,6 +305,7 @@ def train(args):
                     "mean": mean.tolist(), "std": std.tolist()},
         "time_features": args.time_features,
         "time_feature_names": time_feature_names(args.time_features),
+        **({"schedule_inputs": sched_table} if sched_table is not None else {}),
         "input_layout": "x[:, s, :] = [(p - min)/(max - min) (params order), (w - mean)/std (weather order), "
                         "time features] of hour t-2+s (clamped at 0) for the window ending at hour t",
         "outputs": [{"name": nm, "unit": "kWh", "scale": float(scale[k]),

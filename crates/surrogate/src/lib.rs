@@ -8,6 +8,8 @@
 //! * [`surrogate`]: [`Surrogate::load`] and [`Evaluator`], the per-proposal hot path.
 //! * [`pretrained`]: the family's pretrained network folded onto one building, the warm start
 //!   of its surrogate.
+//! * [`schedule`]: the building's schedule as hourly inputs, for a surrogate folded from the
+//!   pretrained network.
 //! * [`predict`]: CSV output of an evaluation.
 //! * [`parity`]: the trainer's PyTorch outputs, against which every trained surrogate's graphs
 //!   are checked.
@@ -17,6 +19,7 @@ pub mod dataset;
 pub mod parity;
 pub mod predict;
 pub mod pretrained;
+pub mod schedule;
 pub mod surrogate;
 pub mod train;
 

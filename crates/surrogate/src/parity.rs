@@ -85,6 +85,21 @@ impl Surrogate {
         let y = self.run_windows(fixture.windows().view())?;
         Ok(relative_error(y.view(), &fixture.y_windows))
     }
+
+    /// The hot path's [`relative_error`] against PyTorch over the fixture's year
+    /// (`y_year`), on the hourly inputs this runtime builds from `weather` (the training set's
+    /// raw `[n_hours, 5]`): checks [`crate::SurrogateMeta::hourly_inputs`], the schedule
+    /// inputs among them, against the trainer's features as well as the graphs.
+    pub fn year_parity_error(
+        self,
+        fixture: &ParityFixture,
+        weather: ArrayView2<'_, f64>,
+    ) -> Result<f64, SurrogateError> {
+        let hourly = self.meta().hourly_inputs_raw(weather);
+        let mut ev = self.bind_hourly(hourly)?;
+        let y = ev.evaluate(&fixture.params_raw)?;
+        Ok(relative_error(y, &fixture.y_year))
+    }
 }
 
 #[cfg(test)]

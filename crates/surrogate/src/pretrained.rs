@@ -1,12 +1,16 @@
 //! The pretrained surrogate as the start of one building's surrogate (issue 66).
 //!
 //! A network pretrained on the building family's corpus (`python -m bemcal_train.pretrain
-//! train --inputs foldable`: a folder with `card.json` and `weights.pt`) takes the building's
-//! descriptors, its engineering parameters and its schedule as a 48-hour profile as static
-//! inputs, and today's hourly inputs. Those static inputs are affine in the calibrated
-//! parameters, so the network *folds* exactly into today's surrogate shape for one building
-//! (`pretrain.fold`): the trainer then fine-tunes it from there (a warm start) instead of
-//! from a random start, and every graph, the chains and their gradient stay as they are.
+//! train`: a folder with `card.json` and `weights.pt`) takes the building's descriptors and its
+//! engineering parameters as static inputs, and the weather, the hour, the day type and the
+//! schedule's value hour by hour (`--inputs conditioned`, the default; `--inputs foldable`
+//! takes the schedule as a 48-hour static profile instead). For one building it *folds*
+//! exactly into the runtime's surrogate shape (`pretrain.fold`): the static inputs are affine
+//! in the calibrated parameters and become the parameters' part and a bias; the schedule's
+//! value becomes hourly inputs (the [`crate::schedule`] table) and, for the calibrated
+//! intervals, a product of an hourly indicator and the parameter that the graphs and their
+//! gradient form themselves. The trainer then fine-tunes it from there (a warm start)
+//! instead of from a random start; the chains and their gradient stay as they are.
 //!
 //! [`fold`] asks the trainer to fold; it answers with a [`FoldVerdict`]: admitted, or refused
 //! with the reason (a building outside the corpus's ranges, a parameter or meter the network

@@ -44,6 +44,7 @@ use ort::value::{Tensor, TensorRef};
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::{ParamSpec, WEATHER_FEATURES};
+use crate::schedule::ScheduleInputs;
 
 /// Name of the metadata file in a surrogate directory.
 pub const METADATA_FILE: &str = "surrogate.json";
@@ -282,6 +283,10 @@ pub struct SurrogateMeta {
     /// Accuracy of the int8 graph, when there is one.
     #[serde(default)]
     pub int8: Option<Int8Info>,
+    /// The building's schedule as hourly inputs, after the time features: a surrogate folded
+    /// from the family's pretrained network ([`crate::schedule`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub schedule_inputs: Option<ScheduleInputs>,
 }
 
 impl SurrogateMeta {
@@ -356,13 +361,19 @@ impl SurrogateMeta {
                 self.time_feature_names, self.time_features
             ));
         }
+        if let Some(s) = &self.schedule_inputs {
+            s.validate(self.params.len())?;
+        }
         if self.n_features != self.params.len() + self.n_hourly() {
             return Err(format!(
-                "n_features {} != {} params + {} weather + {} time features",
+                "n_features {} != {} params + {} weather + {} time features + {} schedule inputs",
                 self.n_features,
                 self.params.len(),
                 self.weather.names.len(),
-                self.time_feature_names.len()
+                self.time_feature_names.len(),
+                self.schedule_inputs
+                    .as_ref()
+                    .map_or(0, ScheduleInputs::n_columns)
             ));
         }
         if self.feature_names.len() != self.n_features {
@@ -398,9 +409,14 @@ impl SurrogateMeta {
         Ok(())
     }
 
-    /// Per-hour features: weather + time features.
+    /// Per-hour features: weather + time features + schedule inputs.
     pub fn n_hourly(&self) -> usize {
-        self.weather.names.len() + self.time_feature_names.len()
+        self.weather.names.len()
+            + self.time_feature_names.len()
+            + self
+                .schedule_inputs
+                .as_ref()
+                .map_or(0, ScheduleInputs::n_columns)
     }
 
     /// Output names in graph order.
@@ -447,13 +463,27 @@ impl SurrogateMeta {
     /// The per-hour part of the input, `[n_hours, n_hourly]`: `(w - mean) / std` for the five
     /// weather features, then the time features (hour of day `h = t mod 24`, hour beginning:
     /// `sin, cos(2 pi h / 24)`, and for `hour+schedule` the same two times the off-day flag,
-    /// day type != weekday). Pure; identical to the trainer's `data.hourly_features`.
+    /// day type != weekday), then the schedule inputs where the surrogate takes them
+    /// ([`ScheduleInputs::fill`]). Pure; identical to the trainer's `data.hourly_features`
+    /// (and `data.schedule_columns`).
     pub fn hourly_inputs(&self, weather: &HourlyFeatures) -> Array2<f32> {
-        let n = weather.len();
+        self.hourly_rows(weather.len(), |t| weather.row(t))
+    }
+
+    /// [`SurrogateMeta::hourly_inputs`] of a raw weather matrix `[n_hours, 5]` (a training
+    /// set's `weather.npy`, day types as their codes). Pure.
+    pub fn hourly_inputs_raw(&self, weather: ArrayView2<'_, f64>) -> Array2<f32> {
+        self.hourly_rows(weather.nrows(), |t| {
+            [0, 1, 2, 3, 4].map(|j| weather[[t, j]])
+        })
+    }
+
+    fn hourly_rows(&self, n: usize, weather: impl Fn(usize) -> [f64; 5]) -> Array2<f32> {
+        let times = 5 + self.time_feature_names.len();
         let k = self.n_hourly();
         let mut m = Array2::zeros((n, k));
         for t in 0..n {
-            let row = weather.row(t);
+            let row = weather(t);
             for j in 0..5 {
                 m[[t, j]] = ((row[j] - self.weather.mean[j]) / self.weather.std[j]) as f32;
             }
@@ -462,6 +492,13 @@ impl SurrogateMeta {
             let extra = [ang.sin(), ang.cos(), off * ang.sin(), off * ang.cos()];
             for (j, v) in extra.iter().take(self.time_feature_names.len()).enumerate() {
                 m[[t, 5 + j]] = *v as f32;
+            }
+            if let Some(sched) = &self.schedule_inputs {
+                let mut out = m.slice_mut(s![t, times..]);
+                let out = out
+                    .as_slice_mut()
+                    .expect("a row of a standard-layout array");
+                sched.fill(t, row[4], out);
             }
         }
         m
@@ -841,13 +878,26 @@ impl Surrogate {
     /// window once (`xw`, `[3, n_hours, n_hourly]`, hour `max(t - 2 + s, 0)` at step `s`) and
     /// keeps it for every later evaluation.
     pub fn bind(self, weather: &HourlyFeatures) -> Result<Evaluator> {
-        let n_hours = weather.len();
+        let hourly = self.meta.hourly_inputs(weather);
+        self.bind_hourly(hourly)
+    }
+
+    /// [`Surrogate::bind`] to hourly inputs already built ([`SurrogateMeta::hourly_inputs`],
+    /// [`SurrogateMeta::hourly_inputs_raw`]), `[n_hours, n_hourly]`.
+    pub fn bind_hourly(self, hourly: Array2<f32>) -> Result<Evaluator> {
+        let n_hours = hourly.nrows();
         if n_hours < LOOKBACK {
             return Err(SurrogateError::Input(format!(
                 "{n_hours} weather hours; need at least {LOOKBACK}"
             )));
         }
-        let hourly = self.meta.hourly_inputs(weather);
+        if hourly.ncols() != self.meta.n_hourly() {
+            return Err(SurrogateError::Input(format!(
+                "{} hourly inputs; the surrogate takes {}",
+                hourly.ncols(),
+                self.meta.n_hourly()
+            )));
+        }
         let xc = self
             .fused
             .as_ref()
