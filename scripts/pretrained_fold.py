@@ -102,6 +102,9 @@ def main():
         cases = json.load(f)["corpus"]["cases"]
     for b, rs in sorted(by.items()):
         rs.sort(key=lambda r: r["point"])
+        if len(rs) < OWN + 5:
+            print(f"building {b}: {len(rs)} of its points simulated, {OWN + 5} needed; left out", flush=True)
+            continue
         spec = rs[0]["spec"]
         known = set(P.ENGINEERING) | set(P.profile_names(spec))
         names = [n for n in sorted(rs[0]["values"]) if n in known and rs[0]["ranges"][n][1] > rs[0]["ranges"][n][0]]
