@@ -128,6 +128,11 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
     assert_eq!(verdict["admitted"], true, "{verdict}");
     assert!(verdict["fold_error"].as_f64().unwrap() < 1e-3, "{verdict}");
     assert_eq!(verdict["inputs"], "conditioned", "{verdict}");
+    // The verdict travels with the surrogate (from a worker, through the refinement rounds).
+    assert!(root
+        .join("inside/out/surrogate")
+        .join(bemcal_surrogate::pretrained::VERDICT_FILE)
+        .is_file());
     // The schedule interval the calibration varies is an hourly input of the folded surrogate,
     // and its graphs (the fused one and its gradient) agree with PyTorch.
     let meta: serde_json::Value = serde_json::from_str(

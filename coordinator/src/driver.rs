@@ -378,6 +378,15 @@ impl Leased<'_> {
             train.init = WARM_START_DIR.into();
             let path = format!("{WARM_START_DIR}/{}", bemcal_surrogate::WEIGHTS_FILE);
             inputs.push(self.artifact(path, &bytes)?);
+            // How the first training started (a pretrained network's verdict) goes on with it.
+            let verdict = dir.join(bemcal_surrogate::pretrained::VERDICT_FILE);
+            if let Ok(bytes) = std::fs::read(&verdict) {
+                let path = format!(
+                    "{WARM_START_DIR}/{}",
+                    bemcal_surrogate::pretrained::VERDICT_FILE
+                );
+                inputs.push(self.artifact(path, &bytes)?);
+            }
         }
         Ok(NewJob {
             stage: Stage::Train,

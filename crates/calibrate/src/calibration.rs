@@ -225,16 +225,21 @@ impl Calibration {
         let sp = &self.project.surrogate;
         // The first training starts from the pretrained network where one is given and it
         // covers this building (crate::pretrained); a refinement round's from the last weights.
-        let init = match (init, &sp.pretrained) {
-            (Some(dir), _) => Some(dir.to_path_buf()),
-            (None, Some(pretrained)) => crate::pretrained::start(
-                &self.inputs,
-                sp,
-                &self.project.resolve(pretrained),
-                &self.out.dataset(),
-                &self.out.pretrained(),
-            )?,
-            (None, None) => None,
+        // Where the start's verdict is, to carry into the new surrogate's folder: the fold's
+        // folder at the first training, the warm start's at a retraining.
+        let (init, verdict_from) = match (init, &sp.pretrained) {
+            (Some(dir), _) => (Some(dir.to_path_buf()), Some(dir.to_path_buf())),
+            (None, Some(pretrained)) => (
+                crate::pretrained::start(
+                    &self.inputs,
+                    sp,
+                    &self.project.resolve(pretrained),
+                    &self.out.dataset(),
+                    &self.out.pretrained(),
+                )?,
+                Some(self.out.pretrained()),
+            ),
+            (None, None) => (None, None),
         };
         let opts = TrainOptions {
             epochs: match init {
@@ -254,7 +259,7 @@ impl Calibration {
             ..TrainOptions::default()
         };
         bemcal_surrogate::train(&self.out.dataset(), &self.surrogate_dir(), &opts)?;
-        Ok(())
+        crate::pretrained::carry(verdict_from.as_deref(), &self.surrogate_dir())
     }
 }
 

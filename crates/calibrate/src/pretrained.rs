@@ -84,8 +84,28 @@ pub fn start(
     })
 }
 
-/// The start recorded in the fold's folder `dir` (`OutputDir::pretrained`), if a pretrained
-/// network was asked for.
+/// Copies the start's verdict from the folder `from` (the fold's, or the surrogate a
+/// retraining warm-starts from) into the surrogate folder `to`, so that it travels with the
+/// surrogate (from a worker, and through the refinement rounds) to the summary; removes a stale
+/// one where there is none to carry.
+pub fn carry(from: Option<&Path>, to: &Path) -> Result<(), Error> {
+    let target = to.join(fold::VERDICT_FILE);
+    match from
+        .map(|d| d.join(fold::VERDICT_FILE))
+        .filter(|f| f.is_file())
+    {
+        Some(source) => std::fs::copy(&source, &target)
+            .map(|_| ())
+            .map_err(|e| Error::io(&source, e)),
+        None if target.is_file() => {
+            std::fs::remove_file(&target).map_err(|e| Error::io(&target, e))
+        }
+        None => Ok(()),
+    }
+}
+
+/// The start recorded in the fold's folder `dir` (`OutputDir::pretrained`), or carried into
+/// a surrogate's folder ([`carry`]), if a pretrained network was asked for.
 pub fn read_start(dir: &Path) -> Option<SurrogateStart> {
     let verdict = fold::read_verdict(dir).ok()?;
     Some(match verdict {
