@@ -567,6 +567,42 @@ def admission(card, meta, building, hidden, layers, time_features):
     return None
 
 
+def fold_static(model, norm, building, params, inputs):
+    """Layer 1's static part of the pretrained network on this building, as an affine map of the
+    normalised parameters ``params`` (its static inputs are affine in them: each parameter's
+    column is the inputs' change from its prior minimum to its maximum): ``(W_p, bias, W_h,
+    state_dict)``, with ``W_h`` layer 1's hourly columns left to the caller."""
+    spec, area = building["spec"], building["floor_area_m2"]
+    lo = {p["name"]: p["min"] for p in params}
+
+    def static(values):
+        return np.array(static_features(spec, values, area, inputs))
+
+    base = dict(building["values"], **lo)
+    s0 = static(base)
+    S = np.stack([static(dict(base, **{p["name"]: p["max"]})) - s0 for p in params], axis=1)
+    sd_s = np.asarray(norm.static_std)
+    z0 = (s0 - np.asarray(norm.static_mean)) / sd_s
+    sd = model.state_dict()
+    W = sd["lstm.weight_ih_l0"].double().numpy()
+    Ws, Wh = W[:, :len(s0)], W[:, len(s0):]
+    return Ws @ (S / sd_s[:, None]), Ws @ z0, Wh, sd
+
+
+def folded_state(sd, w_ih, bias, card, meta, norm, building):
+    """The folded network's state: the pretrained ``sd`` with layer 1's input weights ``w_ih``,
+    ``bias`` added to its input bias, and the head's rows of the building's meters;
+    ``(state, rows, scale)``, the scale in the building's kWh."""
+    out = {k: v.clone() for k, v in sd.items()}
+    out["lstm.weight_ih_l0"] = torch.as_tensor(w_ih, dtype=torch.float32)
+    out["lstm.bias_ih_l0"] = sd["lstm.bias_ih_l0"] + torch.as_tensor(bias, dtype=torch.float32)
+    rows = [card["outputs"].index(o) for o in meta["output_names"]]
+    out["head.weight"] = sd["head.weight"][rows]
+    out["head.bias"] = sd["head.bias"][rows]
+    scale = np.asarray(norm.y_scale)[rows] * building["floor_area_m2"] / 1000.0  # Wh/m2 -> kWh
+    return out, rows, scale
+
+
 def folded(model, card, norm, meta, building, weather):
     """Today's surrogate (``Surrogate(n_params + 9, ...)``, inputs of data.hourly_features with
     hour+schedule) equal to the pretrained network on this building: layer 1's static part
@@ -575,38 +611,17 @@ def folded(model, card, norm, meta, building, weather):
     head keeps the building's meters, in kWh at the scale it returns. Exact up to rounding."""
     from .data import weather_stats
 
-    spec, area = building["spec"], building["floor_area_m2"]
     params = meta["params"]
-    lo = {p["name"]: p["min"] for p in params}
-    hi = {p["name"]: p["max"] for p in params}
-
-    def static(values):
-        return np.array(static_features(spec, values, area, "foldable"))
-
-    base = dict(building["values"], **lo)
-    s0 = static(base)
-    S = np.stack([static(dict(base, **{p["name"]: hi[p["name"]]})) - s0 for p in params], axis=1)
-    sd_s = np.asarray(norm.static_std)
-    z0 = (s0 - np.asarray(norm.static_mean)) / sd_s
-    sd = model.state_dict()
-    W = sd["lstm.weight_ih_l0"].double().numpy()
-    n_static = len(s0)
-    Ws, Wh = W[:, :n_static], W[:, n_static:]
+    W_p, bias, Wh, sd = fold_static(model, norm, building, params, "foldable")
     m_d, sd_d = weather_stats(weather)
     mean_c, std_c = np.asarray(norm.hourly_mean), np.asarray(norm.hourly_std)
-    W_p = Ws @ (S / sd_s[:, None])
     W_w = Wh[:, :5] * (sd_d / std_c[:5])[None, :]
-    bias = Ws @ z0 + Wh[:, :5] @ ((m_d - mean_c[:5]) / std_c[:5])
-    out = {k: v.clone() for k, v in sd.items()}
-    out["lstm.weight_ih_l0"] = torch.as_tensor(np.concatenate([W_p, W_w, Wh[:, 5:]], axis=1), dtype=torch.float32)
-    out["lstm.bias_ih_l0"] = sd["lstm.bias_ih_l0"] + torch.as_tensor(bias, dtype=torch.float32)
-    rows = [card["outputs"].index(o) for o in meta["output_names"]]
-    out["head.weight"] = sd["head.weight"][rows]
-    out["head.bias"] = sd["head.bias"][rows]
+    bias = bias + Wh[:, :5] @ ((m_d - mean_c[:5]) / std_c[:5])
+    out, rows, scale = folded_state(sd, np.concatenate([W_p, W_w, Wh[:, 5:]], axis=1), bias, card, meta,
+                                    norm, building)
     m = card["model"]
     net = Surrogate(len(params) + 9, len(rows), m["hidden"], m["layers"])
     net.load_state_dict(out)
-    scale = np.asarray(norm.y_scale)[rows] * area / 1000.0  # Wh/m2 -> kWh of the building
     return net, scale
 
 
@@ -641,32 +656,17 @@ def folded_conditioned(model, card, norm, meta, building, weather):
     from .data import weather_stats
     from .model import ScheduledSurrogate
 
-    spec, area = building["spec"], building["floor_area_m2"]
     params = meta["params"]
-    lo = {p["name"]: p["min"] for p in params}
-    hi = {p["name"]: p["max"] for p in params}
-    table = schedule_table(spec, building["values"], params)
-
-    def static(values):
-        return np.array(static_features(spec, values, area, "conditioned"))
-
-    base = dict(building["values"], **lo)
-    s0 = static(base)
-    S = np.stack([static(dict(base, **{p["name"]: hi[p["name"]]})) - s0 for p in params], axis=1)
-    sd_s = np.asarray(norm.static_std)
-    z0 = (s0 - np.asarray(norm.static_mean)) / sd_s
-    sd = model.state_dict()
-    W = sd["lstm.weight_ih_l0"].double().numpy()
-    n_static = len(s0)
-    Ws, Wh = W[:, :n_static], W[:, n_static:]  # Wh: HOURLY order
+    table = schedule_table(building["spec"], building["values"], params)
+    W_p, bias, Wh, sd = fold_static(model, norm, building, params, "conditioned")  # Wh: HOURLY order
     m_d, sd_d = weather_stats(weather)
     mean_c, std_c = np.asarray(norm.hourly_mean), np.asarray(norm.hourly_std)
     k = len(table["params"])
-    zero = np.zeros((W.shape[0], 1))
+    zero = np.zeros((Wh.shape[0], 1))
     w_sched = Wh[:, 7:8] / std_c[7]
     w_occ = Wh[:, 8:9] / std_c[8]
     lo_k = np.array([params[i]["min"] for i in table["params"]])
-    cols = [Ws @ (S / sd_s[:, None]),                      # parameters
+    cols = [W_p,                                           # parameters
             Wh[:, :4] * (sd_d[:4] / std_c[:4])[None, :],   # weather, the dataset's normalisation
             zero,                                          # day type code
             Wh[:, 5:7],                                    # hour sin, cos
@@ -676,14 +676,9 @@ def folded_conditioned(model, card, norm, meta, building, weather):
             w_sched,                                       # schedule_fixed
             w_sched * lo_k[None, :],                       # the indicators: the minimum
             w_sched]                                       # q: width * p
-    bias = Ws @ z0 + Wh[:, :4] @ ((m_d[:4] - mean_c[:4]) / std_c[:4]) \
+    bias = bias + Wh[:, :4] @ ((m_d[:4] - mean_c[:4]) / std_c[:4]) \
         - Wh[:, 7] * mean_c[7] / std_c[7] - Wh[:, 8] * mean_c[8] / std_c[8]
-    out = {kk: v.clone() for kk, v in sd.items()}
-    out["lstm.weight_ih_l0"] = torch.as_tensor(np.concatenate(cols, axis=1), dtype=torch.float32)
-    out["lstm.bias_ih_l0"] = sd["lstm.bias_ih_l0"] + torch.as_tensor(bias, dtype=torch.float32)
-    rows = [card["outputs"].index(o) for o in meta["output_names"]]
-    out["head.weight"] = sd["head.weight"][rows]
-    out["head.bias"] = sd["head.bias"][rows]
+    out, rows, scale = folded_state(sd, np.concatenate(cols, axis=1), bias, card, meta, norm, building)
     m = card["model"]
     width = [params[i]["max"] - params[i]["min"] for i in table["params"]]
     n_features = len(params) + 9 + 3 + k
@@ -691,7 +686,6 @@ def folded_conditioned(model, card, norm, meta, building, weather):
     out["sched_params"] = net.sched_params
     out["sched_width"] = net.sched_width
     net.load_state_dict(out)
-    scale = np.asarray(norm.y_scale)[rows] * area / 1000.0  # Wh/m2 -> kWh of the building
     return net, scale, table
 
 

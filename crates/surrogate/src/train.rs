@@ -331,11 +331,12 @@ pub fn train(
     // The graphs as ONNX Runtime runs them here, on the hourly inputs this runtime builds,
     // must reproduce the PyTorch network: on the fixture's windows and over its year.
     let fixture = ParityFixture::read(out_dir)?;
-    let windows = Surrogate::load(out_dir, 1)?.parity_error(&fixture)?;
+    let mut surrogate = Surrogate::load(out_dir, 1)?;
+    let windows = surrogate.parity_error(&fixture)?;
     let weather_file = dataset_dir.join("weather.npy");
     let weather: ndarray::Array2<f64> = ndarray_npy::read_npy(&weather_file)
         .map_err(|e| runtime(format!("cannot read {}: {e}", weather_file.display())))?;
-    let year = Surrogate::load(out_dir, 1)?.year_parity_error(&fixture, weather.view())?;
+    let year = surrogate.year_parity_error(&fixture, weather.view())?;
     let error = if windows.is_nan() || year.is_nan() {
         f64::NAN
     } else {
