@@ -273,7 +273,8 @@ impl Sampler<'_> {
 
     /// What a calibration through this surrogate recovers from EnergyPlus's `outputs` at known
     /// `points` (physical calibrated values): the posterior's mode with those outputs in place
-    /// of the meters (the same missing hours and error model), by BFGS from the point itself.
+    /// of the meters (the same missing hours and error model), by BFGS from the point itself
+    /// to convergence.
     /// The difference to the point is the surrogate's error in parameter space there, from
     /// surrogate error alone ([`bemcal_stats::surrogate_error`]).
     pub fn recover(
@@ -354,7 +355,7 @@ impl Sampler<'_> {
 
     /// The posterior's mode at temperature 1 with `observed` (hours x outputs, row-major) in
     /// place of the meters (the same missing hours and error model), by BFGS from `start`
-    /// (physical calibrated values).
+    /// (physical calibrated values) until it converges ([`MODE_ITERATIONS`]).
     fn untempered_mode(
         &mut self,
         observed: &[f64],
@@ -362,7 +363,7 @@ impl Sampler<'_> {
         start: &[f64],
     ) -> Result<Vec<f64>, Error> {
         let cfg = BfgsConfig {
-            max_iterations: self.cal.project.mcmc.optimiser_iterations,
+            max_iterations: MODE_ITERATIONS.max(self.cal.project.mcmc.optimiser_iterations),
             hessian: false,
             ..BfgsConfig::default()
         };
@@ -397,6 +398,17 @@ impl Sampler<'_> {
         advance_chains(&post, eval, states, n)
     }
 }
+
+/// The BFGS budget of a mode that is itself the result ([`Sampler::recover`], output space
+/// mapping), where the chains' starts stop at `mcmc.optimiser_iterations` (60: the chains
+/// burn in from there). The recovered shifts are the surrogate's error the temperature rule
+/// carries, so their search must end at the mode, by its tolerance, not by a budget. Measured
+/// on the demo building's final surrogate (issue 66, `examples/recovery_check.rs`): at 60
+/// iterations the searches stopped short along the schedule-and-equipment ridge, the weekday
+/// schedule intervals' rms shifts 0.010-0.031 of their prior widths; to convergence
+/// 0.018-0.049 (1.6 times), the envelope's unchanged; 400 and 1,000 iterations gave the same
+/// shifts (the tolerance ended every search), at 1.4 times the recovery's time.
+const MODE_ITERATIONS: usize = 1000;
 
 /// The discrepancy's calendar cells over the calibration's hour slots: hour of day x the
 /// day's kind (the calendar the model runs) x meteorological season.
