@@ -135,7 +135,10 @@ mod evaluator;
 mod meta;
 
 pub use evaluator::Evaluator;
-pub use meta::*;
+pub use meta::{
+    GraphFiles, HeldOut, HeldOutMetric, Int8Info, ModelInfo, OutputInfo, Precision, SurrogateMeta,
+    TrainingInfo, WeatherNorm,
+};
 
 /// One worker's runs: (proposal, first chunk, end chunk, its rows of the output).
 type Runs<'a> = Vec<(usize, usize, usize, &'a mut [f32])>;
