@@ -143,6 +143,15 @@ fn portfolio_of_small_buildings_with_one_broken() {
         assert!(r["g14_pass"].is_boolean());
         assert!(r["max_rhat"].as_f64().unwrap() > 0.9);
         assert!(r["run_time_s"].as_f64().unwrap() > 0.0);
+        // What it cost in worker time, by stage: its simulations, training and chains each
+        // took some, and the stages add up to the whole.
+        let busy = r["worker_s"].as_f64().unwrap();
+        let stages = r["worker_s_by_stage"].as_object().unwrap();
+        for stage in ["train", "chains"] {
+            assert!(stages[stage].as_f64().unwrap() > 0.0, "{name}: {r:#}");
+        }
+        let sum: f64 = stages.values().map(|v| v.as_f64().unwrap()).sum();
+        assert!((sum - busy).abs() < 1e-6 * busy.max(1.0), "{name}: {r:#}");
         assert!(out.join(name).join("summary.json").is_file());
         assert!(
             out.join(name).join("report.html").is_file(),
@@ -175,6 +184,8 @@ fn portfolio_of_small_buildings_with_one_broken() {
     let csv = std::fs::read_to_string(out.join("portfolio.csv")).unwrap();
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(csv.lines().next().unwrap().contains("_nmbe_pct"), "{csv}");
+    assert!(csv.lines().next().unwrap().contains(",worker_s,"), "{csv}");
+    assert!(p["buildings_per_worker_hour"].as_f64().unwrap() > 0.0, "{p:#}");
     // One column per calibrated parameter, its estimate on every finished building's line.
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     for (parameter, value) in row("north")["estimate"].as_object().unwrap() {

@@ -915,6 +915,30 @@ impl Store {
         })
     }
 
+    /// The workers' busy seconds on a run's jobs, by the stage that created them: the
+    /// attempts that ended done or failed (a job's own failure costs its time too); an attempt
+    /// lost with its worker, returned or stale is run again and not counted. Stages without
+    /// such attempts are left out.
+    pub fn worker_seconds(&self, run: &str) -> Result<Vec<(Stage, f64)>> {
+        self.with(|c| {
+            let mut st = c.prepare_cached(
+                "SELECT j.stage, SUM(a.ended_ms - a.started_ms) FROM attempts a
+                 JOIN jobs j ON j.id = a.job_id
+                 WHERE j.run_id = ?1 AND a.outcome IN ('done', 'failed')
+                 GROUP BY j.stage",
+            )?;
+            let rows = st
+                .query_map([run], |r| {
+                    Ok((
+                        crate::states::stage_column(r, 0)?,
+                        r.get::<_, i64>(1)?.max(0) as f64 / 1000.0,
+                    ))
+                })?
+                .collect::<rusqlite::Result<Vec<_>>>()?;
+            Ok(rows)
+        })
+    }
+
     /// Number of attempts (leases granted) for a run's jobs.
     pub fn attempts(&self, run: &str) -> Result<u64> {
         self.with(|c| {
@@ -1765,6 +1789,34 @@ mod tests {
         assert!(s.unreferenced_artifacts(0).unwrap().is_empty());
         s.remove_artifacts(&orphans).unwrap();
         assert!(s.unreferenced_artifacts(later).unwrap().is_empty());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn worker_seconds_count_finished_and_failed_attempts_by_stage_not_returned_ones() {
+        let (s, dir) = store("busy");
+        s.create_run("R", "r", &[], &[]).unwrap();
+        s.set_stage("R", Stage::Simulate, jobs(3, |_| None)).unwrap();
+        let lease = |s: &Store| s.lease("w", 60_000).unwrap().unwrap().lease_id;
+        let (a, b) = (lease(&s), lease(&s));
+        s.complete(a, &[], "{}").unwrap();
+        s.fail(b, "EnergyPlus: Severe", false, 3).unwrap();
+        // A lease given back (a worker stopping) is run again: its time is not the run's cost.
+        let c = lease(&s);
+        s.fail(c, "worker stopping", true, 3).unwrap();
+        // Durations set outright: 2 s, 3 s and (not counted) 7 s.
+        s.with(|conn| {
+            for (l, secs) in [(a, 2_000), (b, 3_000), (c, 7_000)] {
+                conn.execute(
+                    "UPDATE attempts SET started_ms = ended_ms - ?2 WHERE lease_id = ?1",
+                    params![l as i64, secs],
+                )?;
+            }
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(s.worker_seconds("R").unwrap(), vec![(Stage::Simulate, 5.0)]);
+        assert!(s.worker_seconds("other").unwrap().is_empty());
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 pub use bemcal_report::portfolio::{
-    write, BuildingRow, BuildingState, OutputRow, PortfolioSummary,
+    buildings_per_worker_hour, write, BuildingRow, BuildingState, OutputRow, PortfolioSummary,
 };
 
 use crate::client::{self, Client};
@@ -247,6 +247,13 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         converged: summary["converged"].as_bool(),
         estimate: estimate(&s.summary_json),
         run_time_s: summary["timings"]["total_s"].as_f64().unwrap_or(elapsed),
+        worker_s: s.stages.iter().map(|p| p.worker_seconds).sum(),
+        worker_s_by_stage: s
+            .stages
+            .iter()
+            .filter(|p| p.worker_seconds > 0.0)
+            .map(|p| (p.stage().word().to_string(), p.worker_seconds))
+            .collect(),
         simulations_run: s.simulations_run,
         simulations_shared: s.simulations_shared,
         outputs,
@@ -276,6 +283,8 @@ pub fn summarize(
             converged: None,
             estimate: vec![],
             run_time_s: 0.0,
+            worker_s: 0.0,
+            worker_s_by_stage: vec![],
             simulations_run: 0,
             simulations_shared: 0,
             report: None,
@@ -295,6 +304,8 @@ pub fn summarize(
             .count(),
         simulations_run: rows.iter().map(|r| r.simulations_run).sum(),
         simulations_shared: rows.iter().map(|r| r.simulations_shared).sum(),
+        worker_s: rows.iter().map(|r| r.worker_s).sum(),
+        buildings_per_worker_hour: buildings_per_worker_hour(&rows),
         rows,
     }
 }

@@ -246,6 +246,7 @@ impl Service {
     /// The status of a run, with per-stage progress.
     pub fn status(&self, r: &RunRow, with_results: bool) -> Result<RunStatus, Status> {
         let jobs = self.st.store.jobs(&r.id, None).map_err(internal)?;
+        let busy = self.st.store.worker_seconds(&r.id).map_err(internal)?;
         // The stages a run goes through, in order (every stage but `Done`).
         let order: Vec<Stage> = Stage::ALL
             .iter()
@@ -283,6 +284,10 @@ impl Service {
                     done,
                     total,
                     running: mine.iter().filter(|j| j.state == JobState::Leased).count() as u32,
+                    worker_seconds: busy
+                        .iter()
+                        .find(|(b, _)| b == s)
+                        .map_or(0.0, |(_, secs)| *secs),
                 }
             })
             .collect();

@@ -43,7 +43,8 @@ pub enum Sub {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Per building: state, stage, G14 per output, NMBE, CV-RMSE, max R-hat, run time, errors.
+    /// Per building: state, stage, G14 per output, NMBE, CV-RMSE, max R-hat, run time, the
+    /// workers' busy seconds, errors.
     Status {
         /// Portfolio id (printed by `submit`).
         portfolio: String,
@@ -230,8 +231,8 @@ fn finish(
 
 fn print_table(p: &PortfolioSummary) {
     println!(
-        "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8}  outputs (NMBE % / CV-RMSE %)",
-        "building", "state", "stage", "G14", "R-hat", "time s"
+        "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8} {:>8}  outputs (NMBE % / CV-RMSE %)",
+        "building", "state", "stage", "G14", "R-hat", "time s", "worker s"
     );
     for r in &p.rows {
         let outs: Vec<String> = r
@@ -249,7 +250,7 @@ fn print_table(p: &PortfolioSummary) {
             })
             .collect();
         println!(
-            "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8.0}  {}",
+            "{:<20} {:<9} {:<9} {:>5} {:>8} {:>8.0} {:>8.0}  {}",
             r.building,
             r.state.word(),
             r.stage,
@@ -260,6 +261,7 @@ fn print_table(p: &PortfolioSummary) {
             },
             r.max_rhat.map_or("-".into(), |v| format!("{v:.3}")),
             r.run_time_s,
+            r.worker_s,
             outs.join(", ")
         );
         if let Some(e) = &r.error {
@@ -267,7 +269,14 @@ fn print_table(p: &PortfolioSummary) {
         }
     }
     println!(
-        "{} buildings: {} done, {} failed; simulations run {}, shared {}",
-        p.buildings, p.done, p.failed, p.simulations_run, p.simulations_shared
+        "{} buildings: {} done, {} failed; simulations run {}, shared {}; {:.2} worker-hours{}",
+        p.buildings,
+        p.done,
+        p.failed,
+        p.simulations_run,
+        p.simulations_shared,
+        p.worker_s / 3600.0,
+        p.buildings_per_worker_hour
+            .map_or(String::new(), |b| format!(", {b:.2} finished buildings per worker-hour"))
     );
 }

@@ -86,6 +86,13 @@ pub struct BuildingRow {
     pub estimate: Vec<(String, f64)>,
     /// Wall time of its run, s.
     pub run_time_s: f64,
+    /// The workers' busy seconds on its jobs (attempts that ended done or failed): what the
+    /// building cost in worker time, whatever else ran beside it and however long it waited.
+    pub worker_s: f64,
+    /// [`BuildingRow::worker_s`] by the stage whose jobs took it (`{stage: seconds}` in
+    /// portfolio.json, a `worker_s_<stage>` column each in portfolio.csv), stages in run order.
+    #[serde(serialize_with = "bemcal_named::serialize")]
+    pub worker_s_by_stage: Vec<(String, f64)>,
     /// Design simulations EnergyPlus ran for it.
     pub simulations_run: u32,
     /// Design simulations it took from the coordinator's cache (the same inputs run earlier,
@@ -112,8 +119,35 @@ pub struct PortfolioSummary {
     pub simulations_run: u32,
     /// Design simulations taken from the coordinator's cache, over all buildings.
     pub simulations_shared: u32,
+    /// The workers' busy seconds over all buildings ([`BuildingRow::worker_s`]).
+    pub worker_s: f64,
+    /// Finished buildings per hour of one worker's busy time (their [`BuildingRow::worker_s`]
+    /// summed): the portfolio's throughput per core where a worker runs one job at a time.
+    /// None before a building has finished.
+    pub buildings_per_worker_hour: Option<f64>,
     /// One row per building: those submitted, then those whose files could not be read.
     pub rows: Vec<BuildingRow>,
+}
+
+/// Stages over all rows' worker seconds, in first-seen order.
+fn stage_names(p: &PortfolioSummary) -> Vec<String> {
+    let mut names: Vec<String> = vec![];
+    for (n, _) in p.rows.iter().flat_map(|r| &r.worker_s_by_stage) {
+        if !names.contains(n) {
+            names.push(n.clone());
+        }
+    }
+    names
+}
+
+/// [`PortfolioSummary::buildings_per_worker_hour`] of `rows`.
+pub fn buildings_per_worker_hour(rows: &[BuildingRow]) -> Option<f64> {
+    let done: Vec<&BuildingRow> = rows
+        .iter()
+        .filter(|r| r.state == BuildingState::Done)
+        .collect();
+    let busy: f64 = done.iter().map(|r| r.worker_s).sum();
+    (!done.is_empty() && busy > 0.0).then(|| 3600.0 * done.len() as f64 / busy)
 }
 
 /// Parameter names over all rows' estimates, in first-seen order.
@@ -181,8 +215,12 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
 /// `portfolio.csv`: a row per building with its state, Guideline 14 per output and estimates.
 fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) -> String {
     let mut csv = String::from(
-        "building,run,state,stage,g14_pass,max_rhat,converged,run_time_s,simulations_run,simulations_shared",
+        "building,run,state,stage,g14_pass,max_rhat,converged,run_time_s,worker_s,simulations_run,simulations_shared",
     );
+    let stages = stage_names(p);
+    for st in &stages {
+        csv.push_str(&format!(",worker_s_{st}"));
+    }
     for n in names {
         csv.push_str(&format!(
             ",{n}_nmbe_pct,{n}_cv_rmse_pct,{n}_g14_pass,{n}_fitted"
@@ -194,7 +232,7 @@ fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) 
     csv.push_str(",error\n");
     for r in &p.rows {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{:.1},{},{}",
+            "{},{},{},{},{},{},{},{:.1},{:.1},{},{}",
             csv_field(&r.building),
             r.run,
             r.state,
@@ -203,9 +241,14 @@ fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) 
             num(r.max_rhat, 4),
             r.converged.map_or(String::new(), |b| b.to_string()),
             r.run_time_s,
+            r.worker_s,
             r.simulations_run,
             r.simulations_shared
         ));
+        for st in &stages {
+            let v = r.worker_s_by_stage.iter().find(|(k, _)| k == st);
+            csv.push_str(&format!(",{}", v.map_or(String::new(), |(_, v)| format!("{v:.1}"))));
+        }
         for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
                 Some(o) => csv.push_str(&format!(
@@ -238,15 +281,20 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
          td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}td.l,th.l{{text-align:left}}\
          .pass{{color:#1a7f37}}.fail{{color:#b42318;font-weight:bold}}pre{{white-space:pre-wrap;margin:0;text-align:left;max-width:60em}}\
          </style></head><body>\n<h1>Portfolio {name}</h1>\n<p>{n} buildings: {d} done, {f} failed; \
-         {sr} EnergyPlus design runs, {ss} shared between buildings. ASHRAE Guideline 14 (hourly): \
-         |NMBE| &le; 10 %, CV-RMSE &le; 30 %.</p>\n<table>\n<tr><th class=\"l\">building</th><th class=\"l\">state</th>\
-         <th>G14</th><th>max R-hat</th><th>run time (s)</th>",
+         {sr} EnergyPlus design runs, {ss} shared between buildings; {wh:.1} worker-hours{per}. \
+         ASHRAE Guideline 14 (hourly): |NMBE| &le; 10 %, CV-RMSE &le; 30 %.</p>\n<table>\n<tr>\
+         <th class=\"l\">building</th><th class=\"l\">state</th><th>G14</th><th>max R-hat</th>\
+         <th>run time (s)</th><th>worker time (s)</th>",
         name = esc(&p.name),
         n = p.buildings,
         d = p.done,
         f = p.failed,
         sr = p.simulations_run,
-        ss = p.simulations_shared
+        ss = p.simulations_shared,
+        wh = p.worker_s / 3600.0,
+        per = p
+            .buildings_per_worker_hour
+            .map_or(String::new(), |b| format!(", {b:.2} finished buildings per worker-hour"))
     );
     for n in names {
         h.push_str(&format!(
@@ -262,7 +310,7 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
             None => "",
         };
         h.push_str(&format!(
-            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{g14}</td><td>{}</td><td>{:.0}</td>",
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td>{g14}</td><td>{}</td><td>{:.0}</td><td>{:.0}</td>",
             esc(&r.building),
             if r.state == BuildingState::Failed {
                 format!("<span class=\"fail\">failed</span> ({})", esc(&r.stage))
@@ -270,7 +318,8 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
                 r.state.word().to_string()
             },
             num(r.max_rhat, 3),
-            r.run_time_s
+            r.run_time_s,
+            r.worker_s
         ));
         for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
