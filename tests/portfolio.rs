@@ -185,7 +185,10 @@ fn portfolio_of_small_buildings_with_one_broken() {
     assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(csv.lines().next().unwrap().contains("_nmbe_pct"), "{csv}");
     assert!(csv.lines().next().unwrap().contains(",worker_s,"), "{csv}");
-    assert!(p["buildings_per_worker_hour"].as_f64().unwrap() > 0.0, "{p:#}");
+    assert!(
+        p["buildings_per_worker_hour"].as_f64().unwrap() > 0.0,
+        "{p:#}"
+    );
     // One column per calibrated parameter, its estimate on every finished building's line.
     let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
     for (parameter, value) in row("north")["estimate"].as_object().unwrap() {
@@ -209,6 +212,45 @@ fn portfolio_of_small_buildings_with_one_broken() {
         assert!(log.contains(&format!("{name}: done")), "{log}");
     }
     assert!(log.contains("broken: FAILED"), "{log}");
+
+    // The broken building's meters fixed, the same command again into the same folder: the
+    // finished buildings keep their runs (nothing calibrated twice) and only it runs again.
+    std::fs::copy(root.join("north/meters.csv"), broken.join("meters.csv")).unwrap();
+    let rerun = bemcal()
+        .args(["portfolio", "run"])
+        .arg(&manifest)
+        .args(["--local-workers", "2", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let log2 = String::from_utf8_lossy(&rerun.stderr);
+    assert!(rerun.status.success(), "{log2}");
+    assert!(
+        log2.contains("3 of 4 buildings keep their runs") && log2.contains("1 submitted"),
+        "{log2}"
+    );
+    let p2: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("portfolio.json")).unwrap()).unwrap();
+    assert_eq!(
+        (p2["done"].as_u64(), p2["failed"].as_u64()),
+        (Some(4), Some(0)),
+        "{p2:#}"
+    );
+    let rows2 = p2["rows"].as_array().unwrap();
+    assert_eq!(
+        rows2.len(),
+        4,
+        "one row a building, the old failure replaced: {p2:#}"
+    );
+    for name in ["north", "south", "annex"] {
+        let again = rows2.iter().find(|r| r["building"] == name).unwrap();
+        assert_eq!(again["run"], row(name)["run"], "{name} ran again: {p2:#}");
+        assert!(!log2.contains(&format!("{name}: simulate")), "{log2}");
+    }
+    assert_eq!(
+        rows2.iter().find(|r| r["building"] == "broken").unwrap()["state"],
+        "done"
+    );
 }
 
 const TOKEN: &str = "test-token-portfolio-0123456789";

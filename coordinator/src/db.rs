@@ -1796,7 +1796,8 @@ mod tests {
     fn worker_seconds_count_finished_and_failed_attempts_by_stage_not_returned_ones() {
         let (s, dir) = store("busy");
         s.create_run("R", "r", &[], &[]).unwrap();
-        s.set_stage("R", Stage::Simulate, jobs(3, |_| None)).unwrap();
+        s.set_stage("R", Stage::Simulate, jobs(3, |_| None))
+            .unwrap();
         let lease = |s: &Store| s.lease("w", 60_000).unwrap().unwrap().lease_id;
         let (a, b) = (lease(&s), lease(&s));
         s.complete(a, &[], "{}").unwrap();

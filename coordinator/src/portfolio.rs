@@ -92,6 +92,40 @@ pub fn new_id() -> String {
     format!("p{}", &crate::auth::random_token()[..10])
 }
 
+/// The buildings of `m` a rerun of the portfolio must submit, given the portfolio's `runs` on
+/// the coordinator so far: those with no run, or whose latest run failed or was cancelled (a
+/// building whose files were fixed gets a new run). A building whose latest run is running
+/// or done keeps it: the coordinator goes on with a running one where it stopped, and a done
+/// one is not calibrated again. In manifest order.
+pub fn to_resubmit<'m>(m: &'m Manifest, runs: &[RunStatus]) -> Vec<&'m Building> {
+    let runs = latest_per_building(runs.to_vec());
+    m.buildings
+        .iter()
+        .filter(|b| {
+            !runs.iter().any(|r| {
+                r.building == b.name && matches!(r.state(), RunState::Running | RunState::Done)
+            })
+        })
+        .collect()
+}
+
+/// Each building's latest run (by submission time, then id), in submission order: a building
+/// submitted again after a failure is its new run, not both.
+pub fn latest_per_building(mut runs: Vec<RunStatus>) -> Vec<RunStatus> {
+    runs.sort_by(|a, b| (a.created_ms, &a.run_id).cmp(&(b.created_ms, &b.run_id)));
+    let mut out: Vec<RunStatus> = vec![];
+    for r in runs {
+        match out
+            .iter_mut()
+            .find(|o| !o.building.is_empty() && o.building == r.building)
+        {
+            Some(o) => *o = r,
+            None => out.push(r),
+        }
+    }
+    out
+}
+
 /// Submits every building; a building whose files cannot even be bundled here is returned
 /// with its error (the coordinator records the others, failed ones included).
 pub async fn submit(
@@ -100,8 +134,18 @@ pub async fn submit(
     id: &str,
     policy: bemcal_client::bundle::Policy,
 ) -> anyhow::Result<Vec<(String, Result<String, String>)>> {
+    submit_buildings(c, &m.buildings.iter().collect::<Vec<_>>(), id, policy).await
+}
+
+/// Submits `buildings` into portfolio `id` ([`submit`]).
+pub async fn submit_buildings(
+    c: &mut Client,
+    buildings: &[&Building],
+    id: &str,
+    policy: bemcal_client::bundle::Policy,
+) -> anyhow::Result<Vec<(String, Result<String, String>)>> {
     let mut out = vec![];
-    for b in &m.buildings {
+    for b in buildings {
         let r = client::submit_building(c, &b.project, None, id, &b.name, policy)
             .await
             .map(|s| s.run_id)
@@ -111,7 +155,8 @@ pub async fn submit(
     Ok(out)
 }
 
-/// The runs of a portfolio with their summaries (one GetRun per run).
+/// The runs of a portfolio, each building's latest ([`latest_per_building`]), with their
+/// summaries (one GetRun per run) when `full`.
 pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Vec<RunStatus>> {
     let runs = c
         .list_runs(proto::ListRunsRequest {
@@ -121,6 +166,7 @@ pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Ve
         .map_err(|e| anyhow::anyhow!("{}", e.message()))?
         .into_inner()
         .runs;
+    let runs = latest_per_building(runs);
     if !full {
         return Ok(runs);
     }
@@ -326,7 +372,54 @@ pub async fn fetch(c: &mut Client, runs: &[RunStatus], out: &Path) -> anyhow::Re
 
 #[cfg(test)]
 mod tests {
-    use super::{row, RunState, RunStatus};
+    use super::{row, to_resubmit, Building, Manifest, RunState, RunStatus};
+
+    /// A rerun submits the buildings with no run and those whose latest run failed or was
+    /// cancelled; a running or finished one keeps its run, and an old failure of a building
+    /// that has run again since does not count.
+    #[test]
+    fn a_rerun_submits_only_the_buildings_without_a_live_or_finished_run() {
+        let m = Manifest {
+            name: "campus".into(),
+            buildings: ["done", "running", "failed", "cancelled", "new", "fixed"]
+                .iter()
+                .map(|n| Building {
+                    name: n.to_string(),
+                    project: format!("{n}/project.toml").into(),
+                })
+                .collect(),
+        };
+        let run = |building: &str, state: RunState, created_ms: u64| RunStatus {
+            run_id: format!("r-{building}-{created_ms}"),
+            building: building.into(),
+            state: state.into(),
+            created_ms,
+            ..Default::default()
+        };
+        let runs = vec![
+            run("done", RunState::Done, 1),
+            run("running", RunState::Running, 2),
+            run("failed", RunState::Failed, 3),
+            run("cancelled", RunState::Cancelled, 4),
+            run("fixed", RunState::Failed, 5),
+            run("fixed", RunState::Done, 6),
+        ];
+        let names: Vec<&str> = to_resubmit(&m, &runs)
+            .iter()
+            .map(|b| b.name.as_str())
+            .collect();
+        assert_eq!(names, ["failed", "cancelled", "new"]);
+        let latest = super::latest_per_building(runs);
+        assert_eq!(latest.len(), 5);
+        assert_eq!(
+            latest
+                .iter()
+                .find(|r| r.building == "fixed")
+                .unwrap()
+                .state(),
+            RunState::Done
+        );
+    }
 
     /// A meter left out of the fit (`fit = false`, summary `not_fitted`) is shown with its
     /// Guideline 14 figures and does not fail the building.

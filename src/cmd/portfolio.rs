@@ -3,6 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
+use anyhow::Context;
+
 use bemcal_client::bundle::Policy;
 use bemcal_client::client::Client;
 use bemcal_client::proto::RunStatus;
@@ -32,7 +34,9 @@ pub enum Sub {
     },
     /// Run a portfolio through a coordinator and worker processes on loopback; writes
     /// OUT/<building>/ (with report.html), portfolio.csv, portfolio.json and portfolio.html.
-    /// Exits non-zero if any building failed (after writing everything that finished).
+    /// Exits non-zero if any building failed (after writing everything that finished). Run it
+    /// again into the same OUT to go on: finished buildings stand, running ones go on where
+    /// they stopped, failed or cancelled ones are submitted again.
     Run {
         /// The portfolio manifest (as for `submit`).
         manifest: PathBuf,
@@ -149,8 +153,12 @@ fn results(id: &str, out: &Path, client: ClientArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Where `portfolio run` keeps the id of the portfolio it submitted, in OUT/.distributed.
+const PORTFOLIO_ID_FILE: &str = "portfolio.id";
+
 /// `portfolio run`: a local coordinator and workers calibrate every building; a failed one
-/// makes the exit status non-zero after the others' results are written.
+/// makes the exit status non-zero after the others' results are written. A rerun into the
+/// same `out` goes on with the same portfolio ([`portfolio::to_resubmit`]).
 fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Result<()> {
     let rt = bemcal_client::runtime()?;
     let m = portfolio::load_manifest(manifest)?;
@@ -158,7 +166,22 @@ fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Resul
     let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
     std::fs::create_dir_all(out)?;
     let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), 0, &log)?;
-    let id = portfolio::new_id();
+    // A rerun into the same folder goes on with the same portfolio (the coordinator's state
+    // is kept in OUT/.distributed): what finished stands, what was running goes on.
+    let id_file = out.join(".distributed").join(PORTFOLIO_ID_FILE);
+    let earlier = std::fs::read_to_string(&id_file)
+        .ok()
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty());
+    let id = match &earlier {
+        Some(id) => id.clone(),
+        None => {
+            let id = portfolio::new_id();
+            bemcal_durable::write_atomic(&id_file, id.as_bytes())
+                .with_context(|| format!("writing {}", id_file.display()))?;
+            id
+        }
+    };
     let (runs, local_failures) = rt.block_on(async {
         let mut c: Client = connect.client()?;
         // On loopback the files never leave this machine: a building's files may lie anywhere
@@ -166,7 +189,23 @@ fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Resul
         let local = Policy {
             allow_outside: true,
         };
-        let subs = portfolio::submit(&mut c, &m, &id, local).await?;
+        let todo = match &earlier {
+            None => m.buildings.iter().collect(),
+            Some(id) => {
+                let runs = portfolio::statuses(&mut c, id, false).await?;
+                let todo = portfolio::to_resubmit(&m, &runs);
+                log(&format!(
+                    "going on with portfolio {id} from {}: {} of {} buildings keep their runs \
+                     (done or running), {} submitted (new, failed or cancelled before)",
+                    id_file.display(),
+                    m.buildings.len() - todo.len(),
+                    m.buildings.len(),
+                    todo.len()
+                ));
+                todo
+            }
+        };
+        let subs = portfolio::submit_buildings(&mut c, &todo, &id, local).await?;
         let mut failed = vec![];
         for (b, r) in subs {
             match r {
@@ -277,6 +316,8 @@ fn print_table(p: &PortfolioSummary) {
         p.simulations_shared,
         p.worker_s / 3600.0,
         p.buildings_per_worker_hour
-            .map_or(String::new(), |b| format!(", {b:.2} finished buildings per worker-hour"))
+            .map_or(String::new(), |b| format!(
+                ", {b:.2} finished buildings per worker-hour"
+            ))
     );
 }

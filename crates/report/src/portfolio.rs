@@ -247,7 +247,10 @@ fn portfolio_csv(p: &PortfolioSummary, names: &[String], parameters: &[String]) 
         ));
         for st in &stages {
             let v = r.worker_s_by_stage.iter().find(|(k, _)| k == st);
-            csv.push_str(&format!(",{}", v.map_or(String::new(), |(_, v)| format!("{v:.1}"))));
+            csv.push_str(&format!(
+                ",{}",
+                v.map_or(String::new(), |(_, v)| format!("{v:.1}"))
+            ));
         }
         for n in names {
             match r.outputs.iter().find(|o| &o.output == n) {
