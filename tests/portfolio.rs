@@ -90,14 +90,17 @@ fn portfolio_of_small_buildings_with_one_broken() {
     .unwrap();
 
     let out = root.join("out");
+    let portfolio_run = || {
+        bemcal()
+            .args(["portfolio", "run"])
+            .arg(&manifest)
+            .args(["--local-workers", "2", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
     let t0 = Instant::now();
-    let run = bemcal()
-        .args(["portfolio", "run"])
-        .arg(&manifest)
-        .args(["--local-workers", "2", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let run = portfolio_run();
     let wall = t0.elapsed().as_secs_f64();
     let log = String::from_utf8_lossy(&run.stderr);
     let table = String::from_utf8_lossy(&run.stdout);
@@ -216,13 +219,7 @@ fn portfolio_of_small_buildings_with_one_broken() {
     // The broken building's meters fixed, the same command again into the same folder: the
     // finished buildings keep their runs (nothing calibrated twice) and only it runs again.
     std::fs::copy(root.join("north/meters.csv"), broken.join("meters.csv")).unwrap();
-    let rerun = bemcal()
-        .args(["portfolio", "run"])
-        .arg(&manifest)
-        .args(["--local-workers", "2", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let rerun = portfolio_run();
     let log2 = String::from_utf8_lossy(&rerun.stderr);
     assert!(rerun.status.success(), "{log2}");
     assert!(
