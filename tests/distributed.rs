@@ -174,6 +174,36 @@ fn calibrate_status(
     (o.status, String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
+/// `--progress json`: every progress line is one JSON object with its kind and clock; the
+/// driver's messages are `log` events and the run's stages `run` events, the last of which has
+/// every stage done, with the workers' seconds on the chains.
+fn progress_is_events(log: &str) {
+    let events: Vec<serde_json::Value> = log
+        .lines()
+        .filter(|l| l.starts_with("{\""))
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect();
+    assert!(events.iter().all(|e| e["elapsed_s"].is_number()), "{log}");
+    assert!(
+        events.iter().any(|e| e["event"] == "log"
+            && e["message"]
+                .as_str()
+                .unwrap()
+                .contains("extending to 175 iterations")),
+        "{log}"
+    );
+    let last = events
+        .iter()
+        .rev()
+        .find(|e| e["event"] == "run")
+        .expect(log);
+    let stages = last["stages"].as_array().unwrap();
+    let chains = stages.iter().find(|g| g["stage"] == "chains").unwrap();
+    assert!(chains["worker_seconds"].as_f64().unwrap() > 0.0, "{last}");
+    // No bar of the text format among them.
+    assert!(!log.lines().any(|l| l.starts_with("  chains ")), "{log}");
+}
+
 #[test]
 fn distributed_matches_single_process() {
     if !have_engine() {
@@ -231,12 +261,19 @@ fn distributed_matches_single_process() {
     failed_design_point_is_replaced(&local, &local_log);
     // Same surrogate for both (see the module docs), then the distributed path.
     let dist = tmp.path().join("dist");
-    let (dist_status, log) = calibrate_status(&pf, &dist, Some(&local.join("surrogate")), &[]);
+    // Its progress as events for programs (`--progress json`, what the Python module reads).
+    let (dist_status, log) = calibrate_status(
+        &pf,
+        &dist,
+        Some(&local.join("surrogate")),
+        &["--progress", "json"],
+    );
     // The one driver says the same through the coordinator (its messages in the run's status).
     assert!(
         log.contains("extending to 175 iterations (extension 1 of at most 1)"),
         "{log}"
     );
+    progress_is_events(&log);
 
     // Both ran to their end short of the target: reported as not converged, by the exit
     // status, the last lines, summary.json and the report's first screen.

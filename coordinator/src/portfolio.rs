@@ -182,7 +182,8 @@ pub async fn statuses(c: &mut Client, id: &str, full: bool) -> anyhow::Result<Ve
     Ok(out)
 }
 
-fn progress(s: &RunStatus) -> String {
+/// Where a building's run is, in words: `simulate 3/12`, `done`, `FAILED at design: ...`.
+pub fn progress(s: &RunStatus) -> String {
     let g = s.stages.iter().find(|g| g.stage == s.stage);
     let stage = s.stage().word();
     match (s.state(), g) {
@@ -205,12 +206,12 @@ fn building_state(s: RunState) -> BuildingState {
     }
 }
 
-/// Follows a portfolio until every run has ended, calling `log` with one line per building
+/// Follows a portfolio until every run has ended, calling `on_change` with a building's run
 /// whenever its stage (or state) changes.
 pub async fn follow(
     c: &mut Client,
     id: &str,
-    log: &dyn Fn(&str),
+    on_change: &dyn Fn(&RunStatus),
 ) -> anyhow::Result<Vec<RunStatus>> {
     let mut last: Vec<(String, String)> = vec![];
     loop {
@@ -222,7 +223,7 @@ pub async fn follow(
                 Some(l) => l.1 = key,
                 None => last.push((r.run_id.clone(), key)),
             }
-            log(&format!("{}: {}", r.building, progress(r)));
+            on_change(r);
         }
         if runs.iter().all(|r| r.state() != RunState::Running) {
             return statuses(c, id, true).await;

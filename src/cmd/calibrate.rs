@@ -6,6 +6,8 @@ use bemcal_calibrate::project::ErrorModelSetting;
 use bemcal_calibrate::{calibrate, Project};
 use bemcal_report::informed::{how_much_learned, uninformed, what_bills_say, why_uninformed};
 
+use super::progress::{Progress, ProgressFormat, Sink};
+
 /// Run design points, training, chains and validation for a project; write summary.json,
 /// draws.csv, the surrogate and the validation runs under --out.
 #[derive(Debug, clap::Args)]
@@ -30,6 +32,10 @@ pub struct Args {
     /// (overrides the project): `last 3 months`, `oct,nov,dec`, `2017-06-01..2017-08-31`.
     #[arg(long)]
     pub holdout: Option<bemcal_weather::period::Holdout>,
+    /// How progress is written on standard error: `text` for people, `json` for programs (one
+    /// object a line: log lines and, with --local-workers, each stage's jobs).
+    #[arg(long, value_enum, default_value_t)]
+    pub progress: ProgressFormat,
 }
 
 /// The calibration finished and wrote everything, but its chains missed a convergence target:
@@ -70,13 +76,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
         project.validation.holdout = Some(h.clone());
     }
-    let t0 = std::time::Instant::now();
-    let log = move |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
+    let progress = Progress::new(a.progress, Sink::Stderr);
     let s = match a.local_workers {
-        Some(n) => {
-            super::coordinator::calibrate_local(&a.project, &a.out, n.max(1), a.chains_per_job)?
-        }
-        None => calibrate(&project, &a.out, &log)?,
+        Some(n) => super::coordinator::calibrate_local(
+            &a.project,
+            &a.out,
+            n.max(1),
+            a.chains_per_job,
+            &progress,
+        )?,
+        None => calibrate(&project, &a.out, &|m: &str| progress.log(m))?,
     };
     write_report(&project, &a.out);
     if a.json {

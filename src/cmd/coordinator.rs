@@ -430,9 +430,9 @@ pub fn calibrate_local(
     out: &Path,
     workers: usize,
     chains_per_job: usize,
+    progress: &super::progress::Progress,
 ) -> anyhow::Result<Summary> {
-    let t0 = std::time::Instant::now();
-    let log = |m: &str| eprintln!("[{:>7.1} s] {m}", t0.elapsed().as_secs_f64());
+    let log = |m: &str| progress.log(m);
     let (children, connect) = start_local(out, workers, chains_per_job, &log)?;
     let surrogate = bemcal_calibrate::OutputDir::new(out).surrogate();
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
@@ -491,10 +491,7 @@ pub fn calibrate_local(
                 log(l);
             }
             said = said.max(s.log.len());
-            log(&format!("{} ({})", s.stage().word(), s.state().word()));
-            for l in client::progress_lines(s) {
-                eprintln!("{l}");
-            }
+            progress.run(s);
         })
         .await?;
         if st.state() != RunState::Done {

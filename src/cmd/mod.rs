@@ -20,6 +20,7 @@ pub mod params;
 pub mod portfolio;
 pub mod precalibrate;
 pub mod predict;
+mod progress;
 pub mod reference;
 pub mod report;
 pub mod results;

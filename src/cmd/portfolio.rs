@@ -11,6 +11,7 @@ use bemcal_client::proto::RunStatus;
 use bemcal_coordinator::portfolio::{self, PortfolioSummary};
 
 use super::coordinator::ClientArgs;
+use super::progress::{Progress, ProgressFormat, Sink};
 
 /// Calibrate a portfolio of buildings (a manifest of projects).
 #[derive(Debug, clap::Args)]
@@ -46,6 +47,10 @@ pub enum Sub {
         /// Folder for every building's results and the portfolio's files.
         #[arg(long)]
         out: PathBuf,
+        /// How progress is written on standard error: `text` for people, `json` for programs
+        /// (one object a line: log lines, and a `building` event whenever one's stage changes).
+        #[arg(long, value_enum, default_value_t)]
+        progress: ProgressFormat,
     },
     /// Per building: state, stage, G14 per output, NMBE, CV-RMSE, max R-hat, run time, the
     /// workers' busy seconds, errors.
@@ -91,7 +96,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             manifest,
             local_workers,
             out,
-        } => run_local(&manifest, local_workers, &out),
+            progress,
+        } => run_local(
+            &manifest,
+            local_workers,
+            &out,
+            &Progress::new(progress, Sink::Stderr),
+        ),
     }
 }
 
@@ -159,11 +170,15 @@ const PORTFOLIO_ID_FILE: &str = "portfolio.id";
 /// `portfolio run`: a local coordinator and workers calibrate every building; a failed one
 /// makes the exit status non-zero after the others' results are written. A rerun into the
 /// same `out` goes on with the same portfolio ([`portfolio::to_resubmit`]).
-fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Result<()> {
+fn run_local(
+    manifest: &Path,
+    local_workers: usize,
+    out: &Path,
+    progress: &Progress,
+) -> anyhow::Result<()> {
     let rt = bemcal_client::runtime()?;
     let m = portfolio::load_manifest(manifest)?;
-    let t0 = std::time::Instant::now();
-    let log = move |s: &str| eprintln!("[{:>7.1} s] {s}", t0.elapsed().as_secs_f64());
+    let log = |s: &str| progress.log(s);
     std::fs::create_dir_all(out)?;
     let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), 0, &log)?;
     // A rerun into the same folder goes on with the same portfolio (the coordinator's state
@@ -216,7 +231,10 @@ fn run_local(manifest: &Path, local_workers: usize, out: &Path) -> anyhow::Resul
                 }
             }
         }
-        let runs = portfolio::follow(&mut c, &id, &log).await?;
+        let runs = portfolio::follow(&mut c, &id, &|r: &RunStatus| {
+            progress.building(r, &portfolio::progress(r))
+        })
+        .await?;
         portfolio::fetch(&mut c, &runs, out).await?;
         Ok::<_, anyhow::Error>((runs, failed))
     })?;

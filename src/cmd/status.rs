@@ -31,10 +31,7 @@ pub fn to_json(s: &RunStatus) -> serde_json::Value {
         "attempts_total": s.attempts_total,
         "created_ms": s.created_ms,
         "finished_ms": s.finished_ms,
-        "stages": s.stages.iter().map(|g| serde_json::json!({
-            "stage": g.stage().word(), "state": g.state().word(), "done": g.done, "total": g.total, "running": g.running,
-            "worker_seconds": g.worker_seconds,
-        })).collect::<Vec<_>>(),
+        "stages": super::progress::stages_json(s),
         "jobs": s.jobs.iter().map(|j| serde_json::json!({
             "id": j.job_id, "stage": j.stage().word(), "label": j.label, "state": j.state().word(),
             "attempts": j.attempts, "worker": j.worker, "cached": j.cached,

@@ -3,6 +3,7 @@
 use bemcal_client::proto::RunState;
 
 use super::coordinator::ClientArgs;
+use super::progress::{Progress, ProgressFormat, Sink};
 
 /// Follow a run until it ends (exit status 1 if it fails or is cancelled).
 #[derive(Debug, clap::Args)]
@@ -11,31 +12,26 @@ pub struct Args {
     pub run: String,
     #[command(flatten)]
     pub client: ClientArgs,
+    /// How progress is written on standard output: `text` for people, `json` for programs (one
+    /// object a line).
+    #[arg(long, value_enum, default_value_t)]
+    pub progress: ProgressFormat,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let connect = a.client.connect()?;
     let rt = bemcal_client::runtime()?;
-    let t0 = std::time::Instant::now();
+    let progress = Progress::new(a.progress, Sink::Stdout);
     let st = rt.block_on(async {
         let mut c = connect.client()?;
         let mut said = 0;
         bemcal_client::client::watch(&mut c, &a.run, |s| {
             // The driver's messages since the last change, then the stages.
             for l in s.log.iter().skip(said) {
-                println!("[{:>7.1} s] {l}", t0.elapsed().as_secs_f64());
+                progress.log(l);
             }
             said = said.max(s.log.len());
-            println!(
-                "[{:>7.1} s] run {} {} (stage {})",
-                t0.elapsed().as_secs_f64(),
-                s.run_id,
-                s.state().word(),
-                s.stage().word()
-            );
-            for l in bemcal_client::client::progress_lines(s) {
-                println!("{l}");
-            }
+            progress.run(s);
         })
         .await
     })?;

@@ -122,28 +122,35 @@ assert any("reusing" in l for l in lines), lines[-20:]
 assert again.draws.equals(result.draws)
 assert again.estimate == result.estimate
 
-# In a notebook the progress block is shown once and updated in place: the block's lines are
-# grouped, every other line kept (stamped log lines too, once no bars follow them).
-from bemcal._progress import ProgressLines  # noqa: E402
+# The binary's progress events (`--progress json`) become the lines `--progress text` prints,
+# and in a notebook one block of stage bars updated in place: read, not parsed out of text.
+from bemcal._progress import ProgressEvents, TextEcho  # noqa: E402
 
-progress = ProgressLines()
 fed = [
-    "[    0.0 s] coordinator on http://127.0.0.1:1; starting 2 workers",
-    "[    0.1 s] design (running)",
-    "  design    [--------------------]   0/1   running",
-    "[    0.6 s] simulate (running)",
-    "  design    [####################]   1/1   done",
-    "  simulate  [--------------------]   0/12  running",
-    "[   50.0 s] 64 result files written to out",
-    "  a detail",
+    '{"event":"log","message":"coordinator on http://127.0.0.1:1; starting 2 workers","elapsed_s":0.0}',
+    '{"event":"run","run":"r1","state":"running","stage":"design","stages":[{"stage":"design",'
+    '"state":"running","done":0,"total":1,"running":1,"worker_seconds":0.0}],"elapsed_s":0.1}',
+    '{"event":"run","run":"r1","state":"running","stage":"simulate","stages":[{"stage":"design",'
+    '"state":"done","done":1,"total":1,"running":0,"worker_seconds":0.0},{"stage":"simulate",'
+    '"state":"running","done":4,"total":12,"running":2,"worker_seconds":41.5}],"elapsed_s":0.6}',
     "timings: total 50 s",
-    "[   51.0 s] stamped last line",
+    '{"event":"somethingnew","elapsed_s":51.0}',
 ]
-events = [e for line in fed for e in progress.feed(line)] + progress.finish()
+progress = ProgressEvents()
+events = [e for line in fed for e in progress.feed(line)]
 kept = [t for k, t in events if k == "line"]
-assert kept == [fed[0], fed[6], fed[7], fed[8], fed[9]], kept
+assert kept == ["[    0.0 s] coordinator on http://127.0.0.1:1; starting 2 workers",
+                "timings: total 50 s", fed[4]], kept
 blocks = [t for k, t in events if k == "block"]
-assert blocks[-1] == "\n".join(fed[3:6]) and len(blocks) == 3, blocks
+assert len(blocks) == 2, blocks
+assert blocks[-1] == ("[    0.6 s] simulate (running)\n"
+                      "  design    [####################]   1/1   done\n"
+                      "  simulate  [######--------------]   4/12  running (2 running)"), blocks[-1]
+printed = []
+echo = TextEcho(printed.append)
+for line in fed:
+    echo(line)
+assert printed[:2] == [kept[0], "[    0.1 s] design (running)"], printed
 
 print(f"bemcal.load: {len(data.groups())} groups, {len(chains)} chains x {per_chain.iloc[0]} draws, "
       f"{len(calibrated)} parameters; ArviZ summary within {worst:.1e} of bemcal diagnose")

@@ -1,0 +1,175 @@
+//! How a long command shows its progress (`calibrate`, `portfolio run`, `watch`): lines for
+//! people (`--progress text`, the default) or one JSON object a line for programs
+//! (`--progress json`: the Python module, notebooks, log shippers). Both are written here, from
+//! the same events, so that neither has to be parsed out of the other.
+//!
+//! The JSON events, each with `event` and `elapsed_s` (seconds since the command started):
+//! - `{"event": "log", "message": ...}`: a line of the calibration's log (the driver's messages,
+//!   what was reused or resumed);
+//! - `{"event": "run", "run": ..., "state": ..., "stage": ..., "stages": [{"stage", "state",
+//!   "done", "total", "running", "worker_seconds"}, ...]}`: a coordinator run's progress, each
+//!   time it changes;
+//! - `{"event": "building", "building": ..., "run": ..., "state": ..., "stage": ...,
+//!   "progress": ...}`: a portfolio building's state or stage changed.
+
+use std::io::Write;
+use std::time::Instant;
+
+use bemcal_client::proto::RunStatus;
+
+/// `--progress`: how progress is written.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProgressFormat {
+    /// Lines for people: `[   12.3 s] message`, and a bar per stage.
+    #[default]
+    Text,
+    /// One JSON object a line (module docs).
+    Json,
+}
+
+/// Where progress goes.
+#[derive(Debug, Clone, Copy)]
+pub enum Sink {
+    /// Standard error: the command's results go to standard output.
+    Stderr,
+    /// Standard output: progress is the command's output (`watch`).
+    Stdout,
+}
+
+/// Writes a command's progress events in its format.
+#[derive(Debug, Clone)]
+pub struct Progress {
+    format: ProgressFormat,
+    sink: Sink,
+    t0: Instant,
+}
+
+impl Progress {
+    /// Progress in `format` to `sink`, its clock started now.
+    pub fn new(format: ProgressFormat, sink: Sink) -> Progress {
+        Progress {
+            format,
+            sink,
+            t0: Instant::now(),
+        }
+    }
+
+    fn elapsed(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    fn write(&self, text: &str) {
+        // A closed pipe must not stop a calibration: progress is lost, the results are not.
+        let _ = match self.sink {
+            Sink::Stderr => writeln!(std::io::stderr().lock(), "{text}"),
+            Sink::Stdout => writeln!(std::io::stdout().lock(), "{text}"),
+        };
+    }
+
+    fn json(&self, mut event: serde_json::Value) {
+        event["elapsed_s"] = ((self.elapsed() * 10.0).round() / 10.0).into();
+        self.write(&event.to_string());
+    }
+
+    /// A line of the log.
+    pub fn log(&self, message: &str) {
+        match self.format {
+            ProgressFormat::Text => self.write(&format!("[{:>7.1} s] {message}", self.elapsed())),
+            ProgressFormat::Json => self.json(serde_json::json!({
+                "event": "log",
+                "message": message,
+            })),
+        }
+    }
+
+    /// A coordinator run's progress: its stage and each stage's jobs.
+    pub fn run(&self, s: &RunStatus) {
+        match self.format {
+            ProgressFormat::Text => {
+                self.log(&format!("{} ({})", s.stage().word(), s.state().word()));
+                for l in bemcal_client::client::progress_lines(s) {
+                    self.write(&l);
+                }
+            }
+            ProgressFormat::Json => self.json(serde_json::json!({
+                "event": "run",
+                "run": s.run_id,
+                "state": s.state().word(),
+                "stage": s.stage().word(),
+                "stages": stages_json(s),
+            })),
+        }
+    }
+
+    /// A portfolio building's state or stage changed; `progress` says where it is in words
+    /// (`simulate 3/12`, `FAILED at design: ...`).
+    pub fn building(&self, s: &RunStatus, progress: &str) {
+        match self.format {
+            ProgressFormat::Text => self.log(&format!("{}: {progress}", s.building)),
+            ProgressFormat::Json => self.json(serde_json::json!({
+                "event": "building",
+                "building": s.building,
+                "run": s.run_id,
+                "state": s.state().word(),
+                "stage": s.stage().word(),
+                "progress": progress,
+            })),
+        }
+    }
+}
+
+/// A run's stages as JSON (`status --json` and the `run` event).
+pub fn stages_json(s: &RunStatus) -> Vec<serde_json::Value> {
+    s.stages
+        .iter()
+        .map(|g| {
+            serde_json::json!({
+                "stage": g.stage().word(),
+                "state": g.state().word(),
+                "done": g.done,
+                "total": g.total,
+                "running": g.running,
+                "worker_seconds": g.worker_seconds,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bemcal_client::proto::{RunState, StageProgress};
+
+    /// Each JSON event is one line that parses, with its kind and clock.
+    #[test]
+    fn json_events_are_one_object_a_line() {
+        let p = Progress::new(ProgressFormat::Json, Sink::Stderr);
+        let s = RunStatus {
+            run_id: "r1".into(),
+            building: "north".into(),
+            state: RunState::Running.into(),
+            stages: vec![StageProgress {
+                done: 3,
+                total: 12,
+                running: 2,
+                worker_seconds: 41.5,
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        let stages = stages_json(&s);
+        assert_eq!(stages.len(), 1);
+        assert_eq!(stages[0]["done"], 3);
+        assert_eq!(stages[0]["worker_seconds"], 41.5);
+        let mut event = serde_json::json!({"event": "log", "message": "a \"quoted\"\nline"});
+        event["elapsed_s"] = 0.0.into();
+        let line = event.to_string();
+        assert!(!line.contains('\n'), "{line}");
+        let back: serde_json::Value = serde_json::from_str(&line).unwrap();
+        assert_eq!(back["message"], "a \"quoted\"\nline");
+        // Writing does not panic on either sink.
+        p.log("a line");
+        p.run(&s);
+        p.building(&s, "simulate 3/12");
+    }
+}
