@@ -3,11 +3,8 @@
 //! lost lease (with the worker and the reason), and every refusal (a worker that is not the
 //! lease's, a revoked credential, a result that fails its checks, a client over its limits) is
 //! a row of the `audit` table ([`crate::db::Store::audit`]), written in the same transaction as
-//! the change it records where there is one, and a line on the coordinator's standard error
-//! ([`set_log`]: text or JSON; leases and completions only at the `debug` level).
-
-use std::io::Write;
-use std::sync::RwLock;
+//! the change it records where there is one, and a `tracing` event ([`emit`]; leases and
+//! completions at the `debug` level).
 
 use serde::Serialize;
 
@@ -97,60 +94,28 @@ impl Event {
     }
 }
 
-/// How the coordinator's log lines look.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LogFormat {
-    /// `bemcal-coordinator: MS ACTION ACTOR run=.. job=.. lease=..: DETAIL`.
-    #[default]
-    Text,
-    /// One JSON object a line: `ms`, `level`, `actor`, `action`, `run`, `job`, `lease`, `detail`.
-    Json,
-}
-
-/// Which events the coordinator logs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
-pub enum LogLevel {
-    /// None (the audit table still has them all).
-    Off,
-    /// All but routine leases and completions.
-    #[default]
-    Info,
-    /// Every event.
-    Debug,
-}
-
-static LOG: RwLock<(LogFormat, LogLevel)> = RwLock::new((LogFormat::Text, LogLevel::Info));
-
-/// Sets how this process logs audit events (for every coordinator it serves).
-pub fn set_log(format: LogFormat, level: LogLevel) {
-    if let Ok(mut l) = LOG.write() {
-        *l = (format, level);
-    }
-}
-
-/// Logs `ev` on standard error, as [`set_log`] says.
+/// Logs `ev` through `tracing` (target `bemcal::audit`, structured fields `actor`, `action`,
+/// `run`, `job`, `lease`, `detail`): routine leases and completions at `debug`, the rest at
+/// `info`. The binary's subscriber decides what is written and how (text or JSON, `RUST_LOG`).
 pub fn emit(ev: &Event) {
-    let (format, level) = LOG.read().map(|l| *l).unwrap_or_default();
-    let needed = if ev.routine() {
-        LogLevel::Debug
-    } else {
-        LogLevel::Info
-    };
-    if level < needed {
-        return;
+    macro_rules! event {
+        ($level:expr) => {
+            tracing::event!(
+                target: "bemcal::audit",
+                $level,
+                actor = %ev.actor,
+                action = %ev.action,
+                run = ev.run.as_deref(),
+                job = ev.job,
+                lease = ev.lease,
+                detail = %ev.detail,
+            )
+        };
     }
-    let line = match format {
-        LogFormat::Text => format!("bemcal-coordinator: {}", ev.text()),
-        LogFormat::Json => {
-            let mut v = serde_json::to_value(ev).unwrap_or_default();
-            v["level"] = serde_json::Value::from(match needed {
-                LogLevel::Debug => "debug",
-                _ => "info",
-            });
-            v.to_string()
-        }
-    };
-    let _ = writeln!(std::io::stderr().lock(), "{line}");
+    match ev.routine() {
+        true => event!(tracing::Level::DEBUG),
+        false => event!(tracing::Level::INFO),
+    }
 }
 
 #[cfg(test)]

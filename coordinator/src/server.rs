@@ -116,7 +116,7 @@ fn refusals(st: Arc<State>) -> crate::auth::OnRefusal {
             let ev = Event::new(format!("worker:{worker}"), "refuse-revoked")
                 .detail("a call with the revoked worker's credential");
             if let Err(e) = st.store.audit(&ev) {
-                eprintln!("bemcal-coordinator: audit trail: {e}: {}", ev.text());
+                tracing::error!(target: "bemcal::audit", "audit trail not written: {e}: {}", ev.text());
             }
         }
         Refusal::RateLimited { client } => crate::audit::emit(

@@ -180,7 +180,7 @@ impl Service {
     /// Records `ev` in the audit trail; a failure to is logged, not the caller's error.
     fn audit(&self, ev: Event) {
         if let Err(e) = self.st.store.audit(&ev) {
-            eprintln!("bemcal-coordinator: audit trail: {e}: {}", ev.text());
+            tracing::error!(target: "bemcal::audit", "audit trail not written: {e}: {}", ev.text());
         }
     }
 

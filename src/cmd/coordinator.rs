@@ -15,7 +15,6 @@ use bemcal_client::auth::{
 };
 use bemcal_client::client::{self, Connect};
 use bemcal_client::proto::{ListRunsRequest, RunRequest, RunState};
-use bemcal_coordinator::audit::{LogFormat, LogLevel};
 use bemcal_coordinator::db::{AuditFilter, Store};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
@@ -56,13 +55,8 @@ pub struct Args {
     /// not limited).
     #[arg(long, default_value_t = 0.0)]
     pub client_rate: f64,
-    /// How the audit events are logged on standard error: text or json (one object a line).
-    #[arg(long, default_value = "text", value_parser = ["text", "json"])]
-    pub log_format: String,
-    /// Which audit events are logged: off, info (all but leases and completions) or debug
-    /// (all). The database's audit table has them all whatever this says.
-    #[arg(long, default_value = "info", value_parser = ["off", "info", "debug"])]
-    pub log_level: String,
+    #[command(flatten)]
+    pub log: super::logging::LogArgs,
     /// TLS certificate (PEM); with --tls-key, serve https.
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -274,16 +268,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if !a.client_rate.is_finite() || a.client_rate < 0.0 {
         anyhow::bail!("--client-rate must be a number of requests a second, 0 for no limit");
     }
-    let format = match a.log_format.as_str() {
-        "json" => LogFormat::Json,
-        _ => LogFormat::Text,
-    };
-    let level = match a.log_level.as_str() {
-        "off" => LogLevel::Off,
-        "debug" => LogLevel::Debug,
-        _ => LogLevel::Info,
-    };
-    bemcal_coordinator::audit::set_log(format, level);
+    a.log.init();
     if a.artifact_grace_hours.is_nan() || a.artifact_grace_hours < 0.1 {
         anyhow::bail!("--artifact-grace-hours must be at least 0.1 (uploads need time to be used)");
     }
@@ -404,6 +389,8 @@ pub(crate) fn start_local(
             ])
             .arg("--id")
             .arg(format!("local-{i}"))
+            // Its warnings only: the calibration prints its own progress.
+            .args(["--log-level", "warn"])
             .arg("--cache")
             .arg(base.join(format!("worker-{i}")))
             .env(TOKEN_ENV, &token)

@@ -15,6 +15,7 @@ pub mod diagnose;
 pub mod doctor;
 pub mod example;
 pub mod export;
+mod logging;
 pub mod metrics;
 pub mod params;
 pub mod portfolio;

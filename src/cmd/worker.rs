@@ -27,9 +27,12 @@ pub struct Args {
     /// durations, busy slots) on this address (port 0: any free port; the address is printed).
     #[arg(long, env = "BEMCAL_WORKER_METRICS_LISTEN")]
     pub metrics_listen: Option<std::net::SocketAddr>,
+    #[command(flatten)]
+    pub log: super::logging::LogArgs,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    a.log.init();
     let host = std::fs::read_to_string("/etc/hostname")
         .map(|s| s.trim().to_string())
         .unwrap_or_else(|_| "worker".into());

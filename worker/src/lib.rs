@@ -103,7 +103,7 @@ async fn register(
                 ) =>
             {
                 if !said {
-                    eprintln!("worker {name}: waiting for the coordinator: {}", e.message());
+                    tracing::warn!(worker = %name, "waiting for the coordinator: {}", e.message());
                     said = true;
                 }
                 tokio::time::sleep(Duration::from_secs(1)).await;
@@ -115,7 +115,7 @@ async fn register(
             token: reply.credential,
             ..connect.clone()
         };
-        eprintln!("worker {name}: registered as {}", reply.worker_id);
+        tracing::info!(worker = %name, "registered as {}", reply.worker_id);
         return Ok(Some((reply.worker_id, own.client()?)));
     }
     Ok(None)
@@ -185,7 +185,7 @@ pub async fn run(
                 anyhow::bail!("the coordinator refused this worker: {}", e.message())
             }
             Err(e) => {
-                eprintln!("worker {worker_id}: lease: {}", e.message());
+                tracing::warn!(worker = %worker_id, "lease: {}", e.message());
                 tokio::time::sleep(Duration::from_secs(1)).await;
                 continue;
             }
@@ -366,11 +366,7 @@ async fn report_outputs(
     };
     let reported = r.is_ok();
     if let Err(e) = r {
-        eprintln!(
-            "worker {worker}: reporting job {}: {}",
-            job.job_id,
-            e.message()
-        );
+        tracing::warn!(worker = %worker, job = job.job_id, "reporting the job: {}", e.message());
     }
     match uploaded && reported {
         true => Outcome::Done,
