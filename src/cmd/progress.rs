@@ -1,5 +1,6 @@
 //! How a long command shows its progress (`calibrate`, `portfolio run`, `watch`): lines for
-//! people (`--progress text`, the default) or one JSON object a line for programs
+//! people (`--progress text`, the default: on a terminal, a bar per stage updated in place by
+//! `indicatif`, the log lines above them; elsewhere plain lines) or one JSON object a line for programs
 //! (`--progress json`: the Python module, notebooks, log shippers). Both are written here, from
 //! the same events, so that neither has to be parsed out of the other.
 //!
@@ -12,8 +13,11 @@
 //! - `{"event": "building", "building": ..., "run": ..., "state": ..., "stage": ...,
 //!   "progress": ...}`: a portfolio building's state or stage changed.
 
-use std::io::Write;
+use std::io::{IsTerminal, Write};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use bemcal_client::proto::RunStatus;
 
@@ -42,15 +46,29 @@ pub struct Progress {
     format: ProgressFormat,
     sink: Sink,
     t0: Instant,
+    /// Text on a terminal: the stages' bars, drawn in place.
+    bars: Option<Arc<Mutex<Bars>>>,
 }
 
 impl Progress {
-    /// Progress in `format` to `sink`, its clock started now.
+    /// Progress in `format` to `sink`, its clock started now; text on a terminal gets bars.
     pub fn new(format: ProgressFormat, sink: Sink) -> Progress {
+        let terminal = match sink {
+            Sink::Stderr => std::io::stderr().is_terminal(),
+            Sink::Stdout => std::io::stdout().is_terminal(),
+        };
+        let bars = (format == ProgressFormat::Text && terminal).then(|| {
+            let target = match sink {
+                Sink::Stderr => ProgressDrawTarget::stderr(),
+                Sink::Stdout => ProgressDrawTarget::stdout(),
+            };
+            Arc::new(Mutex::new(Bars::new(target)))
+        });
         Progress {
             format,
             sink,
             t0: Instant::now(),
+            bars,
         }
     }
 
@@ -59,6 +77,13 @@ impl Progress {
     }
 
     fn write(&self, text: &str) {
+        if let Some(b) = &self.bars {
+            // Above the bars, which are drawn again below it.
+            if let Ok(b) = b.lock() {
+                let _ = b.multi.println(text);
+                return;
+            }
+        }
         // A closed pipe must not stop a calibration: progress is lost, the results are not.
         let _ = match self.sink {
             Sink::Stderr => writeln!(std::io::stderr().lock(), "{text}"),
@@ -85,12 +110,21 @@ impl Progress {
     /// A coordinator run's progress: its stage and each stage's jobs.
     pub fn run(&self, s: &RunStatus) {
         match self.format {
-            ProgressFormat::Text => {
-                self.log(&format!("{} ({})", s.stage().word(), s.state().word()));
-                for l in bemcal_client::client::progress_lines(s) {
-                    self.write(&l);
+            ProgressFormat::Text => match &self.bars {
+                Some(b) => {
+                    let head = format!("{} ({})", s.stage().word(), s.state().word());
+                    let said = b.lock().map(|mut b| b.update(s, &head)).unwrap_or(true);
+                    if !said {
+                        self.log(&head);
+                    }
                 }
-            }
+                None => {
+                    self.log(&format!("{} ({})", s.stage().word(), s.state().word()));
+                    for l in bemcal_client::client::progress_lines(s) {
+                        self.write(&l);
+                    }
+                }
+            },
             ProgressFormat::Json => self.json(serde_json::json!({
                 "event": "run",
                 "run": s.run_id,
@@ -115,6 +149,57 @@ impl Progress {
                 "progress": progress,
             })),
         }
+    }
+}
+
+/// The stages' bars on a terminal (`indicatif`), one a stage as the run reports it, in the
+/// layout of [`bemcal_client::client::progress_lines`].
+#[derive(Debug)]
+struct Bars {
+    multi: MultiProgress,
+    /// Each stage's word and its bar, in the order they appeared.
+    stages: Vec<(String, ProgressBar)>,
+    /// The run's last `stage (state)`, said once a change.
+    head: String,
+}
+
+impl Bars {
+    fn new(target: ProgressDrawTarget) -> Bars {
+        Bars {
+            multi: MultiProgress::with_draw_target(target),
+            stages: vec![],
+            head: String::new(),
+        }
+    }
+
+    /// Moves the bars to `s`; whether `head` was already said (false: say it).
+    fn update(&mut self, s: &RunStatus, head: &str) -> bool {
+        for g in &s.stages {
+            let word = g.stage().word();
+            let bar = match self.stages.iter().find(|(w, _)| w == word) {
+                Some((_, b)) => b.clone(),
+                None => {
+                    let style = ProgressStyle::with_template(
+                        "  {prefix:<9} [{bar:20}] {pos:>3}/{len:<3} {msg}",
+                    )
+                    .expect("a valid template")
+                    .progress_chars("#-");
+                    let b = self.multi.add(ProgressBar::new(0).with_style(style));
+                    b.set_prefix(word.to_string());
+                    self.stages.push((word.to_string(), b.clone()));
+                    b
+                }
+            };
+            bar.set_length(u64::from(g.total));
+            bar.set_position(u64::from(g.done));
+            bar.set_message(match g.running {
+                0 => g.state().word().to_string(),
+                n => format!("{} ({n} running)", g.state().word()),
+            });
+        }
+        let said = self.head == head;
+        self.head = head.to_string();
+        said
     }
 }
 
@@ -171,5 +256,30 @@ mod tests {
         p.log("a line");
         p.run(&s);
         p.building(&s, "simulate 3/12");
+    }
+
+    /// On a terminal each stage has one bar, moved in place; the run's head is said once a
+    /// change.
+    #[test]
+    fn bars_follow_the_stages_in_place() {
+        let mut bars = Bars::new(ProgressDrawTarget::hidden());
+        let mut s = RunStatus {
+            stages: vec![StageProgress {
+                done: 3,
+                total: 12,
+                running: 2,
+                ..Default::default()
+            }],
+            ..Default::default()
+        };
+        assert!(!bars.update(&s, "simulate (running)"));
+        s.stages[0].done = 12;
+        s.stages[0].running = 0;
+        assert!(bars.update(&s, "simulate (running)"));
+        assert_eq!(bars.stages.len(), 1);
+        let b = &bars.stages[0].1;
+        assert_eq!((b.position(), b.length()), (12, Some(12)));
+        assert!(!b.message().contains("running"), "{}", b.message());
+        assert!(!bars.update(&s, "train (running)"));
     }
 }
