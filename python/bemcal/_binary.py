@@ -11,6 +11,8 @@ from collections import deque
 from pathlib import Path
 from typing import Callable, Iterable, Optional, Sequence
 
+from ._progress import tail_lines
+
 #: Variable naming the binary explicitly.
 BINARY_VAR = "BEMCAL_BIN"
 
@@ -76,7 +78,7 @@ def run(
         try:
             for line in proc.stdout:
                 line = line.rstrip("\n")
-                tail.append(line)
+                tail.extend(tail_lines(line))
                 if echo is not None:
                     echo(line)
         except BaseException:

@@ -64,6 +64,13 @@ class ProgressEvents:
         return [("line", line)]
 
 
+def tail_lines(line: str) -> List[str]:
+    """What a line leaves in an error's tail (:class:`bemcal.BemcalError`): a log line or a
+    building's change as text, any other line as it is; a run's stages (redrawn every change)
+    nothing."""
+    return [text for kind, text in ProgressEvents().feed(line) if kind == "line"]
+
+
 class TextEcho:
     """An ``echo`` that passes a plain callable the lines of ``--progress text``."""
 

@@ -358,8 +358,10 @@ pub(crate) fn start_local(
         .arg(base.join("coordinator"))
         .arg("--chains-per-job")
         .arg(chains_per_job.to_string())
-        // The calibration prints its own progress; the audit trail stays in the database.
+        // The calibration prints its own progress; the audit trail stays in the database. A
+        // RUST_LOG of the user's would override the level and flood the progress.
         .args(["--log-level", "off"])
+        .env_remove("RUST_LOG")
         .env(TOKEN_ENV, &token)
         .stdout(Stdio::piped())
         .spawn()
@@ -391,6 +393,7 @@ pub(crate) fn start_local(
             .arg(format!("local-{i}"))
             // Its warnings only: the calibration prints its own progress.
             .args(["--log-level", "warn"])
+            .env_remove("RUST_LOG")
             .arg("--cache")
             .arg(base.join(format!("worker-{i}")))
             .env(TOKEN_ENV, &token)

@@ -2,7 +2,7 @@
 //! coordinator's audit trail under the target `bemcal::audit`, with the fields `actor`,
 //! `action`, `run`, `job`, `lease`, `detail`; the worker's under `bemcal_worker`) on standard
 //! error, as text or one JSON object a line for log shippers. `RUST_LOG`, where set, is the
-//! filter (`RUST_LOG=bemcal=debug,h2=warn`); else `--log-level`.
+//! filter (`RUST_LOG=bemcal=debug,h2=info`); else `--log-level`.
 
 /// `--log-format`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -18,7 +18,7 @@ pub enum LogFormat {
 /// and errors only).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum LogLevel {
-    /// Nothing (the coordinator's database keeps the whole audit trail whatever this says).
+    /// Nothing (a coordinator's database keeps the whole audit trail whatever this says).
     Off,
     /// Errors only.
     Error,
@@ -51,7 +51,7 @@ pub struct LogArgs {
     #[arg(long, value_enum, default_value_t)]
     pub log_format: LogFormat,
     /// Which events are logged (RUST_LOG, where set, overrides it): off, error, warn, info (all
-    /// but routine leases and completions), debug (all).
+    /// but routine ones: a coordinator's leases and completions), debug (all).
     #[arg(long, value_enum, default_value_t)]
     pub log_level: LogLevel,
 }

@@ -24,7 +24,8 @@ use bemcal_client::proto::RunStatus;
 /// `--progress`: how progress is written.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum ProgressFormat {
-    /// Lines for people: `[   12.3 s] message`, and a bar per stage.
+    /// Lines for people: `[   12.3 s] message`; a run's stages as a bar each (on a terminal,
+    /// redrawn in place).
     #[default]
     Text,
     /// One JSON object a line (module docs).
@@ -96,6 +97,19 @@ impl Progress {
         self.write(&event.to_string());
     }
 
+    /// Ends the bars where they stand (a failed run's too), so that what the command prints
+    /// next goes below them and is not drawn over; call it when the run has ended, before
+    /// printing its results.
+    pub fn finish(&self) {
+        if let Some(b) = &self.bars {
+            if let Ok(b) = b.lock() {
+                for (_, bar) in &b.stages {
+                    bar.abandon();
+                }
+            }
+        }
+    }
+
     /// A line of the log.
     pub fn log(&self, message: &str) {
         match self.format {
@@ -112,14 +126,14 @@ impl Progress {
         match self.format {
             ProgressFormat::Text => match &self.bars {
                 Some(b) => {
-                    let head = format!("{} ({})", s.stage().word(), s.state().word());
+                    let head = head(s);
                     let said = b.lock().map(|mut b| b.update(s, &head)).unwrap_or(true);
                     if !said {
                         self.log(&head);
                     }
                 }
                 None => {
-                    self.log(&format!("{} ({})", s.stage().word(), s.state().word()));
+                    self.log(&head(s));
                     for l in bemcal_client::client::progress_lines(s) {
                         self.write(&l);
                     }
@@ -150,6 +164,16 @@ impl Progress {
             })),
         }
     }
+}
+
+/// A run's line above its stages: `run r0123456789 chains (running)`.
+fn head(s: &RunStatus) -> String {
+    format!(
+        "run {} {} ({})",
+        s.run_id,
+        s.stage().word(),
+        s.state().word()
+    )
 }
 
 /// The stages' bars on a terminal (`indicatif`), one a stage as the run reports it, in the
@@ -256,6 +280,7 @@ mod tests {
         p.log("a line");
         p.run(&s);
         p.building(&s, "simulate 3/12");
+        p.finish();
     }
 
     /// On a terminal each stage has one bar, moved in place; the run's head is said once a
@@ -281,5 +306,15 @@ mod tests {
         assert_eq!((b.position(), b.length()), (12, Some(12)));
         assert!(!b.message().contains("running"), "{}", b.message());
         assert!(!bars.update(&s, "train (running)"));
+        let p = Progress {
+            format: ProgressFormat::Text,
+            sink: Sink::Stderr,
+            t0: Instant::now(),
+            bars: Some(Arc::new(Mutex::new(bars))),
+        };
+        // Ended where they stand: a bar short of its length stays short.
+        p.finish();
+        let b = p.bars.as_ref().unwrap().lock().unwrap();
+        assert!(b.stages.iter().all(|(_, bar)| bar.is_finished()));
     }
 }

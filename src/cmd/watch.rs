@@ -34,7 +34,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             progress.run(s);
         })
         .await
-    })?;
+    });
+    progress.finish();
+    let st = st?;
     if st.state() != RunState::Done {
         anyhow::bail!("run {} {}: {}", st.run_id, st.state().word(), st.error);
     }
