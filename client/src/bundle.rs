@@ -88,7 +88,8 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
         }
     }
     if let Some(sur) = doc.get_mut("surrogate").and_then(|v| v.as_table_mut()) {
-        if let Some(f) = str_at(sur, "pretrained") {
+        // A bundled network (`bundled:NAME`) is in the worker's binary, as bundled weather is.
+        if let Some(f) = str_at(sur, "pretrained").filter(|f| !f.starts_with("bundled:")) {
             let n = files.place_folder(&f, &PRETRAINED_FILES)?;
             sur.insert("pretrained".into(), n.into());
         }
@@ -416,6 +417,14 @@ mod tests {
         );
         let text = String::from_utf8(b[0].1.clone()).unwrap();
         assert!(text.contains("pretrained = \"files/1-family\""), "{text}");
+        // A network the binary ships travels as its name, as bundled weather does.
+        let b = collect(&project("bundled:conditioned-200"), Policy::default()).unwrap();
+        assert_eq!(names(&b), ["project.toml", "model.toml"]);
+        let text = String::from_utf8(b[0].1.clone()).unwrap();
+        assert!(
+            text.contains("pretrained = \"bundled:conditioned-200\""),
+            "{text}"
+        );
     }
 
     #[test]

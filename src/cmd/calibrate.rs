@@ -84,9 +84,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             n.max(1),
             a.chains_per_job,
             &progress,
-        )?,
-        None => calibrate(&project, &a.out, &|m: &str| progress.log(m))?,
+        ),
+        None => calibrate(&project, &a.out, &|m: &str| progress.log(m)).map_err(Into::into),
     };
+    progress.finish();
+    let s = s?;
     write_report(&project, &a.out);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
@@ -99,6 +101,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     print_guideline14(&s);
     print_held_out(&s);
     print_model_form(&s);
+    print_start(&s);
     print_refinement(&s);
     print_timings(&s, &a.out);
     converged_or_not(&s, &a.out)
@@ -272,6 +275,23 @@ fn print_guideline14(s: &bemcal_calibrate::Summary) {
             "not fitted (fit = false), compared only: {}",
             s.not_fitted.join(", ")
         );
+    }
+}
+
+/// How the surrogate's first training started, where a pretrained network was named.
+fn print_start(s: &bemcal_calibrate::Summary) {
+    use bemcal_calibrate::SurrogateStart;
+    match &s.surrogate_start {
+        Some(SurrogateStart::Pretrained {
+            pretrained,
+            corpus_cases,
+        }) => println!(
+            "\nsurrogate: fine-tuned from the pretrained network {pretrained} ({corpus_cases} corpus cases)"
+        ),
+        Some(SurrogateStart::Scratch { reason }) => println!(
+            "\nsurrogate: trained from random weights, not the pretrained network: {reason}"
+        ),
+        None => {}
     }
 }
 

@@ -233,7 +233,7 @@ impl Calibration {
                 crate::pretrained::start(
                     &self.inputs,
                     sp,
-                    &self.project.resolve(pretrained),
+                    &crate::pretrained::source(&self.project, pretrained, &self.out.pretrained())?,
                     &self.out.dataset(),
                     &self.out.pretrained(),
                 )?,

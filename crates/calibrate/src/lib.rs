@@ -94,6 +94,7 @@ pub use metrics::{
 };
 pub use output::{write_outputs_csv, OutputDir};
 pub use posterior::Drawn;
+pub use pretrained::SurrogateStart;
 pub use project::{project_schema, Project};
 pub use summary::{
     summary_schema, write_calibrated_model, write_summary, DesignReport, HoldoutReport,

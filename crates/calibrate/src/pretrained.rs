@@ -34,7 +34,23 @@ pub enum SurrogateStart {
     },
 }
 
-/// Folds the pretrained network of `settings.pretrained` (resolved by the caller: `dir`)
+/// The folder of the pretrained network `reference` (`[surrogate] pretrained`) names: a
+/// folder, relative to the project file, or a network shipped in the binary (`bundled:NAME`),
+/// written into `out/network` for the fold to read.
+pub fn source(project: &crate::Project, reference: &Path, out: &Path) -> Result<PathBuf, Error> {
+    match fold::bundled_name(reference) {
+        None => Ok(project.resolve(reference)),
+        Some(Err(e)) => Err(Error::Config(format!("surrogate.pretrained: {e}"))),
+        Some(Ok(name)) => {
+            let dir = out.join("network");
+            fold::write_bundled(name, &dir)?;
+            Ok(dir)
+        }
+    }
+}
+
+/// Folds the pretrained network of `settings.pretrained` (its folder found by the caller,
+/// [`source`]: `dir`)
 /// onto the building of `inp`, whose training set is `dataset`, into `out`: the warm start's
 /// folder, or None when it cannot start this building's surrogate (the reason written there).
 pub fn start(
@@ -78,6 +94,12 @@ pub fn start(
             )?
         }
     };
+    // A bundled network is recorded by its name, not the folder it was written to.
+    if let (FoldVerdict::Admitted { .. }, Some(reference)) = (&verdict, &settings.pretrained) {
+        if fold::bundled_name(reference).is_some() {
+            fold::relabel_verdict(out, reference)?;
+        }
+    }
     Ok(match verdict {
         FoldVerdict::Admitted { .. } => Some(out.to_path_buf()),
         FoldVerdict::Refused { .. } => None,

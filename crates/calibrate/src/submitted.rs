@@ -116,7 +116,13 @@ impl Project {
         for (kind, f) in p.named_files() {
             file_inside(&root, &p.base, f, kind).map_err(&refuse)?;
         }
-        if let Some(dir) = &p.surrogate.pretrained {
+        // A bundled network (`bundled:NAME`) is in the worker's binary: nothing to check.
+        let folder = p
+            .surrogate
+            .pretrained
+            .as_ref()
+            .filter(|d| bemcal_surrogate::pretrained::bundled_name(d).is_none());
+        if let Some(dir) = folder {
             for f in bemcal_surrogate::pretrained::FILES {
                 file_inside(&root, &p.base, &dir.join(f), SubmittedFile::Pretrained)
                     .map_err(&refuse)?;

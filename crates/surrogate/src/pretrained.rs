@@ -28,6 +28,59 @@ use crate::train::{runtime, trainer_command};
 /// submitted project.
 pub const FILES: [&str; 2] = ["card.json", "weights.pt"];
 
+/// How a project names a network shipped inside the binary: `pretrained = "bundled:NAME"`.
+pub const BUNDLED_PREFIX: &str = "bundled:";
+
+/// The networks shipped inside the binary, so that a pretrained start needs neither the
+/// repository nor a network connection (a pip-installed wheel, a cluster's image): each one's
+/// name and its [`FILES`] (`corpus/pretrained/NAME`, with its README and held-out error).
+const BUNDLED: &[(&str, [&[u8]; 2])] = &[(
+    "conditioned-200",
+    [
+        include_bytes!("../../../corpus/pretrained/conditioned-200/card.json"),
+        include_bytes!("../../../corpus/pretrained/conditioned-200/weights.pt"),
+    ],
+)];
+
+/// The names of the bundled networks.
+pub fn bundled_names() -> Vec<&'static str> {
+    BUNDLED.iter().map(|(n, _)| *n).collect()
+}
+
+/// The bundled network's name where `reference` (a project's `pretrained`) is
+/// `bundled:NAME`; None for a folder. An unknown name is an error that lists the known ones.
+pub fn bundled_name(reference: &Path) -> Option<Result<&'static str, String>> {
+    let name = reference.to_str()?.strip_prefix(BUNDLED_PREFIX)?;
+    Some(
+        BUNDLED
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(n, _)| *n)
+            .ok_or_else(|| {
+                format!(
+                    "no bundled pretrained network '{name}' (this binary ships: {})",
+                    bundled_names().join(", ")
+                )
+            }),
+    )
+}
+
+/// Writes the bundled network `name`'s [`FILES`] into `dir` (created), for a fold to read.
+pub fn write_bundled(name: &str, dir: &Path) -> Result<(), SurrogateError> {
+    let (_, files) = BUNDLED
+        .iter()
+        .find(|(n, _)| *n == name)
+        .ok_or_else(|| runtime(format!("no bundled pretrained network '{name}'")))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| runtime(format!("cannot create {}: {e}", dir.display())))?;
+    for (file, bytes) in FILES.iter().zip(files) {
+        let path = dir.join(file);
+        std::fs::write(&path, bytes)
+            .map_err(|e| runtime(format!("cannot write {}: {e}", path.display())))?;
+    }
+    Ok(())
+}
+
 /// The file in the fold's folder that says what it decided.
 pub const VERDICT_FILE: &str = "pretrained.json";
 
@@ -122,6 +175,21 @@ pub fn write_verdict(dir: &Path, verdict: &FoldVerdict) -> Result<(), SurrogateE
         .map_err(|e| runtime(format!("cannot write {}: {e}", path.display())))
 }
 
+/// Records in `dir`'s verdict that the network came from `pretrained` (a bundled network's
+/// `bundled:NAME`, not the folder it was written to); the trainer's other fields stay.
+pub fn relabel_verdict(dir: &Path, pretrained: &Path) -> Result<(), SurrogateError> {
+    let path = dir.join(VERDICT_FILE);
+    let meta = |message: String| SurrogateError::Metadata {
+        path: path.clone(),
+        message,
+    };
+    let text = std::fs::read_to_string(&path).map_err(|e| meta(format!("cannot read: {e}")))?;
+    let mut value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| meta(e.to_string()))?;
+    value["pretrained"] = pretrained.display().to_string().into();
+    std::fs::write(&path, value.to_string()).map_err(|e| meta(format!("cannot write: {e}")))
+}
+
 /// The verdict a fold left in `dir`.
 pub fn read_verdict(dir: &Path) -> Result<FoldVerdict, SurrogateError> {
     let path = dir.join(VERDICT_FILE);
@@ -148,6 +216,35 @@ pub fn read_verdict(dir: &Path) -> Result<FoldVerdict, SurrogateError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `bundled:NAME` names a shipped network, written out as the folder it was built in;
+    /// anything else is a folder, and an unknown name says which ones there are.
+    #[test]
+    fn a_bundled_network_is_written_as_its_folder() {
+        let name = bundled_name(Path::new("bundled:conditioned-200"))
+            .unwrap()
+            .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        write_bundled(name, dir.path()).unwrap();
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../corpus/pretrained")
+            .join(name);
+        for f in FILES {
+            assert_eq!(
+                std::fs::read(dir.path().join(f)).unwrap(),
+                std::fs::read(shipped.join(f)).unwrap(),
+                "{f}"
+            );
+        }
+        let card: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("card.json")).unwrap()).unwrap();
+        assert!(card.is_object());
+        assert!(bundled_name(Path::new("../pretrained")).is_none());
+        let e = bundled_name(Path::new("bundled:nope"))
+            .unwrap()
+            .unwrap_err();
+        assert!(e.contains("conditioned-200"), "{e}");
+    }
 
     #[test]
     fn both_verdicts_read_as_the_trainer_writes_them() {

@@ -378,8 +378,9 @@ pub struct SurrogateSettings {
     /// held-out loss the constant 1e-3 reaches in about 60, 1.28 times its best after 180.
     pub lr_schedule: bemcal_surrogate::LrSchedule,
     /// The building family's pretrained surrogate: a folder with `card.json` and `weights.pt`
-    /// (`python -m bemcal_train.pretrain train`; one ships in `corpus/pretrained/`), relative
-    /// to the project file. The first training then starts from it, folded onto this building, and
+    /// (`python -m bemcal_train.pretrain train`), relative to the project file, or
+    /// `"bundled:conditioned-200"`, the network shipped inside the binary
+    /// (`corpus/pretrained/conditioned-200`: 200 cases of the family, hidden = 64). The first training then starts from it, folded onto this building, and
     /// fine-tunes for at most `warm_epochs` instead of `epochs` from random weights. A
     /// building it cannot start (an own IDF, outside its corpus's ranges, a parameter or meter
     /// it does not know, a `hidden` other than its own) trains from random weights as without

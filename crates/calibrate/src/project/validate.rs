@@ -493,6 +493,13 @@ impl SurrogateSettings {
         self.time_features
             .parse::<bemcal_surrogate::TimeFeatures>()
             .map_err(|e| format!("surrogate.time_features: {e}"))?;
+        if let Some(Err(e)) = self
+            .pretrained
+            .as_deref()
+            .and_then(bemcal_surrogate::pretrained::bundled_name)
+        {
+            return Err(format!("surrogate.pretrained: {e}"));
+        }
         Ok(())
     }
 }
