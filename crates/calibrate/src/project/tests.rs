@@ -573,3 +573,31 @@ fn the_default_sampler_is_hmc_from_optima_held_to_convergence_targets() {
         "{e}"
     );
 }
+
+/// A setting that fails its check is refused at its line, where the message names its key.
+#[test]
+fn a_failed_check_names_the_line_of_its_key() {
+    let hc = ["heating", "cooling", "electricity"];
+    let e = check(
+        "[surrogate]\nepochs = 3\npretrained = \"bundled:nope\"\n",
+        &hc,
+        "",
+    )
+    .unwrap_err();
+    assert!(
+        e.starts_with(
+            "DIR/project.toml:5: surrogate.pretrained: no bundled pretrained network 'nope'"
+        ),
+        "{e}"
+    );
+    let e = check("[surrogate]\nhidden = 2\n", &hc, "").unwrap_err();
+    assert!(
+        e.starts_with("DIR/project.toml:4: surrogate.hidden = 2 "),
+        "{e}"
+    );
+    assert_eq!(super::validate::leading_key("[meters] needs"), None);
+    assert_eq!(
+        super::validate::leading_key("mcmc.temperature = \"x\""),
+        Some(vec!["mcmc", "temperature"])
+    );
+}

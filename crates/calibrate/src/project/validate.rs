@@ -4,6 +4,17 @@
 
 use super::*;
 
+/// The key a check's message starts with (`surrogate.hidden = 3 must be ...` gives
+/// `["surrogate", "hidden"]`), to find its line; None where it names none.
+pub(super) fn leading_key(message: &str) -> Option<Vec<&str>> {
+    let end = message
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '.'))
+        .unwrap_or(message.len());
+    let key = &message[..end];
+    (key.contains('.') && !key.starts_with('.') && !key.ends_with('.'))
+        .then(|| key.split('.').collect())
+}
+
 impl Project {
     /// Reads and validates a project file.
     pub fn load(path: &Path) -> Result<Project, Error> {
@@ -17,7 +28,8 @@ impl Project {
         p.path = path.to_path_buf();
         p.validate().map_err(|message| Error::Input {
             path: path.into(),
-            line: 0,
+            line: leading_key(&message)
+                .map_or(0, |keys| bemcal_energyplus::toml_line(&text, &keys)),
             message,
         })?;
         Ok(p)
