@@ -105,12 +105,22 @@ POINTS ?=
 SET_POINTS = $(PY) -c "import re, sys; p = sys.argv[1]; s = open(p).read(); \
   open(p, 'w').write(re.sub(r'(?m)^points = [0-9]+.*', 'points = $(POINTS)', s, count=1))"
 WITH_POINTS = $(if $(POINTS),$(SET_POINTS),true)
-CAL := calibration$(if $(HOLDOUT),-holdout)$(if $(POINTS),-p$(POINTS))
+# PRETRAINED=1 starts `make demo`'s surrogate from the family's network the binary ships
+# (`[surrogate] pretrained = "bundled:conditioned-200"`, its width, 64) and spreads the
+# refinement points (`[refine] spread = 2`), the configuration docs/examples.md measures; the
+# calibration goes to calibration-pretrained/.
+PRETRAINED ?=
+SET_PRETRAINED = $(PY) -c "import re, sys; p = sys.argv[1]; s = open(p).read(); \
+  s = re.sub(r'(?m)^hidden = [0-9]+', 'pretrained = \"bundled:conditioned-200\"\nhidden = 64', s, count=1); \
+  open(p, 'w').write(re.sub(r'(?m)^(rounds = [0-9]+.*)$$', r'\1\nspread = 2', s, count=1))"
+WITH_PRETRAINED = $(if $(PRETRAINED),$(SET_PRETRAINED),true)
+CAL := calibration$(if $(HOLDOUT),-holdout)$(if $(POINTS),-p$(POINTS))$(if $(PRETRAINED),-pretrained)
 demo: setup
 	@mkdir -p $(DEMO)
 	cp examples/office/model.toml examples/office/project.toml $(DEMO)/
 	@$(WITH_HOLDOUT) $(DEMO)/project.toml
 	@$(WITH_POINTS) $(DEMO)/project.toml
+	@$(WITH_PRETRAINED) $(DEMO)/project.toml
 	@test -f $(DEMO)/meters.csv || $(BIN) synthesize --model $(DEMO)/model.toml --weather "$(EPW)" \
 	  --truth-seed 2021 --out $(DEMO)/meters.csv --truth $(DEMO)/truth.json
 	$(BIN) precalibrate --meters $(DEMO)/meters.csv --weather "$(EPW)" --out $(DEMO)/precal \

@@ -29,8 +29,9 @@ use std::path::PathBuf;
 /// Errors of the pre-calibration stage. Input errors name the file, line and column.
 #[derive(Debug, thiserror::Error)]
 pub enum PrecalError {
-    /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    /// A file could not be read or written (the operating system's reason is the source,
+    /// which the error's chain prints after this).
+    #[error("cannot access {path}")]
     Io {
         /// The file.
         path: PathBuf,
