@@ -1,7 +1,8 @@
 """Issue 66's portfolio table (scripts/portfolio_pretrained.sh): per building, how its surrogate
 started, the final temperature T, the parameters whose 90 % interval is narrower than half the
 prior's, the truth inside the 90 % interval, Guideline 14 hourly and monthly at the estimate,
-convergence, and its cost: the workers' busy seconds (the coordinator's attempts, by job kind),
+convergence, the temperature at which 90 % of the truths would have been inside
+([temperature_needed]), and its cost: the workers' busy seconds (the coordinator's attempts, by job kind),
 from each batch's portfolio.json (`worker_s`), so that session gaps and the interleaving of
 buildings do not count. Then the totals: pass rate, coverage, and buildings per core-hour of each
 start, with their ratio.
@@ -10,9 +11,14 @@ start, with their ratio.
 
 Standard library only.
 """
+import csv
 import glob
 import json
+import math
 import os
+import re
+import statistics
+import sqlite3
 import sys
 
 
@@ -26,6 +32,53 @@ def portfolio_rows(out):
             for r in json.load(f)["rows"]:
                 rows[r["building"]] = r
     return rows
+
+
+def temperature_needed(cal, truth, s):
+    """The temperature at which 90 % of the truths would lie inside their 90 % intervals, in
+    the Gaussian approximation: each truth's distance from the posterior mean in posterior
+    standard deviations z_j; widening the posterior from T to T' scales them by sqrt(T / T'), so
+    the k-th smallest (k = ceil(0.9 d)) reaches 1.645 at T' = T (z_k / 1.645)^2. Beside the T the
+    rule chose, it says whether the rule erred low (intervals too narrow) or high."""
+    with open(f"{cal}/draws.csv") as f:
+        rows = list(csv.DictReader(f))
+    zs = []
+    for p in s["posterior"]["parameters"]:
+        if p["name"] not in truth:
+            continue
+        x = [float(r[p["name"]]) for r in rows]
+        sd = statistics.stdev(x)
+        if sd > 0:
+            zs.append(abs(truth[p["name"]] - statistics.mean(x)) / sd)
+    if not zs:
+        return None
+    zs.sort()
+    k = math.ceil(0.9 * len(zs))
+    return s["temperature"]["value"] * (zs[k - 1] / 1.645) ** 2
+
+
+def where_time_goes(out, run):
+    """The run's busy seconds in finer parts than its stages, from the coordinator's attempts
+    table (read-only): EnergyPlus (design points, refinement draws, validation), surrogate
+    training, the refinement rounds' random-walk chains, and the final HMC chains with their
+    extensions."""
+    db = f"{out}/data/coordinator.db"
+    if not os.path.exists(db):
+        return {}
+    c = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    parts = {}
+    for label, stage, s in c.execute(
+            "SELECT j.label, j.stage, (a.ended_ms - a.started_ms) / 1000.0 FROM attempts a "
+            "JOIN jobs j ON a.job_id = j.id WHERE j.run_id = ? AND a.outcome IN ('done', 'failed')",
+            (run,)):
+        if stage == "chains":
+            key = "round chains (MH)" if re.search(r"refinement round", label) else "final chains (HMC)"
+        elif stage in ("simulate", "refine", "validate"):
+            key = "EnergyPlus"
+        else:
+            key = stage
+        parts[key] = parts.get(key, 0.0) + s
+    return {k: round(v) for k, v in parts.items()}
 
 
 def row(out, portfolio, summary_path):
@@ -58,7 +111,8 @@ def row(out, portfolio, summary_path):
                                                    ("heating_kwh", "cooling_kwh", "electricity_kwh") if o in last),
         "converged": c["converged"], "rhat": c["max_rhat"], "ess": (c["min_ess_bulk"], c["min_ess_tail"]),
         "busy_s": sum(busy.values()), "busy_by_stage": {k: round(v) for k, v in busy.items()},
-        "wall_s": p["run_time_s"],
+        "wall_s": p["run_time_s"], "parts": where_time_goes(out, p["run"]),
+        "T_needed": temperature_needed(cal, truth, s),
     }
 
 
@@ -69,10 +123,10 @@ def main():
     if "--json" in sys.argv:
         print(json.dumps(rows, indent=1))
         return
-    print("| building | start | T | learned (< 0.5 of prior) | truth in 90 % | G14 hourly / monthly at the estimate (NMBE/CV-RMSE %) | surrogate at the last round's draws (CV-RMSE %) | converged (R-hat, ESS bulk/tail) | worker s (by stage) |")
+    print("| building | start | T (needed for 90 % coverage) | learned (< 0.5 of prior) | truth in 90 % | G14 hourly / monthly at the estimate (NMBE/CV-RMSE %) | surrogate at the last round's draws (CV-RMSE %) | converged (R-hat, ESS bulk/tail) | worker s (by stage) |")
     print("|---|---|---:|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['building']} | {r['start']} | {r['T']:.1f} | {r['learned']} of {r['parameters']} | "
+        print(f"| {r['building']} | {r['start']} | {r['T']:.1f} ({r['T_needed']:.1f}) | {r['learned']} of {r['parameters']} | "
               f"{r['held']} of {r['judged']} | {'pass' if r['g14_hourly'] else 'FAIL'} / "
               f"{'pass' if r['g14_monthly'] else 'FAIL'} ({r['estimate']}: {r['g14']}) | "
               f"{r['surrogate_cv_rmse_last_round']} | {r['converged']} ({r['rhat']:.3f}, {r['ess'][0]:.0f}/{r['ess'][1]:.0f}) | "
@@ -86,6 +140,15 @@ def main():
               f"{sum(r['learned'] for r in rs)} of {sum(r['parameters'] for r in rs)}; median T "
               f"{sorted(r['T'] for r in rs)[len(rs) // 2]:.1f}; {busy / len(rs):.0f} busy s a building, "
               f"{3600 * len(rs) / busy:.2f} buildings per core-hour")
+    print("\nWhere the busy seconds go (the coordinator's attempts):\n")
+    kinds = ["EnergyPlus", "train", "round chains (MH)", "final chains (HMC)"]
+    print("| building | " + " | ".join(kinds) + " |")
+    print("|---|" + "---:|" * len(kinds))
+    for r in rows:
+        if r["parts"]:
+            total = sum(r["parts"].values())
+            print(f"| {r['building']} | " + " | ".join(
+                f"{r['parts'].get(k, 0)} ({100 * r['parts'].get(k, 0) / total:.0f} %)" for k in kinds) + " |")
     # The ratio on the buildings both starts calibrated.
     pairs = [(r, s) for r in rows for s in rows
              if s["building"] == r["building"] + "-scratch" and r["start"] != s["start"]]
