@@ -342,13 +342,15 @@ impl Drop for Children {
 
 /// Starts a coordinator (state in `out/.distributed/coordinator`, `chains_per_job` as its
 /// `--chains-per-job`) and `workers` worker processes on loopback; they stop when the returned
-/// guard is dropped.
+/// guard is dropped. What the workers log (warnings) goes through `progress`, so that it is an
+/// event of its own with `--progress json` and does not break the bars on a terminal.
 pub(crate) fn start_local(
     out: &Path,
     workers: usize,
     chains_per_job: usize,
-    log: &dyn Fn(&str),
+    progress: &super::progress::Progress,
 ) -> anyhow::Result<(impl Drop, Connect)> {
+    let log = |m: &str| progress.log(m);
     let exe = std::env::current_exe().context("locating the bemcal binary")?;
     let base = out.join(".distributed");
     std::fs::create_dir_all(&base)?;
@@ -379,7 +381,7 @@ pub(crate) fn start_local(
     log(&format!("coordinator on {url}; starting {workers} workers"));
     for i in 0..workers {
         // A local worker's coordinator stops with it: nothing to drain for.
-        let w = bemcal_pyenv::child_command(&exe)
+        let mut w = bemcal_pyenv::child_command(&exe)
             .args([
                 "worker",
                 "--coordinator",
@@ -397,8 +399,20 @@ pub(crate) fn start_local(
             .arg("--cache")
             .arg(base.join(format!("worker-{i}")))
             .env(TOKEN_ENV, &token)
+            .stderr(Stdio::piped())
             .spawn()
             .context("starting a worker")?;
+        if let Some(stderr) = w.stderr.take() {
+            let (progress, name) = (progress.clone(), format!("worker local-{i}"));
+            std::thread::spawn(move || {
+                for line in std::io::BufReader::new(stderr)
+                    .lines()
+                    .map_while(Result::ok)
+                {
+                    progress.log(&format!("{name}: {line}"));
+                }
+            });
+        }
         children.0.push(w);
     }
     Ok((
@@ -423,7 +437,7 @@ pub fn calibrate_local(
     progress: &super::progress::Progress,
 ) -> anyhow::Result<Summary> {
     let log = |m: &str| progress.log(m);
-    let (children, connect) = start_local(out, workers, chains_per_job, &log)?;
+    let (children, connect) = start_local(out, workers, chains_per_job, progress)?;
     let surrogate = bemcal_calibrate::OutputDir::new(out).surrogate();
     let reuse = bemcal_surrogate_meta_ok(&surrogate);
     let rt = bemcal_client::runtime()?;

@@ -180,7 +180,8 @@ fn run_local(
     let m = portfolio::load_manifest(manifest)?;
     let log = |s: &str| progress.log(s);
     std::fs::create_dir_all(out)?;
-    let (children, connect) = super::coordinator::start_local(out, local_workers.max(1), 0, &log)?;
+    let (children, connect) =
+        super::coordinator::start_local(out, local_workers.max(1), 0, progress)?;
     // A rerun into the same folder goes on with the same portfolio (the coordinator's state
     // is kept in OUT/.distributed): what finished stands, what was running goes on.
     let id_file = out.join(".distributed").join(PORTFOLIO_ID_FILE);
