@@ -89,6 +89,10 @@ done
 # The from-scratch pair third: the cost ratio is known before the last shapes finish.
 BATCHES=${BATCHES:-p66-A p66-B p66-scratch p66-C p66-D p66-office}
 
+# Workers without EnergyPlus or PyTorch fail every building at once (a fresh machine's missing
+# .venv did, 2026-12-07): check the environment first.
+"$B" doctor >/dev/null 2>&1 || { echo "bemcal doctor failed: run make setup (or set BEMCAL_VENV)" >&2; exit 1; }
+
 # The coordinator and two workers of one slot each (as `--local-workers 2`), restarted on the
 # same state.
 pids=()
