@@ -11,7 +11,7 @@ from collections import deque
 from pathlib import Path
 from typing import Callable, Iterable, Optional, Sequence
 
-from ._progress import tail_lines
+from ._progress import error_tail
 
 #: Variable naming the binary explicitly.
 BINARY_VAR = "BEMCAL_BIN"
@@ -78,7 +78,7 @@ def run(
         try:
             for line in proc.stdout:
                 line = line.rstrip("\n")
-                tail.extend(tail_lines(line))
+                tail.extend(error_tail(line))
                 if echo is not None:
                     echo(line)
         except BaseException:

@@ -64,7 +64,7 @@ class ProgressEvents:
         return [("line", line)]
 
 
-def tail_lines(line: str) -> List[str]:
+def error_tail(line: str) -> List[str]:
     """What a line leaves in an error's tail (:class:`bemcal.BemcalError`): a log line or a
     building's change as text, any other line as it is; a run's stages (redrawn every change)
     nothing."""
