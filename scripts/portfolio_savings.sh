@@ -17,17 +17,6 @@ BUILDINGS=${BUILDINGS:-A-Golden B-Golden}
 PY=${PY:-$PWD/.venv/bin/python}
 export BEMCAL_VENV=${BEMCAL_VENV:-$PWD/.venv}
 mkdir -p "$WORK"
-cat > "$WORK/measures.toml" <<'TOML'
-[[measures]]
-name = "LED lighting"
-scale = { lighting_power_density = 0.6 }
-[[measures]]
-name = "cooling set-point +1 K"
-offset = { cooling_setpoint_occupied = 1.0 }
-[[measures]]
-name = "heating set-point -1 K"
-offset = { heating_setpoint_occupied = -1.0 }
-TOML
 k=0
 for b in $BUILDINGS; do
   k=$((k + 1)); d="$WORK/truth-$k"
@@ -37,34 +26,12 @@ for b in $BUILDINGS; do
   cp "$OUT/buildings/$b"/{model.toml,meters.csv,truth.json} "$d/"
   # The project as calibrated, its measures the three above, the network the binary's.
   sed 's|^pretrained = .*|pretrained = "bundled:conditioned-200"|' "$OUT/buildings/$b/project.toml" > "$d/project.toml"
-  cat "$WORK/measures.toml" >> "$d/project.toml"
+  cat scripts/savings_measures.toml >> "$d/project.toml"
   echo "$b" > "$d/building"
   "$BIN" savings "$d/project.toml" --out "$d/calibration" --draws "$DRAWS" --json > "$d/savings.json" 2> "$d/savings.log" \
     || { tail -5 "$d/savings.log"; echo "$b: savings failed"; continue; }
   weather=$(sed -n 's/^weather = "\(.*\)"/\1/p' "$d/project.toml")
-  $PY - "$d" "$BIN" "$weather" <<'PYEOF'
-import json, subprocess, sys, tomllib
-d, bin, epw = sys.argv[1:4]
-truth = json.load(open(f"{d}/truth.json"))
-measures = tomllib.load(open(f"{d}/project.toml", "rb"))["measures"]
-with open(f"{d}/truth.toml", "w") as f:
-    for n, v in truth.items():
-        f.write(f"{n} = {v!r}\n")
-def annual(sets):
-    args = [bin, "simulate", "--model", f"{d}/model.toml", "--weather", epw, "--values", f"{d}/truth.toml",
-            "--out", f"{d}/truth-run.csv", "--json"]
-    for n, v in sets.items():
-        args += ["--set", f"{n}={v!r}"]
-    return json.loads(subprocess.run(args, check=True, capture_output=True, text=True).stdout)["annual_kwh"]
-base = annual({})
-true = {}
-for m in measures:
-    sets = {n: v for n, v in m.get("set", {}).items()}
-    sets.update({n: truth[n] * f for n, f in m.get("scale", {}).items()})
-    sets.update({n: truth[n] + a for n, a in m.get("offset", {}).items()})
-    true[m["name"]] = {o: base[o] - v for o, v in annual(sets).items()}
-json.dump({"baseline": base, "savings": true}, open(f"{d}/true_savings.json", "w"), indent=1)
-PYEOF
+  $PY scripts/true_savings.py "$d" "$BIN" "$d/model.toml" "$weather"
   echo "$b: done"
 done
 "$PY" scripts/savings_coverage.py "$WORK" "$k"

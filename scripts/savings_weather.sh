@@ -84,16 +84,9 @@ burn_in = 20
 [validation]
 predictive_draws = 0
 mapping_steps = 0
-[[measures]]
-name = "LED lighting"
-scale = { lighting_power_density = 0.6 }
-[[measures]]
-name = "cooling set-point +1 K"
-offset = { cooling_setpoint_occupied = 1.0 }
-[[measures]]
-name = "heating set-point -1 K"
-offset = { heating_setpoint_occupied = -1.0 }
 TOML
+# The three measures (scripts/savings_measures.toml, shared with the other savings checks).
+cat scripts/savings_measures.toml >> "$OUT/project.toml"
 first="$OUT/truth-1/calibration"
 for k in $(seq 1 "$K"); do
   d="$OUT/truth-$k"
@@ -119,33 +112,7 @@ for k in $(seq 1 "$K"); do
   "$BIN" savings "$d/project.toml" --out "$d/calibration" --draws "$DRAWS" --json > "$d/savings.json" 2> "$d/savings.log" \
     || { tail -5 "$d/savings.log"; echo "truth $k: savings failed"; continue; }
   # The true savings under each weather: EnergyPlus at the truth, without and with each measure.
-  $PY - "$d" "$BIN" "$OUT/msp2017.epw" "$OUT/tmy3.epw" <<'PYEOF'
-import json, subprocess, sys, tomllib
-d, bin, actual, typical = sys.argv[1:5]
-truth = json.load(open(f"{d}/truth.json"))
-measures = tomllib.load(open(f"{d}/project.toml", "rb"))["measures"]
-with open(f"{d}/truth.toml", "w") as f:
-    for n, v in truth.items():
-        f.write(f"{n} = {v!r}\n")
-def annual(epw, sets):
-    args = [bin, "simulate", "--model", f"{d}/small.toml", "--weather", epw, "--values", f"{d}/truth.toml",
-            "--out", f"{d}/truth-run.csv", "--json"]
-    for n, v in sets.items():
-        args += ["--set", f"{n}={v!r}"]
-    return json.loads(subprocess.run(args, check=True, capture_output=True, text=True).stdout)["annual_kwh"]
-out = {}
-for weather, epw in (("calibration", actual), ("typical", typical)):
-    base = annual(epw, {})
-    true = {}
-    for m in measures:
-        sets = dict(m.get("set", {}))
-        sets.update({n: truth[n] * f for n, f in m.get("scale", {}).items()})
-        sets.update({n: truth[n] + a for n, a in m.get("offset", {}).items()})
-        after = annual(epw, sets)
-        true[m["name"]] = {o: base[o] - after[o] for o in base}
-    out[weather] = {"baseline": base, "savings": true}
-json.dump(out, open(f"{d}/true_savings.json", "w"), indent=1)
-PYEOF
+  $PY scripts/true_savings.py "$d" "$BIN" "$d/small.toml" calibration="$OUT/msp2017.epw" typical="$OUT/tmy3.epw"
   echo "truth $k: calibration $((t1 - t0)) s, savings $(( $(date +%s) - t1 )) s"
 done
 "$PY" - "$OUT" "$K" <<'PYEOF'
