@@ -261,6 +261,14 @@ pub async fn fetch_results(client: &mut Client, run: &str, out: &Path) -> anyhow
     Ok(st.results.len())
 }
 
+/// A stage's state in words, with its running jobs: `running (2 running)`, `done`.
+pub fn stage_state(s: &proto::StageProgress) -> String {
+    match s.running {
+        0 => s.state().word().to_string(),
+        n => format!("{} ({n} running)", s.state().word()),
+    }
+}
+
 /// One line per stage: `stage  state  done/total (running)`.
 pub fn progress_lines(st: &proto::RunStatus) -> Vec<String> {
     st.stages
@@ -273,18 +281,13 @@ pub fn progress_lines(st: &proto::RunStatus) -> Vec<String> {
                 (s.done as usize * width) / s.total as usize
             };
             format!(
-                "  {:<9} [{}{}] {:>3}/{:<3} {}{}",
+                "  {:<9} [{}{}] {:>3}/{:<3} {}",
                 s.stage().word(),
                 "#".repeat(filled),
                 "-".repeat(width - filled),
                 s.done,
                 s.total,
-                s.state().word(),
-                if s.running > 0 {
-                    format!(" ({} running)", s.running)
-                } else {
-                    String::new()
-                }
+                stage_state(s)
             )
         })
         .collect()

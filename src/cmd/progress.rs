@@ -216,10 +216,7 @@ impl Bars {
             };
             bar.set_length(u64::from(g.total));
             bar.set_position(u64::from(g.done));
-            bar.set_message(match g.running {
-                0 => g.state().word().to_string(),
-                n => format!("{} ({n} running)", g.state().word()),
-            });
+            bar.set_message(bemcal_client::client::stage_state(g));
         }
         let said = self.head == head;
         self.head = head.to_string();

@@ -15,17 +15,10 @@ use bemcal_stats::chain::Chain;
 /// Output files (`relative path`, file) and the job's result.
 pub type Outputs = (Vec<(String, PathBuf)>, proto::JobResult);
 
-/// An error and its sources, `a: b: c`, as the CLI prints them (an I/O error's reason is a
-/// source, not part of the message).
-fn err<E: std::error::Error>(e: E) -> String {
-    let mut s = e.to_string();
-    let mut source = e.source();
-    while let Some(c) = source {
-        s.push_str(": ");
-        s.push_str(&c.to_string());
-        source = c.source();
-    }
-    s
+/// An error and its sources, `a: b: c`, as the CLI prints them (anyhow's `{:#}`; an I/O
+/// error's reason is a source, not part of the message).
+fn err<E: std::error::Error + Send + Sync + 'static>(e: E) -> String {
+    format!("{:#}", anyhow::Error::new(e))
 }
 
 /// Runs `job` with the project at `project_file`, in `work`.
