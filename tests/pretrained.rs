@@ -113,6 +113,14 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
         String::from_utf8_lossy(&pretrain.stderr)
     );
 
+    // A family record beside the network (how far calibrations started from it were off)
+    // goes into the verdict, for the final temperature to pool.
+    std::fs::write(
+        root.join("pretrained").join(bemcal_surrogate::pretrained::FAMILY_FILE),
+        r#"{"measured": "test", "buildings": [{"name": "other", "ratios": {"lighting_power_density": 40.0}}]}"#,
+    )
+    .unwrap();
+
     // Inside the family: folded (exactly, up to rounding), then fine-tuned by the trainer.
     let inside = project(&root.join("inside"), &small_model());
     let summary = calibrate(&inside, &root.join("inside/out"));
@@ -128,11 +136,18 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
     assert_eq!(verdict["admitted"], true, "{verdict}");
     assert!(verdict["fold_error"].as_f64().unwrap() < 1e-3, "{verdict}");
     assert_eq!(verdict["inputs"], "conditioned", "{verdict}");
-    // The verdict travels with the surrogate (from a worker, through the refinement rounds).
-    assert!(root
-        .join("inside/out/surrogate")
-        .join(bemcal_surrogate::pretrained::VERDICT_FILE)
-        .is_file());
+    assert_eq!(
+        verdict["family"]["buildings"][0]["name"], "other",
+        "{verdict}"
+    );
+    // The verdict travels with the surrogate (from a worker, through the refinement rounds),
+    // the family record in it.
+    let carried =
+        bemcal_surrogate::pretrained::read_verdict(&root.join("inside/out/surrogate")).unwrap();
+    assert!(
+        matches!(&carried, bemcal_surrogate::pretrained::FoldVerdict::Admitted { family: Some(f), .. } if f.buildings.len() == 1),
+        "{carried:?}"
+    );
     // The schedule interval the calibration varies is an hourly input of the folded surrogate,
     // and its graphs (the fused one and its gradient) agree with PyTorch.
     let meta: serde_json::Value = serde_json::from_str(

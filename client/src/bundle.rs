@@ -90,7 +90,7 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
     if let Some(sur) = doc.get_mut("surrogate").and_then(|v| v.as_table_mut()) {
         // A bundled network (`bundled:NAME`) is in the worker's binary, as bundled weather is.
         if let Some(f) = str_at(sur, "pretrained").filter(|f| !f.starts_with("bundled:")) {
-            let n = files.place_folder(&f, &PRETRAINED_FILES)?;
+            let n = files.place_folder(&f, &PRETRAINED_FILES, &PRETRAINED_OPTIONAL)?;
             sur.insert("pretrained".into(), n.into());
         }
     }
@@ -115,6 +115,10 @@ pub fn collect(project_file: &Path, policy: Policy) -> anyhow::Result<Vec<(Strin
 /// of `bemcal_surrogate::pretrained::FILES` (the client does not depend on it; a test in the
 /// CLI holds the two lists equal).
 pub const PRETRAINED_FILES: [&str; 2] = ["card.json", "weights.pt"];
+
+/// The files of a pretrained surrogate's folder that travel where present: its family record
+/// (`bemcal_surrogate::pretrained::FAMILY_FILE`).
+pub const PRETRAINED_OPTIONAL: [&str; 1] = ["family.json"];
 
 /// The files of a bundle being collected: each one's name in the bundle and where it is read.
 struct Collector<'a> {
@@ -145,7 +149,12 @@ impl Collector<'_> {
 
     /// Adds `files` of the folder a project names as `p` and returns the folder's name in the
     /// bundle: `p` itself when it is a safe relative path, else `files/N-<folder name>`.
-    fn place_folder(&mut self, p: &str, files: &[&str]) -> anyhow::Result<String> {
+    fn place_folder(
+        &mut self,
+        p: &str,
+        files: &[&str],
+        optional: &[&str],
+    ) -> anyhow::Result<String> {
         let src = if Path::new(p).is_absolute() {
             PathBuf::from(p)
         } else {
@@ -155,7 +164,8 @@ impl Collector<'_> {
             Ok(_) => p.trim_end_matches('/').to_string(),
             Err(_) => format!("files/{}-{}", self.files.len(), bundle_stem(&src)),
         };
-        for f in files {
+        let present = optional.iter().filter(|f| src.join(f).exists());
+        for f in files.iter().chain(present) {
             self.check(&format!("{p}/{f}"), &src.join(f))?;
             self.files.insert(format!("{name}/{f}"), src.join(f));
         }
@@ -368,7 +378,7 @@ mod tests {
     }
 
     #[test]
-    fn a_pretrained_surrogate_travels_as_its_two_files() {
+    fn a_pretrained_surrogate_travels_as_its_files() {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path().join("project");
         std::fs::create_dir_all(d.join("pre")).unwrap();
@@ -398,6 +408,13 @@ mod tests {
                 "pre/card.json",
                 "pre/weights.pt"
             ]
+        );
+        // The family record travels with them where the folder has one.
+        std::fs::write(d.join("pre").join(PRETRAINED_OPTIONAL[0]), "{}").unwrap();
+        let with_family = collect(&project("pre"), Policy::default()).unwrap();
+        assert_eq!(
+            names(&with_family)[2..],
+            ["pre/card.json", "pre/family.json", "pre/weights.pt"]
         );
         // Outside the folder: refused without the option, renamed into files/ with it.
         let e = collect(&project("../family"), Policy::default())

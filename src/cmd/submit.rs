@@ -67,5 +67,9 @@ mod tests {
             bemcal_client::bundle::PRETRAINED_FILES,
             bemcal_surrogate::pretrained::FILES
         );
+        assert_eq!(
+            bemcal_client::bundle::PRETRAINED_OPTIONAL,
+            [bemcal_surrogate::pretrained::FAMILY_FILE]
+        );
     }
 }

@@ -73,6 +73,7 @@ fn chains(cal: &Calibration, c: &proto::ChainSegmentJob, work: &Path) -> Result<
     sampler.set_temperature(ChainTemperature {
         value: c.likelihood_temperature()?,
         measured_at_round: None,
+        pooled_with_buildings: None,
     });
     let states_path = work.join(STATES_FILE);
     let mut states: Vec<Chain> = if states_path.is_file() {

@@ -203,8 +203,18 @@ pub fn drive(
     let finished = loop {
         let round = Round::after(&cal.project, refined.rounds.len() as u32);
         ready!(surrogate(cal, exec, &refined, log)?);
-        let temperature =
-            chain_temperature(cal.project.mcmc.temperature, &cal.inputs.plan, &refined)?;
+        // The final chains pool the family's recoveries where the surrogate started from a
+        // pretrained network that records them (crate::surrogate_error::FAMILY_WEIGHT).
+        let family = round
+            .is_final()
+            .then(|| crate::pretrained::family(&[&cal.out.pretrained(), &cal.surrogate_dir()]))
+            .flatten();
+        let temperature = chain_temperature(
+            cal.project.mcmc.temperature,
+            &cal.inputs.plan,
+            &refined,
+            family.as_ref(),
+        )?;
         let mut sampler = LazySampler::new(cal, temperature);
         let starts = refined
             .rounds
@@ -890,12 +900,17 @@ fn log_chains(chains: &ChainSummary, ck: &Checkpoint, log: Log<'_>) {
     }
     let t = chains.temperature;
     if t.value != 1.0 {
-        let from = match t.measured_at_round {
-            Some(r) => format!(
+        let from = match (t.measured_at_round, t.pooled_with_buildings) {
+            (Some(r), None) => format!(
                 "measured from the surrogate's error at refinement round {r}'s points, so that \
                  the intervals carry it"
             ),
-            None => "mcmc.temperature".into(),
+            (Some(r), Some(n)) => format!(
+                "measured from the surrogate's error at refinement round {r}'s points, pooled \
+                 half and half with {n} buildings calibrated from the same pretrained network, \
+                 so that the intervals carry it"
+            ),
+            (None, _) => "mcmc.temperature".into(),
         };
         log(&format!(
             "chains: likelihood temperature {:.1} ({from}): the chains sample p(theta) L(theta)^(1/T)",

@@ -382,6 +382,10 @@ pub struct ChainTemperature {
     /// The refinement round whose recoveries measured it (`mcmc.temperature =
     /// "surrogate_error"`); `None` for a fixed temperature, or before any round.
     pub measured_at_round: Option<u32>,
+    /// Buildings of the pretrained network's family whose recoveries were pooled with this
+    /// building's own (`crate::surrogate_error::FAMILY_WEIGHT`); `None` where none were.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pooled_with_buildings: Option<u32>,
 }
 
 impl ChainTemperature {
@@ -389,6 +393,7 @@ impl ChainTemperature {
     pub const ONE: ChainTemperature = ChainTemperature {
         value: 1.0,
         measured_at_round: None,
+        pooled_with_buildings: None,
     };
 
     /// [`ChainTemperature::ONE`], for serde's defaults.

@@ -126,6 +126,17 @@ pub fn carry(from: Option<&Path>, to: &Path) -> Result<(), Error> {
     }
 }
 
+/// The family record ([`bemcal_surrogate::pretrained::Family`]) the fold found beside the
+/// pretrained network, as recorded in its verdict: in the fold's folder or carried into the
+/// surrogate's ([`carry`]), the first of `dirs` that has a verdict. None for a building whose
+/// surrogate did not start from a network with one.
+pub fn family(dirs: &[&Path]) -> Option<fold::Family> {
+    match dirs.iter().find_map(|d| fold::read_verdict(d).ok())? {
+        FoldVerdict::Admitted { family, .. } => family,
+        FoldVerdict::Refused { .. } => None,
+    }
+}
+
 /// The start recorded in the fold's folder `dir` (`OutputDir::pretrained`), or carried into
 /// a surrogate's folder ([`carry`]), if a pretrained network was asked for.
 pub fn read_start(dir: &Path) -> Option<SurrogateStart> {
@@ -141,4 +152,35 @@ pub fn read_start(dir: &Path) -> Option<SurrogateStart> {
         },
         FoldVerdict::Refused { reason } => SurrogateStart::Scratch { reason },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The family record is read from the first folder with a verdict; a refused start, or
+    /// none, has no family.
+    #[test]
+    fn the_family_comes_from_the_first_verdict_found() {
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        assert_eq!(family(&[a.path(), b.path()]), None);
+        let rec = fold::Family {
+            measured: "m".into(),
+            buildings: vec![fold::FamilyBuilding {
+                name: "x".into(),
+                ratios: [("p".to_string(), 2.0)].into(),
+            }],
+        };
+        let admitted = FoldVerdict::Admitted {
+            pretrained: "/p".into(),
+            corpus_cases: 1,
+            fold_error: 0.0,
+            family: Some(rec.clone()),
+        };
+        fold::write_verdict(b.path(), &admitted).unwrap();
+        assert_eq!(family(&[a.path(), b.path()]), Some(rec));
+        let refused = FoldVerdict::Refused { reason: "r".into() };
+        fold::write_verdict(a.path(), &refused).unwrap();
+        assert_eq!(family(&[a.path(), b.path()]), None);
+    }
 }

@@ -122,23 +122,18 @@ pub fn add_to_draws(chains: &[Draws], shifts: &[Vec<f64>], seed: u64) -> Result<
 ///
 /// `(1/d) sum_j [2 Phi(z sqrt(T / (1 + r_j))) - 1] = level`, `z = Phi^-1((1 + level) / 2)`,
 ///
-/// with `r_j = T_r s^2 S_jj / V_j`. `S_jj` is the shifts' second moment ([`rms`] squared) and
-/// `V_j` the sample variance of the points they were measured at: posterior draws of chains
-/// that ran at temperature `T_r`, moved `s` = `spread` times farther from their mean, so
-/// `V_j / (T_r s^2)` is the untempered posterior variance `v_j` and `r_j` the shift's variance in
-/// units of it. Why: the truth lies a shift `N(0, S_jj)` from where the untempered posterior
-/// centres, so `N(0, v_j (1 + r_j))` from its centre (law of total variance, as in the module
-/// docs), while the tempered posterior's interval is `+- z sqrt(T v_j)`: parameter `j`'s
-/// interval holds the truth with the probability in the sum. One `T` serves every parameter,
-/// so the sum averages over them (all `r_j` equal give `T = 1 + r`): a parameter whose shift
-/// is many posterior widths costs at most `1/d` of the coverage, so with `d (1 - level) > 1`
-/// (more than 10 parameters at 90 %) it does not set `T` alone; with fewer, the farthest
-/// shift sets it, since then every interval must hold.
-/// Coordinates with no spread are left out. At least 1 (no shift: 1).
+/// with `r_j` the shift's variance in units of the untempered posterior's ([`shift_ratios`]).
+/// Why: the truth lies a shift `N(0, S_jj)` from where the untempered posterior centres, so
+/// `N(0, v_j (1 + r_j))` from its centre (law of total variance, as in the module docs), while
+/// the tempered posterior's interval is `+- z sqrt(T v_j)`: parameter `j`'s interval holds the
+/// truth with the probability in the sum. One `T` serves every parameter, so the sum averages
+/// over them (all `r_j` equal give `T = 1 + r`): a parameter whose shift is many posterior
+/// widths costs at most `1/d` of the coverage, so with `d (1 - level) > 1` (more than 10
+/// parameters at 90 %) it does not set `T` alone; with fewer, the farthest shift sets it,
+/// since then every interval must hold. At least 1 (no shift: 1).
 ///
 /// # Errors
-/// With fewer than two points, shifts and points of other shapes, a non-finite value, `T_r`
-/// below 1, `spread` not positive, `level` outside (0, 1), or no coordinate with any spread.
+/// As [`shift_ratios`]; `level` outside (0, 1).
 pub fn temperature(
     shifts: &[Vec<f64>],
     points: &[Vec<f64>],
@@ -146,6 +141,27 @@ pub fn temperature(
     spread: f64,
     level: f64,
 ) -> Result<f64> {
+    let ratios = shift_ratios(shifts, points, round_temperature, spread)?;
+    pooled_temperature(&[(&ratios, 1.0)], level)
+}
+
+/// Each parameter's shift variance in units of the untempered posterior variance,
+/// `r_j = T_r s^2 S_jj / V_j`: `S_jj` the shifts' second moment ([`rms`] squared), `V_j` the
+/// sample variance of the points they were measured at, posterior draws of chains that ran at
+/// temperature `T_r`, moved `s` = `spread` times farther from their mean, so that
+/// `V_j / (T_r s^2)` is the untempered posterior variance. Dimensionless, so ratios of
+/// different buildings can be pooled ([`pooled_temperature`]). Coordinates whose points have no
+/// spread are left out.
+///
+/// # Errors
+/// With fewer than two points, shifts and points of other shapes, a non-finite value, `T_r`
+/// below 1, `spread` not positive, or no coordinate with any spread.
+pub fn shift_ratios(
+    shifts: &[Vec<f64>],
+    points: &[Vec<f64>],
+    round_temperature: f64,
+    spread: f64,
+) -> Result<Vec<f64>> {
     let m = points.len();
     if m < 2 || shifts.len() != m {
         return Err(StatsError::NotEnoughData(format!(
@@ -159,15 +175,9 @@ pub fn temperature(
             "shifts and points of different lengths".into(),
         ));
     }
-    let valid = round_temperature.is_finite()
-        && round_temperature >= 1.0
-        && spread > 0.0
-        && level > 0.0
-        && level < 1.0;
-    if !valid {
+    if !(round_temperature.is_finite() && round_temperature >= 1.0 && spread > 0.0) {
         return Err(StatsError::Invalid(format!(
-            "round temperature {round_temperature} (at least 1), spread {spread} (positive) \
-             and level {level} (between 0 and 1)"
+            "round temperature {round_temperature} (at least 1) and spread {spread} (positive)"
         )));
     }
     let second_moment = rms(shifts);
@@ -186,7 +196,54 @@ pub fn temperature(
             "the points have no spread".into(),
         ));
     }
-    Ok(temperature_for_coverage(&ratios, level))
+    Ok(ratios)
+}
+
+/// [`temperature`] over groups of ratios ([`shift_ratios`]) with weights: the smallest
+/// `T >= 1` whose expected coverage, each group's average over its parameters weighted by the
+/// group's weight (normalised), reaches `level`. One group is [`temperature`]; a building's own
+/// recoveries and those of other buildings that share its surrogate's pretrained network,
+/// weighted half each, is partial pooling of the surrogate's error over the family (complete
+/// pooling would be one group of all).
+///
+/// # Errors
+/// `level` outside (0, 1); no group with ratios and a positive weight; a ratio not finite and
+/// non-negative or a weight not finite and non-negative.
+pub fn pooled_temperature(groups: &[(&[f64], f64)], level: f64) -> Result<f64> {
+    if !(level > 0.0 && level < 1.0) {
+        return Err(StatsError::Invalid(format!(
+            "level {level} (between 0 and 1)"
+        )));
+    }
+    let bad = groups.iter().any(|(r, w)| {
+        !(w.is_finite() && *w >= 0.0) || r.iter().any(|x| !(x.is_finite() && *x >= 0.0))
+    });
+    if bad {
+        return Err(StatsError::Invalid(
+            "a ratio or weight is not finite and non-negative".into(),
+        ));
+    }
+    let used: Vec<(&[f64], f64)> = groups
+        .iter()
+        .filter(|(r, w)| !r.is_empty() && *w > 0.0)
+        .copied()
+        .collect();
+    let total: f64 = used.iter().map(|(_, w)| w).sum();
+    if used.is_empty() {
+        return Err(StatsError::NotEnoughData(
+            "no group of ratios with a positive weight".into(),
+        ));
+    }
+    let coverage = |t: f64| -> f64 {
+        used.iter()
+            .map(|(r, w)| w / total * expected_coverage(r, level, t))
+            .sum()
+    };
+    let largest = used
+        .iter()
+        .flat_map(|(r, _)| r.iter())
+        .fold(0.0_f64, |a, &r| a.max(r));
+    Ok(temperature_for_coverage(coverage, largest, level))
 }
 
 /// The expected coverage of central `level` intervals `T` times wider in variance than the
@@ -200,16 +257,13 @@ fn expected_coverage(ratios: &[f64], level: f64, t: f64) -> f64 {
     held / ratios.len() as f64
 }
 
-/// The smallest `T >= 1` with [`expected_coverage`] at least `level`. The coverage grows with
-/// `T`, and at `T = 1 + max_j r_j` every parameter's interval holds at least `level`, so
-/// bisection in `ln T` between 1 and that finds it (to a relative 1e-9).
-fn temperature_for_coverage(ratios: &[f64], level: f64) -> f64 {
+/// The smallest `T >= 1` with `coverage(T)` at least `level`. The coverage grows with `T`,
+/// and at `T = 1 + largest` (the largest ratio) every parameter's interval holds at least
+/// `level`, so bisection in `ln T` between 1 and that finds it (to a relative 1e-9).
+fn temperature_for_coverage(coverage: impl Fn(f64) -> f64, largest: f64, level: f64) -> f64 {
     // 1e-12 below: all ratios 0 give exactly `level` at T = 1, up to rounding.
-    let enough = |t: f64| expected_coverage(ratios, level, t) >= level - 1e-12;
-    let (mut lo, mut hi) = (
-        0.0_f64,
-        (1.0 + ratios.iter().fold(0.0_f64, |a, &r| a.max(r))).ln(),
-    );
+    let enough = |t: f64| coverage(t) >= level - 1e-12;
+    let (mut lo, mut hi) = (0.0_f64, (1.0 + largest).ln());
     if enough(1.0) {
         return 1.0;
     }
@@ -329,8 +383,37 @@ mod tests {
         assert!(temperature(&mixed, &[vec![0.1; 3], vec![0.1; 3]], 1.0, 1.0, 0.9).is_err());
         assert!(temperature(&mixed, &points, 0.5, 1.0, 0.9).is_err());
         assert!(temperature(&mixed, &points, 1.0, 1.0, 1.0).is_err());
+        assert!(temperature(&mixed, &points, 1.0, 0.0, 0.9).is_err());
         // Ratios near the largest finite number still end, at a finite T.
-        let t = temperature_for_coverage(&[1e300, 0.0], 0.9);
+        let t = pooled_temperature(&[(&[1e300, 0.0], 1.0)], 0.9).unwrap();
         assert!(t.is_finite() && t > 1e299, "{t}");
+    }
+
+    #[test]
+    fn pooled_temperature_weighs_each_group_s_coverage() {
+        // One group is the single-building rule: all ratios 9 give T = 10.
+        let own = [9.0; 4];
+        let t = pooled_temperature(&[(&own, 1.0)], 0.9).unwrap();
+        assert!((t - 10.0).abs() < 1e-6, "{t}");
+        // A building that measured no shift, pooled half and half with a family whose shifts
+        // are 99 posterior variances: T between its own (1) and the family's (100), where the
+        // two coverages average to the level (its own above it, the family's below).
+        let none = [0.0; 4];
+        let family = [99.0; 12];
+        let t = pooled_temperature(&[(&none, 0.5), (&family, 0.5)], 0.9).unwrap();
+        assert!(t > 1.0 && t < 100.0, "{t}");
+        let avg = 0.5 * expected_coverage(&none, 0.9, t) + 0.5 * expected_coverage(&family, 0.9, t);
+        assert!((avg - 0.9).abs() < 1e-9, "{avg}");
+        assert!(expected_coverage(&family, 0.9, t) < 0.9);
+        // Weights are normalised; a group without ratios or weight is left out.
+        let same = pooled_temperature(&[(&none, 2.0), (&family, 2.0), (&[], 1.0)], 0.9).unwrap();
+        assert!((same - t).abs() < 1e-9 * t);
+        let alone = pooled_temperature(&[(&own, 1.0), (&family, 0.0)], 0.9).unwrap();
+        assert!((alone - 10.0).abs() < 1e-6);
+        // Nothing to pool, a negative ratio or weight, a level outside (0, 1): errors.
+        assert!(pooled_temperature(&[(&[], 1.0)], 0.9).is_err());
+        assert!(pooled_temperature(&[(&[-1.0], 1.0)], 0.9).is_err());
+        assert!(pooled_temperature(&[(&own, -1.0)], 0.9).is_err());
+        assert!(pooled_temperature(&[(&own, 1.0)], 1.0).is_err());
     }
 }

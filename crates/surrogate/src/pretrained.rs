@@ -28,23 +28,32 @@ use crate::train::{runtime, trainer_command};
 /// submitted project.
 pub const FILES: [&str; 2] = ["card.json", "weights.pt"];
 
+/// The optional file of a pretrained surrogate's folder that records how far calibrations
+/// started from it were off ([`Family`]); it travels with a submitted project where present.
+pub const FAMILY_FILE: &str = "family.json";
+
 /// How a project names a network shipped inside the binary: `pretrained = "bundled:NAME"`.
 pub const BUNDLED_PREFIX: &str = "bundled:";
 
 /// The networks shipped inside the binary, so that a pretrained start needs neither the
 /// repository nor a network connection (a pip-installed wheel, a cluster's image): each one's
 /// name and its [`FILES`] (`corpus/pretrained/NAME`, with its README and held-out error).
-const BUNDLED: &[(&str, [&[u8]; 2])] = &[(
+/// Each with its [`FAMILY_FILE`], where it has one.
+#[allow(clippy::type_complexity)]
+const BUNDLED: &[(&str, [&[u8]; 2], Option<&[u8]>)] = &[(
     "conditioned-200",
     [
         include_bytes!("../../../corpus/pretrained/conditioned-200/card.json"),
         include_bytes!("../../../corpus/pretrained/conditioned-200/weights.pt"),
     ],
+    Some(include_bytes!(
+        "../../../corpus/pretrained/conditioned-200/family.json"
+    )),
 )];
 
 /// The names of the bundled networks.
 pub fn bundled_names() -> Vec<&'static str> {
-    BUNDLED.iter().map(|(n, _)| *n).collect()
+    BUNDLED.iter().map(|(n, ..)| *n).collect()
 }
 
 /// The bundled network's name where `reference` (a project's `pretrained`) is
@@ -54,8 +63,8 @@ pub fn bundled_name(reference: &Path) -> Option<Result<&'static str, String>> {
     Some(
         BUNDLED
             .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(n, _)| *n)
+            .find(|(n, ..)| *n == name)
+            .map(|(n, ..)| *n)
             .ok_or_else(|| {
                 format!(
                     "no bundled pretrained network '{name}' (this binary ships: {})",
@@ -67,13 +76,19 @@ pub fn bundled_name(reference: &Path) -> Option<Result<&'static str, String>> {
 
 /// Writes the bundled network `name`'s [`FILES`] into `dir` (created), for a fold to read.
 pub fn write_bundled(name: &str, dir: &Path) -> Result<(), SurrogateError> {
-    let (_, files) = BUNDLED
+    let (_, files, family) = BUNDLED
         .iter()
-        .find(|(n, _)| *n == name)
+        .find(|(n, ..)| *n == name)
         .ok_or_else(|| runtime(format!("no bundled pretrained network '{name}'")))?;
     std::fs::create_dir_all(dir)
         .map_err(|e| runtime(format!("cannot create {}: {e}", dir.display())))?;
-    for (file, bytes) in FILES.iter().zip(files) {
+    let family = family.map(|bytes| (FAMILY_FILE, bytes));
+    for (file, bytes) in FILES
+        .iter()
+        .copied()
+        .zip(files.iter().copied())
+        .chain(family)
+    {
         let path = dir.join(file);
         std::fs::write(&path, bytes)
             .map_err(|e| runtime(format!("cannot write {}: {e}", path.display())))?;
@@ -98,6 +113,10 @@ pub enum FoldVerdict {
         /// Largest difference between the folded and the pretrained network's outputs at the
         /// building's first design points, relative to the largest output (rounding only).
         fold_error: f64,
+        /// The network's [`FAMILY_FILE`], where its folder has one: how far calibrations
+        /// started from it were off, for the final temperature to pool with the building's own.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        family: Option<Family>,
     },
     /// Not used, and why.
     #[serde(rename = "false")]
@@ -105,6 +124,73 @@ pub enum FoldVerdict {
         /// Why (names the descriptor, parameter, meter or setting).
         reason: String,
     },
+}
+
+/// How far calibrations of other buildings, started from the same pretrained network, were off
+/// (`family.json` beside its weights): each building's shift ratios of its last refinement round,
+/// the surrogate's error in units of its untempered posterior's variance, one per calibrated
+/// parameter (`bemcal_stats::surrogate_error::shift_ratios`). The final temperature pools them
+/// with the building's own (`bemcal_calibrate::surrogate_error`). Written by
+/// `scripts/family_shifts.py` from a portfolio's results.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Family {
+    /// What was run to measure them (the binary, the settings, the date).
+    pub measured: String,
+    /// One entry per calibrated building.
+    pub buildings: Vec<FamilyBuilding>,
+}
+
+/// One building of a [`Family`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FamilyBuilding {
+    /// The building's name in the portfolio.
+    pub name: String,
+    /// Shift ratio by calibrated parameter (finite, non-negative).
+    pub ratios: std::collections::BTreeMap<String, f64>,
+}
+
+impl Family {
+    /// Every building's ratios, in one list.
+    pub fn ratios(&self) -> Vec<f64> {
+        self.buildings
+            .iter()
+            .flat_map(|b| b.ratios.values().copied())
+            .collect()
+    }
+
+    /// The family record in the pretrained folder `dir` ([`FAMILY_FILE`]), None where it has
+    /// none.
+    ///
+    /// # Errors
+    /// An unreadable or malformed file, or a ratio that is not finite and non-negative (named
+    /// by building and parameter).
+    pub fn read(dir: &Path) -> Result<Option<Family>, SurrogateError> {
+        let path = dir.join(FAMILY_FILE);
+        if !path.is_file() {
+            return Ok(None);
+        }
+        let meta = |message: String| SurrogateError::Metadata {
+            path: path.clone(),
+            message,
+        };
+        let text = std::fs::read_to_string(&path).map_err(|e| meta(format!("cannot read: {e}")))?;
+        let family: Family = serde_json::from_str(&text).map_err(|e| meta(e.to_string()))?;
+        for b in &family.buildings {
+            if let Some((p, r)) = b
+                .ratios
+                .iter()
+                .find(|(_, r)| !(r.is_finite() && **r >= 0.0))
+            {
+                return Err(meta(format!(
+                    "building '{}', parameter '{p}': ratio {r}, expected a finite number >= 0",
+                    b.name
+                )));
+            }
+        }
+        Ok(Some(family))
+    }
 }
 
 /// What [`fold`] needs of the building: its generated spec (serialised as the model file's
@@ -161,7 +247,15 @@ pub fn fold<S: Serialize>(
             tail.into_iter().rev().collect::<Vec<_>>().join("\n")
         )));
     }
-    read_verdict(out_dir)
+    let verdict = read_verdict(out_dir)?;
+    match (&verdict, Family::read(pretrained)?) {
+        (FoldVerdict::Admitted { .. }, Some(family)) => {
+            let value = serde_json::to_value(&family).map_err(|e| runtime(e.to_string()))?;
+            set_verdict_field(out_dir, "family", value)?;
+            read_verdict(out_dir)
+        }
+        _ => Ok(verdict),
+    }
 }
 
 /// Writes `verdict` into `dir` as the trainer does (for a verdict reached without it).
@@ -178,16 +272,25 @@ pub fn write_verdict(dir: &Path, verdict: &FoldVerdict) -> Result<(), SurrogateE
 /// Records in `dir`'s verdict that the network came from `pretrained` (a bundled network's
 /// `bundled:NAME`, not the folder it was written to); the trainer's other fields stay.
 pub fn relabel_verdict(dir: &Path, pretrained: &Path) -> Result<(), SurrogateError> {
+    set_verdict_field(dir, "pretrained", pretrained.display().to_string().into())
+}
+
+/// Sets `key` of `dir`'s verdict to `value`; the trainer's other fields stay.
+fn set_verdict_field(
+    dir: &Path,
+    key: &str,
+    value: serde_json::Value,
+) -> Result<(), SurrogateError> {
     let path = dir.join(VERDICT_FILE);
     let meta = |message: String| SurrogateError::Metadata {
         path: path.clone(),
         message,
     };
     let text = std::fs::read_to_string(&path).map_err(|e| meta(format!("cannot read: {e}")))?;
-    let mut value: serde_json::Value =
+    let mut verdict: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| meta(e.to_string()))?;
-    value["pretrained"] = pretrained.display().to_string().into();
-    std::fs::write(&path, value.to_string()).map_err(|e| meta(format!("cannot write: {e}")))
+    verdict[key] = value;
+    std::fs::write(&path, verdict.to_string()).map_err(|e| meta(format!("cannot write: {e}")))
 }
 
 /// The verdict a fold left in `dir`.
@@ -229,7 +332,7 @@ mod tests {
         let shipped = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../corpus/pretrained")
             .join(name);
-        for f in FILES {
+        for f in FILES.into_iter().chain([FAMILY_FILE]) {
             assert_eq!(
                 std::fs::read(dir.path().join(f)).unwrap(),
                 std::fs::read(shipped.join(f)).unwrap(),
@@ -269,6 +372,7 @@ mod tests {
             pretrained: "/p".into(),
             corpus_cases: 200,
             fold_error: 1e-7,
+            family: None,
         };
         assert_eq!(read_verdict(dir.path()).unwrap(), admitted);
         let refused = FoldVerdict::Refused {
@@ -278,5 +382,27 @@ mod tests {
         assert_eq!(read_verdict(dir.path()).unwrap(), refused);
         write_verdict(dir.path(), &admitted).unwrap();
         assert_eq!(read_verdict(dir.path()).unwrap(), admitted);
+    }
+
+    /// The shipped family record reads; one with a negative ratio is refused by building and
+    /// parameter; a folder without one has none.
+    #[test]
+    fn a_family_record_reads_and_a_bad_ratio_is_named() {
+        let shipped =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../corpus/pretrained/conditioned-200");
+        let family = Family::read(&shipped).unwrap().unwrap();
+        assert!(family.buildings.len() >= 4 && family.ratios().len() >= 4 * 38);
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(Family::read(dir.path()).unwrap(), None);
+        std::fs::write(
+            dir.path().join(FAMILY_FILE),
+            r#"{"measured": "m", "buildings": [{"name": "B", "ratios": {"a": 1.0, "b": -2.0}}]}"#,
+        )
+        .unwrap();
+        let e = Family::read(dir.path()).unwrap_err().to_string();
+        assert!(
+            e.contains("building 'B', parameter 'b'") && e.contains("-2"),
+            "{e}"
+        );
     }
 }
