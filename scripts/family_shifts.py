@@ -8,9 +8,12 @@ temperature of a later building pools them with its own (bemcal_calibrate::surro
 
 OUT is a portfolio's folder as scripts/portfolio_pretrained.sh leaves it (results/*/NAME/ with
 summary.json and refine.json); buildings that did not start from the pretrained network (their
-summary's surrogate_start) are left out. MEASURED says what was run. Standard library only.
+summary's surrogate_start) are left out. MEASURED says what was run. A building pooled later
+is never pooled with its own entry (the same name), and only on the parameters it calibrates.
+Standard library only.
 """
 import glob
+import math
 import json
 import statistics
 import sys
@@ -31,7 +34,9 @@ def ratios(summary, refine):
         v = statistics.variance(column)
         if v > 0:
             s2 = sum((rec[j] - p[j]) ** 2 for p, rec in zip(points, r["recovered"])) / len(points)
-            out[name] = r["temperature"] * r["spread"] ** 2 * s2 / v
+            ratio = r.get("temperature", 1.0) * r.get("spread", 1.0) ** 2 * s2 / v
+            if math.isfinite(ratio):
+                out[name] = ratio
     return out
 
 

@@ -208,7 +208,8 @@ pub fn drive(
         let family = round
             .is_final()
             .then(|| crate::pretrained::family(&[&cal.out.pretrained(), &cal.surrogate_dir()]))
-            .flatten();
+            .flatten()
+            .map(|f| f.for_building(&cal.project.name, &cal.inputs.plan.calibrated));
         let temperature = chain_temperature(
             cal.project.mcmc.temperature,
             &cal.inputs.plan,

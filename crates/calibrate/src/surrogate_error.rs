@@ -162,9 +162,10 @@ pub const FAMILY_WEIGHT: f64 = 0.5;
 /// of the last round that recorded the recoveries of at least two points (its points moved
 /// `refine.spread` times from the chains' mean, as recorded; the highest-posterior one, never
 /// moved, counted as moved too), 1 before any. With `family` (the final chains of a building
-/// whose surrogate started from a pretrained network with a family record), that round's shift
-/// ratios are pooled with the family's, weighted [`FAMILY_WEIGHT`]
-/// ([`bemcal_stats::surrogate_error::pooled_temperature`]).
+/// whose surrogate started from a pretrained network with a family record, the other
+/// buildings' ratios of the parameters this one calibrates: [`Family::for_building`]), that
+/// round's shift ratios are pooled with the family's, weighted [`FAMILY_WEIGHT`]
+/// ([`bemcal_stats::surrogate_error::pooled_temperature`]); a family without ratios is none.
 ///
 /// # Errors
 /// If the round's points and recoveries do not fit the plan, or have no spread.
@@ -186,7 +187,7 @@ pub fn chain_temperature(
             };
             let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;
             let own = shift_ratios(&unit_shifts, &points, round.temperature, round.spread)?;
-            let family = family.filter(|f| !f.buildings.is_empty());
+            let family = family.filter(|f| !f.ratios().is_empty());
             let pooled = family.map(Family::ratios).unwrap_or_default();
             let groups = [
                 (&own[..], 1.0 - FAMILY_WEIGHT),

@@ -133,7 +133,6 @@ pub enum FoldVerdict {
 /// with the building's own (`bemcal_calibrate::surrogate_error`). Written by
 /// `scripts/family_shifts.py` from a portfolio's results.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Family {
     /// What was run to measure them (the binary, the settings, the date).
     pub measured: String,
@@ -143,7 +142,6 @@ pub struct Family {
 
 /// One building of a [`Family`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct FamilyBuilding {
     /// The building's name in the portfolio.
     pub name: String,
@@ -152,6 +150,31 @@ pub struct FamilyBuilding {
 }
 
 impl Family {
+    /// The buildings to pool with a building named `name` that calibrates `parameters`: all
+    /// but one of the same name (a rerun of a recorded building is not its own family), each
+    /// with the ratios of those parameters only; buildings left with none are left out.
+    pub fn for_building(&self, name: &str, parameters: &[String]) -> Family {
+        let buildings = self
+            .buildings
+            .iter()
+            .filter(|b| b.name != name)
+            .map(|b| FamilyBuilding {
+                name: b.name.clone(),
+                ratios: b
+                    .ratios
+                    .iter()
+                    .filter(|(p, _)| parameters.contains(p))
+                    .map(|(p, r)| (p.clone(), *r))
+                    .collect(),
+            })
+            .filter(|b| !b.ratios.is_empty())
+            .collect();
+        Family {
+            measured: self.measured.clone(),
+            buildings,
+        }
+    }
+
     /// Every building's ratios, in one list.
     pub fn ratios(&self) -> Vec<f64> {
         self.buildings
@@ -248,13 +271,18 @@ pub fn fold<S: Serialize>(
         )));
     }
     let verdict = read_verdict(out_dir)?;
-    match (&verdict, Family::read(pretrained)?) {
-        (FoldVerdict::Admitted { .. }, Some(family)) => {
+    if !matches!(verdict, FoldVerdict::Admitted { .. }) {
+        return Ok(verdict);
+    }
+    // Read only where the network is used: a bad record then stops the run with its file and
+    // building named, before the first training (rerun after fixing it; the design stays).
+    match Family::read(pretrained)? {
+        Some(family) => {
             let value = serde_json::to_value(&family).map_err(|e| runtime(e.to_string()))?;
             set_verdict_field(out_dir, "family", value)?;
             read_verdict(out_dir)
         }
-        _ => Ok(verdict),
+        None => Ok(verdict),
     }
 }
 
@@ -404,5 +432,26 @@ mod tests {
             e.contains("building 'B', parameter 'b'") && e.contains("-2"),
             "{e}"
         );
+    }
+
+    /// A building is pooled with the others, on the parameters it calibrates.
+    #[test]
+    fn a_building_is_pooled_with_the_others_on_its_own_parameters() {
+        let b = |name: &str, ratios: &[(&str, f64)]| FamilyBuilding {
+            name: name.into(),
+            ratios: ratios.iter().map(|(p, r)| (p.to_string(), *r)).collect(),
+        };
+        let family = Family {
+            measured: "m".into(),
+            buildings: vec![
+                b("A", &[("x", 1.0), ("y", 2.0)]),
+                b("B", &[("x", 3.0)]),
+                b("C", &[("z", 4.0)]),
+            ],
+        };
+        let pooled = family.for_building("B", &["x".into(), "y".into()]);
+        assert_eq!(pooled.buildings, vec![b("A", &[("x", 1.0), ("y", 2.0)])]);
+        assert_eq!(pooled.ratios(), vec![1.0, 2.0]);
+        assert!(family.for_building("D", &["w".into()]).buildings.is_empty());
     }
 }
