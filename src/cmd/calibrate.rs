@@ -185,7 +185,8 @@ fn print_posterior(s: &bemcal_calibrate::Summary) {
     }
     let params = &s.posterior.parameters;
     let ratios: Vec<f64> = params.iter().map(|p| p.width_ratio).collect();
-    println!("{}", how_much_learned(&ratios, t));
+    let pooled = s.temperature.pooled_with_buildings;
+    println!("{}", how_much_learned(&ratios, t, pooled));
     let barely = params.iter().filter(|p| uninformed(p.width_ratio)).count();
     if barely > 0 {
         println!("note: {}", why_uninformed(barely, params.len(), t));

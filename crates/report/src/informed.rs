@@ -21,8 +21,9 @@ pub fn learned(width_ratio: f64) -> bool {
 }
 
 /// How much the posterior learned: how many of the parameters' posterior-to-prior width ratios
-/// are under [`LEARNED_LIMIT`], and the likelihood's temperature `t` (1: the posterior itself).
-pub fn how_much_learned(width_ratios: &[f64], t: f64) -> String {
+/// are under [`LEARNED_LIMIT`], and the likelihood's temperature `t` (1: the posterior itself),
+/// with the buildings of the pretrained network's family it pooled, where it did.
+pub fn how_much_learned(width_ratios: &[f64], t: f64, pooled_with: Option<u32>) -> String {
     let n = width_ratios.iter().filter(|w| learned(**w)).count();
     let total = width_ratios.len();
     let share = if total == 0 {
@@ -30,10 +31,13 @@ pub fn how_much_learned(width_ratios: &[f64], t: f64) -> String {
     } else {
         100.0 * n as f64 / total as f64
     };
-    let tempered = if t > 1.0 {
-        format!("tempered by T = {t:.1}")
-    } else {
-        "T = 1".to_string()
+    let tempered = match (t > 1.0, pooled_with) {
+        (true, Some(n)) => format!(
+            "tempered by T = {t:.1} (its own surrogate error pooled with {n} buildings of the \
+             pretrained network's family)"
+        ),
+        (true, None) => format!("tempered by T = {t:.1}"),
+        (false, _) => "T = 1".to_string(),
     };
     format!(
         "the posterior learned {n} of {total} parameters ({share:.0} %: 90 % interval narrower \
@@ -119,11 +123,13 @@ mod tests {
     fn learned_is_narrower_than_half_the_prior() {
         assert!(learned(0.49) && !learned(0.5) && !learned(f64::NAN));
         assert_eq!(
-            how_much_learned(&[0.1, 0.3, 0.95], 1.0),
+            how_much_learned(&[0.1, 0.3, 0.95], 1.0, None),
             "the posterior learned 2 of 3 parameters (67 %: 90 % interval narrower than half \
              the prior's), the likelihood T = 1"
         );
-        assert!(how_much_learned(&[0.8], 651.7).ends_with("0 of 1 parameters (0 %: 90 % interval narrower than half the prior's), the likelihood tempered by T = 651.7"));
+        assert!(how_much_learned(&[0.8], 651.7, None).ends_with("0 of 1 parameters (0 %: 90 % interval narrower than half the prior's), the likelihood tempered by T = 651.7"));
+        assert!(how_much_learned(&[0.2], 79.5, Some(3))
+            .ends_with("tempered by T = 79.5 (its own surrogate error pooled with 3 buildings of the pretrained network's family)"));
     }
 
     #[test]

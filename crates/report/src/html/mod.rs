@@ -235,7 +235,11 @@ fn header(cal: &CalibrationData) -> String {
     let _ = writeln!(
         h,
         "<p class=\"sub\" id=\"learned\">How much it learned: {}.</p>",
-        esc(&how_much_learned(&ratios, s.temperature.value))
+        esc(&how_much_learned(
+            &ratios,
+            s.temperature.value,
+            s.temperature.pooled_with_buildings
+        ))
     );
     h
 }
