@@ -104,6 +104,7 @@ def row(out, portfolio, summary_path):
     last = {e["output"]: e["cv_rmse"] for e in rounds[-1]} if rounds else {}
     return {
         "building": building, "start": start, "T": s["temperature"]["value"],
+        "T_pooled_with": s["temperature"].get("pooled_with_buildings"),
         "learned": learned, "parameters": len(post), "held": held, "judged": len(judged),
         "g14_hourly": hourly, "g14_monthly": monthly, "estimate": s["estimate_choice"]["chosen"],
         "g14": " ".join(f"{v['output'].replace('_kwh', '')} {v['nmbe']:.1f}/{v['cv_rmse']:.1f}" for v in fitted),
@@ -126,7 +127,8 @@ def main():
     print("| building | start | T (needed for 90 % coverage) | learned (< 0.5 of prior) | truth in 90 % | G14 hourly / monthly at the estimate (NMBE/CV-RMSE %) | surrogate at the last round's draws (CV-RMSE %) | converged (R-hat, ESS bulk/tail) | worker s (by stage) |")
     print("|---|---|---:|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['building']} | {r['start']} | {r['T']:.1f} ({r['T_needed']:.1f}) | {r['learned']} of {r['parameters']} | "
+        pooled = f", pooled with {r['T_pooled_with']}" if r["T_pooled_with"] else ""
+        print(f"| {r['building']} | {r['start']} | {r['T']:.1f}{pooled} ({r['T_needed']:.1f}) | {r['learned']} of {r['parameters']} | "
               f"{r['held']} of {r['judged']} | {'pass' if r['g14_hourly'] else 'FAIL'} / "
               f"{'pass' if r['g14_monthly'] else 'FAIL'} ({r['estimate']}: {r['g14']}) | "
               f"{r['surrogate_cv_rmse_last_round']} | {r['converged']} ({r['rhat']:.3f}, {r['ess'][0]:.0f}/{r['ess'][1]:.0f}) | "
