@@ -126,22 +126,26 @@ pub fn carry(from: Option<&Path>, to: &Path) -> Result<(), Error> {
     }
 }
 
+/// The verdict of the fold, in the first of `dirs` that has one: the fold's folder
+/// (`OutputDir::pretrained`) or a surrogate's folder it was carried into ([`carry`]).
+fn first_verdict(dirs: &[&Path]) -> Option<FoldVerdict> {
+    dirs.iter().find_map(|d| fold::read_verdict(d).ok())
+}
+
 /// The family record ([`bemcal_surrogate::pretrained::Family`]) the fold found beside the
-/// pretrained network, as recorded in its verdict: in the fold's folder or carried into the
-/// surrogate's ([`carry`]), the first of `dirs` that has a verdict. None for a building whose
-/// surrogate did not start from a network with one.
+/// pretrained network, as recorded in the first verdict of `dirs` ([`first_verdict`]). None
+/// for a building whose surrogate did not start from a network with one.
 pub fn family(dirs: &[&Path]) -> Option<fold::Family> {
-    match dirs.iter().find_map(|d| fold::read_verdict(d).ok())? {
+    match first_verdict(dirs)? {
         FoldVerdict::Admitted { family, .. } => family,
         FoldVerdict::Refused { .. } => None,
     }
 }
 
-/// The start recorded in the fold's folder `dir` (`OutputDir::pretrained`), or carried into
-/// a surrogate's folder ([`carry`]), if a pretrained network was asked for.
-pub fn read_start(dir: &Path) -> Option<SurrogateStart> {
-    let verdict = fold::read_verdict(dir).ok()?;
-    Some(match verdict {
+/// The start recorded in the first verdict of `dirs` ([`first_verdict`]), if a pretrained
+/// network was asked for.
+pub fn read_start(dirs: &[&Path]) -> Option<SurrogateStart> {
+    Some(match first_verdict(dirs)? {
         FoldVerdict::Admitted {
             pretrained,
             corpus_cases,

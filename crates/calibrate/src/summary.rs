@@ -401,8 +401,10 @@ pub fn write_summary(
             .cloned()
             .zip(chains.sigma_eta.iter().copied())
             .collect(),
-        surrogate_start: crate::pretrained::read_start(&cal.out.pretrained())
-            .or_else(|| crate::pretrained::read_start(&cal.surrogate_dir())),
+        surrogate_start: crate::pretrained::read_start(&[
+            &cal.out.pretrained(),
+            &cal.surrogate_dir(),
+        ]),
         acceptance_rate: chains.acceptance.clone(),
         chain_extensions: chains.extensions,
         temperature: chains.temperature,

@@ -187,20 +187,22 @@ pub fn chain_temperature(
             };
             let (points, unit_shifts) = unit_points_and_shifts(plan, round)?;
             let own = shift_ratios(&unit_shifts, &points, round.temperature, round.spread)?;
-            let family = family.filter(|f| !f.ratios().is_empty());
+            // An empty family is a group pooled_temperature leaves out: the own ratios alone.
             let pooled = family.map(Family::ratios).unwrap_or_default();
-            let groups = [
-                (&own[..], 1.0 - FAMILY_WEIGHT),
-                (&pooled[..], FAMILY_WEIGHT),
-            ];
-            let value = match family {
-                Some(_) => pooled_temperature(&groups, INTERVAL_LEVEL)?,
-                None => pooled_temperature(&groups[..1], INTERVAL_LEVEL)?,
-            };
+            let value = pooled_temperature(
+                &[
+                    (&own[..], 1.0 - FAMILY_WEIGHT),
+                    (&pooled[..], FAMILY_WEIGHT),
+                ],
+                INTERVAL_LEVEL,
+            )?;
+            let pooled_with = family.map_or(0, |f| {
+                f.buildings.iter().filter(|b| !b.ratios.is_empty()).count()
+            });
             Ok(ChainTemperature {
                 value,
                 measured_at_round: Some(round.round),
-                pooled_with_buildings: family.map(|f| f.buildings.len() as u32),
+                pooled_with_buildings: (pooled_with > 0).then_some(pooled_with as u32),
             })
         }
     }

@@ -270,20 +270,17 @@ pub fn fold<S: Serialize>(
             tail.into_iter().rev().collect::<Vec<_>>().join("\n")
         )));
     }
-    let verdict = read_verdict(out_dir)?;
-    if !matches!(verdict, FoldVerdict::Admitted { .. }) {
-        return Ok(verdict);
-    }
+    let mut verdict = read_verdict(out_dir)?;
     // Read only where the network is used: a bad record then stops the run with its file and
     // building named, before the first training (rerun after fixing it; the design stays).
-    match Family::read(pretrained)? {
-        Some(family) => {
-            let value = serde_json::to_value(&family).map_err(|e| runtime(e.to_string()))?;
+    if let FoldVerdict::Admitted { family, .. } = &mut verdict {
+        if let Some(record) = Family::read(pretrained)? {
+            let value = serde_json::to_value(&record).map_err(|e| runtime(e.to_string()))?;
             set_verdict_field(out_dir, "family", value)?;
-            read_verdict(out_dir)
+            *family = Some(record);
         }
-        None => Ok(verdict),
     }
+    Ok(verdict)
 }
 
 /// Writes `verdict` into `dir` as the trainer does (for a verdict reached without it).
