@@ -13,12 +13,16 @@
 use bemcal_precal::meters::BillTable;
 use bemcal_stats::likelihood::intervals::{sum_weight, IntervalLikelihood, IntervalReading};
 use bemcal_stats::metrics::{g14_totals, G14Metrics};
-use bemcal_stats::predictive::reading_quantiles;
+use bemcal_stats::predictive::readings::{
+    choose_scale, reading_quantiles, ReadingScale, LEVEL_FLOORS,
+};
+use bemcal_stats::predictive::ErrorModel;
 use bemcal_weather::grid::GridYear;
 use serde::{Deserialize, Serialize};
 
 use crate::error::Error;
 use crate::metrics::DemandMetrics;
+use crate::project::ErrorModelSetting;
 
 /// The AR(1) coefficient of the hourly errors summed over a bill. With the scale integrated
 /// out it sets only the bills' relative weights, which for bills of similar length hardly
@@ -32,12 +36,18 @@ const LEVELS: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 0.95];
 /// One meter's predictive intervals per bill (issue 69), in `summary.json`'s `predictive`:
 /// EnergyPlus at the posterior draws the validation simulated, each bill's total plus the
 /// error of a bill at the scale of that draw's own residuals over the calibration period's
-/// bills ([`bemcal_stats::predictive::reading_quantiles`]), bounded below by zero for a meter
-/// that never reads below it.
+/// bills, constant or following the bill's level ([`bemcal_stats::predictive::readings`]),
+/// bounded below by zero for a meter that never reads below it.
 #[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct BillsPredictive {
     /// The calibrated output (and its meter).
     pub output: String,
+    /// How a bill's error scales with its level: the meter's `[validation] error_model`
+    /// (`constant` and `hour_of_day`: constant; `level`: the level, its floor the one the
+    /// bills favour; `auto`: whichever the bills favour, [`choose_scale`]). Absent from a
+    /// summary written before it: constant.
+    #[serde(default = "constant_scale")]
+    pub error_scale: ReadingScale,
     /// Share of the calibration period's bills inside their 50 % and 90 % intervals.
     pub in_sample: [f64; 2],
     /// The same for the held-out bills, where there are any.
@@ -61,14 +71,20 @@ impl BillsPredictive {
         });
         format!(
             "{} (bills): the 50 % / 90 % intervals of a bill (EnergyPlus's total at each draw, \
-             plus a bill's error at the scale of that draw's own residuals) hold {:.0} / {:.0} % \
-             of the calibration period's {} bills{held}",
+             plus a bill's error at the scale of that draw's own residuals, {}) hold {:.0} / \
+             {:.0} % of the calibration period's {} bills{held}",
             self.output,
+            self.error_scale.describe(),
             100.0 * self.in_sample[0],
             100.0 * self.in_sample[1],
             count(false)
         )
     }
+}
+
+/// What summaries written before [`BillsPredictive::error_scale`] used.
+fn constant_scale() -> ReadingScale {
+    ReadingScale::Constant
 }
 
 /// One bill's predictive interval.
@@ -206,9 +222,14 @@ impl BilledMeter {
     }
 
     /// Predictive intervals of every compared bill from `sims`, EnergyPlus's hours (with the
-    /// output's base) at each posterior draw ([`BillsPredictive`]); None under three bills in
-    /// the calibration period.
-    pub fn predictive(&self, output: &str, sims: &[Vec<f64>]) -> Option<BillsPredictive> {
+    /// output's base) at each posterior draw, the error's scale as `setting` says
+    /// ([`BillsPredictive`]); None under three bills in the calibration period.
+    pub fn predictive(
+        &self,
+        output: &str,
+        sims: &[Vec<f64>],
+        setting: ErrorModelSetting,
+    ) -> Option<BillsPredictive> {
         let totals: Vec<Vec<f64>> = (sims.iter())
             .map(|sim| {
                 (self.compared.iter())
@@ -222,8 +243,22 @@ impl BilledMeter {
         let weights: Vec<f64> = (self.compared.iter())
             .map(|(_, h)| sum_weight(h.len(), BILL_AR1))
             .collect();
+        let hours: Vec<usize> = self.compared.iter().map(|(_, h)| h.len()).collect();
         let fitted: Vec<bool> = self.held_out.iter().map(|h| !h).collect();
-        let mut q = reading_quantiles(&totals, &measured, &weights, &fitted, &LEVELS)?;
+        let levels = LEVEL_FLOORS.map(|floor| ReadingScale::Level { floor });
+        let candidates: Vec<ReadingScale> = match setting {
+            ErrorModelSetting::Fixed(ErrorModel::Constant | ErrorModel::HourOfDay) => {
+                vec![ReadingScale::Constant]
+            }
+            ErrorModelSetting::Fixed(ErrorModel::Level) => levels.to_vec(),
+            ErrorModelSetting::Auto => std::iter::once(ReadingScale::Constant)
+                .chain(levels)
+                .collect(),
+        };
+        let scale = choose_scale(&candidates, &totals, &measured, &weights, &hours, &fitted);
+        let mut q = reading_quantiles(
+            &totals, &measured, &weights, &hours, &fitted, scale, &LEVELS,
+        )?;
         // An energy meter does not read below zero: the intervals are those of max(0, Y), as
         // the hourly meters' are.
         if measured.iter().all(|m| *m >= 0.0) {
@@ -253,6 +288,7 @@ impl BilledMeter {
         };
         Some(BillsPredictive {
             output: output.to_string(),
+            error_scale: scale,
             in_sample: inside(false)?,
             held_out: inside(true),
             bills,
@@ -328,7 +364,9 @@ mod tests {
         assert_eq!((d.bills, d.mean_measured_kw), (2, 1.5));
         assert!((d.nmbe - 2.1 / 1.5 * 100.0).abs() < 1e-9, "{d:?}");
         // Predictive intervals need three bills in the calibration period: two here.
-        assert!(m.predictive("heating", &[sim.clone()]).is_none());
+        assert!(m
+            .predictive("heating", &[sim.clone()], ErrorModelSetting::Auto)
+            .is_none());
         // The likelihood's readings less a base of 0.1 kWh an hour.
         let l = m.likelihood(0, 1, 8760, &vec![0.1; 8760]).unwrap();
         assert_eq!(l.readings().len(), 2);
@@ -347,7 +385,9 @@ mod tests {
         let held: Vec<bool> = (0..8760).map(|t| t >= 120 * 24).collect();
         m.hold_out(&held);
         let draws = [vec![1.0; 8760], vec![1.2; 8760]];
-        let p = m.predictive("heating_kwh", &draws).unwrap();
+        let p = m
+            .predictive("heating_kwh", &draws, ErrorModelSetting::Auto)
+            .unwrap();
         assert_eq!(p.bills.len(), 5);
         assert_eq!(p.bills[4].held_out as u8 + p.bills[0].held_out as u8, 1);
         for b in &p.bills {

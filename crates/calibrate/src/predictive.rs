@@ -420,7 +420,7 @@ pub fn assess(
             let sims: Vec<Vec<f64>> = (runs.iter())
                 .map(|o| inp.with_base(k, o.get(name).expect("model output")))
                 .collect();
-            bills.extend(b.predictive(name, &sims));
+            bills.extend(b.predictive(name, &sims, error_models.of(name)));
             continue;
         }
         let setting = error_models.of(name);

@@ -50,6 +50,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Result, StatsError};
 use crate::normal::norm_cdf;
 
+pub mod readings;
+
 /// How the noise scale of the predictive distribution is estimated from in-sample residuals.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
@@ -609,50 +611,6 @@ pub fn lag1_autocorrelation(z: &[f64]) -> f64 {
     }
 }
 
-/// Predictive quantiles of readings over intervals of hours (utility bills; issue 69), at
-/// `levels`, `[reading][level]`. At each posterior draw `d`, reading `b` is
-/// `N(s_db, sigma_d^2 w_b)`: `s_db` the draw's total over the reading's hours (`totals[d][b]`),
-/// `w_b` the variance of a sum of AR(1) hours in units of `sigma^2` (`weights`,
-/// [`crate::likelihood::intervals`]), and `sigma_d^2 = Q_d / (B - 2)` the posterior mean of the
-/// scale under Jeffreys' prior given the draw's own residuals over the `fitted` readings,
-/// `Q_d = sum_b r_db^2 / w_b` (Gelman et al., Bayesian Data Analysis, 3rd ed., sec. 3.2: the
-/// scaled inverse-chi^2 posterior), as the bills' likelihood integrates it out. The quantiles
-/// are of the equal-weight mixture over draws. None under three fitted readings.
-pub fn reading_quantiles(
-    totals: &[Vec<f64>],
-    measured: &[f64],
-    weights: &[f64],
-    fitted: &[bool],
-    levels: &[f64],
-) -> Option<Vec<Vec<f64>>> {
-    let n_fit = fitted.iter().filter(|f| **f).count();
-    if n_fit < 3 || totals.is_empty() {
-        return None;
-    }
-    let variances: Vec<f64> = totals
-        .iter()
-        .map(|s| {
-            let q: f64 = (0..measured.len())
-                .filter(|&b| fitted[b])
-                .map(|b| (measured[b] - s[b]).powi(2) / weights[b])
-                .sum();
-            q / (n_fit - 2) as f64
-        })
-        .collect();
-    Some(
-        (0..measured.len())
-            .map(|b| {
-                let components: Vec<(f64, f64)> = (totals.iter().zip(&variances))
-                    .map(|(s, v)| (s[b], (v * weights[b]).sqrt()))
-                    .collect();
-                (levels.iter())
-                    .map(|&p| mixture_quantile_each(&components, p))
-                    .collect()
-            })
-            .collect(),
-    )
-}
-
 /// Variance of `sum_t s_t z_t` where `z` is a unit-variance AR(1) process with coefficient
 /// `phi` (`corr(z_i, z_j) = phi^|i-j|`): `sum_i s_i^2 + 2 sum_i s_i a_i` with
 /// `a_i = sum_(j<i) s_j phi^(i-j) = phi (a_(i-1) + s_(i-1))`, in O(n).
@@ -904,35 +862,6 @@ pub fn pooled_coverage(parts: &[Coverage]) -> Option<Coverage> {
 
 #[cfg(test)]
 mod tests {
-    /// One draw: the reading is N(s_b, Q / (B - 2) w_b) (Q the weighted residuals' squares).
-    #[test]
-    fn a_readings_interval_is_its_draws_total_and_the_scale_of_its_residuals() {
-        let totals = vec![vec![10.0, 20.0, 30.0, 40.0]];
-        let measured = [11.0, 18.0, 32.0, 100.0];
-        let weights = [1.0, 4.0, 1.0, 2.0];
-        // The fourth reading is held out: Q = 1 + 4 / 4 + 4 = 6 over 3 readings, sigma^2 = 6.
-        let fitted = [true, true, true, false];
-        let q = reading_quantiles(&totals, &measured, &weights, &fitted, &[0.5, 0.95]).unwrap();
-        let z95 = 1.644_853_626_951_472_2;
-        assert!((q[3][0] - 40.0).abs() < 1e-6);
-        assert!(
-            (q[3][1] - (40.0 + z95 * (6.0_f64 * 2.0).sqrt())).abs() < 1e-6,
-            "{q:?}"
-        );
-        assert!(
-            (q[1][1] - (20.0 + z95 * (6.0_f64 * 4.0).sqrt())).abs() < 1e-6,
-            "{q:?}"
-        );
-        assert!(reading_quantiles(
-            &totals,
-            &measured,
-            &weights,
-            &[true, true, false, false],
-            &[0.5]
-        )
-        .is_none());
-    }
-
     #[test]
     fn each_error_model_is_named_as_serde_names_it() {
         for m in ErrorModel::ALL {

@@ -823,7 +823,9 @@ pub struct ValidationSettings {
 /// `[validation] error_model`: one setting for every meter (`"level"`, `"auto"`), or a table
 /// by output with an optional `default` (`{ default = "auto", heating_kwh = "hour_of_day" }`):
 /// the meters of one building may favour different ones. `default` is the key of the others,
-/// not an output's name.
+/// not an output's name. A meter read as bills takes its setting too: `constant` and
+/// `hour_of_day` give its bills one error scale, `level` one that follows each bill's level,
+/// `auto` whichever its bills favour ([`crate::bills::BillsPredictive::error_scale`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorModels {
     /// The setting of an output the table does not name: `auto` unless set (docs/benchmarks.md,
