@@ -76,7 +76,7 @@ impl ReadingScale {
             .filter(|(m, f)| **f && m.is_finite())
             .fold((0.0, 0usize), |(s, c), (m, _)| (s + m, c + 1));
         let mean = sum / count.max(1) as f64;
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return vec![1.0; totals.len()];
         }
         level.iter().map(|m| m + floor * mean).collect()
