@@ -19,7 +19,10 @@
 //!   The lighting prior reaches below zero, where EnergyPlus refuses the `Lights` object: the
 //!   design point in the lowest stratum fails, is recorded with EnergyPlus's lines and replaced
 //!   by a spare hypercube point, the same way on both paths; reruns reuse the settled (or
-//!   interrupted) design.
+//!   interrupted) design. The project asks for its measures' savings as the last stage
+//!   (`[savings] with_calibration`, 2 measures, 2 draws): the workers' measure jobs give the
+//!   local path's files and savings, and the run with one chain per job takes all 9 from the
+//!   coordinator's cache.
 //! - `refinement_round_local_and_distributed`: one surrogate refinement round (3 posterior
 //!   draws simulated, added, retrained) on both paths; with the same first surrogate both pick
 //!   and simulate the same draws and measure the same surrogate error there.
@@ -245,7 +248,8 @@ fn distributed_matches_single_process() {
         .replace(
             "predictive_draws = 0\n",
             "predictive_draws = 3\nholdout = \"dec\"\n",
-        );
+        )
+        + SAVINGS;
     assert!(
         text.contains("holdout")
             && text.contains("kernel = \"hmc\"")
@@ -380,6 +384,7 @@ fn distributed_matches_single_process() {
     assert!(short[0]["rhat"].as_f64().unwrap() >= short[1]["rhat"].as_f64().unwrap());
     assert_eq!(c["max_rhat"], short[0]["rhat"]);
     assert_eq!(sa["convergence"], sb["convergence"]);
+    savings_are_the_same(&local, &dist, &local_log, &log);
     // The same design, failures and replacements (the error texts name each run's own folder).
     for k in [
         "reasons",
@@ -448,6 +453,13 @@ fn distributed_matches_single_process() {
         std::fs::read_to_string(grouped.join("draws.csv")).unwrap() == draws,
         "draws.csv: one job per chain against the single process"
     );
+    // The savings' runs are jobs like the design's: the same draws' runs, answered from the
+    // coordinator's cache, and the same savings.
+    assert!(
+        log.contains("EnergyPlus savings runs: 0 run, 9 from the coordinator's cache"),
+        "{log}"
+    );
+    assert_eq!(summary(&grouped)["savings"], summary(&local)["savings"]);
 
     // A rerun reads the settled design (simulations/design.json) and runs nothing.
     let rerun = |out: &Path, surrogate: Option<&Path>| {
@@ -483,6 +495,72 @@ fn distributed_matches_single_process() {
     );
     let sd = summary(&dist);
     assert_eq!(sd["design"]["simulated"], 6);
+}
+
+/// Two measures whose savings the calibration estimates as its last stage (`[savings]
+/// with_calibration`): a parameter's offset and a building edit, over 2 posterior draws and the
+/// estimate (9 EnergyPlus runs).
+const SAVINGS: &str = r#"
+[savings]
+with_calibration = true
+draws = 2
+
+[[measures]]
+name = "cooling set-point +1 K"
+offset = { cooling_setpoint_occupied = 1.0 }
+
+[[measures]]
+name = "air-side economizer"
+building = { economizer = true }
+"#;
+
+/// The savings stage ran on both paths to the same runs and savings: on the coordinator as
+/// measure jobs on the workers, their files placed where the local path writes its own.
+fn savings_are_the_same(local: &Path, dist: &Path, local_log: &str, dist_log: &str) {
+    let runs = "savings: 2 measure(s) at 2 posterior draws and the estimate, 1 weather(s): 9 \
+                EnergyPlus runs";
+    assert!(local_log.contains(runs), "{local_log}");
+    assert!(dist_log.contains(runs), "{dist_log}");
+    assert!(
+        dist_log.contains("EnergyPlus savings runs: 9 run, 0 from the coordinator's cache"),
+        "{dist_log}"
+    );
+    let files = |root: &Path| -> Vec<PathBuf> {
+        let mut f: Vec<PathBuf> = common::walk(&root.join("savings"))
+            .into_iter()
+            .map(|p| p.strip_prefix(root).unwrap().to_path_buf())
+            .collect();
+        f.sort();
+        f
+    };
+    let (a, b) = (files(local), files(dist));
+    assert_eq!(a.len(), 9, "{a:?}");
+    assert_eq!(a, b, "the savings' run files");
+    for f in &a {
+        assert!(
+            std::fs::read(local.join(f)).unwrap() == std::fs::read(dist.join(f)).unwrap(),
+            "{} differs between the single-process and distributed runs",
+            f.display()
+        );
+    }
+    let (sa, sb) = (summary(local), summary(dist));
+    assert_eq!(sa["savings"], sb["savings"], "summary.json savings");
+    let measures = sa["savings"]["measures"].as_array().unwrap();
+    assert_eq!(measures.len(), 2, "{}", sa["savings"]);
+    // The economizer saves cooling at every draw (its runs are the building's edited model).
+    let economizer = &measures[1];
+    let cooling = (economizer["outputs"].as_array().unwrap().iter())
+        .find(|o| o["output"] == "cooling_kwh")
+        .unwrap();
+    assert!(
+        cooling["savings_kwh"]["median"].as_f64().unwrap() > 0.0,
+        "{cooling}"
+    );
+    // The report has its savings section on both paths.
+    for out in [local, dist] {
+        let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(html.contains("air-side economizer"), "{}", out.display());
+    }
 }
 
 /// The design point in the lowest lighting stratum failed: the calibration recorded it with

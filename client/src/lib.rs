@@ -91,7 +91,8 @@ impl proto::ChainSegmentJob {
 ///   Guideline 14 figures are the coordinator's to compute from the job's files.
 /// - 4: workers register (`Register`) and call with their own credential; the worker token
 ///   alone no longer leases.
-pub const PROTOCOL: u32 = 4;
+/// - 5: `MeasureJob`, the measures' savings runs (`[savings] with_calibration`).
+pub const PROTOCOL: u32 = 5;
 
 /// Largest gRPC message either side accepts (artifacts travel in chunks well below it).
 pub const MAX_MESSAGE_BYTES: usize = 16 * 1024 * 1024;

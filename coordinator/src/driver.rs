@@ -18,8 +18,9 @@ use bemcal_calibrate::design::saved_outputs;
 use bemcal_calibrate::driver::{
     drive, Executor, LazySampler, PointResult, Ready, ValidationResult,
 };
-use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
+use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
+use bemcal_calibrate::savings::{SavingsPlan, SavingsRun};
 use bemcal_calibrate::sequence::{Round, ValidationRun};
 use bemcal_calibrate::Project;
 use bemcal_calibrate::{stage_seconds, Calibration, Error, Summary, Timings};
@@ -346,6 +347,56 @@ impl Leased<'_> {
             },
             cache_key: Some(key),
         }
+    }
+
+    /// The job of one savings run of `plan`, cached by what it simulates: the inputs, the
+    /// weather file's content, the measure's building edits and the parameters' values with
+    /// the measure applied (a renamed measure, or another run of the same building, reuses it).
+    fn measure_job(
+        &self,
+        inputs_hash: &str,
+        plan: &SavingsPlan,
+        run: &SavingsRun,
+    ) -> std::result::Result<NewJob, Error> {
+        let measure = run.measure.map(|j| &plan.measures[j]);
+        let values = serde_json::to_string(&run.values).map_err(ex)?;
+        let measure_json = match measure {
+            Some(m) => serde_json::to_string(m).map_err(ex)?,
+            None => String::new(),
+        };
+        let weather = plan.weather_path(run);
+        let bytes = std::fs::read(weather)
+            .map_err(|e| Error::Executor(format!("{}: {e}", weather.display())))?;
+        let building = measure.map_or(String::new(), |m| {
+            serde_json::to_string(&m.building).unwrap_or_default()
+        });
+        let key = hex::encode(Sha256::digest(format!(
+            "measure\n{inputs_hash}\n{}\n{building}\n{values}",
+            hex::encode(Sha256::digest(&bytes))
+        )));
+        let what = measure.map_or("the baseline".to_string(), |m| {
+            format!("measure {:?}", m.name)
+        });
+        Ok(NewJob {
+            stage: Stage::Savings,
+            kind: JobKind::Measure,
+            label: format!(
+                "savings: {what} at point {} ({} weather)",
+                run.key,
+                run.weather.as_str()
+            ),
+            spec: proto::Job {
+                bundle: crate::client::refs(&self.r.bundle),
+                kind: Some(Kind::Measure(proto::MeasureJob {
+                    point: run.key as u32,
+                    values_json: values,
+                    weather: run.weather.as_str().into(),
+                    measure_json,
+                })),
+                ..Default::default()
+            },
+            cache_key: Some(key),
+        })
     }
 
     /// The training job of round `round` for the training set in `dataset/`, warm-started
@@ -729,6 +780,47 @@ impl Executor for Leased<'_> {
                         "point {i}: the worker's outputs did not match its parameter values"
                     ))
                 })?;
+            results.push(Ok(o));
+        }
+        Ok(Ready::Done(results))
+    }
+
+    /// Places each run's point file in its folder of `savings/` (cached files may come from
+    /// another run: they are named after this one's) and reads it back, checking it answers
+    /// the run's values.
+    fn savings(
+        &mut self,
+        cal: &Calibration,
+        plan: &SavingsPlan,
+    ) -> std::result::Result<Ready<Vec<PointResult>>, Error> {
+        let hash = self.inputs_hash(cal)?;
+        let specs = (plan.runs.iter())
+            .map(|run| self.measure_job(&hash, plan, run))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let rows = match self.wave(specs, |j, s| j.spec.kind == s.spec.kind)? {
+            Ready::Done(rows) => rows,
+            Ready::Pending => return Ok(Ready::Pending),
+        };
+        let mut results = vec![];
+        for (j, run) in rows.iter().zip(&plan.runs) {
+            if let Some(e) = reported_failure(j) {
+                results.push(Err(e));
+                continue;
+            }
+            let dir = plan.run_rel(run);
+            let files: Vec<File> = (j.outputs.iter())
+                .map(|f| File {
+                    path: format!("{dir}/{}", point_file(run.key)),
+                    ..f.clone()
+                })
+                .collect();
+            self.st.place(&cal.out, &files).map_err(ex)?;
+            let o = saved_outputs(&cal.out.join(&dir), run.key, &run.values).ok_or_else(|| {
+                Error::Executor(format!(
+                    "{}: the worker's outputs did not match the run's parameter values",
+                    j.label
+                ))
+            })?;
             results.push(Ok(o));
         }
         Ok(Ready::Done(results))

@@ -20,7 +20,7 @@ use crate::proto::*;
 use crate::states::{wire_stage, JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
-use bemcal_calibrate::output::{DRAWS_FILE, STATES_FILE};
+use bemcal_calibrate::output::{point_file, DRAWS_FILE, STATES_FILE};
 use bemcal_calibrate::OutputDir;
 
 /// Largest artifact accepted (bytes).
@@ -103,6 +103,8 @@ fn check_result(
     let fits = match (kind, &result.outcome) {
         (Some(Kind::Simulate(_)), Some(Outcome::Simulated(_))) => true,
         (Some(Kind::Simulate(_)), Some(Outcome::EnergyplusFailed(_))) => outputs.is_empty(),
+        (Some(Kind::Measure(_)), Some(Outcome::Simulated(_))) => true,
+        (Some(Kind::Measure(_)), Some(Outcome::EnergyplusFailed(_))) => outputs.is_empty(),
         (Some(Kind::Validate(v)), Some(Outcome::EnergyplusFailed(_))) => {
             v.tolerate_failure && outputs.is_empty()
         }
@@ -140,6 +142,21 @@ fn check_result(
             }
             &outputs[0]
         }
+        (Some(Kind::Measure(m)), Some(Outcome::Simulated(_))) => match outputs {
+            // Its folder is the measure's (the coordinator places it by the run it asked for).
+            [f] if f.path.starts_with("savings/")
+                && f.path
+                    .ends_with(&format!("/{}", point_file(m.point as usize))) =>
+            {
+                f
+            }
+            _ => {
+                return Err(format!(
+                    "a savings run brings one file, savings/.../{}",
+                    point_file(m.point as usize)
+                ))
+            }
+        },
         (Some(Kind::Validate(v)), Some(Outcome::Validated(_))) => {
             let want = OutputDir::validation_point_rel(v.index as usize);
             match outputs.iter().find(|f| f.path == want) {
@@ -247,11 +264,14 @@ impl Service {
     pub fn status(&self, r: &RunRow, with_results: bool) -> Result<RunStatus, Status> {
         let jobs = self.st.store.jobs(&r.id, None).map_err(internal)?;
         let busy = self.st.store.worker_seconds(&r.id).map_err(internal)?;
-        // The stages a run goes through, in order (every stage but `Done`).
+        // The stages a run goes through, in order (every stage but `Done`; the savings only
+        // where the run has reached them: a project without `[savings] with_calibration`
+        // never does).
+        let savings = r.stage == Stage::Savings || jobs.iter().any(|j| j.stage == Stage::Savings);
         let order: Vec<Stage> = Stage::ALL
             .iter()
             .copied()
-            .filter(|s| *s != Stage::Done)
+            .filter(|s| *s != Stage::Done && (*s != Stage::Savings || savings))
             .collect();
         let cur = order
             .iter()

@@ -145,6 +145,8 @@ words! {
         Chains = "chains",
         /// EnergyPlus at the estimate or the initial model, against the meters.
         Validate = "validate",
+        /// EnergyPlus at a posterior draw with a measure or without (the savings).
+        Measure = "measure",
     }
 }
 

@@ -103,6 +103,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     print_model_form(&s);
     print_start(&s);
     print_refinement(&s);
+    // `[savings] with_calibration`: the measures' savings, as `bemcal savings` prints them.
+    if let Some(r) = &s.savings {
+        println!();
+        super::savings::print_table(r);
+    }
     print_timings(&s, &a.out);
     converged_or_not(&s, &a.out)
 }

@@ -14,7 +14,7 @@ use bemcal_client::auth::{
     DEFAULT_CLIENT, TOKEN_ENV,
 };
 use bemcal_client::client::{self, Connect};
-use bemcal_client::proto::{ListRunsRequest, RunRequest, RunState};
+use bemcal_client::proto::{self, ListRunsRequest, RunRequest, RunState};
 use bemcal_coordinator::db::{AuditFilter, Store};
 use bemcal_coordinator::driver::Config;
 use bemcal_coordinator::server::{serve, Options};
@@ -505,6 +505,17 @@ pub fn calibrate_local(
             "EnergyPlus design simulations: {} run, {} from the coordinator's cache",
             st.simulations_run, st.simulations_shared
         ));
+        let savings: Vec<bool> = (st.jobs.iter())
+            .filter(|j| j.stage() == proto::Stage::Savings)
+            .map(|j| j.cached)
+            .collect();
+        if !savings.is_empty() {
+            let cached = savings.iter().filter(|c| **c).count();
+            log(&format!(
+                "EnergyPlus savings runs: {} run, {cached} from the coordinator's cache",
+                savings.len() - cached
+            ));
+        }
         let n = client::fetch_results(&mut c, &run, out).await?;
         log(&format!("{n} result files written to {}", out.display()));
         let s: Summary = serde_json::from_str(&st.summary_json)?;

@@ -111,7 +111,7 @@ fn read_measures(path: &std::path::Path) -> anyhow::Result<Vec<Measure>> {
 }
 
 /// The savings as a table: a block per measure, a row per weather and output.
-fn print_table(r: &SavingsReport) {
+pub(super) fn print_table(r: &SavingsReport) {
     println!(
         "savings over {} posterior draws ({}):",
         r.draws, r.draws_file

@@ -368,6 +368,23 @@ pub fn metric(page: &str, series: &str) -> Option<f64> {
     })
 }
 
+/// Every file under `dir`, its subfolders' included (none where `dir` does not exist).
+pub fn walk(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return vec![];
+    };
+    let mut files = vec![];
+    for e in entries {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            files.extend(walk(&p));
+        } else {
+            files.push(p);
+        }
+    }
+    files
+}
+
 /// Copies the folder `from` to `to`, its subfolders included.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();

@@ -3,13 +3,16 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
+use bemcal_calibrate::measures::{Measure, SavingsWeather};
+use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::ChainTemperature;
+use bemcal_calibrate::savings::{run_rel, simulate_run};
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
 use bemcal_client::client::walk;
 use bemcal_client::proto::{self, job::Kind};
+use bemcal_energyplus::params::ParameterValues;
 use bemcal_stats::chain::Chain;
 
 /// Output files (`relative path`, file) and the job's result.
@@ -30,6 +33,7 @@ pub fn execute(job: &proto::Job, project_file: &Path, work: &Path) -> Result<Out
         Some(Kind::Train(t)) => train(&cal, t, work),
         Some(Kind::Chains(c)) => chains(&cal, c, work),
         Some(Kind::Validate(v)) => validate(&cal, v, work),
+        Some(Kind::Measure(m)) => measure(&cal, m, work),
         None => Err("job without a kind (a newer coordinator?)".into()),
     }
 }
@@ -141,5 +145,34 @@ fn validate(cal: &Calibration, v: &proto::ValidateJob, work: &Path) -> Result<Ou
     Ok((
         vec![(a.clone(), work.join(&a)), (b.clone(), work.join(&b))],
         proto::JobResult::validated(),
+    ))
+}
+
+/// A savings run: EnergyPlus at a posterior draw (or the estimate) with a measure or without
+/// one; an EnergyPlus failure is the job's result (the savings leave that draw out).
+fn measure(cal: &Calibration, m: &proto::MeasureJob, work: &Path) -> Result<Outputs, String> {
+    let weather: SavingsWeather =
+        serde_json::from_value(serde_json::Value::String(m.weather.clone()))
+            .map_err(|e| format!("measure job's weather {:?}: {e}", m.weather))?;
+    let measure: Option<Measure> = match m.measure_json.as_str() {
+        "" => None,
+        json => {
+            let measure: Measure =
+                serde_json::from_str(json).map_err(|e| format!("measure job's measure: {e}"))?;
+            measure.check()?;
+            Some(measure)
+        }
+    };
+    let values: ParameterValues =
+        serde_json::from_str(&m.values_json).map_err(|e| format!("measure job's values: {e}"))?;
+    let i = m.point as usize;
+    let secs = match simulate_run(cal, weather, measure.as_ref(), i, &values) {
+        Ok((_, secs)) => secs,
+        Err(e) => return Ok((vec![], proto::JobResult::energyplus_failed(e.to_string()))),
+    };
+    let rel = format!("{}/{}", run_rel(weather, measure.as_ref()), point_file(i));
+    Ok((
+        vec![(rel.clone(), work.join(&rel))],
+        proto::JobResult::simulated(secs),
     ))
 }

@@ -61,6 +61,7 @@ pub fn kind_name(job: &proto::Job) -> &'static str {
         Some(Kind::Train(_)) => "train",
         Some(Kind::Chains(_)) => "chains",
         Some(Kind::Validate(_)) => "validate",
+        Some(Kind::Measure(_)) => "measure",
         None => "unknown",
     }
 }

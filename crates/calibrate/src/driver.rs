@@ -36,6 +36,7 @@ use crate::posterior::{ChainTemperature, Checkpoint};
 use crate::project::Estimate;
 use crate::refine::{close_round, refinement_points, RefineLog, RefineRound, SimulatedDraw};
 use crate::replacement::{Attempt, Outcome, Step};
+use crate::savings::SavingsPlan;
 use crate::sequence::{
     after_final_chains, next_validation, validation_runs, AfterFinalChains, Round, Stage,
     ValidationRole, ValidationRun,
@@ -124,6 +125,15 @@ pub trait Executor {
         cal: &Calibration,
         runs: &[ValidationRun],
     ) -> Result<Ready<Vec<ValidationResult>>, Error>;
+
+    /// EnergyPlus at each run of the measures' savings ([`SavingsPlan::runs`]), saved under
+    /// its folder of `savings/` ([`SavingsPlan::run_rel`]); one result per run, in order, a
+    /// failed run its reason (it does not stop the others).
+    fn savings(
+        &mut self,
+        cal: &Calibration,
+        plan: &SavingsPlan,
+    ) -> Result<Ready<Vec<PointResult>>, Error>;
 
     /// The time spent per stage so far, and in all.
     fn timings(&self) -> Timings;
@@ -246,8 +256,34 @@ pub fn drive(
     let (_, design) = cal.settled_design()?;
     let (calibrated, initial) = (validated.calibrated, validated.initial);
     let summary = write_summary(cal, &design, &chains, calibrated, initial, exec.timings())?;
+    let summary = ready!(savings(cal, exec, summary, log)?);
     exec.enter(Stage::Done)?;
     Ok(Ready::Done(summary))
+}
+
+/// The measures' savings as the calibration's last stage where `[savings] with_calibration`
+/// asks for them (as `bemcal savings` would estimate them from the finished folder, EnergyPlus
+/// alone): the plan ([`SavingsPlan::new`]), its runs by the executor, and the savings added
+/// to `summary`, which is written again with them.
+fn savings(
+    cal: &Calibration,
+    exec: &mut dyn Executor,
+    summary: Summary,
+    log: Log<'_>,
+) -> Result<Ready<Summary>, Error> {
+    let settings = &cal.project.savings;
+    if !settings.with_calibration {
+        return Ok(Ready::Done(summary));
+    }
+    exec.enter(Stage::Savings)?;
+    let plan = SavingsPlan::new(cal, &cal.project.measures, settings.draws, settings.split)?;
+    log(&plan.describe());
+    let runs = ready!(exec.savings(cal, &plan)?);
+    let report = plan.finish(cal, runs, 0, log)?;
+    Ok(Ready::Done(Summary {
+        savings: Some(report),
+        ..summary
+    }))
 }
 
 /// The design: the hypercube's points simulated in waves, a failed point replaced by a spare

@@ -20,6 +20,7 @@ use crate::output::read_record;
 use crate::posterior::{run_chains, Checkpoint};
 use crate::project::Project;
 use crate::replacement::Attempt;
+use crate::savings::SavingsPlan;
 use crate::sequence::{Round, Stage, ValidationRun};
 use crate::summary::{Summary, Timings};
 
@@ -150,7 +151,9 @@ pub fn stage_seconds(t: &mut Timings, stage: Stage) -> Option<&mut f64> {
         Stage::Merge => Some(&mut t.summary_s),
         Stage::Refine => Some(&mut t.refinement_s),
         Stage::Validate => Some(&mut t.validation_s),
-        Stage::Summary | Stage::Done => None,
+        // The savings run after summary.json's timings are written; `bemcal savings` and the
+        // coordinator's worker seconds by stage time them.
+        Stage::Summary | Stage::Savings | Stage::Done => None,
     }
 }
 
@@ -237,6 +240,17 @@ impl Executor for InProcess<'_> {
             ran.not_repeated
         ));
         Ok(Ready::Done(ran.results))
+    }
+
+    fn savings(
+        &mut self,
+        cal: &Calibration,
+        plan: &SavingsPlan,
+    ) -> Result<Ready<Vec<PointResult>>, Error> {
+        let parallel = cal.project.design.parallel;
+        Ok(Ready::Done(crate::savings::simulate_all(
+            cal, plan, parallel, self.log,
+        )?))
     }
 
     fn train(

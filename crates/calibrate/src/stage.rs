@@ -23,6 +23,9 @@ pub enum Stage {
     Validate,
     /// `summary.json` and the output files (in-process).
     Summary,
+    /// EnergyPlus at posterior draws with and without each measure (`[savings]
+    /// with_calibration`), their savings added to `summary.json`.
+    Savings,
     /// Finished.
     Done,
 }
@@ -38,6 +41,7 @@ impl Stage {
         Stage::Refine,
         Stage::Validate,
         Stage::Summary,
+        Stage::Savings,
         Stage::Done,
     ];
 
@@ -56,6 +60,7 @@ impl Stage {
             Stage::Refine => "refine",
             Stage::Validate => "validate",
             Stage::Summary => "summary",
+            Stage::Savings => "savings",
             Stage::Done => "done",
         }
     }

@@ -107,6 +107,9 @@ pub struct Project {
     /// posterior draws of a finished calibration.
     #[serde(default)]
     pub measures: Vec<crate::measures::Measure>,
+    /// `[savings]`: the measures' savings as the calibration's last stage.
+    #[serde(default)]
+    pub savings: SavingsSettings,
     /// Folder of the project file (set on load).
     #[serde(skip)]
     pub base: PathBuf,
@@ -300,6 +303,35 @@ impl Default for SimulationSettings {
 
 /// Bytes in a GiB.
 const GIB: f64 = (1u64 << 30) as f64;
+
+/// `[savings]`: the `[[measures]]`' savings estimated by the calibration itself, after its
+/// summary (`summary.json` `savings`), as `bemcal savings` would estimate them from the
+/// finished folder: on a coordinator each measure's EnergyPlus runs are jobs like the design's,
+/// cached and resumed with the run. Off by default: each draw costs two EnergyPlus runs per
+/// measure and weather, one of them shared by every measure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SavingsSettings {
+    /// Estimate the measures' savings at the end of the calibration (needs `[[measures]]`).
+    pub with_calibration: bool,
+    /// Posterior draws EnergyPlus simulates with and without each measure (`bemcal savings
+    /// --draws`).
+    pub draws: usize,
+    /// How two parameters the posterior ties together are split at each draw: `"priors"`
+    /// (drawn again from their priors along the line the meters constrain) or `"chains"`
+    /// (`bemcal savings --split`).
+    pub split: crate::savings::Split,
+}
+
+impl Default for SavingsSettings {
+    fn default() -> Self {
+        SavingsSettings {
+            with_calibration: false,
+            draws: 30,
+            split: crate::savings::Split::Priors,
+        }
+    }
+}
 
 impl SimulationSettings {
     /// Longest wall-time limit accepted, s (a week).

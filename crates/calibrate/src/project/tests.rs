@@ -467,6 +467,31 @@ fn refinement_settings_default_on_and_are_checked() {
 }
 
 #[test]
+fn savings_with_the_calibration_are_off_unless_asked_and_need_measures() {
+    let p = project("").unwrap();
+    assert!(!p.savings.with_calibration);
+    assert_eq!(
+        (p.savings.draws, p.savings.split),
+        (30, crate::savings::Split::Priors)
+    );
+    let measure = "[[measures]]\nname = \"LED\"\nscale = { lighting_power_density = 0.6 }\n";
+    let p = project(&format!(
+        "[savings]\nwith_calibration = true\ndraws = 4\nsplit = \"chains\"\n{measure}"
+    ))
+    .unwrap();
+    assert_eq!(
+        (p.savings.draws, p.savings.split),
+        (4, crate::savings::Split::Chains)
+    );
+    let e = project("[savings]\nwith_calibration = true\n").unwrap_err();
+    assert!(e.contains("needs [[measures]]"), "{e}");
+    let e = project(&format!("[savings]\ndraws = 1\n{measure}")).unwrap_err();
+    assert!(e.contains("savings.draws = 1: at least 2"), "{e}");
+    let e = project("[savings]\nsplit = \"halves\"\n").unwrap_err();
+    assert!(e.contains("halves"), "{e}");
+}
+
+#[test]
 fn the_temperature_is_one_a_number_at_least_one_or_the_surrogates_error() {
     assert_eq!(
         project("").unwrap().mcmc.temperature,

@@ -76,6 +76,19 @@ impl Project {
                 ));
             }
         }
+        if self.savings.with_calibration && self.measures.is_empty() {
+            return Err(
+                "[savings] with_calibration = true needs [[measures]] (a name and set, \
+                 scale or offset of parameters, or building fields)"
+                    .into(),
+            );
+        }
+        if self.savings.draws < 2 {
+            return Err(format!(
+                "savings.draws = {}: at least 2 (an interval needs a spread)",
+                self.savings.draws
+            ));
+        }
         if self.meters.file.is_none() && self.meters.bills.is_empty() {
             return Err(
                 "[meters] needs file = \"...\" (hourly or sub-hourly meters) or [[meters.bills]] (utility bills)"

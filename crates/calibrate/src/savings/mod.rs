@@ -23,6 +23,7 @@ use bemcal_stats::savings::{
 };
 use bemcal_weather::grid::slot_month;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use crate::calibration::{Calibration, Log};
 use crate::design::simulate_point;
@@ -71,8 +72,12 @@ pub struct SavingsOptions {
     pub split: Split,
 }
 
-/// How a saving treats two parameters the posterior ties together (`bemcal savings --split`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How a saving treats two parameters the posterior ties together (`bemcal savings --split`,
+/// `[savings] split`).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum Split {
     /// Each draw's split between them drawn again from their priors along the line the meters
     /// constrain ([`bemcal_stats::split::redraw_on_line`]): the default.
@@ -86,92 +91,244 @@ pub enum Split {
 const SPLIT_SEED: u64 = 70;
 
 /// Simulates `measures` over posterior draws of the finished calibration in `cal.out` (as
-/// `opts` says), writes `savings` into its `summary.json` and returns it.
+/// `opts` says), writes `savings` into its `summary.json` and returns it: a [`SavingsPlan`],
+/// its runs simulated here ([`simulate_all`]), and [`SavingsPlan::finish`].
 pub fn estimate_savings(
     cal: &Calibration,
     measures: &[Measure],
     opts: SavingsOptions,
     log: Log<'_>,
 ) -> Result<SavingsReport, Error> {
-    let (draws, parallel) = (opts.draws, opts.parallel);
-    let inp = &cal.inputs;
-    let plan = &inp.plan;
-    let notes_of = check_measures(cal, measures)?;
-    let mut summary = finished_summary(cal)?;
-    let posterior = PosteriorDraws::read(cal)?;
-    let lines = split_lines(cal, &summary, &posterior.rows, opts.split);
-    let rows = redraw_splits(cal, &lines, posterior.evenly(draws), SPLIT_SEED);
-    let estimate = estimate_point(&summary, &plan.calibrated)?;
-    let points: Vec<ParameterValues> = rows
-        .iter()
-        .chain(std::iter::once(&estimate))
-        .map(|x| plan.values(x))
-        .collect();
-    let mut weathers = vec![(SavingsWeather::Calibration, inp.weather_path.clone())];
+    let plan = SavingsPlan::new(cal, measures, opts.draws, opts.split)?;
+    log(&plan.describe());
+    let runs = simulate_all(cal, &plan, opts.parallel, log)?;
+    plan.finish(cal, runs, opts.surrogate_draws, log)
+}
+
+/// One EnergyPlus run of the savings: a point (a posterior draw, or the estimate after them)
+/// under one weather, without a measure or with one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SavingsRun {
+    /// The weather it runs under.
+    pub weather: SavingsWeather,
+    /// The measure (an index into [`SavingsPlan::measures`]), or none: the baseline.
+    pub measure: Option<usize>,
+    /// The point's key: its file is `point_<key>.json` in [`SavingsPlan::run_rel`]'s folder.
+    pub key: usize,
+    /// The parameters' values, the measure applied.
+    pub values: ParameterValues,
+}
+
+/// What a finished calibration's savings simulate, decided once ([`SavingsPlan::new`]): the
+/// posterior draws (their splits redrawn where the posterior ties two parameters), the
+/// estimate, the weathers and, per weather and point, the baseline's run and each measure's
+/// ([`SavingsPlan::runs`]). Whoever simulates the runs (here, or a coordinator's workers)
+/// hands their results to [`SavingsPlan::finish`] in the same order.
+pub struct SavingsPlan {
+    /// The measures, checked.
+    pub measures: Vec<Measure>,
+    /// Every run, per weather, per point (the draws, then the estimate), the baseline and
+    /// then each measure.
+    pub runs: Vec<SavingsRun>,
+    notes_of: Vec<Vec<String>>,
+    summary: Summary,
+    posterior: PosteriorDraws,
+    lines: Vec<RedrawnSplit>,
+    rows: Vec<Vec<f64>>,
+    points: Vec<ParameterValues>,
+    weathers: Vec<(SavingsWeather, PathBuf)>,
+    models: Vec<bemcal_energyplus::Model>,
+}
+
+impl SavingsPlan {
+    /// The plan of `measures` over `draws` posterior draws of the finished calibration in
+    /// `cal.out`, two tied parameters split as `split` says.
+    pub fn new(
+        cal: &Calibration,
+        measures: &[Measure],
+        draws: usize,
+        split: Split,
+    ) -> Result<SavingsPlan, Error> {
+        let inp = &cal.inputs;
+        let plan = &inp.plan;
+        let notes_of = check_measures(cal, measures)?;
+        let summary = finished_summary(cal)?;
+        let posterior = PosteriorDraws::read(cal)?;
+        let lines = split_lines(cal, &summary, &posterior.rows, split);
+        let rows = redraw_splits(cal, &lines, posterior.evenly(draws), SPLIT_SEED);
+        let estimate = estimate_point(&summary, &plan.calibrated)?;
+        let points: Vec<ParameterValues> = rows
+            .iter()
+            .chain(std::iter::once(&estimate))
+            .map(|x| plan.values(x))
+            .collect();
+        let weathers = weathers(cal)?;
+        let models = (measures.iter())
+            .map(|m| m.model(&inp.model))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|message| cal.project.error_at(&["measures"], message))?;
+        let mut runs = vec![];
+        for (w, _) in &weathers {
+            for (key, v) in points.iter().enumerate() {
+                let run = |measure, values| SavingsRun {
+                    weather: *w,
+                    measure,
+                    key,
+                    values,
+                };
+                runs.push(run(None, v.clone()));
+                for (j, m) in measures.iter().enumerate() {
+                    runs.push(run(Some(j), m.apply(v)));
+                }
+            }
+        }
+        Ok(SavingsPlan {
+            measures: measures.to_vec(),
+            runs,
+            notes_of,
+            summary,
+            posterior,
+            lines,
+            rows,
+            points,
+            weathers,
+            models,
+        })
+    }
+
+    /// One line for the log: how many runs.
+    pub fn describe(&self) -> String {
+        format!(
+            "savings: {} measure(s) at {} posterior draws and the estimate, {} weather(s): {} \
+             EnergyPlus runs (cached ones reloaded)",
+            self.measures.len(),
+            self.rows.len(),
+            self.weathers.len(),
+            self.runs.len()
+        )
+    }
+
+    /// The folder of `run`'s file, relative to the output folder.
+    pub fn run_rel(&self, run: &SavingsRun) -> String {
+        run_rel(run.weather, run.measure.map(|j| &self.measures[j]))
+    }
+
+    /// The weather file of `run`.
+    pub fn weather_path(&self, run: &SavingsRun) -> &Path {
+        let (_, path) = (self.weathers.iter())
+            .find(|(w, _)| *w == run.weather)
+            .expect("a plan's runs are under its weathers");
+        path
+    }
+
+    /// The model of `run`: the measure's building where it edits one.
+    fn model<'a>(&'a self, cal: &'a Calibration, run: &SavingsRun) -> &'a bemcal_energyplus::Model {
+        run.measure.map_or(&cal.inputs.model, |j| &self.models[j])
+    }
+
+    /// The savings from the runs' results (one per [`SavingsPlan::runs`], in order; a failed
+    /// run: its reason), corrected by `surrogate_draws` of the surrogate where that is more
+    /// than 0: written into `summary.json` (`savings`) and returned.
+    pub fn finish(
+        self,
+        cal: &Calibration,
+        runs: Vec<Result<HourlyOutputs, String>>,
+        surrogate_draws: usize,
+        log: Log<'_>,
+    ) -> Result<SavingsReport, Error> {
+        if runs.len() != self.runs.len() {
+            return Err(Error::Config(format!(
+                "savings: {} results for {} runs",
+                runs.len(),
+                self.runs.len()
+            )));
+        }
+        let simulated = Simulated {
+            cal,
+            summary: &self.summary,
+            rows: &self.rows,
+            points: &self.points,
+            weathers: self.weathers.iter().map(|(w, _)| *w).collect(),
+            measures: self.measures.len(),
+            runs,
+            lines: &self.lines,
+        };
+        let mut surrogate = match surrogate_draws {
+            0 => None,
+            n => SurrogateSide::load(cal, self.posterior.evenly(n), &self.rows, &self.lines, log)?,
+        };
+        let mut out = vec![];
+        for (j, m) in self.measures.iter().enumerate() {
+            let mut ms = simulated.measure(j, m, self.notes_of[j].clone());
+            if let Some(side) = surrogate.as_mut() {
+                if ms.beyond_prior.is_empty() && ms.notes.is_empty() {
+                    side.correct(&simulated, j, m, &mut ms)?;
+                }
+            }
+            out.push(ms);
+        }
+        let mut notes = report_notes(&self.summary, self.rows.len());
+        notes.extend(self.lines.iter().map(split_note));
+        let report = SavingsReport {
+            draws: self.rows.len(),
+            draws_file: self.posterior.file.clone(),
+            notes,
+            split_redrawn: self.lines.clone(),
+            measures: out,
+        };
+        let mut summary = self.summary;
+        summary.savings = Some(report.clone());
+        let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
+        write_atomic(&cal.out.summary_json(), &json)?;
+        Ok(report)
+    }
+}
+
+/// The weathers a saving is estimated under: the calibration's and, where the calibration
+/// used the metered year's weather, the site's typical year.
+fn weathers(cal: &Calibration) -> Result<Vec<(SavingsWeather, PathBuf)>, Error> {
+    let mut weathers = vec![(SavingsWeather::Calibration, cal.inputs.weather_path.clone())];
     if cal.project.measured_weather.is_some() {
-        let typical = crate::inputs::resolve_weather(&cal.project, inp.runner.engine())?;
+        let typical = crate::inputs::resolve_weather(&cal.project, cal.inputs.runner.engine())?;
         weathers.push((SavingsWeather::Typical, typical));
     }
-    let models = (measures.iter())
-        .map(|m| m.model(&inp.model))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|message| cal.project.error_at(&["measures"], message))?;
-    let root = cal.out.join("savings");
-    let mut jobs: Vec<Job<'_>> = vec![];
-    for (w, path) in &weathers {
-        for (i, v) in points.iter().enumerate() {
-            let dir = root.join(w.as_str());
-            jobs.push((dir.join("baseline"), path, &inp.model, i, v.clone()));
-            for (m, model) in measures.iter().zip(&models) {
-                jobs.push((dir.join(m.runs_folder()), path, model, i, m.apply(v)));
-            }
-        }
-    }
-    log(&format!(
-        "savings: {} measure(s) at {} posterior draws and the estimate, {} weather(s): {} \
-         EnergyPlus runs (cached ones reloaded)",
-        measures.len(),
-        rows.len(),
-        weathers.len(),
-        jobs.len()
-    ));
-    let simulated = Simulated {
-        cal,
-        summary: &summary,
-        rows: &rows,
-        points: &points,
-        weathers: weathers.iter().map(|(w, _)| *w).collect(),
-        measures: measures.len(),
-        runs: simulate_all(cal, &jobs, parallel, log)?,
-        lines: &lines,
+    Ok(weathers)
+}
+
+/// The folder of a savings run's file under `weather`, with `measure` or without (the
+/// baseline), relative to the output folder: `savings/<weather>/<baseline | measure>`.
+pub fn run_rel(weather: SavingsWeather, measure: Option<&Measure>) -> String {
+    let folder = measure.map_or_else(|| "baseline".to_string(), Measure::runs_folder);
+    format!("savings/{}/{folder}", weather.as_str())
+}
+
+/// EnergyPlus (or the cached file) for one savings run outside a plan, as a worker runs it:
+/// `measure`'s model (the calibration's without one) at `values` under `weather`, saved as
+/// `point_<key>.json` in [`run_rel`]'s folder of `cal.out`; its outputs and EnergyPlus's wall
+/// time (none where the file was there).
+pub fn simulate_run(
+    cal: &Calibration,
+    weather: SavingsWeather,
+    measure: Option<&Measure>,
+    key: usize,
+    values: &ParameterValues,
+) -> crate::design::PointRun {
+    let path = (weathers(cal)?.into_iter())
+        .find(|(w, _)| *w == weather)
+        .map(|(_, p)| p)
+        .ok_or_else(|| {
+            Error::Config(format!(
+                "savings under the {} weather: the project has no measured weather",
+                weather.as_str()
+            ))
+        })?;
+    let model = match measure {
+        Some(m) => m.model(&cal.inputs.model).map_err(Error::Config)?,
+        None => cal.inputs.model.clone(),
     };
-    let mut surrogate = match opts.surrogate_draws {
-        0 => None,
-        n => SurrogateSide::load(cal, posterior.evenly(n), &rows, &lines, log)?,
-    };
-    let mut out = vec![];
-    for (j, m) in measures.iter().enumerate() {
-        let mut ms = simulated.measure(j, m, notes_of[j].clone());
-        if let Some(side) = surrogate.as_mut() {
-            if ms.beyond_prior.is_empty() && ms.notes.is_empty() {
-                side.correct(&simulated, j, m, &mut ms)?;
-            }
-        }
-        out.push(ms);
-    }
-    let mut notes = report_notes(&summary, rows.len());
-    notes.extend(lines.iter().map(split_note));
-    let report = SavingsReport {
-        draws: rows.len(),
-        draws_file: posterior.file,
-        notes,
-        split_redrawn: lines,
-        measures: out,
-    };
-    summary.savings = Some(report.clone());
-    let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
-    write_atomic(&cal.out.summary_json(), &json)?;
-    Ok(report)
+    let dir = cal.out.join(run_rel(weather, measure));
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    simulate_point(&cal.inputs.runner, &model, values, &path, &dir, key)
 }
 
 /// Each measure checked against the model and the calibration (the first refused: an error
@@ -286,20 +443,11 @@ impl Simulated<'_> {
     }
 }
 
-/// A savings run: its folder, weather, model (the measure's building), key and parameter
-/// values.
-type Job<'a> = (
-    PathBuf,
-    &'a Path,
-    &'a bemcal_energyplus::Model,
-    usize,
-    ParameterValues,
-);
-
-/// Every job's run (reloaded where cached), in order; a failed run is its reason.
-fn simulate_all(
+/// Every run of `plan` (reloaded where cached), in order, `parallel` at once; a failed run
+/// is its reason.
+pub fn simulate_all(
     cal: &Calibration,
-    jobs: &[Job<'_>],
+    plan: &SavingsPlan,
     parallel: usize,
     log: Log<'_>,
 ) -> Result<Vec<Result<HourlyOutputs, String>>, Error> {
@@ -309,17 +457,22 @@ fn simulate_all(
         .build()
         .map_err(|e| Error::Config(format!("thread pool: {e}")))?;
     let done = std::sync::atomic::AtomicUsize::new(0);
+    let n = plan.runs.len();
     Ok(pool.install(|| {
-        jobs.par_iter()
-            .map(|(dir, weather, model, i, values)| {
-                let r = std::fs::create_dir_all(dir)
-                    .map_err(|e| Error::io(dir, e))
-                    .and_then(|()| simulate_point(&inp.runner, model, values, weather, dir, *i))
+        (plan.runs.par_iter())
+            .map(|run| {
+                let dir = cal.out.join(plan.run_rel(run));
+                let r = std::fs::create_dir_all(&dir)
+                    .map_err(|e| Error::io(&dir, e))
+                    .and_then(|()| {
+                        let (model, weather) = (plan.model(cal, run), plan.weather_path(run));
+                        simulate_point(&inp.runner, model, &run.values, weather, &dir, run.key)
+                    })
                     .map(|(o, _)| o)
                     .map_err(|e| bemcal_excerpt::shorten(&e.to_string()).into_owned());
-                let n = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
-                if n.is_multiple_of(20) || n == jobs.len() {
-                    log(&format!("savings: {n} of {} runs", jobs.len()));
+                let k = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+                if k.is_multiple_of(20) || k == n {
+                    log(&format!("savings: {k} of {n} runs"));
                 }
                 r
             })
