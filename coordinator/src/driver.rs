@@ -18,6 +18,7 @@ use bemcal_calibrate::design::saved_outputs;
 use bemcal_calibrate::driver::{
     drive, Executor, LazySampler, PointResult, Ready, ValidationResult,
 };
+use bemcal_calibrate::measures::SavingsWeather;
 use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::savings::{SavingsPlan, SavingsRun};
@@ -354,7 +355,7 @@ impl Leased<'_> {
     /// the measure applied (a renamed measure, or another run of the same building, reuses it).
     fn measure_job(
         &self,
-        inputs_hash: &str,
+        (inputs_hash, weather_hash): (&str, &str),
         plan: &SavingsPlan,
         run: &SavingsRun,
     ) -> std::result::Result<NewJob, Error> {
@@ -364,15 +365,12 @@ impl Leased<'_> {
             Some(m) => serde_json::to_string(m).map_err(ex)?,
             None => String::new(),
         };
-        let weather = plan.weather_path(run);
-        let bytes = std::fs::read(weather)
-            .map_err(|e| Error::Executor(format!("{}: {e}", weather.display())))?;
-        let building = measure.map_or(String::new(), |m| {
-            serde_json::to_string(&m.building).unwrap_or_default()
-        });
+        let building = match measure {
+            Some(m) => serde_json::to_string(&m.building).map_err(ex)?,
+            None => String::new(),
+        };
         let key = hex::encode(Sha256::digest(format!(
-            "measure\n{inputs_hash}\n{}\n{building}\n{values}",
-            hex::encode(Sha256::digest(&bytes))
+            "measure\n{inputs_hash}\n{weather_hash}\n{building}\n{values}"
         )));
         let what = measure.map_or("the baseline".to_string(), |m| {
             format!("measure {:?}", m.name)
@@ -794,9 +792,21 @@ impl Executor for Leased<'_> {
         plan: &SavingsPlan,
     ) -> std::result::Result<Ready<Vec<PointResult>>, Error> {
         let hash = self.inputs_hash(cal)?;
-        let specs = (plan.runs.iter())
-            .map(|run| self.measure_job(&hash, plan, run))
-            .collect::<std::result::Result<Vec<_>, _>>()?;
+        // Each weather file's content, hashed once.
+        let mut weather_hashes: Vec<(SavingsWeather, String)> = vec![];
+        let mut specs = vec![];
+        for run in &plan.runs {
+            if !weather_hashes.iter().any(|(w, _)| *w == run.weather) {
+                let path = plan.weather_path(run);
+                let bytes = std::fs::read(path)
+                    .map_err(|e| Error::Executor(format!("{}: {e}", path.display())))?;
+                weather_hashes.push((run.weather, hex::encode(Sha256::digest(&bytes))));
+            }
+            let (_, weather_hash) = (weather_hashes.iter())
+                .find(|(w, _)| *w == run.weather)
+                .expect("hashed above");
+            specs.push(self.measure_job((&hash, weather_hash), plan, run)?);
+        }
         let rows = match self.wave(specs, |j, s| j.spec.kind == s.spec.kind)? {
             Ready::Done(rows) => rows,
             Ready::Pending => return Ok(Ready::Pending),

@@ -21,6 +21,7 @@ use crate::states::{wire_stage, JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
 use bemcal_calibrate::output::{point_file, DRAWS_FILE, STATES_FILE};
+use bemcal_calibrate::savings::{parse_run, run_rel};
 use bemcal_calibrate::OutputDir;
 
 /// Largest artifact accepted (bytes).
@@ -142,21 +143,19 @@ fn check_result(
             }
             &outputs[0]
         }
-        (Some(Kind::Measure(m)), Some(Outcome::Simulated(_))) => match outputs {
-            // Its folder is the measure's (the coordinator places it by the run it asked for).
-            [f] if f.path.starts_with("savings/")
-                && f.path
-                    .ends_with(&format!("/{}", point_file(m.point as usize))) =>
-            {
-                f
+        (Some(Kind::Measure(m)), Some(Outcome::Simulated(_))) => {
+            // Exactly the file of the run the job asked for, in its measure's folder.
+            let (weather, measure) = parse_run(&m.weather, &m.measure_json)?;
+            let want = format!(
+                "{}/{}",
+                run_rel(weather, measure.as_ref()),
+                point_file(m.point as usize)
+            );
+            match outputs {
+                [f] if f.path == want => f,
+                _ => return Err(format!("a savings run brings one file, {want}")),
             }
-            _ => {
-                return Err(format!(
-                    "a savings run brings one file, savings/.../{}",
-                    point_file(m.point as usize)
-                ))
-            }
-        },
+        }
         (Some(Kind::Validate(v)), Some(Outcome::Validated(_))) => {
             let want = OutputDir::validation_point_rel(v.index as usize);
             match outputs.iter().find(|f| f.path == want) {

@@ -56,11 +56,8 @@ pub enum SplitArg {
 
 /// Run `bemcal savings`.
 pub fn run(a: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        a.draws >= 2,
-        "--draws {}: at least 2 (an interval needs a spread)",
-        a.draws
-    );
+    bemcal_calibrate::savings::check_draws(a.draws)
+        .map_err(|e| anyhow::anyhow!("--draws {}: {e}", a.draws))?;
     let project = Project::load(&a.project)?;
     let measures = match &a.measures {
         Some(path) => read_measures(path)?,

@@ -3,10 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_calibrate::measures::{Measure, SavingsWeather};
 use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::ChainTemperature;
-use bemcal_calibrate::savings::{run_rel, simulate_run};
+use bemcal_calibrate::savings::{parse_run, run_rel, SavingsRunInputs};
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
@@ -151,22 +150,14 @@ fn validate(cal: &Calibration, v: &proto::ValidateJob, work: &Path) -> Result<Ou
 /// A savings run: EnergyPlus at a posterior draw (or the estimate) with a measure or without
 /// one; an EnergyPlus failure is the job's result (the savings leave that draw out).
 fn measure(cal: &Calibration, m: &proto::MeasureJob, work: &Path) -> Result<Outputs, String> {
-    let weather: SavingsWeather =
-        serde_json::from_value(serde_json::Value::String(m.weather.clone()))
-            .map_err(|e| format!("measure job's weather {:?}: {e}", m.weather))?;
-    let measure: Option<Measure> = match m.measure_json.as_str() {
-        "" => None,
-        json => {
-            let measure: Measure =
-                serde_json::from_str(json).map_err(|e| format!("measure job's measure: {e}"))?;
-            measure.check()?;
-            Some(measure)
-        }
-    };
+    let (weather, measure) = parse_run(&m.weather, &m.measure_json)?;
     let values: ParameterValues =
         serde_json::from_str(&m.values_json).map_err(|e| format!("measure job's values: {e}"))?;
     let i = m.point as usize;
-    let secs = match simulate_run(cal, weather, measure.as_ref(), i, &values) {
+    // What the run needs is the job's to have (an error, retried, never cached); only the run
+    // itself may fail as EnergyPlus's failure, which is cached with the job's inputs.
+    let run = SavingsRunInputs::of(cal, weather, measure.as_ref()).map_err(err)?;
+    let secs = match run.simulate(cal, i, &values) {
         Ok((_, secs)) => secs,
         Err(e) => return Ok((vec![], proto::JobResult::energyplus_failed(e.to_string()))),
     };

@@ -276,14 +276,28 @@ fn savings(
         return Ok(Ready::Done(summary));
     }
     exec.enter(Stage::Savings)?;
-    let plan = SavingsPlan::new(cal, &cal.project.measures, settings.draws, settings.split)?;
+    // The calibration is finished and written: savings that cannot be estimated are said, and
+    // leave it standing.
+    let not_estimated = |e: Error| {
+        log(&format!(
+            "savings: not estimated: {e} (the calibration stands; `bemcal savings` on its \
+             folder estimates them once that is mended)"
+        ));
+        Ok(Ready::Done(summary.clone()))
+    };
+    let plan = match SavingsPlan::new(cal, &cal.project.measures, settings.draws, settings.split) {
+        Ok(plan) => plan,
+        Err(e) => return not_estimated(e),
+    };
     log(&plan.describe());
     let runs = ready!(exec.savings(cal, &plan)?);
-    let report = plan.finish(cal, runs, 0, log)?;
-    Ok(Ready::Done(Summary {
-        savings: Some(report),
-        ..summary
-    }))
+    match plan.finish(cal, runs, 0, log) {
+        Ok(report) => Ok(Ready::Done(Summary {
+            savings: Some(report),
+            ..summary.clone()
+        })),
+        Err(e) => not_estimated(e),
+    }
 }
 
 /// The design: the hypercube's points simulated in waves, a failed point replaced by a spare

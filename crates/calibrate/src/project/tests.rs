@@ -486,7 +486,15 @@ fn savings_with_the_calibration_are_off_unless_asked_and_need_measures() {
     let e = project("[savings]\nwith_calibration = true\n").unwrap_err();
     assert!(e.contains("needs [[measures]]"), "{e}");
     let e = project(&format!("[savings]\ndraws = 1\n{measure}")).unwrap_err();
-    assert!(e.contains("savings.draws = 1: at least 2"), "{e}");
+    assert!(
+        e.contains("savings.draws = 1: 1 posterior draws for the savings: at least 2"),
+        "{e}"
+    );
+    let e = project("[[measures]]\nname = \"Baseline\"\noffset = { x = 1.0 }\n").unwrap_err();
+    assert!(
+        e.contains("the name 'baseline' is the runs' without a measure"),
+        "{e}"
+    );
     let e = project("[savings]\nsplit = \"halves\"\n").unwrap_err();
     assert!(e.contains("halves"), "{e}");
 }

@@ -68,6 +68,14 @@ impl Project {
         let mut folders = std::collections::BTreeSet::new();
         for m in &self.measures {
             m.check()?;
+            // The runs without a measure have that folder (`savings::run_rel`).
+            if m.folder() == "baseline" {
+                return Err(format!(
+                    "measure '{}': the name 'baseline' is the runs' without a measure: give the \
+                     measure another",
+                    bemcal_excerpt::excerpt(&m.name, 60)
+                ));
+            }
             if !folders.insert(m.folder()) {
                 return Err(format!(
                     "measure '{}': another measure has the same name (letters and digits, \
@@ -83,12 +91,8 @@ impl Project {
                     .into(),
             );
         }
-        if self.savings.draws < 2 {
-            return Err(format!(
-                "savings.draws = {}: at least 2 (an interval needs a spread)",
-                self.savings.draws
-            ));
-        }
+        crate::savings::check_draws(self.savings.draws)
+            .map_err(|e| format!("savings.draws = {}: {e}", self.savings.draws))?;
         if self.meters.file.is_none() && self.meters.bills.is_empty() {
             return Err(
                 "[meters] needs file = \"...\" (hourly or sub-hourly meters) or [[meters.bills]] (utility bills)"

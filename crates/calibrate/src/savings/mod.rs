@@ -149,6 +149,7 @@ impl SavingsPlan {
         draws: usize,
         split: Split,
     ) -> Result<SavingsPlan, Error> {
+        check_draws(draws).map_err(Error::Config)?;
         let inp = &cal.inputs;
         let plan = &inp.plan;
         let notes_of = check_measures(cal, measures)?;
@@ -267,6 +268,14 @@ impl SavingsPlan {
             }
             out.push(ms);
         }
+        let failed = simulated.runs.iter().filter(|r| r.is_err()).count();
+        if failed > 0 {
+            log(&format!(
+                "savings: {failed} of {} EnergyPlus runs failed and are left out (reasons in \
+                 summary.json savings.measures[].failed)",
+                simulated.runs.len()
+            ));
+        }
         let mut notes = report_notes(&self.summary, self.rows.len());
         notes.extend(self.lines.iter().map(split_note));
         let report = SavingsReport {
@@ -281,6 +290,36 @@ impl SavingsPlan {
         let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
         write_atomic(&cal.out.summary_json(), &json)?;
         Ok(report)
+    }
+}
+
+/// A savings run as a measure job names it (`MeasureJob`'s weather word and measure JSON,
+/// empty for the baseline): its weather and its measure, checked.
+pub fn parse_run(
+    weather: &str,
+    measure_json: &str,
+) -> Result<(SavingsWeather, Option<Measure>), String> {
+    let w: SavingsWeather = serde_json::from_value(serde_json::Value::String(weather.into()))
+        .map_err(|e| format!("a savings run's weather {weather:?}: {e}"))?;
+    let measure = match measure_json {
+        "" => None,
+        json => {
+            let m: Measure =
+                serde_json::from_str(json).map_err(|e| format!("a savings run's measure: {e}"))?;
+            m.check()?;
+            Some(m)
+        }
+    };
+    Ok((w, measure))
+}
+
+/// Posterior draws a saving needs: at least 2 (an interval needs a spread).
+pub fn check_draws(draws: usize) -> Result<(), String> {
+    match draws {
+        0 | 1 => Err(format!(
+            "{draws} posterior draws for the savings: at least 2 (an interval needs a spread)"
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -302,33 +341,55 @@ pub fn run_rel(weather: SavingsWeather, measure: Option<&Measure>) -> String {
     format!("savings/{}/{folder}", weather.as_str())
 }
 
-/// EnergyPlus (or the cached file) for one savings run outside a plan, as a worker runs it:
-/// `measure`'s model (the calibration's without one) at `values` under `weather`, saved as
-/// `point_<key>.json` in [`run_rel`]'s folder of `cal.out`; its outputs and EnergyPlus's wall
-/// time (none where the file was there).
-pub fn simulate_run(
-    cal: &Calibration,
-    weather: SavingsWeather,
-    measure: Option<&Measure>,
-    key: usize,
-    values: &ParameterValues,
-) -> crate::design::PointRun {
-    let path = (weathers(cal)?.into_iter())
-        .find(|(w, _)| *w == weather)
-        .map(|(_, p)| p)
-        .ok_or_else(|| {
-            Error::Config(format!(
-                "savings under the {} weather: the project has no measured weather",
-                weather.as_str()
-            ))
-        })?;
-    let model = match measure {
-        Some(m) => m.model(&cal.inputs.model).map_err(Error::Config)?,
-        None => cal.inputs.model.clone(),
-    };
-    let dir = cal.out.join(run_rel(weather, measure));
-    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-    simulate_point(&cal.inputs.runner, &model, values, &path, &dir, key)
+/// What one savings run needs besides its values, outside a plan (as a worker runs it): the
+/// weather file and the model (the measure's building where it edits one), and its folder.
+pub struct SavingsRunInputs {
+    weather: PathBuf,
+    model: bemcal_energyplus::Model,
+    dir: PathBuf,
+}
+
+impl SavingsRunInputs {
+    /// The inputs of a run under `weather` with `measure` (none: the baseline), its folder
+    /// [`run_rel`]'s in `cal.out`.
+    pub fn of(
+        cal: &Calibration,
+        weather: SavingsWeather,
+        measure: Option<&Measure>,
+    ) -> Result<SavingsRunInputs, Error> {
+        let path = (weathers(cal)?.into_iter())
+            .find(|(w, _)| *w == weather)
+            .map(|(_, p)| p)
+            .ok_or_else(|| {
+                Error::Config(format!(
+                    "savings under the {} weather: the project has no measured weather",
+                    weather.as_str()
+                ))
+            })?;
+        let model = match measure {
+            Some(m) => m.model(&cal.inputs.model).map_err(Error::Config)?,
+            None => cal.inputs.model.clone(),
+        };
+        let dir = cal.out.join(run_rel(weather, measure));
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        Ok(SavingsRunInputs {
+            weather: path,
+            model,
+            dir,
+        })
+    }
+
+    /// EnergyPlus (or the cached file) at `values`, saved as `point_<key>.json` in the run's
+    /// folder; its outputs and EnergyPlus's wall time (none where the file was there).
+    pub fn simulate(
+        &self,
+        cal: &Calibration,
+        key: usize,
+        values: &ParameterValues,
+    ) -> crate::design::PointRun {
+        let runner = &cal.inputs.runner;
+        simulate_point(runner, &self.model, values, &self.weather, &self.dir, key)
+    }
 }
 
 /// Each measure checked against the model and the calibration (the first refused: an error
