@@ -6,10 +6,12 @@
 
 use std::path::{Path, PathBuf};
 
+use bemcal_calibrate::measures::SavingsReport;
 use serde::Deserialize;
 
 pub use bemcal_report::portfolio::{
     buildings_per_worker_hour, write, BuildingRow, BuildingState, OutputRow, PortfolioSummary,
+    SavingsRow,
 };
 
 use crate::client::{self, Client};
@@ -305,6 +307,9 @@ pub fn row(s: &RunStatus) -> BuildingRow {
         simulations_shared: s.simulations_shared,
         outputs,
         report: None,
+        savings: (summary.get("savings").cloned())
+            .and_then(|v| serde_json::from_value::<SavingsReport>(v).ok())
+            .map_or(vec![], |r| SavingsRow::of(&r)),
     }
 }
 
@@ -335,6 +340,7 @@ pub fn summarize(
             simulations_run: 0,
             simulations_shared: 0,
             report: None,
+            savings: vec![],
         });
     }
     PortfolioSummary {
@@ -447,5 +453,34 @@ mod tests {
         let r = row(&status(""));
         assert_eq!(r.g14_pass, Some(false));
         assert!(r.outputs.iter().all(|o| o.fitted));
+    }
+
+    /// A building whose summary has savings (the report's fixture: one measure, two outputs)
+    /// gets a savings row per output; one without has none.
+    #[test]
+    fn a_buildings_savings_are_read_from_its_summary() {
+        let fixture = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../crates/report/tests/fixtures/summary.json"
+        );
+        let status = |summary_json: String| RunStatus {
+            run_id: "r1".into(),
+            state: RunState::Done.into(),
+            summary_json,
+            ..Default::default()
+        };
+        let r = row(&status(std::fs::read_to_string(fixture).unwrap()));
+        let got: Vec<(&str, &str)> = (r.savings.iter())
+            .map(|s| (s.measure.as_str(), s.output.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("cooling set-point +1 K", "cooling_kwh"),
+                ("cooling set-point +1 K", "lighting_kwh")
+            ]
+        );
+        assert!(r.savings[0].savings_kwh.median.is_finite());
+        assert!(row(&status("{}".into())).savings.is_empty());
     }
 }

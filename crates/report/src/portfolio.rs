@@ -1,6 +1,7 @@
 //! The portfolio page: a portfolio's summary (one row per building: state, Guideline 14 per
 //! output, max R-hat, run time, failure) as `portfolio.csv`, `portfolio.json` and a
-//! self-contained `portfolio.html` linking each building's report.
+//! self-contained `portfolio.html` linking each building's report; where buildings estimated
+//! their measures' savings, `portfolio_savings.csv` and a table of them on the page.
 
 use std::path::Path;
 
@@ -24,6 +25,46 @@ pub struct OutputRow {
     /// The calibration fitted this meter (false: `fit = false`, compared only; its pass or
     /// fail does not count in the building's [`BuildingRow::g14_pass`]).
     pub fitted: bool,
+}
+
+/// One measure's saving on one output of a building, under one weather, from its
+/// `summary.json` `savings` (`[savings] with_calibration`): a row of `portfolio_savings.csv`.
+#[derive(Debug, Clone, Serialize)]
+pub struct SavingsRow {
+    /// The measure's name.
+    pub measure: String,
+    /// The model output (and its meter).
+    pub output: String,
+    /// The weather simulated (`calibration` or `typical`).
+    pub weather: String,
+    /// The annual baseline at the draws' median, kWh.
+    pub baseline_kwh: f64,
+    /// The annual saving: median and 90 % credible interval, kWh.
+    pub savings_kwh: bemcal_stats::savings::Spread,
+    /// The median saving in percent of each draw's baseline.
+    pub percent: f64,
+    /// Why the saving is the model's rather than the building's, where it is (no meter, not
+    /// fitted, Guideline 14 missed at the estimate).
+    pub warning: Option<String>,
+}
+
+impl SavingsRow {
+    /// Every measure's rows of a calibration's savings, in the summary's order.
+    pub fn of(savings: &bemcal_calibrate::measures::SavingsReport) -> Vec<SavingsRow> {
+        (savings.measures.iter())
+            .flat_map(|m| {
+                m.outputs.iter().map(|o| SavingsRow {
+                    measure: m.measure.clone(),
+                    output: o.output.clone(),
+                    weather: o.weather.as_str().to_string(),
+                    baseline_kwh: o.baseline_kwh,
+                    savings_kwh: o.savings_kwh,
+                    percent: o.savings_percent.median,
+                    warning: o.warning.clone(),
+                })
+            })
+            .collect()
+    }
 }
 
 /// Where a building's calibration is.
@@ -100,6 +141,10 @@ pub struct BuildingRow {
     pub simulations_shared: u32,
     /// The building's report, relative to the summary folder.
     pub report: Option<String>,
+    /// Its measures' savings, where its calibration estimated them (`[savings]
+    /// with_calibration`); also `portfolio_savings.csv`, a row each.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub savings: Vec<SavingsRow>,
 }
 
 /// `portfolio.json`.
@@ -209,7 +254,80 @@ pub fn write(dir: &Path, p: &PortfolioSummary) -> Result<(), ReportError> {
         &dir.join("portfolio.html"),
         portfolio_html(p, &names).as_bytes(),
     )?;
+    if p.rows.iter().any(|r| !r.savings.is_empty()) {
+        write_atomic(
+            &dir.join("portfolio_savings.csv"),
+            savings_csv(p).as_bytes(),
+        )?;
+    }
     Ok(())
+}
+
+/// `portfolio_savings.csv`: a row per building, measure, output and weather (tidy: one
+/// saving a line, for a pivot table), its median, 90 % interval and warning.
+fn savings_csv(p: &PortfolioSummary) -> String {
+    let mut csv = String::from(
+        "building,measure,output,weather,baseline_kwh,savings_kwh,savings_kwh_q5,savings_kwh_q95,savings_pct,warning\n",
+    );
+    for r in &p.rows {
+        for s in &r.savings {
+            let [lo, hi] = s.savings_kwh.interval_90;
+            csv.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{}\n",
+                csv_field(&r.building),
+                csv_field(&s.measure),
+                csv_field(&s.output),
+                s.weather,
+                num(Some(s.baseline_kwh), 0),
+                num(Some(s.savings_kwh.median), 0),
+                num(Some(lo), 0),
+                num(Some(hi), 0),
+                num(Some(s.percent), 2),
+                csv_field(s.warning.as_deref().unwrap_or(""))
+            ));
+        }
+    }
+    csv
+}
+
+/// The page's savings table: a row per building, measure and output under the calibration's
+/// weather (the typical year's are in `portfolio_savings.csv`); empty where no building
+/// estimated savings.
+fn savings_html(p: &PortfolioSummary) -> String {
+    let rows: Vec<(&BuildingRow, &SavingsRow)> = (p.rows.iter())
+        .flat_map(|r| r.savings.iter().map(move |s| (r, s)))
+        .filter(|(_, s)| s.weather == "calibration")
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut h = String::from(
+        "<h2>Savings of retrofit measures</h2>\n<p>Each building's measures over its posterior \
+         draws (EnergyPlus with and without each; the calibration's weather; \
+         <code>portfolio_savings.csv</code> has every weather): the median saving and its 90 % \
+         credible interval. A warning says where the saving is the model's rather than the \
+         building's.</p>\n<table>\n<tr><th class=\"l\">building</th><th class=\"l\">measure</th>\
+         <th class=\"l\">output</th><th>baseline (kWh)</th><th>saves (kWh)</th>\
+         <th>90 % interval (kWh)</th><th>%</th><th class=\"l\">warning</th></tr>\n",
+    );
+    for (r, s) in rows {
+        let [lo, hi] = s.savings_kwh.interval_90;
+        h.push_str(&format!(
+            "<tr><td class=\"l\">{}</td><td class=\"l\">{}</td><td class=\"l\">{}</td>\
+             <td>{}</td><td>{}</td><td>[{}, {}]</td><td>{}</td><td class=\"l\">{}</td></tr>\n",
+            esc(&r.building),
+            esc(&s.measure),
+            esc(&s.output),
+            num(Some(s.baseline_kwh), 0),
+            num(Some(s.savings_kwh.median), 0),
+            num(Some(lo), 0),
+            num(Some(hi), 0),
+            num(Some(s.percent), 1),
+            esc(s.warning.as_deref().unwrap_or(""))
+        ));
+    }
+    h.push_str("</table>\n");
+    h
 }
 
 /// `portfolio.csv`: a row per building with its state, Guideline 14 per output and estimates.
@@ -345,6 +463,114 @@ fn portfolio_html(p: &PortfolioSummary, names: &[String]) -> String {
         };
         h.push_str(&format!("<td class=\"l\">{last}</td></tr>\n"));
     }
-    h.push_str("</table>\n</body></html>\n");
+    h.push_str("</table>\n");
+    h.push_str(&savings_html(p));
+    h.push_str("</body></html>\n");
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bemcal_stats::savings::Spread;
+
+    /// A finished building with one measure's saving on two outputs under one weather, and
+    /// one that failed to load.
+    fn summary() -> PortfolioSummary {
+        let saving = |output: &str, median: f64, warning: Option<&str>| SavingsRow {
+            measure: "LED, 0.6 x lighting".into(),
+            output: output.into(),
+            weather: "calibration".into(),
+            baseline_kwh: 10_000.0,
+            savings_kwh: Spread {
+                median,
+                interval_50: [median - 10.0, median + 10.0],
+                interval_90: [median - 40.0, median + 40.0],
+            },
+            percent: median / 100.0,
+            warning: warning.map(String::from),
+        };
+        let done = BuildingRow {
+            building: "north".into(),
+            run: "r1".into(),
+            state: BuildingState::Done,
+            stage: "done".into(),
+            error: None,
+            g14_pass: Some(true),
+            outputs: vec![],
+            max_rhat: Some(1.004),
+            converged: Some(true),
+            estimate: vec![],
+            run_time_s: 100.0,
+            worker_s: 180.0,
+            worker_s_by_stage: vec![("savings".into(), 20.0)],
+            simulations_run: 6,
+            simulations_shared: 0,
+            report: Some("north/report.html".into()),
+            savings: vec![
+                saving("electricity_kwh", 1_200.0, None),
+                saving(
+                    "lighting_kwh",
+                    1_500.0,
+                    Some("no meter: the model's saving"),
+                ),
+            ],
+        };
+        let failed = BuildingRow {
+            building: "annex".into(),
+            state: BuildingState::Failed,
+            error: Some("meters.csv: line 3".into()),
+            savings: vec![],
+            report: None,
+            ..done.clone()
+        };
+        PortfolioSummary {
+            portfolio: "p1".into(),
+            name: "campus".into(),
+            buildings: 2,
+            done: 1,
+            failed: 1,
+            simulations_run: 6,
+            simulations_shared: 0,
+            worker_s: 180.0,
+            buildings_per_worker_hour: Some(20.0),
+            rows: vec![done, failed],
+        }
+    }
+
+    /// The buildings' savings come out as one tidy CSV row each (names with commas quoted),
+    /// a table on the page with the warning, and in portfolio.json; a portfolio without
+    /// savings writes no savings file.
+    #[test]
+    fn the_buildings_savings_are_a_csv_row_each_and_a_table() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = summary();
+        write(dir.path(), &p).unwrap();
+        let csv = std::fs::read_to_string(dir.path().join("portfolio_savings.csv")).unwrap();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 3, "{csv}");
+        assert_eq!(
+            lines[1],
+            "north,\"LED, 0.6 x lighting\",electricity_kwh,calibration,10000,1200,1160,1240,12.00,"
+        );
+        assert!(lines[2].ends_with(",no meter: the model's saving"), "{csv}");
+        let html = std::fs::read_to_string(dir.path().join("portfolio.html")).unwrap();
+        assert!(html.contains("<h2>Savings of retrofit measures</h2>"));
+        assert!(
+            html.contains("[1160, 1240]") && html.contains("no meter"),
+            "{html}"
+        );
+        let json = std::fs::read_to_string(dir.path().join("portfolio.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(v["rows"][0]["savings"][0]["savings_kwh"]["median"], 1200.0);
+        assert!(v["rows"][1].get("savings").is_none(), "{}", v["rows"][1]);
+
+        let none = tempfile::tempdir().unwrap();
+        let mut p = summary();
+        p.rows.iter_mut().for_each(|r| r.savings.clear());
+        write(none.path(), &p).unwrap();
+        assert!(!none.path().join("portfolio_savings.csv").exists());
+        let html = std::fs::read_to_string(none.path().join("portfolio.html")).unwrap();
+        assert!(!html.contains("Savings of retrofit measures"));
+    }
 }
