@@ -545,6 +545,15 @@ fn savings_are_the_same(local: &Path, dist: &Path, local_log: &str, dist_log: &s
     }
     let (sa, sb) = (summary(local), summary(dist));
     assert_eq!(sa["savings"], sb["savings"], "summary.json savings");
+    // The stage's time is in the timings on both paths (local: its wall time; the
+    // coordinator: its workers' seconds).
+    for s in [&sa, &sb] {
+        assert!(
+            s["timings"]["savings_s"].as_f64().unwrap() > 0.0,
+            "{}",
+            s["timings"]
+        );
+    }
     let measures = sa["savings"]["measures"].as_array().unwrap();
     assert_eq!(measures.len(), 2, "{}", sa["savings"]);
     // The economizer saves cooling at every draw (its runs are the building's edited model).

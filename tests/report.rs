@@ -177,7 +177,7 @@ fn write_calibration(dir: &Path) {
         "surrogate_held_out": {"metrics": {"heating_kwh": {"cv_rmse_pct": 9.0, "nmbe_pct": 1.0, "rmse_kwh": 1.2, "mean_kwh": 8.0}}, "points": [3, 7]},
         "refinement": [],
         "timings": {"design_s": 0.01, "simulations_s": 250.0, "training_s": 300.0, "chains_s": 120.0,
-                    "summary_s": 5.0, "validation_s": 8.0, "refinement_s": 0.0, "total_s": 683.01}
+                    "summary_s": 5.0, "validation_s": 8.0, "refinement_s": 0.0, "savings_s": 0.0, "total_s": 683.01}
     });
     // Savings of a measure (`bemcal savings`), as a real run wrote them.
     let mut summary = summary;

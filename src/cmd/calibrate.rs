@@ -322,8 +322,10 @@ fn print_refinement(s: &bemcal_calibrate::Summary) {
 fn print_timings(s: &bemcal_calibrate::Summary, out: &std::path::Path) {
     let t = &s.timings;
     println!(
-        "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, refinement {:.0} s, summary {:.0} s, validation {:.0} s, total {:.0} s",
-        t.design_s, t.simulations_s, t.training_s, t.chains_s, t.refinement_s, t.summary_s, t.validation_s, t.total_s
+        "\ntimings: design {:.0} s, simulations {:.0} s, training {:.0} s, chains {:.0} s, refinement {:.0} s, summary {:.0} s, validation {:.0} s, {}total {:.0} s",
+        t.design_s, t.simulations_s, t.training_s, t.chains_s, t.refinement_s, t.summary_s, t.validation_s,
+        if t.savings_s > 0.0 { format!("savings {:.0} s, ", t.savings_s) } else { String::new() },
+        t.total_s
     );
     println!(
         "wrote {}/summary.json, draws.csv, posterior_predictive.csv, validation/ (discrepancy.csv: the model-form discrepancy), calibrated.idf",

@@ -291,7 +291,9 @@ fn savings(
     };
     log(&plan.describe());
     let runs = ready!(exec.savings(cal, &plan)?);
-    match plan.finish(cal, runs, 0, log) {
+    // The savings' time closed into the timings the summary is written again with.
+    exec.enter(Stage::Done)?;
+    match plan.finish(cal, runs, 0, Some(exec.timings()), log) {
         Ok(report) => Ok(Ready::Done(Summary {
             savings: Some(report),
             ..summary.clone()

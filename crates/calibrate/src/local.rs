@@ -151,9 +151,8 @@ pub fn stage_seconds(t: &mut Timings, stage: Stage) -> Option<&mut f64> {
         Stage::Merge => Some(&mut t.summary_s),
         Stage::Refine => Some(&mut t.refinement_s),
         Stage::Validate => Some(&mut t.validation_s),
-        // The savings run after summary.json's timings are written; `bemcal savings` and the
-        // coordinator's worker seconds by stage time them.
-        Stage::Summary | Stage::Savings | Stage::Done => None,
+        Stage::Savings => Some(&mut t.savings_s),
+        Stage::Summary | Stage::Done => None,
     }
 }
 

@@ -49,6 +49,11 @@ pub struct Timings {
     #[serde(default, deserialize_with = "bemcal_stats::nan::null_as_nan")]
     #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub refinement_s: f64,
+    /// The measures' savings (`[savings] with_calibration`): EnergyPlus with and without each
+    /// measure at posterior draws; 0 without them.
+    #[serde(default, deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub savings_s: f64,
     /// The whole calibration.
     #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
     #[schemars(with = "bemcal_stats::nan::NumberOrNull")]

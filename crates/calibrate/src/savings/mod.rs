@@ -102,7 +102,7 @@ pub fn estimate_savings(
     let plan = SavingsPlan::new(cal, measures, opts.draws, opts.split)?;
     log(&plan.describe());
     let runs = simulate_all(cal, &plan, opts.parallel, log)?;
-    plan.finish(cal, runs, opts.surrogate_draws, log)
+    plan.finish(cal, runs, opts.surrogate_draws, None, log)
 }
 
 /// One EnergyPlus run of the savings: a point (a posterior draw, or the estimate after them)
@@ -229,12 +229,14 @@ impl SavingsPlan {
 
     /// The savings from the runs' results (one per [`SavingsPlan::runs`], in order; a failed
     /// run: its reason), corrected by `surrogate_draws` of the surrogate where that is more
-    /// than 0: written into `summary.json` (`savings`) and returned.
+    /// than 0: written into `summary.json` (`savings`, and `timings` where given: the
+    /// calibration's with its savings stage) and returned.
     pub fn finish(
         self,
         cal: &Calibration,
         runs: Vec<Result<HourlyOutputs, String>>,
         surrogate_draws: usize,
+        timings: Option<crate::summary::Timings>,
         log: Log<'_>,
     ) -> Result<SavingsReport, Error> {
         if runs.len() != self.runs.len() {
@@ -287,6 +289,9 @@ impl SavingsPlan {
         };
         let mut summary = self.summary;
         summary.savings = Some(report.clone());
+        if let Some(t) = timings {
+            summary.timings = t;
+        }
         let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Config(e.to_string()))?;
         write_atomic(&cal.out.summary_json(), &json)?;
         Ok(report)

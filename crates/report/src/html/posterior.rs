@@ -406,7 +406,12 @@ pub(super) fn run_timings(s: &Summary) -> String {
         ("refinement simulations", t.refinement_s),
         ("posterior summary", t.summary_s),
         ("validation simulations", t.validation_s),
-    ] {
+        ("savings simulations", t.savings_s),
+    ]
+    .into_iter()
+    // The savings only where the calibration estimated them.
+    .filter(|(name, v)| !(name.starts_with("savings") && *v == 0.0))
+    {
         let share = if t.total_s > 0.0 {
             100.0 * v / t.total_s
         } else {
