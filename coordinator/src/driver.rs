@@ -18,8 +18,7 @@ use bemcal_calibrate::design::saved_outputs;
 use bemcal_calibrate::driver::{
     drive, Executor, LazySampler, PointResult, Ready, ValidationResult,
 };
-use bemcal_calibrate::measures::SavingsWeather;
-use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
+use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::Checkpoint;
 use bemcal_calibrate::savings::{SavingsPlan, SavingsRun};
 use bemcal_calibrate::sequence::{Round, ValidationRun};
@@ -793,18 +792,17 @@ impl Executor for Leased<'_> {
     ) -> std::result::Result<Ready<Vec<PointResult>>, Error> {
         let hash = self.inputs_hash(cal)?;
         // Each weather file's content, hashed once.
-        let mut weather_hashes: Vec<(SavingsWeather, String)> = vec![];
+        let mut weather_hashes = vec![];
+        for (w, path) in plan.weathers() {
+            let bytes = std::fs::read(path)
+                .map_err(|e| Error::Executor(format!("{}: {e}", path.display())))?;
+            weather_hashes.push((*w, hex::encode(Sha256::digest(&bytes))));
+        }
         let mut specs = vec![];
         for run in &plan.runs {
-            if !weather_hashes.iter().any(|(w, _)| *w == run.weather) {
-                let path = plan.weather_path(run);
-                let bytes = std::fs::read(path)
-                    .map_err(|e| Error::Executor(format!("{}: {e}", path.display())))?;
-                weather_hashes.push((run.weather, hex::encode(Sha256::digest(&bytes))));
-            }
             let (_, weather_hash) = (weather_hashes.iter())
                 .find(|(w, _)| *w == run.weather)
-                .expect("hashed above");
+                .expect("a plan's runs are under its weathers");
             specs.push(self.measure_job((&hash, weather_hash), plan, run)?);
         }
         let rows = match self.wave(specs, |j, s| j.spec.kind == s.spec.kind)? {
@@ -817,15 +815,15 @@ impl Executor for Leased<'_> {
                 results.push(Err(e));
                 continue;
             }
-            let dir = plan.run_rel(run);
             let files: Vec<File> = (j.outputs.iter())
                 .map(|f| File {
-                    path: format!("{dir}/{}", point_file(run.key)),
+                    path: plan.run_file(run),
                     ..f.clone()
                 })
                 .collect();
             self.st.place(&cal.out, &files).map_err(ex)?;
-            let o = saved_outputs(&cal.out.join(&dir), run.key, &run.values).ok_or_else(|| {
+            let dir = cal.out.join(plan.run_rel(run));
+            let o = saved_outputs(&dir, run.key, &run.values).ok_or_else(|| {
                 Error::Executor(format!(
                     "{}: the worker's outputs did not match the run's parameter values",
                     j.label

@@ -20,8 +20,8 @@ use crate::proto::*;
 use crate::states::{wire_stage, JobKind, JobState, RunState, Stage};
 use crate::{bundle, excerpt, CHUNK_BYTES, MAX_ERROR_BYTES};
 use bemcal_calibrate::design::check_point_file;
-use bemcal_calibrate::output::{point_file, DRAWS_FILE, STATES_FILE};
-use bemcal_calibrate::savings::{parse_run, run_rel};
+use bemcal_calibrate::output::{DRAWS_FILE, STATES_FILE};
+use bemcal_calibrate::savings::{parse_run, run_file};
 use bemcal_calibrate::OutputDir;
 
 /// Largest artifact accepted (bytes).
@@ -146,11 +146,7 @@ fn check_result(
         (Some(Kind::Measure(m)), Some(Outcome::Simulated(_))) => {
             // Exactly the file of the run the job asked for, in its measure's folder.
             let (weather, measure) = parse_run(&m.weather, &m.measure_json)?;
-            let want = format!(
-                "{}/{}",
-                run_rel(weather, measure.as_ref()),
-                point_file(m.point as usize)
-            );
+            let want = run_file(weather, measure.as_ref(), m.point as usize);
             match outputs {
                 [f] if f.path == want => f,
                 _ => return Err(format!("a savings run brings one file, {want}")),

@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use bemcal_calibrate::output::{point_file, OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
+use bemcal_calibrate::output::{OutputDir, DRAWS_FILE, STATES_FILE, WARM_FILE};
 use bemcal_calibrate::posterior::ChainTemperature;
-use bemcal_calibrate::savings::{parse_run, run_rel, SavingsRunInputs};
+use bemcal_calibrate::savings::{parse_run, run_file, SavingsRunInputs};
 use bemcal_calibrate::Calibration;
 use bemcal_calibrate::Project;
 use bemcal_client::artifacts::safe_relative;
@@ -161,7 +161,7 @@ fn measure(cal: &Calibration, m: &proto::MeasureJob, work: &Path) -> Result<Outp
         Ok((_, secs)) => secs,
         Err(e) => return Ok((vec![], proto::JobResult::energyplus_failed(e.to_string()))),
     };
-    let rel = format!("{}/{}", run_rel(weather, measure.as_ref()), point_file(i));
+    let rel = run_file(weather, measure.as_ref(), i);
     Ok((
         vec![(rel.clone(), work.join(&rel))],
         proto::JobResult::simulated(secs),

@@ -276,29 +276,31 @@ fn savings(
         return Ok(Ready::Done(summary));
     }
     exec.enter(Stage::Savings)?;
+    let estimated =
+        match SavingsPlan::new(cal, &cal.project.measures, settings.draws, settings.split) {
+            Ok(plan) => {
+                log(&plan.describe());
+                let runs = ready!(exec.savings(cal, &plan)?);
+                // The savings' time closed into the timings the summary is written again with.
+                exec.enter(Stage::Done)?;
+                plan.finish(cal, runs, 0, Some(exec.timings()), log)
+            }
+            Err(e) => Err(e),
+        };
     // The calibration is finished and written: savings that cannot be estimated are said, and
     // leave it standing.
-    let not_estimated = |e: Error| {
-        log(&format!(
-            "savings: not estimated: {e} (the calibration stands; `bemcal savings` on its \
-             folder estimates them once that is mended)"
-        ));
-        Ok(Ready::Done(summary.clone()))
-    };
-    let plan = match SavingsPlan::new(cal, &cal.project.measures, settings.draws, settings.split) {
-        Ok(plan) => plan,
-        Err(e) => return not_estimated(e),
-    };
-    log(&plan.describe());
-    let runs = ready!(exec.savings(cal, &plan)?);
-    // The savings' time closed into the timings the summary is written again with.
-    exec.enter(Stage::Done)?;
-    match plan.finish(cal, runs, 0, Some(exec.timings()), log) {
+    match estimated {
         Ok(report) => Ok(Ready::Done(Summary {
             savings: Some(report),
-            ..summary.clone()
+            ..summary
         })),
-        Err(e) => not_estimated(e),
+        Err(e) => {
+            log(&format!(
+                "savings: not estimated: {e} (the calibration stands; `bemcal savings` on its \
+                 folder estimates them once that is mended)"
+            ));
+            Ok(Ready::Done(summary))
+        }
     }
 }
 

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use bemcal_calibrate::measures::SavingsWeather;
 use serde::Serialize;
 
 use crate::error::ReportError;
@@ -35,8 +36,8 @@ pub struct SavingsRow {
     pub measure: String,
     /// The model output (and its meter).
     pub output: String,
-    /// The weather simulated (`calibration` or `typical`).
-    pub weather: String,
+    /// The weather simulated.
+    pub weather: SavingsWeather,
     /// The annual baseline at the draws' median, kWh.
     pub baseline_kwh: f64,
     /// The annual saving: median and 90 % credible interval, kWh.
@@ -56,7 +57,7 @@ impl SavingsRow {
                 m.outputs.iter().map(|o| SavingsRow {
                     measure: m.measure.clone(),
                     output: o.output.clone(),
-                    weather: o.weather.as_str().to_string(),
+                    weather: o.weather,
                     baseline_kwh: o.baseline_kwh,
                     savings_kwh: o.savings_kwh,
                     percent: o.savings_percent.median,
@@ -277,7 +278,7 @@ fn savings_csv(p: &PortfolioSummary) -> String {
                 csv_field(&r.building),
                 csv_field(&s.measure),
                 csv_field(&s.output),
-                s.weather,
+                s.weather.as_str(),
                 num(Some(s.baseline_kwh), 0),
                 num(Some(s.savings_kwh.median), 0),
                 num(Some(lo), 0),
@@ -296,7 +297,7 @@ fn savings_csv(p: &PortfolioSummary) -> String {
 fn savings_html(p: &PortfolioSummary) -> String {
     let rows: Vec<(&BuildingRow, &SavingsRow)> = (p.rows.iter())
         .flat_map(|r| r.savings.iter().map(move |s| (r, s)))
-        .filter(|(_, s)| s.weather == "calibration")
+        .filter(|(_, s)| s.weather == SavingsWeather::Calibration)
         .collect();
     if rows.is_empty() {
         return String::new();
@@ -480,7 +481,7 @@ mod tests {
         let saving = |output: &str, median: f64, warning: Option<&str>| SavingsRow {
             measure: "LED, 0.6 x lighting".into(),
             output: output.into(),
-            weather: "calibration".into(),
+            weather: SavingsWeather::Calibration,
             baseline_kwh: 10_000.0,
             savings_kwh: Spread {
                 median,

@@ -214,8 +214,18 @@ impl SavingsPlan {
         run_rel(run.weather, run.measure.map(|j| &self.measures[j]))
     }
 
+    /// `run`'s file, relative to the output folder ([`run_file`]).
+    pub fn run_file(&self, run: &SavingsRun) -> String {
+        run_file(run.weather, run.measure.map(|j| &self.measures[j]), run.key)
+    }
+
+    /// The weathers the plan's runs are under, with their files.
+    pub fn weathers(&self) -> &[(SavingsWeather, PathBuf)] {
+        &self.weathers
+    }
+
     /// The weather file of `run`.
-    pub fn weather_path(&self, run: &SavingsRun) -> &Path {
+    fn weather_path(&self, run: &SavingsRun) -> &Path {
         let (_, path) = (self.weathers.iter())
             .find(|(w, _)| *w == run.weather)
             .expect("a plan's runs are under its weathers");
@@ -344,6 +354,16 @@ fn weathers(cal: &Calibration) -> Result<Vec<(SavingsWeather, PathBuf)>, Error> 
 pub fn run_rel(weather: SavingsWeather, measure: Option<&Measure>) -> String {
     let folder = measure.map_or_else(|| "baseline".to_string(), Measure::runs_folder);
     format!("savings/{}/{folder}", weather.as_str())
+}
+
+/// A savings run's file, relative to the output folder: `point_<key>.json` in [`run_rel`]'s
+/// folder (where the worker writes it, the coordinator checks and places it).
+pub fn run_file(weather: SavingsWeather, measure: Option<&Measure>, key: usize) -> String {
+    format!(
+        "{}/{}",
+        run_rel(weather, measure),
+        crate::output::point_file(key)
+    )
 }
 
 /// What one savings run needs besides its values, outside a plan (as a worker runs it): the
