@@ -48,12 +48,19 @@ declare -A CLIMATE=(
   [Golden]=bundled:USA_CO_Golden-NREL.724666_TMY3.epw
   [Chicago]=bundled:USA_IL_Chicago-OHare.Intl.AP.725300_TMY3.epw
 )
-BUILDINGS=""  # every building, in order
+# The from-scratch pair third: the cost ratio is known before the last shapes finish.
+BATCHES=${BATCHES:-p66-A p66-B p66-scratch p66-C p66-D p66-office}
+# Only the buildings of the batches asked for are synthesised (seeds stay each building's own).
+wanted() {
+  case " $BATCHES " in *" p66-$1 "*) return 0 ;; esac
+  case " $BATCHES " in *" p66-scratch "*) case " $SCRATCH " in *" $1-$2 "*) return 0 ;; esac ;; esac
+  return 1
+}
 seed=2100
 for s in A B C D office; do
   for c in Golden Chicago; do
     name=$s-$c; seed=$((seed + 1)); dir="$OUT/buildings/$name"
-    BUILDINGS="$BUILDINGS $name"
+    wanted "$s" "$c" || continue
     [ -f "$dir/meters.csv" ] && continue
     mkdir -p "$dir"
     if [ "$s" = office ]; then
@@ -86,9 +93,6 @@ done
 { echo 'name = "p66-scratch"'
   for b in $SCRATCH; do printf '[[building]]\nname = "%s-scratch"\nproject = "buildings/%s/project-scratch.toml"\n' "$b" "$b"; done
 } >"$OUT/p66-scratch.toml"
-# The from-scratch pair third: the cost ratio is known before the last shapes finish.
-BATCHES=${BATCHES:-p66-A p66-B p66-scratch p66-C p66-D p66-office}
-
 # Workers without EnergyPlus or PyTorch fail every building at once (a fresh machine's missing
 # .venv did, 2026-12-07): check the environment first.
 "$B" doctor >/dev/null 2>&1 || { echo "bemcal doctor failed: run make setup (or set BEMCAL_VENV)" >&2; exit 1; }

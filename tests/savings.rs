@@ -1,9 +1,10 @@
 //! Issue 70: retrofit savings with credible intervals from a finished calibration
-//! (`bemcal savings`). The small model's two-parameter calibration, then three measures over its
+//! (`bemcal savings`). The small model's two-parameter calibration, then five measures over its
 //! posterior draws with EnergyPlus: a cooling set-point raised 1 K (against EnergyPlus at the
-//! hidden truth), a set-point beyond the prior (the surrogate's training range), and LED
-//! lighting, then the surrogate's route for the measures inside its range; bad measures refused
-//! with the file and the reason. Real EnergyPlus, PyTorch and
+//! hidden truth), a set-point beyond the prior (the surrogate's training range), LED lighting,
+//! an economizer (a building edit) and the AHUs' fan pressure (an edit of the IDF's objects),
+//! then the surrogate's route for the measures inside its range; bad measures refused with the
+//! file and the reason. Real EnergyPlus, PyTorch and
 //! ONNX Runtime; skipped (with a message) when the Python environment is missing.
 
 use std::path::Path;
@@ -29,6 +30,9 @@ scale = { lighting_power_density = 0.6 }
 [[measures]]
 name = "air-side economizer"
 building = { economizer = true }
+[[measures]]
+name = "low-pressure ductwork"
+idf = [{ class = "HVACTemplate:System:VAV", field = "Supply Fan Delta Pressure", edit = "scale", value = 0.7 }]
 "#;
 
 fn project() -> String {
@@ -159,6 +163,29 @@ fn savings_come_with_intervals_from_the_posterior() {
         lights["savings_kwh"]["interval_90"],
         serde_json::json!([0.0, 0.0])
     );
+    // An edit of the IDF's objects that no parameter reaches (the AHUs' fan pressure x 0.7):
+    // EnergyPlus simulates it, and it saves electricity (the fans) at every draw, no lighting.
+    let ducts = (savings["measures"].as_array().unwrap().iter())
+        .find(|m| m["measure"] == "low-pressure ductwork")
+        .unwrap();
+    assert_eq!(ducts["method"], "energyplus", "{ducts}");
+    assert_eq!(
+        ducts["edits"],
+        serde_json::json!(["HVACTemplate:System:VAV * Supply Fan Delta Pressure x 0.7"])
+    );
+    assert!(
+        (ducts["method_note"].as_str().unwrap()).contains("edits the IDF"),
+        "{ducts}"
+    );
+    let fans = row(&savings, "low-pressure ductwork", "electricity_kwh");
+    let [lo, hi] = [0, 1].map(|i| fans["savings_kwh"]["interval_90"][i].as_f64().unwrap());
+    eprintln!("fan pressure x 0.7: electricity saving [{lo:.0}, {hi:.0}] kWh");
+    assert!(lo > 0.0 && lo <= hi, "{fans}");
+    let lights = row(&savings, "low-pressure ductwork", "lighting_kwh");
+    assert_eq!(
+        lights["savings_kwh"]["interval_90"],
+        serde_json::json!([0.0, 0.0])
+    );
     // LED lighting x 0.6 saves 40 % of the lighting at every draw.
     let led = row(&savings, "LED lighting", "lighting_kwh");
     let pct = led["savings_percent"]["median"].as_f64().unwrap();
@@ -184,8 +211,8 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     let text = String::from_utf8_lossy(&py.stdout);
     let (rows, pct) = text.trim().split_once(' ').unwrap();
-    // 4 measures x 5 outputs x (the year + 12 months).
-    assert_eq!(rows, "260", "{text}");
+    // 5 measures x 5 outputs x (the year + 12 months).
+    assert_eq!(rows, "325", "{text}");
     assert_eq!(pct, "40.0", "{text}");
 
     // The surrogate route: 40 draws of the surrogate corrected onto EnergyPlus at the 6 it
@@ -216,6 +243,10 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     assert_eq!(
         method("air-side economizer"),
+        ("energyplus".into(), 0.into())
+    );
+    assert_eq!(
+        method("low-pressure ductwork"),
         ("energyplus".into(), 0.into())
     );
     let cooling = row(&savings, "cooling set-point +1 K", "cooling_kwh");
@@ -271,6 +302,21 @@ fn bad_measures_are_refused_with_the_file_and_the_reason() {
         (
             "[[measures]]\nname = \"doas\"\nbuilding = { hvac = \"doas_fan_coil\" }\n",
             "the edits change the model's parameters",
+        ),
+        (
+            "[[measures]]\nname = \"fans\"\nidf = [{ class = \"HVACTemplate:System:VAV\", \
+             field = \"Fan Pressure\", value = 500.0 }]\n",
+            "class 'HVACTemplate:System:VAV' has no field 'Fan Pressure'",
+        ),
+        (
+            "[[measures]]\nname = \"fans\"\nidf = [{ class = \"HVACTemplate:System:VAV\", \
+             object = \"AHU9\", field = \"Supply Fan Delta Pressure\", value = 500.0 }]\n",
+            "the IDF each draw simulates has no object AHU9",
+        ),
+        (
+            "[[measures]]\nname = \"fans\"\nidf = [{ class = \"HVACTemplate:System:VAV\", \
+             field = \"Supply Fan Total Efficiency\", value = 0.7 }]\n",
+            "changes nothing: the fields already hold what it writes",
         ),
     ] {
         std::fs::write(dir.join("project.toml"), base.clone() + measure).unwrap();

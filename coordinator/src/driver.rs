@@ -350,7 +350,7 @@ impl Leased<'_> {
     }
 
     /// The job of one savings run of `plan`, cached by what it simulates: the inputs, the
-    /// weather file's content, the measure's building edits and the parameters' values with
+    /// weather file's content, the measure's building and IDF edits and the parameters' values with
     /// the measure applied (a renamed measure, or another run of the same building, reuses it).
     fn measure_job(
         &self,
@@ -364,7 +364,9 @@ impl Leased<'_> {
             Some(m) => serde_json::to_string(m).map_err(ex)?,
             None => String::new(),
         };
+        // The building edits' JSON as before IDF edits existed (cached runs keep their keys).
         let building = match measure {
+            Some(m) if m.edits_model() => m.model_edits_key(),
             Some(m) => serde_json::to_string(&m.building).map_err(ex)?,
             None => String::new(),
         };

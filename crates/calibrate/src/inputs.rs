@@ -238,7 +238,7 @@ pub fn weather_for(
 pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
     let path = project.resolve(&project.model);
     let mut model = Model::load(&path, runner.idd())?;
-    project.check_model(&model)?;
+    project.check_model(&model, runner.idd())?;
     if let Some(p) = &project.priors {
         let path = project.resolve(p);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;

@@ -16,10 +16,15 @@
 //! [[measures]]
 //! name = "air-side economizer"
 //! building = { economizer = true }             # a generated building's spec fields
+//! [[measures]]
+//! name = "low-pressure ductwork"                 # fields of the IDF each draw simulates
+//! idf = [{ class = "HVACTemplate:System:VAV", field = "Supply Fan Delta Pressure", edit = "scale", value = 0.7 }]
 //! ```
 
 use std::collections::BTreeMap;
 
+use bemcal_energyplus::idd::Idd;
+use bemcal_energyplus::model::IdfEdit;
 use bemcal_energyplus::params::ParameterValues;
 use bemcal_stats::savings::Spread;
 use serde::{Deserialize, Serialize};
@@ -46,6 +51,12 @@ pub struct Measure {
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     #[schemars(with = "BTreeMap<String, serde_json::Value>")]
     pub building: BTreeMap<String, serde_json::Value>,
+    /// Fields of the IDF each draw simulates (your own IDF's objects, or a generated
+    /// building's), the same in every draw, applied after the draw's parameters
+    /// ([`bemcal_energyplus::Model::with_idf_edits`]): what a measure changes that no parameter
+    /// reaches. EnergyPlus simulates such a measure.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub idf: Vec<IdfEdit>,
 }
 
 /// How a measure edits one parameter.
@@ -97,7 +108,8 @@ impl Measure {
 
     /// The edits as a reader says them: `lighting_power_density x 0.6`, `economizer = true`.
     pub fn describe(&self) -> Vec<String> {
-        let building = self.building.iter().map(|(n, v)| format!("{n} = {v}"));
+        let building = (self.building.iter().map(|(n, v)| format!("{n} = {v}")))
+            .chain(self.idf.iter().map(IdfEdit::describe));
         self.edits()
             .into_iter()
             .map(|(n, e)| match e {
@@ -109,30 +121,61 @@ impl Measure {
             .collect()
     }
 
+    /// True where it edits the model itself (its building or its IDF), not only the
+    /// parameters' values: the surrogate never saw such a model, and a run's values alone do
+    /// not say what it simulated.
+    pub fn edits_model(&self) -> bool {
+        !self.building.is_empty() || !self.idf.is_empty()
+    }
+
     /// The model its runs simulate: the calibration's, with the measure's building edits
-    /// where it has any ([`bemcal_energyplus::Model::with_building_edits`]).
+    /// ([`bemcal_energyplus::Model::with_building_edits`]) and then its IDF edits
+    /// ([`bemcal_energyplus::Model::with_idf_edits`]) where it has any.
     pub fn model(
         &self,
         model: &bemcal_energyplus::Model,
+        idd: &Idd,
     ) -> Result<bemcal_energyplus::Model, String> {
-        if self.building.is_empty() {
-            return Ok(model.clone());
-        }
         let who = format!("measure '{}'", bemcal_excerpt::excerpt(&self.name, 60));
-        model
-            .with_building_edits(&self.building)
-            .map_err(|e| format!("{who}: {e}"))
+        let mut m = model.clone();
+        if !self.building.is_empty() {
+            m = m
+                .with_building_edits(&self.building)
+                .map_err(|e| format!("{who}: {e}"))?;
+        }
+        if !self.idf.is_empty() {
+            m = m
+                .with_idf_edits(&self.idf, idd)
+                .map_err(|e| format!("{who}: {e}"))?;
+        }
+        Ok(m)
+    }
+
+    /// What its edits of the model are, as text: the key of the runs it simulates beside their
+    /// values (the building edits' JSON, then the IDF edits' where there are any); empty for a
+    /// measure of parameters alone.
+    pub fn model_edits_key(&self) -> String {
+        if !self.edits_model() {
+            return String::new();
+        }
+        let mut text = serde_json::to_string(&self.building).unwrap_or_default();
+        if !self.idf.is_empty() {
+            text.push('\n');
+            text.push_str(&serde_json::to_string(&self.idf).unwrap_or_default());
+        }
+        text
     }
 
     /// The folder of its runs under `savings/<weather>/`: [`Measure::folder`], and for a
-    /// measure with building edits a key of those edits, since a run is reloaded by its
-    /// parameter values alone and the same values then simulate another building.
+    /// measure that edits the model a key of those edits ([`Measure::model_edits_key`]),
+    /// since a run is reloaded by its parameter values alone and the same values then
+    /// simulate another building.
     pub fn runs_folder(&self) -> String {
-        if self.building.is_empty() {
+        if !self.edits_model() {
             return self.folder();
         }
         use sha2::Digest;
-        let text = serde_json::to_string(&self.building).unwrap_or_default();
+        let text = self.model_edits_key();
         let digest = sha2::Sha256::digest(text.as_bytes());
         let key: String = digest[..4].iter().map(|b| format!("{b:02x}")).collect();
         format!("{}-{key}", self.folder())
@@ -162,11 +205,25 @@ impl Measure {
             ));
         }
         let edits = self.edits();
-        if edits.is_empty() && self.building.is_empty() {
+        if edits.is_empty() && !self.edits_model() {
             return Err(format!(
                 "{who} names nothing: give set = {{ NAME = VALUE }}, scale = {{ NAME = FACTOR }} \
-                 or offset = {{ NAME = AMOUNT }} of parameters, or building = {{ FIELD = VALUE }}"
+                 or offset = {{ NAME = AMOUNT }} of parameters, building = {{ FIELD = VALUE }}, \
+                 or idf = [{{ class = ..., object = ..., field = ..., edit = ..., value = ... }}]"
             ));
+        }
+        for e in &self.idf {
+            let identity = match e.edit {
+                bemcal_energyplus::model::Edit::Set => false,
+                bemcal_energyplus::model::Edit::Scale => e.value == 1.0,
+                bemcal_energyplus::model::Edit::Offset => e.value == 0.0,
+            };
+            if identity {
+                return Err(format!(
+                    "{who} changes nothing: idf edit '{}' leaves the field as it is",
+                    bemcal_excerpt::excerpt(&e.describe(), 120)
+                ));
+            }
         }
         let mut seen = std::collections::BTreeSet::new();
         for (name, edit) in edits {
@@ -205,13 +262,26 @@ impl Measure {
     pub fn check_model(
         &self,
         model: &bemcal_energyplus::Model,
+        idd: &Idd,
         calibrated: &[String],
         fixed: &ParameterValues,
     ) -> Result<Vec<String>, String> {
         let who = format!("measure '{}'", bemcal_excerpt::excerpt(&self.name, 60));
         let mut notes = vec![];
+        if self.edits_model() {
+            self.model(model, idd)?;
+        }
+        if !self.idf.is_empty() {
+            let objects: Vec<String> = (self.idf.iter())
+                .map(|e| format!("{} {}", e.class, e.object))
+                .collect();
+            notes.push(format!(
+                "it edits the IDF ({}), the same in every draw: its interval carries the \
+                 calibrated parameters' uncertainty under the edited model, none of the edit's own",
+                bemcal_excerpt::shorten(&objects.join(", "))
+            ));
+        }
         if !self.building.is_empty() {
-            self.model(model)?;
             let fields: Vec<&str> = self.building.keys().map(String::as_str).collect();
             notes.push(format!(
                 "it edits the building ({}), the same in every draw: its interval carries the \
@@ -510,6 +580,29 @@ mod tests {
         assert_eq!(m.apply(&v), v);
         let plain = measure("name = \"LED\"\nscale = { lpd = 0.6 }");
         assert_eq!(plain.runs_folder(), "led");
+    }
+
+    #[test]
+    fn an_idf_measure_names_its_edits_and_keys_its_runs_by_them() {
+        let m = measure(
+            "name = \"Fans\"\nidf = [{ class = \"Fan:VariableVolume\", field = \"Pressure Rise\", \
+             edit = \"scale\", value = 0.7 }]",
+        );
+        m.check().unwrap();
+        assert!(m.edits_model());
+        assert_eq!(m.describe(), ["Fan:VariableVolume * Pressure Rise x 0.7"]);
+        let economizer = measure("name = \"Fans\"\nbuilding = { economizer = true }");
+        // A building edit's key is its JSON, as before IDF edits existed (cached runs keep it).
+        assert_eq!(economizer.model_edits_key(), r#"{"economizer":true}"#);
+        assert!(m.runs_folder().starts_with("fans-"));
+        assert_ne!(m.runs_folder(), economizer.runs_folder());
+        let e = measure(
+            "name = \"x\"\nidf = [{ class = \"Lights\", field = \"Watts per Floor Area\", \
+             edit = \"scale\", value = 1.0 }]",
+        )
+        .check()
+        .unwrap_err();
+        assert!(e.contains("changes nothing") && e.contains("Lights"), "{e}");
     }
 
     #[test]

@@ -78,6 +78,58 @@ pub enum Edit {
     Offset,
 }
 
+/// A retrofit measure's edit of fields of the IDF a draw simulates ([`Model::with_idf_edits`]):
+/// the objects and field as a [`FieldTarget`] names them, and the value the edit takes, the
+/// same in every draw. Relative edits (`scale`, `offset`) start from the field as the draw's
+/// parameters left it.
+///
+/// ```toml
+/// idf = [{ class = "HVACTemplate:System:VAV", object = "*", field = "Supply Fan Delta Pressure", edit = "scale", value = 0.7 }]
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct IdfEdit {
+    /// The objects' class.
+    pub class: String,
+    /// Their name, `*` (the default), or a pattern with `*` wildcards.
+    #[serde(default = "every_object")]
+    pub object: String,
+    /// The field's name as the IDD spells it, or `*` (every numeric field, with `scale` or
+    /// `offset`).
+    pub field: String,
+    /// How the value enters the field (`set`, the default; `scale`; `offset`).
+    #[serde(default)]
+    pub edit: Edit,
+    /// The value, factor or amount.
+    pub value: f64,
+}
+
+fn every_object() -> String {
+    "*".into()
+}
+
+impl IdfEdit {
+    /// The objects and field it edits.
+    pub fn target(&self) -> FieldTarget {
+        FieldTarget {
+            class: self.class.clone(),
+            object: self.object.clone(),
+            field: self.field.clone(),
+            edit: self.edit,
+        }
+    }
+
+    /// As a reader says it: `HVACTemplate:System:VAV * Supply Fan Delta Pressure x 0.7`.
+    pub fn describe(&self) -> String {
+        let what = format!("{} {} {}", self.class, self.object, self.field);
+        match self.edit {
+            Edit::Set => format!("{what} = {}", self.value),
+            Edit::Scale => format!("{what} x {}", self.value),
+            Edit::Offset => format!("{what} {:+}", self.value),
+        }
+    }
+}
+
 impl FieldTarget {
     /// True when `name` matches `object` (`*` wildcards, case-insensitive).
     fn matches(&self, name: Option<&str>) -> bool {
@@ -199,6 +251,9 @@ pub struct Model {
     parameters: Vec<ParameterDef>,
     constraints: Vec<Constraint>,
     outputs: Vec<OutputSpec>,
+    /// A retrofit measure's edits of the IDF, applied after the parameters
+    /// ([`Model::with_idf_edits`]); none for a calibration's model.
+    idf_edits: Vec<IdfEdit>,
     /// Where it was loaded from (for messages).
     pub path: PathBuf,
 }
@@ -212,6 +267,7 @@ impl Model {
             constraints: spec.constraints(),
             outputs,
             source: Source::Generated(spec),
+            idf_edits: vec![],
             path: PathBuf::from("<generated>"),
         }
     }
@@ -286,6 +342,7 @@ impl Model {
             constraints: map.constraints.clone(),
             outputs: map.outputs.clone(),
             source: Source::Mapped { idf, map, calendar },
+            idf_edits: vec![],
             path: path.into(),
         })
     }
@@ -369,6 +426,7 @@ impl Model {
             parameters: self.parameters.clone(),
             constraints: self.constraints.clone(),
             outputs: self.outputs.clone(),
+            idf_edits: self.idf_edits.clone(),
             path: self.path.clone(),
         })
     }
@@ -412,49 +470,96 @@ impl Model {
         Ok(v)
     }
 
-    /// The IDF for a set of parameter values (see [`Model::values`]).
+    /// The IDF for a set of parameter values (see [`Model::values`]), with a measure's IDF
+    /// edits where the model has any ([`Model::with_idf_edits`]).
     pub fn instantiate(&self, given: &ParameterValues, idd: &Idd) -> Result<Idf, Error> {
         let v = self.values(given)?;
-        match &self.source {
-            Source::Generated(spec) => spec.to_idf(&v),
+        let mut out = match &self.source {
+            Source::Generated(spec) => spec.to_idf(&v)?,
             Source::Mapped { idf, map, calendar } => {
                 let mut out = idf.clone();
                 for p in &map.parameters {
-                    let value = v[&p.name];
                     for t in &p.targets {
-                        let index = (t.field != "*").then(|| {
-                            idd.field_index(&t.class, &t.field)
-                                .expect("checked at load")
-                        });
                         // Relative edits start from the user's IDF, so edits never compound.
-                        for (o, original) in
-                            out.objects.iter_mut().zip(&idf.objects).filter(|(o, _)| {
-                                o.class.eq_ignore_ascii_case(&t.class) && t.matches(o.name())
-                            })
-                        {
-                            for i in t.positions(original, index) {
-                                if o.fields.len() <= i {
-                                    o.fields.resize(i + 1, String::new());
-                                }
-                                let base = || {
-                                    original.fields[i]
-                                        .trim()
-                                        .parse::<f64>()
-                                        .expect("checked at load")
-                                };
-                                o.fields[i] = match t.edit {
-                                    Edit::Set => num(value),
-                                    Edit::Scale => num(base() * value),
-                                    Edit::Offset => num(base() + value),
-                                };
-                            }
-                        }
+                        edit_fields(&mut out, idf, t, v[&p.name], idd);
                     }
                 }
                 // After the edits, which pair each object with the user's by position.
                 crate::calendar::set_run_period(&mut out, calendar);
-                Ok(out)
+                out
             }
+        };
+        if !self.idf_edits.is_empty() {
+            let drawn = out.clone();
+            for e in &self.idf_edits {
+                edit_fields(&mut out, &drawn, &e.target(), e.value, idd);
+            }
+        }
+        Ok(out)
+    }
+
+    /// The same model with a retrofit measure's edits of the IDF each draw simulates, applied
+    /// after the parameters (a relative edit starts from the field as the draw left it): the
+    /// parameters, their priors and the outputs stay the calibration's. Each edit is checked
+    /// against the IDF at the priors' modes (its class, field and objects, a number in every
+    /// field a relative edit takes, a value a `set` can write) and refused where it changes
+    /// nothing there; the message names the edit.
+    pub fn with_idf_edits(&self, edits: &[IdfEdit], idd: &Idd) -> Result<Model, String> {
+        let at_modes = self
+            .instantiate(&ParameterValues::new(), idd)
+            .map_err(|e| format!("the model at its priors' modes: {e}"))?;
+        for e in edits {
+            let who = format!("idf edit '{}'", bemcal_excerpt::excerpt(&e.describe(), 120));
+            if !e.value.is_finite() || (e.edit == Edit::Scale && e.value < 0.0) {
+                return Err(format!(
+                    "{who}: the value must be finite (a factor 0 or more)"
+                ));
+            }
+            check_target(&e.target(), &at_modes, idd, "the IDF each draw simulates")
+                .map_err(|m| format!("{who}: {m}"))?;
+            let mut edited = at_modes.clone();
+            edit_fields(&mut edited, &at_modes, &e.target(), e.value, idd);
+            if edited == at_modes {
+                return Err(format!(
+                    "{who} changes nothing: the fields already hold what it writes"
+                ));
+            }
+        }
+        let mut model = self.clone();
+        model.idf_edits.extend(edits.iter().cloned());
+        Ok(model)
+    }
+}
+
+/// Writes `value` into the fields `t` names in `out` (objects paired with `original` by
+/// position): set, or `original`'s number scaled or offset. The one rule of an edit, for the
+/// parameters' targets and a measure's edits alike.
+fn edit_fields(out: &mut Idf, original: &Idf, t: &FieldTarget, value: f64, idd: &Idd) {
+    let index = (t.field != "*").then(|| {
+        idd.field_index(&t.class, &t.field)
+            .expect("checked at load")
+    });
+    for (o, original) in out
+        .objects
+        .iter_mut()
+        .zip(&original.objects)
+        .filter(|(o, _)| o.class.eq_ignore_ascii_case(&t.class) && t.matches(o.name()))
+    {
+        for i in t.positions(original, index) {
+            if o.fields.len() <= i {
+                o.fields.resize(i + 1, String::new());
+            }
+            let base = || {
+                original.fields[i]
+                    .trim()
+                    .parse::<f64>()
+                    .expect("checked at load")
+            };
+            o.fields[i] = match t.edit {
+                Edit::Set => num(value),
+                Edit::Scale => num(base() * value),
+                Edit::Offset => num(base() + value),
+            };
         }
     }
 }
@@ -474,62 +579,62 @@ fn check_parameter(
         return Err(format!("parameter {}: no targets", p.name));
     }
     for t in &p.targets {
-        if t.field == "*" && t.edit == Edit::Set {
-            return Err(format!(
-                "parameter {}: field = \"*\" needs edit = \"scale\" or \"offset\"",
-                p.name
-            ));
-        }
-        if t.field != "*" && idd.field_index(&t.class, &t.field).is_none() {
-            let known = idd.fields(&t.class).map(|f| f.join(", "));
-            return Err(format!(
-                "parameter {}: class '{}' has no field '{}'{}",
-                p.name,
-                t.class,
-                t.field,
-                known
-                    .map(|k| format!(" (fields: {k})"))
-                    .unwrap_or_else(|| " (unknown class)".into())
-            ));
-        }
-        let index = (t.field != "*")
-            .then(|| idd.field_index(&t.class, &t.field))
-            .flatten();
-        let matched: Vec<_> = idf
-            .of_class(&t.class)
-            .filter(|o| t.matches(o.name()))
-            .collect();
-        if t.edit != Edit::Set {
-            for o in &matched {
-                let positions = t.positions(o, index);
-                let bad = positions.iter().find(|&&i| {
-                    o.fields
-                        .get(i)
-                        .is_none_or(|f| f.trim().parse::<f64>().is_err())
-                });
-                if positions.is_empty() || bad.is_some() {
-                    return Err(format!(
-                        "parameter {}: edit = \"{:?}\" needs a number in {} '{}' field '{}' (found '{}')",
-                        p.name,
-                        t.edit,
-                        t.class,
-                        o.name().unwrap_or(""),
-                        t.field,
-                        bad.and_then(|&i| o.fields.get(i)).map_or("", |f| f.as_str())
-                    ));
-                }
+        check_target(t, idf, idd, &idf_path.display().to_string())
+            .map_err(|m| format!("parameter {}: {m}", p.name))?;
+    }
+    Ok(())
+}
+
+/// Checks one target against an IDF (`idf_name` names it in the message) and the IDD: the
+/// class and field, at least one object, and a number in every field a relative edit takes.
+fn check_target(t: &FieldTarget, idf: &Idf, idd: &Idd, idf_name: &str) -> Result<(), String> {
+    if t.field == "*" && t.edit == Edit::Set {
+        return Err("field = \"*\" needs edit = \"scale\" or \"offset\"".into());
+    }
+    if t.field != "*" && idd.field_index(&t.class, &t.field).is_none() {
+        let known = idd.fields(&t.class).map(|f| f.join(", "));
+        return Err(format!(
+            "class '{}' has no field '{}'{}",
+            t.class,
+            t.field,
+            known
+                .map(|k| format!(" (fields: {})", bemcal_excerpt::shorten(&k)))
+                .unwrap_or_else(|| " (unknown class)".into())
+        ));
+    }
+    let index = (t.field != "*")
+        .then(|| idd.field_index(&t.class, &t.field))
+        .flatten();
+    let matched: Vec<_> = idf
+        .of_class(&t.class)
+        .filter(|o| t.matches(o.name()))
+        .collect();
+    if t.edit != Edit::Set {
+        for o in &matched {
+            let positions = t.positions(o, index);
+            let bad = positions.iter().find(|&&i| {
+                o.fields
+                    .get(i)
+                    .is_none_or(|f| f.trim().parse::<f64>().is_err())
+            });
+            if positions.is_empty() || bad.is_some() {
+                return Err(format!(
+                    "edit = \"{:?}\" needs a number in {} '{}' field '{}' (found '{}')",
+                    t.edit,
+                    t.class,
+                    o.name().unwrap_or(""),
+                    t.field,
+                    bad.and_then(|&i| o.fields.get(i))
+                        .map_or("", |f| f.as_str())
+                ));
             }
         }
-        let n = matched.len();
-        if n == 0 {
-            return Err(format!(
-                "parameter {}: {} has no object {} of class {}",
-                p.name,
-                idf_path.display(),
-                t.object,
-                t.class
-            ));
-        }
+    }
+    if matched.is_empty() {
+        return Err(format!(
+            "{idf_name} has no object {} of class {}",
+            t.object, t.class
+        ));
     }
     Ok(())
 }
@@ -585,4 +690,91 @@ pub fn model_file_schema() -> schemars::Schema {
     let mut s = schemars::schema_for!(ModelFile);
     s.insert("title".into(), "bemcal model file".into());
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An own IDF of two `Lights` and a map scaling both, in a fresh folder.
+    fn mapped() -> (Model, Idd) {
+        let idd = Idd::parse("Lights,\n  A1 , \\field Name\n  N1 ; \\field Watts per Floor Area\n");
+        let dir = std::env::temp_dir().join(format!("bemcal-model-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("b.idf"),
+            "Lights, Office Lights, 10;\nLights, Core Lights, 8;\n",
+        )
+        .unwrap();
+        let text = r#"
+[idf]
+path = "b.idf"
+[[parameter]]
+name = "lighting_scale"
+prior = { min = 0.5, mode = 1.0, max = 1.5 }
+targets = [{ class = "Lights", object = "*", field = "Watts per Floor Area", edit = "scale" }]
+[[output]]
+name = "electricity_kwh"
+meters = ["Electricity:Facility"]
+"#;
+        let model = Model::from_toml(text, &dir.join("model.toml"), &idd).unwrap();
+        (model, idd)
+    }
+
+    fn lights(idf: &Idf) -> Vec<String> {
+        idf.of_class("Lights")
+            .map(|o| o.fields[1].clone())
+            .collect()
+    }
+
+    fn edit(object: &str, field: &str, edit: Edit, value: f64) -> IdfEdit {
+        IdfEdit {
+            class: "Lights".into(),
+            object: object.into(),
+            field: field.into(),
+            edit,
+            value,
+        }
+    }
+
+    #[test]
+    fn idf_edits_apply_after_the_draws_parameters() {
+        let (model, idd) = mapped();
+        let field = "Watts per Floor Area";
+        let led = model
+            .with_idf_edits(&[edit("Office*", field, Edit::Scale, 0.6)], &idd)
+            .unwrap();
+        let draw = ParameterValues::from([("lighting_scale".to_string(), 1.2)]);
+        assert_eq!(
+            lights(&model.instantiate(&draw, &idd).unwrap()),
+            ["12.0", "9.6"]
+        );
+        // The office's lights at the draw's 12 W/m2, then x 0.6; the core's as the draw left them.
+        assert_eq!(
+            lights(&led.instantiate(&draw, &idd).unwrap()),
+            ["7.2", "9.6"]
+        );
+        assert_eq!(led.parameters(), model.parameters());
+        let set = model
+            .with_idf_edits(&[edit("*", field, Edit::Set, 5.0)], &idd)
+            .unwrap();
+        assert_eq!(
+            lights(&set.instantiate(&draw, &idd).unwrap()),
+            ["5.0", "5.0"]
+        );
+    }
+
+    #[test]
+    fn idf_edits_that_name_nothing_or_change_nothing_are_refused() {
+        let (model, idd) = mapped();
+        let err = |e: IdfEdit| model.with_idf_edits(&[e], &idd).unwrap_err();
+        let field = "Watts per Floor Area";
+        assert!(err(edit("*", "Watts", Edit::Set, 5.0)).contains("has no field 'Watts'"));
+        assert!(err(edit("Lobby*", field, Edit::Set, 5.0))
+            .contains("the IDF each draw simulates has no object Lobby* of class Lights"));
+        // At the priors' modes the office's lights hold 10 W/m2 already.
+        assert!(err(edit("Office Lights", field, Edit::Set, 10.0)).contains("changes nothing"));
+        assert!(err(edit("*", "*", Edit::Set, 1.0)).contains("needs edit = \"scale\""));
+        assert!(err(edit("*", field, Edit::Scale, -1.0)).contains("a factor 0 or more"));
+    }
 }

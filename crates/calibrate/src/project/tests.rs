@@ -30,7 +30,7 @@ fn the_shipped_example_projects_load() {
         let p = Project::load(&examples.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
         let model = p.resolve(&p.model);
         assert!(model.is_file(), "{name}: model {:?}", p.model);
-        p.check_model(&spec_model(&model))
+        p.check_model(&spec_model(&model), &bemcal_energyplus::idd::Idd::parse(""))
             .unwrap_or_else(|e| panic!("{name}: {e}"));
     }
 }
@@ -252,7 +252,7 @@ fn check(top: &str, roles: &[&str], tail: &str) -> Result<(), String> {
     )
     .unwrap();
     Project::load(&path)
-        .and_then(|p| p.check_model(&spec_model(&model)))
+        .and_then(|p| p.check_model(&spec_model(&model), &bemcal_energyplus::idd::Idd::parse("")))
         .map_err(|e| {
             e.to_string()
                 .replace(&dir.path().display().to_string(), "DIR")

@@ -120,19 +120,28 @@ impl Project {
     /// them; `[outputs]` names outputs the model has; and with `[[meters.columns]]` given,
     /// every role that `[outputs]` or a `[[bases]]` sub-meter names is a column's role and
     /// every column's role is compared with a model output or is a base.
-    pub fn check_model(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
+    pub fn check_model(
+        &self,
+        model: &bemcal_energyplus::Model,
+        idd: &bemcal_energyplus::idd::Idd,
+    ) -> Result<(), Error> {
         self.check_fixed(model)?;
-        self.check_measures(model)?;
+        self.check_measures(model, idd)?;
         let outputs: Vec<&str> = model.outputs().iter().map(|o| o.name.as_str()).collect();
         self.check_outputs(&outputs)?;
         self.check_meter_roles(&outputs)
     }
 
-    /// `[[measures]]`: every parameter a measure edits is the model's.
-    fn check_measures(&self, model: &bemcal_energyplus::Model) -> Result<(), Error> {
+    /// `[[measures]]`: every parameter a measure edits is the model's, and its building and
+    /// IDF edits apply.
+    fn check_measures(
+        &self,
+        model: &bemcal_energyplus::Model,
+        idd: &bemcal_energyplus::idd::Idd,
+    ) -> Result<(), Error> {
         let all: Vec<String> = model.parameters().iter().map(|p| p.name.clone()).collect();
         for m in &self.measures {
-            m.check_model(model, &all, &Default::default())
+            m.check_model(model, idd, &all, &Default::default())
                 .map_err(|message| self.error_at(&["measures"], message))?;
         }
         Ok(())

@@ -165,7 +165,7 @@ impl SavingsPlan {
             .collect();
         let weathers = weathers(cal)?;
         let models = (measures.iter())
-            .map(|m| m.model(&inp.model))
+            .map(|m| m.model(&inp.model, inp.runner.idd()))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|message| cal.project.error_at(&["measures"], message))?;
         let mut runs = vec![];
@@ -392,7 +392,9 @@ impl SavingsRunInputs {
                 ))
             })?;
         let model = match measure {
-            Some(m) => m.model(&cal.inputs.model).map_err(Error::Config)?,
+            Some(m) => {
+                (m.model(&cal.inputs.model, cal.inputs.runner.idd())).map_err(Error::Config)?
+            }
             None => cal.inputs.model.clone(),
         };
         let dir = cal.out.join(run_rel(weather, measure));
@@ -432,7 +434,9 @@ fn check_measures(cal: &Calibration, measures: &[Measure]) -> Result<Vec<Vec<Str
     (measures.iter())
         .map(|m| {
             m.check()
-                .and_then(|()| m.check_model(&inp.model, &plan.calibrated, &plan.fixed))
+                .and_then(|()| {
+                    m.check_model(&inp.model, inp.runner.idd(), &plan.calibrated, &plan.fixed)
+                })
                 .map_err(|message| cal.project.error_at(&["measures"], message))
         })
         .collect()
@@ -858,6 +862,10 @@ fn method_note(m: &Measure, beyond_prior: &[String], not_calibrated: &[String]) 
     if !m.building.is_empty() {
         "EnergyPlus at every draw: the measure edits the building, which the surrogate was \
          trained with fixed"
+            .into()
+    } else if !m.idf.is_empty() {
+        "EnergyPlus at every draw: the measure edits the IDF's objects, which the surrogate \
+         was trained with fixed"
             .into()
     } else if !beyond_prior.is_empty() {
         format!(

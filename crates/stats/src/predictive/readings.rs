@@ -273,7 +273,7 @@ mod tests {
         let hours = [720; 12];
         let weights = [1.0; 12];
         let fitted = [true; 12];
-        let sign = |m: usize| if m % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = |m: usize| if m.is_multiple_of(2) { 1.0 } else { -1.0 };
         let relative: Vec<f64> = (0..12).map(|m| level[m] * (1.0 + 0.2 * sign(m))).collect();
         let constant: Vec<f64> = (0..12).map(|m| level[m] + 80.0 * sign(m)).collect();
         let mut candidates = vec![ReadingScale::Constant];
