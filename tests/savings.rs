@@ -171,7 +171,7 @@ fn savings_come_with_intervals_from_the_posterior() {
     assert_eq!(ducts["method"], "energyplus", "{ducts}");
     assert_eq!(
         ducts["edits"],
-        serde_json::json!(["HVACTemplate:System:VAV * Supply Fan Delta Pressure x 0.7"])
+        serde_json::json!(["HVACTemplate:System:VAV Supply Fan Delta Pressure x 0.7"])
     );
     assert!(
         (ducts["method_note"].as_str().unwrap()).contains("edits the IDF"),
@@ -204,13 +204,18 @@ fn savings_come_with_intervals_from_the_posterior() {
             .arg(
                 "import sys, bemcal.results as r; c = r.load(sys.argv[1]); s = c.savings; \
                  y = s[(s.measure == 'LED lighting') & (s.output == 'lighting_kwh') & s.month.isna()]; \
-                 print(len(s), round(float(y.median_pct.iloc[0]), 1))",
+                 d = s[s.measure == 'low-pressure ductwork'].iloc[0]; \
+                 print(len(s), round(float(y.median_pct.iloc[0]), 1), d.method, d.edits.split()[0])",
             )
             .arg(&out)
             .env("PYTHONPATH", common::repo().join("python")),
     );
     let text = String::from_utf8_lossy(&py.stdout);
-    let (rows, pct) = text.trim().split_once(' ').unwrap();
+    let fields: Vec<&str> = text.split_whitespace().collect();
+    let [rows, pct, method, edited] = fields[..] else {
+        panic!("{text}")
+    };
+    assert_eq!((method, edited), ("energyplus", "HVACTemplate:System:VAV"));
     // 5 measures x 5 outputs x (the year + 12 months).
     assert_eq!(rows, "325", "{text}");
     assert_eq!(pct, "40.0", "{text}");

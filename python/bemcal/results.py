@@ -295,7 +295,8 @@ def metrics_frame(summary: dict) -> pd.DataFrame:
 
 def savings_frame(summary: dict) -> pd.DataFrame:
     """``summary.json``'s ``savings`` as one tidy table: a row per measure, output, weather
-    and period (the year, then each month)."""
+    and period (the year, then each month), with the measure's edits (``; ``-joined) and how
+    its savings were estimated (``energyplus`` or ``surrogate_corrected``)."""
     rows = []
     for m in (summary.get("savings") or {}).get("measures") or []:
         for o in m.get("outputs") or []:
@@ -306,6 +307,8 @@ def savings_frame(summary: dict) -> pd.DataFrame:
                 rows.append(
                     dict(
                         measure=m["measure"],
+                        edits="; ".join(m.get("edits") or []),
+                        method=m.get("method"),
                         output=o["output"],
                         weather=o["weather"],
                         month=month,
@@ -321,7 +324,7 @@ def savings_frame(summary: dict) -> pd.DataFrame:
                     )
                 )
     columns = [
-        "measure", "output", "weather", "month", "n", "median_kwh", "q5_kwh", "q25_kwh",
+        "measure", "edits", "method", "output", "weather", "month", "n", "median_kwh", "q5_kwh", "q25_kwh",
         "q75_kwh", "q95_kwh", "median_pct", "at_estimate_kwh", "warning",
     ]
     return pd.DataFrame(rows, columns=columns)

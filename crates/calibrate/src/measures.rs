@@ -590,7 +590,7 @@ mod tests {
         );
         m.check().unwrap();
         assert!(m.edits_model());
-        assert_eq!(m.describe(), ["Fan:VariableVolume * Pressure Rise x 0.7"]);
+        assert_eq!(m.describe(), ["Fan:VariableVolume Pressure Rise x 0.7"]);
         let economizer = measure("name = \"Fans\"\nbuilding = { economizer = true }");
         // A building edit's key is its JSON, as before IDF edits existed (cached runs keep it).
         assert_eq!(economizer.model_edits_key(), r#"{"economizer":true}"#);

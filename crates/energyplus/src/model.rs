@@ -119,9 +119,13 @@ impl IdfEdit {
         }
     }
 
-    /// As a reader says it: `HVACTemplate:System:VAV * Supply Fan Delta Pressure x 0.7`.
+    /// As a reader says it: `HVACTemplate:System:VAV Supply Fan Delta Pressure x 0.7` (the
+    /// object named where it is not `*`).
     pub fn describe(&self) -> String {
-        let what = format!("{} {} {}", self.class, self.object, self.field);
+        let what = match self.object.as_str() {
+            "*" => format!("{} {}", self.class, self.field),
+            object => format!("{} {object} {}", self.class, self.field),
+        };
         match self.edit {
             Edit::Set => format!("{what} = {}", self.value),
             Edit::Scale => format!("{what} x {}", self.value),
@@ -508,6 +512,7 @@ impl Model {
         let at_modes = self
             .instantiate(&ParameterValues::new(), idd)
             .map_err(|e| format!("the model at its priors' modes: {e}"))?;
+        let mut taken: Vec<(Vec<(usize, usize)>, String)> = vec![];
         for e in edits {
             let who = format!("idf edit '{}'", bemcal_excerpt::excerpt(&e.describe(), 120));
             if !e.value.is_finite() || (e.edit == Edit::Scale && e.value < 0.0) {
@@ -515,20 +520,100 @@ impl Model {
                     "{who}: the value must be finite (a factor 0 or more)"
                 ));
             }
+            if is_setting(&e.class) {
+                return Err(format!(
+                    "{who}: {} objects are the simulation's settings (its period, time step, \
+                     outputs, site), not a measure's",
+                    e.class
+                ));
+            }
             check_target(&e.target(), &at_modes, idd, "the IDF each draw simulates")
                 .map_err(|m| format!("{who}: {m}"))?;
+            let fields = edited_fields(&at_modes, &e.target(), idd);
+            if let Some((_, other)) = taken
+                .iter()
+                .find(|(f, _)| f.iter().any(|x| fields.contains(x)))
+            {
+                return Err(format!(
+                    "{who} edits a field '{other}' edits too: give each field one edit"
+                ));
+            }
+            if let Some(p) = self.parameter_on(&fields, &at_modes, idd) {
+                return Err(format!(
+                    "{who} edits a field parameter {p} sets in every draw: edit the parameter \
+                     instead (set, scale or offset = {{ {p} = ... }})"
+                ));
+            }
             let mut edited = at_modes.clone();
             edit_fields(&mut edited, &at_modes, &e.target(), e.value, idd);
-            if edited == at_modes {
+            let number = |idf: &Idf, (o, i): (usize, usize)| {
+                let text = idf.objects[o].fields.get(i).map_or("", |f| f.trim());
+                text.parse::<f64>().map_err(|_| text.to_string())
+            };
+            if fields
+                .iter()
+                .all(|&x| number(&edited, x) == number(&at_modes, x))
+            {
                 return Err(format!(
                     "{who} changes nothing: the fields already hold what it writes"
                 ));
             }
+            taken.push((fields, e.describe()));
         }
         let mut model = self.clone();
         model.idf_edits.extend(edits.iter().cloned());
         Ok(model)
     }
+
+    /// The mapped parameter whose targets take one of `fields` (object, field positions in
+    /// `idf`, the IDF at the priors' modes, objects by position as in the user's IDF); None
+    /// for a generated building, whose parameters are its spec's.
+    fn parameter_on(&self, fields: &[(usize, usize)], idf: &Idf, idd: &Idd) -> Option<String> {
+        let Source::Mapped { map, .. } = &self.source else {
+            return None;
+        };
+        (map.parameters.iter())
+            .find(|p| {
+                (p.targets.iter()).any(|t| {
+                    edited_fields(idf, t, idd)
+                        .iter()
+                        .any(|x| fields.contains(x))
+                })
+            })
+            .map(|p| p.name.clone())
+    }
+}
+
+/// Whether `class` holds the simulation's settings (its period, time step, outputs, site),
+/// which the calibration fixes and a measure's IDF edit may not touch.
+fn is_setting(class: &str) -> bool {
+    let c = class.to_ascii_lowercase();
+    [
+        "version",
+        "simulationcontrol",
+        "timestep",
+        "building",
+        "convergencelimits",
+        "site:location",
+    ]
+    .contains(&c.as_str())
+        || ["runperiod", "sizingperiod", "output"]
+            .iter()
+            .any(|p| c.starts_with(p))
+}
+
+/// The (object, field) positions `t` edits in `idf`.
+fn edited_fields(idf: &Idf, t: &FieldTarget, idd: &Idd) -> Vec<(usize, usize)> {
+    let index = (t.field != "*")
+        .then(|| idd.field_index(&t.class, &t.field))
+        .flatten();
+    if t.field != "*" && index.is_none() {
+        return vec![];
+    }
+    (idf.objects.iter().enumerate())
+        .filter(|(_, o)| o.class.eq_ignore_ascii_case(&t.class) && t.matches(o.name()))
+        .flat_map(|(k, o)| t.positions(o, index).into_iter().map(move |i| (k, i)))
+        .collect()
 }
 
 /// Writes `value` into the fields `t` names in `out` (objects paired with `original` by
@@ -696,9 +781,12 @@ pub fn model_file_schema() -> schemars::Schema {
 mod tests {
     use super::*;
 
-    /// An own IDF of two `Lights` and a map scaling both, in a fresh folder.
+    /// An own IDF of two `Lights` and a map scaling the office's, in a fresh folder.
     fn mapped() -> (Model, Idd) {
-        let idd = Idd::parse("Lights,\n  A1 , \\field Name\n  N1 ; \\field Watts per Floor Area\n");
+        let idd = Idd::parse(
+            "Lights,\n  A1 , \\field Name\n  N1 ; \\field Watts per Floor Area\n\
+             RunPeriod,\n  A1 , \\field Name\n  N1 ; \\field Begin Month\n",
+        );
         let dir = std::env::temp_dir().join(format!("bemcal-model-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(
@@ -712,7 +800,7 @@ path = "b.idf"
 [[parameter]]
 name = "lighting_scale"
 prior = { min = 0.5, mode = 1.0, max = 1.5 }
-targets = [{ class = "Lights", object = "*", field = "Watts per Floor Area", edit = "scale" }]
+targets = [{ class = "Lights", object = "Office*", field = "Watts per Floor Area", edit = "scale" }]
 [[output]]
 name = "electricity_kwh"
 meters = ["Electricity:Facility"]
@@ -737,44 +825,62 @@ meters = ["Electricity:Facility"]
         }
     }
 
+    const FIELD: &str = "Watts per Floor Area";
+
     #[test]
-    fn idf_edits_apply_after_the_draws_parameters() {
+    fn idf_edits_apply_to_the_fields_no_parameter_sets() {
         let (model, idd) = mapped();
-        let field = "Watts per Floor Area";
         let led = model
-            .with_idf_edits(&[edit("Office*", field, Edit::Scale, 0.6)], &idd)
+            .with_idf_edits(&[edit("Core*", FIELD, Edit::Scale, 0.6)], &idd)
             .unwrap();
         let draw = ParameterValues::from([("lighting_scale".to_string(), 1.2)]);
         assert_eq!(
             lights(&model.instantiate(&draw, &idd).unwrap()),
-            ["12.0", "9.6"]
+            ["12.0", "8"]
         );
-        // The office's lights at the draw's 12 W/m2, then x 0.6; the core's as the draw left them.
+        // The office's lights as the draw sets them; the core's x 0.6.
         assert_eq!(
             lights(&led.instantiate(&draw, &idd).unwrap()),
-            ["7.2", "9.6"]
+            ["12.0", "4.8"]
         );
         assert_eq!(led.parameters(), model.parameters());
         let set = model
-            .with_idf_edits(&[edit("*", field, Edit::Set, 5.0)], &idd)
+            .with_idf_edits(&[edit("Core Lights", FIELD, Edit::Set, 5.0)], &idd)
             .unwrap();
         assert_eq!(
             lights(&set.instantiate(&draw, &idd).unwrap()),
-            ["5.0", "5.0"]
+            ["12.0", "5.0"]
+        );
+        assert_eq!(
+            edit("*", FIELD, Edit::Scale, 0.6).describe(),
+            "Lights Watts per Floor Area x 0.6"
         );
     }
 
     #[test]
     fn idf_edits_that_name_nothing_or_change_nothing_are_refused() {
         let (model, idd) = mapped();
-        let err = |e: IdfEdit| model.with_idf_edits(&[e], &idd).unwrap_err();
-        let field = "Watts per Floor Area";
+        let errs = |e: &[IdfEdit]| model.with_idf_edits(e, &idd).unwrap_err();
+        let err = |e: IdfEdit| errs(&[e]);
         assert!(err(edit("*", "Watts", Edit::Set, 5.0)).contains("has no field 'Watts'"));
-        assert!(err(edit("Lobby*", field, Edit::Set, 5.0))
+        assert!(err(edit("Lobby*", FIELD, Edit::Set, 5.0))
             .contains("the IDF each draw simulates has no object Lobby* of class Lights"));
-        // At the priors' modes the office's lights hold 10 W/m2 already.
-        assert!(err(edit("Office Lights", field, Edit::Set, 10.0)).contains("changes nothing"));
+        // The core's lights hold 8 W/m2 (written "8"): a set to 8.0 changes nothing.
+        assert!(err(edit("Core Lights", FIELD, Edit::Set, 8.0)).contains("changes nothing"));
         assert!(err(edit("*", "*", Edit::Set, 1.0)).contains("needs edit = \"scale\""));
-        assert!(err(edit("*", field, Edit::Scale, -1.0)).contains("a factor 0 or more"));
+        assert!(err(edit("Core*", FIELD, Edit::Scale, -1.0)).contains("a factor 0 or more"));
+        // The map's parameter scales the office's lights: an edit of that field is the
+        // parameter's to make.
+        let e = err(edit("*", FIELD, Edit::Set, 5.0));
+        assert!(
+            e.contains("parameter lighting_scale sets in every draw"),
+            "{e}"
+        );
+        // Two edits of one field, and the simulation's settings, are refused.
+        let core = |v| edit("Core*", FIELD, Edit::Scale, v);
+        assert!(errs(&[core(0.5), core(0.6)]).contains("give each field one edit"));
+        let mut period = edit("*", "Begin Month", Edit::Set, 2.0);
+        period.class = "RunPeriod".into();
+        assert!(err(period).contains("the simulation's settings"));
     }
 }

@@ -274,7 +274,10 @@ impl SavingsPlan {
         for (j, m) in self.measures.iter().enumerate() {
             let mut ms = simulated.measure(j, m, self.notes_of[j].clone());
             if let Some(side) = surrogate.as_mut() {
-                if ms.beyond_prior.is_empty() && ms.notes.is_empty() {
+                // Inside the surrogate's training range: its model, priors and calibrated
+                // parameters (a measure that edits the model, or a parameter held fixed, has
+                // a note).
+                if !m.edits_model() && ms.beyond_prior.is_empty() && ms.notes.is_empty() {
                     side.correct(&simulated, j, m, &mut ms)?;
                 }
             }
@@ -427,7 +430,7 @@ fn check_measures(cal: &Calibration, measures: &[Measure]) -> Result<Vec<Vec<Str
         return Err(cal.project.error_at(
             &["measures"],
             "no measures: add [[measures]] to the project (a name and set, scale or offset \
-             of parameters, or building fields)"
+             of parameters, building fields, or idf edits)"
                 .into(),
         ));
     }
