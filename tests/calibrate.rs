@@ -227,7 +227,8 @@ fn small_synthetic_calibration_recovers_truth_and_passes_g14() {
 /// Issue 19: the model form of this synthetic building (EnergyPlus plus noise) reaches every
 /// meter, and the same EnergyPlus runs against a meter holding a load the model lacks (a
 /// constant 3x the electricity's mean added) say that meter is out of reach, mostly a constant
-/// offset, while the other meters stay reached.
+/// offset, with the lighting density at its prior's bound named as the largest lever (too
+/// small to reach it), while the other meters stay reached.
 fn model_form_tells_reached_from_out_of_reach(dir: &Path, out: &Path, summary: &serde_json::Value) {
     let f = &summary["model_form"];
     let meters = f["meters"].as_array().unwrap();
@@ -301,6 +302,22 @@ fn model_form_tells_reached_from_out_of_reach(dir: &Path, out: &Path, summary: &
             );
             assert!(
                 m.findings[1].contains("below the meter"),
+                "{:?}",
+                m.findings
+            );
+            // What the calibrated parameters could do about it, from the design's EnergyPlus
+            // runs: the lighting density at its prior's maximum raises the electricity, by
+            // far less than the load the model lacks.
+            let levers = m.levers.as_ref().expect("levers of a meter out of reach");
+            eprintln!("levers: {}", levers.finding());
+            assert_eq!(levers.parameters[0].parameter, "lighting_power_density");
+            assert_eq!(
+                levers.parameters[0].bound,
+                bemcal_stats::model_form::Bound::Upper
+            );
+            assert!(levers.parameters[0].moves_kwh > 0.0 && levers.gap_kwh > 0.0);
+            assert!(
+                (m.findings.iter()).any(|f| f.contains("no setting inside these priors")),
                 "{:?}",
                 m.findings
             );

@@ -373,25 +373,9 @@ fn surrogate(
         return Ok(Ready::Done(()));
     }
     exec.enter(Stage::Train)?;
-    let (outcome, design) = cal.settled_design()?;
-    let full = cal.full_design(&design, refined);
-    let keys = outcome
-        .slots
-        .iter()
-        .copied()
-        .chain(refined.points().map(|p| p.index));
-    let outputs = keys
-        .zip(&full.points)
-        .map(|(i, x)| {
-            saved_outputs(&cal.simulations_dir(), i, &cal.inputs.plan.values(x)).ok_or_else(|| {
-                Error::Stage {
-                    stage: "training set",
-                    message: format!("point {i}: no simulation saved in simulations/"),
-                }
-            })
-        })
-        .collect::<Result<Vec<_>, Error>>()?;
-    cal.training_set(design.points.len(), &full, &outputs)?;
+    let (full, outputs) = cal.simulated_points(refined)?;
+    let designed = full.points.len() - refined.points().count();
+    cal.training_set(designed, &full, &outputs)?;
     let init = cal.warm_start(refined);
     log(&format!(
         "training the surrogate (PyTorch) on {} points{}",

@@ -12,8 +12,8 @@
 use bemcal_energyplus::HourlyOutputs;
 use bemcal_stats::metrics::{g14, G14Metrics};
 use bemcal_stats::model_form::{
-    additive_discrepancy, partial_fit, pattern, piled_at_bound, quantile_bands, reach, slope,
-    Bound, FactorGroups, PartialFit, Pattern, Reach, Verdict,
+    additive_discrepancy, levers, marginal_slopes, partial_fit, pattern, piled_at_bound,
+    quantile_bands, reach, slope, Bound, FactorGroups, PartialFit, Pattern, Reach, Verdict,
 };
 use bemcal_stats::summary::PosteriorSummary;
 use serde::{Deserialize, Serialize};
@@ -42,6 +42,9 @@ pub const WEATHER_SHARE_MODEL: f64 = 0.2;
 /// model's. The share alone would count a meter's noise against it, the size alone the
 /// model's level (a model at three times the meter's level varies three times as much).
 pub const WEATHER_FRACTION: f64 = 0.5;
+
+/// The levers named in an out-of-reach meter's finding (all count in the together figure).
+pub const LEVERS_NAMED: usize = 3;
 
 const MONTHS: [&str; 12] = [
     "Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec",
@@ -94,8 +97,106 @@ pub struct MeterForm {
     /// (absent in summaries written before it was measured).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub weather: Option<WeatherShare>,
+    /// For a meter out of reach, what the calibrated parameters could do about it within
+    /// their priors ([`Levers`]); absent for a meter reached, or where the design's runs
+    /// could not be read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub levers: Option<Levers>,
     /// In words: whether the model reaches the meter, and what to look at if not.
     pub findings: Vec<String>,
+}
+
+/// How far each calibrated parameter moves a meter's total toward the meter within its prior,
+/// to first order: slopes of the total over the EnergyPlus runs of the design and the
+/// refinement rounds ([`bemcal_stats::model_form::marginal_slopes`]), from each parameter's
+/// posterior median to the prior bound on the meter's side ([`bemcal_stats::model_form::levers`]).
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Levers {
+    /// EnergyPlus runs the slopes are taken over.
+    pub runs: usize,
+    /// The meter's total minus the model's at the estimate, kWh (what closing it needs).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub gap_kwh: f64,
+    /// The parameters that move the total toward the meter, largest first.
+    pub parameters: Vec<MeterLever>,
+}
+
+/// One parameter as a lever on a meter's total ([`Levers`]).
+#[derive(Debug, Clone, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct MeterLever {
+    /// The calibrated parameter.
+    pub parameter: String,
+    /// Its posterior median (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub median: f64,
+    /// The prior bound on the meter's side.
+    pub bound: Bound,
+    /// That bound's value.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub bound_value: f64,
+    /// The total's change from the median to the bound, kWh.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub moves_kwh: f64,
+    /// The value it alone would need to close the gap (the parameter's unit).
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub alone_needs: f64,
+}
+
+impl Levers {
+    /// In words: the largest levers, what all of them together move against the gap, and
+    /// whether the priors can reach the meter at all.
+    pub fn finding(&self) -> String {
+        let mwh = |x: f64| x / 1000.0;
+        if self.parameters.is_empty() {
+            return format!(
+                "no calibrated parameter moves it toward the meter ({:+.1} MWh needed) within \
+                 its prior, to first order over {} EnergyPlus runs: look at the meter's scope, \
+                 the weather and the systems the model has",
+                mwh(self.gap_kwh),
+                self.runs
+            );
+        }
+        let named: Vec<String> = (self.parameters.iter().take(LEVERS_NAMED))
+            .map(|l| {
+                format!(
+                    "{} to its prior's {} bound {} (median {:.4}) {:+.1} MWh",
+                    l.parameter,
+                    l.bound.as_str(),
+                    l.bound_value,
+                    l.median,
+                    mwh(l.moves_kwh)
+                )
+            })
+            .collect();
+        let together: f64 = self.parameters.iter().map(|l| l.moves_kwh).sum();
+        let first = &self.parameters[0];
+        let verdict = if together.abs() < self.gap_kwh.abs() {
+            format!(
+                "no setting inside these priors reaches the meter: widen a prior only where a \
+                 value beyond is physical ({} alone would need {:.4}), else look at what the \
+                 model lacks (the meter's scope, the weather, a system or a load)",
+                first.parameter, first.alone_needs
+            )
+        } else {
+            "the priors could reach the meter together, yet the posterior stays away: the other \
+             meters, or the surrogate's error, hold it"
+                .into()
+        };
+        format!(
+            "what would move it, to first order over {} EnergyPlus runs of the design and the \
+             refinement rounds: {}; all {} together {:+.1} MWh of the {:+.1} MWh needed: {verdict}",
+            self.runs,
+            named.join(", "),
+            self.parameters.len(),
+            mwh(together),
+            mwh(self.gap_kwh)
+        )
+    }
 }
 
 /// The share of the hourly variation beyond the calendar (hour of day by day kind, month) that
@@ -343,6 +444,7 @@ pub fn report(
         meters.push(form);
     }
     write_discrepancy_csv(cal, &columns)?;
+    add_levers(cal, posterior, &mut meters, draws.len());
     let piled = piled_parameters(cal, posterior);
     Ok(ModelFormReport {
         draws: draws.len(),
@@ -411,10 +513,84 @@ fn meter_form(
         temperature_slope_kwh_per_k,
         discrepancy,
         weather,
+        levers: None,
         findings: vec![],
     };
     form.findings = findings(&form, draws.len());
     Ok((form, additive.delta, corrected))
+}
+
+/// Whether the model cannot reach the meter's level at the estimate or any posterior draw.
+fn out_of_reach(r: &Reach) -> bool {
+    r.verdict == Verdict::Level && !r.within_draws
+}
+
+/// [`Levers`] for every meter out of reach, and their finding (the design's runs read once,
+/// only where a meter needs them; none where they cannot be read).
+fn add_levers(
+    cal: &Calibration,
+    posterior: &PosteriorSummary,
+    meters: &mut [MeterForm],
+    draws: usize,
+) {
+    if !meters.iter().any(|m| out_of_reach(&m.reach)) {
+        return;
+    }
+    let Some((design, runs)) =
+        (cal.refine_log().ok()).and_then(|log| cal.simulated_points(&log).ok())
+    else {
+        return;
+    };
+    let inp = &cal.inputs;
+    let plan = &inp.plan;
+    let medians: Vec<f64> = (plan.calibrated.iter())
+        .map(|name| {
+            (posterior.parameters.iter())
+                .find(|p| &p.name == name)
+                .map_or(f64::NAN, |p| p.median)
+        })
+        .collect();
+    let bounds: Vec<(f64, f64)> = plan.priors.iter().map(|p| (p.min(), p.max())).collect();
+    for m in meters.iter_mut().filter(|m| out_of_reach(&m.reach)) {
+        let Some(k) = inp.outputs.iter().position(|o| *o == m.output) else {
+            continue;
+        };
+        let measured = &inp.measured[k];
+        let totals: Vec<f64> = (runs.iter())
+            .map(|o| {
+                o.get(&m.output).map_or(f64::NAN, |sim| {
+                    let with_base = inp.with_base(k, sim);
+                    (measured.iter().zip(&with_base))
+                        .filter(|(y, _)| y.is_finite())
+                        .map(|(_, s)| s)
+                        .sum()
+                })
+            })
+            .collect();
+        let gap = m.reach.measured_kwh - m.reach.estimate_kwh;
+        let slopes = marginal_slopes(&design.points, &totals);
+        let parameters = levers(gap, &medians, &slopes, &bounds)
+            .into_iter()
+            .map(|l| MeterLever {
+                parameter: plan.calibrated[l.index].clone(),
+                median: medians[l.index],
+                bound: if l.bound == bounds[l.index].1 {
+                    Bound::Upper
+                } else {
+                    Bound::Lower
+                },
+                bound_value: l.bound,
+                moves_kwh: l.moves_kwh,
+                alone_needs: l.alone_needs,
+            })
+            .collect();
+        m.levers = Some(Levers {
+            runs: runs.len(),
+            gap_kwh: gap,
+            parameters,
+        });
+        m.findings = findings(m, draws);
+    }
 }
 
 /// Parameters whose posterior median lies against a bound of their prior.
@@ -502,6 +678,9 @@ pub fn findings(form: &MeterForm, draws: usize) -> Vec<String> {
         .max_by(|a, b| a.pattern.eta_squared.total_cmp(&b.pattern.eta_squared));
     if let Some(p) = strongest {
         out.push(pattern_finding(form, p));
+    }
+    if let Some(l) = &form.levers {
+        out.push(l.finding());
     }
     let d = &form.discrepancy;
     out.push(format!(
@@ -621,8 +800,51 @@ mod tests {
                 held_out: None,
             },
             weather: None,
+            levers: None,
             findings: vec![],
         }
+    }
+
+    fn lever(parameter: &str, bound_value: f64, moves_kwh: f64, alone_needs: f64) -> MeterLever {
+        MeterLever {
+            parameter: parameter.into(),
+            median: 1.0,
+            bound: Bound::Upper,
+            bound_value,
+            moves_kwh,
+            alone_needs,
+        }
+    }
+
+    #[test]
+    fn levers_say_whether_the_priors_can_reach_the_meter() {
+        // The meter 1,820 MWh below the model: two levers move it 300 MWh down together.
+        let mut f = form(Verdict::Level, -239.0, false, vec![]);
+        f.levers = Some(Levers {
+            runs: 36,
+            gap_kwh: -1_820_000.0,
+            parameters: vec![
+                lever("infiltration_ach", 0.1, -200_000.0, -7.5),
+                lever("heating_setpoint_occupied", 19.0, -100_000.0, 2.0),
+            ],
+        });
+        let text = findings(&f, 8).join("\n");
+        assert!(
+            text.contains("over 36 EnergyPlus runs")
+                && text.contains(
+                    "infiltration_ach to its prior's upper bound 0.1 (median 1.0000) -200.0 MWh"
+                )
+                && text.contains("all 2 together -300.0 MWh of the -1820.0 MWh needed")
+                && text.contains("no setting inside these priors reaches the meter")
+                && text.contains("infiltration_ach alone would need -7.5000"),
+            "{text}"
+        );
+        f.levers.as_mut().unwrap().gap_kwh = -250_000.0;
+        let text = findings(&f, 8).join("\n");
+        assert!(text.contains("could reach the meter together"), "{text}");
+        f.levers.as_mut().unwrap().parameters.clear();
+        let text = findings(&f, 8).join("\n");
+        assert!(text.contains("no calibrated parameter moves it"), "{text}");
     }
 
     fn groups(means: &[f64]) -> Vec<Group> {

@@ -298,6 +298,33 @@ impl Calibration {
         d
     }
 
+    /// Every point EnergyPlus simulated for the surrogate (the settled design, then the
+    /// rounds' draws in `log`) and its outputs, as saved in `simulations/`: the training set's
+    /// points, and the first-order slopes of model form ([`crate::model_form`]).
+    pub fn simulated_points(
+        &self,
+        log: &RefineLog,
+    ) -> Result<(Design, Vec<bemcal_energyplus::HourlyOutputs>), Error> {
+        let (outcome, design) = self.settled_design()?;
+        let full = self.full_design(&design, log);
+        let keys = (outcome.slots.iter().copied()).chain(log.points().map(|p| p.index));
+        let outputs = keys
+            .zip(&full.points)
+            .map(|(i, x)| {
+                crate::design::saved_outputs(
+                    &self.simulations_dir(),
+                    i,
+                    &self.inputs.plan.values(x),
+                )
+                .ok_or_else(|| Error::Stage {
+                    stage: "training set",
+                    message: format!("point {i}: no simulation saved in simulations/"),
+                })
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
+        Ok((full, outputs))
+    }
+
     /// The surrogate folder a retraining after the rounds in `log` warm-starts from: the last
     /// round's surrogate, when `surrogate.warm_start` is on and its weights were kept (a
     /// surrogate trained before warm starts existed has none: train from scratch).

@@ -28,6 +28,11 @@
 //!   on the model alike, it tells a meter that does not follow the weather file from a model
 //!   that does.
 //! - [`piled_at_bound`]: a parameter whose posterior median lies against a prior bound.
+//! - [`marginal_slopes`] and [`levers`]: for a meter out of reach, how far each parameter
+//!   moves its total toward the meter within its prior, from first-order slopes over the
+//!   EnergyPlus runs of a Latin-hypercube design (whose columns are nearly uncorrelated, so
+//!   each parameter's simple regression slope estimates its first-order effect: Saltelli et
+//!   al. 2008, Global Sensitivity Analysis: The Primer, Sec. 1.2.3).
 
 use serde::{Deserialize, Serialize};
 
@@ -480,6 +485,91 @@ pub enum Bound {
     Upper,
 }
 
+impl Bound {
+    /// `lower` or `upper`, as a sentence says it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Bound::Lower => "lower",
+            Bound::Upper => "upper",
+        }
+    }
+}
+
+/// Each parameter's least-squares slope of `y` (one total per simulated point) on its column
+/// of `x` (points x parameters): `cov(x_j, y) / var(x_j)`, the change of the total per unit
+/// of the parameter to first order; NaN where the parameter does not vary or fewer than three
+/// points have a finite total.
+pub fn marginal_slopes(x: &[Vec<f64>], y: &[f64]) -> Vec<f64> {
+    let p = x.first().map_or(0, Vec::len);
+    let rows: Vec<(&Vec<f64>, f64)> = (x.iter().zip(y.iter().copied()))
+        .filter(|(r, v)| v.is_finite() && r.len() == p && r.iter().all(|a| a.is_finite()))
+        .collect();
+    if rows.len() < 3 {
+        return vec![f64::NAN; p];
+    }
+    let n = rows.len() as f64;
+    let y_mean = rows.iter().map(|(_, v)| v).sum::<f64>() / n;
+    (0..p)
+        .map(|j| {
+            let x_mean = rows.iter().map(|(r, _)| r[j]).sum::<f64>() / n;
+            let (mut sxy, mut sxx) = (0.0, 0.0);
+            for (r, v) in &rows {
+                sxy += (r[j] - x_mean) * (v - y_mean);
+                sxx += (r[j] - x_mean).powi(2);
+            }
+            if sxx > 0.0 {
+                sxy / sxx
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+/// How one parameter moves a meter's total toward the meter, to first order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lever {
+    /// The parameter's index.
+    pub index: usize,
+    /// The prior bound toward which it moves the total toward the meter.
+    pub bound: f64,
+    /// The total's change, kWh, from the parameter's value to that bound (the gap's sign).
+    pub moves_kwh: f64,
+    /// The value the parameter alone would need to close the gap (beyond `bound` where the
+    /// prior cannot).
+    pub alone_needs: f64,
+}
+
+/// The parameters that move a total toward the meter, largest first: for each, with slope
+/// `slopes[j]` ([`marginal_slopes`]) at `values[j]` inside `bounds[j]` (min, max), the total's
+/// change from there to the bound on the side that closes `gap` (meter minus model, kWh), and
+/// the value that would close it alone. Parameters without a finite slope, or already at
+/// that bound, are left out.
+pub fn levers(gap: f64, values: &[f64], slopes: &[f64], bounds: &[(f64, f64)]) -> Vec<Lever> {
+    let mut out: Vec<Lever> = (0..values.len().min(slopes.len()).min(bounds.len()))
+        .filter_map(|j| {
+            let (b, x) = (slopes[j], values[j]);
+            if !(b.is_finite() && b != 0.0 && x.is_finite() && gap.is_finite()) {
+                return None;
+            }
+            let bound = if b * gap > 0.0 {
+                bounds[j].1
+            } else {
+                bounds[j].0
+            };
+            let moves_kwh = b * (bound - x);
+            (moves_kwh * gap > 0.0).then_some(Lever {
+                index: j,
+                bound,
+                moves_kwh,
+                alone_needs: x + gap / b,
+            })
+        })
+        .collect();
+    out.sort_by(|a, b| b.moves_kwh.abs().total_cmp(&a.moves_kwh.abs()));
+    out
+}
+
 /// The bound a posterior median lies against: within [`PILE_SHARE`] of the prior's range
 /// from it (None inside, or for a degenerate range). A posterior pressed against a bound
 /// says the data want a value the prior does not allow, or that the parameter compensates
@@ -678,5 +768,45 @@ mod tests {
         assert_eq!(piled_at_bound(0.0, 10.0, 9.6), Some(Bound::Upper));
         assert_eq!(piled_at_bound(0.0, 10.0, 5.0), None);
         assert_eq!(piled_at_bound(1.0, 1.0, 1.0), None);
+    }
+
+    #[test]
+    fn slopes_of_a_linear_total_over_an_orthogonal_design_are_its_coefficients() {
+        // y = 100 + 3 a - 2 b over a 3 x 3 grid (uncorrelated columns), one point missing.
+        let mut x = vec![];
+        let mut y = vec![];
+        for a in [0.0, 1.0, 2.0] {
+            for b in [10.0, 20.0, 30.0] {
+                x.push(vec![a, b, 5.0]);
+                y.push(100.0 + 3.0 * a - 2.0 * b);
+            }
+        }
+        let s = marginal_slopes(&x, &y);
+        assert!(
+            (s[0] - 3.0).abs() < 1e-12 && (s[1] + 2.0).abs() < 1e-12,
+            "{s:?}"
+        );
+        assert!(s[2].is_nan(), "a constant column has no slope");
+        assert!(marginal_slopes(&x[..2], &y[..2])[0].is_nan());
+    }
+
+    #[test]
+    fn levers_move_the_total_toward_the_meter_largest_first() {
+        // The meter is 50 kWh above the model. a (slope 3, at 1 in [0, 2]) moves +3 toward
+        // its max and alone would need 1 + 50 / 3; b (slope -2, at 20 in [10, 30]) moves +20
+        // toward its min; c does not vary.
+        let l = levers(
+            50.0,
+            &[1.0, 20.0, 5.0],
+            &[3.0, -2.0, f64::NAN],
+            &[(0.0, 2.0), (10.0, 30.0), (0.0, 10.0)],
+        );
+        assert_eq!(l.len(), 2);
+        assert_eq!((l[0].index, l[0].bound, l[0].moves_kwh), (1, 10.0, 20.0));
+        assert_eq!((l[1].index, l[1].bound, l[1].moves_kwh), (0, 2.0, 3.0));
+        assert!((l[1].alone_needs - (1.0 + 50.0 / 3.0)).abs() < 1e-12);
+        assert_eq!(l[0].alone_needs, -5.0);
+        // Already at the bound that would help: no lever.
+        assert!(levers(50.0, &[2.0], &[3.0], &[(0.0, 2.0)]).is_empty());
     }
 }
