@@ -188,8 +188,8 @@ impl Levers {
                 .into()
         };
         format!(
-            "what would move it, to first order over {} EnergyPlus runs of the design and the \
-             refinement rounds: {}; all {} together {:+.1} MWh of the {:+.1} MWh needed: {verdict}",
+            "what would move it, to first order over the {} EnergyPlus runs the surrogate \
+             learned from: {}; all {} together {:+.1} MWh of the {:+.1} MWh needed: {verdict}",
             self.runs,
             named.join(", "),
             self.parameters.len(),
@@ -830,7 +830,7 @@ mod tests {
         });
         let text = findings(&f, 8).join("\n");
         assert!(
-            text.contains("over 36 EnergyPlus runs")
+            text.contains("over the 36 EnergyPlus runs the surrogate learned from")
                 && text.contains(
                     "infiltration_ach to its prior's upper bound 0.1 (median 1.0000) -200.0 MWh"
                 )

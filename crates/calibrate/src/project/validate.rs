@@ -140,9 +140,10 @@ impl Project {
         idd: &bemcal_energyplus::idd::Idd,
     ) -> Result<(), Error> {
         let all: Vec<String> = model.parameters().iter().map(|p| p.name.clone()).collect();
-        for m in &self.measures {
+        for (i, m) in self.measures.iter().enumerate() {
+            // The line of the measure itself ([[measures]] number i).
             m.check_model(model, idd, &all, &Default::default())
-                .map_err(|message| self.error_at(&["measures"], message))?;
+                .map_err(|message| self.error_at(&["measures", &i.to_string()], message))?;
         }
         Ok(())
     }
