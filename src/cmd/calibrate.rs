@@ -224,6 +224,12 @@ fn print_surrogate_error(s: &bemcal_calibrate::Summary) {
 
 /// Correlated pairs, chains moved to the best mode, independence steps switched off.
 fn print_posterior_notes(s: &bemcal_calibrate::Summary) {
+    if let Some(m) = &s.posterior.modes {
+        println!(
+            "warning: {}",
+            bemcal_report::modes::modes_sentence(m, &s.posterior.parameters)
+        );
+    }
     for c in &s.posterior.correlated_pairs {
         println!(
             "warning: {} and {} are strongly correlated (rho = {:.2}): not separately identifiable",

@@ -22,6 +22,7 @@ mod error;
 pub mod html;
 pub mod informed;
 pub mod io;
+pub mod modes;
 pub mod plots;
 pub mod portfolio;
 pub mod recovery;

@@ -205,6 +205,7 @@ mod tests {
             correlated_pairs: vec![],
             max_rhat: f64::NAN,
             min_ess_bulk: f64::NAN,
+            modes: None,
         }
     }
 

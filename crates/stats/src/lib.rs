@@ -21,6 +21,7 @@
 //!   points by recovering their known values, added to the draws.
 //! - [`likelihood`]: the Gaussian likelihood of reference Eqs. 5 and 7.
 //! - [`metrics`]: ASHRAE Guideline 14 NMBE and CV-RMSE.
+//! - [`modes`]: chains settled in different modes of the posterior, and what separates them.
 //! - [`model_form`]: whether a model can reach a meter, residual patterns, an additive
 //!   discrepancy, parameters piled against a prior bound.
 //! - [`savings`]: a retrofit measure's savings over posterior draws, their intervals and what
@@ -41,6 +42,7 @@ pub mod likelihood;
 pub mod mcmc;
 pub mod metrics;
 pub mod model_form;
+pub mod modes;
 pub mod nan;
 pub mod optim;
 pub mod predictive;

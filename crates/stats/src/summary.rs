@@ -95,6 +95,10 @@ pub struct PosteriorSummary {
     #[serde(deserialize_with = "crate::nan::null_as_nan")]
     #[schemars(with = "crate::nan::NumberOrNull")]
     pub min_ess_bulk: f64,
+    /// Where the chains settled in different modes, which chains and what separates them
+    /// ([`crate::modes::chain_modes`]); absent where they share one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modes: Option<crate::modes::ChainModes>,
 }
 
 /// Summarise chains of unit-space draws (as [`crate::mcmc`] records them) against their
@@ -180,6 +184,7 @@ pub fn summarize(priors: &[Prior], chains: &[Draws]) -> Result<PosteriorSummary>
         .iter()
         .map(|p| p.ess_bulk)
         .fold(f64::NAN, f64::min);
+    let log_density: Vec<Vec<f64>> = chains.iter().map(|c| c.log_density.clone()).collect();
     Ok(PosteriorSummary {
         parameters,
         map_point,
@@ -187,6 +192,7 @@ pub fn summarize(priors: &[Prior], chains: &[Draws]) -> Result<PosteriorSummary>
         correlated_pairs,
         max_rhat,
         min_ess_bulk,
+        modes: crate::modes::chain_modes(&physical, &log_density),
     })
 }
 

@@ -134,6 +134,16 @@ pub(super) fn warnings(s: &Summary) -> String {
     if let Some(note) = what_bills_say(&s.billed_outputs()) {
         warn.push(esc(&note));
     }
+    if let Some(m) = &post.modes {
+        let sentence = crate::modes::modes_sentence(m, &post.parameters);
+        let mut chars = sentence.chars();
+        let first = chars.next().map(|c| c.to_uppercase().collect::<String>());
+        warn.push(esc(&format!(
+            "{}{}.",
+            first.unwrap_or_default(),
+            chars.as_str()
+        )));
+    }
     for c in &post.correlated_pairs {
         warn.push(format!(
             "<b>{}</b> and <b>{}</b> are strongly correlated in the posterior (&rho; = {:+.2}): the data constrain a combination, not each one.",
