@@ -145,6 +145,10 @@ pub struct MeterLever {
     #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
     #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
     pub alone_needs: f64,
+    /// Its prior's range (max - min), the scale of how far beyond it `alone_needs` lies.
+    #[serde(deserialize_with = "bemcal_stats::nan::null_as_nan")]
+    #[schemars(with = "bemcal_stats::nan::NumberOrNull")]
+    pub prior_range: f64,
 }
 
 impl Levers {
@@ -164,7 +168,7 @@ impl Levers {
         let named: Vec<String> = (self.parameters.iter().take(LEVERS_NAMED))
             .map(|l| {
                 format!(
-                    "{} to its prior's {} bound {} (median {:.4}) {:+.1} MWh",
+                    "{} to its prior's {} bound {:.4} (median {:.4}) {:+.1} MWh",
                     l.parameter,
                     l.bound.as_str(),
                     l.bound_value,
@@ -178,9 +182,12 @@ impl Levers {
         let verdict = if together.abs() < self.gap_kwh.abs() {
             format!(
                 "no setting inside these priors reaches the meter: widen a prior only where a \
-                 value beyond is physical ({} alone would need {:.4}), else look at what the \
-                 model lacks (the meter's scope, the weather, a system or a load)",
-                first.parameter, first.alone_needs
+                 value beyond is physical ({} alone would need {:.4}, {:.1} times its prior's \
+                 range beyond the bound), else look at what the model lacks (the meter's scope, \
+                 the weather, a system or a load)",
+                first.parameter,
+                first.alone_needs,
+                (first.alone_needs - first.bound_value).abs() / first.prior_range
             )
         } else {
             "the priors could reach the meter together, yet the posterior stays away: the other \
@@ -582,10 +589,11 @@ fn add_levers(
                 bound_value: l.bound,
                 moves_kwh: l.moves_kwh,
                 alone_needs: l.alone_needs,
+                prior_range: bounds[l.index].1 - bounds[l.index].0,
             })
             .collect();
         m.levers = Some(Levers {
-            runs: runs.len(),
+            runs: totals.iter().filter(|t| t.is_finite()).count(),
             gap_kwh: gap,
             parameters,
         });
@@ -813,6 +821,7 @@ mod tests {
             bound_value,
             moves_kwh,
             alone_needs,
+            prior_range: 1.0,
         }
     }
 
@@ -832,11 +841,13 @@ mod tests {
         assert!(
             text.contains("over the 36 EnergyPlus runs the surrogate learned from")
                 && text.contains(
-                    "infiltration_ach to its prior's upper bound 0.1 (median 1.0000) -200.0 MWh"
+                    "infiltration_ach to its prior's upper bound 0.1000 (median 1.0000) -200.0 MWh"
                 )
                 && text.contains("all 2 together -300.0 MWh of the -1820.0 MWh needed")
                 && text.contains("no setting inside these priors reaches the meter")
-                && text.contains("infiltration_ach alone would need -7.5000"),
+                && text.contains(
+                    "infiltration_ach alone would need -7.5000, 7.6 times its prior's range"
+                ),
             "{text}"
         );
         f.levers.as_mut().unwrap().gap_kwh = -250_000.0;

@@ -31,13 +31,14 @@ pub fn modes_sentence(m: &ChainModes, parameters: &[ParameterSummary]) -> String
         })
         .collect();
     format!(
-        "the chains settled in {} modes: {}; separated by {}: the data fit more than one way \
-         (the first mode fits best), longer chains will not merge them, and the intervals pool \
-         modes the meters cannot tell apart: a sub-meter or a prior that rules one out would",
+        "the chains settled in {} places: {}; separated by {}: either modes of the posterior \
+         (the data fit more than one way, the first best; longer chains will not merge them, \
+         and the intervals pool what the meters cannot tell apart: a sub-meter or a prior that \
+         rules one out would) or chains not mixed yet (longer chains would merge them)",
         m.chains.len(),
         modes.join(" and "),
         if separated.is_empty() {
-            "no single parameter (a combination)".to_string()
+            "no parameter on its own once the places' chains are pooled".to_string()
         } else {
             separated.join(", ")
         }
@@ -68,7 +69,7 @@ mod tests {
         .unwrap();
         let s = modes_sentence(&m, &[p]);
         assert!(
-            s.starts_with("the chains settled in 2 modes: chains 1, 3 (mean log density -8.0) and chains 0, 2")
+            s.starts_with("the chains settled in 2 places: chains 1, 3 (mean log density -8.0) and chains 0, 2")
                 && s.contains("equipment_power_density 15.0500 against 11.5500 (5 SDs apart)"),
             "{s}"
         );

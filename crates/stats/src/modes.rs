@@ -35,6 +35,8 @@ pub struct Separation {
     /// Its mean in each mode (the modes' order).
     pub means: Vec<f64>,
     /// The difference of the first two modes' means in pooled within-chain standard deviations.
+    #[serde(deserialize_with = "crate::nan::null_as_nan")]
+    #[schemars(with = "crate::nan::NumberOrNull")]
     pub gap_sd: f64,
 }
 
