@@ -90,6 +90,16 @@ pub(super) fn not_converged_banner(s: &Summary) -> String {
     )
 }
 
+/// The chains' modes ([`crate::modes::modes_sentence`]) as a sentence of the warnings.
+fn modes_warning(post: &bemcal_stats::summary::PosteriorSummary) -> Option<String> {
+    let sentence = crate::modes::modes_sentence(post.modes.as_ref()?, &post.parameters);
+    let mut chars = sentence.chars();
+    let first: String = (chars.next())
+        .map(|c| c.to_uppercase().collect())
+        .unwrap_or_default();
+    Some(esc(&format!("{first}{}.", chars.as_str())))
+}
+
 /// Warnings: R-hat, bulk ESS, uninformed parameters, correlated pairs, acceptance rates,
 /// Guideline 14 failures and design runs EnergyPlus could not simulate.
 pub(super) fn warnings(s: &Summary) -> String {
@@ -134,16 +144,7 @@ pub(super) fn warnings(s: &Summary) -> String {
     if let Some(note) = what_bills_say(&s.billed_outputs()) {
         warn.push(esc(&note));
     }
-    if let Some(m) = &post.modes {
-        let sentence = crate::modes::modes_sentence(m, &post.parameters);
-        let mut chars = sentence.chars();
-        let first = chars.next().map(|c| c.to_uppercase().collect::<String>());
-        warn.push(esc(&format!(
-            "{}{}.",
-            first.unwrap_or_default(),
-            chars.as_str()
-        )));
-    }
+    warn.extend(modes_warning(post));
     for c in &post.correlated_pairs {
         warn.push(format!(
             "<b>{}</b> and <b>{}</b> are strongly correlated in the posterior (&rho; = {:+.2}): the data constrain a combination, not each one.",
