@@ -60,11 +60,16 @@ fn at_truth(dir: &Path, set: &[(&str, f64)]) -> serde_json::Value {
     serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["annual_kwh"].clone()
 }
 
+/// Measure `name` in `savings`.
+fn measure<'a>(savings: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    (savings["measures"].as_array().unwrap().iter())
+        .find(|m| m["measure"] == name)
+        .unwrap_or_else(|| panic!("no measure {name}: {savings}"))
+}
+
 /// The output `output` under the calibration's weather of measure `name` in `savings`.
 fn row<'a>(savings: &'a serde_json::Value, name: &str, output: &str) -> &'a serde_json::Value {
-    let m = (savings["measures"].as_array().unwrap().iter())
-        .find(|m| m["measure"] == name)
-        .unwrap_or_else(|| panic!("no measure {name}: {savings}"));
+    let m = measure(savings, name);
     (m["outputs"].as_array().unwrap().iter())
         .find(|o| o["output"] == output && o["weather"] == "calibration")
         .unwrap_or_else(|| panic!("no {output} in {m}"))
@@ -128,9 +133,7 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
 
     // Beyond the prior, the surrogate's training range: EnergyPlus, and said.
-    let beyond = (savings["measures"].as_array().unwrap().iter())
-        .find(|m| m["measure"] == "cooling set-point 27 C")
-        .unwrap();
+    let beyond = measure(&savings, "cooling set-point 27 C");
     assert_eq!(beyond["method"], "energyplus", "{beyond}");
     assert_eq!(
         beyond["beyond_prior"],
@@ -142,9 +145,7 @@ fn savings_come_with_intervals_from_the_posterior() {
         .contains("outside its prior"));
     // An economizer, a building edit: EnergyPlus simulates it, and it saves cooling (Golden's
     // dry air cools for free much of the year) but no lighting.
-    let economizer = (savings["measures"].as_array().unwrap().iter())
-        .find(|m| m["measure"] == "air-side economizer")
-        .unwrap();
+    let economizer = measure(&savings, "air-side economizer");
     assert_eq!(economizer["method"], "energyplus", "{economizer}");
     assert_eq!(
         economizer["edits"],
@@ -165,9 +166,7 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     // An edit of the IDF's objects that no parameter reaches (the AHUs' fan pressure x 0.7):
     // EnergyPlus simulates it, and it saves electricity (the fans) at every draw, no lighting.
-    let ducts = (savings["measures"].as_array().unwrap().iter())
-        .find(|m| m["measure"] == "low-pressure ductwork")
-        .unwrap();
+    let ducts = measure(&savings, "low-pressure ductwork");
     assert_eq!(ducts["method"], "energyplus", "{ducts}");
     assert_eq!(
         ducts["edits"],
@@ -233,9 +232,7 @@ fn savings_come_with_intervals_from_the_posterior() {
     );
     let savings: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
     let method = |name: &str| {
-        let m = (savings["measures"].as_array().unwrap().iter())
-            .find(|m| m["measure"] == name)
-            .unwrap();
+        let m = measure(&savings, name);
         (m["method"].clone(), m["surrogate_draws"].clone())
     };
     assert_eq!(

@@ -364,12 +364,11 @@ impl Leased<'_> {
             Some(m) => serde_json::to_string(m).map_err(ex)?,
             None => String::new(),
         };
-        // The building edits' JSON as before IDF edits existed (cached runs keep their keys).
-        let building = match measure {
-            Some(m) if m.edits_model() => m.model_edits_key(),
-            Some(m) => serde_json::to_string(&m.building).map_err(ex)?,
-            None => String::new(),
-        };
+        // A measure without IDF edits keys as before they existed (cached runs keep their keys).
+        let building = measure.map_or(
+            String::new(),
+            bemcal_calibrate::measures::Measure::model_edits_key,
+        );
         let key = hex::encode(Sha256::digest(format!(
             "measure\n{inputs_hash}\n{weather_hash}\n{building}\n{values}"
         )));

@@ -71,6 +71,40 @@ pub enum Edit {
 }
 
 impl Edit {
+    /// An IDF edit's amount as the same kind of edit.
+    pub fn of(e: &IdfEdit) -> Edit {
+        use bemcal_energyplus::model::Edit as Field;
+        match e.edit {
+            Field::Set => Edit::Set(e.value),
+            Field::Scale => Edit::Scale(e.value),
+            Field::Offset => Edit::Offset(e.value),
+        }
+    }
+
+    /// The amount checked, for `who` (the measure) editing `name`: finite, a factor 0 or
+    /// more, and not the identity (a factor 1, an amount 0).
+    fn check(self, who: &str, name: &str) -> Result<(), String> {
+        let (amount, identity, what) = match self {
+            Edit::Set(v) => (v, false, "value"),
+            Edit::Scale(f) => (f, f == 1.0, "factor"),
+            Edit::Offset(d) => (d, d == 0.0, "amount"),
+        };
+        if !amount.is_finite() {
+            return Err(format!("{who}: {name}'s {what} {amount} is not finite"));
+        }
+        if let Edit::Scale(f) = self {
+            if f < 0.0 {
+                return Err(format!("{who}: {name} x {f}: a factor must be 0 or more"));
+            }
+        }
+        if identity {
+            return Err(format!(
+                "{who} changes nothing: {name}'s {what} {amount} leaves it as it is"
+            ));
+        }
+        Ok(())
+    }
+
     /// The parameter's value after the edit.
     pub fn apply(self, value: f64) -> f64 {
         match self {
@@ -152,12 +186,9 @@ impl Measure {
     }
 
     /// What its edits of the model are, as text: the key of the runs it simulates beside their
-    /// values (the building edits' JSON, then the IDF edits' where there are any); empty for a
-    /// measure of parameters alone.
+    /// values (the building edits' JSON, `{}` where there are none, then the IDF edits' where
+    /// there are any).
     pub fn model_edits_key(&self) -> String {
-        if !self.edits_model() {
-            return String::new();
-        }
         let mut text = serde_json::to_string(&self.building).unwrap_or_default();
         if !self.idf.is_empty() {
             text.push('\n');
@@ -212,19 +243,6 @@ impl Measure {
                  or idf = [{{ class = ..., object = ..., field = ..., edit = ..., value = ... }}]"
             ));
         }
-        for e in &self.idf {
-            let identity = match e.edit {
-                bemcal_energyplus::model::Edit::Set => false,
-                bemcal_energyplus::model::Edit::Scale => e.value == 1.0,
-                bemcal_energyplus::model::Edit::Offset => e.value == 0.0,
-            };
-            if identity {
-                return Err(format!(
-                    "{who} changes nothing: idf edit '{}' leaves the field as it is",
-                    bemcal_excerpt::excerpt(&e.describe(), 120)
-                ));
-            }
-        }
         let mut seen = std::collections::BTreeSet::new();
         for (name, edit) in edits {
             if !seen.insert(name) {
@@ -232,24 +250,11 @@ impl Measure {
                     "{who} edits {name} twice (in two of set, scale and offset): give one"
                 ));
             }
-            let (amount, identity, what) = match edit {
-                Edit::Set(v) => (v, false, "value"),
-                Edit::Scale(f) => (f, f == 1.0, "factor"),
-                Edit::Offset(d) => (d, d == 0.0, "amount"),
-            };
-            if !amount.is_finite() {
-                return Err(format!("{who}: {name}'s {what} {amount} is not finite"));
-            }
-            if let Edit::Scale(f) = edit {
-                if f < 0.0 {
-                    return Err(format!("{who}: {name} x {f}: a factor must be 0 or more"));
-                }
-            }
-            if identity {
-                return Err(format!(
-                    "{who} changes nothing: {name}'s {what} {amount} leaves it as it is"
-                ));
-            }
+            edit.check(&who, name)?;
+        }
+        for e in &self.idf {
+            let name = format!("idf edit '{}'", bemcal_excerpt::excerpt(&e.describe(), 120));
+            Edit::of(e).check(&who, &name)?;
         }
         Ok(())
     }
