@@ -135,3 +135,162 @@ fn holidays_the_building_works_are_said_and_the_line_mends_them() {
         "without the line the holidays should run the weekend schedule: {without:.0} against {measured:.0}"
     );
 }
+
+/// A building open on Saturday mornings (meters from EnergyPlus with its Saturdays labelled
+/// `partial` in a day-type file, their own intervals 0-8, 8-13, 13-24 at 0.05 / 0.8 / 0.05,
+/// Sundays and holidays at 0.05): pre-calibration labels the Saturdays partial days by what
+/// they look like, writes their schedule priors and boundaries, and suggests the day-type
+/// file; the model with it runs the Saturdays on their own intervals (EnergyPlus at the same
+/// values then matches the meters on those dates; with the Saturday-Sunday rule it runs them
+/// as days off and misses).
+#[test]
+fn saturday_half_days_run_their_own_schedule() {
+    if !have_engine() {
+        eprintln!("skipping: no .venv (run `make setup`)");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let small = small_model();
+    assert!(!small.contains("year"), "the small model sets its year");
+    let small = format!("{small}\nyear = 2021\n");
+    let saturdays: Vec<String> = (0..52)
+        .map(|w| {
+            (chrono::NaiveDate::from_ymd_opt(2021, 1, 2).unwrap() + chrono::Duration::weeks(w))
+                .to_string()
+        })
+        .collect();
+    let mut calendar = String::from("date,label\n");
+    for d in &saturdays {
+        calendar.push_str(&format!("{d},partial\n"));
+    }
+    std::fs::write(dir.join("true_calendar.csv"), calendar).unwrap();
+    let half_day = "partial_boundaries = [8, 13, 24]\n";
+    std::fs::write(
+        dir.join("truth.toml"),
+        format!("{small}{half_day}day_types_file = \"true_calendar.csv\"\n"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("model.toml"), &small).unwrap();
+    let mut truth: Vec<String> = (1..=10)
+        .map(|i| format!("schedule_weekend_{i:02}=0.05"))
+        .collect();
+    truth.extend(
+        ["0.05", "0.8", "0.05"]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| format!("schedule_partial_{:02}={v}", i + 1)),
+    );
+    let set: Vec<String> = truth
+        .iter()
+        .flat_map(|t| ["--set".into(), t.clone()])
+        .collect();
+    let weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw";
+    run_ok(
+        bemcal()
+            .args(["synthesize", "--model"])
+            .arg(dir.join("truth.toml"))
+            .args(["--weather", weather, "--gap", "0:0"])
+            .args(&set)
+            .arg("--out")
+            .arg(dir.join("meters.csv")),
+    );
+    run_ok(
+        bemcal()
+            .args(["precalibrate", "--meters"])
+            .arg(dir.join("meters.csv"))
+            .args(["--weather", weather, "--out"])
+            .arg(dir.join("precal")),
+    );
+    let summary = std::fs::read_to_string(dir.join("precal/summary.txt")).unwrap();
+    let calendar = std::fs::read_to_string(dir.join("precal/calendar.csv")).unwrap();
+    let label = |date: &str| {
+        calendar
+            .lines()
+            .find(|l| l.starts_with(date))
+            .and_then(|l| l.split(',').nth(3))
+            .unwrap_or("")
+            .to_string()
+    };
+    let partial = saturdays.iter().filter(|d| label(d) == "partial").count();
+    let others = calendar
+        .lines()
+        .filter(|l| l.split(',').nth(3) == Some("partial"))
+        .count()
+        - partial;
+    assert!(
+        partial >= 48 && others == 0,
+        "{partial} Saturdays and {others} other days partial:\n{summary}"
+    );
+    assert!(
+        summary.contains("partial days: cluster") && summary.contains("day_types_file = \""),
+        "{summary}"
+    );
+    let priors = std::fs::read_to_string(dir.join("precal/priors.toml")).unwrap();
+    assert!(
+        priors.contains("partial_boundaries") && priors.contains("schedule_partial_01"),
+        "{priors}"
+    );
+    // The line pasted: the Saturdays run their own intervals.
+    let line = summary
+        .lines()
+        .find_map(|l| {
+            l.find("day_types_file = ")
+                .map(|i| l[i..].trim().to_string())
+        })
+        .unwrap();
+    std::fs::write(
+        dir.join("mended.toml"),
+        format!(
+            "{small}{half_day}{}\n",
+            line.replace(&dir.join("precal").display().to_string(), "precal")
+        ),
+    )
+    .unwrap();
+    let simulate = |model: &str, out: &str| {
+        run_ok(
+            bemcal()
+                .args(["simulate", "--model"])
+                .arg(dir.join(model))
+                .args(["--weather", weather])
+                .args(&set)
+                .arg("--out")
+                .arg(dir.join(out)),
+        );
+        sum_on(&dir.join(out), "electricity_kwh", &saturdays)
+    };
+    let measured = sum_on(&dir.join("meters.csv"), "electricity_kwh", &saturdays);
+    let with_line = simulate("mended.toml", "mended.csv");
+    // The rule's Saturdays run the weekend intervals (the partial ones are no parameters).
+    let rule_set: Vec<String> = truth
+        .iter()
+        .filter(|t| !t.starts_with("schedule_partial_"))
+        .flat_map(|t| ["--set".into(), t.clone()])
+        .collect();
+    run_ok(
+        bemcal()
+            .args(["simulate", "--model"])
+            .arg(dir.join("model.toml"))
+            .args(["--weather", weather])
+            .args(&rule_set)
+            .arg("--out")
+            .arg(dir.join("rule.csv")),
+    );
+    let without = sum_on(&dir.join("rule.csv"), "electricity_kwh", &saturdays);
+    let said = summary
+        .lines()
+        .find(|l| l.contains("partial days: cluster"));
+    eprintln!("{}", said.unwrap_or(""));
+    eprintln!(
+        "electricity on the 52 Saturdays, kWh: meters {measured:.0}, with the day-type file \
+         {with_line:.0}, with the Saturday-Sunday rule {without:.0}"
+    );
+    assert!(
+        (with_line - measured).abs() < 0.05 * measured,
+        "with the line: {with_line:.0} against the meters' {measured:.0}"
+    );
+    assert!(
+        without < 0.9 * measured,
+        "with the rule the Saturdays run as days off: {without:.0} against {measured:.0}"
+    );
+}

@@ -73,8 +73,9 @@ def time_features(weather, mode):
     """Time-of-day features per hour, [n_hours, k]. Hour of day h = t mod 24 (hour beginning).
 
     * ``hour``: sin, cos of 2*pi*h/24.
-    * ``hour+schedule``: those plus the same two multiplied by the off-day flag (day type code
-      != 0: weekend or holiday), so working days and off days get their own daily profile.
+    * ``hour+schedule``: those plus the same two multiplied by the off-day flag (the day type
+      code clamped to 0..1: weekend or holiday 1, a partial day 0.5), so working days and off
+      days get their own daily profile.
     """
     n = weather.shape[0]
     h = np.arange(n) % 24
@@ -83,7 +84,7 @@ def time_features(weather, mode):
     if mode in ("hour", "hour+schedule"):
         cols += [np.sin(ang), np.cos(ang)]
     if mode == "hour+schedule":
-        off = (weather[:, 4] != 0).astype(np.float64)
+        off = np.clip(weather[:, 4], 0.0, 1.0)  # days off 1, partial days (code 0.5) 0.5
         cols += [off * np.sin(ang), off * np.cos(ang)]
     time_feature_names(mode)
     return np.stack(cols, axis=1) if cols else np.zeros((n, 0))

@@ -70,6 +70,15 @@ pub fn start(
             fold::write_verdict(out, &v)?;
             v
         }
+        Some(spec) if spec.has_partial_days() => {
+            let v = FoldVerdict::Refused {
+                reason: "the calendar has partial days (day_types_file); the pretrained network \
+                         knows working days and days off only"
+                    .into(),
+            };
+            fold::write_verdict(out, &v)?;
+            v
+        }
         Some(spec) => {
             // Every parameter's value: the fixed ones as the plan keeps them, the calibrated
             // at their prior modes (the design points replace them in the fold).

@@ -66,7 +66,9 @@ pub(crate) fn set_run_period(m: &mut Idf, calendar: &Calendar) {
 /// calendar (1 March 2020, a Sunday, simulates as a Saturday). Each date's schedule is therefore
 /// set against the weekday EnergyPlus will give it: a working day it counts as a weekend is
 /// `CustomDay1` (the weekday schedule), an off day it counts as a weekday is a `Holiday` (the
-/// weekend schedule).
+/// weekend schedule), and a partial day is `CustomDay2` whatever its weekday (a generated
+/// building's partial-day schedule; an own IDF's schedules run it on their `CustomDay2` lines, or
+/// `AllOtherDays` where they have none).
 pub(crate) fn add_run_period(m: &mut Idf, calendar: &Calendar) {
     let year = calendar.year;
     let (first, last) = (year.first_date(), year.last_date());
@@ -99,9 +101,10 @@ pub(crate) fn add_run_period(m: &mut Idf, calendar: &Calendar) {
             .expect("a date of the year");
         let energyplus_weekday = first.weekday().num_days_from_monday() as usize + k;
         let weekend = energyplus_weekday % 7 >= 5;
-        let kind = match (t.is_off_day(), weekend) {
-            (true, false) => "Holiday",
-            (false, true) => "CustomDay1",
+        let kind = match (t, t.is_off_day(), weekend) {
+            (bemcal_weather::DayType::Partial, _, _) => "CustomDay2",
+            (_, true, false) => "Holiday",
+            (_, false, true) => "CustomDay1",
             _ => continue,
         };
         special += 1;

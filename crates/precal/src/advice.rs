@@ -25,10 +25,6 @@ pub const WEAK_SILHOUETTE: f64 = 0.5;
 /// already moved) is a break: a school's holidays, a closure between Christmas and New Year.
 pub const BREAK_MIN_WEEKDAYS: usize = 3;
 
-/// A cluster whose mean level lies at least this share of the span from both the lowest and
-/// the highest cluster's is a third kind of day (a Saturday half-day, a term's quieter weeks).
-pub const THIRD_KIND_MARGIN: f64 = 0.25;
-
 /// A line to paste into the model file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "key", content = "value")]
@@ -106,7 +102,7 @@ pub fn calendar_advice(c: &DayTypeClusters) -> Vec<Suggestion> {
         .collect();
     out.extend(breaks(&clustered, &moved_names));
     out.extend(holidays(&clustered));
-    out.extend(third_kinds(c, &clustered));
+    out.extend(partial_days(c, &clustered));
     out
 }
 
@@ -165,10 +161,10 @@ fn breaks(days: &[&DayRecord], moved: &[Weekday]) -> Option<Suggestion> {
     })
 }
 
-/// Clusters whose level lies between the working days' and the days off's, at least
-/// [`THIRD_KIND_MARGIN`] of the span from each (a Saturday half-day): the model takes two day
-/// types, so these days run the schedule of their label, and widen its priors.
-fn third_kinds(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
+/// Clusters labelled partial days ([`DayLabel::Partial`]: a level between the working days'
+/// and the days off's, a Saturday half-day): the model runs them on their own schedule
+/// intervals where the day-type file labels them, else on the weekday/weekend rule.
+fn partial_days(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
     let levels = &c.cluster_levels;
     let (lo, hi) = levels
         .iter()
@@ -177,8 +173,7 @@ fn third_kinds(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
         });
     let mut out = vec![];
     for (k, &level) in levels.iter().enumerate() {
-        let at = (level - lo) / (hi - lo);
-        if !(THIRD_KIND_MARGIN..=1.0 - THIRD_KIND_MARGIN).contains(&at) {
+        if c.cluster_labels.get(k) != Some(&DayLabel::Partial) {
             continue;
         }
         let members: Vec<&DayRecord> = days
@@ -186,9 +181,6 @@ fn third_kinds(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
             .copied()
             .filter(|d| d.cluster == Some(k))
             .collect();
-        let Some(label) = c.cluster_labels.get(k) else {
-            continue;
-        };
         let names = weekday_shares(days, |_| true, |d| d.cluster == Some(k));
         let which = match (names.is_empty(), members.first(), members.last()) {
             (false, _, _) => names.join(", "),
@@ -197,14 +189,12 @@ fn third_kinds(c: &DayTypeClusters, days: &[&DayRecord]) -> Vec<Suggestion> {
         };
         out.push(Suggestion {
             evidence: format!(
-                "a third kind of day: cluster {k}, {} days ({which}), at a level of {level:.2} \
-                 between the days off's {lo:.2} and the working days' {hi:.2}: the model takes two \
-                 day types, so these days run the '{}' schedule and widen its priors; \
-                 calendar.csv's cluster column lists them, to label as the building runs them",
+                "partial days: cluster {k}, {} days ({which}), at a level of {level:.2} between \
+                 the days off's {lo:.2} and the working days' {hi:.2}: with the day-type file they \
+                 run their own schedule intervals (schedule_partial_*, priors from this cluster)",
                 members.len(),
-                label.as_str()
             ),
-            paste: None,
+            paste: Some(Paste::DayTypesFile),
         });
     }
     out
@@ -417,9 +407,9 @@ mod tests {
     }
 
     #[test]
-    fn a_saturday_half_day_is_a_third_kind() {
+    fn a_saturday_half_day_is_a_partial_day() {
         // Working weekdays at 0.9, Saturdays at 0.6, Sundays and holidays off: the silhouette
-        // finds the three kinds, and the model's two day types cannot hold them.
+        // finds the three kinds, and the Saturdays are partial days with their own schedule.
         let c = year_of_peaks(
             |d, t| match (t, d.weekday()) {
                 (DayType::Weekday, _) => Some(0.9),
@@ -431,16 +421,23 @@ mod tests {
         assert_eq!(c.clustering.k, 3, "{:?}", c.silhouettes);
         let advice = calendar_advice(&c);
         let text: Vec<&str> = advice.iter().map(|s| s.evidence.as_str()).collect();
-        let third = advice
+        let partial = advice
             .iter()
-            .find(|s| s.evidence.starts_with("a third kind of day"))
+            .find(|s| s.evidence.starts_with("partial days"))
             .unwrap_or_else(|| panic!("{text:?}"));
         assert!(
-            third.evidence.contains("Saturday 5") && third.evidence.contains("'weekday' schedule"),
+            partial.evidence.contains("Saturday 5")
+                && partial.evidence.contains("schedule_partial"),
             "{}",
-            third.evidence
+            partial.evidence
         );
-        assert!(third.paste.is_none());
+        assert_eq!(partial.paste, Some(Paste::DayTypesFile));
+        let saturday = c
+            .days
+            .iter()
+            .find(|d| d.date.weekday() == Weekday::Sat && d.calendar == DayType::Weekend)
+            .unwrap();
+        assert_eq!(saturday.label, Some(DayLabel::Partial));
     }
 
     #[test]

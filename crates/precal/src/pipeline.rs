@@ -50,6 +50,10 @@ pub struct ScheduleBoundaries {
     pub weekday_boundaries: Vec<usize>,
     /// Weekend (and holiday) intervals.
     pub weekend_boundaries: Vec<usize>,
+    /// Partial days' intervals, where the meters show partial days
+    /// ([`crate::schedule::DayLabel::Partial`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub partial_boundaries: Vec<usize>,
 }
 
 /// The content of `priors.toml`, the file the calibration reads (written by pre-calibration,
@@ -79,7 +83,7 @@ pub struct Precalibration {
     pub profiles: DailyProfiles,
     /// Day-type clusters and the calendar.
     pub clusters: DayTypeClusters,
-    /// Weekday and weekend quartiles and intervals.
+    /// Weekday and weekend quartiles and intervals (and partial days', where they are).
     pub schedules: Vec<DayTypeSchedule>,
     /// The priors file content.
     pub priors: PriorsFile,
@@ -158,12 +162,9 @@ impl Precalibration {
         out
     }
 
-    /// The weekday or weekend schedule.
-    pub fn schedule(&self, label: DayLabel) -> &DayTypeSchedule {
-        self.schedules
-            .iter()
-            .find(|s| s.label == label)
-            .expect("both day types present")
+    /// The weekday or weekend schedule (always there), or the partial days' (where they are).
+    pub fn schedule(&self, label: DayLabel) -> Option<&DayTypeSchedule> {
+        self.schedules.iter().find(|s| s.label == label)
     }
 
     /// Hourly fractions before merging (2 x 24) and intervals after.
@@ -353,6 +354,7 @@ fn priors_file(
         schedule: Some(ScheduleBoundaries {
             weekday_boundaries: schedules[0].boundaries(),
             weekend_boundaries: schedules[1].boundaries(),
+            partial_boundaries: schedules.get(2).map_or(vec![], |s| s.boundaries()),
         }),
         parameter,
     }

@@ -97,7 +97,8 @@ impl Default for ScheduleOptions {
     }
 }
 
-/// The two schedule day types of the building model.
+/// The schedule day types of the building model: working days, days off and, where the meters
+/// show them, partial days.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DayLabel {
@@ -105,26 +106,35 @@ pub enum DayLabel {
     Weekday,
     /// Weekends and holidays.
     Weekend,
+    /// Days between the two (a Saturday half-day, a term's quieter weeks): a cluster whose
+    /// level lies at least [`PARTIAL_MARGIN`] of the span from both the days off's and the
+    /// working days'. Only the profiles give it, never the calendar.
+    Partial,
 }
 
 impl DayLabel {
-    /// `weekday` / `weekend`.
+    /// `weekday` / `weekend` / `partial`.
     pub fn as_str(self) -> &'static str {
         match self {
             DayLabel::Weekday => "weekday",
             DayLabel::Weekend => "weekend",
+            DayLabel::Partial => "partial",
         }
     }
 
     /// The label a calendar day type runs on.
     pub fn of(d: DayType) -> DayLabel {
-        if d.is_off_day() {
-            DayLabel::Weekend
-        } else {
-            DayLabel::Weekday
+        match d {
+            DayType::Weekend | DayType::Holiday => DayLabel::Weekend,
+            DayType::Partial => DayLabel::Partial,
+            DayType::Weekday => DayLabel::Weekday,
         }
     }
 }
+
+/// A cluster whose mean level lies at least this share of the span from both the lowest and
+/// the highest cluster's is a partial day (a Saturday half-day, a term's quieter weeks).
+pub const PARTIAL_MARGIN: f64 = 0.25;
 
 /// How the clusters got their labels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -170,8 +180,9 @@ pub fn daily_level(p: &[f64; 24]) -> f64 {
 /// days from days off where the busiest rises by at least [`MIN_WORKING_RISE`], the lowest
 /// level is at most [`OFF_DAY_SEPARATION`] of the highest, and the lowest-level cluster rises
 /// less than the highest-level one: then a cluster is `weekend` (days off) where its level is
-/// nearer the lowest than the highest. Elsewhere by the calendar `counts` (working, off days)
-/// of each cluster, and [`LabelRule::Calendar`] says so.
+/// nearer the lowest than the highest, `partial` where it lies at least [`PARTIAL_MARGIN`] of
+/// the span from both. Elsewhere by the calendar `counts` (working, off days) of each cluster,
+/// and [`LabelRule::Calendar`] says so.
 pub fn label_clusters(
     levels: &[f64],
     rises: &[f64],
@@ -190,9 +201,15 @@ pub fn label_clusters(
         let (l0, l1) = (levels[lo], levels[hi]);
         let labels = levels
             .iter()
-            .map(|&l| match l - l0 < l1 - l {
-                true => DayLabel::Weekend,
-                false => DayLabel::Weekday,
+            .map(|&l| {
+                let at = (l - l0) / (l1 - l0);
+                if (PARTIAL_MARGIN..=1.0 - PARTIAL_MARGIN).contains(&at) {
+                    DayLabel::Partial
+                } else if l - l0 < l1 - l {
+                    DayLabel::Weekend
+                } else {
+                    DayLabel::Weekday
+                }
             })
             .collect();
         return (labels, LabelRule::Profile);
@@ -416,7 +433,9 @@ pub fn cluster_days(
         rec.label = Some(cluster_labels[c]);
         rec.medoid_distance = med_dist[i];
         let mut why = Vec::new();
-        if DayLabel::of(rec.calendar) != cluster_labels[c] {
+        // The calendar has no partial days: a partial cluster's days are no mismatch.
+        if cluster_labels[c] != DayLabel::Partial && DayLabel::of(rec.calendar) != cluster_labels[c]
+        {
             why.push(format!(
                 "calendar {} in a '{}' cluster",
                 rec.calendar,
@@ -638,14 +657,17 @@ impl DayTypeSchedule {
     }
 }
 
-/// Hourly quartiles and intervals for weekday and weekend from the clusters.
+/// Hourly quartiles and intervals for weekday and weekend from the clusters, and for partial
+/// days where a cluster holds them.
 pub fn day_type_schedules(
     profiles: &DailyProfiles,
     clusters: &DayTypeClusters,
     opts: &ScheduleOptions,
 ) -> Result<Vec<DayTypeSchedule>, PrecalError> {
+    let partial = clusters.cluster_labels.contains(&DayLabel::Partial);
     [DayLabel::Weekday, DayLabel::Weekend]
         .into_iter()
+        .chain(partial.then_some(DayLabel::Partial))
         .map(|label| {
             let mut idx = clusters.members(profiles, label);
             let mut source = format!(

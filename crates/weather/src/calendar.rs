@@ -1,4 +1,5 @@
-//! The calendar of a calibration year: day types (weekday, weekend, holiday), holiday lists
+//! The calendar of a calibration year: day types (weekday, weekend, holiday, and the partial
+//! days a building's meters show), holiday lists
 //! (US federal, UK bank holidays, a listed file) and the day types the meters show
 //! (pre-calibration's calendar file). Typical-year (TMY) weather files mix source years and so
 //! carry no usable weekday: the calendar gives each date of the chosen year its day type.
@@ -21,21 +22,26 @@ pub enum DayType {
     Weekend,
     /// A holiday of the calendar's list.
     Holiday,
+    /// A day of partial operation the meters show (a Saturday half-day, a term's quieter
+    /// weeks): only from a day-type file (label `partial`), run on its own schedule.
+    Partial,
 }
 
 impl DayType {
-    /// The numeric code used as a surrogate input: weekday 0, weekend 1, holiday 2.
+    /// The numeric code used as a surrogate input: weekday 0, weekend 1, holiday 2, and a
+    /// partial day 0.5, between a working day and a day off.
     pub fn code(self) -> f64 {
         match self {
             DayType::Weekday => 0.0,
             DayType::Weekend => 1.0,
             DayType::Holiday => 2.0,
+            DayType::Partial => 0.5,
         }
     }
 
     /// True for days that run the weekend schedule in the building model (weekends and holidays).
     pub fn is_off_day(self) -> bool {
-        !matches!(self, DayType::Weekday)
+        matches!(self, DayType::Weekend | DayType::Holiday)
     }
 }
 
@@ -45,6 +51,7 @@ impl fmt::Display for DayType {
             DayType::Weekday => "weekday",
             DayType::Weekend => "weekend",
             DayType::Holiday => "holiday",
+            DayType::Partial => "partial",
         })
     }
 }
@@ -118,8 +125,8 @@ impl<'de> Deserialize<'de> for Holidays {
 }
 
 /// Reads a day-type calendar: a CSV with a `date` column (`YYYY-MM-DD`) and a `label` column
-/// (`weekday` or `weekend`, as pre-calibration's `calendar.csv` writes them from the meters'
-/// day-type clusters); other labels (`skipped`) leave the date to the calendar's rule.
+/// (`weekday`, `weekend` or `partial`, as pre-calibration's `calendar.csv` writes them from the
+/// meters' day-type clusters); other labels (`skipped`) leave the date to the calendar's rule.
 pub fn read_day_type_calendar(
     path: &Path,
 ) -> Result<std::collections::BTreeMap<NaiveDate, DayType>, WeatherError> {
@@ -166,6 +173,7 @@ pub fn read_day_type_calendar(
         match record.get(li).unwrap_or("").trim() {
             "weekday" => out.insert(date, DayType::Weekday),
             "weekend" => out.insert(date, DayType::Weekend),
+            "partial" => out.insert(date, DayType::Partial),
             _ => None,
         };
     }

@@ -115,6 +115,13 @@ pub struct BuildingSpec {
     /// Hour (1..=24) at which each weekend/holiday schedule interval ends; the last must be 24.
     #[serde(default = "default_weekend_bounds")]
     pub weekend_boundaries: Vec<u32>,
+    /// Hour (1..=24) at which each partial day's schedule interval ends (pre-calibration's
+    /// `priors.toml` gives them where the meters show partial days); the last must be 24. Only
+    /// a calendar with partial days (`partial` in `day_types_file`) uses them: those days run
+    /// their own interval fractions ([`partial_param`]) and the weekday's occupied hours.
+    /// Unset with partial days: the weekday's default intervals.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub partial_boundaries: Vec<u32>,
     /// One supply-air temperature parameter per AHU instead of one shared by both.
     #[serde(default)]
     pub separate_ahu_supply_air: bool,
@@ -285,6 +292,18 @@ pub fn weekday_param(n: usize) -> String {
 /// Name of the n-th (1-based) weekend schedule interval fraction.
 pub fn weekend_param(n: usize) -> String {
     format!("schedule_weekend_{n:02}")
+}
+/// Name of the n-th (1-based) partial day's schedule interval fraction.
+pub fn partial_param(n: usize) -> String {
+    format!("schedule_partial_{n:02}")
+}
+
+/// The default prior of a partial day's interval `i` (0-based) on the weekday's default
+/// intervals: from 0.1 to the weekday's maximum, its mode halfway between the weekday's and a
+/// quiet day's 0.15 (a partial day lies between a working day and a day off).
+fn default_partial_prior(i: usize) -> (f64, f64, f64) {
+    let (_, mode, max) = WEEKDAY_PRIORS.get(i).copied().unwrap_or((0.1, 0.4, 0.8));
+    (0.1, 0.5 * (mode + 0.15), max)
 }
 
 impl BuildingSpec {
@@ -492,6 +511,10 @@ impl BuildingSpec {
         ] {
             check_boundaries(bounds).map_err(|m| at(what, format!("{what}: {m}")))?;
         }
+        if !self.partial_boundaries.is_empty() {
+            check_boundaries(&self.partial_boundaries)
+                .map_err(|m| at("partial_boundaries", format!("partial_boundaries: {m}")))?;
+        }
         Ok(())
     }
 
@@ -511,6 +534,23 @@ impl BuildingSpec {
                 .map_err(|m| at(format!("priors.{name}: {m}")))?;
         }
         Ok(())
+    }
+
+    /// True where the calendar has partial days (`partial` in `day_types_file`).
+    pub fn has_partial_days(&self) -> bool {
+        self.observed_day_types
+            .values()
+            .any(|t| *t == bemcal_weather::DayType::Partial)
+    }
+
+    /// The partial days' schedule intervals: none without partial days, else
+    /// `partial_boundaries` or the weekday's defaults.
+    pub fn partial_intervals(&self) -> Vec<u32> {
+        match (self.has_partial_days(), self.partial_boundaries.is_empty()) {
+            (false, _) => vec![],
+            (true, true) => default_weekday_bounds(),
+            (true, false) => self.partial_boundaries.clone(),
+        }
     }
 
     /// Total conditioned floor area, m2.
@@ -548,6 +588,15 @@ impl BuildingSpec {
             let prior = WEEKEND_PRIORS.get(i).copied().unwrap_or((0.1, 0.25, 0.5));
             let d = format!("weekend/holiday schedule fraction, interval {}", i + 1);
             out.push(def(&weekend_param(i + 1), "-", &d, prior));
+        }
+        for (i, _) in self.partial_intervals().iter().enumerate() {
+            let d = format!("partial day schedule fraction, interval {}", i + 1);
+            out.push(def(
+                &partial_param(i + 1),
+                "-",
+                &d,
+                default_partial_prior(i),
+            ));
         }
         // The reference's hot water prior belongs to its 11,437 m2 building: scale by floor area.
         let scale = self.floor_area_m2() / REFERENCE_FLOOR_AREA_M2;
@@ -748,11 +797,16 @@ impl BuildingSpec {
         let we: Vec<f64> = (1..=self.weekend_boundaries.len())
             .map(|i| value(v, &weekend_param(i)))
             .collect::<Result<_, _>>()?;
+        let partial = self.partial_intervals();
+        let pd: Vec<f64> = (1..=partial.len())
+            .map(|i| value(v, &partial_param(i)))
+            .collect::<Result<_, _>>()?;
         interval_schedule(
             m,
             "Occupancy",
             (&self.weekday_boundaries, &wd),
             (&self.weekend_boundaries, &we),
+            (&partial, &pd),
         );
         Ok(())
     }
@@ -832,14 +886,19 @@ impl BuildingSpec {
     ) {
         let [o0, o1] = self.occupied_hours;
         let mut f: Vec<String> = vec![name.into(), limits.into(), "Through: 12/31".into()];
+        // Partial days (CustomDay2) keep the weekday's occupied hours.
+        let working = match self.has_partial_days() {
+            true => "Weekdays CustomDay1 CustomDay2",
+            false => "Weekdays CustomDay1",
+        };
         match design {
             Some(d) => {
                 f.push("For: SummerDesignDay WinterDesignDay".into());
                 f.push("Until: 24:00".into());
                 f.push(num(d));
-                f.push("For: Weekdays CustomDay1".into());
+                f.push(format!("For: {working}"));
             }
-            None => f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into()),
+            None => f.push(format!("For: {working} SummerDesignDay WinterDesignDay")),
         }
         if o0 > 0 {
             f.push(format!("Until: {o0:02}:00"));
@@ -1076,19 +1135,27 @@ fn constant(m: &mut Idf, name: &str, limits: &str, value: f64) {
     );
 }
 
-/// `Schedule:Compact` with one value per interval: weekdays (and design days) and
-/// weekends/holidays.
+/// `Schedule:Compact` with one value per interval: weekdays (and design days), partial days
+/// (`CustomDay2`, where there are intervals) and weekends/holidays.
 fn interval_schedule(
     m: &mut Idf,
     name: &str,
     weekday: (&[u32], &[f64]),
     weekend: (&[u32], &[f64]),
+    partial: (&[u32], &[f64]),
 ) {
     let mut f: Vec<String> = vec![name.into(), "Fraction".into(), "Through: 12/31".into()];
     f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into());
     for (h, v) in weekday.0.iter().zip(weekday.1) {
         f.push(format!("Until: {h:02}:00"));
         f.push(num(*v));
+    }
+    if !partial.0.is_empty() {
+        f.push("For: CustomDay2".into());
+        for (h, v) in partial.0.iter().zip(partial.1) {
+            f.push(format!("Until: {h:02}:00"));
+            f.push(num(*v));
+        }
     }
     f.push("For: AllOtherDays".into());
     for (h, v) in weekend.0.iter().zip(weekend.1) {
@@ -1237,6 +1304,75 @@ mod tests {
             .map(|o| (o.fields[1].clone(), o.fields[3].clone()))
             .collect();
         (rp, special)
+    }
+
+    #[test]
+    fn partial_days_run_their_own_intervals_on_custom_day_2() {
+        // Saturdays of 2021 labelled partial (a half-day): the spec gains a partial day's
+        // intervals (the weekday's defaults, or its own boundaries), the Saturdays become
+        // CustomDay2 and the occupancy schedule has a CustomDay2 block; the set-points keep the
+        // weekday's occupied hours on them.
+        let mut s = BuildingSpec {
+            year: 2021.into(),
+            holidays: bemcal_weather::Holidays::None,
+            ..Default::default()
+        };
+        let names = |s: &BuildingSpec| -> Vec<String> {
+            s.parameters()
+                .into_iter()
+                .map(|d| d.name)
+                .filter(|n| n.starts_with("schedule_partial_"))
+                .collect()
+        };
+        assert!(names(&s).is_empty() && !s.has_partial_days());
+        let saturdays = (0..52).map(|w| {
+            chrono::NaiveDate::from_ymd_opt(2021, 1, 2).unwrap() + chrono::Duration::weeks(w)
+        });
+        s.observed_day_types = saturdays
+            .map(|d| (d, bemcal_weather::DayType::Partial))
+            .collect();
+        assert_eq!(names(&s).len(), default_weekday_bounds().len());
+        s.partial_boundaries = vec![8, 13, 24];
+        assert_eq!(
+            names(&s),
+            [
+                "schedule_partial_01",
+                "schedule_partial_02",
+                "schedule_partial_03"
+            ]
+        );
+        let (_, special) = run_period(&s);
+        assert_eq!(special.len(), 52);
+        assert!(
+            special.iter().all(|(_, kind)| kind == "CustomDay2"),
+            "{special:?}"
+        );
+        assert_eq!(special[0].0, "1/2");
+        let mut v = complete_values(&s.parameters(), &Default::default()).unwrap();
+        v.insert("schedule_partial_02".into(), 0.42);
+        let idf = s.to_idf(&v).unwrap();
+        let schedule = |name: &str| {
+            idf.of_class("Schedule:Compact")
+                .find(|o| o.fields[0] == name)
+                .unwrap()
+                .fields
+                .join(",")
+        };
+        assert!(
+            schedule("Occupancy").contains("For: CustomDay2,Until: 08:00,")
+                && schedule("Occupancy").contains("Until: 13:00,0.42,Until: 24:00"),
+            "{}",
+            schedule("Occupancy")
+        );
+        assert!(
+            schedule("Heating Setpoint").contains("For: Weekdays CustomDay1 CustomDay2,"),
+            "{}",
+            schedule("Heating Setpoint")
+        );
+        // Boundaries that do not end at 24 are refused, named.
+        s.partial_boundaries = vec![8, 13];
+        let e = s.validate().unwrap_err();
+        assert!(e.contains("partial_boundaries"), "{e}");
     }
 
     #[test]

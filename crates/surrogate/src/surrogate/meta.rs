@@ -342,7 +342,7 @@ impl SurrogateMeta {
     /// The per-hour part of the input, `[n_hours, n_hourly]`: `(w - mean) / std` for the five
     /// weather features, then the time features (hour of day `h = t mod 24`, hour beginning:
     /// `sin, cos(2 pi h / 24)`, and for `hour+schedule` the same two times the off-day flag,
-    /// day type != weekday), then the schedule inputs where the surrogate takes them
+    /// the day type's code clamped to 0..1: 1 on days off, 0.5 on partial days), then the schedule inputs where the surrogate takes them
     /// ([`ScheduleInputs::fill`]). Pure; identical to the trainer's `data.hourly_features`
     /// (and `data.schedule_columns`).
     pub fn hourly_inputs(&self, weather: &HourlyFeatures) -> Array2<f32> {
@@ -367,7 +367,8 @@ impl SurrogateMeta {
                 m[[t, j]] = ((row[j] - self.weather.mean[j]) / self.weather.std[j]) as f32;
             }
             let ang = 2.0 * std::f64::consts::PI * ((t % 24) as f64) / 24.0;
-            let off = if row[4] != 0.0 { 1.0 } else { 0.0 };
+            // Off days (weekend 1, holiday 2) 1, working days 0, a partial day its 0.5.
+            let off = row[4].clamp(0.0, 1.0);
             let extra = [ang.sin(), ang.cos(), off * ang.sin(), off * ang.cos()];
             for (j, v) in extra.iter().take(self.time_feature_names.len()).enumerate() {
                 m[[t, 5 + j]] = *v as f32;
