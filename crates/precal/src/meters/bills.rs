@@ -334,9 +334,12 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         .map(|u| u.parse::<BillUnit>())
         .transpose()
         .map_err(|m| file_err(path, format!("[[meters.bills]] unit: {m}")))?;
+    // A semicolon- or tab-separated file writes decimal commas (super::sniff_delimiter).
+    let delimiter = super::sniff_delimiter(text);
     let mut rdr = csv::ReaderBuilder::new()
         .flexible(true)
         .trim(csv::Trim::All)
+        .delimiter(delimiter)
         .from_reader(text.as_bytes());
     let headers = rdr
         .headers()
@@ -348,6 +351,10 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
             let line = e.position().map_or(0, |p| p.line());
             row_err(path, line, "", format!("malformed CSV: {e}"))
         })?;
+        let rec = match delimiter {
+            b',' => rec,
+            _ => super::decimal_points(&rec, usize::MAX),
+        };
         if !rec.iter().all(str::is_empty) {
             bills.push(parse_row(&rec, &col, spec, default_unit, path)?);
         }
@@ -625,6 +632,24 @@ mod tests {
             NaiveDate::from_ymd_opt(2021, 3, 9).unwrap()
         );
         assert!(t.bills[1].estimated && !t.bills[2].estimated);
+        assert_eq!(
+            t.notes,
+            vec!["estimated reads: 2021-02-04 to 2021-03-08 (line 3)".to_string()]
+        );
+    }
+
+    #[test]
+    fn semicolon_separated_bills_with_decimal_commas() {
+        let t = parse(
+            "Start;End;Quantity;Unit;Estimated\n\
+             2021-01-05;2021-02-03;120,5;therm;\n\
+             2021-02-04;2021-03-08;3,2;MMBtu;E\n",
+            &spec(None),
+        )
+        .unwrap();
+        assert!((t.bills[0].kwh - 120.5 * 29.307_107).abs() < 1e-6);
+        assert!((t.bills[1].kwh - 3.2 * 293.071_07).abs() < 1e-6);
+        // The line an error names is the file's.
         assert_eq!(
             t.notes,
             vec!["estimated reads: 2021-02-04 to 2021-03-08 (line 3)".to_string()]

@@ -466,9 +466,17 @@ fn read_table(
     std_offset_h: Option<f64>,
     notes: &mut Vec<String>,
 ) -> Result<Table, PrecalError> {
+    let delimiter = sniff_delimiter(text);
+    if delimiter != b',' {
+        notes.push(format!(
+            "fields separated by '{}' (no comma in the header line), decimal commas read as points",
+            if delimiter == b'\t' { "\\t" } else { ";" }
+        ));
+    }
     let mut rdr = csv::ReaderBuilder::new()
         .flexible(true)
         .trim(csv::Trim::All)
+        .delimiter(delimiter)
         .from_reader(text.as_bytes());
     let headers: Vec<String> = rdr
         .headers()
@@ -489,6 +497,10 @@ fn read_table(
         if record.iter().all(str::is_empty) {
             continue;
         }
+        let record = match delimiter {
+            b',' => record,
+            _ => decimal_points(&record, ts_idx),
+        };
         let raw = record.get(ts_idx).unwrap_or("");
         if raw.is_empty() {
             return Err(row_err(path, line, &ts_name, "empty timestamp".into()));
@@ -512,6 +524,47 @@ fn read_table(
         rows,
         saw_24,
     })
+}
+
+/// The meters file's field separator, from its header line: a comma where the line has one,
+/// else a semicolon or a tab where it has one (the exports of spreadsheets and loggers set to a
+/// locale whose decimal mark is the comma), else a comma.
+pub(crate) fn sniff_delimiter(text: &str) -> u8 {
+    let header = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
+    if header.contains(',') {
+        b','
+    } else if header.contains(';') {
+        b';'
+    } else if header.contains('\t') {
+        b'\t'
+    } else {
+        b','
+    }
+}
+
+/// `record` with a decimal comma read as a point in every field but the timestamp's
+/// (`12,5` -> `12.5`) where that makes a number: a file whose fields a semicolon or a tab
+/// separates ([`sniff_delimiter`]) writes its decimals so. The record keeps its position (the
+/// line errors name).
+pub(crate) fn decimal_points(record: &csv::StringRecord, ts_idx: usize) -> csv::StringRecord {
+    let mut out: csv::StringRecord = record
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let pointed = f.replacen(',', ".", 1);
+            let decimal = i != ts_idx
+                && f.matches(',').count() == 1
+                && !f.contains('.')
+                && pointed.parse::<f64>().is_ok();
+            if decimal {
+                pointed
+            } else {
+                f.to_string()
+            }
+        })
+        .collect();
+    out.set_position(record.position().cloned());
+    out
 }
 
 /// The timestamp column's index (`spec.timestamp_column`, else the first header naming a time
@@ -652,6 +705,32 @@ mod tests {
             "{:?}",
             d.notes
         );
+    }
+
+    #[test]
+    fn semicolons_and_decimal_commas_as_a_european_spreadsheet_writes_them() {
+        let comma = "timestamp,Heat\n2011-01-01 00:00,1.5\n2011-01-01 01:00,2\n";
+        let semicolon = "timestamp;Heat\n2011-01-01 00:00;1,5\n2011-01-01 01:00;2\n";
+        let tab = "timestamp\tHeat\n2011-01-01 00:00\t1,5\n2011-01-01 01:00\t2\n";
+        let mut s = spec();
+        s.timestamp_format = "iso8601".into();
+        let read = |t: &str| parse_meters(t, Path::new("m.csv"), &s, None, None).unwrap();
+        let base = read(comma);
+        assert!(!base.notes.iter().any(|n| n.contains("separated")));
+        for t in [semicolon, tab] {
+            let d = read(t);
+            assert_eq!(&d.series[0].values[..2], &[1.5, 2.0]);
+            assert!(
+                d.notes.iter().any(|n| n.contains("decimal commas")),
+                "{:?}",
+                d.notes
+            );
+        }
+        // A comma-separated file's quoted "1,5" stays an error (a thousands separator or a
+        // decimal comma: not guessed), named with its line.
+        let quoted = "timestamp,Heat\n2011-01-01 00:00,\"1,5\"\n";
+        let e = parse_meters(quoted, Path::new("m.csv"), &s, None, None).unwrap_err();
+        assert!(e.to_string().contains("m.csv:2:"), "{e}");
     }
 
     #[test]
