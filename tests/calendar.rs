@@ -35,6 +35,41 @@ fn sum_on(path: &Path, column: &str, dates: &[String]) -> f64 {
         .sum()
 }
 
+/// The weather of these tests.
+const WEATHER: &str = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw";
+
+/// EnergyPlus on `model` in `dir` with `set` (`--set NAME=VALUE` pairs): `command` is
+/// `synthesize` (meters with noise, no gap) or `simulate`, into `out`.
+fn energyplus(dir: &Path, command: &str, model: &str, set: &[String], out: &str) {
+    let gap: &[&str] = if command == "synthesize" {
+        &["--gap", "0:0"]
+    } else {
+        &[]
+    };
+    run_ok(
+        bemcal()
+            .args([command, "--model"])
+            .arg(dir.join(model))
+            .args(["--weather", WEATHER])
+            .args(gap)
+            .args(set)
+            .arg("--out")
+            .arg(dir.join(out)),
+    );
+}
+
+/// Pre-calibration of `dir`'s meters.csv into `dir/precal`; its summary.txt.
+fn precalibrate(dir: &Path) -> String {
+    run_ok(
+        bemcal()
+            .args(["precalibrate", "--meters"])
+            .arg(dir.join("meters.csv"))
+            .args(["--weather", WEATHER, "--out"])
+            .arg(dir.join("precal")),
+    );
+    std::fs::read_to_string(dir.join("precal/summary.txt")).unwrap()
+}
+
 /// A building that works every US federal holiday (meters from EnergyPlus with `holidays =
 /// "none"`): pre-calibration labels the holidays as working days, suggests `holidays = "none"`
 /// with the evidence, and the model with that line runs the weekday schedule on those dates
@@ -56,22 +91,8 @@ fn holidays_the_building_works_are_said_and_the_line_mends_them() {
         format!("{small}\nholidays = \"none\"\n"),
     )
     .unwrap();
-    let weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw";
-    run_ok(
-        bemcal()
-            .args(["synthesize", "--model"])
-            .arg(dir.join("truth.toml"))
-            .args(["--weather", weather, "--gap", "0:0", "--out"])
-            .arg(dir.join("meters.csv")),
-    );
-    run_ok(
-        bemcal()
-            .args(["precalibrate", "--meters"])
-            .arg(dir.join("meters.csv"))
-            .args(["--weather", weather, "--out"])
-            .arg(dir.join("precal")),
-    );
-    let summary = std::fs::read_to_string(dir.join("precal/summary.txt")).unwrap();
+    energyplus(dir, "synthesize", "truth.toml", &[], "meters.csv");
+    let summary = precalibrate(dir);
     // The calendar's holidays (US federal, the default) are labelled working days, by what they
     // look like.
     let calendar = std::fs::read_to_string(dir.join("precal/calendar.csv")).unwrap();
@@ -107,13 +128,7 @@ fn holidays_the_building_works_are_said_and_the_line_mends_them() {
     let mended = format!("{small}\n{line}\n");
     std::fs::write(dir.join("mended.toml"), mended).unwrap();
     let simulate = |model: &str, out: &str| {
-        run_ok(
-            bemcal()
-                .args(["simulate", "--model"])
-                .arg(dir.join(model))
-                .args(["--weather", weather, "--out"])
-                .arg(dir.join(out)),
-        );
+        energyplus(dir, "simulate", model, &[], out);
         sum_on(&dir.join(out), "electricity_kwh", &holidays)
     };
     let measured = sum_on(&dir.join("meters.csv"), "electricity_kwh", &holidays);
@@ -185,24 +200,8 @@ fn saturday_half_days_run_their_own_schedule() {
         .iter()
         .flat_map(|t| ["--set".into(), t.clone()])
         .collect();
-    let weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw";
-    run_ok(
-        bemcal()
-            .args(["synthesize", "--model"])
-            .arg(dir.join("truth.toml"))
-            .args(["--weather", weather, "--gap", "0:0"])
-            .args(&set)
-            .arg("--out")
-            .arg(dir.join("meters.csv")),
-    );
-    run_ok(
-        bemcal()
-            .args(["precalibrate", "--meters"])
-            .arg(dir.join("meters.csv"))
-            .args(["--weather", weather, "--out"])
-            .arg(dir.join("precal")),
-    );
-    let summary = std::fs::read_to_string(dir.join("precal/summary.txt")).unwrap();
+    energyplus(dir, "synthesize", "truth.toml", &set, "meters.csv");
+    let summary = precalibrate(dir);
     let calendar = std::fs::read_to_string(dir.join("precal/calendar.csv")).unwrap();
     let label = |date: &str| {
         calendar
@@ -247,36 +246,19 @@ fn saturday_half_days_run_their_own_schedule() {
         ),
     )
     .unwrap();
-    let simulate = |model: &str, out: &str| {
-        run_ok(
-            bemcal()
-                .args(["simulate", "--model"])
-                .arg(dir.join(model))
-                .args(["--weather", weather])
-                .args(&set)
-                .arg("--out")
-                .arg(dir.join(out)),
-        );
+    let simulate = |model: &str, set: &[String], out: &str| {
+        energyplus(dir, "simulate", model, set, out);
         sum_on(&dir.join(out), "electricity_kwh", &saturdays)
     };
     let measured = sum_on(&dir.join("meters.csv"), "electricity_kwh", &saturdays);
-    let with_line = simulate("mended.toml", "mended.csv");
+    let with_line = simulate("mended.toml", &set, "mended.csv");
     // The rule's Saturdays run the weekend intervals (the partial ones are no parameters).
     let rule_set: Vec<String> = truth
         .iter()
         .filter(|t| !t.starts_with("schedule_partial_"))
         .flat_map(|t| ["--set".into(), t.clone()])
         .collect();
-    run_ok(
-        bemcal()
-            .args(["simulate", "--model"])
-            .arg(dir.join("model.toml"))
-            .args(["--weather", weather])
-            .args(&rule_set)
-            .arg("--out")
-            .arg(dir.join("rule.csv")),
-    );
-    let without = sum_on(&dir.join("rule.csv"), "electricity_kwh", &saturdays);
+    let without = simulate("model.toml", &rule_set, "rule.csv");
     let said = summary
         .lines()
         .find(|l| l.contains("partial days: cluster"));
