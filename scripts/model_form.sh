@@ -22,12 +22,16 @@
 #
 #   CASES="same bias system zoning all"   which cases
 #   TERMS="none hour_day_season hour_day_season_free"   which terms (none first)
-#   OUT=out/model-form
+#   OUT=out/model-form (out/model-form-pretrained with PRETRAINED=1)
 #   BIN=target/release/bemcal
+#   PRETRAINED=1   the surrogate starts from the bundled pretrained network (issue 66's path:
+#                  `pretrained = "bundled:conditioned-200"`, `[refine] spread = 2`), its final
+#                  temperature pooled with the family's recoveries
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-target/release/bemcal}
-OUT=${OUT:-out/model-form}
+PRETRAINED=${PRETRAINED:-}
+OUT=${OUT:-out/model-form${PRETRAINED:+-pretrained}}
 PY=${PY:-.venv/bin/python}
 CASES=${CASES:-same timestep bias system zoning all}
 TERMS=${TERMS:-none hour_day_season hour_day_season_free}
@@ -53,6 +57,10 @@ for c in $CASES; do
   if [ ! -f "$d/quick.toml" ]; then
     cp examples/office/small.toml examples/office/quick.toml "$d/"
     printf '\n[validation]\nholdout = "last 2 months"\n' >> "$d/quick.toml"
+    if [ -n "$PRETRAINED" ]; then
+      sed -i -e 's|^hidden = [0-9]*|pretrained = "bundled:conditioned-200"\nhidden = 64|' \
+        -e 's|^\(rounds = [0-9]*.*\)$|\1\nspread = 2|' "$d/quick.toml"
+    fi
   fi
   if [ ! -f "$d/meters.csv" ]; then
     meters_model "$c" "$d/meters_model.toml"

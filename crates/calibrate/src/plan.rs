@@ -39,8 +39,16 @@ impl Plan {
         let names: Vec<&str> = model.parameters().iter().map(|p| p.name.as_str()).collect();
         for n in calibrate.iter().chain(fixed.keys()) {
             if !names.contains(&n.as_str()) {
+                let why = match n.starts_with("schedule_partial_") {
+                    true => {
+                        " (a partial day's schedule interval: the model's calendar has no \
+                              partial days; day_types_file labels them, as pre-calibration's \
+                              calendar.csv does)"
+                    }
+                    false => "",
+                };
                 return Err(Error::Config(format!(
-                    "unknown parameter '{n}'; the model has: {}",
+                    "unknown parameter '{n}'{why}; the model has: {}",
                     names.join(", ")
                 )));
             }
@@ -235,6 +243,10 @@ mod tests {
             e.to_string().contains("unknown parameter 'lighting'"),
             "{e}"
         );
+        // A partial day's interval on a calendar without partial days says where they come from.
+        let e =
+            Plan::new(&model, &["schedule_partial_01".into()], &Default::default()).unwrap_err();
+        assert!(e.to_string().contains("no partial days"), "{e}");
         let fixed: ParameterValues = [("shgc".to_string(), 0.4)].into();
         let e = Plan::new(&model, &["shgc".into()], &fixed).unwrap_err();
         assert!(e.to_string().contains("both calibrated and fixed"), "{e}");
