@@ -39,20 +39,22 @@ weather = "bundled:USA_CO_Golden-NREL.724666_TMY3.epw"
 "#;
 
 /// A project folder for the small calibration with `pretrained = "../pretrained"` and
-/// `model` as its model; meters synthesised at known values.
-fn project(dir: &Path, model: &str) -> std::path::PathBuf {
+/// `model` as its model, a schedule interval among its parameters where `schedule`; meters
+/// synthesised at known values.
+fn project(dir: &Path, model: &str, schedule: bool) -> std::path::PathBuf {
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("model.toml"), model).unwrap();
-    let text = small_project("pretrained-start", 6)
-        .replace(
-            "hidden = 32\n",
-            "hidden = 32\npretrained = \"../pretrained\"\n",
-        )
-        .replace(
+    let mut text = small_project("pretrained-start", 6).replace(
+        "hidden = 32\n",
+        "hidden = 32\npretrained = \"../pretrained\"\n",
+    );
+    if schedule {
+        text = text.replace(
             "\"cooling_setpoint_occupied\"]",
             "\"cooling_setpoint_occupied\", \"schedule_weekday_06\"]",
         );
-    assert!(text.contains("pretrained = ") && text.contains("schedule_weekday_06"));
+    }
+    assert!(text.contains("pretrained = ") && text.contains("schedule_weekday_06") == schedule);
     std::fs::write(dir.join("project.toml"), text).unwrap();
     run_ok(
         bemcal()
@@ -122,7 +124,7 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
     .unwrap();
 
     // Inside the family: folded (exactly, up to rounding), then fine-tuned by the trainer.
-    let inside = project(&root.join("inside"), &small_model());
+    let inside = project(&root.join("inside"), &small_model(), true);
     let summary = calibrate(&inside, &root.join("inside/out"));
     assert_eq!(
         summary["surrogate_start"]["from"], "pretrained",
@@ -178,10 +180,33 @@ fn a_pretrained_network_starts_the_surrogate_inside_its_family_and_not_outside()
         .unwrap()
         .is_finite());
 
+    // Inside, no schedule interval calibrated: the folded surrogate's schedule term is 0 and
+    // its weight column unused, and its graphs still agree with PyTorch (the exported graphs
+    // once kept that column and ONNX Runtime refused them: the quick example on this path).
+    let fixed_schedule = project(&root.join("fixed-schedule"), &small_model(), false);
+    let summary = calibrate(&fixed_schedule, &root.join("fixed-schedule/out"));
+    assert_eq!(
+        summary["surrogate_start"]["from"], "pretrained",
+        "{summary}"
+    );
+    let meta: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("fixed-schedule/out/surrogate/surrogate.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        meta["schedule_inputs"]["params"],
+        serde_json::json!([]),
+        "{meta}"
+    );
+    for check in ["fused_vs_torch", "vjp_vs_torch"] {
+        let err = meta["onnxruntime_check"][check].as_f64().unwrap();
+        assert!(err < 1e-4, "{check} {err}");
+    }
+
     // Outside it (a longer footprint than any the corpus holds): from random weights, and why.
     let longer = small_model().replace("footprint_m = [20.0, 15.0]", "footprint_m = [30.0, 15.0]");
     assert_ne!(longer, small_model());
-    let outside = project(&root.join("outside"), &longer);
+    let outside = project(&root.join("outside"), &longer, false);
     let summary = calibrate(&outside, &root.join("outside/out"));
     assert_eq!(summary["surrogate_start"]["from"], "scratch", "{summary}");
     let reason = summary["surrogate_start"]["reason"].as_str().unwrap();

@@ -64,11 +64,15 @@ def build_fast(model, n_params, n_hourly, scale, nonnegative):
     f32 = lambda a: np.ascontiguousarray(a, dtype=np.float32)
     sd = {k: v.detach().cpu().numpy().astype(np.float64) for k, v in lstm.state_dict().items()}
     w_ih0 = _gates(sd["weight_ih_l0"], H)
+    # A ScheduledSurrogate calibrating no schedule parameter: its schedule term q is 0 and its
+    # weight column (the last) unused.
+    unused_q = hasattr(model, "sched_params") and model.sched_params.shape[0] == 0
+    w_hourly = w_ih0[None, :, n_params:w_ih0.shape[1] - unused_q]
     inits = [
         numpy_helper.from_array(f32(w_ih0[:, :n_params].T), "w_p"),
         numpy_helper.from_array(f32(_gates(sd["bias_ih_l0"], H)[None, :]), "b_ih0"),
         numpy_helper.from_array(f32(_gates(sd["bias_hh_l0"], H)[None, :]), "b_hh0"),
-        numpy_helper.from_array(f32(w_ih0[None, :, n_params:]), "w_0"),
+        numpy_helper.from_array(f32(w_hourly), "w_0"),
         numpy_helper.from_array(f32(_gates(sd["weight_hh_l0"], H)[None]), "r_0"),
         numpy_helper.from_array(np.array([1], dtype=np.int64), "axis1"),
         numpy_helper.from_array(f32(model.head.weight.detach().cpu().numpy().T), "w_fc"),

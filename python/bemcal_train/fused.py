@@ -129,7 +129,9 @@ def _forward(model, n_params, scale, nonnegative, int8, chunk):
     g.nodes.append(helper.make_node("Split", [pb, splits], pbs, name="pb_split", axis=1))
     pbg = dict(zip("ifgo", pbs))
     sched = schedule_term(g, model, n_params, w0)
-    n_in = w0.shape[1] - (sched is not None)  # the LSTM's inputs less the schedule term
+    # The LSTM's inputs less the schedule term: a ScheduledSurrogate's last weight column is q's
+    # (q = 0 where no schedule parameter is calibrated, its column then unused).
+    n_in = w0.shape[1] - hasattr(model, "sched_params")
     if sched is not None:  # C = W_p . p + b + q w_q, q per row (ScheduledSurrogate)
         pbg = {k: g.op("Add", [pbg[k], g.op("MatMul", [sched["q"], g.init(g.name("wq"), blk(sched["w"], k).T)])])
                for k in "ifgo"}
