@@ -263,20 +263,6 @@ pub fn load_model(project: &Project, runner: &Runner) -> Result<Model, Error> {
             model.path = p0;
         }
         for e in &pf.parameter {
-            if e.name.starts_with("schedule_partial_")
-                && !model.spec().is_some_and(|s| s.has_partial_days())
-            {
-                return Err(Error::Input {
-                    path: path.clone(),
-                    line: 0,
-                    message: format!(
-                        "parameter {}: a partial day's prior, and the model's calendar has no \
-                         partial days: set day_types_file to pre-calibration's calendar.csv in \
-                         the model file (it labels them), or remove the schedule_partial_* entries",
-                        e.name
-                    ),
-                });
-            }
             let prior =
                 bemcal_energyplus::TriangularPrior::new(e.min, e.mode, e.max).map_err(|m| {
                     Error::Input {

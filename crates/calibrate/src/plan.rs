@@ -39,14 +39,8 @@ impl Plan {
         let names: Vec<&str> = model.parameters().iter().map(|p| p.name.as_str()).collect();
         for n in calibrate.iter().chain(fixed.keys()) {
             if !names.contains(&n.as_str()) {
-                let why = match n.starts_with("schedule_partial_") {
-                    true => {
-                        " (a partial day's schedule interval: the model's calendar has no \
-                              partial days; day_types_file labels them, as pre-calibration's \
-                              calendar.csv does)"
-                    }
-                    false => "",
-                };
+                let why = (model.spec().and_then(|s| s.absent(n)))
+                    .map_or(String::new(), |r| format!(" ({r})"));
                 return Err(Error::Config(format!(
                     "unknown parameter '{n}'{why}; the model has: {}",
                     names.join(", ")

@@ -358,15 +358,16 @@ impl Model {
 
     /// Replaces the prior of a parameter (e.g. from pre-calibration).
     pub fn set_prior(&mut self, name: &str, prior: TriangularPrior) -> Result<(), Error> {
-        let p = self
-            .parameters
-            .iter_mut()
-            .find(|p| p.name == name)
-            .ok_or_else(|| Error::Parameter {
+        let Some(i) = self.parameters.iter().position(|p| p.name == name) else {
+            let why = self.spec().and_then(|s| s.absent(name));
+            return Err(Error::Parameter {
                 name: name.into(),
-                message: "unknown parameter".into(),
-            })?;
-        p.prior = prior;
+                message: why.map_or("unknown parameter".into(), |w| {
+                    format!("unknown parameter ({w})")
+                }),
+            });
+        };
+        self.parameters[i].prior = prior;
         Ok(())
     }
 

@@ -524,16 +524,29 @@ impl BuildingSpec {
         for (name, p) in &self.priors {
             let at = |m: String| (vec!["priors".to_string(), name.clone()], m);
             if !names.contains(name) {
-                let why = match self.hvac.omitted().iter().find(|(n, _)| n == name) {
-                    Some((_, reason)) => format!(" ({reason})"),
-                    None => String::new(),
-                };
+                let why = self
+                    .absent(name)
+                    .map_or(String::new(), |r| format!(" ({r})"));
                 return Err(at(format!("priors.{name}: unknown parameter{why}")));
             }
             TriangularPrior::new(p.min, p.mode, p.max)
                 .map_err(|m| at(format!("priors.{name}: {m}")))?;
         }
         Ok(())
+    }
+
+    /// Why this building has no parameter `name` where another building would: its HVAC
+    /// system has no such setting, or its calendar no partial days for a partial day's
+    /// interval. None for a name no building has.
+    pub fn absent(&self, name: &str) -> Option<String> {
+        if let Some((_, reason)) = self.hvac.omitted().iter().find(|(n, _)| *n == name) {
+            return Some(reason.to_string());
+        }
+        (name.starts_with("schedule_partial_") && !self.has_partial_days()).then(|| {
+            "a partial day's schedule interval: the model's calendar has no partial days; \
+             day_types_file labels them, as pre-calibration's calendar.csv does"
+                .to_string()
+        })
     }
 
     /// True where the calendar has partial days (`partial` in `day_types_file`).
@@ -1145,22 +1158,21 @@ fn interval_schedule(
     partial: (&[u32], &[f64]),
 ) {
     let mut f: Vec<String> = vec![name.into(), "Fraction".into(), "Through: 12/31".into()];
-    f.push("For: Weekdays CustomDay1 SummerDesignDay WinterDesignDay".into());
-    for (h, v) in weekday.0.iter().zip(weekday.1) {
-        f.push(format!("Until: {h:02}:00"));
-        f.push(num(*v));
-    }
-    if !partial.0.is_empty() {
-        f.push("For: CustomDay2".into());
-        for (h, v) in partial.0.iter().zip(partial.1) {
+    let days = [
+        (
+            "Weekdays CustomDay1 SummerDesignDay WinterDesignDay",
+            weekday,
+        ),
+        ("CustomDay2", partial),
+        ("AllOtherDays", weekend),
+    ];
+    // A day kind without intervals (partial days where the calendar has none) has no block.
+    for (kind, (hours, values)) in days.into_iter().filter(|(_, d)| !d.0.is_empty()) {
+        f.push(format!("For: {kind}"));
+        for (h, v) in hours.iter().zip(values) {
             f.push(format!("Until: {h:02}:00"));
             f.push(num(*v));
         }
-    }
-    f.push("For: AllOtherDays".into());
-    for (h, v) in weekend.0.iter().zip(weekend.1) {
-        f.push(format!("Until: {h:02}:00"));
-        f.push(num(*v));
     }
     m.add("Schedule:Compact", &f);
 }
