@@ -334,8 +334,8 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         .map(|u| u.parse::<BillUnit>())
         .transpose()
         .map_err(|m| file_err(path, format!("[[meters.bills]] unit: {m}")))?;
-    // A semicolon- or tab-separated file writes decimal commas (super::sniff_delimiter).
-    let delimiter = super::sniff_delimiter(text);
+    // A semicolon- or tab-separated file writes decimal commas (super::dialect::sniff_delimiter).
+    let delimiter = super::dialect::sniff_delimiter(text);
     let mut rdr = csv::ReaderBuilder::new()
         .flexible(true)
         .trim(csv::Trim::All)
@@ -353,7 +353,7 @@ pub fn parse_bills(text: &str, path: &Path, spec: &BillSpec) -> Result<BillTable
         })?;
         let rec = match delimiter {
             b',' => rec,
-            _ => super::decimal_points(&rec, usize::MAX),
+            _ => super::dialect::decimal_points(&rec, usize::MAX),
         };
         if !rec.iter().all(str::is_empty) {
             bills.push(parse_row(&rec, &col, spec, default_unit, path)?);
